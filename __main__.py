@@ -1,0 +1,3 @@
+from ecatcfg.cli import main
+
+raise SystemExit(main())

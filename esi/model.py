@@ -1,0 +1,504 @@
+"""The device model: what an ESI file (ETG.2000) says about a slave, as typed Python objects.
+
+Plain slotted dataclasses rather than pydantic models: a full read of the 3 MB Beckhoff files
+creates ~150 000 objects, and the reader (``esi.reader``) already validates every value as it
+converts it (numbers, booleans, hexBinary, enumerations), recording what it could not read as
+:class:`ReadProblem` with the file and line.  Every object carries ``source`` (file, line) so
+lint findings and compiler errors can point at the XML that defined it.
+
+Names follow ETG.2000 element names in snake case (``RxPdo`` -> :class:`Pdo` with
+``direction="rx"``, ``Sm`` -> :class:`SyncManager`, ``Fmmu`` -> :class:`Fmmu`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Literal, NamedTuple
+
+# LcId 1033 is English (US); ETG.2000 makes it the default language of a NameType.
+ENGLISH = 1033
+
+MAILBOX_PROTOCOLS = ("AoE", "EoE", "CoE", "FoE", "SoE", "VoE")
+
+# AL state names used in ETG.2000 access restrictions (Flags/Access ReadRestrictions,
+# WriteRestrictions: e.g. "PreOp_SafeOp").
+STATES = ("PreOp", "SafeOp", "Op")
+
+
+class Source(NamedTuple):
+    """Where a model object was defined: the file as the user named it and a 1-based line."""
+
+    file: str
+    line: int
+
+    def __str__(self) -> str:
+        return f"{self.file}:{self.line}"
+
+
+@dataclass(slots=True)
+class ReadProblem:
+    """Something the reader could not take as written; the value is left as ``None``.
+
+    ``severity`` is ``"error"`` when the device cannot be identified or used (a bad product
+    code), ``"warning"`` otherwise (a bad default value deep in the dictionary).
+    """
+
+    source: Source
+    message: str
+    severity: Literal["error", "warning"] = "warning"
+    column: int | None = None
+
+
+@dataclass(slots=True)
+class IgnoredElement:
+    """An element the reader does not know (not in ETG.2000 at that place); lint reports it."""
+
+    source: Source
+    tag: str
+    parent: str
+
+
+def pick_name(names: dict[int, str], lcid: int = ENGLISH) -> str:
+    """The text in ``lcid``, else English, else the first language given, else ``""``."""
+    if lcid in names:
+        return names[lcid]
+    if ENGLISH in names:
+        return names[ENGLISH]
+    return next(iter(names.values()), "")
+
+
+@dataclass(slots=True)
+class Vendor:
+    id: int | None
+    names: dict[int, str]
+    source: Source
+
+    @property
+    def name(self) -> str:
+        return pick_name(self.names)
+
+
+@dataclass(slots=True)
+class Group:
+    type: str
+    names: dict[int, str]
+    source: Source
+
+    @property
+    def name(self) -> str:
+        return pick_name(self.names)
+
+
+@dataclass(slots=True)
+class Access:
+    """Flags/Access: ``ro``, ``rw`` or ``wo``, optionally limited to some AL states."""
+
+    value: str
+    read_states: frozenset[str] = frozenset(STATES)
+    write_states: frozenset[str] = frozenset(STATES)
+
+    def readable_in(self, state: str) -> bool:
+        return "r" in self.value and state in self.read_states
+
+    def writable_in(self, state: str) -> bool:
+        return "w" in self.value and state in self.write_states
+
+
+@dataclass(slots=True)
+class ObjectFlags:
+    access: Access | None = None
+    category: str | None = None       # m(andatory) / o(ptional) / c(onditional)
+    pdo_mapping: str | None = None    # "R", "T", "RT", "TR" (ETG.2000: which PDO kind)
+    sdo_access: str | None = None     # CompleteAccess / SubIndexAccess
+    backup: int | None = None
+    setting: int | None = None
+
+
+@dataclass(slots=True)
+class ObjectInfo:
+    """Object/Info or one of its SubItem/Info: defaults and limits."""
+
+    default_data: bytes | None = None
+    default_value: int | None = None
+    default_string: str | None = None
+    min_value: int | None = None
+    max_value: int | None = None
+    min_data: bytes | None = None
+    max_data: bytes | None = None
+    sub_items: list[tuple[str, ObjectInfo]] = field(default_factory=list)
+
+
+@dataclass(slots=True)
+class ArrayInfo:
+    lbound: int
+    elements: int
+
+
+@dataclass(slots=True)
+class DataTypeSubItem:
+    """DataType/SubItem: one member of a record or array type."""
+
+    subindex: int | None
+    name: str
+    type: str
+    bit_size: int | None
+    bit_offset: int | None
+    flags: ObjectFlags | None
+    source: Source
+
+
+@dataclass(slots=True)
+class DataType:
+    name: str
+    bit_size: int | None
+    source: Source
+    base_type: str | None = None
+    index: int | None = None
+    array_info: list[ArrayInfo] = field(default_factory=list)
+    sub_items: list[DataTypeSubItem] = field(default_factory=list)
+    enums: dict[int, str] = field(default_factory=dict)
+
+
+@dataclass(slots=True)
+class DictObject:
+    """Dictionary/Objects/Object: one CoE object (index) with its type and flags."""
+
+    index: int | None
+    names: dict[int, str]
+    type: str
+    bit_size: int | None
+    source: Source
+    info: ObjectInfo | None = None
+    flags: ObjectFlags | None = None
+    depend_on_slot: bool = False
+
+    @property
+    def name(self) -> str:
+        return pick_name(self.names)
+
+
+@dataclass(slots=True)
+class Dictionary:
+    """Profile/Dictionary: the object dictionary a CoE slave declares."""
+
+    data_types: dict[str, DataType]
+    objects: dict[int, DictObject]
+    source: Source
+
+    def sub_items(self, obj: DictObject) -> list[DataTypeSubItem]:
+        """The subitems of ``obj`` by its data type (empty for a simple variable)."""
+        dt = self.data_types.get(obj.type)
+        return dt.sub_items if dt is not None else []
+
+
+@dataclass(slots=True)
+class Profile:
+    source: Source
+    profile_no: int | None = None
+    add_info: int | None = None
+    channel: int | None = None
+    dictionary: Dictionary | None = None
+    dictionary_file: str | None = None
+
+
+@dataclass(slots=True)
+class PdoEntry:
+    """RxPdo/Entry or TxPdo/Entry; ``index == 0`` is a padding (gap) entry."""
+
+    index: int | None
+    subindex: int | None
+    bit_len: int | None
+    data_type: str | None
+    names: dict[int, str]
+    source: Source
+    depend_on_slot: bool = False
+
+    @property
+    def name(self) -> str:
+        return pick_name(self.names)
+
+    @property
+    def is_padding(self) -> bool:
+        return self.index == 0
+
+
+@dataclass(slots=True)
+class Pdo:
+    """An RxPdo (outputs, master -> slave) or TxPdo (inputs, slave -> master)."""
+
+    direction: Literal["rx", "tx"]
+    index: int | None
+    names: dict[int, str]
+    source: Source
+    sm: int | None = None
+    su: int | None = None
+    fixed: bool = False
+    mandatory: bool = False
+    virtual: bool = False
+    excludes: list[int] = field(default_factory=list)
+    entries: list[PdoEntry] = field(default_factory=list)
+    os_fac: int | None = None
+    os_min: int | None = None
+    os_max: int | None = None
+    os_index_inc: int | None = None
+    pdo_order: int | None = None
+    depend_on_slot: bool = False
+
+    @property
+    def name(self) -> str:
+        return pick_name(self.names)
+
+    @property
+    def bit_length(self) -> int:
+        """Sum of the entries' BitLen (entries without a valid BitLen count as 0)."""
+        return sum(e.bit_len or 0 for e in self.entries)
+
+
+SmType = Literal["MBoxOut", "MBoxIn", "Outputs", "Inputs"]
+
+
+@dataclass(slots=True)
+class SyncManager:
+    """Device/Sm, numbered by its position in the file (SM0, SM1, ...)."""
+
+    number: int
+    type: str | None                 # MBoxOut / MBoxIn / Outputs / Inputs (None if empty)
+    source: Source
+    start_address: int | None = None
+    control_byte: int | None = None
+    default_size: int | None = None
+    min_size: int | None = None
+    max_size: int | None = None
+    enable: int | None = None
+    op_only: bool = False
+    virtual: bool = False
+    watchdog: bool | None = None
+    one_byte_mode: bool = False
+    fixed_assignment: bool = False
+
+    @property
+    def is_mailbox(self) -> bool:
+        return self.type in ("MBoxOut", "MBoxIn")
+
+
+@dataclass(slots=True)
+class Fmmu:
+    """Device/Fmmu: its use (Outputs / Inputs / MBoxState) and optional SM binding."""
+
+    number: int
+    type: str | None
+    source: Source
+    sm: int | None = None
+    su: int | None = None
+    op_only: bool = False
+
+
+@dataclass(slots=True)
+class CoeInitCmd:
+    """Mailbox/CoE/InitCmd: an SDO download the master does in the given transitions."""
+
+    transitions: list[str]
+    index: int | None
+    subindex: int | None
+    data: bytes | None
+    source: Source
+    complete_access: bool = False
+    fixed: bool = False
+    comment: str | None = None
+    depend_on_slot: bool = False
+
+
+@dataclass(slots=True)
+class CoeSettings:
+    source: Source
+    sdo_info: bool = False
+    pdo_assign: bool = False
+    pdo_config: bool = False
+    pdo_upload: bool = False
+    complete_access: bool = False
+    segmented_sdo: bool = False
+    init_cmds: list[CoeInitCmd] = field(default_factory=list)
+
+
+@dataclass(slots=True)
+class Mailbox:
+    """Device/Mailbox: the protocols the slave speaks; CoE details in ``coe``."""
+
+    protocols: list[str]
+    source: Source
+    coe: CoeSettings | None = None
+    data_link_layer: bool = False
+
+
+@dataclass(slots=True)
+class DcOpMode:
+    """Dc/OpMode: a distributed-clock mode and the registers 0x0980/0x09A0/0x09A4 settings.
+
+    ``cycle_time_sync0`` is the value in ns, used when ``*_factor`` is absent; a factor means
+    "that many times the bus cycle" (ETG.2000; negative factor = a fraction of it).
+    """
+
+    name: str
+    source: Source
+    desc: str | None = None
+    assign_activate: int | None = None
+    cycle_time_sync0: int | None = None
+    cycle_time_sync0_factor: int | None = None
+    shift_time_sync0: int | None = None
+    cycle_time_sync1: int | None = None
+    cycle_time_sync1_factor: int | None = None
+    shift_time_sync1: int | None = None
+
+
+@dataclass(slots=True)
+class Dc:
+    opmodes: list[DcOpMode]
+    source: Source
+
+
+@dataclass(slots=True)
+class Eeprom:
+    """Device/Eeprom: either the whole image (``data``) or its size and config words."""
+
+    source: Source
+    byte_size: int | None = None
+    config_data: bytes | None = None
+    boot_strap: bytes | None = None
+    data: bytes | None = None
+    categories: list[tuple[int, bytes]] = field(default_factory=list)
+    assign_to_pdi: bool = False
+
+
+@dataclass(slots=True)
+class DeviceInfo:
+    """Device/Info: timeouts (ms), E-bus current (mA) and identification settings."""
+
+    source: Source
+    preop_timeout: int | None = None
+    safeop_op_timeout: int | None = None
+    back_to_init_timeout: int | None = None
+    back_to_safeop_timeout: int | None = None
+    mailbox_request_timeout: int | None = None
+    mailbox_response_timeout: int | None = None
+    ebus_current: int | None = None
+    identification_ado: int | None = None
+
+
+@dataclass(slots=True)
+class Slot:
+    """Slots/Slot of a modular device (ETG.2000 MDP): which modules may sit in it."""
+
+    names: dict[int, str]
+    source: Source
+    min_instances: int | None = None
+    max_instances: int | None = None
+    module_idents: list[int] = field(default_factory=list)
+    default_ident: int | None = None
+    module_classes: list[str] = field(default_factory=list)
+    slot_pdo_increment: int | None = None
+    slot_index_increment: int | None = None
+
+    @property
+    def name(self) -> str:
+        return pick_name(self.names)
+
+
+@dataclass(slots=True)
+class Slots:
+    slots: list[Slot]
+    source: Source
+    slot_pdo_increment: int | None = None
+    slot_index_increment: int | None = None
+
+
+@dataclass(slots=True)
+class Module:
+    """Descriptions/Modules/Module (or a module library's Module): a pluggable module."""
+
+    ident: int | None
+    type_name: str
+    names: dict[int, str]
+    source: Source
+    module_class: str | None = None
+    pdo_group: int | None = None
+    rx_pdos: list[Pdo] = field(default_factory=list)
+    tx_pdos: list[Pdo] = field(default_factory=list)
+    mailbox: Mailbox | None = None
+    profile: Profile | None = None
+    dc_opmode_name: str | None = None
+
+    @property
+    def name(self) -> str:
+        return pick_name(self.names)
+
+
+@dataclass(slots=True)
+class Device:
+    """Descriptions/Devices/Device: one product revision as a configurator needs it."""
+
+    type_name: str
+    product_code: int | None
+    revision: int | None
+    names: dict[int, str]
+    source: Source
+    vendor: Vendor
+    physics: str | None = None
+    group_type: str | None = None
+    info: DeviceInfo | None = None
+    fmmus: list[Fmmu] = field(default_factory=list)
+    sms: list[SyncManager] = field(default_factory=list)
+    rx_pdos: list[Pdo] = field(default_factory=list)
+    tx_pdos: list[Pdo] = field(default_factory=list)
+    mailbox: Mailbox | None = None
+    dc: Dc | None = None
+    eeprom: Eeprom | None = None
+    profiles: list[Profile] = field(default_factory=list)
+    slots: Slots | None = None
+
+    @property
+    def name(self) -> str:
+        return pick_name(self.names)
+
+    @property
+    def selector(self) -> str:
+        """The exact ``VENDOR:PRODUCT:REVISION`` selector of this device."""
+        return format_selector(self.vendor.id, self.product_code, self.revision)
+
+    @property
+    def dictionary(self) -> Dictionary | None:
+        """The object dictionary (the first Profile that has one)."""
+        for p in self.profiles:
+            if p.dictionary is not None:
+                return p.dictionary
+        return None
+
+    @property
+    def pdos(self) -> list[Pdo]:
+        return self.rx_pdos + self.tx_pdos
+
+    def sm_by_type(self, sm_type: str) -> list[SyncManager]:
+        return [sm for sm in self.sms if sm.type == sm_type]
+
+
+@dataclass(slots=True)
+class EsiFile:
+    """One ESI file: root ``EtherCATInfo`` (devices) or ``EtherCATModule`` (module library)."""
+
+    path: str
+    root: str
+    vendor: Vendor
+    version: str | None = None
+    groups: list[Group] = field(default_factory=list)
+    devices: list[Device] = field(default_factory=list)
+    modules: list[Module] = field(default_factory=list)
+    info_references: list[tuple[str, Source]] = field(default_factory=list)
+    problems: list[ReadProblem] = field(default_factory=list)
+    ignored: list[IgnoredElement] = field(default_factory=list)
+
+    def group(self, type_: str | None) -> Group | None:
+        return next((g for g in self.groups if g.type == type_), None)
+
+
+def format_selector(vendor: int | None, product: int | None, revision: int | None) -> str:
+    parts = [vendor, product, revision]
+    return ":".join("?" if p is None else f"0x{p:x}" for p in parts)

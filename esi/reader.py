@@ -1,0 +1,755 @@
+"""ETG.2000 reader: an ESI file (lxml tree) -> :class:`~ecatcfg.esi.model.EsiFile`.
+
+One pass over each element's children, dispatching on the tag.  Values are converted with
+``esi.values``; a value that cannot be read becomes ``None`` plus a :class:`ReadProblem` with
+the file and line, so one bad default deep in a dictionary does not cost the whole file.
+Elements that ETG.2000 does not define at that place are kept as :class:`IgnoredElement`
+for lint; elements the schema defines but a configurator does not need (images, URLs,
+diagnosis texts, vendor-specific blocks) are skipped silently.
+"""
+
+from __future__ import annotations
+
+import gc
+from pathlib import Path
+
+from lxml import etree
+
+from ecatcfg.errors import EcatcfgError
+from ecatcfg.esi import xmlsafe
+from ecatcfg.esi.model import (
+    Access, ArrayInfo, CoeInitCmd, CoeSettings, DataType, DataTypeSubItem, Dc, DcOpMode,
+    Device, DeviceInfo, DictObject, Dictionary, Eeprom, EsiFile, Fmmu, Group, IgnoredElement,
+    Mailbox, MAILBOX_PROTOCOLS, Module, ObjectFlags, ObjectInfo, Pdo, PdoEntry, Profile,
+    ReadProblem, Slot, Slots, Source, STATES, SyncManager, Vendor,
+)
+from ecatcfg.esi.values import parse_bool, parse_hex_bytes, parse_int
+
+ROOTS = ("EtherCATInfo", "EtherCATModule")
+
+# Children that ETG.2000 (EtherCATInfo.xsd / EtherCATBase.xsd, version 1.17) allows at each
+# place but that this reader does not model.  A child in neither this set nor the reader's own
+# dispatch is reported as an IgnoredElement.
+_SKIPPED: dict[str, frozenset[str]] = {
+    "EtherCATInfo": frozenset(),
+    "Vendor": frozenset(("Comment", "URL", "DescriptionURL", "Image16x14", "ImageFile16x14",
+                         "ImageData16x14", "VendorSpecific")),
+    "Descriptions": frozenset(),
+    "Group": frozenset(("Comment", "Image16x14", "ImageFile16x14", "ImageData16x14",
+                        "VendorSpecific")),
+    "Device": frozenset(("Sci", "HideType", "AlternativeType", "SubDevice", "Comment", "URL",
+                         "Su", "ESC", "Image16x14", "ImageFile16x14", "ImageData16x14",
+                         "VendorSpecific")),
+    "Info": frozenset(("Electrical", "EtherCATController", "Port", "ExecutionUnit",
+                       "VendorSpecific", "StationAliasSupported", "IdentificationReg134",
+                       "DeviceFeature")),
+    "Pdo": frozenset(("ExcludedSm",)),
+    "Entry": frozenset(("Comment",)),
+    "Mailbox": frozenset(("VendorSpecific",)),
+    "CoE": frozenset(("Object",)),
+    "InitCmd": frozenset(),
+    "Dc": frozenset(("VendorSpecific",)),
+    "OpMode": frozenset(("Sm", "VendorSpecific")),
+    "Eeprom": frozenset(("VendorSpecific",)),
+    "Profile": frozenset(("SubAddInfo", "ChannelCount", "ChannelInfo", "DiagFile",
+                          "DiagMessages", "VendorSpecific")),
+    "Dictionary": frozenset(("UnitTypes",)),
+    "DataType": frozenset(("Comment", "Properties", "Xml")),
+    "SubItem": frozenset(("DisplayName", "Comment", "DefaultString", "DefaultData", "MinValue",
+                          "MaxValue", "DefaultValue", "Property", "Xml")),
+    "Object": frozenset(("Comment", "Properties", "Xml")),
+    "ObjectInfo": frozenset(("DisplayName", "Unit")),
+    "Flags": frozenset(("SafetyMapping", "Attribute", "Transition")),
+    "Slots": frozenset(("SlotGroupData", "ModulePdoGroup", "SlotSelections")),
+    "Slot": frozenset(("Image16x14", "ImageFile16x14", "ImageData16x14")),
+    "Module": frozenset(("SafetyParaMapping", "Image16x14", "ImageFile16x14",
+                         "ImageData16x14", "VendorSpecific")),
+}
+
+_STATE_BY_LOWER = {s.lower(): s for s in STATES}
+_new_source = tuple.__new__     # Source(...) without NamedTuple's Python-level __new__
+
+
+class EsiReadError(EcatcfgError):
+    """A file that cannot be read as an ESI file at all (not XML, wrong root element)."""
+
+
+def read_file(path: str | Path, shown_as: str | None = None) -> EsiFile:
+    """Read one ESI file or module library into the model."""
+    name = shown_as or str(path)
+    return read_tree(xmlsafe.parse_file(path, name), name)
+
+
+def read_bytes(data: bytes, shown_as: str) -> EsiFile:
+    return read_tree(xmlsafe.parse_bytes(data, shown_as), shown_as)
+
+
+def read_tree(tree: etree._ElementTree, file: str) -> EsiFile:
+    root = tree.getroot()
+    check_root(root, file)
+    # A big file makes ~100k small objects and no cycles; the cyclic GC would otherwise
+    # rescan the growing heap dozens of times (measured: ~20% of a full corpus read).
+    was_enabled = gc.isenabled()
+    gc.disable()
+    try:
+        return _Reader(file).read_root(root)
+    finally:
+        if was_enabled:
+            gc.enable()
+
+
+def check_root(root: etree._Element, file: str) -> None:
+    if root.tag not in ROOTS:
+        raise EsiReadError(f"root element is <{root.tag}>, expected <EtherCATInfo> or "
+                           "<EtherCATModule>: not an ESI file", file, root.sourceline)
+
+
+def children(el: etree._Element):
+    """Element children only (comments and processing instructions left out)."""
+    return el.iterchildren(etree.Element)
+
+
+def text_of(el: etree._Element) -> str:
+    return (el.text or "").strip()
+
+
+class _Reader:
+    """Reads one file; collects problems and ignored elements as it goes."""
+
+    def __init__(self, file: str) -> None:
+        self.file = file
+        self.problems: list[ReadProblem] = []
+        self.ignored: list[IgnoredElement] = []
+
+    # -- values ---------------------------------------------------------------------------
+
+    def src(self, el: etree._Element) -> Source:
+        return _new_source(Source, (self.file, el.sourceline or 0))
+
+    def _problem(self, el: etree._Element, what: str, exc: ValueError,
+                 severity: str) -> None:
+        self.problems.append(ReadProblem(self.src(el), f"{what}: {exc}", severity))
+
+    # int_/bool_/hex_ are the hot path of a full read (~150k calls on the corpus): kept flat.
+    def int_(self, raw: str | None, el: etree._Element, what: str,
+             severity: str = "warning") -> int | None:
+        if raw is None:
+            return None
+        try:
+            return parse_int(raw)
+        except ValueError as exc:
+            self._problem(el, what, exc, severity)
+            return None
+
+    def bool_(self, raw: str | None, el: etree._Element, what: str,
+              default: bool = False) -> bool:
+        if raw is None:
+            return default
+        try:
+            return parse_bool(raw)
+        except ValueError as exc:
+            self._problem(el, what, exc, "warning")
+            return default
+
+    def hex_(self, raw: str | None, el: etree._Element, what: str) -> bytes | None:
+        if raw is None:
+            return None
+        try:
+            return parse_hex_bytes(raw)
+        except ValueError as exc:
+            self._problem(el, what, exc, "warning")
+            return None
+
+    def unknown(self, ch: etree._Element, context: str, parent: etree._Element) -> None:
+        """Record ``ch`` unless ETG.2000 allows it here (or it is a comment/PI)."""
+        if ch.tag.__class__ is str and ch.tag not in _SKIPPED[context]:
+            self.ignored.append(IgnoredElement(self.src(ch), ch.tag, parent.tag))
+
+    @staticmethod
+    def add_name(names: dict[int, str], el: etree._Element) -> None:
+        lcid = el.get("LcId")
+        key = 1033
+        if lcid is not None:
+            try:
+                key = int(lcid)
+            except ValueError:
+                pass
+        names.setdefault(key, text_of(el))
+
+    # -- file level -----------------------------------------------------------------------
+
+    def read_root(self, root: etree._Element) -> EsiFile:
+        vendor = Vendor(None, {}, self.src(root))
+        esi = EsiFile(self.file, root.tag, vendor, version=root.get("Version"))
+        for ch in root:
+            tag = ch.tag
+            if tag == "Vendor":
+                esi.vendor = vendor = self.vendor(ch)
+            elif tag == "InfoReference":
+                esi.info_references.append((text_of(ch), self.src(ch)))
+            elif tag == "Descriptions":
+                self.descriptions(ch, esi)
+            elif tag == "Modules" and root.tag == "EtherCATModule":
+                esi.modules.extend(self.module(m) for m in ch if m.tag == "Module")
+            else:
+                self.unknown(ch, "EtherCATInfo", root)
+        for dev in esi.devices:
+            dev.vendor = vendor
+        esi.problems = self.problems
+        esi.ignored = self.ignored
+        return esi
+
+    def vendor(self, el: etree._Element) -> Vendor:
+        vendor = Vendor(None, {}, self.src(el))
+        for ch in el:
+            if ch.tag == "Id":
+                vendor.id = self.int_(ch.text, ch, "Vendor/Id", "error")
+            elif ch.tag == "Name":
+                self.add_name(vendor.names, ch)
+            else:
+                self.unknown(ch, "Vendor", el)
+        return vendor
+
+    def descriptions(self, el: etree._Element, esi: EsiFile) -> None:
+        for ch in el:
+            tag = ch.tag
+            if tag == "Groups":
+                for g in ch:
+                    if g.tag == "Group":
+                        esi.groups.append(self.group(g))
+                    else:
+                        self.unknown(g, "Descriptions", ch)
+            elif tag == "Devices":
+                for d in ch:
+                    if d.tag == "Device":
+                        esi.devices.append(self.device(d, esi.vendor))
+                    else:
+                        self.unknown(d, "Descriptions", ch)
+            elif tag == "Modules":
+                for m in ch:
+                    if m.tag == "Module":
+                        esi.modules.append(self.module(m))
+                    else:
+                        self.unknown(m, "Descriptions", ch)
+            else:
+                self.unknown(ch, "Descriptions", el)
+
+    def group(self, el: etree._Element) -> Group:
+        group = Group("", {}, self.src(el))
+        for ch in el:
+            if ch.tag == "Type":
+                group.type = text_of(ch)
+            elif ch.tag == "Name":
+                self.add_name(group.names, ch)
+            else:
+                self.unknown(ch, "Group", el)
+        return group
+
+    # -- device ---------------------------------------------------------------------------
+
+    def device(self, el: etree._Element, vendor: Vendor) -> Device:
+        dev = Device("", None, None, {}, self.src(el), vendor, physics=el.get("Physics"))
+        for ch in el:
+            tag = ch.tag
+            if tag == "RxPdo" or tag == "TxPdo":
+                pdo = self.pdo(ch)
+                (dev.rx_pdos if tag == "RxPdo" else dev.tx_pdos).append(pdo)
+            elif tag == "Sm":
+                dev.sms.append(self.sm(ch, len(dev.sms)))
+            elif tag == "Fmmu":
+                dev.fmmus.append(self.fmmu(ch, len(dev.fmmus)))
+            elif tag == "Type":
+                dev.type_name = text_of(ch)
+                dev.product_code = self.int_(ch.get("ProductCode"), ch, "Type/@ProductCode",
+                                             "error")
+                dev.revision = self.int_(ch.get("RevisionNo"), ch, "Type/@RevisionNo", "error")
+            elif tag == "Name":
+                self.add_name(dev.names, ch)
+            elif tag == "GroupType":
+                dev.group_type = text_of(ch)
+            elif tag == "Info":
+                dev.info = self.info(ch)
+            elif tag == "Mailbox":
+                dev.mailbox = self.mailbox(ch)
+            elif tag == "Dc":
+                dev.dc = self.dc(ch)
+            elif tag == "Eeprom":
+                dev.eeprom = self.eeprom(ch)
+            elif tag == "Profile":
+                dev.profiles.append(self.profile(ch))
+            elif tag == "Slots":
+                dev.slots = self.slots(ch)
+            else:
+                self.unknown(ch, "Device", el)
+        return dev
+
+    def info(self, el: etree._Element) -> DeviceInfo:
+        info = DeviceInfo(self.src(el))
+        for ch in el:
+            tag = ch.tag
+            if tag == "StateMachine":
+                for t in ch.iterfind("Timeout/*"):
+                    attr = _STATE_TIMEOUTS.get(t.tag)
+                    if attr:
+                        setattr(info, attr, self.int_(t.text, t, f"StateMachine/Timeout/{t.tag}"))
+            elif tag == "Mailbox":
+                for t in ch.iterfind("Timeout/*"):
+                    attr = _MAILBOX_TIMEOUTS.get(t.tag)
+                    if attr:
+                        setattr(info, attr, self.int_(t.text, t, f"Mailbox/Timeout/{t.tag}"))
+            elif tag == "IdentificationAdo":
+                info.identification_ado = self.int_(ch.text, ch, "Info/IdentificationAdo")
+            else:
+                if tag == "Electrical":
+                    cur = ch.find("EBusCurrent")
+                    if cur is not None:
+                        info.ebus_current = self.int_(cur.text, cur, "Electrical/EBusCurrent")
+                self.unknown(ch, "Info", el)
+        return info
+
+    def sm(self, el: etree._Element, number: int) -> SyncManager:
+        g = el.get
+        return SyncManager(
+            number=number,
+            type=text_of(el) or None,
+            source=self.src(el),
+            start_address=self.int_(g("StartAddress"), el, "Sm/@StartAddress"),
+            control_byte=self.int_(g("ControlByte"), el, "Sm/@ControlByte"),
+            default_size=self.int_(g("DefaultSize"), el, "Sm/@DefaultSize"),
+            min_size=self.int_(g("MinSize"), el, "Sm/@MinSize"),
+            max_size=self.int_(g("MaxSize"), el, "Sm/@MaxSize"),
+            enable=self.int_(g("Enable"), el, "Sm/@Enable"),
+            op_only=self.bool_(g("OpOnly"), el, "Sm/@OpOnly"),
+            virtual=self.bool_(g("Virtual"), el, "Sm/@Virtual"),
+            watchdog=(None if g("Watchdog") is None
+                      else self.bool_(g("Watchdog"), el, "Sm/@Watchdog")),
+            one_byte_mode=self.bool_(g("OneByteMode"), el, "Sm/@OneByteMode"),
+            fixed_assignment=self.bool_(g("FixedAssignment"), el, "Sm/@FixedAssignment"),
+        )
+
+    def fmmu(self, el: etree._Element, number: int) -> Fmmu:
+        return Fmmu(number, text_of(el) or None, self.src(el),
+                    sm=self.int_(el.get("Sm"), el, "Fmmu/@Sm"),
+                    su=self.int_(el.get("Su"), el, "Fmmu/@Su"),
+                    op_only=self.bool_(el.get("OpOnly"), el, "Fmmu/@OpOnly"))
+
+    def pdo(self, el: etree._Element) -> Pdo:
+        g = el.get
+        tag = el.tag
+        pdo = Pdo("rx" if tag == "RxPdo" else "tx", None, {}, self.src(el),
+                  sm=self.int_(g("Sm"), el, f"{tag}/@Sm"),
+                  su=self.int_(g("Su"), el, f"{tag}/@Su"),
+                  fixed=self.bool_(g("Fixed"), el, f"{tag}/@Fixed"),
+                  mandatory=self.bool_(g("Mandatory"), el, f"{tag}/@Mandatory"),
+                  virtual=self.bool_(g("Virtual"), el, f"{tag}/@Virtual"),
+                  os_fac=self.int_(g("OSFac"), el, f"{tag}/@OSFac"),
+                  os_min=self.int_(g("OSMin"), el, f"{tag}/@OSMin"),
+                  os_max=self.int_(g("OSMax"), el, f"{tag}/@OSMax"),
+                  os_index_inc=self.int_(g("OSIndexInc"), el, f"{tag}/@OSIndexInc"),
+                  pdo_order=self.int_(g("PdoOrder"), el, f"{tag}/@PdoOrder"))
+        for ch in el:
+            ctag = ch.tag
+            if ctag == "Entry":
+                pdo.entries.append(self.entry(ch))
+            elif ctag == "Index":
+                pdo.index = self.int_(ch.text, ch, f"{tag}/Index", "error")
+                pdo.depend_on_slot = self.bool_(ch.get("DependOnSlot"), ch, "@DependOnSlot")
+            elif ctag == "Name":
+                self.add_name(pdo.names, ch)
+            elif ctag == "Exclude":
+                value = self.int_(ch.text, ch, f"{tag}/Exclude")
+                if value is not None:
+                    pdo.excludes.append(value)
+            else:
+                self.unknown(ch, "Pdo", el)
+        return pdo
+
+    def entry(self, el: etree._Element) -> PdoEntry:
+        entry = PdoEntry(None, None, None, None, {}, self.src(el))
+        for ch in el:
+            tag = ch.tag
+            if tag == "Index":
+                entry.index = self.int_(ch.text, ch, "Entry/Index", "error")
+                if ch.get("DependOnSlot") is not None:
+                    entry.depend_on_slot = self.bool_(ch.get("DependOnSlot"), ch,
+                                                      "@DependOnSlot")
+            elif tag == "SubIndex":
+                entry.subindex = self.int_(ch.text, ch, "Entry/SubIndex", "error")
+            elif tag == "BitLen":
+                entry.bit_len = self.int_(ch.text, ch, "Entry/BitLen", "error")
+            elif tag == "DataType":
+                entry.data_type = (ch.text or "").strip()
+            elif tag == "Name":
+                self.add_name(entry.names, ch)
+            else:
+                self.unknown(ch, "Entry", el)
+        return entry
+
+    def mailbox(self, el: etree._Element) -> Mailbox:
+        mbx = Mailbox([], self.src(el),
+                      data_link_layer=self.bool_(el.get("DataLinkLayer"), el,
+                                                 "Mailbox/@DataLinkLayer"))
+        for ch in el:
+            tag = ch.tag
+            if tag in MAILBOX_PROTOCOLS:
+                mbx.protocols.append(tag)
+                if tag == "CoE":
+                    mbx.coe = self.coe(ch)
+            else:
+                self.unknown(ch, "Mailbox", el)
+        return mbx
+
+    def coe(self, el: etree._Element) -> CoeSettings:
+        g = el.get
+        coe = CoeSettings(self.src(el),
+                          sdo_info=self.bool_(g("SdoInfo"), el, "CoE/@SdoInfo"),
+                          pdo_assign=self.bool_(g("PdoAssign"), el, "CoE/@PdoAssign"),
+                          pdo_config=self.bool_(g("PdoConfig"), el, "CoE/@PdoConfig"),
+                          pdo_upload=self.bool_(g("PdoUpload"), el, "CoE/@PdoUpload"),
+                          complete_access=self.bool_(g("CompleteAccess"), el,
+                                                     "CoE/@CompleteAccess"),
+                          segmented_sdo=self.bool_(g("SegmentedSdo"), el, "CoE/@SegmentedSdo"))
+        for ch in el:
+            if ch.tag == "InitCmd":
+                coe.init_cmds.append(self.coe_init_cmd(ch))
+            else:
+                self.unknown(ch, "CoE", el)
+        return coe
+
+    def coe_init_cmd(self, el: etree._Element) -> CoeInitCmd:
+        cmd = CoeInitCmd([], None, None, None, self.src(el),
+                         complete_access=self.bool_(el.get("CompleteAccess"), el,
+                                                    "InitCmd/@CompleteAccess"),
+                         fixed=self.bool_(el.get("Fixed"), el, "InitCmd/@Fixed"))
+        for ch in el:
+            tag = ch.tag
+            if tag == "Transition":
+                cmd.transitions.append(text_of(ch))
+            elif tag == "Index":
+                cmd.index = self.int_(ch.text, ch, "InitCmd/Index", "error")
+                cmd.depend_on_slot = self.bool_(ch.get("DependOnSlot"), ch, "@DependOnSlot")
+            elif tag == "SubIndex":
+                cmd.subindex = self.int_(ch.text, ch, "InitCmd/SubIndex", "error")
+            elif tag == "Data":
+                cmd.data = self.hex_(ch.text or "", ch, "InitCmd/Data")
+            elif tag == "Comment":
+                cmd.comment = text_of(ch)
+            else:
+                self.unknown(ch, "InitCmd", el)
+        return cmd
+
+    def dc(self, el: etree._Element) -> Dc:
+        dc = Dc([], self.src(el))
+        for ch in el:
+            if ch.tag == "OpMode":
+                dc.opmodes.append(self.opmode(ch))
+            else:
+                self.unknown(ch, "Dc", el)
+        return dc
+
+    def opmode(self, el: etree._Element) -> DcOpMode:
+        mode = DcOpMode("", self.src(el))
+        for ch in el:
+            tag = ch.tag
+            if tag == "Name":
+                mode.name = text_of(ch)
+            elif tag == "Desc":
+                mode.desc = text_of(ch)
+            elif tag == "AssignActivate":
+                mode.assign_activate = self.int_(ch.text, ch, "OpMode/AssignActivate")
+            elif tag in _DC_TIMES:
+                setattr(mode, _DC_TIMES[tag], self.int_(ch.text, ch, f"OpMode/{tag}"))
+                if tag.startswith("CycleTime") and ch.get("Factor") is not None:
+                    setattr(mode, _DC_TIMES[tag] + "_factor",
+                            self.int_(ch.get("Factor"), ch, f"{tag}/@Factor"))
+            else:
+                self.unknown(ch, "OpMode", el)
+        return mode
+
+    def eeprom(self, el: etree._Element) -> Eeprom:
+        eep = Eeprom(self.src(el), assign_to_pdi=self.bool_(el.get("AssignToPdi"), el,
+                                                            "Eeprom/@AssignToPdi"))
+        for ch in el:
+            tag = ch.tag
+            if tag == "ByteSize":
+                eep.byte_size = self.int_(ch.text, ch, "Eeprom/ByteSize")
+            elif tag == "ConfigData":
+                eep.config_data = self.hex_(ch.text or "", ch, "Eeprom/ConfigData")
+            elif tag == "BootStrap":
+                eep.boot_strap = self.hex_(ch.text or "", ch, "Eeprom/BootStrap")
+            elif tag == "Data":
+                eep.data = self.hex_(ch.text or "", ch, "Eeprom/Data")
+            elif tag == "Category":
+                cat_no = self.int_(ch.findtext("CatNo"), ch, "Category/CatNo")
+                data = self.hex_(ch.findtext("Data") or "", ch, "Category/Data")
+                if cat_no is not None and data is not None:
+                    eep.categories.append((cat_no, data))
+            else:
+                self.unknown(ch, "Eeprom", el)
+        return eep
+
+    # -- profile and dictionary ----------------------------------------------------------
+
+    def profile(self, el: etree._Element) -> Profile:
+        prof = Profile(self.src(el), channel=self.int_(el.get("Channel"), el, "@Channel"))
+        for ch in el:
+            tag = ch.tag
+            if tag == "ProfileNo":
+                prof.profile_no = self.int_(ch.text, ch, "Profile/ProfileNo")
+            elif tag == "AddInfo":
+                prof.add_info = self.int_(ch.text, ch, "Profile/AddInfo")
+            elif tag == "Dictionary":
+                prof.dictionary = self.dictionary(ch)
+            elif tag == "DictionaryFile":
+                prof.dictionary_file = text_of(ch)
+            else:
+                self.unknown(ch, "Profile", el)
+        return prof
+
+    def dictionary(self, el: etree._Element) -> Dictionary:
+        dic = Dictionary({}, {}, self.src(el))
+        for ch in el:
+            tag = ch.tag
+            if tag == "DataTypes":
+                for dt in ch:
+                    if dt.tag == "DataType":
+                        d = self.data_type(dt)
+                        dic.data_types.setdefault(d.name, d)
+                    else:
+                        self.unknown(dt, "Dictionary", ch)
+            elif tag == "Objects":
+                for ob in ch:
+                    if ob.tag == "Object":
+                        o = self.dict_object(ob)
+                        if o.index is not None:
+                            dic.objects.setdefault(o.index, o)
+                    else:
+                        self.unknown(ob, "Dictionary", ch)
+            else:
+                self.unknown(ch, "Dictionary", el)
+        return dic
+
+    def data_type(self, el: etree._Element) -> DataType:
+        dt = DataType("", None, self.src(el))
+        for ch in el:
+            tag = ch.tag
+            if tag == "SubItem":
+                dt.sub_items.append(self.dt_sub_item(ch))
+            elif tag == "Name":
+                dt.name = (ch.text or "").strip()
+            elif tag == "BitSize":
+                dt.bit_size = self.int_(ch.text, ch, "DataType/BitSize")
+            elif tag == "BaseType":
+                dt.base_type = (ch.text or "").strip()
+            elif tag == "Index":
+                dt.index = self.int_(ch.text, ch, "DataType/Index")
+            elif tag == "ArrayInfo":
+                lb = self.int_(ch.findtext("LBound"), ch, "ArrayInfo/LBound")
+                n = self.int_(ch.findtext("Elements"), ch, "ArrayInfo/Elements")
+                if lb is not None and n is not None:
+                    dt.array_info.append(ArrayInfo(lb, n))
+            elif tag == "EnumInfo":
+                value = self.int_(ch.findtext("Enum"), ch, "EnumInfo/Enum")
+                if value is not None:
+                    dt.enums[value] = (ch.findtext("Text") or "").strip()
+            else:
+                self.unknown(ch, "DataType", el)
+        return dt
+
+    def dt_sub_item(self, el: etree._Element) -> DataTypeSubItem:
+        item = DataTypeSubItem(None, "", "", None, None, None, self.src(el))
+        for ch in el:
+            tag = ch.tag
+            if tag == "SubIdx":
+                item.subindex = self.int_(ch.text, ch, "SubItem/SubIdx")
+            elif tag == "Name":
+                item.name = (ch.text or "").strip()
+            elif tag == "Type":
+                item.type = (ch.text or "").strip()
+            elif tag == "BitSize":
+                item.bit_size = self.int_(ch.text, ch, "SubItem/BitSize")
+            elif tag == "BitOffs":
+                item.bit_offset = self.int_(ch.text, ch, "SubItem/BitOffs")
+            elif tag == "Flags":
+                item.flags = self.flags(ch)
+            else:
+                self.unknown(ch, "SubItem", el)
+        return item
+
+    def dict_object(self, el: etree._Element) -> DictObject:
+        obj = DictObject(None, {}, "", None, self.src(el))
+        for ch in el:
+            tag = ch.tag
+            if tag == "Index":
+                obj.index = self.int_(ch.text, ch, "Object/Index", "error")
+                if ch.get("DependOnSlot") is not None:
+                    obj.depend_on_slot = self.bool_(ch.get("DependOnSlot"), ch,
+                                                    "@DependOnSlot")
+            elif tag == "Name":
+                self.add_name(obj.names, ch)
+            elif tag == "Type":
+                obj.type = (ch.text or "").strip()
+            elif tag == "BitSize":
+                obj.bit_size = self.int_(ch.text, ch, "Object/BitSize")
+            elif tag == "Info":
+                obj.info = self.object_info(ch)
+            elif tag == "Flags":
+                obj.flags = self.flags(ch)
+            else:
+                self.unknown(ch, "Object", el)
+        return obj
+
+    def object_info(self, el: etree._Element) -> ObjectInfo:
+        info = ObjectInfo()
+        for ch in el:
+            tag = ch.tag
+            if tag == "SubItem":
+                name, sub = "", None
+                for part in ch:
+                    if part.tag == "Name":
+                        name = part.text or ""
+                    elif part.tag == "Info":
+                        sub = self.object_info(part)
+                info.sub_items.append((name, sub or ObjectInfo()))
+            elif tag == "DefaultData":
+                info.default_data = self.hex_(ch.text or "", ch, "Info/DefaultData")
+            elif tag == "DefaultValue":
+                info.default_value = self.int_(ch.text, ch, "Info/DefaultValue")
+            elif tag == "DefaultString":
+                info.default_string = ch.text or ""
+            elif tag == "MinValue":
+                info.min_value = self.int_(ch.text, ch, "Info/MinValue")
+            elif tag == "MaxValue":
+                info.max_value = self.int_(ch.text, ch, "Info/MaxValue")
+            elif tag == "MinData":
+                info.min_data = self.hex_(ch.text or "", ch, "Info/MinData")
+            elif tag == "MaxData":
+                info.max_data = self.hex_(ch.text or "", ch, "Info/MaxData")
+            else:
+                self.unknown(ch, "ObjectInfo", el)
+        return info
+
+    def flags(self, el: etree._Element) -> ObjectFlags:
+        flags = ObjectFlags()
+        for ch in el:
+            tag = ch.tag
+            if tag == "Access":
+                flags.access = self.access(ch)
+            elif tag == "PdoMapping":
+                flags.pdo_mapping = (ch.text or "").strip().upper()
+            elif tag == "Category":
+                flags.category = (ch.text or "").strip()
+            elif tag == "SdoAccess":
+                flags.sdo_access = (ch.text or "").strip()
+            elif tag == "Backup":
+                flags.backup = self.int_(ch.text, ch, "Flags/Backup")
+            elif tag == "Setting":
+                flags.setting = self.int_(ch.text, ch, "Flags/Setting")
+            else:
+                self.unknown(ch, "Flags", el)
+        return flags
+
+    def access(self, el: etree._Element) -> Access:
+        acc = Access(text_of(el).lower())
+        for attr in ("ReadRestrictions", "WriteRestrictions"):
+            raw = el.get(attr)
+            if raw is None:
+                continue
+            states = []
+            for part in raw.strip().split("_"):
+                state = _STATE_BY_LOWER.get(part.lower())
+                if state is None:
+                    self.problems.append(ReadProblem(
+                        self.src(el), f"Access/@{attr}: unknown state {part!r} in {raw!r}"))
+                else:
+                    states.append(state)
+            if attr == "ReadRestrictions":
+                acc.read_states = frozenset(states)
+            else:
+                acc.write_states = frozenset(states)
+        return acc
+
+    # -- modular devices ------------------------------------------------------------------
+
+    def slots(self, el: etree._Element) -> Slots:
+        slots = Slots([], self.src(el),
+                      slot_pdo_increment=self.int_(el.get("SlotPdoIncrement"), el,
+                                                   "Slots/@SlotPdoIncrement"),
+                      slot_index_increment=self.int_(el.get("SlotIndexIncrement"), el,
+                                                     "Slots/@SlotIndexIncrement"))
+        for ch in el:
+            if ch.tag == "Slot":
+                slots.slots.append(self.slot(ch))
+            else:
+                self.unknown(ch, "Slots", el)
+        return slots
+
+    def slot(self, el: etree._Element) -> Slot:
+        g = el.get
+        slot = Slot({}, self.src(el),
+                    min_instances=self.int_(g("MinInstances"), el, "Slot/@MinInstances"),
+                    max_instances=self.int_(g("MaxInstances"), el, "Slot/@MaxInstances"),
+                    default_ident=self.int_(g("Default"), el, "Slot/@Default"),
+                    slot_pdo_increment=self.int_(g("SlotPdoIncrement"), el,
+                                                 "Slot/@SlotPdoIncrement"),
+                    slot_index_increment=self.int_(g("SlotIndexIncrement"), el,
+                                                   "Slot/@SlotIndexIncrement"))
+        for ch in el:
+            tag = ch.tag
+            if tag == "ModuleIdent":
+                ident = self.int_(ch.text, ch, "Slot/ModuleIdent")
+                if ident is not None:
+                    slot.module_idents.append(ident)
+                    if ch.get("Default") is not None and \
+                            self.bool_(ch.get("Default"), ch, "ModuleIdent/@Default"):
+                        slot.default_ident = ident
+            elif tag == "ModuleClass":
+                slot.module_classes.append((ch.findtext("Class") or "").strip())
+            elif tag == "Name":
+                self.add_name(slot.names, ch)
+            else:
+                self.unknown(ch, "Slot", el)
+        return slot
+
+    def module(self, el: etree._Element) -> Module:
+        mod = Module(None, "", {}, self.src(el))
+        for ch in el:
+            tag = ch.tag
+            if tag == "Type":
+                mod.type_name = text_of(ch)
+                mod.ident = self.int_(ch.get("ModuleIdent"), ch, "Type/@ModuleIdent", "error")
+                mod.module_class = ch.get("ModuleClass")
+                mod.pdo_group = self.int_(ch.get("ModulePdoGroup"), ch, "@ModulePdoGroup")
+            elif tag == "Name":
+                self.add_name(mod.names, ch)
+            elif tag == "RxPdo":
+                mod.rx_pdos.append(self.pdo(ch))
+            elif tag == "TxPdo":
+                mod.tx_pdos.append(self.pdo(ch))
+            elif tag == "Mailbox":
+                mod.mailbox = self.mailbox(ch)
+            elif tag == "Profile":
+                mod.profile = self.profile(ch)
+            elif tag == "DcOpModeName":
+                mod.dc_opmode_name = text_of(ch)
+            else:
+                self.unknown(ch, "Module", el)
+        return mod
+
+
+_STATE_TIMEOUTS = {
+    "PreopTimeout": "preop_timeout",
+    "SafeopOpTimeout": "safeop_op_timeout",
+    "BackToInitTimeout": "back_to_init_timeout",
+    "BackToSafeopTimeout": "back_to_safeop_timeout",
+}
+_MAILBOX_TIMEOUTS = {
+    "RequestTimeout": "mailbox_request_timeout",
+    "ResponseTimeout": "mailbox_response_timeout",
+}
+_DC_TIMES = {
+    "CycleTimeSync0": "cycle_time_sync0",
+    "ShiftTimeSync0": "shift_time_sync0",
+    "CycleTimeSync1": "cycle_time_sync1",
+    "ShiftTimeSync1": "shift_time_sync1",
+}
