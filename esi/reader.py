@@ -318,7 +318,7 @@ class _Reader:
             default_size=self.int_(g("DefaultSize"), el, "Sm/@DefaultSize"),
             min_size=self.int_(g("MinSize"), el, "Sm/@MinSize"),
             max_size=self.int_(g("MaxSize"), el, "Sm/@MaxSize"),
-            enable=self.int_(g("Enable"), el, "Sm/@Enable"),
+            enable=self.enable(g("Enable"), el),
             op_only=self.bool_(g("OpOnly"), el, "Sm/@OpOnly"),
             virtual=self.bool_(g("Virtual"), el, "Sm/@Virtual"),
             watchdog=(None if g("Watchdog") is None
@@ -326,6 +326,12 @@ class _Reader:
             one_byte_mode=self.bool_(g("OneByteMode"), el, "Sm/@OneByteMode"),
             fixed_assignment=self.bool_(g("FixedAssignment"), el, "Sm/@FixedAssignment"),
         )
+
+    def enable(self, raw: str | None, el: etree._Element) -> int | None:
+        """Sm/@Enable: a HexDecValue in the schema, but a flag; ``true``/``false`` occur."""
+        if raw is not None and raw.strip().lower() in ("true", "false"):
+            return int(parse_bool(raw))
+        return self.int_(raw, el, "Sm/@Enable")
 
     def fmmu(self, el: etree._Element, number: int) -> Fmmu:
         return Fmmu(number, text_of(el) or None, self.src(el),

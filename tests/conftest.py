@@ -1,0 +1,74 @@
+"""Shared fixtures.  Corpus-dependent tests skip locally when ../shared/corpus is missing, but
+fail in CI: `.ci/run` sets ECATCFG_REQUIRE_CORPUS=1 so nothing silently skips there."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+EXAMPLES = ROOT / "examples"
+FIXTURES = Path(__file__).resolve().parent / "fixtures"
+CORPUS = Path(os.environ.get("ECATCFG_CORPUS", ROOT.parent / "shared" / "corpus"))
+
+
+def _require(what: str) -> None:
+    if os.environ.get("ECATCFG_REQUIRE_CORPUS") == "1":
+        pytest.fail(f"{what} is required in CI (ECATCFG_REQUIRE_CORPUS=1) but missing")
+    pytest.skip(f"{what} not found; tests on real vendor files skipped")
+
+
+@pytest.fixture(scope="session")
+def corpus() -> Path:
+    if not (CORPUS / "esi").is_dir():
+        _require(f"the corpus at {CORPUS}")
+    return CORPUS
+
+
+@pytest.fixture(scope="session")
+def esi_schema(corpus: Path):
+    from lxml import etree
+    xsd = corpus / "schemas" / "esi-1.17" / "EtherCATInfo.xsd"
+    if not xsd.is_file():
+        _require(str(xsd))
+    return etree.XMLSchema(etree.parse(str(xsd)))
+
+
+@pytest.fixture(autouse=True)
+def _private_cache(tmp_path_factory, monkeypatch):
+    """Every test gets its own empty index cache: never the user's ~/.cache."""
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path_factory.mktemp("xdg-cache")))
+
+
+def write(tmp_path: Path, name: str, text: str | bytes) -> Path:
+    path = tmp_path / name
+    path.write_bytes(text.encode() if isinstance(text, str) else text)
+    return path
+
+
+# A minimal, valid ESI body for fixtures; {devices} is replaced by Device elements.
+ESI_TEMPLATE = """<?xml version="1.0" encoding="{encoding}"?>
+<EtherCATInfo Version="1.17">
+  <Vendor><Id>{vendor}</Id><Name>Fixture Vendor</Name></Vendor>
+  <Descriptions>
+    <Groups><Group><Type>G</Type><Name>Group</Name></Group></Groups>
+    <Devices>
+{devices}
+    </Devices>
+  </Descriptions>
+</EtherCATInfo>
+"""
+
+
+def device_xml(type_name: str = "FX1", product: str = "#x10", revision: str = "#x1",
+               body: str = "") -> str:
+    return (f'      <Device Physics="YY"><Type ProductCode="{product}" RevisionNo="{revision}">'
+            f'{type_name}</Type><Name LcId="1033">{type_name} name</Name>'
+            f"<GroupType>G</GroupType>{body}</Device>")
+
+
+def esi_xml(*devices: str, vendor: str = "#x00E0F1", encoding: str = "UTF-8") -> str:
+    return ESI_TEMPLATE.format(devices="\n".join(devices) or device_xml(), vendor=vendor,
+                               encoding=encoding)
