@@ -38,7 +38,7 @@ def test_omitted_revision_takes_highest_and_says_so(lib):
 
 
 def test_missing_revision_lists_the_available_ones(lib):
-    with pytest.raises(SelectorError, match=r"revision 0x9 of 0xe0f1:0x10 \(Drive \) is not in "
+    with pytest.raises(SelectorError, match=r"revision 0x9 of 0xe0f1:0x10 \(Drive\) is not in "
                        r"the library; available: 0xe0f1:0x10:0x1, 0xe0f1:0x10:0x2, 0xe0f1:0x10:0x3"):
         lib.find("0xe0f1:0x10:9")
 
