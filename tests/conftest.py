@@ -1,5 +1,6 @@
 """Shared fixtures.  Corpus-dependent tests skip locally when ../shared/corpus is missing, but
-fail in CI: `.ci/run` sets ECATCFG_REQUIRE_CORPUS=1 so nothing silently skips there."""
+fail in CI (CI=true, or ECATCFG_REQUIRE_CORPUS=1 as `.ci/run` sets): nothing silently skips
+there."""
 
 from __future__ import annotations
 
@@ -15,7 +16,7 @@ CORPUS = Path(os.environ.get("ECATCFG_CORPUS", ROOT.parent / "shared" / "corpus"
 
 
 def _require(what: str) -> None:
-    if os.environ.get("ECATCFG_REQUIRE_CORPUS") == "1":
+    if os.environ.get("ECATCFG_REQUIRE_CORPUS") == "1" or os.environ.get("CI") == "true":
         pytest.fail(f"{what} is required in CI (ECATCFG_REQUIRE_CORPUS=1) but missing")
     pytest.skip(f"{what} not found; tests on real vendor files skipped")
 

@@ -1,0 +1,93 @@
+"""The command-line contract: exit codes, JSON shape, messages, and light imports."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+from conftest import EXAMPLES, ROOT, device_xml, esi_xml, write
+
+CONTRACT_KEYS = {"file", "line", "vendor_id", "product_code", "revision", "type", "name",
+                 "group", "rx_pdos", "tx_pdos", "rx_entries", "tx_entries", "mailbox",
+                 "dc_opmodes", "slots", "modules"}
+
+
+def ecatcfg(*args: str, cwd=ROOT) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "ecatcfg", *args], capture_output=True,
+                          text=True, cwd=cwd)
+
+
+def test_devices_json_shape_on_examples():
+    out = ecatcfg("devices", "--format", "json", "examples/")
+    assert out.returncode == 0, out.stderr
+    devices = json.loads(out.stdout)["devices"]
+    assert len(devices) == 4
+    drive = next(d for d in devices if d["type"] == "EXD-402")
+    assert CONTRACT_KEYS <= set(drive)
+    assert drive == {**drive, "file": "examples/ecatcfg-example-devices.xml",
+                     "vendor_id": 0xE0000ECA, "product_code": 0x7201, "revision": 0x20000,
+                     "rx_pdos": 1, "tx_pdos": 1, "rx_entries": 2, "tx_entries": 2,
+                     "mailbox": ["CoE", "FoE"], "dc_opmodes": ["DC", "FreeRun"], "slots": 0,
+                     "modules": 0, "group": "ExDrive",
+                     "name": "EXD-402 servo drive, CiA 402 (example)"}
+    text = (EXAMPLES / "ecatcfg-example-devices.xml").read_text().splitlines()
+    assert 'ProductCode="#x00007201"' in text[drive["line"]]   # line of <Device>, Type next
+
+
+def test_devices_text_lists_selector_and_source():
+    out = ecatcfg("devices", "examples")
+    assert out.returncode == 0
+    assert "0xe0000eca:0x7201:0x20000" in out.stdout and "4 devices in 1 files" in out.stdout
+
+
+def test_missing_path_exits_2():
+    out = ecatcfg("devices", "no/such/dir")
+    assert out.returncode == 2 and "no/such/dir: no such file or folder" in out.stderr
+    assert "Traceback" not in out.stderr
+
+
+def test_usage_error_exits_2():
+    out = ecatcfg("devices", "--format", "yaml", "examples")
+    assert out.returncode == 2 and "invalid choice" in out.stderr
+    assert ecatcfg().returncode == 2
+
+
+def test_malformed_file_exits_1_naming_file_and_line(tmp_path):
+    write(tmp_path, "cut.xml", esi_xml()[:300])
+    write(tmp_path, "good.xml", esi_xml(device_xml("GOOD")))
+    out = ecatcfg("devices", str(tmp_path))
+    assert out.returncode == 1
+    assert f"{tmp_path}/cut.xml:" in out.stderr and "not well-formed" in out.stderr
+    assert "Traceback" not in out.stderr
+    assert "GOOD" in out.stdout                         # the good file is still listed
+
+
+def test_bad_product_code_exits_1_with_line(tmp_path):
+    path = write(tmp_path, "bad.xml", esi_xml(device_xml(product="#xNOPE")))
+    out = ecatcfg("devices", "--format", "json", str(path))
+    assert out.returncode == 1
+    err = json.loads(out.stdout)["errors"][0]
+    assert err["file"] == str(path) and err["line"] > 1 and "#xNOPE" in err["message"]
+
+
+def test_help_and_devices_do_not_import_scapy_or_the_runtime():
+    probe = (
+        "import sys, io, contextlib\n"
+        "from ecatcfg.cli import main\n"
+        "with contextlib.redirect_stdout(io.StringIO()):\n"
+        "    try: main(['--help'])\n"
+        "    except SystemExit: pass\n"
+        "    heavy_after_help = [m for m in sys.modules if m.startswith(('scapy', 'lxml', 'ecatcfg.runtime'))]\n"
+        "    main(['devices', 'examples'])\n"
+        "bad = [m for m in sys.modules if m.startswith(('scapy', 'ecatcfg.runtime', 'pysoem'))]\n"
+        "print(heavy_after_help, bad)\n")
+    out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True,
+                         cwd=ROOT, check=True)
+    assert out.stdout.strip() == "[] []"
+
+
+def test_demo_lists_the_embedded_examples(tmp_path):
+    out = ecatcfg("demo", cwd=tmp_path)                  # no paths, any folder
+    assert out.returncode == 0, out.stderr
+    assert "EXD-402" in out.stdout and "4 devices" in out.stdout

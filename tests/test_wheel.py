@@ -1,0 +1,47 @@
+"""Build a wheel, install it into a fresh venv and run the CLI from there.
+
+This is what catches missing package data (the examples and templates must be inside the
+wheel) and generic top-level modules leaking into site-packages.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import venv
+import zipfile
+
+from conftest import ROOT
+
+
+def test_wheel_installs_and_runs(tmp_path):
+    dist = tmp_path / "dist"
+    subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", str(dist),
+                    str(ROOT)], check=True, capture_output=True)
+    wheel, = dist.glob("ecatcfg-*.whl")
+    names = zipfile.ZipFile(wheel).namelist()
+    top = {n.split("/")[0] for n in names if not n.split("/")[0].endswith(".dist-info")}
+    assert top == {"ecatcfg"}, top
+    assert "ecatcfg/examples/ecatcfg-example-devices.xml" in names
+    assert "ecatcfg/templates/__init__.py" in names
+    assert not any(n.startswith("ecatcfg/tests/") or n.startswith("ecatcfg/bench/")
+                   for n in names)
+
+    env_dir = tmp_path / "venv"
+    venv.create(env_dir, with_pip=True)
+    py = env_dir / "bin" / "python"
+    subprocess.run([str(py), "-m", "pip", "install", "-q", str(wheel)], check=True,
+                   capture_output=True)
+    exe = env_dir / "bin" / "ecatcfg"
+    run = lambda *a, cwd=ROOT: subprocess.run([str(exe), *a], capture_output=True, text=True,
+                                              cwd=cwd)
+    out = run("--help")
+    assert out.returncode == 0 and "devices" in out.stdout
+    out = run("devices", "examples/")
+    assert out.returncode == 0 and "EXD-402" in out.stdout, out.stderr
+    out = run("demo", cwd=tmp_path)        # the embedded default: package data only
+    assert out.returncode == 0 and "4 devices in 1 files" in out.stdout, out.stderr
+    # the installed module is the wheel's, not the checkout's
+    where = subprocess.run([str(py), "-c", "import ecatcfg; print(ecatcfg.__file__)"],
+                           capture_output=True, text=True, cwd=tmp_path, check=True)
+    assert str(env_dir) in where.stdout
