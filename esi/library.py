@@ -43,8 +43,7 @@ class LibraryFile:
 
 
 class Library:
-    def __init__(self, paths: list[str | Path], cache: IndexCache | None | bool = True,
-                 explicit_files_must_be_esi: bool = True) -> None:
+    def __init__(self, paths: list[str | Path], cache: IndexCache | None | bool = True) -> None:
         """Index ``paths``.
 
         ``cache``: an :class:`IndexCache`, ``True`` for the default one, ``False``/``None`` for
@@ -58,18 +57,18 @@ class Library:
         self._models: dict[Path, EsiFile] = {}
         for given in paths:
             for path, shown, explicit in _expand(given):
-                self._add(path, shown, explicit and explicit_files_must_be_esi)
+                self._add(path, shown, explicit)
         if self.cache is not None:
             self.cache.flush()
         self.entries: list[DeviceEntry] = self._entries()
 
     # -- indexing -------------------------------------------------------------------------
 
-    def _add(self, path: Path, shown: str, must_be_esi: bool) -> None:
+    def _add(self, path: Path, shown: str, named_directly: bool) -> None:
         try:
             summary = self._summary(path, shown)
         except reader.EsiReadError as exc:
-            if must_be_esi:
+            if named_directly:
                 self.problems.append(exc)
             else:
                 self.skipped.append(shown)

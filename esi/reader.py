@@ -104,11 +104,6 @@ def check_root(root: etree._Element, file: str) -> None:
                            "<EtherCATModule>: not an ESI file", file, root.sourceline)
 
 
-def children(el: etree._Element):
-    """Element children only (comments and processing instructions left out)."""
-    return el.iterchildren(etree.Element)
-
-
 def text_of(el: etree._Element) -> str:
     return (el.text or "").strip()
 

@@ -6,6 +6,7 @@ wheel) and generic top-level modules leaking into site-packages.
 
 from __future__ import annotations
 
+import shutil
 import subprocess
 import sys
 import venv
@@ -15,9 +16,14 @@ from conftest import ROOT
 
 
 def test_wheel_installs_and_runs(tmp_path):
+    # Build from a clean copy: pip builds in-tree, and a stale build/lib in the checkout
+    # would both hide missing files and leave litter behind.
+    src = tmp_path / "src"
+    shutil.copytree(ROOT, src, ignore=shutil.ignore_patterns(
+        ".git", "build", "dist", "*.egg-info", "__pycache__", ".pytest_cache"))
     dist = tmp_path / "dist"
     subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", str(dist),
-                    str(ROOT)], check=True, capture_output=True)
+                    str(src)], check=True, capture_output=True)
     wheel, = dist.glob("ecatcfg-*.whl")
     names = zipfile.ZipFile(wheel).namelist()
     top = {n.split("/")[0] for n in names if not n.split("/")[0].endswith(".dist-info")}
