@@ -112,6 +112,7 @@ class ObjectFlags:
     sdo_access: str | None = None     # CompleteAccess / SubIndexAccess
     backup: int | None = None
     setting: int | None = None
+    source: Source | None = None
 
 
 @dataclass(slots=True)
@@ -126,6 +127,7 @@ class ObjectInfo:
     min_data: bytes | None = None
     max_data: bytes | None = None
     sub_items: list[tuple[str, ObjectInfo]] = field(default_factory=list)
+    source: Source | None = None      # None for a SubItem that gives no Info
 
 
 @dataclass(slots=True)

@@ -21,6 +21,8 @@ _FALSE = frozenset(("0", "false"))
 
 def parse_int(text: str) -> int:
     """A HexDecValue: ``#x1A00``, ``0x1A00`` or decimal (optionally signed)."""
+    if text.isascii() and text.isdigit():      # the common "8", "16", "1033": no regex
+        return int(text)
     m = _DEC.match(text)
     if m is not None:
         return int(m.group(1))
