@@ -94,7 +94,7 @@ def summarize(tree: etree._ElementTree, file: str) -> FileSummary:
         if id_el is not None:
             vendor_id = number(id_el.text, id_el, "Vendor/Id")
         vendor_name = _english(vendor_el.findall("Name"))
-    summary = FileSummary(root.tag, vendor_id, vendor_name)
+    summary = FileSummary(root.tag, vendor_id, vendor_name, errors=errors)
     summary.info_references = [(el.text or "").strip() for el in root.iterfind("InfoReference")]
     if root.tag == "EtherCATModule":
         summary.modules = len(root.findall("Modules/Module"))
@@ -102,7 +102,6 @@ def summarize(tree: etree._ElementTree, file: str) -> FileSummary:
     summary.modules = len(root.findall("Descriptions/Modules/Module"))
     for ordinal, dev in enumerate(root.iterfind("Descriptions/Devices/Device")):
         summary.devices.append(_device(dev, ordinal, number))
-    summary.errors = errors
     return summary
 
 

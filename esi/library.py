@@ -37,7 +37,7 @@ class Selection:
 
 @dataclass(slots=True)
 class LibraryFile:
-    path: Path                   # where it is
+    path: Path                   # where it is, resolved (absolute, no symlinks)
     shown: str                   # how messages name it
     summary: FileSummary
 
@@ -57,7 +57,7 @@ class Library:
         self._models: dict[Path, EsiFile] = {}
         for given in paths:
             for path, shown, explicit in _expand(given):
-                self._add(path, shown, explicit)
+                self._add(path.resolve(), shown, explicit)
         if self.cache is not None:
             self.cache.flush()
         self.entries: list[DeviceEntry] = self._entries()
@@ -86,7 +86,7 @@ class Library:
             st = path.stat()
         except OSError as exc:
             raise xmlsafe.XmlError(f"cannot read: {exc.strerror}", shown) from None
-        digest = cache.known_digest(path.resolve(), st) if cache else None
+        digest = cache.known_digest(path, st) if cache else None
         if digest is not None:
             summary = cache.get(digest)
             if summary is not None:
@@ -104,7 +104,7 @@ class Library:
             if cache is not None:
                 cache.put(digest, summary)
         if cache is not None:
-            cache.remember(path.resolve(), st, digest)
+            cache.remember(path, st, digest)
         return summary
 
     def _entries(self) -> list[DeviceEntry]:
@@ -137,7 +137,7 @@ class Library:
         candidate = (lf.path.parent.joinpath(*parts)).resolve() if parts else None
         by_name = PureWindowsPath(ref).name.lower()
         for other in self.files:
-            if candidate is not None and other.path.resolve() == candidate:
+            if other.path == candidate:
                 return other
         for other in self.files:
             if other.path.name.lower() == by_name and other is not lf:

@@ -123,3 +123,11 @@ def test_examples_validate_against_the_etg_schema(esi_schema):
     from lxml import etree
     for path in EXAMPLES.glob("*.xml"):
         assert esi_schema.validate(etree.parse(str(path))), esi_schema.error_log
+
+
+def test_bad_vendor_id_in_a_module_library_is_reported(tmp_path):
+    write(tmp_path, "lib.xml", MODULE_LIB.replace("<Id>#x00E0F1</Id>", "<Id>#xQQ</Id>"))
+    lib = Library([tmp_path], cache=False)
+    problem, = lib.problems
+    assert problem.file.endswith("lib.xml") and problem.line == 2
+    assert "Vendor/Id" in problem.message and "#xQQ" in problem.message
