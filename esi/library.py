@@ -15,6 +15,7 @@ from __future__ import annotations
 import difflib
 import os
 from dataclasses import dataclass
+from typing import Iterable
 from pathlib import Path, PureWindowsPath
 
 from ecatcfg.errors import EcatcfgError, UsageError
@@ -56,7 +57,7 @@ class Library:
         self.problems: list[EcatcfgError] = []
         self._models: dict[Path, EsiFile] = {}
         for given in paths:
-            for path, shown, explicit in _expand(given):
+            for path, shown, explicit in expand_paths(given):
                 self._add(path.resolve(), shown, explicit)
         if self.cache is not None:
             self.cache.flush()
@@ -127,22 +128,11 @@ class Library:
     # -- module libraries -----------------------------------------------------------------
 
     def resolve_reference(self, lf: LibraryFile, ref: str) -> LibraryFile | None:
-        """The module library an ``InfoReference`` names, or ``None``.
-
-        Tried in order: the path relative to the referencing file (Windows separators
-        accepted), then any library file with the same file name (case-insensitive): vendor
-        files refer to ``Sub\\Folder\\File.xml`` while the file often lies beside them.
-        """
-        parts = PureWindowsPath(ref).parts
-        candidate = (lf.path.parent.joinpath(*parts)).resolve() if parts else None
-        by_name = PureWindowsPath(ref).name.lower()
-        for other in self.files:
-            if other.path == candidate:
-                return other
-        for other in self.files:
-            if other.path.name.lower() == by_name and other is not lf:
-                return other
-        return None
+        """The module library an ``InfoReference`` names, or ``None`` (see
+        :func:`find_reference`)."""
+        by_path = {other.path: other for other in self.files if other is not lf}
+        found = find_reference(lf.path, ref, by_path)
+        return by_path[found] if found is not None else None
 
     def unresolved_references(self) -> list[tuple[LibraryFile, str]]:
         return [(lf, ref) for lf in self.files for ref in lf.summary.info_references
@@ -255,7 +245,29 @@ def _highest(entries: list[DeviceEntry]) -> Selection:
     return Selection(best, note)
 
 
-def _expand(given: str | Path) -> list[tuple[Path, str, bool]]:
+def find_reference(referencing: Path, ref: str, candidates: Iterable[Path]) -> Path | None:
+    """Where the module library named by an ``InfoReference`` in ``referencing`` is.
+
+    Tried in order: the path relative to the referencing file (Windows separators
+    accepted), then any of ``candidates`` (resolved paths) with the same file name
+    (case-insensitive): vendor files refer to ``Sub\\Folder\\File.xml`` while the file often
+    lies beside them.
+    """
+    parts = PureWindowsPath(ref).parts
+    if not parts:
+        return None
+    candidate = referencing.parent.joinpath(*parts).resolve()
+    by_name = PureWindowsPath(ref).name.lower()
+    candidates = list(candidates)
+    if candidate in candidates:
+        return candidate
+    for other in candidates:
+        if other.name.lower() == by_name and other != referencing:
+            return other
+    return None
+
+
+def expand_paths(given: str | Path) -> list[tuple[Path, str, bool]]:
     """``(path, shown name, named directly)`` for a file or a folder searched recursively."""
     path = Path(given)
     if path.is_file():

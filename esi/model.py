@@ -47,6 +47,9 @@ class ReadProblem:
     message: str
     severity: Literal["error", "warning"] = "warning"
     column: int | None = None
+    # What could not be read: "number" (hex/decimal), "data" (hexBinary), "flag" (boolean),
+    # "text" (an enumerated word such as an AL state); lint maps them to its rules.
+    kind: Literal["number", "data", "flag", "text"] = "number"
 
 
 @dataclass(slots=True)
@@ -350,6 +353,16 @@ class DcOpMode:
     cycle_time_sync1: int | None = None
     cycle_time_sync1_factor: int | None = None
     shift_time_sync1: int | None = None
+    # VendorSpecific/TwinCAT @UseFromBuildNo / @IgnoreFromBuildNo: Beckhoff files give two
+    # versions of a mode under one name, each for a range of TwinCAT builds.
+    use_from_build: int | None = None
+    ignore_from_build: int | None = None
+
+    def overlaps(self, other: DcOpMode) -> bool:
+        """Whether both modes apply to some common TwinCAT build (always, without ranges)."""
+        lo = max(self.use_from_build or 0, other.use_from_build or 0)
+        hi = min(self.ignore_from_build or 1 << 62, other.ignore_from_build or 1 << 62)
+        return lo < hi
 
 
 @dataclass(slots=True)

@@ -49,7 +49,7 @@ _SKIPPED: dict[str, frozenset[str]] = {
     "CoE": frozenset(("Object",)),
     "InitCmd": frozenset(),
     "Dc": frozenset(("VendorSpecific",)),
-    "OpMode": frozenset(("Sm", "VendorSpecific")),
+    "OpMode": frozenset(("Sm",)),
     "Eeprom": frozenset(("VendorSpecific",)),
     "Profile": frozenset(("SubAddInfo", "ChannelCount", "ChannelInfo", "DiagFile",
                           "DiagMessages", "VendorSpecific")),
@@ -124,8 +124,8 @@ class _Reader:
         return _new_source(Source, (self.file, el.sourceline or 0))
 
     def _problem(self, el: etree._Element, what: str, exc: ValueError,
-                 severity: str) -> None:
-        self.problems.append(ReadProblem(self.src(el), f"{what}: {exc}", severity))
+                 severity: str, kind: str = "number") -> None:
+        self.problems.append(ReadProblem(self.src(el), f"{what}: {exc}", severity, kind=kind))
 
     # int_/bool_/hex_ are the hot path of a full read (~150k calls on the corpus): kept flat.
     def int_(self, raw: str | None, el: etree._Element, what: str,
@@ -145,7 +145,7 @@ class _Reader:
         try:
             return parse_bool(raw)
         except ValueError as exc:
-            self._problem(el, what, exc, "warning")
+            self._problem(el, what, exc, "warning", "flag")
             return default
 
     def hex_(self, raw: str | None, el: etree._Element, what: str) -> bytes | None:
@@ -154,7 +154,7 @@ class _Reader:
         try:
             return parse_hex_bytes(raw)
         except ValueError as exc:
-            self._problem(el, what, exc, "warning")
+            self._problem(el, what, exc, "warning", "data")
             return None
 
     def unknown(self, ch: etree._Element, context: str, parent: etree._Element) -> None:
@@ -465,6 +465,13 @@ class _Reader:
                 if tag.startswith("CycleTime") and ch.get("Factor") is not None:
                     setattr(mode, _DC_TIMES[tag] + "_factor",
                             self.int_(ch.get("Factor"), ch, f"{tag}/@Factor"))
+            elif tag == "VendorSpecific":
+                tc = ch.find("TwinCAT")
+                if tc is not None:
+                    mode.use_from_build = self.int_(tc.get("UseFromBuildNo"), tc,
+                                                    "TwinCAT/@UseFromBuildNo")
+                    mode.ignore_from_build = self.int_(tc.get("IgnoreFromBuildNo"), tc,
+                                                       "TwinCAT/@IgnoreFromBuildNo")
             else:
                 self.unknown(ch, "OpMode", el)
         return mode
@@ -663,7 +670,8 @@ class _Reader:
                 state = _STATE_BY_LOWER.get(part.lower())
                 if state is None:
                     self.problems.append(ReadProblem(
-                        self.src(el), f"Access/@{attr}: unknown state {part!r} in {raw!r}"))
+                        self.src(el), f"Access/@{attr}: unknown state {part!r} in {raw!r}",
+                        kind="text"))
                 else:
                     states.append(state)
             if attr == "ReadRestrictions":

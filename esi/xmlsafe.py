@@ -33,8 +33,12 @@ def _parser() -> etree.XMLParser:
 _PARSER = _parser()
 
 
-def parse_bytes(data: bytes, file: str) -> etree._ElementTree:
-    """Parse a whole document held in memory; ``file`` is only used in messages."""
+def parse_bytes(data: bytes, file: str, strip: bool = True) -> etree._ElementTree:
+    """Parse a whole document held in memory; ``file`` is only used in messages.
+
+    ``strip=False`` keeps a default namespace (for schema validation); call
+    :func:`strip_namespaces` before reading the tree as ESI.
+    """
     try:
         root = etree.fromstring(data, _PARSER)
     except etree.XMLSyntaxError as exc:
@@ -48,8 +52,8 @@ def parse_bytes(data: bytes, file: str) -> etree._ElementTree:
             raise XmlError(f"the document declares the entity {entity.name!r}; entity "
                            "declarations are not allowed (possible XXE or entity bomb)",
                            file, 1)
-    if isinstance(root.tag, str) and root.tag.startswith("{"):
-        _strip_namespaces(root)
+    if strip:
+        strip_namespaces(tree)
     return tree
 
 
@@ -63,8 +67,11 @@ def parse_file(path: str | Path, shown_as: str | None = None) -> etree._ElementT
     return parse_bytes(data, name)
 
 
-def _strip_namespaces(root: etree._Element) -> None:
+def strip_namespaces(tree: etree._ElementTree) -> None:
     """ESI elements carry no namespace; a few generators add a default one anyway."""
+    root = tree.getroot()
+    if not (isinstance(root.tag, str) and root.tag.startswith("{")):
+        return
     for el in root.iter():
         tag = el.tag
         if isinstance(tag, str) and tag[0] == "{":

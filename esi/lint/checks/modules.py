@@ -1,0 +1,58 @@
+"""ESI6xx: modular devices (ETG.2000 MDP): slots, modules and module libraries."""
+
+from __future__ import annotations
+
+from typing import Iterator
+
+from ecatcfg.esi.lint.context import FileContext
+from ecatcfg.esi.lint.rules import Hit, device_rule, file_rule
+from ecatcfg.esi.model import Device, Module
+
+
+@device_rule("ESI601", "error", "a Slot names a module ident no known module has", """
+    Slot/ModuleIdent (and Slot/@Default) list the modules that fit the slot by their
+    Type/@ModuleIdent.  No module of this file or of the module libraries it references
+    (InfoReference) has this ident, so the slot cannot be filled with it.  Not checked while
+    a referenced library is missing (ESI602 reports that).""")
+def slot_ident_unknown(dev: Device, ctx: FileContext) -> Iterator[Hit]:
+    if dev.slots is None:
+        return
+    known = ctx.known_module_idents()
+    if known is None:
+        return
+    for slot in dev.slots.slots:
+        idents = list(slot.module_idents)
+        if slot.default_ident is not None and slot.default_ident not in idents:
+            idents.append(slot.default_ident)
+        for ident in idents:
+            if ident not in known:
+                yield Hit(slot.source, f"Slot {slot.name!r} names module ident "
+                          f"0x{ident:08X}, which no known module has")
+
+
+@file_rule("ESI602", "error", "an InfoReference names a module library that is not found", """
+    <InfoReference> names a file (an EtherCATModule library) that holds module descriptions
+    this file's slots use.  It is looked for relative to this file (Windows separators
+    accepted), then by file name beside it and among the files being linted.  Without it,
+    modules cannot be configured; keep the library with the device file.""")
+def info_reference_missing(ctx: FileContext) -> Iterator[Hit]:
+    for ref in ctx.references:
+        if ref.path is None:
+            yield Hit(ref.source, f"InfoReference {ref.text!r}: module library not found")
+        elif ref.error:
+            yield Hit(ref.source, f"InfoReference {ref.text!r}: {ref.error}")
+
+
+@file_rule("ESI603", "error", "two modules of a file have the same ident", """
+    Slots and topologies name a module by Type/@ModuleIdent; two modules with one ident make
+    the choice arbitrary.""")
+def duplicate_module_ident(ctx: FileContext) -> Iterator[Hit]:
+    seen: dict[int, Module] = {}
+    for mod in ctx.esi.modules:
+        if mod.ident is None:
+            continue
+        if mod.ident in seen:
+            yield Hit(mod.source, f"Module {mod.type_name!r} has the ident 0x{mod.ident:08X} "
+                      f"of {seen[mod.ident].type_name!r} at line {seen[mod.ident].source.line}")
+        else:
+            seen[mod.ident] = mod

@@ -1,0 +1,190 @@
+"""ESI2xx: SyncManagers, FMMUs and the mailbox."""
+
+from __future__ import annotations
+
+from typing import Iterator
+
+from ecatcfg.esi.lint.checks.common import (
+    ADDRESS_SPACE_END, DIGITAL_OUTPUT_AREA, MIN_MAILBOX_SIZE, PROCESS_RAM_START, SM_DIR_MASK,
+    SM_DIR_READ, SM_DIR_WRITE, SM_MODE_MAILBOX, SM_MODE_MASK, sm_length,
+)
+from ecatcfg.esi.lint.context import FileContext
+from ecatcfg.esi.lint.rules import Hit, device_rule
+from ecatcfg.esi.model import Device, SyncManager
+
+# The direction bits each SM type needs in its control byte (ESC register 0x0804 bits 3:2).
+SM_DIRECTION = {"MBoxOut": SM_DIR_WRITE, "MBoxIn": SM_DIR_READ,
+                "Outputs": SM_DIR_WRITE, "Inputs": SM_DIR_READ}
+
+
+def _real_sms(dev: Device) -> list[tuple[SyncManager, int]]:
+    """(SM, programmed length) for the SMs that occupy ESC memory: not virtual, with a start
+    address and a non-zero length."""
+    out = []
+    for sm in dev.sms:
+        if sm.virtual or sm.start_address is None:
+            continue
+        length = sm_length(dev, sm)
+        if length > 0:
+            out.append((sm, length))
+    return out
+
+
+def _is_buffered(sm: SyncManager) -> bool:
+    return not sm.is_mailbox and sm.control_byte is not None \
+        and sm.control_byte & SM_MODE_MASK != SM_MODE_MAILBOX
+
+
+@device_rule("ESI201", "error", "two SyncManager areas overlap", """
+    Each SyncManager guards its own window of ESC memory (StartAddress, length).  Two windows
+    that share bytes corrupt each other's data: a mailbox response overwrites inputs, outputs
+    land in the mailbox.  The length is the one a configurator programs: the default-assigned
+    PDOs' size for process data, else DefaultSize.""")
+def sm_overlap(dev: Device, ctx: FileContext) -> Iterator[Hit]:
+    sms = _real_sms(dev)
+    for i, (a, la) in enumerate(sms):
+        for b, lb in sms[i + 1:]:
+            if a.start_address < b.start_address + lb and b.start_address < a.start_address + la:
+                yield Hit(b.source, f"Sm {b.number} (0x{b.start_address:04X}, {lb} bytes) "
+                          f"overlaps Sm {a.number} (0x{a.start_address:04X}, {la} bytes)")
+
+
+@device_rule("ESI202", "warning", "a buffered SyncManager's three buffers reach into another SM",
+             """
+    A process-data SM in buffered (3-buffer) mode uses three times its length of ESC memory
+    from its start address (the master only sees the first), so the next SM must start at
+    least 3 x length further on.  Here the hidden buffers overlap another SM's window; the
+    slave refuses SAFEOP or its data is corrupted (SOES checks start + 3 x length).  Not
+    checked for the digital-output area 0x0F00, which has no buffers.""")
+def sm_triple_buffer_overlap(dev: Device, ctx: FileContext) -> Iterator[Hit]:
+    sms = _real_sms(dev)
+    for a, la in sms:
+        if not _is_buffered(a) or a.start_address in DIGITAL_OUTPUT_AREA:
+            continue
+        end = a.start_address + 3 * la
+        for b, lb in sms:
+            if b is a:
+                continue
+            if a.start_address + la <= b.start_address < end:
+                yield Hit(a.source, f"Sm {a.number} at 0x{a.start_address:04X} with {la} bytes "
+                          f"uses 0x{a.start_address:04X}-0x{end - 1:04X} in 3-buffer mode, "
+                          f"reaching Sm {b.number} at 0x{b.start_address:04X}")
+
+
+@device_rule("ESI203", "error", "a SyncManager area lies outside ESC process memory", """
+    SyncManagers guard process RAM, which starts at 0x1000 in every ESC and cannot go past
+    0xFFFF; below 0x1000 lie the ESC registers (only the digital-output area 0x0F00-0x0F7F
+    of simple I/O ESCs may be used).  An SM there would overwrite registers or cannot be
+    programmed at all.  Virtual SMs, which only describe data, are not checked.""")
+def sm_outside_memory(dev: Device, ctx: FileContext) -> Iterator[Hit]:
+    for sm, length in _real_sms(dev):
+        start, end = sm.start_address, sm.start_address + length
+        low_ok = start >= PROCESS_RAM_START or (start in DIGITAL_OUTPUT_AREA
+                                                and end <= DIGITAL_OUTPUT_AREA.stop)
+        if not low_ok or end > ADDRESS_SPACE_END:
+            yield Hit(sm.source, f"Sm {sm.number} covers 0x{start:04X}-0x{end - 1:04X}, "
+                      "outside process memory 0x1000-0xFFFF")
+
+
+@device_rule("ESI204", "error", "a mailbox SyncManager is too small for one SDO", """
+    A mailbox SM must hold the 6-byte mailbox header plus the smallest CoE SDO request
+    (2-byte CoE header + 8 bytes), 16 bytes in all; masters size their mailbox buffers from
+    it.  Smaller, no SDO can be exchanged and the mailbox is useless.""")
+def mailbox_too_small(dev: Device, ctx: FileContext) -> Iterator[Hit]:
+    for sm in dev.sms:
+        if sm.is_mailbox and not sm.virtual:
+            size = sm.default_size if sm.default_size is not None else sm.max_size
+            if size is not None and size < MIN_MAILBOX_SIZE:
+                yield Hit(sm.source, f"{sm.type} Sm {sm.number} is {size} bytes; a mailbox "
+                          f"needs at least {MIN_MAILBOX_SIZE}")
+
+
+@device_rule("ESI205", "error", "a mailbox SyncManager's control byte is not a mailbox mode", """
+    The control byte (ESC register 0x0804) of a mailbox SM must select mailbox (1-buffer)
+    mode, bits 1:0 = 10, and the SM's direction, bits 3:2: 01 (master writes) for MBoxOut,
+    00 (master reads) for MBoxIn.  The usual values are 0x26 and 0x22.  Anything else and the
+    slave refuses PREOP with AL status 0x0016 (invalid mailbox configuration).""")
+def mailbox_control_byte(dev: Device, ctx: FileContext) -> Iterator[Hit]:
+    for sm in dev.sms:
+        if not sm.is_mailbox or sm.control_byte is None:
+            continue
+        cb = sm.control_byte
+        if cb & SM_MODE_MASK != SM_MODE_MAILBOX or cb & SM_DIR_MASK != SM_DIRECTION[sm.type]:
+            want = "0x26" if sm.type == "MBoxOut" else "0x22"
+            yield Hit(sm.source, f"{sm.type} Sm {sm.number} has ControlByte 0x{cb:02X}, not "
+                      f"a {sm.type} mailbox mode (e.g. {want})")
+
+
+@device_rule("ESI206", "warning", "a process-data SyncManager uses mailbox (1-buffer) mode", """
+    Process data normally uses buffered (3-buffer) mode: the master always reads the newest
+    complete inputs and writes outputs without waiting.  In 1-buffer (mailbox) mode, control
+    byte bits 1:0 = 10, the master only gets inputs after the slave wrote them and a write
+    waits until the slave read the last one; cyclic reads see WKC 0 in between.  Some
+    devices do this on purpose (Beckhoff EL1252 inputs); otherwise it is a mistake.""")
+def process_data_mailbox_mode(dev: Device, ctx: FileContext) -> Iterator[Hit]:
+    for sm in dev.sms:
+        if sm.type in ("Outputs", "Inputs") and not sm.virtual and sm.control_byte is not None \
+                and sm.control_byte & SM_MODE_MASK == SM_MODE_MAILBOX:
+            yield Hit(sm.source, f"{sm.type} Sm {sm.number} has ControlByte "
+                      f"0x{sm.control_byte:02X}: 1-buffer (mailbox) mode")
+
+
+@device_rule("ESI207", "error", "a process-data SyncManager's direction is the wrong way", """
+    Control byte bits 3:2 (ESC register 0x0804) set who writes the SM: 01 = the master
+    (Outputs), 00 = the slave (Inputs).  This SM's bits disagree with its type, so the ESC
+    blocks the direction the data needs to go.""")
+def process_data_direction(dev: Device, ctx: FileContext) -> Iterator[Hit]:
+    for sm in dev.sms:
+        if sm.type in ("Outputs", "Inputs") and not sm.virtual and sm.control_byte is not None \
+                and sm.control_byte & SM_DIR_MASK != SM_DIRECTION[sm.type]:
+            yield Hit(sm.source, f"{sm.type} Sm {sm.number} has ControlByte "
+                      f"0x{sm.control_byte:02X}, whose direction bits say "
+                      f"{'master writes' if sm.control_byte & SM_DIR_WRITE else 'slave writes'}")
+
+
+@device_rule("ESI208", "error", "mailbox protocols are declared but there is no mailbox SM", """
+    Device/Mailbox lists protocols (CoE, FoE, EoE ...) but the device has no MBoxOut and
+    MBoxIn SyncManager to carry them, so a master can neither send a request nor read a
+    response.""")
+def mailbox_without_sm(dev: Device, ctx: FileContext) -> Iterator[Hit]:
+    if dev.mailbox is None or not dev.mailbox.protocols:
+        return
+    types = {sm.type for sm in dev.sms if not sm.virtual}
+    missing = [t for t in ("MBoxOut", "MBoxIn") if t not in types]
+    if missing:
+        yield Hit(dev.mailbox.source, f"Mailbox declares {', '.join(dev.mailbox.protocols)} "
+                  f"but the device has no {' and no '.join(missing)} SyncManager")
+
+
+def _directions_in_use(dev: Device) -> list[str]:
+    need = []
+    if any(not p.virtual for p in dev.rx_pdos):
+        need.append("Outputs")
+    if any(not p.virtual for p in dev.tx_pdos):
+        need.append("Inputs")
+    return need
+
+
+@device_rule("ESI209", "error", "no FMMU for a process-data direction the device uses", """
+    Each direction of process data needs an FMMU to map it into the logical process image:
+    an "Outputs" FMMU for RxPDOs, an "Inputs" FMMU for TxPDOs.  The device lists its FMMUs
+    but none for this direction, so configurators that follow the list (as the SII FMMU
+    category tells masters) cannot map the data.""")
+def fmmu_missing(dev: Device, ctx: FileContext) -> Iterator[Hit]:
+    if not dev.fmmus:
+        return
+    have = {f.type for f in dev.fmmus}
+    for direction in _directions_in_use(dev):
+        if direction not in have:
+            listed = ", ".join(f.type or "(empty)" for f in dev.fmmus)
+            yield Hit(dev.fmmus[0].source, f"the device has {direction.lower()} PDOs but no "
+                      f"{direction} FMMU (listed: {listed})")
+
+
+@device_rule("ESI210", "warning", "a device with process data lists no FMMU", """
+    The device has PDOs but no Fmmu elements.  Configurators then guess (FMMU0 outputs,
+    FMMU1 inputs, FMMU2 mailbox state), and the SII image built from the ESI has no FMMU
+    category for masters to read.  List the FMMUs the ESC uses.""")
+def fmmu_list_missing(dev: Device, ctx: FileContext) -> Iterator[Hit]:
+    if not dev.fmmus and _directions_in_use(dev):
+        yield Hit(dev.source, f"{dev.type_name!r} has process data but lists no Fmmu")

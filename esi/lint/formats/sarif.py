@@ -1,0 +1,79 @@
+"""SARIF 2.1.0 for GitHub code scanning: one rule descriptor per rule in effect, one result
+per finding with its physical location (file as given, 1-based line and column)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import PurePath
+from typing import TextIO
+from urllib.parse import quote
+
+from ecatcfg import __version__
+from ecatcfg.esi.lint.finding import FileResult
+from ecatcfg.esi.lint.rules import Rule
+
+SCHEMA = "https://json.schemastore.org/sarif-2.1.0.json"
+_LEVEL = {"error": "error", "warning": "warning", "info": "note"}
+
+
+def write(results: list[FileResult], rules: dict[str, Rule], out: TextIO) -> None:
+    ids = sorted(rules)
+    index = {rid: i for i, rid in enumerate(ids)}
+    descriptors = [{
+        "id": rid,
+        "name": _camel(rules[rid].summary),
+        "shortDescription": {"text": rules[rid].summary},
+        "fullDescription": {"text": rules[rid].explanation},
+        "help": {"text": rules[rid].explanation},
+        "defaultConfiguration": {"level": _LEVEL[rules[rid].severity]},
+        "properties": {"tags": ["ethercat", "esi"]},
+    } for rid in ids]
+    sarif_results = []
+    for result in results:
+        for f in result.findings:
+            region = {}
+            if f.line:
+                region["startLine"] = f.line
+                if f.column:
+                    region["startColumn"] = f.column
+            physical: dict = {"artifactLocation": {"uri": _uri(f.file)}}
+            if region:
+                physical["region"] = region
+            item = {
+                "ruleId": f.rule,
+                "ruleIndex": index[f.rule],
+                "level": _LEVEL[f.severity],
+                "message": {"text": f.message},
+                "locations": [{"physicalLocation": physical}],
+            }
+            if f.device is not None:
+                item["properties"] = {"device": f.device.as_json()}
+            sarif_results.append(item)
+    doc = {
+        "$schema": SCHEMA,
+        "version": "2.1.0",
+        "runs": [{
+            "tool": {"driver": {
+                "name": "ecatcfg lint",
+                "semanticVersion": __version__,
+                "rules": descriptors,
+            }},
+            "results": sarif_results,
+            "columnKind": "unicodeCodePoints",
+        }],
+    }
+    json.dump(doc, out, indent=1)
+    out.write("\n")
+
+
+def _uri(path: str) -> str:
+    """A relative URI reference as GitHub resolves it against the checkout."""
+    p = PurePath(path)
+    text = p.as_posix()
+    if p.is_absolute():
+        return "file://" + "/".join(quote(part, safe="") for part in text.split("/"))
+    return "/".join(quote(part, safe="") for part in text.split("/"))
+
+
+def _camel(summary: str) -> str:
+    return "".join(w.capitalize() for w in summary.replace("-", " ").split() if w.isalnum())

@@ -1,0 +1,206 @@
+"""Lint files: parse safely, validate against the schema, read the model, run the rules.
+
+``lint_paths`` spreads files over worker processes (``jobs``); each worker keeps its compiled
+schemas and referenced module libraries for all the files it gets.  A file that cannot be
+parsed is a finding (ESI001) at the parser's line, never an exception.
+"""
+
+from __future__ import annotations
+
+import bisect
+import os
+import time
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+from lxml import etree
+
+from ecatcfg.esi import reader, xmlsafe
+from ecatcfg.esi.library import expand_paths
+from ecatcfg.esi.lint.context import FileContext
+from ecatcfg.esi.lint.finding import DeviceRef, FileResult, Finding
+from ecatcfg.esi.lint.rules import RULES, iter_checks
+from ecatcfg.esi.lint.schema import SchemaSet
+
+
+@dataclass(frozen=True, slots=True)
+class LintOptions:
+    active: frozenset[str]               # rule ids in effect
+    schema_dir: Path | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class Target:
+    path: Path
+    shown: str                           # as the user named it (joined inside folders)
+    named_directly: bool
+
+
+def collect(paths: list[str]) -> list[Target]:
+    """The files to lint; raises UsageError for a path that does not exist."""
+    targets = []
+    for given in paths:
+        targets.extend(Target(p, shown, direct) for p, shown, direct in expand_paths(given))
+    return targets
+
+
+# -- one file -------------------------------------------------------------------------------
+
+_schemas: SchemaSet | None = None
+
+
+def _schema_set(options: LintOptions) -> SchemaSet | None:
+    global _schemas
+    if options.schema_dir is None:
+        return None
+    if _schemas is None or _schemas.folder != options.schema_dir:
+        _schemas = SchemaSet(options.schema_dir)
+    return _schemas
+
+
+class _Emitter:
+    """Turns hits into findings for one file, keeping only the active rules."""
+
+    def __init__(self, shown: str, active: frozenset[str]) -> None:
+        self.shown = shown
+        self.active = active
+        self.findings: list[Finding] = []
+
+    def add(self, rule_id: str, line: int | None, column: int | None, message: str,
+            device: DeviceRef | None = None) -> None:
+        if rule_id in self.active:
+            self.findings.append(Finding(self.shown, line or None, column, rule_id,
+                                         RULES[rule_id].severity, message, device))
+
+
+def lint_file(target: Target, options: LintOptions, others: list[Path]) -> FileResult | None:
+    """Lint one file; ``None`` for a non-ESI XML file met inside a folder (skipped)."""
+    start = time.perf_counter()
+    result = FileResult(target.shown)
+    out = _Emitter(target.shown, options.active)
+    try:
+        data = target.path.read_bytes()
+        tree = xmlsafe.parse_bytes(data, target.shown, strip=False)
+    except (OSError, xmlsafe.XmlError) as exc:
+        if isinstance(exc, OSError):
+            out.add("ESI001", None, None, f"cannot read: {exc.strerror}")
+        else:
+            out.add("ESI001", exc.line, exc.column, exc.message)
+        return _done(result, out, start)
+
+    root_name = etree.QName(tree.getroot()).localname
+    if root_name not in reader.ROOTS:
+        if not target.named_directly:
+            return None
+        out.add("ESI001", tree.getroot().sourceline, None,
+                f"root element is <{root_name}>, expected <EtherCATInfo> or <EtherCATModule>: "
+                "not an ESI file")
+        return _done(result, out, start)
+
+    schema_errors = None
+    schemas = _schema_set(options)
+    if schemas is not None:
+        schema_errors = schemas.validate(tree)
+        result.schema_checked = schema_errors is not None
+        if schema_errors is None:
+            result.schema_missing = str(schemas.path_for(root_name))
+
+    xmlsafe.strip_namespaces(tree)
+    spans = _device_spans(tree)
+    esi = reader.read_tree(tree, target.shown)
+    devices = [DeviceRef(d.vendor.id, d.product_code, d.revision, d.type_name, d.source.line)
+               for d in esi.devices]
+    result.devices = devices
+    starts = [line for line, _ in spans]
+
+    def device_at(line: int | None) -> DeviceRef | None:
+        if not line or len(spans) != len(devices):
+            return None
+        i = bisect.bisect_right(starts, line) - 1
+        if i >= 0 and (spans[i][1] is None or line < spans[i][1]):
+            return devices[i]
+        return None
+
+    for line, column, message in schema_errors or ():
+        out.add("XSD001", line, column, message, device_at(line))
+
+    ctx = FileContext(esi, target.path.resolve(), others)
+    for rule in iter_checks(options.active):
+        if rule.file_check is not None:
+            for hit in rule.file_check(ctx):
+                out.add(rule.id, hit.source.line, hit.column, hit.message,
+                        device_at(hit.source.line))
+        if rule.device_check is not None:
+            for dev, ref in zip(esi.devices, devices):
+                for hit in rule.device_check(dev, ctx):
+                    out.add(rule.id, hit.source.line, hit.column, hit.message, ref)
+    return _done(result, out, start)
+
+
+def _done(result: FileResult, out: _Emitter, start: float) -> FileResult:
+    result.findings = sorted(out.findings, key=Finding.sort_key)
+    result.seconds = time.perf_counter() - start
+    return result
+
+
+def _device_spans(tree: etree._ElementTree) -> list[tuple[int, int | None]]:
+    """(first line, first line after it) of each Device element, in document order."""
+    spans = []
+    for el in tree.getroot().iterfind("Descriptions/Devices/Device"):
+        node, end = el, None
+        while node is not None and end is None:
+            nxt = node.getnext()
+            if nxt is not None:
+                end = nxt.sourceline
+            node = node.getparent()
+        spans.append((el.sourceline or 0, end))
+    return spans
+
+
+# -- many files -----------------------------------------------------------------------------
+
+def default_jobs() -> int:
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:                           # not on Linux
+        return os.cpu_count() or 1
+
+
+def lint_paths(targets: list[Target], options: LintOptions, jobs: int | None = None,
+               progress: Callable[[int, int], None] | None = None) -> list[FileResult]:
+    """Lint ``targets`` (in parallel when ``jobs`` > 1); results in the targets' order,
+    skipped non-ESI files left out."""
+    jobs = jobs or default_jobs()
+    others = [t.path.resolve() for t in targets]
+    results: list[FileResult | None] = [None] * len(targets)
+    done = 0
+    if jobs == 1 or len(targets) < 2:
+        for i, target in enumerate(targets):
+            results[i] = lint_file(target, options, others)
+            done += 1
+            if progress:
+                progress(done, len(targets))
+    else:
+        schemas = _schema_set(options)
+        if schemas is not None:        # compile once here; forked workers inherit them
+            for root in reader.ROOTS:
+                schemas.schema_for(root)
+        # Biggest files first, so no worker is left with a 3 MB file at the end.
+        order = sorted(range(len(targets)), key=lambda i: -_size(targets[i].path))
+        with ProcessPoolExecutor(max_workers=min(jobs, len(targets))) as pool:
+            futures = {pool.submit(lint_file, targets[i], options, others): i for i in order}
+            for future in as_completed(futures):
+                results[futures[future]] = future.result()
+                done += 1
+                if progress:
+                    progress(done, len(targets))
+    return [r for r in results if r is not None]
+
+
+def _size(path: Path) -> int:
+    try:
+        return path.stat().st_size
+    except OSError:
+        return 0
