@@ -7,6 +7,7 @@ need one, and an unexpanded entity would silently lose data.
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 from lxml import etree
@@ -31,6 +32,7 @@ def _parser() -> etree.XMLParser:
 
 
 _PARSER = _parser()
+_POSITION = re.compile(r",? line \d+, column \d+$")
 
 
 def parse_bytes(data: bytes, file: str, strip: bool = True) -> etree._ElementTree:
@@ -43,7 +45,8 @@ def parse_bytes(data: bytes, file: str, strip: bool = True) -> etree._ElementTre
         root = etree.fromstring(data, _PARSER)
     except etree.XMLSyntaxError as exc:
         line, column = exc.position if exc.position else (exc.lineno, None)
-        raise XmlError(f"not well-formed XML: {exc.msg}", file, line or None, column or None) \
+        message = _POSITION.sub("", exc.msg)      # the location is reported separately
+        raise XmlError(f"not well-formed XML: {message}", file, line or None, column or None) \
             from None
     tree = root.getroottree()
     dtd = tree.docinfo.internalDTD
