@@ -52,9 +52,10 @@ def parse_bytes(data: bytes, file: str, strip: bool = True) -> etree._ElementTre
     dtd = tree.docinfo.internalDTD
     if dtd is not None:
         for entity in dtd.iterentities():
+            at = data.find(b"<!ENTITY")
             raise XmlError(f"the document declares the entity {entity.name!r}; entity "
                            "declarations are not allowed (possible XXE or entity bomb)",
-                           file, 1)
+                           file, data.count(b"\n", 0, at) + 1 if at >= 0 else 1)
     if strip:
         strip_namespaces(tree)
     return tree

