@@ -11,6 +11,7 @@ import io
 import os
 import sys
 import textwrap
+from dataclasses import replace
 from pathlib import Path
 
 FORMATS = ("text", "json", "junit", "sarif")
@@ -41,6 +42,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="read [tool.ecatcfg.lint] from this file (default: the nearest "
                         "pyproject.toml from the current folder up)")
     p.add_argument("--no-config", action="store_true", help="ignore pyproject.toml")
+    p.add_argument("--skip-non-esi", action="store_true",
+                   help="skip XML files that are not ESI files even when named directly "
+                        "(as pre-commit passes every changed *.xml)")
     p.add_argument("--explain", metavar="ID", help="explain one rule and exit")
     p.add_argument("--list-rules", action="store_true", help="list every rule and exit")
     p.set_defaults(run=run)
@@ -105,6 +109,8 @@ def _lint(args: argparse.Namespace, active: frozenset[str], schema_dir: Path | N
     from ecatcfg.fileio import write_atomic
 
     targets = collect(args.paths)
+    if args.skip_non_esi:
+        targets = [replace(t, named_directly=False) for t in targets]
     progress = _ProgressBar(sys.stderr) if sys.stderr.isatty() and len(targets) > 1 else None
     results = lint_paths(targets, LintOptions(active, schema_dir), jobs, progress)
     if progress:

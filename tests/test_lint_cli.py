@@ -77,6 +77,16 @@ def test_non_esi_file_named_directly_is_an_error(mixed):
     assert out.returncode == 1
     [finding] = json.loads(out.stdout)["findings"]
     assert finding["rule"] == "ESI001" and finding["line"] == 1
+    # as the pre-commit hook runs it
+    skipped = lint(str(mixed / "config.xml"), str(mixed / "clean.xml"), "--skip-non-esi")
+    assert skipped.returncode == 0 and skipped.stdout.startswith("1 file checked")
+
+
+def test_pre_commit_hook_definition():
+    import yaml
+    [hook] = yaml.safe_load((ROOT / ".pre-commit-hooks.yaml").read_text())
+    assert hook["id"] == "ecatcfg-lint" and hook["language"] == "python"
+    assert hook["entry"].split()[:3] == ["ecatcfg", "lint", "--skip-non-esi"]
 
 
 def test_json_shape(mixed):

@@ -73,3 +73,10 @@ def test_select_and_ignore_take_ids_and_prefixes():
     assert select_rules(["ESI2"], ["ESI20"]) == {r for r in all_rules() if r.startswith("ESI21")}
     with pytest.raises(ValueError, match="ESI999"):
         select_rules(["ESI999"], None)
+
+
+def test_docs_list_every_rule():
+    from conftest import ROOT
+    doc = (ROOT / "docs" / "lint.md").read_text()
+    for rule in all_rules().values():
+        assert f"| {rule.id} | {rule.severity} | {rule.summary} |" in doc, rule.id

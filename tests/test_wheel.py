@@ -45,6 +45,8 @@ def test_wheel_installs_and_runs(tmp_path):
     assert out.returncode == 0 and "devices" in out.stdout
     out = run("devices", "examples/")
     assert out.returncode == 0 and "EXD-402" in out.stdout, out.stderr
+    out = run("lint", "examples/", "--no-config", "--jobs", "2")   # rules load from the wheel
+    assert out.returncode == 0 and "0 errors, 0 warnings" in out.stdout, out.stderr
     out = run("demo", cwd=tmp_path)        # the embedded default: package data only
     assert out.returncode == 0 and "4 devices in 1 files" in out.stdout, out.stderr
     # the installed module is the wheel's, not the checkout's
