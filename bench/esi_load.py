@@ -23,6 +23,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from timing import interleaved
+
 ROOT = Path(__file__).resolve().parent.parent
 DEFAULT_CORPUS = ROOT.parent / "shared" / "corpus" / "esi"
 
@@ -37,20 +39,6 @@ for p in sorted(Path(sys.argv[1]).rglob('*.xml')):
 
 def files_of(corpus: Path) -> list[Path]:
     return sorted(corpus.rglob("*.xml"))
-
-
-def timed(fn) -> float:
-    start = time.perf_counter()
-    fn()
-    return time.perf_counter() - start
-
-
-def interleaved(base, cand, repeat: int) -> tuple[list[float], list[float]]:
-    b, c = [], []
-    for _ in range(repeat):
-        b.append(timed(base))
-        c.append(timed(cand))
-    return b, c
 
 
 def row(name: str, b: list[float], c: list[float], target: str) -> str:

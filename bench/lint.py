@@ -17,11 +17,11 @@ from __future__ import annotations
 import argparse
 import os
 import platform
-import statistics
 import subprocess
 import sys
-import time
 from pathlib import Path
+
+from timing import interleaved, ms, ratio
 
 ROOT = Path(__file__).resolve().parent.parent
 DEFAULT_CORPUS = ROOT.parent / "shared" / "corpus"
@@ -38,28 +38,6 @@ for p in sorted(Path(sys.argv[1]).rglob('*.xml')):
         schemas[root] = etree.XMLSchema(etree.parse(str(Path(sys.argv[2]) / (root + '.xsd'))))
     schemas[root].validate(tree)
 """
-
-
-def timed(fn) -> float:
-    start = time.perf_counter()
-    fn()
-    return time.perf_counter() - start
-
-
-def interleaved(base, cand, repeat: int) -> tuple[list[float], list[float]]:
-    b, c = [], []
-    for _ in range(repeat):
-        b.append(timed(base))
-        c.append(timed(cand))
-    return b, c
-
-
-def ms(values: list[float]) -> str:
-    return f"{min(values) * 1e3:.0f} / {statistics.median(values) * 1e3:.0f}"
-
-
-def ratio(b: list[float], c: list[float]) -> str:
-    return f"{min(c) / min(b):.2f}x / {statistics.median(c) / statistics.median(b):.2f}x"
 
 
 def main() -> None:

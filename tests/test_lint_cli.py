@@ -4,7 +4,6 @@ configuration, hostile inputs."""
 from __future__ import annotations
 
 import json
-import os
 import subprocess
 import sys
 import time

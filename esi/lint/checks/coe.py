@@ -10,7 +10,7 @@ from ecatcfg.esi.lint.checks.common import (
 )
 from ecatcfg.esi.lint.context import FileContext
 from ecatcfg.esi.lint.rules import Hit, device_rule
-from ecatcfg.esi.model import CoeInitCmd, Device, Source
+from ecatcfg.esi.model import CoeInitCmd, Device, DictObject, Source
 
 
 def _init_cmds(dev: Device) -> list[CoeInitCmd]:
@@ -20,16 +20,22 @@ def _init_cmds(dev: Device) -> list[CoeInitCmd]:
             if c.index is not None and not c.depend_on_slot]
 
 
+def _init_cmd_targets(dev: Device) -> Iterator[tuple[CoeInitCmd, DictEntry | DictObject | None]]:
+    """(InitCmd, dictionary lookup of what it writes) for a device whose dictionary lists
+    objects; a CompleteAccess command writes the object from subindex 0."""
+    dic = has_objects(dev)
+    if dic is None:
+        return
+    for cmd in _init_cmds(dev):
+        yield cmd, lookup(dic, cmd.index, 0 if cmd.complete_access else cmd.subindex)
+
+
 @device_rule("ESI301", "error", "a CoE InitCmd writes an object the dictionary does not have", """
     Mailbox/CoE/InitCmd makes every configurator download this value at start-up.  The
     device's dictionary lists objects, but not this one (or not this subindex), so the slave
     will most likely answer abort 0x06020000 / 0x06090011 and the state change fails.""")
 def init_cmd_object_missing(dev: Device, ctx: FileContext) -> Iterator[Hit]:
-    dic = has_objects(dev)
-    if dic is None:
-        return
-    for cmd in _init_cmds(dev):
-        found = lookup(dic, cmd.index, cmd.subindex if not cmd.complete_access else 0)
+    for cmd, found in _init_cmd_targets(dev):
         if found is None:
             yield Hit(cmd.source, f"InitCmd writes {hex4(cmd.index)}:{cmd.subindex or 0:02X}; "
                       f"the dictionary has no object {hex4(cmd.index)}")
@@ -44,11 +50,7 @@ def init_cmd_object_missing(dev: Device, ctx: FileContext) -> Iterator[Hit]:
     or a WriteRestrictions list without that state.  The slave answers abort 0x06010002
     (read-only) or 0x08000022 (wrong state) and the transition fails.""")
 def init_cmd_read_only(dev: Device, ctx: FileContext) -> Iterator[Hit]:
-    dic = has_objects(dev)
-    if dic is None:
-        return
-    for cmd in _init_cmds(dev):
-        found = lookup(dic, cmd.index, cmd.subindex if not cmd.complete_access else 0)
+    for cmd, found in _init_cmd_targets(dev):
         if not isinstance(found, DictEntry) or found.flags is None \
                 or found.flags.access is None:
             continue
@@ -97,13 +99,9 @@ def unknown_data_type(dev: Device, ctx: FileContext) -> Iterator[Hit]:
     0x06070010 (length of service parameter does not match) / 0x06070012 / 0x06070013.
     CompleteAccess commands write whole objects and are not compared.""")
 def init_cmd_size(dev: Device, ctx: FileContext) -> Iterator[Hit]:
-    dic = has_objects(dev)
-    if dic is None:
-        return
-    for cmd in _init_cmds(dev):
+    for cmd, found in _init_cmd_targets(dev):
         if cmd.complete_access or cmd.data is None:
             continue
-        found = lookup(dic, cmd.index, cmd.subindex)
         if not isinstance(found, DictEntry) or not found.bit_size:
             continue
         want = (found.bit_size + 7) // 8
