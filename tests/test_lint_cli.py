@@ -248,3 +248,17 @@ def test_hostile_inputs_with_schema(tmp_path, corpus):
         out = lint(str(path), "--format", "json", "--schema-dir", str(schemas), "--no-config")
         assert out.returncode == 1 and "Traceback" not in out.stderr, name
         assert SECRET not in out.stdout, name
+
+
+def test_text_colour_only_when_asked():
+    import io
+    from ecatcfg.esi.lint import FileResult, Finding
+    from ecatcfg.esi.lint.formats import text
+    results = [FileResult("a.xml", [Finding("a.xml", 3, 7, "ESI105", "error", "too long")])]
+    plain, coloured = io.StringIO(), io.StringIO()
+    text.write(results, {}, plain)
+    text.write(results, {}, coloured, colour=True)
+    assert plain.getvalue().splitlines() == [
+        "a.xml:3:7: error ESI105 too long",
+        "1 file checked: 1 errors, 0 warnings, 0 infos (1 file with errors)"]
+    assert "\033[1;31merror\033[0m" in coloured.getvalue()

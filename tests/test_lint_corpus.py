@@ -16,7 +16,7 @@ from conftest import ROOT
 # Vendors whose files TwinCAT accepts: an error finding there is either a real defect of the
 # file (listed here, with the reason) or a false positive, i.e. a bug in a rule.
 TRUSTED = ("beckhoff", "drives/Elmo", "drives/IS620N", "drives/SV660", "drives/SOMANET",
-           "drives/C5-E")
+           "open-stacks/siitool/Somanet", "drives/C5-E")
 KNOWN_DEFECTS = {
     # Profile/Dictionary without Objects (the schema requires them) in four CU2508 revisions.
     ("beckhoff/Beckhoff CUxxxx.xml", "XSD001"): [488, 522, 738, 957],
