@@ -94,6 +94,9 @@ def run(args: argparse.Namespace) -> int:
         active = select_rules(select, ignore)
     except ValueError as exc:
         raise UsageError(str(exc)) from None
+    if not active:
+        raise UsageError("no rule left to check: --select/--ignore (with the config file's "
+                         f"ignore list {cfg.ignore}) exclude every rule")
     schema_dir = Path(args.schema_dir) if args.schema_dir else cfg.schema_dir
     if schema_dir is not None and not schema_dir.is_dir():
         raise UsageError(f"schema folder {schema_dir}: no such folder")
@@ -106,6 +109,7 @@ def _lint(args: argparse.Namespace, active: frozenset[str], schema_dir: Path | N
           jobs: int | None, rules: dict) -> int:
     from ecatcfg.esi.lint.formats import json as json_format, junit, sarif, text
     from ecatcfg.esi.lint.runner import LintOptions, collect, lint_paths
+    from ecatcfg.errors import UsageError
     from ecatcfg.fileio import write_atomic
 
     targets = collect(args.paths)
@@ -134,7 +138,10 @@ def _lint(args: argparse.Namespace, active: frozenset[str], schema_dir: Path | N
         {"json": json_format, "junit": junit, "sarif": sarif}[args.format].write(
             results, in_effect, buffer)
     if args.output:
-        write_atomic(Path(args.output), buffer.getvalue().encode())
+        try:
+            write_atomic(Path(args.output), buffer.getvalue().encode())
+        except OSError as exc:
+            raise UsageError(f"-o {args.output}: cannot write: {exc.strerror}") from None
     else:
         sys.stdout.write(buffer.getvalue())
     return 1 if any(f.severity == "error" for r in results for f in r.findings) else 0

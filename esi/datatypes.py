@@ -52,18 +52,18 @@ def canonical(name: str) -> str | None:
     returned normalised (``STRING(12)``, ``ARRAY [0..3] OF USINT``).
     """
     key = name.strip().upper()
-    key = ALIASES.get(key, key)
-    if key in BASE_TYPES:
-        return key
-    m = _STRING.match(key)
-    if m:
-        return f"{m.group(1).upper()}({int(m.group(2))})"
+    bounds = []
     m = _ARRAY.match(key)
-    if m:
-        element = canonical(m.group(3))
-        if element is not None:
-            return f"ARRAY [{int(m.group(1))}..{int(m.group(2))}] OF {element}"
-    return None
+    if m:                       # an array of a base type; arrays of arrays are not base types
+        bounds = [int(m.group(1)), int(m.group(2))]
+        key = m.group(3).strip()
+    key = ALIASES.get(key, key)
+    if key not in BASE_TYPES:
+        m = _STRING.match(key)
+        if not m:
+            return None
+        key = f"{m.group(1).upper()}({int(m.group(2))})"
+    return f"ARRAY [{bounds[0]}..{bounds[1]}] OF {key}" if bounds else key
 
 
 def bit_size(name: str) -> int | None:
@@ -78,7 +78,7 @@ def bit_size(name: str) -> int | None:
         return int(m.group(2)) * (16 if m.group(1) == "WSTRING" else 8)
     m = _ARRAY.match(key)
     if m:
-        element = bit_size(m.group(3))
+        element = bit_size(m.group(3))      # canonical() allows only a base element type
         count = int(m.group(2)) - int(m.group(1)) + 1
         return element * count if element is not None and count > 0 else None
     return None

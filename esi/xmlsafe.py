@@ -19,8 +19,17 @@ class XmlError(EcatcfgError):
     """A file that is not well-formed or not safe to read."""
 
 
+class _RefuseExternal(etree.Resolver):
+    """Answers every request for an external resource (a DOCTYPE's DTD, an external entity)
+    with an empty document: libxml2 asks even with ``load_dtd=False``, and would otherwise
+    open the named local file."""
+
+    def resolve(self, url, public_id, context):
+        return self.resolve_string("", context)
+
+
 def _parser() -> etree.XMLParser:
-    return etree.XMLParser(
+    parser = etree.XMLParser(
         resolve_entities=False,
         no_network=True,
         load_dtd=False,
@@ -29,6 +38,8 @@ def _parser() -> etree.XMLParser:
         remove_blank_text=False,
         collect_ids=False,
     )
+    parser.resolvers.add(_RefuseExternal())
+    return parser
 
 
 _PARSER = _parser()
@@ -49,6 +60,12 @@ def parse_bytes(data: bytes, file: str, strip: bool = True) -> etree._ElementTre
         raise XmlError(f"not well-formed XML: {message}", file, line or None, column or None) \
             from None
     tree = root.getroottree()
+    if tree.docinfo.system_url or tree.docinfo.public_id:
+        at = data.find(b"<!DOCTYPE")
+        raise XmlError("the document refers to an external DTD "
+                       f"({tree.docinfo.system_url or tree.docinfo.public_id!r}); ESI files need "
+                       "none and external references are not followed",
+                       file, data.count(b"\n", 0, at) + 1 if at >= 0 else 1)
     dtd = tree.docinfo.internalDTD
     if dtd is not None:
         for entity in dtd.iterentities():

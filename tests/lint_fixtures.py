@@ -171,6 +171,9 @@ CASES: list[Case] = [
                              mailbox=M + MAILBOX)), esi()),
     Case("ESI209", esi(drive(fmmus=f"{M}<Fmmu>Inputs</Fmmu>\n<Fmmu>MBoxState</Fmmu>")), esi()),
     Case("ESI210", esi(drive(fmmus="").replace("<Device", f"{M}<Device")), esi()),
+    Case("ESI211", esi(drive(fmmus=FMMUS + "\n<Fmmu>Outputs</Fmmu>" * 13
+                             + f"\n{M}<Fmmu>Inputs</Fmmu>")),
+         esi(drive(fmmus=FMMUS + "\n<Fmmu>Outputs</Fmmu>" * 13))),
 
     Case("ESI301", esi(drive(mailbox=init_cmd("#x8001", "0100", mark=True))), esi()),
     Case("ESI302", esi(drive(mailbox=init_cmd("#x8000", "0100", "SO", mark=True))),

@@ -4,6 +4,7 @@ configuration, hostile inputs."""
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 import time
@@ -262,3 +263,48 @@ def test_text_colour_only_when_asked():
         "a.xml:3:7: error ESI105 too long",
         "1 file checked: 1 errors, 0 warnings, 0 infos (1 file with errors)"]
     assert "\033[1;31merror\033[0m" in coloured.getvalue()
+
+
+def test_external_dtd_is_never_opened(tmp_path):
+    """A DOCTYPE naming a FIFO: opening it would block the process, so the timeout tells."""
+    fifo = tmp_path / "trap.dtd"
+    os.mkfifo(fifo)
+    path = write(tmp_path, "dtd.xml", f'<?xml version="1.0"?>\n<!DOCTYPE EtherCATInfo SYSTEM '
+                                      f'"{fifo}">\n<EtherCATInfo/>\n')
+    out = lint(str(path), "--format", "json", "--no-config", timeout=10)
+    assert out.returncode == 1
+    [finding] = json.loads(out.stdout)["findings"]
+    assert finding["rule"] == "ESI001" and finding["line"] == 2
+    assert "external DTD" in finding["message"]
+
+
+def test_odd_paths_and_config_are_usage_errors_or_findings(tmp_path, mixed):
+    assert lint(str(mixed), "-o", str(tmp_path / "no" / "such" / "dir.txt")).returncode == 2
+    for content in ("tool = 3\n", "[tool]\necatcfg = 3\n", b"\xff\xfe[tool]"):
+        project = tmp_path / f"p{abs(hash(content))}"
+        project.mkdir()
+        write(project, "pyproject.toml", content)
+        out = lint(str(mixed), cwd=project)
+        assert out.returncode == 2 and "Traceback" not in out.stderr, content
+    loop = mixed / "loop.xml"
+    loop.symlink_to(loop)
+    long_ref = esi(head="<InfoReference>" + "x" * 300 + ".xml</InfoReference>\n")
+    write(mixed, "longref.xml", long_ref)
+    out = lint(str(mixed), "--format", "json", "--no-config")
+    assert out.returncode == 1 and "Traceback" not in out.stderr
+    rules = {(Path(f["file"]).name, f["rule"]) for f in json.loads(out.stdout)["findings"]}
+    assert {("loop.xml", "ESI001"), ("longref.xml", "ESI602")} <= rules
+
+
+def test_no_rule_left_is_a_usage_error(mixed, tmp_path):
+    write(tmp_path, "pyproject.toml", '[tool.ecatcfg.lint]\nignore = ["ESI004"]\n')
+    out = lint(str(mixed), "--select", "ESI004", cwd=tmp_path)
+    assert out.returncode == 2 and "no rule left" in out.stderr
+
+
+def test_schema_note_said_once_for_many_files(mixed, tmp_path):
+    empty = tmp_path / "schemas"
+    empty.mkdir()
+    out = lint(str(mixed), "--schema-dir", str(empty), "--jobs", "2", "--no-config")
+    assert out.stderr.count("EtherCATInfo.xsd not found") == 1
+    assert "3 file(s)" in out.stderr

@@ -80,3 +80,76 @@ def test_docs_list_every_rule():
     doc = (ROOT / "docs" / "lint.md").read_text()
     for rule in all_rules().values():
         assert f"| {rule.id} | {rule.severity} | {rule.summary} |" in doc, rule.id
+
+
+# -- cases found in review: each failed before its fix ----------------------------------------
+
+from lint_fixtures import MAILBOX, PROFILE, drive, entry, esi, rx  # noqa: E402
+
+
+def _findings(tmp_path: Path, text: str) -> list:
+    path = tmp_path / "case.xml"
+    path.write_text(text)
+    return lint_file(Target(path, str(path), True), LintOptions(ALL), []).findings
+
+
+def test_complete_access_init_cmd_judged_by_the_subindices_it_writes(tmp_path):
+    def ca(sub: int, transition: str = "PS") -> str:
+        return esi(drive(mailbox=MAILBOX.replace(
+            "<InitCmd><Transition>PS</Transition><Index>#x8000</Index><SubIndex>0</SubIndex>"
+            "<Data>0100</Data>",
+            f'<InitCmd CompleteAccess="1"><Transition>{transition}</Transition><Index>#x7010'
+            f"</Index><SubIndex>{sub}</SubIndex><Data>0100000000</Data>")))
+    # 0x7010:00 is ro, :01 rw: a CompleteAccess write from 0 or 1 changes :01 and is fine
+    assert _findings(tmp_path, ca(1)) == []
+    assert _findings(tmp_path, ca(0)) == []
+    ro = esi(drive(profile=PROFILE.replace(
+        "<Type>DINT</Type><BitSize>32</BitSize><BitOffs>16</BitOffs><Flags><Access>rw",
+        "<Type>DINT</Type><BitSize>32</BitSize><BitOffs>16</BitOffs><Flags><Access>ro"),
+        mailbox=MAILBOX.replace("<InitCmd>", '<InitCmd CompleteAccess="1">').replace(
+            "#x8000", "#x7010")))
+    assert {f.rule for f in _findings(tmp_path, ro)} == {"ESI302"}
+
+
+def test_objects_of_a_second_profile_count(tmp_path):
+    second = PROFILE.replace("<Profile>", '<Profile Channel="2">').replace(
+        "#x6000", "#x6800").replace("#x7000", "#x7800").replace("#x7010", "#x7810").replace(
+        "#x8000", "#x8800")
+    text = esi(drive(profile=PROFILE + "\n" + second,
+                     rx=rx(entry=entry("#x7800", 0, 16, "UINT"))))
+    assert _findings(tmp_path, text) == []
+
+
+def test_every_repeated_identity_is_reported(tmp_path):
+    text = esi(drive(), drive(type_name="B"), drive(type_name="C"))
+    assert [f.message.split("'")[1] for f in _findings(tmp_path, text)
+            if f.rule == "ESI004"] == ["B", "C"]
+
+
+@pytest.mark.parametrize("control, rule", [("#x68", "ESI207"), ("#x65", "ESI207"),
+                                           ("#x66", "ESI206")])
+def test_reserved_control_byte_bits(tmp_path, control, rule):
+    text = esi(drive(sm2=f'<Sm ControlByte="{control}" DefaultSize="2" Enable="1" '
+                         'StartAddress="#x1100">Outputs</Sm>'))
+    hits = [f for f in _findings(tmp_path, text) if f.rule in ("ESI206", "ESI207")]
+    assert [f.rule for f in hits] == [rule]
+    if control == "#x68":
+        assert "reserved" in hits[0].message
+
+
+def test_nested_array_type_is_unknown_not_a_crash(tmp_path):
+    deep = "ARRAY [0..1] OF " * 5000 + "BYTE"
+    text = esi(drive(rx=rx(entry=entry("#x7000", 0, 16, deep))))
+    assert "ESI303" in {f.rule for f in _findings(tmp_path, text)}
+
+
+def test_thousands_of_sync_managers_are_cheap(tmp_path):
+    import time
+    sms = "\n".join('<Sm ControlByte="#x64" DefaultSize="2" Enable="1" '
+                    'StartAddress="#x1100">Outputs</Sm>' for _ in range(3000))
+    start = time.perf_counter()
+    found = _findings(tmp_path, esi(drive(sm2=sms)))
+    assert time.perf_counter() - start < 1.0
+    assert "ESI211" in {f.rule for f in found}
+    assert not {"ESI201", "ESI202"} & {f.rule for f in found}     # no pairwise flood
+    assert len(found) < 10

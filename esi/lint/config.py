@@ -45,11 +45,15 @@ def load(path: Path | None) -> LintConfig:
         doc = tomllib.loads(path.read_text(encoding="utf-8"))
     except OSError as exc:
         raise UsageError(f"cannot read: {exc.strerror}", str(path)) from None
-    except tomllib.TOMLDecodeError as exc:
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise UsageError(f"not valid TOML: {exc}", str(path)) from None
-    table = doc.get("tool", {}).get("ecatcfg", {}).get("lint")
-    if table is None:
-        return LintConfig(source=path)
+    table: object = doc
+    for key in ("tool", "ecatcfg", "lint"):
+        if not isinstance(table, dict):
+            raise UsageError(f"{path}: [{key}]'s parent is not a table")
+        table = table.get(key)
+        if table is None:
+            return LintConfig(source=path)
     where = f"{path} [tool.ecatcfg.lint]"
     if not isinstance(table, dict):
         raise UsageError(f"{where}: must be a table")

@@ -51,13 +51,16 @@ class FileContext:
     def _resolve(self, text: str, source: Source) -> Reference:
         parts = PureWindowsPath(text).parts
         target: Path | None = None
-        if parts:
-            direct = self.path.parent.joinpath(*parts)
-            if direct.is_file():
-                target = direct.resolve()
-            else:
-                beside = [p.resolve() for p in self.path.parent.glob("*.xml")]
-                target = find_reference(self.path, text, self.others + beside)
+        try:
+            if parts:
+                direct = self.path.parent.joinpath(*parts)
+                if direct.is_file():
+                    target = direct.resolve()
+                else:
+                    beside = [p.resolve() for p in self.path.parent.glob("*.xml")]
+                    target = find_reference(self.path, text, self.others + beside)
+        except (OSError, RuntimeError) as exc:   # a name too long, a symlink loop
+            return Reference(text, source, None, error=f"cannot look it up: {exc}")
         if target is None:
             return Reference(text, source, None)
         try:

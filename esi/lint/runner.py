@@ -126,7 +126,7 @@ def lint_file(target: Target, options: LintOptions, others: list[Path]) -> FileR
     for line, column, message in schema_errors or ():
         out.add("XSD001", line, column, message, device_at(line))
 
-    ctx = FileContext(esi, target.path.resolve(), others)
+    ctx = FileContext(esi, _resolved(target.path), others)
     for rule in iter_checks(options.active):
         if rule.file_check is not None:
             for hit in rule.file_check(ctx):
@@ -173,7 +173,7 @@ def lint_paths(targets: list[Target], options: LintOptions, jobs: int | None = N
     """Lint ``targets`` (in parallel when ``jobs`` > 1); results in the targets' order,
     skipped non-ESI files left out."""
     jobs = jobs or default_jobs()
-    others = [t.path.resolve() for t in targets]
+    others = [_resolved(t.path) for t in targets]
     results: list[FileResult | None] = [None] * len(targets)
     done = 0
     if jobs == 1 or len(targets) < 2:
@@ -197,6 +197,13 @@ def lint_paths(targets: list[Target], options: LintOptions, jobs: int | None = N
                 if progress:
                     progress(done, len(targets))
     return [r for r in results if r is not None]
+
+
+def _resolved(path: Path) -> Path:
+    try:
+        return path.resolve()
+    except (OSError, RuntimeError):         # a symlink loop: reading it fails later, as ESI001
+        return path.absolute()
 
 
 def _size(path: Path) -> int:

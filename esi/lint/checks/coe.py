@@ -6,7 +6,7 @@ from typing import Iterator
 
 from ecatcfg.esi import datatypes
 from ecatcfg.esi.lint.checks.common import (
-    TRANSITION_STATE, DictEntry, has_objects, hex4, lookup,
+    TRANSITION_STATE, DictEntry, device_dictionary, dictionary_with_objects, hex4, lookup,
 )
 from ecatcfg.esi.lint.context import FileContext
 from ecatcfg.esi.lint.rules import Hit, device_rule
@@ -21,13 +21,21 @@ def _init_cmds(dev: Device) -> list[CoeInitCmd]:
 
 
 def _init_cmd_targets(dev: Device) -> Iterator[tuple[CoeInitCmd, DictEntry | DictObject | None]]:
-    """(InitCmd, dictionary lookup of what it writes) for a device whose dictionary lists
-    objects; a CompleteAccess command writes the object from subindex 0."""
-    dic = has_objects(dev)
+    """(InitCmd, dictionary lookup of the subindex it writes) for a device whose dictionary
+    lists objects.  A CompleteAccess command writes the whole object from its SubIndex (0 or
+    1); subindex 0 of a record is often read-only and is then judged by subindex 1, the
+    first entry the command really changes."""
+    dic = dictionary_with_objects(dev)
     if dic is None:
         return
     for cmd in _init_cmds(dev):
-        yield cmd, lookup(dic, cmd.index, 0 if cmd.complete_access else cmd.subindex)
+        found = lookup(dic, cmd.index, cmd.subindex)
+        if cmd.complete_access and not cmd.subindex and isinstance(found, DictEntry) \
+                and found.flags is not None and found.flags.access is not None \
+                and "w" not in found.flags.access.value:
+            first = lookup(dic, cmd.index, 1)
+            found = first if isinstance(first, DictEntry) else found
+        yield cmd, found
 
 
 @device_rule("ESI301", "error", "a CoE InitCmd writes an object the dictionary does not have", """
@@ -58,11 +66,11 @@ def init_cmd_read_only(dev: Device, ctx: FileContext) -> Iterator[Hit]:
         for transition in cmd.transitions:
             state = TRANSITION_STATE.get(transition.upper())
             if state is not None and not access.writable_in(state):
-                yield Hit(cmd.source, f"InitCmd ({transition}) writes "
-                          f"{hex4(cmd.index)}:{cmd.subindex or 0:02X}, whose access is "
-                          f"{access.value!r} with writes allowed in "
-                          f"{', '.join(sorted(access.write_states)) or 'no state'}; "
-                          f"{transition} runs in {state}")
+                why = (f"access {access.value!r}" if "w" not in access.value else
+                       "writes allowed only in "
+                       + (", ".join(sorted(access.write_states)) or "no state"))
+                yield Hit(cmd.source, f"InitCmd ({transition}, runs in {state}) writes "
+                          f"{hex4(cmd.index)}:{cmd.subindex or 0:02X}: {why}")
 
 
 @device_rule("ESI303", "error", "a data type name is not known", """
@@ -71,7 +79,7 @@ def init_cmd_read_only(dev: Device, ctx: FileContext) -> Iterator[Hit]:
     device's Dictionary/DataTypes.  Its size and encoding are then unknown: SDO values cannot
     be typed and process data cannot be decoded.""")
 def unknown_data_type(dev: Device, ctx: FileContext) -> Iterator[Hit]:
-    dic = dev.dictionary
+    dic = device_dictionary(dev)
     defined = set(dic.data_types) if dic is not None else set()
 
     def unknown(name: str | None, source: Source, what: str) -> Iterator[Hit]:

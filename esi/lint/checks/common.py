@@ -13,7 +13,7 @@ MIN_MAILBOX_SIZE = 6 + 10
 
 # Mode bits 1:0 and direction bits 3:2 of an SM control byte (ESC register 0x0804).
 SM_MODE_MASK, SM_MODE_BUFFERED, SM_MODE_MAILBOX = 0x03, 0x00, 0x02
-SM_DIR_MASK, SM_DIR_READ, SM_DIR_WRITE = 0x0C, 0x00, 0x04
+SM_DIR_MASK, SM_DIR_ECAT_READS, SM_DIR_ECAT_WRITES = 0x0C, 0x00, 0x04
 
 # ESC address space: registers below 0x1000 (0x0F00.. is the digital-output area that simple
 # I/O terminals map an SM onto), process RAM from 0x1000 to at most 0xFFFF.
@@ -43,9 +43,24 @@ def has_coe(dev: Device) -> bool:
     return dev.mailbox is not None and "CoE" in dev.mailbox.protocols
 
 
-def has_objects(dev: Device) -> Dictionary | None:
+def device_dictionary(dev: Device) -> Dictionary | None:
+    """The device's object dictionary, merged over its Profiles (multi-axis drives give one
+    Profile per channel); the first definition of an object or type wins."""
+    dicts = [p.dictionary for p in dev.profiles if p.dictionary is not None]
+    if len(dicts) <= 1:
+        return dicts[0] if dicts else None
+    merged = Dictionary({}, {}, dicts[0].source)
+    for dic in dicts:
+        for name, dt in dic.data_types.items():
+            merged.data_types.setdefault(name, dt)
+        for index, obj in dic.objects.items():
+            merged.objects.setdefault(index, obj)
+    return merged
+
+
+def dictionary_with_objects(dev: Device) -> Dictionary | None:
     """The device's dictionary if it describes objects (an empty one says nothing)."""
-    dic = dev.dictionary
+    dic = device_dictionary(dev)
     return dic if dic is not None and dic.objects else None
 
 
@@ -72,13 +87,15 @@ def lookup(dic: Dictionary, index: int, subindex: int | None) -> DictEntry | Dic
                 ai = arr.array_info[0]
                 if ai.lbound <= sub < ai.lbound + ai.elements:
                     size = arr.bit_size // ai.elements if arr.bit_size else None
-                    return DictEntry(obj, arr.base_type or item.type, size,
+                    return DictEntry(obj, arr.base_type or "", size,
                                      item.flags or obj.flags)
     if dt.array_info:                      # the object's type itself is an array
         ai = dt.array_info[0]
+        if sub == 0:                       # CoE arrays: subindex 0 = number of entries
+            return DictEntry(obj, "USINT", 8, obj.flags)
         if ai.lbound <= sub < ai.lbound + ai.elements:
             size = dt.bit_size // ai.elements if dt.bit_size else None
-            return DictEntry(obj, dt.base_type or obj.type, size, obj.flags)
+            return DictEntry(obj, dt.base_type or "", size, obj.flags)
     return obj
 
 

@@ -65,9 +65,11 @@ def cycle_settings(dev: Device, ctx: FileContext) -> Iterator[Hit]:
     different TwinCAT builds (VendorSpecific/TwinCAT @UseFromBuildNo / @IgnoreFromBuildNo);
     such pairs, whose build ranges do not overlap, are not reported.""")
 def duplicate_opmode(dev: Device, ctx: FileContext) -> Iterator[Hit]:
-    modes = _modes(dev)
-    for i, mode in enumerate(modes):
-        clash = next((m for m in modes[:i] if m.name == mode.name and m.overlaps(mode)), None)
+    by_name: dict[str, list[DcOpMode]] = {}
+    for mode in _modes(dev):
+        earlier = by_name.setdefault(mode.name, [])
+        clash = next((m for m in earlier if m.overlaps(mode)), None)
+        earlier.append(mode)
         if clash is not None:
             yield Hit(mode.source, f"OpMode {mode.name!r} repeats the name of line "
                       f"{clash.source.line}")

@@ -37,10 +37,10 @@ def slot_ident_unknown(dev: Device, ctx: FileContext) -> Iterator[Hit]:
     modules cannot be configured; keep the library with the device file.""")
 def info_reference_missing(ctx: FileContext) -> Iterator[Hit]:
     for ref in ctx.references:
-        if ref.path is None:
-            yield Hit(ref.source, f"InfoReference {ref.text!r}: module library not found")
-        elif ref.error:
+        if ref.error:
             yield Hit(ref.source, f"InfoReference {ref.text!r}: {ref.error}")
+        elif ref.path is None:
+            yield Hit(ref.source, f"InfoReference {ref.text!r}: module library not found")
 
 
 @file_rule("ESI603", "error", "two modules of a file have the same ident", """

@@ -6,7 +6,9 @@ from collections import defaultdict
 from typing import Iterator
 
 from ecatcfg.esi import datatypes
-from ecatcfg.esi.lint.checks.common import DictEntry, has_coe, has_objects, hex4, lookup
+from ecatcfg.esi.lint.checks.common import (
+    DictEntry, device_dictionary, dictionary_with_objects, has_coe, hex4, lookup,
+)
 from ecatcfg.esi.lint.context import FileContext
 from ecatcfg.esi.lint.rules import Hit, device_rule
 from ecatcfg.esi.model import Device, Pdo, PdoEntry
@@ -25,7 +27,7 @@ def _mapped_entries(dev: Device) -> Iterator[tuple[Pdo, PdoEntry, DictEntry | ob
     """(pdo, entry, dictionary lookup) for every non-padding entry of a device whose
     dictionary lists objects.  Slot-dependent entries are left out: their index is only known
     once a module sits in the slot."""
-    dic = has_objects(dev)
+    dic = dictionary_with_objects(dev)
     if dic is None:
         return
     for pdo in dev.pdos:
@@ -135,7 +137,7 @@ def entry_type_differs(dev: Device, ctx: FileContext) -> Iterator[Hit]:
     for pdo, entry, found in _mapped_entries(dev):
         if isinstance(found, DictEntry) and entry.data_type and found.type \
                 and not _same_type(entry.data_type, found.type):
-            dic = dev.dictionary
+            dic = device_dictionary(dev)
             # A dictionary type derived from a base type (an enum, say) matches its base.
             dt = dic.data_types.get(found.type) if dic else None
             if dt is not None and dt.base_type and _same_type(entry.data_type, dt.base_type):
@@ -188,12 +190,16 @@ def exclude_missing(dev: Device, ctx: FileContext) -> Iterator[Hit]:
     Mandatory itself or assigned by default (has an Sm), so the default configuration (or
     every configuration) breaks the device's own exclusion rules.""")
 def mandatory_excluded(dev: Device, ctx: FileContext) -> Iterator[Hit]:
+    excluded_by: dict[int, list[Pdo]] = defaultdict(list)   # index -> PDOs always there
+    for other in dev.pdos:
+        if other.mandatory or other.sm is not None:
+            for ex in other.excludes:
+                excluded_by[ex].append(other)
     for pdo in dev.pdos:
         if not pdo.mandatory or pdo.index is None:
             continue
-        for other in dev.pdos:
-            if other is not pdo and pdo.index in other.excludes \
-                    and (other.mandatory or other.sm is not None):
+        for other in excluded_by.get(pdo.index, ()):
+            if other is not pdo:
                 why = "Mandatory" if other.mandatory else f"assigned to Sm {other.sm}"
                 yield Hit(pdo.source, f"Mandatory {_tag(pdo)} is excluded by {_tag(other)} "
                           f"({why}, line {other.source.line})")

@@ -5,21 +5,29 @@ from __future__ import annotations
 from typing import Iterator
 
 from ecatcfg.esi.lint.checks.common import (
-    ADDRESS_SPACE_END, DIGITAL_OUTPUT_AREA, MIN_MAILBOX_SIZE, PROCESS_RAM_START, SM_DIR_MASK,
-    SM_DIR_READ, SM_DIR_WRITE, SM_MODE_MAILBOX, SM_MODE_MASK, sm_length,
+    ADDRESS_SPACE_END, DIGITAL_OUTPUT_AREA, MIN_MAILBOX_SIZE, PROCESS_RAM_START,
+    SM_DIR_ECAT_READS, SM_DIR_ECAT_WRITES, SM_DIR_MASK, SM_MODE_BUFFERED, SM_MODE_MAILBOX,
+    SM_MODE_MASK, sm_length,
 )
 from ecatcfg.esi.lint.context import FileContext
 from ecatcfg.esi.lint.rules import Hit, device_rule
 from ecatcfg.esi.model import Device, SyncManager
 
 # The direction bits each SM type needs in its control byte (ESC register 0x0804 bits 3:2).
-SM_DIRECTION = {"MBoxOut": SM_DIR_WRITE, "MBoxIn": SM_DIR_READ,
-                "Outputs": SM_DIR_WRITE, "Inputs": SM_DIR_READ}
+SM_DIRECTION = {"MBoxOut": SM_DIR_ECAT_WRITES, "MBoxIn": SM_DIR_ECAT_READS,
+                "Outputs": SM_DIR_ECAT_WRITES, "Inputs": SM_DIR_ECAT_READS}
+DIRECTION_TEXT = {0x00: "master reads", 0x04: "master writes", 0x08: "reserved (10)",
+                  0x0C: "reserved (11)"}
+# An ESC has at most 16 SyncManagers (0x0800-0x087F) and 16 FMMUs (0x0600-0x06FF).
+MAX_UNITS = 16
 
 
 def _real_sms(dev: Device) -> list[tuple[SyncManager, int]]:
     """(SM, programmed length) for the SMs that occupy ESC memory: not virtual, with a start
-    address and a non-zero length."""
+    address and a non-zero length.  Empty beyond the ESC's 16 SMs (ESI211 reports those), so
+    the pairwise checks stay cheap on absurd input."""
+    if len(dev.sms) > MAX_UNITS:
+        return []
     out = []
     for sm in dev.sms:
         if sm.virtual or sm.start_address is None:
@@ -129,17 +137,25 @@ def process_data_mailbox_mode(dev: Device, ctx: FileContext) -> Iterator[Hit]:
                       f"0x{sm.control_byte:02X}: 1-buffer (mailbox) mode")
 
 
-@device_rule("ESI207", "error", "a process-data SyncManager's direction is the wrong way", """
+@device_rule("ESI207", "error", "a process-data SyncManager's control byte has the wrong mode "
+             "or direction", """
     Control byte bits 3:2 (ESC register 0x0804) set who writes the SM: 01 = the master
-    (Outputs), 00 = the slave (Inputs).  This SM's bits disagree with its type, so the ESC
-    blocks the direction the data needs to go.""")
-def process_data_direction(dev: Device, ctx: FileContext) -> Iterator[Hit]:
+    (Outputs), 00 = the slave (Inputs); 10 and 11 are reserved.  Bits 1:0 select buffered
+    (00) or mailbox (10) mode; 01 and 11 are reserved.  This SM's bits disagree with its type
+    or use a reserved value, so the ESC blocks the direction the data needs to go or does not
+    work as a SyncManager at all.""")
+def process_data_control_byte(dev: Device, ctx: FileContext) -> Iterator[Hit]:
     for sm in dev.sms:
-        if sm.type in ("Outputs", "Inputs") and not sm.virtual and sm.control_byte is not None \
-                and sm.control_byte & SM_DIR_MASK != SM_DIRECTION[sm.type]:
-            yield Hit(sm.source, f"{sm.type} Sm {sm.number} has ControlByte "
-                      f"0x{sm.control_byte:02X}, whose direction bits say "
-                      f"{'master writes' if sm.control_byte & SM_DIR_WRITE else 'slave writes'}")
+        if sm.type not in ("Outputs", "Inputs") or sm.virtual or sm.control_byte is None:
+            continue
+        cb = sm.control_byte
+        mode = cb & SM_MODE_MASK
+        if cb & SM_DIR_MASK != SM_DIRECTION[sm.type]:
+            yield Hit(sm.source, f"{sm.type} Sm {sm.number} has ControlByte 0x{cb:02X}, whose "
+                      f"direction bits say {DIRECTION_TEXT[cb & SM_DIR_MASK]}")
+        elif mode not in (SM_MODE_BUFFERED, SM_MODE_MAILBOX):
+            yield Hit(sm.source, f"{sm.type} Sm {sm.number} has ControlByte 0x{cb:02X}, whose "
+                      f"mode bits {mode:02b} are reserved")
 
 
 @device_rule("ESI208", "error", "mailbox protocols are declared but there is no mailbox SM", """
@@ -188,3 +204,14 @@ def fmmu_missing(dev: Device, ctx: FileContext) -> Iterator[Hit]:
 def fmmu_list_missing(dev: Device, ctx: FileContext) -> Iterator[Hit]:
     if not dev.fmmus and _directions_in_use(dev):
         yield Hit(dev.source, f"{dev.type_name!r} has process data but lists no Fmmu")
+
+
+@device_rule("ESI211", "error", "more SyncManagers or FMMUs than an ESC has", """
+    An ESC has at most 16 SyncManagers (registers 0x0800-0x087F) and 16 FMMUs
+    (0x0600-0x06FF); the SII categories describe no more.  A device listing more cannot be
+    configured (and the SyncManager layout checks are skipped for it).""")
+def too_many_units(dev: Device, ctx: FileContext) -> Iterator[Hit]:
+    for what, units in (("Sm", dev.sms), ("Fmmu", dev.fmmus)):
+        if len(units) > MAX_UNITS:
+            yield Hit(units[MAX_UNITS].source, f"the device lists {len(units)} {what} "
+                      f"elements; an ESC has at most {MAX_UNITS}")

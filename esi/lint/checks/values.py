@@ -2,12 +2,11 @@
 
 from __future__ import annotations
 
-from collections import Counter
 from typing import Iterator
 
 from ecatcfg.esi.lint.context import FileContext
 from ecatcfg.esi.lint.rules import Hit, declare, file_rule
-from ecatcfg.esi.model import ENGLISH, format_selector
+from ecatcfg.esi.model import ENGLISH, Device, format_selector
 
 # Produced by the schema step and the runner, not by a check function.
 XSD001 = declare("XSD001", "error", "the file does not validate against the ETG.2000 schema", """
@@ -53,18 +52,17 @@ def unreadable_value(ctx: FileContext) -> Iterator[Hit]:
     reports exactly these in its SII.  Two Device elements with the same pair in one file make
     the choice arbitrary (ecatcfg takes the first).  Give each revision its own RevisionNo.""")
 def duplicate_identity(ctx: FileContext) -> Iterator[Hit]:
-    seen = Counter()
+    first: dict[tuple[int, int], Device] = {}
     for dev in ctx.esi.devices:
         if dev.product_code is None or dev.revision is None:
             continue
         key = (dev.product_code, dev.revision)
-        seen[key] += 1
-        if seen[key] == 2:
-            first = next(d for d in ctx.esi.devices
-                         if (d.product_code, d.revision) == key)
+        if key not in first:
+            first[key] = dev
+        else:
             yield Hit(dev.source, f"{dev.type_name!r} has the identity "
                       f"{format_selector(dev.vendor.id, *key)} already used by "
-                      f"{first.type_name!r} at line {first.source.line}")
+                      f"{first[key].type_name!r} at line {first[key].source.line}")
 
 
 @file_rule("ESI005", "warning", "a name has no text in the default language", """

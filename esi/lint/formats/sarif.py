@@ -4,6 +4,7 @@ per finding with its physical location (file as given, 1-based line and column).
 from __future__ import annotations
 
 import json
+import re
 from pathlib import PurePath
 from typing import TextIO
 from urllib.parse import quote
@@ -76,4 +77,6 @@ def _uri(path: str) -> str:
 
 
 def _camel(summary: str) -> str:
-    return "".join(w.capitalize() for w in summary.replace("-", " ").split() if w.isalnum())
+    """``"a PDO entry's DataType differs"`` -> ``"APdoEntrySDataTypeDiffers"``."""
+    return "".join(w[:1].upper() + w[1:].lower() if w.isupper() and len(w) > 1 else
+                   w[:1].upper() + w[1:] for w in re.split(r"[^A-Za-z0-9]+", summary) if w)
