@@ -144,7 +144,7 @@ def _lint(args: argparse.Namespace, active: frozenset[str], schema_dir: Path | N
             raise UsageError(f"-o {args.output}: cannot write: {exc.strerror}") from None
     else:
         sys.stdout.write(buffer.getvalue())
-    return 1 if any(f.severity == "error" for r in results for f in r.findings) else 0
+    return 1 if any(r.has_errors for r in results) else 0
 
 
 def _ids(values: list[str]) -> list[str]:

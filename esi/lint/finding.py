@@ -57,6 +57,10 @@ class FileResult:
     schema_missing: str | None = None    # the schema file that would have applied
     seconds: float = 0.0
 
+    @property
+    def has_errors(self) -> bool:
+        return any(f.severity == "error" for f in self.findings)
+
 
 def count_by_severity(findings: list[Finding]) -> dict[str, int]:
     counts = {"error": 0, "warning": 0, "info": 0}

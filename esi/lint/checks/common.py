@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Callable, Hashable, Iterable, Iterator, TypeVar
 
 from ecatcfg.esi.model import (
     Device, DictObject, Dictionary, ObjectFlags, SyncManager,
@@ -109,6 +110,23 @@ def sm_length(dev: Device, sm: SyncManager) -> int:
     if sm.default_size is not None:
         return sm.default_size
     return (sm.max_size or 0) if sm.is_mailbox else 0
+
+
+T = TypeVar("T")
+
+
+def repeats(items: Iterable[T], key: Callable[[T], Hashable | None]) -> Iterator[tuple[T, T]]:
+    """(item, the first item with the same key) for every later item sharing a key; items
+    whose key is ``None`` are left out."""
+    first: dict[Hashable, T] = {}
+    for item in items:
+        k = key(item)
+        if k is None:
+            continue
+        if k in first:
+            yield item, first[k]
+        else:
+            first[k] = item
 
 
 def hex4(value: int | None) -> str:

@@ -4,9 +4,10 @@ from __future__ import annotations
 
 from typing import Iterator
 
+from ecatcfg.esi.lint.checks.common import repeats
 from ecatcfg.esi.lint.context import FileContext
 from ecatcfg.esi.lint.rules import Hit, device_rule, file_rule
-from ecatcfg.esi.model import Device, Module
+from ecatcfg.esi.model import Device
 
 
 @device_rule("ESI601", "error", "a Slot names a module ident no known module has", """
@@ -47,12 +48,6 @@ def info_reference_missing(ctx: FileContext) -> Iterator[Hit]:
     Slots and topologies name a module by Type/@ModuleIdent; two modules with one ident make
     the choice arbitrary.""")
 def duplicate_module_ident(ctx: FileContext) -> Iterator[Hit]:
-    seen: dict[int, Module] = {}
-    for mod in ctx.esi.modules:
-        if mod.ident is None:
-            continue
-        if mod.ident in seen:
-            yield Hit(mod.source, f"Module {mod.type_name!r} has the ident 0x{mod.ident:08X} "
-                      f"of {seen[mod.ident].type_name!r} at line {seen[mod.ident].source.line}")
-        else:
-            seen[mod.ident] = mod
+    for mod, first in repeats(ctx.esi.modules, lambda m: m.ident):
+        yield Hit(mod.source, f"Module {mod.type_name!r} has the ident 0x{mod.ident:08X} "
+                  f"of {first.type_name!r} at line {first.source.line}")

@@ -7,7 +7,7 @@ from typing import Iterator
 
 from ecatcfg.esi import datatypes
 from ecatcfg.esi.lint.checks.common import (
-    DictEntry, device_dictionary, dictionary_with_objects, has_coe, hex4, lookup,
+    DictEntry, device_dictionary, dictionary_with_objects, has_coe, hex4, lookup, repeats,
 )
 from ecatcfg.esi.lint.context import FileContext
 from ecatcfg.esi.lint.rules import Hit, device_rule
@@ -56,15 +56,9 @@ def pdo_index_range(dev: Device, ctx: FileContext) -> Iterator[Hit]:
     A PDO is assigned, excluded and (re)mapped by its index; two PDOs with one index make
     0x1C12/0x1C13 ambiguous and one of them unreachable.  Virtual PDOs are not compared.""")
 def duplicate_pdo_index(dev: Device, ctx: FileContext) -> Iterator[Hit]:
-    first: dict[int, Pdo] = {}
-    for pdo in dev.pdos:
-        if pdo.index is None or pdo.virtual:
-            continue
-        if pdo.index in first:
-            yield Hit(pdo.source, f"{_tag(pdo)} repeats the index of the PDO at line "
-                      f"{first[pdo.index].source.line}")
-        else:
-            first[pdo.index] = pdo
+    for pdo, first in repeats(dev.pdos, lambda p: None if p.virtual else p.index):
+        yield Hit(pdo.source, f"{_tag(pdo)} repeats the index of the PDO at line "
+                  f"{first.source.line}")
 
 
 @device_rule("ESI103", "warning", "a PDO entry maps an object the dictionary does not have", """

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from typing import Iterator
 
+from ecatcfg.esi.lint.checks.common import repeats
 from ecatcfg.esi.lint.context import FileContext
 from ecatcfg.esi.lint.rules import Hit, declare, file_rule
 from ecatcfg.esi.model import ENGLISH, Device, format_selector
@@ -52,17 +53,15 @@ def unreadable_value(ctx: FileContext) -> Iterator[Hit]:
     reports exactly these in its SII.  Two Device elements with the same pair in one file make
     the choice arbitrary (ecatcfg takes the first).  Give each revision its own RevisionNo.""")
 def duplicate_identity(ctx: FileContext) -> Iterator[Hit]:
-    first: dict[tuple[int, int], Device] = {}
-    for dev in ctx.esi.devices:
+    def identity(dev: Device) -> tuple[int, int] | None:
         if dev.product_code is None or dev.revision is None:
-            continue
-        key = (dev.product_code, dev.revision)
-        if key not in first:
-            first[key] = dev
-        else:
-            yield Hit(dev.source, f"{dev.type_name!r} has the identity "
-                      f"{format_selector(dev.vendor.id, *key)} already used by "
-                      f"{first[key].type_name!r} at line {first[key].source.line}")
+            return None
+        return dev.product_code, dev.revision
+
+    for dev, first in repeats(ctx.esi.devices, identity):
+        yield Hit(dev.source, f"{dev.type_name!r} has the identity "
+                  f"{format_selector(dev.vendor.id, dev.product_code, dev.revision)} already "
+                  f"used by {first.type_name!r} at line {first.source.line}")
 
 
 @file_rule("ESI005", "warning", "a name has no text in the default language", """

@@ -19,8 +19,7 @@ def write(results: list[FileResult], rules: dict[str, Rule], out: TextIO) -> Non
         "findings": [f.as_json() for f in findings],
         "summary": {
             "files": len(results),
-            "files_with_errors": sum(1 for r in results
-                                     if any(f.severity == "error" for f in r.findings)),
+            "files_with_errors": sum(1 for r in results if r.has_errors),
             "errors": counts["error"], "warnings": counts["warning"], "infos": counts["info"],
             "by_rule": dict(sorted(by_rule.items())),
             "schema_checked": sum(1 for r in results if r.schema_checked),

@@ -28,7 +28,7 @@ def write(results: list[FileResult], rules: dict[str, Rule], out: TextIO,
 def summary_line(results: list[FileResult]) -> str:
     counts = count_by_severity([f for r in results for f in r.findings])
     files = len(results)
-    with_errors = sum(1 for r in results if any(f.severity == "error" for f in r.findings))
+    with_errors = sum(1 for r in results if r.has_errors)
     return (f"{files} file{'s' if files != 1 else ''} checked: {counts['error']} errors, "
             f"{counts['warning']} warnings, {counts['info']} infos"
             + (f" ({with_errors} file{'s' if with_errors != 1 else ''} with errors)"
