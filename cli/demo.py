@@ -1,31 +1,67 @@
 """``ecatcfg demo``: the main job on the embedded default (the README's first command).
 
-Until the compiler and the runtime exist this lists the example devices that ship inside the
-package; later it compiles the example topology and applies it to a virtual segment.
+Compiles the example topology shipped inside the package (``examples/topology.yaml`` with the
+self-written ESI files in ``examples/esi/``) into an ENI and a C header, and shows what the
+configuration does.  Applying it to a virtual segment joins once the runtime exists.
 """
 
 from __future__ import annotations
 
 import argparse
-import sys
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("demo", help="run the main job on the embedded example",
-                       description="Show what ecatcfg does on the example files shipped "
-                                   "inside the package; needs no arguments and no hardware.")
-    p.add_argument("--format", choices=("text", "json"), default="text")
+                       description="Compile the example topology shipped inside the package "
+                                   "into an ENI and a C header; needs no arguments and no "
+                                   "hardware.")
+    p.add_argument("--out-dir", default="ecatcfg-demo", metavar="DIR",
+                   help="where to write demo.eni.xml and demo.h (default: ./ecatcfg-demo)")
     p.set_defaults(run=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    from ecatcfg.cli.devices import report
+    from pathlib import Path
+
+    from ecatcfg import __version__
+    from ecatcfg.compiler import build, eni_writer, header, topology
     from ecatcfg.esi.library import Library
     from ecatcfg.examples import example_dir
+    from ecatcfg.fileio import write_atomic
 
     folder = example_dir()
-    if args.format == "text":
-        print(f"Example ESI files shipped with ecatcfg ({folder}):\n")
-    lib = Library([folder])
-    report(lib, args.format, sys.stdout)
-    return 1 if lib.problems else 0
+    loaded = topology.load(folder / "topology.yaml", "examples/topology.yaml")
+    result = build.compile_topology(loaded, Library([folder / "esi"], cache=False))
+    plan = result.plan
+    out = Path(args.out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    eni, h = out / "demo.eni.xml", out / "demo.h"
+    write_atomic(eni, eni_writer.to_bytes(plan, generator=f"ecatcfg {__version__}"))
+    write_atomic(h, header.render(plan, "examples/topology.yaml", guard=header.guard_for(h.name)))
+
+    print(f"Example line compiled ({folder / 'topology.yaml'}):\n")
+    print(f"  {'slave':10} {'device':18} {'addr':>5} {'out':>5} {'in':>5}  mailbox  DC")
+    for s in plan.slaves:
+        pd = s.process_data
+        out_bits = sum(r.bit_length for r in pd.send) if pd else 0
+        in_bits = sum(r.bit_length for r in pd.recv) if pd else 0
+        device = next(x.device for x in loaded.topology.slaves if x.name == s.name)
+        print(f"  {s.name:10} {device:18} {s.phys_addr:>5} {_bits(out_bits):>5} "
+              f"{_bits(in_bits):>5}  {'CoE' if s.mailbox else '-':7}  "
+              f"{'ref clock' if s.dc and s.dc.reference_clock else 'yes' if s.dc else '-'}")
+    for n, frame in enumerate(plan.cyclic[0].frames):
+        cmds = ", ".join(f"{c.comment.split(';')[1].strip() if ';' in c.comment else c.cmd}"
+                         f"{f' (WKC {c.cnt})' if c.cnt else ''}" for c in frame.cmds)
+        print(f"\n  cyclic frame {n + 1} every {plan.cyclic[0].cycle_time} us: {cmds}")
+    init = sum(len(s.init_cmds) for s in plan.slaves)
+    coe = sum(len(s.mailbox.coe_init_cmds) for s in plan.slaves if s.mailbox)
+    print(f"  {init} register InitCmds, {coe} CoE InitCmds, process image "
+          f"{plan.process_image.outputs_size} bytes")
+    for w in result.warnings:
+        print(f"  warning: {w}")
+    print(f"\nwrote {eni} and {h}")
+    return 0
+
+
+def _bits(bits: int) -> str:
+    return "-" if not bits else f"{bits // 8}B" if bits % 8 == 0 else f"{bits}b"

@@ -37,6 +37,15 @@ def esi_schema(corpus: Path):
     return etree.XMLSchema(etree.parse(str(xsd)))
 
 
+@pytest.fixture(scope="session")
+def eni_schema(corpus: Path):
+    from lxml import etree
+    xsd = corpus / "schemas" / "eni-1.3" / "EtherCATConfig.xsd"
+    if not xsd.is_file():
+        _require(str(xsd))
+    return etree.XMLSchema(etree.parse(str(xsd)))
+
+
 @pytest.fixture(autouse=True)
 def _private_cache(tmp_path_factory, monkeypatch):
     """Every test gets its own empty index cache: never the user's ~/.cache."""

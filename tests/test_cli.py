@@ -22,23 +22,23 @@ def test_devices_json_shape_on_examples():
     out = ecatcfg("devices", "--format", "json", "examples/")
     assert out.returncode == 0, out.stderr
     devices = json.loads(out.stdout)["devices"]
-    assert len(devices) == 4
+    assert len(devices) == 5
     drive = next(d for d in devices if d["type"] == "EXD-402")
     assert CONTRACT_KEYS <= set(drive)
-    assert drive == {**drive, "file": "examples/ecatcfg-example-devices.xml",
+    assert drive == {**drive, "file": "examples/esi/ecatcfg-EXD402-drive.xml",
                      "vendor_id": 0xE0000ECA, "product_code": 0x7201, "revision": 0x20000,
-                     "rx_pdos": 1, "tx_pdos": 1, "rx_entries": 2, "tx_entries": 2,
+                     "rx_pdos": 2, "tx_pdos": 2, "rx_entries": 4, "tx_entries": 4,
                      "mailbox": ["CoE", "FoE"], "dc_opmodes": ["DC", "FreeRun"], "slots": 0,
                      "modules": 0, "group": "ExDrive",
                      "name": "EXD-402 servo drive, CiA 402 (example)"}
-    text = (EXAMPLES / "ecatcfg-example-devices.xml").read_text().splitlines()
+    text = (EXAMPLES / "esi" / "ecatcfg-EXD402-drive.xml").read_text().splitlines()
     assert 'ProductCode="#x00007201"' in text[drive["line"]]   # line of <Device>, Type next
 
 
 def test_devices_text_lists_selector_and_source():
     out = ecatcfg("devices", "examples")
     assert out.returncode == 0
-    assert "0xe0000eca:0x7201:0x20000" in out.stdout and "4 devices in 1 files" in out.stdout
+    assert "0xe0000eca:0x7201:0x20000" in out.stdout and "5 devices in 3 files" in out.stdout
 
 
 def test_missing_path_exits_2():
@@ -87,7 +87,9 @@ def test_help_and_devices_do_not_import_scapy_or_the_runtime():
     assert out.stdout.strip() == "[] []"
 
 
-def test_demo_lists_the_embedded_examples(tmp_path):
+def test_demo_compiles_the_embedded_example(tmp_path):
     out = ecatcfg("demo", cwd=tmp_path)                  # no paths, any folder
     assert out.returncode == 0, out.stderr
-    assert "EXD-402" in out.stdout and "4 devices" in out.stdout
+    assert "axis1" in out.stdout and "LRW (WKC 7)" in out.stdout
+    assert (tmp_path / "ecatcfg-demo" / "demo.eni.xml").read_bytes().startswith(b"<?xml")
+    assert b"#define ECAT_OUT_AXIS1" in (tmp_path / "ecatcfg-demo" / "demo.h").read_bytes()

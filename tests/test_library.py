@@ -115,13 +115,15 @@ def test_info_reference_resolved_beside_the_file_or_warned(tmp_path):
 
 def test_examples_are_a_valid_library():
     lib = Library([EXAMPLES], cache=False)
-    assert {e.type for e in lib.entries} == {"EX1100", "EX1008", "EX2008", "EXD-402"}
+    assert {e.type for e in lib.entries} == {"EX1100", "EX1004", "EX1008", "EX2008", "EXD-402"}
     assert lib.problems == []
 
 
 def test_examples_validate_against_the_etg_schema(esi_schema):
     from lxml import etree
-    for path in EXAMPLES.glob("*.xml"):
+    paths = sorted(EXAMPLES.glob("esi/*.xml"))
+    assert len(paths) == 3
+    for path in paths:
         assert esi_schema.validate(etree.parse(str(path))), esi_schema.error_log
 
 

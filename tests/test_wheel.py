@@ -28,7 +28,9 @@ def test_wheel_installs_and_runs(tmp_path):
     names = zipfile.ZipFile(wheel).namelist()
     top = {n.split("/")[0] for n in names if not n.split("/")[0].endswith(".dist-info")}
     assert top == {"ecatcfg"}, top
-    assert "ecatcfg/examples/ecatcfg-example-devices.xml" in names
+    assert "ecatcfg/examples/esi/ecatcfg-EXD402-drive.xml" in names
+    assert "ecatcfg/examples/topology.yaml" in names
+    assert "ecatcfg/templates/process_image.h.j2" in names
     assert "ecatcfg/templates/__init__.py" in names
     assert not any(n.startswith("ecatcfg/tests/") or n.startswith("ecatcfg/bench/")
                    for n in names)
@@ -48,7 +50,14 @@ def test_wheel_installs_and_runs(tmp_path):
     out = run("lint", "examples/", "--no-config", "--jobs", "2")   # rules load from the wheel
     assert out.returncode == 0 and "0 errors, 0 warnings" in out.stdout, out.stderr
     out = run("demo", cwd=tmp_path)        # the embedded default: package data only
-    assert out.returncode == 0 and "4 devices in 1 files" in out.stdout, out.stderr
+    assert out.returncode == 0 and "LRW (WKC 7)" in out.stdout, out.stderr
+    assert (tmp_path / "ecatcfg-demo" / "demo.h").is_file()     # template from the wheel
+    out = run("compile", str(ROOT / "examples" / "topology.yaml"), "--esi",
+              str(ROOT / "examples" / "esi"), "-o", str(tmp_path / "w.xml"))
+    assert out.returncode == 0, out.stderr
+    # the installed compiler gives the same bytes as the demo's embedded run
+    assert (tmp_path / "w.xml").read_bytes() == \
+        (tmp_path / "ecatcfg-demo" / "demo.eni.xml").read_bytes()
     # the installed module is the wheel's, not the checkout's
     where = subprocess.run([str(py), "-c", "import ecatcfg; print(ecatcfg.__file__)"],
                            capture_output=True, text=True, cwd=tmp_path, check=True)

@@ -5,9 +5,10 @@ from __future__ import annotations
 from typing import Iterator
 
 from ecatcfg.esi import datatypes
-from ecatcfg.esi.lint.checks.common import (
-    TRANSITION_STATE, DictEntry, device_dictionary, dictionary_with_objects, hex4, lookup,
+from ecatcfg.esi.coe import (
+    TRANSITION_STATE, DictEntry, device_dictionary, dictionary_with_objects, lookup,
 )
+from ecatcfg.esi.lint.checks.common import hex4
 from ecatcfg.esi.lint.context import FileContext
 from ecatcfg.esi.lint.rules import Hit, device_rule
 from ecatcfg.esi.model import CoeInitCmd, Device, DictObject, Source

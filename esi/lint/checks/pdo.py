@@ -6,9 +6,10 @@ from collections import defaultdict
 from typing import Iterator
 
 from ecatcfg.esi import datatypes
-from ecatcfg.esi.lint.checks.common import (
-    DictEntry, device_dictionary, dictionary_with_objects, has_coe, hex4, lookup, repeats,
+from ecatcfg.esi.coe import (
+    DictEntry, device_dictionary, dictionary_with_objects, has_coe, lookup,
 )
+from ecatcfg.esi.lint.checks.common import hex4, repeats
 from ecatcfg.esi.lint.context import FileContext
 from ecatcfg.esi.lint.rules import Hit, device_rule
 from ecatcfg.esi.model import Device, Pdo, PdoEntry

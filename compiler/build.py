@@ -1,0 +1,214 @@
+"""Topology + device library -> NetworkPlan: the compiler's one entry point.
+
+``compile_topology`` resolves every slave (``resolve``), lays out the process image
+(``layout``), then writes each slave's register InitCmds (``initcmds``) and CoE InitCmds
+(``pdocmds`` + the ESI's own + the user's SDOs).  Nothing is returned when any slave has an
+error: all errors are raised together as one :class:`TopologyError`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from ecatcfg.compiler import initcmds, layout as layout_mod, pdocmds
+from ecatcfg.compiler.plan import (Cyclic, DcPlan, MailboxArea, MailboxPlan, MasterPlan,
+                                   NetworkPlan, PreviousPort, ProcessData, ProcessImage,
+                                   SlavePlan, SmSettings, Variable)
+from ecatcfg.compiler.resolve import ResolvedSlave, resolve_all
+from ecatcfg.compiler.topology import LoadedTopology, TopologyError
+from ecatcfg.errors import EcatcfgError
+from ecatcfg.esc import MAILBOX_STATE_ADDR, SmConfig
+from ecatcfg.esi.library import Library
+
+# How often a master polls SM1 of a slave without a mailbox-state bit (ms; EC-Engineer
+# writes 10 for the Elmo Gold).
+MAILBOX_POLL_TIME = 10
+# The ENI schema's ProcessData has elements Sm0..Sm3 only.
+ENI_MAX_SM = 3
+SYNC1_BIT = 0x0400            # AssignActivate bit for SYNC1 (0x0981 bit 2)
+
+
+@dataclass(slots=True)
+class CompileResult:
+    plan: NetworkPlan
+    warnings: list[EcatcfgError] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+
+
+def compile_topology(loaded: LoadedTopology, library: Library) -> CompileResult:
+    resolved, errors = resolve_all(loaded, library)
+    errors += _fmmu_errors(loaded, resolved)
+    if errors:
+        raise TopologyError(errors)
+    topo = loaded.topology
+    cycle_ns = topo.master.cycle_time_us * 1000
+    ref = next((s for s in resolved if s.dc_mode and s.dc_mode.assign_activate), None)
+    polled = [i for i, s in enumerate(resolved) if _uses_state_bit(s)]
+    try:
+        lay = layout_mod.build(resolved, topo.master.layout, ref is not None, polled)
+    except EcatcfgError as exc:
+        raise TopologyError([loaded.error(exc.message, "slaves")]) from None
+
+    slaves: list[SlavePlan] = []
+    for i, s in enumerate(resolved):
+        sl = lay.slaves[i]
+        dc = _dc_plan(s, cycle_ns, s is ref)
+        init = initcmds.slave_init_cmds(
+            s, sl, dc, s.dc_mode.assign_activate if dc and s.dc_mode else 0, _bootstrap(s))
+        slaves.append(SlavePlan(
+            name=s.name, phys_addr=s.phys_addr, auto_inc_addr=(-s.position) & 0xFFFF,
+            vendor_id=s.device.vendor.id or 0, product_code=s.device.product_code or 0,
+            revision=s.device.revision or 0, physics=s.device.physics or "YY",
+            process_data=_process_data(s, sl), mailbox=_mailbox(s, sl), init_cmds=init, dc=dc,
+            previous_ports=[PreviousPort("B", slaves[-1].phys_addr)] if slaves else []))
+
+    outputs = _unique([v for sl in lay.slaves for v in sl.outputs])
+    inputs = _unique([v for sl in lay.slaves for v in sl.inputs])
+    plan = NetworkPlan(
+        master=MasterPlan(topo.master.name, init_cmds=initcmds.master_init_cmds(),
+                          mailbox_states=(MAILBOX_STATE_ADDR, len(polled)) if polled else None),
+        slaves=slaves,
+        cyclic=[Cyclic(lay.frames, cycle_time=topo.master.cycle_time_us)],
+        process_image=ProcessImage(lay.image_size, lay.image_size, inputs, outputs))
+    notes = [f"slave {s.name!r}: {s.note}" for s in resolved if s.note]
+    return CompileResult(plan, ebus_warnings(loaded, resolved), notes)
+
+
+def _uses_state_bit(s: ResolvedSlave) -> bool:
+    """Poll the mailbox through the logical state bit when the ESI offers an MBoxState FMMU
+    (Beckhoff terminals, EC-train); otherwise poll SM1 every MAILBOX_POLL_TIME ms."""
+    kinds = [f.type for f in s.device.fmmus]
+    mailboxes = [sm for sm in s.device.sms if sm.is_mailbox]
+    return len(mailboxes) >= 2 and "MBoxState" in kinds and \
+        len(kinds) >= _pd_fmmu_count(s) + 1
+
+
+def _pd_fmmu_count(s: ResolvedSlave) -> int:
+    out, inp = layout_mod.pd_bits(s)
+    return sum(1 for _, bits in out + inp if bits)
+
+
+def _fmmu_errors(loaded: LoadedTopology, resolved: list[ResolvedSlave]) -> list[EcatcfgError]:
+    errors = []
+    for s in resolved:
+        have, need = len(s.device.fmmus), _pd_fmmu_count(s)
+        if have and need > have:
+            errors.append(loaded.error(
+                f"slave {s.name!r}: its process data needs {need} FMMUs, the ESI of "
+                f"{s.device.type_name} declares {have}", "slaves", s.position))
+    return errors
+
+
+def _dc_plan(s: ResolvedSlave, cycle_ns: int, reference: bool) -> DcPlan | None:
+    mode = s.dc_mode
+    if mode is None or not mode.assign_activate:
+        return None
+    cycle0 = _cycle(mode.cycle_time_sync0, mode.cycle_time_sync0_factor, cycle_ns) or cycle_ns
+    cycle1 = 0
+    if mode.assign_activate & SYNC1_BIT:
+        # ETG.2000: the SYNC1 factor multiplies the SYNC0 cycle; 0x09A4 counts from SYNC0
+        # and includes the SYNC1 shift (as IgH writes it).
+        cycle1 = (_cycle(mode.cycle_time_sync1, mode.cycle_time_sync1_factor, cycle0) or 0) \
+            + (mode.shift_time_sync1 or 0)
+    return DcPlan(reference, cycle0, cycle1, mode.shift_time_sync0 or 0)
+
+
+def _cycle(value: int | None, factor: int | None, base: int) -> int | None:
+    if factor is not None and factor != 0:
+        return base * factor if factor > 0 else base // -factor
+    return value or None
+
+
+def _bootstrap(s: ResolvedSlave) -> tuple[SmConfig, SmConfig] | None:
+    """SM0/SM1 for BOOT from the ESI ``Eeprom/BootStrap`` (out start, out size, in start,
+    in size; 2 bytes each)."""
+    boot = s.device.eeprom.boot_strap if s.device.eeprom else None
+    mailboxes = [sm for sm in s.device.sms if sm.is_mailbox]
+    if not boot or len(boot) < 8 or len(mailboxes) < 2:
+        return None
+    o_start, o_len, i_start, i_len = (int.from_bytes(boot[i:i + 2], "little")
+                                      for i in range(0, 8, 2))
+    if not o_len or not i_len:
+        return None
+    return (SmConfig(o_start, o_len, mailboxes[0].control_byte or 0x26, True),
+            SmConfig(i_start, i_len, mailboxes[1].control_byte or 0x22, True))
+
+
+def _process_data(s: ResolvedSlave, sl: layout_mod.SlaveLayout) -> ProcessData | None:
+    pd_sms = [sm for sm in sorted(s.device.sms, key=lambda x: x.number)
+              if not sm.is_mailbox and sm.type in ("Outputs", "Inputs")
+              and sm.number <= ENI_MAX_SM]
+    if not pd_sms and not s.pdos:
+        return None
+    out, inp = layout_mod.pd_bits(s)
+    bits = dict(out + inp)
+    sms = []
+    for sm in pd_sms:
+        length = (bits.get(sm.number, 0) + 7) // 8
+        sms.append(SmSettings(
+            sm.number, sm.type or "", sm.start_address or 0,
+            sm.control_byte or 0 if length else 0, bool(length),
+            [p.index for p in s.assigned(sm.number)], sm.min_size, sm.max_size,
+            sm.default_size, True if sm.virtual else None))
+    return ProcessData([sl.send] if sl.send else [], [sl.recv] if sl.recv else [], sms,
+                       list(s.pdos))
+
+
+def _mailbox(s: ResolvedSlave, sl: layout_mod.SlaveLayout) -> MailboxPlan | None:
+    dev = s.device
+    mailboxes = [sm for sm in dev.sms if sm.is_mailbox]
+    if dev.mailbox is None or len(mailboxes) < 2:
+        return None
+    out, inp = mailboxes[0], mailboxes[1]
+    boot = _bootstrap(s)
+    coe = pdocmds.pdo_cmds(s) + s.esi_cmds + s.module_cmds + s.user_cmds
+    return MailboxPlan(
+        send=MailboxArea(out.start_address or 0, out.default_size or out.max_size or 0),
+        recv=MailboxArea(inp.start_address or 0, inp.default_size or inp.max_size or 0),
+        protocols=list(dev.mailbox.protocols),
+        poll_time=None if sl.status_bit is not None else MAILBOX_POLL_TIME,
+        status_bit_addr=sl.status_bit,
+        bootstrap_send=MailboxArea(boot[0].start, boot[0].length) if boot else None,
+        bootstrap_recv=MailboxArea(boot[1].start, boot[1].length) if boot else None,
+        coe_init_cmds=coe,
+        coe_profiles=[(p.profile_no, None if p.add_info is None else str(p.add_info))
+                      for p in dev.profiles if p.profile_no is not None]
+        if "CoE" in dev.mailbox.protocols else [],
+        data_link_layer=True if dev.mailbox.data_link_layer else None)
+
+
+def _unique(variables: list[Variable]) -> list[Variable]:
+    """Variable names must be unique (C header, lookups): later duplicates get _2, _3, ..."""
+    seen: dict[str, int] = {}
+    for v in variables:
+        n = seen.get(v.name, 0)
+        seen[v.name] = n + 1
+        if n:
+            v.name = f"{v.name}_{n + 1}"
+    return variables
+
+
+def ebus_warnings(loaded: LoadedTopology, resolved: list[ResolvedSlave]) -> list[EcatcfgError]:
+    """E-bus budget (ESI ``Electrical/EBusCurrent``, mA): a negative value supplies current
+    (a coupler: -2000), positive values draw it; warn when the terminals after a supplier
+    draw more than it gives."""
+    warnings: list[EcatcfgError] = []
+    supplier: ResolvedSlave | None = None
+    budget = drawn = 0
+    warned = False
+    for s in resolved:
+        current = s.device.info.ebus_current if s.device.info else None
+        if current is None:
+            continue
+        if current < 0:
+            supplier, budget, drawn, warned = s, -current, 0, False
+            continue
+        drawn += current
+        if supplier is not None and drawn > budget and not warned:
+            warned = True
+            warnings.append(loaded.error(
+                f"E-bus current: the terminals after {supplier.name!r} "
+                f"({supplier.device.type_name}) draw {drawn} mA up to slave {s.name!r}, more "
+                f"than the {budget} mA it supplies; add a power feed terminal",
+                "slaves", s.position))
+    return warnings

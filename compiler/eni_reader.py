@@ -1,0 +1,445 @@
+"""Read an ENI file (ETG.2100 ``EtherCATConfig``) into a :class:`NetworkPlan`.
+
+Tolerant of what real exporters write (eni-observations §1, §8): booleans ``1``/``0`` or
+``true``/``false``, numbers decimal or ``#x``/``0x`` hex, ``InitCmd/Timeout`` (newer than the
+2011 schema), an ``EncryptedEtherCATConfig`` root with a clear-text body, and any element this
+reader does not know (Elmo Application Studio's ``ElmoSpecialResources``, ``HotConnect``,
+``EoE``, ``PotentialReferenceClock`` ...), which is skipped.  What the plan needs and the file
+lacks or misspells is an :class:`EniReadError` naming the file and the element's line.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+from lxml import etree
+
+from ecatcfg.compiler.plan import (
+    BitRange,
+    CoeInitCmd,
+    Cyclic,
+    CyclicCmd,
+    DcPlan,
+    Frame,
+    InitCmd,
+    MailboxArea,
+    MailboxPlan,
+    MasterPlan,
+    NetworkPlan,
+    PdoDesc,
+    PdoEntryDesc,
+    PreviousPort,
+    ProcessData,
+    ProcessImage,
+    SlavePlan,
+    SmSettings,
+    Validate,
+    Variable,
+)
+from ecatcfg.errors import EcatcfgError
+from ecatcfg.esc import Transition
+from ecatcfg.esi import xmlsafe
+
+Element = etree._Element
+
+_ROOTS = ("EtherCATConfig", "EncryptedEtherCATConfig")
+# Bounded lengths: no ENI number needs more, and Python refuses int() of > 4300 digits.
+_NUMBER = re.compile(r"[+-]?(?:[0-9]{1,20}|#x[0-9a-f]{1,16}|0x[0-9a-f]{1,16})", re.IGNORECASE)
+_BOOLEANS = {"1": True, "true": True, "0": False, "false": False}
+_DC_VALUES = ("ReferenceClock", "CycleTime0", "CycleTime1", "ShiftTime")
+
+
+class EniReadError(EcatcfgError):
+    """An ENI file this reader cannot turn into a plan."""
+
+
+def _parse_int(text: str) -> int | None:
+    """Decimal (signed), ``#x`` (ESI style) or ``0x`` hex; ``None`` if it is none of those."""
+    text = text.strip()
+    if not _NUMBER.fullmatch(text):
+        return None
+    sign = -1 if text[0] == "-" else 1
+    digits = text.lstrip("+-")
+    if digits[:2].lower() in ("#x", "0x"):
+        return sign * int(digits[2:], 16)
+    return sign * int(digits, 10)
+
+
+def read_file(path: str | Path, shown_as: str | None = None) -> NetworkPlan:
+    """Read the ENI at ``path``; errors name ``shown_as`` (the path as the user gave it)."""
+    name = shown_as or str(path)
+    try:
+        data = Path(path).read_bytes()
+    except OSError as exc:
+        raise EniReadError(f"cannot read: {exc.strerror}", name) from None
+    return read_bytes(data, name)
+
+
+def read_bytes(data: bytes, shown_as: str) -> NetworkPlan:
+    """Read an ENI held in memory; ``shown_as`` names it in messages."""
+    tree = xmlsafe.parse_bytes(data, shown_as, strip=True)   # refuses entities and DTDs
+    return _Reader(shown_as).network(tree.getroot())
+
+
+class _Reader:
+    """Element-to-plan conversion; every error carries the file and the element's line."""
+
+    def __init__(self, file: str) -> None:
+        self.file = file
+
+    def error(self, message: str, el: Element) -> EniReadError:
+        return EniReadError(message, self.file, el.sourceline)
+
+    # --- values ---------------------------------------------------------------------------
+
+    @staticmethod
+    def text(el: Element) -> str:
+        """An element's text, CDATA included, comments left out."""
+        return "".join(el.itertext())
+
+    def child(self, parent: Element, tag: str) -> Element:
+        el = parent.find(tag)
+        if el is None:
+            raise self.error(f"<{parent.tag}> has no <{tag}>", parent)
+        return el
+
+    def number(self, el: Element) -> int:
+        text = self.text(el)
+        value = _parse_int(text)
+        if value is None:
+            raise self.error(f"<{el.tag}> is not a number: {text.strip()!r}", el)
+        return value
+
+    def req_int(self, parent: Element, tag: str) -> int:
+        return self.number(self.child(parent, tag))
+
+    def opt_int(self, parent: Element, tag: str) -> int | None:
+        el = parent.find(tag)
+        return None if el is None else self.number(el)
+
+    def int_or(self, parent: Element, tag: str, default: int) -> int:
+        value = self.opt_int(parent, tag)
+        return default if value is None else value
+
+    def uint32(self, parent: Element, tag: str) -> int:
+        """A uint32 the schema types xs:int: negative values are its signed spelling."""
+        return self.req_int(parent, tag) & 0xFFFFFFFF
+
+    def attr_int(self, el: Element, name: str) -> int | None:
+        text = el.get(name)
+        if text is None:
+            return None
+        value = _parse_int(text)
+        if value is None:
+            raise self.error(f"attribute {name} of <{el.tag}> is not a number: {text!r}", el)
+        return value
+
+    def boolean(self, el: Element) -> bool:
+        value = _BOOLEANS.get(self.text(el).strip().lower())
+        if value is None:
+            raise self.error(f"<{el.tag}> is not a boolean: {self.text(el).strip()!r}", el)
+        return value
+
+    def opt_bool(self, parent: Element, tag: str) -> bool | None:
+        el = parent.find(tag)
+        return None if el is None else self.boolean(el)
+
+    def attr_bool(self, el: Element, name: str) -> bool | None:
+        text = el.get(name)
+        if text is None:
+            return None
+        value = _BOOLEANS.get(text.strip().lower())
+        if value is None:
+            raise self.error(f"attribute {name} of <{el.tag}> is not a boolean: {text!r}", el)
+        return value
+
+    def hex_bytes(self, el: Element) -> bytes:
+        text = "".join(self.text(el).split())
+        try:
+            return bytes.fromhex(text)
+        except ValueError:
+            raise self.error(f"<{el.tag}> is not hex bytes: {text[:40]!r}", el) from None
+
+    def opt_hex(self, parent: Element, tag: str) -> bytes | None:
+        el = parent.find(tag)
+        return None if el is None else self.hex_bytes(el)
+
+    def hex_or(self, parent: Element, tag: str, default: bytes) -> bytes:
+        value = self.opt_hex(parent, tag)
+        return default if value is None else value
+
+    def opt_text(self, parent: Element, tag: str) -> str | None:
+        el = parent.find(tag)
+        return None if el is None else self.text(el)
+
+    def transitions(self, parent: Element) -> list[Transition]:
+        result = []
+        for el in parent.iterchildren("Transition"):
+            name = self.text(el).strip()
+            try:
+                result.append(Transition(name))
+            except ValueError:
+                raise self.error(f"unknown transition {name!r}", el) from None
+        return result
+
+    # --- document -------------------------------------------------------------------------
+
+    def network(self, root: Element) -> NetworkPlan:
+        if root.tag not in _ROOTS:
+            raise self.error(f"not an ENI file: the root element is <{root.tag}>, "
+                             "expected <EtherCATConfig>", root)
+        config = self.child(root, "Config")
+        image = config.find("ProcessImage")
+        return NetworkPlan(
+            master=self.master(self.child(config, "Master")),
+            slaves=[self.slave(el) for el in config.iterchildren("Slave")],
+            cyclic=[self.cyclic(el) for el in config.iterchildren("Cyclic")],
+            process_image=ProcessImage() if image is None else self.process_image(image),
+            version=root.get("Version"),
+        )
+
+    # --- commands -------------------------------------------------------------------------
+
+    def address(self, el: Element) -> tuple[int | None, int | None, int | None]:
+        """``(adp, ado, addr)``: ``(Adp?, Ado) | Addr``."""
+        adp, ado, addr = (self.opt_int(el, "Adp"), self.opt_int(el, "Ado"),
+                          self.opt_int(el, "Addr"))
+        if addr is not None:
+            addr &= 0xFFFFFFFF
+        if ado is None and addr is None:
+            raise self.error(f"<{el.tag}> has neither <Ado> nor <Addr>", el)
+        return adp, ado, addr
+
+    def payload(self, el: Element) -> tuple[bytes | None, int]:
+        """``(data, length)``: ``Data``, or ``DataLength`` zero bytes (eni-observations §2)."""
+        data = self.opt_hex(el, "Data")
+        if data is not None:
+            return data, len(data)
+        length = self.opt_int(el, "DataLength")
+        if length is None:
+            raise self.error(f"<{el.tag}> has neither <Data> nor <DataLength>", el)
+        return None, length
+
+    def init_cmd(self, el: Element) -> InitCmd:
+        adp, ado, addr = self.address(el)
+        data, length = self.payload(el)
+        validate = el.find("Validate")
+        return InitCmd(
+            transitions=self.transitions(el),
+            comment=self.opt_text(el, "Comment") or "",
+            cmd=self.req_int(el, "Cmd"),
+            length=length,
+            adp=adp, ado=ado, addr=addr, data=data,
+            cnt=self.opt_int(el, "Cnt"),
+            retries=self.opt_int(el, "Retries"),
+            validate=None if validate is None else self.validate(validate),
+            requires=self.opt_text(el, "Requires"),
+            before_slave=self.opt_bool(el, "BeforeSlave"),
+            timeout=self.opt_int(el, "Timeout"),
+        )
+
+    def validate(self, el: Element) -> Validate:
+        return Validate(data=self.hex_bytes(self.child(el, "Data")),
+                        mask=self.opt_hex(el, "DataMask"),
+                        timeout=self.int_or(el, "Timeout", 0))
+
+    def init_cmds(self, parent: Element) -> list[InitCmd]:
+        cmds = parent.find("InitCmds")
+        return [] if cmds is None else [self.init_cmd(c) for c in cmds.iterchildren("InitCmd")]
+
+    # --- master ---------------------------------------------------------------------------
+
+    def master(self, el: Element) -> MasterPlan:
+        info = self.child(el, "Info")
+        defaults = MasterPlan(name="")
+        states = el.find("MailboxStates")
+        return MasterPlan(
+            name=self.opt_text(info, "Name") or "",
+            destination=self.hex_or(info, "Destination", defaults.destination),
+            source=self.hex_or(info, "Source", defaults.source),
+            ether_type=self.hex_or(info, "EtherType", defaults.ether_type),
+            mailbox_states=None if states is None else (self.uint32(states, "StartAddr"),
+                                                         self.req_int(states, "Count")),
+            init_cmds=self.init_cmds(el),
+        )
+
+    # --- slaves ---------------------------------------------------------------------------
+
+    def slave(self, el: Element) -> SlavePlan:
+        info = self.child(el, "Info")
+        pd = el.find("ProcessData")
+        mailbox = el.find("Mailbox")
+        dc = el.find("DC")
+        return SlavePlan(
+            name=self.opt_text(info, "Name") or "",
+            phys_addr=self.req_int(info, "PhysAddr") & 0xFFFF,
+            auto_inc_addr=self.req_int(info, "AutoIncAddr") & 0xFFFF,     # -1 -> 65535
+            # EAS writes Physics as an attribute of Slave as well (eni-observations §8).
+            physics=self.opt_text(info, "Physics") or el.get("Physics") or "YY",
+            vendor_id=self.uint32(info, "VendorId"),
+            product_code=self.uint32(info, "ProductCode"),
+            revision=self.uint32(info, "RevisionNo"),
+            serial_no=self.int_or(info, "SerialNo", 0) & 0xFFFFFFFF,
+            process_data=None if pd is None else self.process_data(pd),
+            mailbox=None if mailbox is None else self.mailbox(mailbox),
+            init_cmds=self.init_cmds(el),
+            dc=None if dc is None else self.dc(dc),
+            previous_ports=[self.previous_port(p) for p in el.iterchildren("PreviousPort")],
+        )
+
+    def bit_range(self, el: Element) -> BitRange:
+        return BitRange(self.req_int(el, "BitStart"), self.req_int(el, "BitLength"))
+
+    def process_data(self, el: Element) -> ProcessData:
+        return ProcessData(
+            send=[self.bit_range(s) for s in el.iterchildren("Send")],
+            recv=[self.bit_range(r) for r in el.iterchildren("Recv")],
+            sms=[self.sm(sm, n) for n in range(4) for sm in el.iterchildren(f"Sm{n}")],
+            pdos=[self.pdo(p) for p in el.iterchildren("RxPdo", "TxPdo")],
+        )
+
+    def sm(self, el: Element, number: int) -> SmSettings:
+        return SmSettings(
+            number=number,
+            type=self.opt_text(el, "Type") or "",
+            start_address=self.req_int(el, "StartAddress"),
+            control_byte=self.req_int(el, "ControlByte"),
+            enable=self.boolean(self.child(el, "Enable")),
+            pdos=[self.number(p) for p in el.iterchildren("Pdo")],
+            min_size=self.opt_int(el, "MinSize"),
+            max_size=self.opt_int(el, "MaxSize"),
+            default_size=self.opt_int(el, "DefaultSize"),
+            virtual=self.opt_bool(el, "Virtual"),
+            watchdog=self.opt_int(el, "Watchdog"),
+        )
+
+    def pdo(self, el: Element) -> PdoDesc:
+        return PdoDesc(
+            direction="rx" if el.tag == "RxPdo" else "tx",
+            index=self.req_int(el, "Index"),
+            name=self.opt_text(el, "Name") or "",        # the first Name (one per language)
+            entries=[self.entry(e) for e in el.iterchildren("Entry")],
+            sm=self.attr_int(el, "Sm"),
+            fixed=bool(self.attr_bool(el, "Fixed")),
+            mandatory=bool(self.attr_bool(el, "Mandatory")),
+            virtual=bool(self.attr_bool(el, "Virtual")),
+            excludes=[self.number(x) for x in el.iterchildren("Exclude")],
+        )
+
+    def entry(self, el: Element) -> PdoEntryDesc:
+        return PdoEntryDesc(
+            index=self.req_int(el, "Index"),
+            subindex=self.int_or(el, "SubIndex", 0),
+            bit_len=self.req_int(el, "BitLen"),
+            name=self.opt_text(el, "Name") or "",
+            data_type=self.opt_text(el, "DataType"),
+        )
+
+    def mailbox_area(self, el: Element) -> MailboxArea:
+        return MailboxArea(self.req_int(el, "Start"), self.req_int(el, "Length"))
+
+    def mailbox(self, el: Element) -> MailboxPlan:
+        recv = self.child(el, "Recv")
+        boot = el.find("BootStrap")
+        coe = el.find("CoE")
+        return MailboxPlan(
+            send=self.mailbox_area(self.child(el, "Send")),
+            recv=self.mailbox_area(recv),
+            protocols=[self.text(p).strip() for p in el.iterchildren("Protocol")],
+            poll_time=self.opt_int(recv, "PollTime"),
+            status_bit_addr=self.opt_int(recv, "StatusBitAddr"),
+            bootstrap_send=None if boot is None else self.mailbox_area(self.child(boot, "Send")),
+            bootstrap_recv=None if boot is None else self.mailbox_area(self.child(boot, "Recv")),
+            coe_init_cmds=[] if coe is None else self.coe_init_cmds(coe),
+            coe_profiles=[] if coe is None else self.coe_profiles(coe),
+            data_link_layer=self.attr_bool(el, "DataLinkLayer"),
+        )
+
+    def coe_init_cmds(self, coe: Element) -> list[CoeInitCmd]:
+        cmds = coe.find("InitCmds")
+        if cmds is None:
+            return []
+        return [self.coe_init_cmd(c) for c in cmds.iterchildren("InitCmd")]
+
+    def coe_init_cmd(self, el: Element) -> CoeInitCmd:
+        return CoeInitCmd(
+            transitions=self.transitions(el),
+            comment=self.opt_text(el, "Comment") or "",
+            index=self.req_int(el, "Index"),
+            subindex=self.int_or(el, "SubIndex", 0),
+            data=self.hex_or(el, "Data", b""),
+            ccs=self.int_or(el, "Ccs", 1),
+            timeout=self.int_or(el, "Timeout", 0),
+            complete_access=bool(self.attr_bool(el, "CompleteAccess")),
+            fixed=bool(self.attr_bool(el, "Fixed")),
+            disabled=bool(self.opt_bool(el, "Disabled")),
+        )
+
+    def coe_profiles(self, coe: Element) -> list[tuple[int, str | None]]:
+        profile = coe.find("Profile")
+        if profile is None:
+            return []
+        return [(self.req_int(ch, "ProfileNo"), self.opt_text(ch, "AddInfo"))
+                for ch in profile.iterchildren("ChannelInfo")]
+
+    def dc(self, el: Element) -> DcPlan | None:
+        """``None`` for a DC element that only says the slave *could* be reference clock
+        (``PotentialReferenceClock`` alone: EC-Engineer, slaves with DC unused)."""
+        if all(el.find(tag) is None for tag in _DC_VALUES):
+            return None
+        return DcPlan(
+            reference_clock=bool(self.opt_bool(el, "ReferenceClock")),
+            cycle_time0=self.int_or(el, "CycleTime0", 0),
+            cycle_time1=self.int_or(el, "CycleTime1", 0),
+            shift_time=self.int_or(el, "ShiftTime", 0),
+        )
+
+    def previous_port(self, el: Element) -> PreviousPort:
+        # Selected is xs:int in the 2011 schema; TwinCAT writes "true" (eni-observations §1).
+        return PreviousPort(port=self.text(self.child(el, "Port")).strip(),
+                            phys_addr=self.opt_int(el, "PhysAddr"),
+                            selected=self.attr_bool(el, "Selected"))
+
+    # --- cyclic frames and process image --------------------------------------------------
+
+    def cyclic(self, el: Element) -> Cyclic:
+        return Cyclic(frames=[self.frame(f) for f in el.iterchildren("Frame")],
+                      cycle_time=self.opt_int(el, "CycleTime"),
+                      comment=self.opt_text(el, "Comment"))
+
+    def frame(self, el: Element) -> Frame:
+        return Frame(cmds=[self.cyclic_cmd(c) for c in el.iterchildren("Cmd")],
+                     comment=self.opt_text(el, "Comment"))
+
+    def cyclic_cmd(self, el: Element) -> CyclicCmd:
+        adp, ado, addr = self.address(el)
+        data, length = self.payload(el)
+        return CyclicCmd(
+            states=[self.text(s).strip() for s in el.iterchildren("State")],
+            comment=self.opt_text(el, "Comment") or "",
+            cmd=self.req_int(el, "Cmd"),
+            length=length,
+            adp=adp, ado=ado, addr=addr, data=data,
+            cnt=self.opt_int(el, "Cnt"),
+            input_offs=self.int_or(el, "InputOffs", 0),
+            output_offs=self.int_or(el, "OutputOffs", 0),
+        )
+
+    def process_image(self, el: Element) -> ProcessImage:
+        image = ProcessImage()
+        inputs, outputs = el.find("Inputs"), el.find("Outputs")
+        if inputs is not None:
+            image.inputs_size = self.req_int(inputs, "ByteSize")
+            image.inputs = [self.variable(v) for v in inputs.iterchildren("Variable")]
+        if outputs is not None:
+            image.outputs_size = self.req_int(outputs, "ByteSize")
+            image.outputs = [self.variable(v) for v in outputs.iterchildren("Variable")]
+        return image
+
+    def variable(self, el: Element) -> Variable:
+        return Variable(name=self.text(self.child(el, "Name")),
+                        bit_size=self.req_int(el, "BitSize"),
+                        bit_offs=self.req_int(el, "BitOffs"),
+                        data_type=self.opt_text(el, "DataType"),
+                        comment=self.opt_text(el, "Comment"))

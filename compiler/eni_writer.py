@@ -1,0 +1,407 @@
+"""Write a :class:`NetworkPlan` as an ENI file (ETG.2100 ``EtherCATConfig``, version 1.3).
+
+Element order follows the 2011 schema (``schemas/eni-1.3/EtherCATConfig.xsd``); the spelling
+follows what TwinCAT and EC-Engineer write (eni-observations §1): integers in decimal (uint32
+values from 2^31 up in their signed spelling, see :func:`_uint32`), ``Data``
+as lowercase hex bytes in wire order, PDO and entry indices ESI style (``#x1a00``), booleans
+``1``/``0`` (EC-Engineer's spelling, and the only one ``PreviousPort/@Selected``, an xs:int,
+accepts).  The output is deterministic: the same plan gives the same bytes.
+
+The slave/master InitCmd ``timeout`` is not written: the 2011 schema's ``ECatCmdType`` has no
+``Timeout`` (eni-observations §3), so the compiler carries poll timeouts in ``Validate``.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+from lxml import etree
+
+from ecatcfg.compiler.plan import (
+    BitRange,
+    CoeInitCmd,
+    Cyclic,
+    CyclicCmd,
+    DcPlan,
+    InitCmd,
+    MailboxArea,
+    MailboxPlan,
+    MasterPlan,
+    NetworkPlan,
+    PdoDesc,
+    PdoEntryDesc,
+    PreviousPort,
+    ProcessData,
+    ProcessImage,
+    SlavePlan,
+    SmSettings,
+    Variable,
+)
+from ecatcfg.fileio import write_atomic
+
+_XSI = "http://www.w3.org/2001/XMLSchema-instance"
+_DECLARATION = b'<?xml version="1.0" encoding="UTF-8"?>\n'
+
+Element = etree._Element
+
+
+def to_bytes(plan: NetworkPlan, generator: str | None = None) -> bytes:
+    """The ENI document for ``plan``; ``generator`` goes into a leading
+    ``<!-- Created with ... -->`` comment (as EC-Engineer writes one)."""
+    root = etree.Element("EtherCATConfig", nsmap={"xsi": _XSI})
+    if plan.version is not None:
+        root.set("Version", plan.version)
+    root.set(f"{{{_XSI}}}noNamespaceSchemaLocation", "EtherCATConfig.xsd")
+    if generator is not None:
+        # "--" may not occur inside an XML comment.
+        root.addprevious(etree.Comment(f" Created with {re.sub('-(?=-)', '- ', generator)} "))
+    config = _sub(root, "Config")
+    _master(config, plan.master)
+    for slave in plan.slaves:
+        _slave(config, slave)
+    for cyclic in plan.cyclic:
+        _cyclic(config, cyclic)
+    _process_image(config, plan.process_image)
+    body = etree.tostring(root.getroottree(), encoding="UTF-8", xml_declaration=False,
+                          pretty_print=True)
+    return _DECLARATION + body
+
+
+def write(plan: NetworkPlan, path: str | Path, generator: str | None = None) -> None:
+    """Write ``plan`` to ``path`` atomically."""
+    write_atomic(path, to_bytes(plan, generator))
+
+
+# --- value spelling -------------------------------------------------------------------------
+
+def _sub(parent: Element, tag: str, text: str | None = None) -> Element:
+    el = etree.SubElement(parent, tag)
+    if text is not None:
+        el.text = text
+    return el
+
+
+def _bool(value: bool) -> str:
+    return "1" if value else "0"
+
+
+def _int(parent: Element, tag: str, value: int) -> Element:
+    return _sub(parent, tag, str(value))
+
+
+def _uint32(parent: Element, tag: str, value: int) -> Element:
+    """A uint32 (identity, logical address) in a schema ``xs:int``: values from 2^31 up are
+    written as their signed 32-bit twin (0xE0000ECA -> -536867126), which validates and
+    which int32 parsers in masters read back to the same bits; the reader masks them."""
+    if not 0 <= value <= 0xFFFFFFFF:
+        raise ValueError(f"<{tag}> {value} is not a 32-bit unsigned value")
+    return _int(parent, tag, value - (1 << 32) if value & 0x80000000 else value)
+
+
+def _opt_int(parent: Element, tag: str, value: int | None) -> None:
+    if value is not None:
+        _int(parent, tag, value)
+
+
+def _hex(parent: Element, tag: str, value: bytes) -> Element:
+    return _sub(parent, tag, value.hex())
+
+
+def _text(parent: Element, tag: str, value: str) -> None:
+    """A string field where "" means absent (the reader gives "" for a missing element)."""
+    if value:
+        _sub(parent, tag, value)
+
+
+def _opt_text(parent: Element, tag: str, value: str | None) -> None:
+    """An optional string field: None is absent, "" an empty element."""
+    if value is not None:
+        _sub(parent, tag, value)
+
+
+def _index(value: int) -> str:
+    """PDO and entry indices as ESI writes them (eni-observations §1)."""
+    return f"#x{value:04x}"
+
+
+def _set_flag(el: Element, name: str, value: bool) -> None:
+    """An optional boolean attribute: written only when true (absent means false)."""
+    if value:
+        el.set(name, _bool(True))
+
+
+# --- commands -------------------------------------------------------------------------------
+
+def _address(el: Element, adp: int | None, ado: int | None, addr: int | None) -> None:
+    """``(Adp?, Ado) | Addr``: physical or logical addressing, never both."""
+    if addr is not None:
+        if adp is not None or ado is not None:
+            raise ValueError("a command has both a logical Addr and Adp/Ado")
+        _uint32(el, "Addr", addr)
+        return
+    if ado is None:
+        raise ValueError("a command needs Ado (physical) or Addr (logical)")
+    _opt_int(el, "Adp", adp)
+    _int(el, "Ado", ado)
+
+
+def _payload(el: Element, data: bytes | None, length: int) -> None:
+    """``Data | DataLength``: ``data is None`` means ``length`` zero bytes."""
+    if data is None:
+        _int(el, "DataLength", length)
+        return
+    if len(data) != length:
+        raise ValueError(f"command length {length} differs from its {len(data)} data bytes")
+    _hex(el, "Data", data)
+
+
+def _init_cmd(parent: Element, cmd: InitCmd) -> None:
+    el = _sub(parent, "InitCmd")
+    for transition in cmd.transitions:
+        _sub(el, "Transition", transition.value)
+    if cmd.before_slave is not None:
+        _sub(el, "BeforeSlave", _bool(cmd.before_slave))
+    _text(el, "Comment", cmd.comment)
+    _opt_text(el, "Requires", cmd.requires)
+    _int(el, "Cmd", cmd.cmd)
+    _address(el, cmd.adp, cmd.ado, cmd.addr)
+    _payload(el, cmd.data, cmd.length)
+    _opt_int(el, "Cnt", cmd.cnt)
+    _opt_int(el, "Retries", cmd.retries)
+    if cmd.validate is not None:
+        validate = _sub(el, "Validate")
+        _hex(validate, "Data", cmd.validate.data)
+        if cmd.validate.mask is not None:
+            _hex(validate, "DataMask", cmd.validate.mask)
+        _int(validate, "Timeout", cmd.validate.timeout)
+    # cmd.timeout: no place for it in the 2011 ECatCmdType (module docstring).
+
+
+def _init_cmds(parent: Element, cmds: list[InitCmd]) -> None:
+    el = _sub(parent, "InitCmds")
+    for cmd in cmds:
+        _init_cmd(el, cmd)
+
+
+# --- master ---------------------------------------------------------------------------------
+
+def _master(config: Element, master: MasterPlan) -> None:
+    el = _sub(config, "Master")
+    info = _sub(el, "Info")
+    _sub(info, "Name", master.name)
+    _hex(info, "Destination", master.destination)
+    _hex(info, "Source", master.source)
+    _hex(info, "EtherType", master.ether_type)
+    if master.mailbox_states is not None:
+        states = _sub(el, "MailboxStates")
+        _uint32(states, "StartAddr", master.mailbox_states[0])
+        _int(states, "Count", master.mailbox_states[1])
+    _init_cmds(el, master.init_cmds)
+
+
+# --- slaves ---------------------------------------------------------------------------------
+
+def _slave(config: Element, slave: SlavePlan) -> None:
+    el = _sub(config, "Slave")
+    info = _sub(el, "Info")
+    _sub(info, "Name", slave.name)
+    _int(info, "PhysAddr", slave.phys_addr)
+    _int(info, "AutoIncAddr", slave.auto_inc_addr)
+    _sub(info, "Physics", slave.physics)
+    _uint32(info, "VendorId", slave.vendor_id)
+    _uint32(info, "ProductCode", slave.product_code)
+    _uint32(info, "RevisionNo", slave.revision)
+    _uint32(info, "SerialNo", slave.serial_no)
+    if slave.process_data is not None:
+        _process_data(el, slave.process_data)
+    if slave.mailbox is not None:
+        _mailbox(el, slave.mailbox)
+    _init_cmds(el, slave.init_cmds)
+    for port in slave.previous_ports:
+        _previous_port(el, port)
+    if slave.dc is not None:
+        _dc(el, slave.dc)
+
+
+def _bit_range(parent: Element, tag: str, bits: BitRange) -> None:
+    el = _sub(parent, tag)
+    _int(el, "BitStart", bits.bit_start)
+    _int(el, "BitLength", bits.bit_length)
+
+
+def _process_data(parent: Element, pd: ProcessData) -> None:
+    el = _sub(parent, "ProcessData")
+    for bits in pd.send:
+        _bit_range(el, "Send", bits)
+    for bits in pd.recv:
+        _bit_range(el, "Recv", bits)
+    numbers = [sm.number for sm in pd.sms]
+    if len(set(numbers)) != len(numbers) or not set(numbers) <= {0, 1, 2, 3}:
+        raise ValueError(f"ProcessData SyncManagers must be distinct Sm0..Sm3, got {numbers}")
+    for sm in sorted(pd.sms, key=lambda s: s.number):      # the schema orders Sm0..Sm3
+        _sm(el, sm)
+    for pdo in pd.pdos:
+        _pdo(el, pdo)
+
+
+def _sm(parent: Element, sm: SmSettings) -> None:
+    el = _sub(parent, f"Sm{sm.number}")
+    _sub(el, "Type", sm.type)
+    _opt_int(el, "MinSize", sm.min_size)
+    _opt_int(el, "MaxSize", sm.max_size)
+    _opt_int(el, "DefaultSize", sm.default_size)
+    _int(el, "StartAddress", sm.start_address)
+    _int(el, "ControlByte", sm.control_byte)
+    _sub(el, "Enable", _bool(sm.enable))
+    if sm.virtual is not None:
+        _sub(el, "Virtual", _bool(sm.virtual))
+    _opt_int(el, "Watchdog", sm.watchdog)
+    for index in sm.pdos:
+        _int(el, "Pdo", index)              # xs:int: decimal, as the real files write it
+
+
+def _pdo(parent: Element, pdo: PdoDesc) -> None:
+    if pdo.direction not in ("rx", "tx"):
+        raise ValueError(f"PDO direction must be 'rx' or 'tx', got {pdo.direction!r}")
+    el = _sub(parent, "RxPdo" if pdo.direction == "rx" else "TxPdo")
+    _set_flag(el, "Fixed", pdo.fixed)
+    _set_flag(el, "Mandatory", pdo.mandatory)
+    _set_flag(el, "Virtual", pdo.virtual)
+    if pdo.sm is not None:
+        el.set("Sm", str(pdo.sm))
+    _sub(el, "Index", _index(pdo.index))
+    _sub(el, "Name", pdo.name)
+    for index in pdo.excludes:
+        _sub(el, "Exclude", _index(index))
+    for entry in pdo.entries:
+        _entry(el, entry)
+
+
+def _entry(parent: Element, entry: PdoEntryDesc) -> None:
+    el = _sub(parent, "Entry")
+    _sub(el, "Index", _index(entry.index))
+    _int(el, "SubIndex", entry.subindex)
+    _int(el, "BitLen", entry.bit_len)
+    _text(el, "Name", entry.name)           # padding entries (index 0) have none
+    _opt_text(el, "DataType", entry.data_type)
+
+
+def _mailbox_area(parent: Element, tag: str, area: MailboxArea) -> Element:
+    el = _sub(parent, tag)
+    _int(el, "Start", area.start)
+    _int(el, "Length", area.length)
+    return el
+
+
+def _mailbox(parent: Element, mb: MailboxPlan) -> None:
+    el = _sub(parent, "Mailbox")
+    if mb.data_link_layer is not None:
+        el.set("DataLinkLayer", _bool(mb.data_link_layer))
+    _mailbox_area(el, "Send", mb.send)
+    recv = _mailbox_area(el, "Recv", mb.recv)
+    _opt_int(recv, "PollTime", mb.poll_time)
+    _opt_int(recv, "StatusBitAddr", mb.status_bit_addr)
+    if (mb.bootstrap_send is None) != (mb.bootstrap_recv is None):
+        raise ValueError("BootStrap needs both a send and a receive mailbox")
+    if mb.bootstrap_send is not None and mb.bootstrap_recv is not None:
+        boot = _sub(el, "BootStrap")
+        _mailbox_area(boot, "Send", mb.bootstrap_send)
+        _mailbox_area(boot, "Recv", mb.bootstrap_recv)
+    for protocol in mb.protocols:
+        _sub(el, "Protocol", protocol)
+    if mb.coe_init_cmds or mb.coe_profiles:
+        _coe(el, mb)
+
+
+def _coe(parent: Element, mb: MailboxPlan) -> None:
+    el = _sub(parent, "CoE")
+    if mb.coe_init_cmds:
+        cmds = _sub(el, "InitCmds")
+        for cmd in mb.coe_init_cmds:
+            _coe_init_cmd(cmds, cmd)
+    if mb.coe_profiles:
+        profile = _sub(el, "Profile")
+        for number, add_info in mb.coe_profiles:
+            channel = _sub(profile, "ChannelInfo")
+            _int(channel, "ProfileNo", number)
+            _opt_text(channel, "AddInfo", add_info)
+
+
+def _coe_init_cmd(parent: Element, cmd: CoeInitCmd) -> None:
+    el = _sub(parent, "InitCmd")
+    _set_flag(el, "Fixed", cmd.fixed)
+    _set_flag(el, "CompleteAccess", cmd.complete_access)
+    for transition in cmd.transitions:
+        _sub(el, "Transition", transition.value)
+    _text(el, "Comment", cmd.comment)
+    _int(el, "Timeout", cmd.timeout)        # required here, unlike in ECatCmdType
+    _int(el, "Ccs", cmd.ccs)
+    _int(el, "Index", cmd.index)
+    _int(el, "SubIndex", cmd.subindex)
+    _hex(el, "Data", cmd.data)
+    if cmd.disabled:
+        _sub(el, "Disabled", _bool(True))
+
+
+def _previous_port(parent: Element, port: PreviousPort) -> None:
+    el = _sub(parent, "PreviousPort")
+    if port.selected is not None:
+        el.set("Selected", _bool(port.selected))     # xs:int in the 2011 schema
+    _sub(el, "Port", port.port)
+    _opt_int(el, "PhysAddr", port.phys_addr)
+
+
+def _dc(parent: Element, dc: DcPlan) -> None:
+    el = _sub(parent, "DC")
+    _sub(el, "ReferenceClock", _bool(dc.reference_clock))
+    _int(el, "CycleTime0", dc.cycle_time0)
+    _int(el, "CycleTime1", dc.cycle_time1)
+    _int(el, "ShiftTime", dc.shift_time)
+
+
+# --- cyclic frames and process image --------------------------------------------------------
+
+def _cyclic(config: Element, cyclic: Cyclic) -> None:
+    if not cyclic.frames or not all(frame.cmds for frame in cyclic.frames):
+        raise ValueError("a Cyclic needs at least one Frame, and each Frame a Cmd")
+    el = _sub(config, "Cyclic")
+    _opt_text(el, "Comment", cyclic.comment)
+    _opt_int(el, "CycleTime", cyclic.cycle_time)
+    for frame in cyclic.frames:
+        frame_el = _sub(el, "Frame")
+        _opt_text(frame_el, "Comment", frame.comment)
+        for cmd in frame.cmds:
+            _cyclic_cmd(frame_el, cmd)
+
+
+def _cyclic_cmd(parent: Element, cmd: CyclicCmd) -> None:
+    el = _sub(parent, "Cmd")
+    for state in cmd.states:
+        _sub(el, "State", state)
+    _text(el, "Comment", cmd.comment)
+    _int(el, "Cmd", cmd.cmd)
+    _address(el, cmd.adp, cmd.ado, cmd.addr)
+    _payload(el, cmd.data, cmd.length)
+    _opt_int(el, "Cnt", cmd.cnt)
+    _int(el, "InputOffs", cmd.input_offs)
+    _int(el, "OutputOffs", cmd.output_offs)
+
+
+def _process_image(config: Element, image: ProcessImage) -> None:
+    el = _sub(config, "ProcessImage")
+    for tag, size, variables in (("Inputs", image.inputs_size, image.inputs),
+                                 ("Outputs", image.outputs_size, image.outputs)):
+        part = _sub(el, tag)
+        _int(part, "ByteSize", size)
+        for variable in variables:
+            _variable(part, variable)
+
+
+def _variable(parent: Element, var: Variable) -> None:
+    el = _sub(parent, "Variable")
+    _sub(el, "Name", var.name)
+    _opt_text(el, "Comment", var.comment)
+    _opt_text(el, "DataType", var.data_type)
+    _int(el, "BitSize", var.bit_size)
+    _int(el, "BitOffs", var.bit_offs)

@@ -1,0 +1,96 @@
+"""CoE InitCmds for PDO assignment (0x1C1n) and mapping (0x16xx / 0x1Axx), PREOP→SAFEOP.
+
+The sequence is ETG.1020's 6-step procedure, in the order TwinCAT and EC-Engineer write it
+(eni-observations §5): stop every assignment (``0x1C12:00 = 0``), clear the configurable PDOs
+that stay unassigned, write each remapped PDO (``:00 = 0``, entries, count), then write each
+assignment (entries, then the count, which re-enables it).  With CoE CompleteAccess in the
+ESI, a whole assignment or mapping is one download at subindex 0 (count, a padding byte,
+then the entries).
+
+Clearing unassigned configurable PDOs: EC-Engineer does it (``clear pdo 0x1A07 entries`` for
+the Elmo Gold) and so do we, so a mapping some earlier tool left in the slave cannot linger on
+a PDO the ENI says is empty.  Only PDOs the dictionary (when there is one) shows writable in
+PREOP are cleared: clearing a PDO the slave refuses would stop the bring-up.
+"""
+
+from __future__ import annotations
+
+import struct
+
+from ecatcfg.compiler.plan import CoeInitCmd, PdoDesc
+from ecatcfg.compiler.resolve import ResolvedSlave
+from ecatcfg.esc import Transition
+from ecatcfg.esi.coe import DictEntry, lookup
+from ecatcfg.esi.model import Dictionary
+
+ASSIGN_BASE = 0x1C10          # 0x1C10 + n: PDO assignment of SM n (ETG.1000.6)
+
+
+def _cmd(comment: str, index: int, subindex: int, data: bytes,
+         complete_access: bool = False) -> CoeInitCmd:
+    return CoeInitCmd([Transition.PS], comment, index, subindex, data,
+                      complete_access=complete_access, fixed=True)
+
+
+def _writable(dic: Dictionary | None, index: int) -> bool:
+    if dic is None or not dic.objects:
+        return True
+    found = lookup(dic, index, 0)
+    if not isinstance(found, DictEntry):
+        return False
+    access = found.flags.access if found.flags else None
+    return access is None or access.writable_in("PreOp")
+
+
+def _entry_word(e) -> bytes:
+    return struct.pack("<I", (e.index << 16) | (e.subindex << 8) | e.bit_len)
+
+
+def pdo_cmds(slave: ResolvedSlave) -> list[CoeInitCmd]:
+    dev = slave.device
+    coe = dev.mailbox.coe if dev.mailbox else None
+    if coe is None or not coe.pdo_assign:
+        return []
+    ca = coe.complete_access
+    dic = slave.dictionary
+    sms = sorted({sm.number for sm in dev.sms
+                  if not sm.is_mailbox and not sm.virtual and sm.type in ("Outputs", "Inputs")})
+    cmds = [_cmd(f"clear sm pdos (0x{ASSIGN_BASE + n:04X})", ASSIGN_BASE + n, 0, b"\x00")
+            for n in sms]
+    if coe.pdo_config:
+        # TxPDOs first, as EC-Engineer lists and clears them.
+        for p in sorted(slave.pdos, key=lambda p: p.direction != "tx"):
+            if not p.fixed and not p.virtual and p.sm is None and _writable(dic, p.index):
+                cmds.append(_cmd(f"clear pdo 0x{p.index:04X} entries", p.index, 0, b"\x00"))
+        for p in slave.pdos:
+            if p.sm is not None and not p.fixed and (p.index in slave.remapped or p.entries):
+                cmds += _mapping(p, ca)
+    for n in sms:
+        cmds += _assignment(ASSIGN_BASE + n, slave.assigned(n), ca)
+    return cmds
+
+
+def _mapping(p: PdoDesc, ca: bool) -> list[CoeInitCmd]:
+    words = [_entry_word(e) for e in p.entries]
+    if ca:
+        return [_cmd(f"download pdo 0x{p.index:04X} entries", p.index, 0,
+                     bytes([len(words), 0]) + b"".join(words), complete_access=True)]
+    cmds = [_cmd(f"clear pdo 0x{p.index:04X} entries", p.index, 0, b"\x00")]
+    cmds += [_cmd(f"download pdo 0x{p.index:04X} entry", p.index, i, w)
+             for i, w in enumerate(words, start=1)]
+    cmds.append(_cmd(f"download pdo 0x{p.index:04X} entry count", p.index, 0,
+                     bytes([len(words)])))
+    return cmds
+
+
+def _assignment(index: int, pdos: list[PdoDesc], ca: bool) -> list[CoeInitCmd]:
+    if not pdos:
+        return []
+    words = [struct.pack("<H", p.index) for p in pdos]
+    if ca:
+        return [_cmd(f"download pdo 0x{index:04X} index", index, 0,
+                     bytes([len(words), 0]) + b"".join(words), complete_access=True)]
+    cmds = [_cmd(f"download pdo 0x{index:04X}:{i:02X} index", index, i, w)
+            for i, w in enumerate(words, start=1)]
+    cmds.append(_cmd(f"download pdo 0x{index:04X} count", index, 0, bytes([len(words)])))
+    return cmds

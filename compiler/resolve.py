@@ -1,0 +1,475 @@
+"""Topology slave -> the device it names and the configuration the user chose for it.
+
+Everything the user can get wrong about one slave is checked here, each error pointing at
+the topology line: the device selector, modules and slots, the PDO choice (unknown,
+excluded, mandatory left out, not changeable), PDO mappings (fixed PDO, object missing or
+not mappable, wrong bit length), the DC op mode and startup SDOs (object, subindex, access,
+value range).  Errors are collected, not raised one at a time: the user sees all of them.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+from ecatcfg.compiler import sdo as sdo_codec
+from ecatcfg.compiler.plan import CoeInitCmd, PdoDesc, PdoEntryDesc
+from ecatcfg.compiler.topology import LoadedTopology, Slave
+from ecatcfg.errors import EcatcfgError
+from ecatcfg.esc import Transition
+from ecatcfg.esi.coe import TRANSITION_STATE, DictEntry, device_dictionary, has_coe, lookup
+from ecatcfg.esi.library import Library, SelectorError
+from ecatcfg.esi.model import DcOpMode, Device, Dictionary, Module, Pdo, SyncManager
+
+
+@dataclass(slots=True)
+class ResolvedSlave:
+    """One slave with its device and the user's choices, checked."""
+
+    cfg: Slave
+    position: int
+    device: Device
+    phys_addr: int
+    pdos: list[PdoDesc]                      # every PDO, as configured (sm set = assigned)
+    dc_mode: DcOpMode | None = None
+    esi_cmds: list[CoeInitCmd] = field(default_factory=list)   # device + modules, user-edited
+    user_cmds: list[CoeInitCmd] = field(default_factory=list)  # user SDOs replacing nothing
+    module_cmds: list[CoeInitCmd] = field(default_factory=list)   # module ident list (0xF030)
+    remapped: set[int] = field(default_factory=set)
+    pdo_prefix: dict[int, str] = field(default_factory=dict)  # module PDOs: "Module 2 (X)"
+    note: str | None = None                  # e.g. which revision was taken
+
+    @property
+    def name(self) -> str:
+        return self.cfg.name
+
+    def assigned(self, sm: int) -> list[PdoDesc]:
+        return [p for p in self.pdos if p.sm == sm]
+
+    @property
+    def dictionary(self) -> Dictionary | None:
+        return device_dictionary(self.device)
+
+
+class _Errors:
+    def __init__(self, loaded: LoadedTopology) -> None:
+        self.loaded = loaded
+        self.items: list[EcatcfgError] = []
+
+    def add(self, message: str, *path: str | int) -> None:
+        self.items.append(self.loaded.error(message, *path))
+
+
+def resolve_all(loaded: LoadedTopology, library: Library) -> tuple[list[ResolvedSlave],
+                                                                   list[EcatcfgError]]:
+    errors = _Errors(loaded)
+    resolved: list[ResolvedSlave] = []
+    used: dict[int, int] = {}
+    names: dict[str, int] = {}
+    for pos, cfg in enumerate(loaded.topology.slaves):
+        where = ("slaves", pos)
+        if cfg.name in names:
+            errors.add(f"slave name {cfg.name!r} is already used by slave {names[cfg.name]}",
+                       *where, "name")
+        names.setdefault(cfg.name, pos)
+        phys = cfg.station_address if cfg.station_address is not None else 1001 + pos
+        if phys in used:
+            errors.add(f"station address {phys} is also the address of slave "
+                       f"{loaded.topology.slaves[used[phys]].name!r}", *where,
+                       "station_address" if cfg.station_address is not None else "name")
+        used.setdefault(phys, pos)
+        before = len(errors.items)
+        slave = _resolve(cfg, pos, phys, library, errors)
+        if slave is not None and len(errors.items) == before:
+            resolved.append(slave)
+    return resolved, errors.items
+
+
+def _resolve(cfg: Slave, pos: int, phys: int, library: Library,
+             errors: _Errors) -> ResolvedSlave | None:
+    where = ("slaves", pos)
+    try:
+        selection = library.find(cfg.device)
+        device = library.device(selection.entry)
+    except SelectorError as exc:
+        errors.add(f"slave {cfg.name!r}: {exc.message}", *where, "device")
+        return None
+    if device.product_code is None or device.revision is None or device.vendor.id is None:
+        errors.add(f"slave {cfg.name!r}: the ESI device at {device.source} has no readable "
+                   "identity", *where, "device")
+        return None
+    # Say which revision was taken only when there was a choice.
+    e = selection.entry
+    choices = {x.revision for x in library.entries
+               if (x.vendor_id, x.product_code) == (e.vendor_id, e.product_code)}
+    slave = ResolvedSlave(cfg, pos, device, phys, [],
+                          note=selection.note if len(choices) > 1 else None)
+    modules = _plug_modules(slave, library.modules_for(selection.entry), errors)
+    _choose_pdos(slave, modules, errors)
+    _apply_mappings(slave, errors)
+    slave.dc_mode = _dc_mode(slave, errors)
+    _sdos(slave, modules, errors)
+    return slave
+
+
+# -- modules ------------------------------------------------------------------------------
+
+@dataclass(slots=True)
+class _Plugged:
+    slot: int                     # 1-based
+    module: Module
+    pdo_offset: int
+    index_offset: int
+
+
+def _plug_modules(slave: ResolvedSlave, library_modules: dict[int, Module],
+                  errors: _Errors) -> list[_Plugged]:
+    dev, cfg = slave.device, slave.cfg
+    where = ("slaves", slave.position, "modules")
+    if dev.slots is None:
+        if cfg.modules:
+            errors.add(f"slave {cfg.name!r}: {dev.type_name} is not a modular device "
+                       "(its ESI has no Slots)", *where)
+        return []
+    slots = dev.slots.slots
+    plugged: list[_Plugged] = []
+    for number in cfg.modules:
+        if not 1 <= number <= len(slots):
+            errors.add(f"slave {cfg.name!r}: slot {number} does not exist; {dev.type_name} "
+                       f"has {len(slots)} slots (numbered from 1)", *where, number)
+    for number, slot in enumerate(slots, start=1):
+        ident = cfg.modules.get(number, slot.default_ident)
+        if ident is None:
+            continue
+        module = library_modules.get(ident)
+        if module is None:
+            errors.add(f"slave {cfg.name!r}: no module with ident 0x{ident:08X} in the "
+                       "library (for the InfoReference module files, pass their folder "
+                       "with --esi)", *where, number)
+            continue
+        fits = ident in slot.module_idents or (
+            module.module_class is not None and module.module_class in slot.module_classes)
+        if not fits:
+            allowed = ", ".join(f"0x{i:08X}" for i in slot.module_idents[:12])
+            errors.add(f"slave {cfg.name!r}: module 0x{ident:08X} ({module.type_name}) does "
+                       f"not fit slot {number} ({slot.name or 'unnamed'}); it takes "
+                       f"{allowed or 'module classes ' + ', '.join(slot.module_classes)}",
+                       *where, number)
+            continue
+        pdo_inc = slot.slot_pdo_increment if slot.slot_pdo_increment is not None \
+            else dev.slots.slot_pdo_increment
+        idx_inc = slot.slot_index_increment if slot.slot_index_increment is not None \
+            else dev.slots.slot_index_increment
+        plugged.append(_Plugged(number, module, (number - 1) * (pdo_inc or 0),
+                                (number - 1) * (idx_inc or 0)))
+    return plugged
+
+
+# -- PDO choice ---------------------------------------------------------------------------
+
+def _desc(pdo: Pdo, pdo_offset: int = 0, index_offset: int = 0) -> PdoDesc:
+    """A plan PDO from an ESI PDO; module PDOs shifted by their slot (ETG.2000 DependOnSlot)."""
+    index = (pdo.index or 0) + pdo_offset
+    entries = [PdoEntryDesc(
+        index=(e.index or 0) + (index_offset if e.depend_on_slot and e.index else 0),
+        subindex=e.subindex or 0, bit_len=e.bit_len or 0, name=e.name,
+        data_type=e.data_type) for e in pdo.entries]
+    return PdoDesc(pdo.direction, index, pdo.name, entries, sm=pdo.sm, fixed=pdo.fixed,
+                   mandatory=pdo.mandatory, virtual=pdo.virtual,
+                   excludes=[x + pdo_offset for x in pdo.excludes])
+
+
+def default_sm(device: Device, direction: str) -> SyncManager | None:
+    wanted = "Outputs" if direction == "rx" else "Inputs"
+    return next((sm for sm in device.sms if sm.type == wanted and not sm.virtual), None)
+
+
+def _choose_pdos(slave: ResolvedSlave, modules: list[_Plugged], errors: _Errors) -> None:
+    dev, cfg = slave.device, slave.cfg
+    # ESI document order (the ENI lists PDOs, and EC-Engineer clears them, in that order).
+    pdos = [_desc(p) for p in sorted(dev.rx_pdos + dev.tx_pdos, key=lambda p: p.source.line)]
+    for plug in modules:
+        for p in plug.module.rx_pdos + plug.module.tx_pdos:
+            d = _desc(p, plug.pdo_offset, plug.index_offset)
+            slave.pdo_prefix[d.index] = f"Module {plug.slot} ({plug.module.name or plug.module.type_name})"
+            pdos.append(d)
+    slave.pdos = pdos
+    coe = dev.mailbox.coe if dev.mailbox else None
+    can_assign = bool(coe and coe.pdo_assign)
+    for direction, chosen, key in (("rx", cfg.rx_pdos, "rx_pdos"), ("tx", cfg.tx_pdos, "tx_pdos")):
+        mine = [p for p in pdos if p.direction == direction]
+        sm = default_sm(dev, direction)
+        for p in mine:
+            if p.sm is not None and p.virtual:
+                p.sm = None
+            elif p.sm is not None and not any(s.number == p.sm for s in dev.sms):
+                p.sm = sm.number if sm else None
+        if chosen is None:
+            continue
+        where = ("slaves", slave.position, key)
+        by_index = {p.index: p for p in mine}
+        seen: set[int] = set()
+        ok = True
+        for i, index in enumerate(chosen):
+            p = by_index.get(index)
+            if p is None:
+                listed = ", ".join(f"0x{x:04X}" for x in sorted(by_index)[:16])
+                errors.add(f"slave {cfg.name!r}: {dev.type_name} has no "
+                           f"{'RxPdo' if direction == 'rx' else 'TxPdo'} 0x{index:04X}"
+                           f"{'; it has ' + listed if listed else ''}", *where, i)
+                ok = False
+            elif index in seen:
+                errors.add(f"slave {cfg.name!r}: PDO 0x{index:04X} is listed twice", *where, i)
+                ok = False
+            elif p.virtual:
+                errors.add(f"slave {cfg.name!r}: PDO 0x{index:04X} is virtual and cannot be "
+                           "assigned", *where, i)
+                ok = False
+            seen.add(index)
+        if not ok:
+            continue
+        for i, index in enumerate(chosen):
+            for other in by_index[index].excludes:
+                if other in seen and other != index:
+                    errors.add(f"slave {cfg.name!r}: PDO 0x{index:04X} excludes 0x{other:04X}, "
+                               "which is also chosen", *where, i)
+        for p in mine:
+            if p.mandatory and p.index not in seen:
+                errors.add(f"slave {cfg.name!r}: mandatory PDO 0x{p.index:04X} "
+                           f"({p.name}) is left out", *where)
+        default = [p.index for p in mine if p.sm is not None]
+        if list(chosen) != default and not can_assign:
+            errors.add(f"slave {cfg.name!r}: {dev.type_name} does not support PDO assignment "
+                       "(no CoE PdoAssign in its ESI); its fixed assignment is "
+                       + (", ".join(f"0x{x:04X}" for x in default) or "empty"), *where)
+            continue
+        if sm is None and chosen:
+            errors.add(f"slave {cfg.name!r}: {dev.type_name} has no "
+                       f"{'Outputs' if direction == 'rx' else 'Inputs'} SyncManager", *where)
+            continue
+        for p in mine:
+            p.sm = None
+        for index in chosen:      # the order the user gave is the assignment order
+            p = by_index[index]
+            p.sm = sm.number if sm else None
+        # keep assignment order = list order: move chosen PDOs to the end in that order
+        order = {index: n for n, index in enumerate(chosen)}
+        others = [p for p in slave.pdos if p.direction != direction or p.index not in order]
+        picked = sorted((p for p in slave.pdos if p.direction == direction
+                         and p.index in order), key=lambda p: order[p.index])
+        slave.pdos = others + picked
+    _check_sm_sizes(slave, errors)
+
+
+def _check_sm_sizes(slave: ResolvedSlave, errors: _Errors) -> None:
+    for sm in slave.device.sms:
+        if sm.is_mailbox or sm.max_size is None:
+            continue
+        size = (sum(e.bit_len for p in slave.assigned(sm.number) for e in p.entries) + 7) // 8
+        if size > sm.max_size:
+            errors.add(f"slave {slave.name!r}: the PDOs assigned to SM{sm.number} need {size} "
+                       f"bytes, more than its MaxSize {sm.max_size}", "slaves", slave.position)
+
+
+# -- PDO mapping --------------------------------------------------------------------------
+
+def _apply_mappings(slave: ResolvedSlave, errors: _Errors) -> None:
+    cfg, dev = slave.cfg, slave.device
+    if not cfg.pdo_mapping:
+        return
+    coe = dev.mailbox.coe if dev.mailbox else None
+    dic = slave.dictionary
+    by_index = {p.index: p for p in slave.pdos}
+    for index, entries in cfg.pdo_mapping.items():
+        where = ("slaves", slave.position, "pdo_mapping", index)
+        pdo = by_index.get(index)
+        if pdo is None:
+            errors.add(f"slave {cfg.name!r}: {dev.type_name} has no PDO 0x{index:04X} to map",
+                       *where)
+            continue
+        if not (coe and coe.pdo_config):
+            errors.add(f"slave {cfg.name!r}: {dev.type_name} does not support PDO mapping "
+                       "(no CoE PdoConfig in its ESI)", *where)
+            continue
+        if pdo.fixed:
+            errors.add(f"slave {cfg.name!r}: PDO 0x{index:04X} ({pdo.name}) has a fixed "
+                       "mapping (Fixed in the ESI)", *where)
+            continue
+        if pdo.sm is None:
+            key = "rx_pdos" if pdo.direction == "rx" else "tx_pdos"
+            errors.add(f"slave {cfg.name!r}: PDO 0x{index:04X} is mapped but not assigned; "
+                       f"add it to {key}", *where)
+            continue
+        new: list[PdoEntryDesc] = []
+        for i, (obj, sub, bits) in enumerate(entries):
+            entry = _mapped_entry(slave, pdo, dic, obj, sub, bits, (*where, i), errors)
+            if entry is not None:
+                new.append(entry)
+        if len(new) == len(entries):
+            pdo.entries = new
+            slave.remapped.add(index)
+
+
+def _mapped_entry(slave: ResolvedSlave, pdo: PdoDesc, dic: Dictionary | None, obj: int,
+                  sub: int, bits: int, where: tuple, errors: _Errors) -> PdoEntryDesc | None:
+    if obj == 0:                                  # a gap (padding) of `bits` bits
+        return PdoEntryDesc(0, 0, bits)
+    if dic is None:
+        errors.add(f"slave {slave.name!r}: {slave.device.type_name} has no object dictionary "
+                   f"in its ESI, so 0x{obj:04X}:{sub:02X} cannot be checked or mapped", *where)
+        return None
+    found = lookup(dic, obj, sub)
+    if found is None:
+        errors.add(f"slave {slave.name!r}: object 0x{obj:04X} is not in the dictionary of "
+                   f"{slave.device.type_name}", *where)
+        return None
+    if not isinstance(found, DictEntry):
+        errors.add(f"slave {slave.name!r}: object 0x{obj:04X} has no subindex {sub}", *where)
+        return None
+    letter = "R" if pdo.direction == "rx" else "T"
+    mapping = (found.flags.pdo_mapping if found.flags else None) or ""
+    if letter not in mapping.upper():
+        kind = "an RxPDO" if letter == "R" else "a TxPDO"
+        errors.add(f"slave {slave.name!r}: object 0x{obj:04X}:{sub:02X} ({found.obj.name}) "
+                   f"cannot be mapped into {kind} (PdoMapping is "
+                   f"{mapping or 'not set'} in the dictionary)", *where)
+        return None
+    if found.bit_size is not None and found.bit_size != bits:
+        errors.add(f"slave {slave.name!r}: object 0x{obj:04X}:{sub:02X} is {found.bit_size} "
+                   f"bits, not {bits}", *where)
+        return None
+    name = found.obj.name if sub == 0 or found.obj.type == found.type else \
+        _sub_name(dic, found.obj.type, sub) or f"{found.obj.name} {sub}"
+    return PdoEntryDesc(obj, sub, bits, name, found.type or None)
+
+
+def _sub_name(dic: Dictionary, type_name: str, sub: int) -> str | None:
+    dt = dic.data_types.get(type_name)
+    if dt is None:
+        return None
+    return next((s.name for s in dt.sub_items if s.subindex == sub), None)
+
+
+# -- DC -----------------------------------------------------------------------------------
+
+def _dc_mode(slave: ResolvedSlave, errors: _Errors) -> DcOpMode | None:
+    name = slave.cfg.dc
+    if name is None:
+        return None
+    where = ("slaves", slave.position, "dc")
+    dc = slave.device.dc
+    modes = dc.opmodes if dc else []
+    if not modes:
+        errors.add(f"slave {slave.name!r}: {slave.device.type_name} has no DC op modes",
+                   *where)
+        return None
+    matches = [m for m in modes if m.name == name] or [
+        m for m in modes if m.name.strip().casefold() == name.strip().casefold()]
+    if not matches:
+        names = ", ".join(dict.fromkeys(m.name for m in modes))
+        errors.add(f"slave {slave.name!r}: no DC op mode {name!r}; {slave.device.type_name} "
+                   f"has {names}", *where)
+        return None
+    # Beckhoff files give build-dependent variants of one mode: take the current one.
+    current = [m for m in matches if m.ignore_from_build is None]
+    return max(current or matches, key=lambda m: m.use_from_build or 0)
+
+
+# -- SDOs ---------------------------------------------------------------------------------
+
+def _coe_cmd(cmd, offset: int = 0) -> CoeInitCmd:
+    index = (cmd.index or 0) + (offset if cmd.depend_on_slot else 0)
+    transitions = [Transition(t) for t in cmd.transitions if t in Transition.__members__]
+    return CoeInitCmd(transitions, cmd.comment or f"download 0x{index:04X}:{cmd.subindex or 0:02X}",
+                      index, cmd.subindex or 0, cmd.data or b"",
+                      complete_access=cmd.complete_access, fixed=cmd.fixed)
+
+
+def _sdos(slave: ResolvedSlave, modules: list[_Plugged], errors: _Errors) -> None:
+    dev, cfg = slave.device, slave.cfg
+    esi = [_coe_cmd(c) for c in (dev.mailbox.coe.init_cmds
+                                 if dev.mailbox and dev.mailbox.coe else [])]
+    for plug in modules:
+        mb = plug.module.mailbox
+        if mb and mb.coe:
+            esi += [_coe_cmd(c, plug.index_offset) for c in mb.coe.init_cmds]
+    slave.esi_cmds = esi
+    if not cfg.sdos:
+        return
+    dic = slave.dictionary
+    for i, user in enumerate(cfg.sdos):
+        where = ("slaves", slave.position, "sdos", i)
+        if not has_coe(dev):
+            errors.add(f"slave {slave.name!r}: {dev.type_name} has no CoE mailbox, so SDOs "
+                       "cannot be written", *where)
+            return
+        state = TRANSITION_STATE.get(user.transition.value)
+        if state is None:
+            errors.add(f"slave {slave.name!r}: SDOs cannot run in transition "
+                       f"{user.transition.value} (the mailbox works from PREOP on); use one of "
+                       + ", ".join(TRANSITION_STATE), *where, "transition")
+            continue
+        data = _sdo_data(slave, dic, user, state, where, errors)
+        if data is None:
+            continue
+        _place_sdo(slave, CoeInitCmd([user.transition], user.comment or _sdo_comment(
+            dic, user.index, user.subindex), user.index, user.subindex, data,
+            complete_access=user.complete_access))
+
+
+def _sdo_data(slave: ResolvedSlave, dic: Dictionary | None, user, state: str, where: tuple,
+              errors: _Errors) -> bytes | None:
+    if user.data is not None:
+        return bytes.fromhex(user.data.replace(" ", ""))
+    type_name, bit_size = user.type, None
+    target = f"0x{user.index:04X}:{user.subindex:02X}"
+    if dic is not None and dic.objects:
+        found = lookup(dic, user.index, user.subindex)
+        if found is None:
+            errors.add(f"slave {slave.name!r}: object 0x{user.index:04X} is not in the "
+                       f"dictionary of {slave.device.type_name}", *where, "index")
+            return None
+        if not isinstance(found, DictEntry):
+            errors.add(f"slave {slave.name!r}: object 0x{user.index:04X} ({found.name}) has "
+                       f"no subindex {user.subindex}", *where, "subindex")
+            return None
+        access = found.flags.access if found.flags else None
+        if access is not None and not access.writable_in(state):
+            errors.add(f"slave {slave.name!r}: {target} ({found.obj.name}) is not writable in "
+                       f"{state} (access {access.value})", *where)
+            return None
+        type_name = type_name or found.type
+        bit_size = found.bit_size
+    if not type_name:
+        errors.add(f"slave {slave.name!r}: {slave.device.type_name} has no object dictionary "
+                   f"in its ESI; give 'type' (e.g. UINT) or 'data' for {target}", *where)
+        return None
+    try:
+        return sdo_codec.encode(user.value, type_name, bit_size)
+    except sdo_codec.SdoValueError as exc:
+        errors.add(f"slave {slave.name!r}: {target}: {exc}", *where, "value")
+        return None
+
+
+def _sdo_comment(dic: Dictionary | None, index: int, subindex: int) -> str:
+    """The object's name (and the subindex's) from the dictionary, as startup lists show it."""
+    obj = dic.objects.get(index) if dic else None
+    if obj is None or not obj.name:
+        return f"download 0x{index:04X}:{subindex:02X}"
+    sub = _sub_name(dic, obj.type, subindex) if subindex else None
+    return f"{obj.name}: {sub}" if sub else obj.name
+
+
+def _place_sdo(slave: ResolvedSlave, cmd: CoeInitCmd) -> None:
+    """A user SDO on the same object and transition as an ESI InitCmd replaces it in place
+    and keeps its comment (as EC-Engineer does with Elmo's 0x60C2:01)."""
+    t = cmd.transitions[0]
+    for n, esi in enumerate(slave.esi_cmds):
+        if (esi.index, esi.subindex) == (cmd.index, cmd.subindex) and t in esi.transitions:
+            replaced = replace(cmd, comment=esi.comment)
+            if esi.transitions == [t]:
+                slave.esi_cmds[n] = replaced
+            else:
+                esi.transitions = [x for x in esi.transitions if x != t]
+                slave.esi_cmds.insert(n + 1, replaced)
+            return
+    slave.user_cmds.append(cmd)

@@ -1,0 +1,89 @@
+"""The CoE view of a device: its object dictionary and what one ``index:subindex`` is.
+
+Shared by lint (checks that InitCmds and PDO entries match the dictionary) and the compiler
+(typing user SDOs, checking PDO mappings).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from ecatcfg.esi.model import Device, DictObject, Dictionary, ObjectFlags
+
+# The AL state an InitCmd's SDO runs in: a transition's commands are sent from its source
+# state, except I->P, whose mailbox commands can only run once the mailbox is up (PreOp).
+TRANSITION_STATE = {
+    "IP": "PreOp", "PS": "PreOp", "PI": "PreOp", "PO": "PreOp",
+    "SP": "SafeOp", "SO": "SafeOp", "SI": "SafeOp",
+    "OS": "Op", "OP": "Op", "OI": "Op",
+}
+
+
+@dataclass(frozen=True, slots=True)
+class DictEntry:
+    """What the dictionary says about one (index, subindex)."""
+
+    obj: DictObject
+    type: str
+    bit_size: int | None
+    flags: ObjectFlags | None
+
+
+def has_coe(dev: Device) -> bool:
+    return dev.mailbox is not None and "CoE" in dev.mailbox.protocols
+
+
+def device_dictionary(dev: Device) -> Dictionary | None:
+    """The device's object dictionary, merged over its Profiles (multi-axis drives give one
+    Profile per channel); the first definition of an object or type wins."""
+    dicts = [p.dictionary for p in dev.profiles if p.dictionary is not None]
+    if len(dicts) <= 1:
+        return dicts[0] if dicts else None
+    merged = Dictionary({}, {}, dicts[0].source)
+    for dic in dicts:
+        for name, dt in dic.data_types.items():
+            merged.data_types.setdefault(name, dt)
+        for index, obj in dic.objects.items():
+            merged.objects.setdefault(index, obj)
+    return merged
+
+
+def dictionary_with_objects(dev: Device) -> Dictionary | None:
+    """The device's dictionary if it describes objects (an empty one says nothing)."""
+    dic = device_dictionary(dev)
+    return dic if dic is not None and dic.objects else None
+
+
+def lookup(dic: Dictionary, index: int, subindex: int | None) -> DictEntry | DictObject | None:
+    """The dictionary entry for ``index:subindex``; the object alone when the object exists
+    but not the subindex; ``None`` when the object is missing."""
+    obj = dic.objects.get(index)
+    if obj is None:
+        return None
+    sub = subindex or 0
+    dt = dic.data_types.get(obj.type)
+    if dt is None or not (dt.sub_items or dt.array_info):
+        # A simple variable: only subindex 0.
+        return DictEntry(obj, obj.type, obj.bit_size, obj.flags) if sub == 0 else obj
+    for item in dt.sub_items:
+        if item.subindex == sub:
+            return DictEntry(obj, item.type, item.bit_size, item.flags or obj.flags)
+    # Records often describe their array part as one SubItem (no SubIdx) whose type is an
+    # ARRAY type: it stands for subindices LBound .. LBound + Elements - 1.
+    for item in dt.sub_items:
+        if item.subindex is None:
+            arr = dic.data_types.get(item.type)
+            if arr is not None and arr.array_info:
+                ai = arr.array_info[0]
+                if ai.lbound <= sub < ai.lbound + ai.elements:
+                    size = arr.bit_size // ai.elements if arr.bit_size else None
+                    return DictEntry(obj, arr.base_type or "", size,
+                                     item.flags or obj.flags)
+    if dt.array_info:                      # the object's type itself is an array
+        ai = dt.array_info[0]
+        if sub == 0:                       # CoE arrays: subindex 0 = number of entries
+            return DictEntry(obj, "USINT", 8, obj.flags)
+        if ai.lbound <= sub < ai.lbound + ai.elements:
+            size = dt.bit_size // ai.elements if dt.bit_size else None
+            return DictEntry(obj, dt.base_type or "", size, obj.flags)
+    return obj

@@ -1,0 +1,422 @@
+"""ENI writer and reader: our own files round-trip exactly and validate against the 2011
+ETG.2100 schema; every real ENI in ../shared/corpus/eni reads, with counts that agree with an
+independent XPath count on the raw XML; bad input is a one-line EcatcfgError."""
+
+from __future__ import annotations
+
+import copy
+from pathlib import Path
+
+import pytest
+from lxml import etree
+
+from ecatcfg.compiler.eni_reader import EniReadError, read_bytes, read_file
+from ecatcfg.compiler.eni_writer import to_bytes, write
+from ecatcfg.compiler.plan import (
+    BitRange,
+    CoeInitCmd,
+    Cyclic,
+    CyclicCmd,
+    DcPlan,
+    Frame,
+    InitCmd,
+    MailboxArea,
+    MailboxPlan,
+    MasterPlan,
+    NetworkPlan,
+    PdoDesc,
+    PdoEntryDesc,
+    PreviousPort,
+    ProcessData,
+    ProcessImage,
+    SlavePlan,
+    SmSettings,
+    Validate,
+    Variable,
+)
+from ecatcfg.errors import EcatcfgError
+from ecatcfg.esc import Transition as T
+
+# --- a small, rich plan built by hand -------------------------------------------------------
+
+
+def _master() -> MasterPlan:
+    return MasterPlan(
+        name="ecatcfg master",
+        source=bytes.fromhex("020000000001"),
+        mailbox_states=(0x09000000, 1),
+        init_cmds=[
+            InitCmd([T.IP], "read slave count", cmd=7, length=2, adp=0, ado=0x0130,
+                    data=b"\x00\x00", retries=0, requires="cycle", before_slave=True),
+            InitCmd([T.IP, T.PI, T.BI, T.SI, T.OI], "clear fmmu", cmd=8, length=256, adp=0,
+                    ado=0x0600, retries=3, requires="cycle", before_slave=True),
+            InitCmd([T.IP], "en/disable second physical address", cmd=8, length=1, adp=0,
+                    ado=0x0103, data=b"\x00", retries=3, requires="cycle", before_slave=False),
+        ])
+
+
+def _coupler() -> SlavePlan:
+    return SlavePlan(
+        name="Term 1 (EK1100)", phys_addr=1001, auto_inc_addr=0, vendor_id=0xE0000ECA,
+        product_code=0x044C2C52, revision=0x80120000, serial_no=0xFFFFFFFF, physics="YYY",
+        init_cmds=[
+            InitCmd([T.IP], "set physical address", cmd=2, length=2, adp=0, ado=0x0010,
+                    data=bytes.fromhex("e903"), cnt=1, retries=3),
+            InitCmd([T.IP], "check device state for PREOP", cmd=4, length=6, adp=1001,
+                    ado=0x0130, data=bytes(6), cnt=1, retries=3, requires="cycle",
+                    validate=Validate(bytes.fromhex("020000000000"),
+                                      bytes.fromhex("1f0000000000"), 10000)),
+            InitCmd([T.IP], "check vendor id", cmd=1, length=4, adp=0, ado=0x0508,
+                    data=bytes(4), validate=Validate(bytes.fromhex("02000000"), None, 100)),
+        ])
+
+
+def _drive() -> SlavePlan:
+    pdos = [
+        PdoDesc("rx", 0x1600, "Outputs", sm=2, fixed=True, mandatory=True,
+                excludes=[0x1601], entries=[
+                    PdoEntryDesc(0x6040, 0, 16, "Control word", "UINT"),
+                    PdoEntryDesc(0, 0, 8),                                  # padding
+                    PdoEntryDesc(0x607A, 0, 32, "Target position", "DINT")]),
+        PdoDesc("tx", 0x1A00, "Inputs", sm=3, entries=[
+            PdoEntryDesc(0x6041, 0, 16, "Status word", "UINT")]),
+        PdoDesc("rx", 0x1601, "Alt outputs", virtual=True, excludes=[0x1600]),
+    ]
+    sms = [SmSettings(2, "Outputs", 0x1100, 0x64, True, pdos=[0x1600], min_size=0,
+                      max_size=32, default_size=32, virtual=False, watchdog=1),
+           SmSettings(3, "Inputs", 0x1180, 0x20, True, pdos=[0x1A00], default_size=32)]
+    mailbox = MailboxPlan(
+        send=MailboxArea(0x1800, 140), recv=MailboxArea(0x1900, 140),
+        protocols=["CoE", "FoE"], status_bit_addr=1,
+        bootstrap_send=MailboxArea(0x1000, 244), bootstrap_recv=MailboxArea(0x10F4, 244),
+        coe_init_cmds=[
+            CoeInitCmd([T.PS], "download pdo 0x1C12 index", 0x1C12, 0,
+                       bytes.fromhex("0100 0016"), complete_access=True, fixed=True),
+            CoeInitCmd([T.PS, T.SO], "Op mode", 0x6060, 0, b"\x08", timeout=3000),
+            CoeInitCmd([T.PS], "", 0x2000, 1, b"", ccs=1, disabled=True),
+        ],
+        coe_profiles=[(402, None), (5001, "extra")],
+        data_link_layer=True)
+    return SlavePlan(
+        name="Drive 1 <α & β>", phys_addr=1002, auto_inc_addr=0xFFFF, vendor_id=0x9A,
+        product_code=0x00030924, revision=0x00010420, serial_no=12345,
+        process_data=ProcessData(send=[BitRange(0, 56)], recv=[BitRange(0, 16)], sms=sms,
+                                 pdos=pdos),
+        mailbox=mailbox,
+        init_cmds=[
+            InitCmd([T.PS], "set sm 2 (outputs)", cmd=5, length=8, adp=1002, ado=0x0810,
+                    data=bytes.fromhex("00110e0064000100"), cnt=1, retries=3),
+            InitCmd([T.PS], "set dc start time", cmd=5, length=8, adp=1002, ado=0x0990,
+                    requires="cycle"),
+        ],
+        dc=DcPlan(reference_clock=True, cycle_time0=1_000_000, cycle_time1=0, shift_time=0),
+        previous_ports=[PreviousPort("B", 1001, True), PreviousPort("C", None, False),
+                        PreviousPort("D")])
+
+
+def _cyclic() -> list[Cyclic]:
+    frame = Frame(comment="frame 0", cmds=[
+        CyclicCmd(["PREOP", "SAFEOP", "OP"], "DC; ARMW; System Time Register", cmd=13,
+                  length=4, adp=0, ado=0x0910, input_offs=16, output_offs=16),
+        CyclicCmd(["SAFEOP", "OP"], "PD; LRW;", cmd=12, length=7, addr=0x10000000, cnt=3,
+                  input_offs=30, output_offs=30),
+        CyclicCmd(["OP"], "", cmd=8, length=2, ado=0x0120, data=b"\x08\x00"),
+    ])
+    second = Frame([CyclicCmd(["SAFEOP"], "", cmd=7, length=2, adp=0, ado=0x0130, cnt=2)])
+    return [Cyclic(frames=[frame], cycle_time=1000, comment="task 1"), Cyclic(frames=[second])]
+
+
+def rich_plan() -> NetworkPlan:
+    image = ProcessImage(
+        inputs_size=2, outputs_size=7,
+        inputs=[Variable("Drive 1.Inputs.Status word", 16, 0, "UINT")],
+        outputs=[Variable("Drive 1.Outputs.Control word", 16, 0, "UINT", comment=""),
+                 Variable("Drive 1.Outputs.Target position", 32, 24, "DINT", "pos")])
+    return NetworkPlan(master=_master(), slaves=[_coupler(), _drive()], cyclic=_cyclic(),
+                       process_image=image)
+
+
+# --- our own files --------------------------------------------------------------------------
+
+
+def test_round_trip_gives_an_equal_plan():
+    plan = rich_plan()
+    assert read_bytes(to_bytes(plan), "ours.xml") == plan
+    assert read_bytes(to_bytes(plan, generator="ecatcfg 1.0"), "ours.xml") == plan
+
+
+def test_output_is_deterministic_and_spelled_like_the_real_files():
+    data = to_bytes(rich_plan(), generator="ecatcfg 1.0")
+    assert data == to_bytes(copy.deepcopy(rich_plan()), generator="ecatcfg 1.0")
+    text = data.decode("utf-8")
+    assert text.startswith('<?xml version="1.0" encoding="UTF-8"?>\n'
+                           "<!-- Created with ecatcfg 1.0 -->\n<EtherCATConfig ")
+    assert 'Version="1.3"' in text and 'xsi:noNamespaceSchemaLocation="EtherCATConfig.xsd"' in text
+    assert "\n  <Config>\n    <Master>\n" in text                 # 2-space indentation
+    assert "<Ado>304</Ado>" in text and "<Data>00110e0064000100</Data>" in text
+    assert "<DataLength>256</DataLength>" in text and "<Index>#x1a00</Index>" in text
+    assert "<BeforeSlave>1</BeforeSlave>" in text and "true" not in text
+    assert "<Name>Drive 1 &lt;α &amp; β&gt;</Name>" in text and "CDATA" not in text
+    assert "<Addr>268435456</Addr>" in text
+    # uint32 values beyond xs:int in their signed spelling; read back unsigned.
+    assert "<VendorId>-536867126</VendorId>" in text and "<SerialNo>-1</SerialNo>" in text
+
+
+def test_init_cmd_timeout_is_not_written():
+    plan = rich_plan()
+    plan.slaves[0].init_cmds[0].timeout = 4321
+    text = to_bytes(plan).decode()
+    assert "<Timeout>4321</Timeout>" not in text
+    assert read_bytes(to_bytes(plan), "x").slaves[0].init_cmds[0].timeout is None
+
+
+def test_comment_cannot_be_broken_by_the_generator_name():
+    data = to_bytes(rich_plan(), generator="x -- y --->")
+    etree.fromstring(data)                                    # still well-formed
+
+
+def test_write_and_read_file(tmp_path: Path):
+    path = tmp_path / "net.xml"
+    write(rich_plan(), path)
+    assert read_file(path) == rich_plan()
+    assert [p.name for p in tmp_path.iterdir()] == ["net.xml"]
+
+
+def test_written_file_validates_against_the_2011_schema(eni_schema):
+    for generator in (None, "ecatcfg"):
+        doc = etree.fromstring(to_bytes(rich_plan(), generator))
+        assert eni_schema.validate(doc), eni_schema.error_log
+
+
+def test_minimal_plan_validates(eni_schema):
+    plan = NetworkPlan(master=MasterPlan(name="m"))
+    doc = etree.fromstring(to_bytes(plan))
+    assert eni_schema.validate(doc), eni_schema.error_log
+    assert read_bytes(to_bytes(plan), "x") == plan
+
+
+def test_sync_managers_are_written_in_schema_order():
+    plan = rich_plan()
+    plan.slaves[1].process_data.sms.reverse()
+    assert [sm.number for sm in read_bytes(to_bytes(plan), "x").slaves[1].process_data.sms] \
+        == [2, 3]
+
+
+@pytest.mark.parametrize("change, message", [
+    (lambda p: setattr(p.master.init_cmds[0], "addr", 5), "both"),
+    (lambda p: setattr(p.master.init_cmds[0], "ado", None), "needs Ado"),
+    (lambda p: setattr(p.master.init_cmds[0], "length", 3), "length"),
+    (lambda p: setattr(p.slaves[1].mailbox, "bootstrap_recv", None), "BootStrap"),
+    (lambda p: p.slaves[1].process_data.sms.append(SmSettings(2, "Outputs", 0, 0, True)),
+     "Sm0..Sm3"),
+    (lambda p: p.cyclic[1].frames[0].cmds.clear(), "Frame"),
+    (lambda p: p.cyclic[1].frames.clear(), "Cyclic"),
+    (lambda p: setattr(p.slaves[0], "vendor_id", -1), "32-bit"),
+    (lambda p: setattr(p.cyclic[0].frames[0].cmds[1], "addr", 1 << 32), "32-bit"),
+])
+def test_plans_the_schema_cannot_express_are_refused(change, message):
+    plan = rich_plan()
+    change(plan)
+    with pytest.raises(ValueError, match=message):
+        to_bytes(plan)
+
+
+# --- the real files -------------------------------------------------------------------------
+
+
+def eni_files(corpus: Path) -> list[Path]:
+    return sorted((corpus / "eni").rglob("*.xml"))
+
+
+def _config(path: Path) -> etree._Element:
+    root = etree.parse(str(path)).getroot()
+    return root.find("Config")
+
+
+def xpath_facts(path: Path) -> dict:
+    """What the raw XML says, counted with plain XPath (independent of the reader)."""
+    config = _config(path)
+    slaves = config.xpath("Slave")
+    return {
+        "master_cmds": int(config.xpath("count(Master/InitCmds/InitCmd)")),
+        "slaves": [(int(s.xpath("string(Info/PhysAddr)")), int(s.xpath("string(Info/VendorId)")),
+                    int(s.xpath("string(Info/ProductCode)")),
+                    int(s.xpath("count(InitCmds/InitCmd)")),
+                    int(s.xpath("count(Mailbox/CoE/InitCmds/InitCmd)")),
+                    int(s.xpath("count(ProcessData/RxPdo | ProcessData/TxPdo)")))
+                   for s in slaves],
+        "cyclic_cmds": int(config.xpath("count(Cyclic/Frame/Cmd)")),
+        "variables": int(config.xpath("count(ProcessImage/*/Variable)")),
+    }
+
+
+def plan_facts(plan: NetworkPlan) -> dict:
+    return {
+        "master_cmds": len(plan.master.init_cmds),
+        "slaves": [(s.phys_addr, s.vendor_id, s.product_code, len(s.init_cmds),
+                    len(s.mailbox.coe_init_cmds) if s.mailbox else 0,
+                    len(s.process_data.pdos) if s.process_data else 0)
+                   for s in plan.slaves],
+        "cyclic_cmds": sum(len(f.cmds) for c in plan.cyclic for f in c.frames),
+        "variables": len(plan.process_image.inputs) + len(plan.process_image.outputs),
+    }
+
+
+def test_corpus_has_the_eni_files(corpus):
+    names = {p.relative_to(corpus / "eni").as_posix() for p in eni_files(corpus)}
+    assert len(names) == 10
+    assert {"rocos-ethercat/eni.xml", "rocos-ethercat/eni1.xml",
+            "jn-ec-master/mega_master_eni.xml", "murrelektronik-variox/eni.xml"} <= names
+
+
+def test_every_corpus_eni_reads_with_matching_counts(corpus, eni_schema):
+    for path in eni_files(corpus):
+        plan = read_file(path)
+        assert plan_facts(plan) == xpath_facts(path), path
+        assert plan.slaves, path
+        # Re-written, every real file validates and reads back the same (InitCmd timeouts
+        # are the one thing the 2011 schema cannot carry).
+        data = to_bytes(plan)
+        assert eni_schema.validate(etree.fromstring(data)), (path, eni_schema.error_log)
+        for cmd in [*plan.master.init_cmds, *(c for s in plan.slaves for c in s.init_cmds)]:
+            cmd.timeout = None
+        assert read_bytes(data, "rewritten.xml") == plan, path
+
+
+def test_ec_engineer_file_values(corpus):
+    plan = read_file(corpus / "eni" / "rocos-ethercat" / "eni.xml")
+    drive = plan.slaves[0]
+    assert (drive.phys_addr, drive.auto_inc_addr, drive.vendor_id) == (1001, 0, 154)
+    sm2 = next(c for c in drive.init_cmds if c.comment == "set sm 2 (outputs)")
+    assert (sm2.data.hex(), sm2.cmd, sm2.adp, sm2.ado, sm2.transitions) == (
+        "00110e0064000100", 5, 1001, 0x0810, [T.PS])
+    lrw = next(c for c in plan.cyclic[0].frames[0].cmds if c.cmd == 12)
+    assert (lrw.addr, lrw.length, lrw.cnt, lrw.data, lrw.states) == (
+        268435456, 14, 3, None, ["SAFEOP", "OP"])
+    assert plan.cyclic[0].cycle_time == 1000
+    assert plan.process_image.inputs_size == 28
+    assert plan.master.init_cmds[0].before_slave is True
+    clear_fmmu = next(c for c in plan.master.init_cmds if c.comment == "clear fmmu")
+    assert (clear_fmmu.data, clear_fmmu.length, clear_fmmu.payload) == (None, 256, bytes(256))
+    assert plan.master.destination == b"\xff" * 6 and plan.master.ether_type == b"\xa4\x88"
+    assert drive.dc == DcPlan(True, 1_000_000, 0, 0)
+    tx = next(p for p in drive.process_data.pdos if p.index == 0x1A00)
+    assert (tx.direction, tx.fixed, tx.excludes[0], tx.entries[2].index) == (
+        "tx", True, 0x1A01, 0x6041)
+
+
+def test_twincat_file_values(corpus):
+    plan = read_file(corpus / "eni" / "jn-ec-master" / "mega_master_eni.xml")
+    el2008 = plan.slave("Term 2 (EL2008)")
+    assert el2008.auto_inc_addr == 65535 and el2008.position == 1
+    so = next(c for c in el2008.init_cmds if c.comment == "set sm 0 (outputs)")
+    assert (so.data.hex(), so.transitions, so.retries) == ("000f010044000100", [T.SO], 3)
+    assert plan.master.init_cmds[0].before_slave is True                 # "true"
+    assert plan.master.mailbox_states == (0x09000000, 1)
+    init = next(c for c in el2008.init_cmds
+                if c.comment == "set device state to INIT" and T.IP in c.transitions)
+    assert init.timeout == 3000
+    assert el2008.previous_ports == [PreviousPort("B", 1001, True)]   # Selected="true"
+    assert plan.process_image.inputs_size == 1536
+
+
+def test_encrypted_root_with_clear_body(corpus):
+    plan = read_file(corpus / "eni" / "murrelektronik-variox" / "eni.xml")
+    assert plan.version == "1.3" and len(plan.slaves) == 2
+    coupler = plan.slaves[0]
+    assert coupler.process_data == ProcessData()               # <ProcessData />
+    assert coupler.dc is None                                  # PotentialReferenceClock only
+
+
+def test_elmo_application_studio_dialect(corpus):
+    plan = read_file(corpus / "eni" / "rocos-ethercat" / "eni1.xml")
+    assert plan.version is None
+    drive = plan.slaves[0]
+    assert (drive.name, drive.phys_addr, drive.physics) == ("Elmo Drive", 1001, "YY")
+    assert drive.mailbox.protocols == ["EoE", "FoE", "CoE"]
+    assert [c.complete_access for c in drive.mailbox.coe_init_cmds] == [True, True, False, False]
+    assert drive.mailbox.coe_init_cmds[0].data.hex() == "05000a1a0e1a111a131a1d1a"
+    assert drive.mailbox.coe_init_cmds[0].timeout == 10000
+    assert [c.addr for c in plan.cyclic[0].frames[0].cmds] == [0x11000, 0x12000]
+
+
+def test_complete_access_and_status_bit(corpus):
+    plan = read_file(corpus / "eni" / "acontis-doc" / "acontis-TrainingSlaves-ENI.xml")
+    slave = plan.slaves[1]
+    assert slave.mailbox.status_bit_addr == 1 and slave.mailbox.data_link_layer is True
+    cmd = next(c for c in slave.mailbox.coe_init_cmds if c.comment == "download pdo 0x1C12 index")
+    assert (cmd.complete_access, cmd.fixed, cmd.data.hex()) == (True, True, "020000160116")
+
+
+# --- tolerance and bad input ----------------------------------------------------------------
+
+_SMALL = """<?xml version="1.0"?>
+<EtherCATConfig Version="1.3">
+  <Config>
+    <Master><Info><Name>m</Name><Destination>ffffffffffff</Destination>
+      <Source>000000000000</Source></Info></Master>
+    <Slave>
+      <Info><Name>s</Name><PhysAddr>{phys}</PhysAddr><AutoIncAddr>-1</AutoIncAddr>
+        <Physics>YY</Physics><VendorId>#x9a</VendorId><ProductCode>0x10</ProductCode>
+        <RevisionNo>1</RevisionNo><SerialNo>0</SerialNo></Info>
+      <InitCmds>
+        <InitCmd><Transition>{transition}</Transition><Cmd>{cmd}</Cmd><Adp>0</Adp>
+          <Ado>16</Ado><Data>E903</Data><Timeout>100</Timeout><Unknown/></InitCmd>
+      </InitCmds>
+      <HotConnect><GroupMemberCnt>1</GroupMemberCnt></HotConnect>
+    </Slave>
+  </Config>
+</EtherCATConfig>
+"""
+
+
+def small(phys: str = "1001", transition: str = "IP", cmd: str = "2") -> bytes:
+    return _SMALL.format(phys=phys, transition=transition, cmd=cmd).encode()
+
+
+def test_tolerant_reading_of_numbers_and_unknown_elements():
+    plan = read_bytes(small(), "small.xml")
+    slave = plan.slaves[0]
+    assert (slave.auto_inc_addr, slave.vendor_id, slave.product_code) == (0xFFFF, 0x9A, 0x10)
+    assert slave.init_cmds[0].data == b"\xe9\x03" and slave.init_cmds[0].timeout == 100
+    assert plan.master.ether_type == b"\xa4\x88" and plan.process_image == ProcessImage()
+
+
+@pytest.mark.parametrize("data, line, words", [
+    (small(phys="abc"), 7, "PhysAddr"),
+    (small(phys="12abc"), 7, "not a number"),
+    (small(phys="9" * 5000), 7, "not a number"),
+    (small().replace(b"<Slave>", b'<Slave><Mailbox DataLinkLayer="yes"><Send><Start>1</Start>'
+                     b"<Length>1</Length></Send><Recv><Start>1</Start><Length>1</Length>"
+                     b"</Recv></Mailbox>"), 6, "DataLinkLayer"),
+    (small(cmd="LWR"), 11, "<Cmd>"),
+    (small(transition="XY"), 11, "unknown transition"),
+    (small().replace(b"<PhysAddr>1001</PhysAddr>", b""), 7, "PhysAddr"),
+    (small().replace(b"E903", b"E90"), 12, "hex"),
+    (small().replace(b"<Ado>16</Ado>", b""), 11, "neither <Ado> nor <Addr>"),
+    (small()[:300], None, "not well-formed"),
+    (b'<?xml version="1.0"?>\n<EtherCATInfo Version="1.17"/>\n', 2, "root element"),
+    (b'<?xml version="1.0"?>\n<EtherCATConfig/>\n', 2, "<Config>"),
+    (b'<?xml version="1.0"?>\n<!DOCTYPE x [\n<!ENTITY e "boom">\n]>\n'
+     b"<EtherCATConfig><Config/></EtherCATConfig>\n", 3, "entity"),
+])
+def test_bad_input_is_a_located_error(data: bytes, line: int | None, words: str):
+    with pytest.raises(EcatcfgError) as info:
+        read_bytes(data, "bad.xml")
+    error = info.value
+    assert error.file == "bad.xml" and words in error.message
+    if line is not None:
+        assert error.line == line
+    else:
+        assert error.line
+    assert str(error).startswith("bad.xml:")
+
+
+def test_reader_errors_are_eni_read_errors():
+    with pytest.raises(EniReadError):
+        read_bytes(small(phys="abc"), "bad.xml")
+
+
+def test_missing_file_is_an_error(tmp_path: Path):
+    with pytest.raises(EniReadError, match="cannot read"):
+        read_file(tmp_path / "nope.xml", shown_as="nope.xml")
