@@ -70,8 +70,22 @@ def compile_topology(loaded: LoadedTopology, library: Library) -> CompileResult:
         slaves=slaves,
         cyclic=[Cyclic(lay.frames, cycle_time=topo.master.cycle_time_us)],
         process_image=ProcessImage(lay.image_size, lay.image_size, inputs, outputs))
-    notes = [f"slave {s.name!r}: {s.note}" for s in resolved if s.note]
+    notes = _notes(resolved)
     return CompileResult(plan, ebus_warnings(loaded, resolved), notes)
+
+
+def _notes(resolved: list[ResolvedSlave]) -> list[str]:
+    """One line per distinct note (e.g. the revision taken), naming the slaves it concerns."""
+    by_note: dict[str, list[str]] = {}
+    for s in resolved:
+        if s.note:
+            by_note.setdefault(s.note, []).append(s.name)
+    out = []
+    for note, names in by_note.items():
+        who = ", ".join(repr(n) for n in names[:3]) + (
+            f" and {len(names) - 3} more" if len(names) > 3 else "")
+        out.append(f"slave{'s' if len(names) > 1 else ''} {who}: {note}")
+    return out
 
 
 def _uses_state_bit(s: ResolvedSlave) -> bool:

@@ -24,6 +24,9 @@ from ecatcfg.esi.values import parse_int
 
 Path_ = tuple[str | int, ...]
 
+# libyaml's composer when PyYAML has it (10x faster on big topologies); marks are the same.
+_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+
 # Composing follows aliases: a few anchors can expand to millions of nodes ("billion laughs").
 MAX_NODES = 200_000
 
@@ -230,7 +233,7 @@ def loads(data: bytes | str, shown: str) -> LoadedTopology:
         except UnicodeDecodeError as exc:
             raise EcatcfgError(f"not UTF-8 text (byte {exc.start})", shown) from None
     try:
-        node = yaml.compose(data, Loader=yaml.SafeLoader)
+        node = yaml.compose(data, Loader=_LOADER)
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark or exc.context_mark
         raise EcatcfgError(f"not valid YAML/JSON: {exc.problem or exc.context}", shown,
