@@ -19,7 +19,7 @@ import struct
 from ecatcfg.compiler.layout import SlaveLayout, pd_bits
 from ecatcfg.compiler.plan import DcPlan, InitCmd, Validate
 from ecatcfg.compiler.resolve import ResolvedSlave
-from ecatcfg.esc import (AL_ERROR_ACK, SII_PRODUCT_CODE, SII_VENDOR_ID, AlState, Cmd, FmmuConfig,
+from ecatcfg.esc import (AL_ERROR_ACK, SII_PRODUCT_CODE, SII_VENDOR_ID, AlState, Cmd,
                          Reg, SmConfig, Transition as T, eeprom_read_request, fmmu_register,
                          sm_register)
 
@@ -253,7 +253,3 @@ def _pd_sm(slave: ResolvedSlave, n: int, bits: int) -> bytes:
     if not length:
         return SmConfig(sm.start_address or 0, 0, 0, False).to_bytes()
     return SmConfig(sm.start_address or 0, length, sm.control_byte or 0, True).to_bytes()
-
-
-def fmmu_of(cmd: InitCmd) -> FmmuConfig:
-    return FmmuConfig.from_bytes(cmd.payload)

@@ -301,3 +301,74 @@ def test_usage_errors(tmp_path, capsys):
                  "-o", str(tmp_path / "no" / "o.xml")]) == 2
     assert main(["compile", str(topo), "--esi", str(tmp_path / "nothing"),
                  "-o", str(tmp_path / "o.xml")]) == 2
+
+
+# -- modular devices ------------------------------------------------------------------------
+
+MODULES = """<?xml version="1.0"?>
+<EtherCATModule Version="1.12"><Vendor><Id>#xE0000ECA</Id><Name>V</Name></Vendor><Modules>
+<Module><Type ModuleIdent="#x1111">M-DI</Type><Name>DI module</Name>
+<TxPdo Fixed="1" Sm="3"><Index DependOnSlot="1">#x1A00</Index><Name>In</Name>
+<Entry><Index DependOnSlot="1">#x6000</Index><SubIndex>1</SubIndex><BitLen>8</BitLen>
+<Name>DI</Name><DataType>USINT</DataType></Entry></TxPdo></Module>
+<Module><Type ModuleIdent="#x2222">M-AO</Type><Name>AO module</Name>
+<RxPdo Fixed="1" Sm="2"><Index DependOnSlot="1">#x1600</Index><Name>Out</Name>
+<Entry><Index DependOnSlot="1">#x7000</Index><SubIndex>1</SubIndex><BitLen>16</BitLen>
+<Name>AO</Name><DataType>INT</DataType></Entry></RxPdo></Module>
+</Modules></EtherCATModule>
+"""
+COUPLER_BODY = (
+    '<Fmmu>Outputs</Fmmu><Fmmu>Inputs</Fmmu>'
+    '<Sm ControlByte="#x26" DefaultSize="128" Enable="1" StartAddress="#x1000">MBoxOut</Sm>'
+    '<Sm ControlByte="#x22" DefaultSize="128" Enable="1" StartAddress="#x1080">MBoxIn</Sm>'
+    '<Sm ControlByte="#x64" Enable="1" StartAddress="#x1100">Outputs</Sm>'
+    '<Sm ControlByte="#x20" Enable="1" StartAddress="#x1180">Inputs</Sm>'
+    '<Slots SlotIndexIncrement="#x10" SlotPdoIncrement="1">'
+    '<Slot><Name>S1</Name><ModuleIdent>#x1111</ModuleIdent></Slot>'
+    '<Slot><Name>S2</Name><ModuleIdent Default="1">#x2222</ModuleIdent></Slot></Slots>')
+
+
+@pytest.fixture
+def modular(tmp_path) -> Path:
+    from conftest import device_xml, esi_xml
+    folder = tmp_path / "esi"
+    folder.mkdir()
+    write(folder, "coupler.xml", esi_xml(device_xml("MX-1", body=COUPLER_BODY)).replace(
+        "<Vendor>", "<InfoReference>mods.xml</InfoReference><Vendor>"))
+    write(folder, "mods.xml", MODULES)
+    return folder
+
+
+def test_modules_shift_pdos_and_objects_by_slot(tmp_path, modular):
+    plan = compile_text(tmp_path, "slaves:\n  - {name: m, device: MX-1, modules: {1: 0x1111}}\n",
+                        [modular]).plan
+    pdos = {p.index: p for p in plan.slaves[0].process_data.pdos}
+    # slot 1: no offset; slot 2 (its default module 0x2222): PDO +1, objects +0x10
+    assert pdos[0x1A00].entries[0].index == 0x6000 and pdos[0x1A00].sm == 3
+    assert pdos[0x1601].entries[0].index == 0x7010 and pdos[0x1601].sm == 2
+    names = {v.name for v in plan.process_image.inputs + plan.process_image.outputs}
+    assert names == {"m.Module 1 (DI module).In.DI", "m.Module 2 (AO module).Out.AO"}
+
+
+def test_module_that_does_not_fit_its_slot(tmp_path, modular, capsys):
+    topo = write(tmp_path, "t.yaml", "slaves:\n  - name: m\n    device: MX-1\n"
+                                     "    modules: {1: 0x2222, 3: 0x1111}\n")
+    assert main(["compile", str(topo), "--esi", str(modular), "-o", str(tmp_path / "o")]) == 1
+    err = capsys.readouterr().err
+    assert f"{topo}:4: slave 'm': module 0x00002222 (M-AO) does not fit slot 1 (S1)" in err
+    assert "slot 3 does not exist; MX-1 has 2 slots" in err
+    assert not (tmp_path / "o").exists()
+
+
+def test_etg2001_modular_drive(tmp_path, corpus):
+    plan = compile_text(tmp_path, "slaves:\n  - {name: d, device: Drive1, "
+                                  "modules: {1: 0x100, 2: 0x200}}\n",
+                        [corpus / "esi/modular/ETG2001_ModulesSlots_CiA402.xml"]).plan
+    d = plan.slaves[0]
+    assigned = {p.index: [hex(e.index) for e in p.entries] for p in d.process_data.pdos
+                if p.sm is not None}
+    # SlotPdoIncrement 16, SlotIndexIncrement 0x800: axis 2 maps 0x68xx objects.
+    assert assigned == {0x1600: ["0x607a", "0x6040"], 0x1A00: ["0x6064", "0x6041"],
+                        0x1610: ["0x68ff", "0x6840"], 0x1A10: ["0x686c", "0x6841"]}
+    coe = [(c.index, c.subindex, c.data.hex()) for c in d.mailbox.coe_init_cmds]
+    assert coe[-2:] == [(0x1C12, 0, "020000161016"), (0x1C13, 0, "0200001a101a")]

@@ -13,6 +13,7 @@ import venv
 import zipfile
 
 from conftest import ROOT
+from ecatcfg.cli import main
 
 
 def test_wheel_installs_and_runs(tmp_path):
@@ -55,9 +56,13 @@ def test_wheel_installs_and_runs(tmp_path):
     out = run("compile", str(ROOT / "examples" / "topology.yaml"), "--esi",
               str(ROOT / "examples" / "esi"), "-o", str(tmp_path / "w.xml"))
     assert out.returncode == 0, out.stderr
-    # the installed compiler gives the same bytes as the demo's embedded run
-    assert (tmp_path / "w.xml").read_bytes() == \
-        (tmp_path / "ecatcfg-demo" / "demo.eni.xml").read_bytes()
+    # the installed compiler gives the same bytes as the demo's embedded run, and as the
+    # checkout (whose output test_compile validates against the ETG ENI schema)
+    wheel_eni = (tmp_path / "w.xml").read_bytes()
+    assert wheel_eni == (tmp_path / "ecatcfg-demo" / "demo.eni.xml").read_bytes()
+    assert main(["compile", str(ROOT / "examples" / "topology.yaml"), "--esi",
+                 str(ROOT / "examples" / "esi"), "-o", str(tmp_path / "c.xml")]) == 0
+    assert wheel_eni == (tmp_path / "c.xml").read_bytes()
     # the installed module is the wheel's, not the checkout's
     where = subprocess.run([str(py), "-c", "import ecatcfg; print(ecatcfg.__file__)"],
                            capture_output=True, text=True, cwd=tmp_path, check=True)
