@@ -204,7 +204,7 @@ def test_ebus_current_warning(tmp_path):
     result = compile_text(tmp_path, f"slaves:\n  - {{name: c, device: EX1100}}\n{terminals}\n")
     [warning] = result.warnings
     assert warning.line == 2 + 23 and "2070 mA" in warning.message and "2000 mA" in warning.message
-    result = compile_text(tmp_path, f"slaves:\n  - {{name: c, device: EX1100}}\n"
+    result = compile_text(tmp_path, "slaves:\n  - {name: c, device: EX1100}\n"
                                     + "\n".join(terminals.splitlines()[:22]) + "\n")
     assert result.warnings == []
 
