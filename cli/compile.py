@@ -35,10 +35,18 @@ def run(args: argparse.Namespace) -> int:
 
     if not Path(args.topology).exists():
         raise UsageError(f"{args.topology}: no such file")
-    for out in [args.output] + ([args.header] if args.header else []):
+    outputs = [args.output] + ([args.header] if args.header else [])
+    for out in outputs:
         parent = Path(out).parent
         if not parent.is_dir():
             raise UsageError(f"{out}: folder {str(parent)!r} does not exist")
+        # Checked before anything is written: a failure after the ENI would leave it behind.
+        if Path(out).is_dir():
+            raise UsageError(f"{out}: is a folder, not a file to write")
+    # One output must not replace the other, nor the topology it is compiled from.
+    targets = [Path(p).resolve() for p in [args.topology] + outputs]
+    if len(set(targets)) < len(targets):
+        raise UsageError("the topology, -o and --header must be three different files")
     loaded = topology.load(args.topology)
     lib = Library(args.esi, cache=not args.no_cache)
     if lib.problems:
@@ -54,12 +62,11 @@ def run(args: argparse.Namespace) -> int:
     eni = eni_writer.to_bytes(result.plan, generator=f"ecatcfg {__version__}")
     h = header.render(result.plan, Path(args.topology).name,
                       guard=header.guard_for(Path(args.header).name)) if args.header else None
-    try:
-        write_atomic(args.output, eni)
-        if h is not None:
-            write_atomic(args.header, h)
-    except OSError as exc:
-        raise UsageError(f"cannot write {exc.filename}: {exc.strerror}") from None
+    for target, data in [(args.output, eni)] + ([(args.header, h)] if h is not None else []):
+        try:
+            write_atomic(target, data)
+        except OSError as exc:      # name the user's file, not the temporary one beside it
+            raise UsageError(f"cannot write {target}: {exc.strerror}") from None
     plan = result.plan
     frames = sum(len(c.frames) for c in plan.cyclic)
     print(f"wrote {args.output}: {len(plan.slaves)} slaves, {frames} cyclic frame"

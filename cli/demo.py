@@ -25,6 +25,7 @@ def run(args: argparse.Namespace) -> int:
 
     from ecatcfg import __version__
     from ecatcfg.compiler import build, eni_writer, header, topology
+    from ecatcfg.errors import UsageError
     from ecatcfg.esi.library import Library
     from ecatcfg.examples import example_dir
     from ecatcfg.fileio import write_atomic
@@ -34,10 +35,18 @@ def run(args: argparse.Namespace) -> int:
     result = build.compile_topology(loaded, Library([folder / "esi"], cache=False))
     plan = result.plan
     out = Path(args.out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     eni, h = out / "demo.eni.xml", out / "demo.h"
-    write_atomic(eni, eni_writer.to_bytes(plan, generator=f"ecatcfg {__version__}"))
-    write_atomic(h, header.render(plan, "examples/topology.yaml", guard=header.guard_for(h.name)))
+    files = [(eni, eni_writer.to_bytes(plan, generator=f"ecatcfg {__version__}")),
+             (h, header.render(plan, "examples/topology.yaml", guard=header.guard_for(h.name)))]
+    # A file named like the folder, a folder named like a file, no permission: exit 2.
+    for path, data in [(out, None)] + files:
+        try:
+            if data is None:
+                out.mkdir(parents=True, exist_ok=True)
+            else:
+                write_atomic(path, data)
+        except OSError as exc:
+            raise UsageError(f"cannot write {path}: {exc.strerror}") from None
 
     print(f"Example line compiled ({folder / 'topology.yaml'}):\n")
     print(f"  {'slave':10} {'device':18} {'addr':>5} {'out':>5} {'in':>5}  mailbox  DC")

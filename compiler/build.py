@@ -26,6 +26,7 @@ MAILBOX_POLL_TIME = 10
 # The ENI schema's ProcessData has elements Sm0..Sm3 only.
 ENI_MAX_SM = 3
 SYNC1_BIT = 0x0400            # AssignActivate bit for SYNC1 (0x0981 bit 2)
+U32_MAX = 0xFFFFFFFF
 
 
 @dataclass(slots=True)
@@ -37,6 +38,7 @@ class CompileResult:
 
 def compile_topology(loaded: LoadedTopology, library: Library) -> CompileResult:
     resolved, errors = resolve_all(loaded, library)
+    errors += _esi_value_errors(loaded, resolved)
     errors += _fmmu_errors(loaded, resolved)
     if errors:
         raise TopologyError(errors)
@@ -46,13 +48,25 @@ def compile_topology(loaded: LoadedTopology, library: Library) -> CompileResult:
     polled = [i for i, s in enumerate(resolved) if _uses_state_bit(s)]
     try:
         lay = layout_mod.build(resolved, topo.master.layout, ref is not None, polled)
-    except EcatcfgError as exc:
-        raise TopologyError([loaded.error(exc.message, "slaves")]) from None
+    except layout_mod.LayoutError as exc:
+        raise TopologyError([loaded.error(exc.message, "slaves", exc.slave)]) from None
+
+    dcs = [_dc_plan(s, cycle_ns, s is ref) for s in resolved]
+    # 0x09A0/0x09A4 hold 32-bit nanoseconds: a SYNC cycle of more than 4.29 s cannot be set.
+    too_long = [loaded.error(f"slave {s.name!r}: DC op mode {s.dc_mode.name!r} gives a SYNC "
+                             f"cycle of {max(dc.cycle_time0, dc.cycle_time1)} ns, more than "
+                             f"the {U32_MAX} ns the ESC register holds; shorten "
+                             "master.cycle_time_us", "slaves", s.position, "dc")
+                for s, dc in zip(resolved, dcs)
+                if dc and s.dc_mode and not (0 <= dc.cycle_time0 <= U32_MAX
+                                             and 0 <= dc.cycle_time1 <= U32_MAX)]
+    if too_long:
+        raise TopologyError(too_long)
 
     slaves: list[SlavePlan] = []
     for i, s in enumerate(resolved):
         sl = lay.slaves[i]
-        dc = _dc_plan(s, cycle_ns, s is ref)
+        dc = dcs[i]
         init = initcmds.slave_init_cmds(
             s, sl, dc, s.dc_mode.assign_activate if dc and s.dc_mode else 0, _bootstrap(s))
         slaves.append(SlavePlan(
@@ -99,7 +113,45 @@ def _uses_state_bit(s: ResolvedSlave) -> bool:
 
 def _pd_fmmu_count(s: ResolvedSlave) -> int:
     out, inp = layout_mod.pd_bits(s)
-    return sum(1 for _, bits in out + inp if bits)
+    return (len(layout_mod.fmmu_groups(s, out, "Outputs"))
+            + len(layout_mod.fmmu_groups(s, inp, "Inputs")))
+
+
+def _esi_value_errors(loaded: LoadedTopology,
+                      resolved: list[ResolvedSlave]) -> list[EcatcfgError]:
+    """ESI numbers that go into register images and SDO data must fit their fields (a broken
+    ESI must be an error naming it, not a struct.error)."""
+    errors = []
+    for s in resolved:
+        dev = s.device
+        checks: list[tuple[str, int | None, int]] = [
+            ("VendorId", dev.vendor.id, U32_MAX), ("ProductCode", dev.product_code, U32_MAX),
+            ("RevisionNo", dev.revision, U32_MAX)]
+        for sm in dev.sms:
+            checks += [(f"Sm {sm.number} StartAddress", sm.start_address, 0xFFFF),
+                       (f"Sm {sm.number} ControlByte", sm.control_byte, 0xFF),
+                       (f"Sm {sm.number} DefaultSize", sm.default_size, 0xFFFF),
+                       (f"Sm {sm.number} MinSize", sm.min_size, 0xFFFF),
+                       (f"Sm {sm.number} MaxSize", sm.max_size, 0xFFFF)]
+        if s.dc_mode is not None:
+            checks.append((f"OpMode {s.dc_mode.name!r} AssignActivate",
+                           s.dc_mode.assign_activate, 0xFFFF))
+        coe = dev.mailbox.coe if dev.mailbox else None
+        for p in s.pdos:
+            checks.append(("a PDO index", p.index, 0xFFFF))
+            for e in p.entries:
+                checks += [(f"PDO 0x{p.index:X} entry index", e.index, 0xFFFF),
+                           (f"PDO 0x{p.index:X} entry subindex", e.subindex, 0xFF)]
+                # A mapping entry (0x16xx/0x1Axx) holds the bit length in one byte.
+                if coe and coe.pdo_config and not p.fixed and p.sm is not None:
+                    checks.append((f"PDO 0x{p.index:X} entry BitLen", e.bit_len, 0xFF))
+        for what, value, limit in checks:
+            if value is not None and not 0 <= value <= limit:
+                errors.append(loaded.error(
+                    f"slave {s.name!r}: the ESI of {dev.type_name} ({dev.source}) has "
+                    f"{what} {value:#x}, outside 0..{limit:#x}", "slaves", s.position,
+                    "device"))
+    return errors
 
 
 def _fmmu_errors(loaded: LoadedTopology, resolved: list[ResolvedSlave]) -> list[EcatcfgError]:

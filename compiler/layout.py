@@ -36,6 +36,14 @@ STATE_ALL = ["PREOP", "SAFEOP", "OP"]
 STATE_PD = ["SAFEOP", "OP"]
 
 
+class LayoutError(EcatcfgError):
+    """A slave whose process data cannot be laid out; ``slave`` is its bus position."""
+
+    def __init__(self, message: str, slave: int) -> None:
+        super().__init__(message)
+        self.slave = slave
+
+
 @dataclass(slots=True)
 class SlaveLayout:
     sm_bits: dict[int, int] = field(default_factory=dict)     # PD SM -> assigned bits
@@ -86,6 +94,33 @@ def pd_bits(slave: ResolvedSlave) -> tuple[list[tuple[int, int]], list[tuple[int
     return out, inp
 
 
+def fmmu_groups(slave: ResolvedSlave, sms: list[tuple[int, int]],
+                direction: str) -> list[list[tuple[int, int]]]:
+    """The SMs (with data) of one direction, grouped by the FMMU that maps them.
+
+    One FMMU per SM, unless the ESI declares fewer ``Outputs``/``Inputs`` FMMUs than there
+    are SMs with data: then SMs whose memory follows on from the previous one's (EL2809:
+    SM0 0x0F00 + SM1 0x0F01, one byte each) share one FMMU, as TwinCAT maps them.  Only a
+    whole-byte SM can be followed that way: the FMMU maps logical bits to physical bits
+    one to one.
+    """
+    used = [(n, bits) for n, bits in sms if bits]
+    declared = sum(1 for f in slave.device.fmmus if f.type == direction)
+    if not slave.device.fmmus or declared >= len(used):
+        return [[x] for x in used]
+    start = {sm.number: sm.start_address or 0 for sm in slave.device.sms}
+    groups: list[list[tuple[int, int]]] = []
+    for n, bits in used:
+        if groups:
+            last_n, last_bits = groups[-1][-1]
+            whole = all(b % 8 == 0 for _, b in groups[-1])
+            if whole and start[last_n] + last_bits // 8 == start[n]:
+                groups[-1].append((n, bits))
+                continue
+        groups.append([(n, bits)])
+    return groups
+
+
 def _place(cursor: int, bits: int) -> int:
     """Where a region of ``bits`` starts: byte-sized data on a byte, bit-sized at the bit."""
     return cursor if bits % 8 else (cursor + 7) // 8 * 8
@@ -123,8 +158,9 @@ def build(slaves: list[ResolvedSlave], layout: str, uses_dc: bool,
                         d.bits = s + w
                 break
             if attempt or not any(d.regions for d in dgs):
-                raise EcatcfgError(f"slave {slaves[i].name!r} has more process data "
-                                   f"({max(wants) // 8} bytes) than one frame can carry")
+                raise LayoutError(f"slave {slaves[i].name!r} has more process data "
+                                  f"({(max(wants) + 7) // 8} bytes) than one frame can carry",
+                                  slaves[i].position)
             frames.append([_Datagram(k) for k in kinds])
 
     # Logical addresses: consecutive windows; LRD windows after all LWR ones (TwinCAT).
@@ -212,16 +248,17 @@ def _map_region(result: SlaveLayout, slave: ResolvedSlave, size: tuple, d: _Data
         total = 0
         for sm_number, bits in sms:
             result.sm_bits[sm_number] = bits
-            if not bits:
-                continue
-            sm = next(s for s in slave.device.sms if s.number == sm_number)
+        for group in fmmu_groups(slave, sms, label.capitalize()):
+            sm = next(s for s in slave.device.sms if s.number == group[0][0])
+            bits = sum(b for _, b in group)
             logical = d.addr * 8 + bit
             first = logical % 8
             result.fmmus.append((FmmuConfig(logical // 8, (first + bits + 7) // 8, first,
                                             (first + bits - 1) % 8, sm.start_address or 0, 0,
                                             kind), label))
-            _variables(result, slave, sm_number, d.image_offs * 8 + bit, label)
-            bit += bits
+            for sm_number, sm_bits in group:
+                _variables(result, slave, sm_number, d.image_offs * 8 + bit, label)
+                bit += sm_bits
             total += bits
         if total:
             rng = BitRange(start, total)

@@ -49,24 +49,31 @@ def _entry_word(e) -> bytes:
 def pdo_cmds(slave: ResolvedSlave) -> list[CoeInitCmd]:
     dev = slave.device
     coe = dev.mailbox.coe if dev.mailbox else None
-    if coe is None or not coe.pdo_assign:
+    if coe is None or not (coe.pdo_assign or coe.pdo_config):
         return []
     ca = coe.complete_access
     dic = slave.dictionary
     sms = sorted({sm.number for sm in dev.sms
                   if not sm.is_mailbox and not sm.virtual and sm.type in ("Outputs", "Inputs")})
+    # PdoConfig without PdoAssign (a fixed assignment of configurable PDOs): a remapped PDO
+    # is still downloaded, or the slave would keep its old entries while the SMs are sized
+    # for the new ones.
     cmds = [_cmd(f"clear sm pdos (0x{ASSIGN_BASE + n:04X})", ASSIGN_BASE + n, 0, b"\x00")
-            for n in sms]
+            for n in sms] if coe.pdo_assign else []
     if coe.pdo_config:
         # TxPDOs first, as EC-Engineer lists and clears them.
         for p in sorted(slave.pdos, key=lambda p: p.direction != "tx"):
-            if not p.fixed and not p.virtual and p.sm is None and _writable(dic, p.index):
+            if coe.pdo_assign and not p.fixed and not p.virtual and p.sm is None \
+                    and _writable(dic, p.index):
                 cmds.append(_cmd(f"clear pdo 0x{p.index:04X} entries", p.index, 0, b"\x00"))
         for p in slave.pdos:
-            if p.sm is not None and not p.fixed and (p.index in slave.remapped or p.entries):
+            # Without PdoAssign only what the user remapped: the rest stays as the slave has it.
+            if p.sm is not None and not p.fixed and (
+                    p.index in slave.remapped or (coe.pdo_assign and p.entries)):
                 cmds += _mapping(p, ca)
-    for n in sms:
-        cmds += _assignment(ASSIGN_BASE + n, slave.assigned(n), ca)
+    if coe.pdo_assign:
+        for n in sms:
+            cmds += _assignment(ASSIGN_BASE + n, slave.assigned(n), ca)
     return cmds
 
 

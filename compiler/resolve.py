@@ -16,6 +16,7 @@ from ecatcfg.compiler.plan import CoeInitCmd, PdoDesc, PdoEntryDesc
 from ecatcfg.compiler.topology import LoadedTopology, Slave
 from ecatcfg.errors import EcatcfgError
 from ecatcfg.esc import Transition
+from ecatcfg.esi import datatypes
 from ecatcfg.esi.coe import TRANSITION_STATE, DictEntry, device_dictionary, has_coe, lookup
 from ecatcfg.esi.library import Library, SelectorError
 from ecatcfg.esi.model import DcOpMode, Device, Dictionary, Module, Pdo, SyncManager
@@ -36,6 +37,7 @@ class ResolvedSlave:
     module_cmds: list[CoeInitCmd] = field(default_factory=list)   # module ident list (0xF030)
     remapped: set[int] = field(default_factory=set)
     pdo_prefix: dict[int, str] = field(default_factory=dict)  # module PDOs: "Module 2 (X)"
+    module_dicts: list[tuple[int, Dictionary]] = field(default_factory=list)  # (offset, dic)
     note: str | None = None                  # e.g. which revision was taken
 
     @property
@@ -48,6 +50,21 @@ class ResolvedSlave:
     @property
     def dictionary(self) -> Dictionary | None:
         return device_dictionary(self.device)
+
+    def dictionary_for(self, index: int) -> tuple[Dictionary | None, int]:
+        """The dictionary that describes object ``index`` and its index there: the device's,
+        or a plugged module's (its DependOnSlot objects moved by the slot's offset, so slot
+        3's 0x8020 is the module's 0x8000).  Falls back to the device's."""
+        dic = self.dictionary
+        if dic is not None and index in dic.objects:
+            return dic, index
+        for offset, mod in self.module_dicts:
+            obj = mod.objects.get(index - offset)
+            if obj is not None and (obj.depend_on_slot or not offset):
+                return mod, index - offset
+            if offset and index in mod.objects and not mod.objects[index].depend_on_slot:
+                return mod, index
+        return dic, index
 
 
 class _Errors:
@@ -104,8 +121,11 @@ def _resolve(cfg: Slave, pos: int, phys: int, library: Library,
     slave = ResolvedSlave(cfg, pos, device, phys, [],
                           note=selection.note if len(choices) > 1 else None)
     modules = _plug_modules(slave, library.modules_for(selection.entry), errors)
+    slave.module_dicts = [(p.index_offset, p.module.profile.dictionary) for p in modules
+                          if p.module.profile and p.module.profile.dictionary]
     _choose_pdos(slave, modules, errors)
     _apply_mappings(slave, errors)
+    _check_sm_sizes(slave, errors)          # after the mappings: they change the sizes
     slave.dc_mode = _dc_mode(slave, errors)
     _sdos(slave, modules, errors)
     return slave
@@ -168,14 +188,16 @@ def _plug_modules(slave: ResolvedSlave, library_modules: dict[int, Module],
 
 def _desc(pdo: Pdo, pdo_offset: int = 0, index_offset: int = 0) -> PdoDesc:
     """A plan PDO from an ESI PDO; module PDOs shifted by their slot (ETG.2000 DependOnSlot)."""
-    index = (pdo.index or 0) + pdo_offset
+    # Only an Index marked DependOnSlot moves with the slot; a fixed index stays as written.
+    index = (pdo.index or 0) + (pdo_offset if pdo.depend_on_slot else 0)
     entries = [PdoEntryDesc(
         index=(e.index or 0) + (index_offset if e.depend_on_slot and e.index else 0),
         subindex=e.subindex or 0, bit_len=e.bit_len or 0, name=e.name,
         data_type=e.data_type) for e in pdo.entries]
     return PdoDesc(pdo.direction, index, pdo.name, entries, sm=pdo.sm, fixed=pdo.fixed,
                    mandatory=pdo.mandatory, virtual=pdo.virtual,
-                   excludes=[x + pdo_offset for x in pdo.excludes])
+                   excludes=[x + (pdo_offset if pdo.depend_on_slot else 0)
+                             for x in pdo.excludes])
 
 
 def default_sm(device: Device, direction: str) -> SyncManager | None:
@@ -198,10 +220,14 @@ def _choose_pdos(slave: ResolvedSlave, modules: list[_Plugged], errors: _Errors)
     for direction, chosen, key in (("rx", cfg.rx_pdos, "rx_pdos"), ("tx", cfg.tx_pdos, "tx_pdos")):
         mine = [p for p in pdos if p.direction == direction]
         sm = default_sm(dev, direction)
+        # SMs of this direction: a PDO the ESI puts on a missing SM, a mailbox SM or one of
+        # the other direction goes to the direction's first SM instead.
+        wanted = "Outputs" if direction == "rx" else "Inputs"
+        fitting = {s.number for s in dev.sms if s.type == wanted}
         for p in mine:
             if p.sm is not None and p.virtual:
                 p.sm = None
-            elif p.sm is not None and not any(s.number == p.sm for s in dev.sms):
+            elif p.sm is not None and p.sm not in fitting:
                 p.sm = sm.number if sm else None
         if chosen is None:
             continue
@@ -257,7 +283,6 @@ def _choose_pdos(slave: ResolvedSlave, modules: list[_Plugged], errors: _Errors)
         picked = sorted((p for p in slave.pdos if p.direction == direction
                          and p.index in order), key=lambda p: order[p.index])
         slave.pdos = others + picked
-    _check_sm_sizes(slave, errors)
 
 
 def _check_sm_sizes(slave: ResolvedSlave, errors: _Errors) -> None:
@@ -299,6 +324,13 @@ def _apply_mappings(slave: ResolvedSlave, errors: _Errors) -> None:
             errors.add(f"slave {cfg.name!r}: PDO 0x{index:04X} is mapped but not assigned; "
                        f"add it to {key}", *where)
             continue
+        # The mapping object's own dictionary entry says how many entries it holds.
+        room = sum(1 for n in range(1, 256)
+                   if dic is not None and isinstance(lookup(dic, index, n), DictEntry))
+        if room and len(entries) > room:
+            errors.add(f"slave {cfg.name!r}: PDO 0x{index:04X} holds at most {room} entries "
+                       f"(its object in the dictionary), not {len(entries)}", *where)
+            continue
         new: list[PdoEntryDesc] = []
         for i, (obj, sub, bits) in enumerate(entries):
             entry = _mapped_entry(slave, pdo, dic, obj, sub, bits, (*where, i), errors)
@@ -313,11 +345,12 @@ def _mapped_entry(slave: ResolvedSlave, pdo: PdoDesc, dic: Dictionary | None, ob
                   sub: int, bits: int, where: tuple, errors: _Errors) -> PdoEntryDesc | None:
     if obj == 0:                                  # a gap (padding) of `bits` bits
         return PdoEntryDesc(0, 0, bits)
-    if dic is None:
+    if dic is None and slave.dictionary_for(obj)[0] is None:
         errors.add(f"slave {slave.name!r}: {slave.device.type_name} has no object dictionary "
                    f"in its ESI, so 0x{obj:04X}:{sub:02X} cannot be checked or mapped", *where)
         return None
-    found = lookup(dic, obj, sub)
+    dic, local = slave.dictionary_for(obj)
+    found = lookup(dic, local, sub) if dic is not None else None
     if found is None:
         errors.add(f"slave {slave.name!r}: object 0x{obj:04X} is not in the dictionary of "
                    f"{slave.device.type_name}", *where)
@@ -395,7 +428,6 @@ def _sdos(slave: ResolvedSlave, modules: list[_Plugged], errors: _Errors) -> Non
     slave.esi_cmds = esi
     if not cfg.sdos:
         return
-    dic = slave.dictionary
     for i, user in enumerate(cfg.sdos):
         where = ("slaves", slave.position, "sdos", i)
         if not has_coe(dev):
@@ -408,22 +440,24 @@ def _sdos(slave: ResolvedSlave, modules: list[_Plugged], errors: _Errors) -> Non
                        f"{user.transition.value} (the mailbox works from PREOP on); use one of "
                        + ", ".join(TRANSITION_STATE), *where, "transition")
             continue
-        data = _sdo_data(slave, dic, user, state, where, errors)
+        dic, local = slave.dictionary_for(user.index)
+        data = _sdo_data(slave, dic, local, user, state, where, errors)
         if data is None:
             continue
         _place_sdo(slave, CoeInitCmd([user.transition], user.comment or _sdo_comment(
-            dic, user.index, user.subindex), user.index, user.subindex, data,
+            dic, local, user.index, user.subindex), user.index, user.subindex, data,
             complete_access=user.complete_access))
 
 
-def _sdo_data(slave: ResolvedSlave, dic: Dictionary | None, user, state: str, where: tuple,
-              errors: _Errors) -> bytes | None:
+def _sdo_data(slave: ResolvedSlave, dic: Dictionary | None, local: int, user, state: str,
+              where: tuple, errors: _Errors) -> bytes | None:
+    """``local``: the object's index in ``dic`` (a module's own, for a slot object)."""
     if user.data is not None:
         return bytes.fromhex(user.data.replace(" ", ""))
     type_name, bit_size = user.type, None
     target = f"0x{user.index:04X}:{user.subindex:02X}"
     if dic is not None and dic.objects:
-        found = lookup(dic, user.index, user.subindex)
+        found = lookup(dic, local, user.subindex)
         if found is None:
             errors.add(f"slave {slave.name!r}: object 0x{user.index:04X} is not in the "
                        f"dictionary of {slave.device.type_name}", *where, "index")
@@ -436,6 +470,14 @@ def _sdo_data(slave: ResolvedSlave, dic: Dictionary | None, user, state: str, wh
         if access is not None and not access.writable_in(state):
             errors.add(f"slave {slave.name!r}: {target} ({found.obj.name}) is not writable in "
                        f"{state} (access {access.value})", *where)
+            return None
+        # A 'type' of another size than the object would be refused by the slave (SDO abort
+        # "length of service parameter does not match"): say so here instead.
+        given = datatypes.bit_size(type_name) if type_name else None
+        if given is not None and found.bit_size is not None and given != found.bit_size:
+            errors.add(f"slave {slave.name!r}: {target} ({found.obj.name}) is "
+                       f"{found.bit_size} bits ({found.type}), but 'type' {type_name} is "
+                       f"{given} bits", *where, "type")
             return None
         type_name = type_name or found.type
         bit_size = found.bit_size
@@ -450,9 +492,9 @@ def _sdo_data(slave: ResolvedSlave, dic: Dictionary | None, user, state: str, wh
         return None
 
 
-def _sdo_comment(dic: Dictionary | None, index: int, subindex: int) -> str:
+def _sdo_comment(dic: Dictionary | None, local: int, index: int, subindex: int) -> str:
     """The object's name (and the subindex's) from the dictionary, as startup lists show it."""
-    obj = dic.objects.get(index) if dic else None
+    obj = dic.objects.get(local) if dic else None
     if obj is None or not obj.name:
         return f"download 0x{index:04X}:{subindex:02X}"
     sub = _sub_name(dic, obj.type, subindex) if subindex else None

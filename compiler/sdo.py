@@ -26,15 +26,25 @@ def encode(value: int | float | str, type_name: str, bit_size: int | None = None
     if base is None:
         raise SdoValueError(f"type {type_name!r} is not a base type; give 'data' as hex bytes")
     if base in _FLOATS:
-        if isinstance(value, str):
-            raise SdoValueError(f"{value!r} is not a number for {base}")
-        return struct.pack(_FLOATS[base], float(value))
+        try:
+            # YAML 1.1 reads 1e-3 (no dot) as a string: accept numbers written that way.
+            number = float(value)
+            return struct.pack(_FLOATS[base], number)
+        except ValueError:
+            raise SdoValueError(f"{value!r} is not a number for {base}") from None
+        except OverflowError:
+            raise SdoValueError(f"{value} is outside the range of {base}") from None
     m = _STRING.match(base)
     if m:
         if not isinstance(value, str):
             raise SdoValueError(f"{base} takes a string value")
-        data = value.encode("utf-16-le" if base.startswith("W") else "latin-1",
-                            errors="strict")
+        codec = "utf-16-le" if base.startswith("W") else "latin-1"
+        try:
+            data = value.encode(codec, errors="strict")
+        except UnicodeEncodeError as exc:
+            raise SdoValueError(f"{value!r} has a character {base} cannot hold "
+                                f"({exc.object[exc.start]!r}); give 'data' as hex "
+                                "bytes") from None
         limit = (bit_size or 0) // 8 or (int(m.group(1)) if m.group(1) else 0)
         if limit and len(data) > limit:
             raise SdoValueError(f"{value!r} is {len(data)} bytes, more than {base} "

@@ -15,8 +15,8 @@ from pathlib import Path
 from typing import Annotated, Any, Literal
 
 import yaml
-from pydantic import (BaseModel, BeforeValidator, ConfigDict, Field, ValidationError,
-                      field_validator, model_validator)
+from pydantic import (AfterValidator, BaseModel, BeforeValidator, ConfigDict, Field,
+                      ValidationError, WithJsonSchema, field_validator, model_validator)
 
 from ecatcfg.errors import EcatcfgError
 from ecatcfg.esc import Transition
@@ -29,6 +29,10 @@ _LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
 
 # Composing follows aliases: a few anchors can expand to millions of nodes ("billion laughs").
 MAX_NODES = 200_000
+# A topology nests about six levels deep; much deeper input only exhausts the stack.
+MAX_DEPTH = 64
+# Characters XML 1.0 cannot carry (names and comments end up in the ENI).
+_NOT_XML = re.compile("[^\t\n\r\x20-\ud7ff\ue000-\ufffd\U00010000-\U0010ffff]")
 
 
 class TopologyError(EcatcfgError):
@@ -58,10 +62,34 @@ def _number(value: Any) -> Any:
     return value
 
 
-Number = Annotated[int, BeforeValidator(_number)]
-Index = Annotated[int, BeforeValidator(_number), Field(ge=0, le=0xFFFF)]
-SubIndex = Annotated[int, BeforeValidator(_number), Field(ge=0, le=0xFF)]
-Address = Annotated[int, BeforeValidator(_number), Field(ge=1, le=0xFFFF)]
+def _xml_text(value: str) -> str:
+    bad = _NOT_XML.search(value)
+    if bad:
+        raise ValueError(f"character U+{ord(bad.group()):04X} cannot be written to an ENI (XML)")
+    return value
+
+
+def _num(lo: int | None = None, hi: int | None = None) -> Any:
+    """An integer that may also be written "0x1A00", "#x1A00" or "26".  The JSON Schema
+    says so (and keeps the bounds): with the validator first, pydantic wrote ``type:
+    integer`` with non-standard ``ge``/``le`` keys, so editors flagged ``"0x00001111"``."""
+    number: dict[str, Any] = {"type": "integer"}
+    if lo is not None:
+        number["minimum"] = lo
+    if hi is not None:
+        number["maximum"] = hi
+    text = {"type": "string", "pattern": r"^\s*([+-]?[0-9]+|(0[xX]|#[xX])[0-9A-Fa-f]+)\s*$"}
+    return Annotated[int, Field(ge=lo, le=hi), BeforeValidator(_number),
+                     WithJsonSchema({"anyOf": [number, text]})]
+
+
+XmlText = Annotated[str, AfterValidator(_xml_text)]
+Index = _num(0, 0xFFFF)
+SubIndex = _num(0, 0xFF)
+Address = _num(1, 0xFFFF)
+CycleTime = _num(1, 10_000_000)
+SlotNumber = _num(1)
+ModuleIdent = _num(0, 0xFFFFFFFF)
 
 
 class _Model(BaseModel):
@@ -71,9 +99,9 @@ class _Model(BaseModel):
 class Master(_Model):
     """The master and its cycle."""
 
-    name: str = Field("ecatcfg", min_length=1, description="Master name in the ENI")
-    cycle_time_us: int = Field(1000, ge=1, le=10_000_000,
-                               description="Bus cycle in microseconds (DC SYNC0 factor 1)")
+    name: XmlText = Field("ecatcfg", min_length=1, description="Master name in the ENI")
+    cycle_time_us: CycleTime = Field(1000, description="Bus cycle in microseconds "
+                                                       "(DC SYNC0 factor 1)")
     layout: Literal["lrw", "lrd_lwr"] = Field(
         "lrw", description="lrw: one LRW per frame, outputs and inputs of a slave overlap "
                            "(EC-Engineer style); lrd_lwr: separate LWR and LRD windows "
@@ -91,7 +119,7 @@ class Sdo(_Model):
     type: str | None = Field(None, description="Data type when the ESI has no dictionary")
     transition: Transition = Field(Transition.PS, description="When to write it (IP, PS, SO, ...)")
     complete_access: bool = False
-    comment: str | None = None
+    comment: XmlText | None = None
 
     @field_validator("value", mode="before")
     @classmethod
@@ -107,28 +135,34 @@ class Sdo(_Model):
         if self.data is not None and not re.fullmatch(r"(?:[0-9A-Fa-f]{2})+",
                                                        self.data.replace(" ", "")):
             raise ValueError(f"data {self.data!r} is not hex bytes (e.g. '0a00')")
+        # CompleteAccess writes a whole object from subindex 0 or 1 (ETG.1000.6): its bytes
+        # are the object's layout, which one typed value cannot give.
+        if self.complete_access and (self.subindex > 1 or self.data is None):
+            raise ValueError("complete_access needs 'data' (the object's bytes) and "
+                             "subindex 0 or 1")
         return self
 
 
-MappingEntry = tuple[Index, SubIndex, Annotated[int, Field(ge=1, le=0xFF)]]
+BitLen = _num(1, 0xFF)
+MappingEntry = tuple[Index, SubIndex, BitLen]
 
 
 class Slave(_Model):
     """One slave, in bus order."""
 
-    name: str = Field(min_length=1, pattern=r"^[^\x00-\x1f\x7f]+$",
-                      description="Unique name; prefixes its process variables")
+    name: XmlText = Field(min_length=1, pattern=r"^[^\x00-\x1f\x7f]+$",
+                          description="Unique name; prefixes its process variables")
     device: str = Field(min_length=1,
                         description='ESI Type name or "VENDOR:PRODUCT[:REVISION]"')
     station_address: Address | None = Field(None, description="Default 1001, 1002, ...")
-    alias: Annotated[int, BeforeValidator(_number), Field(ge=1, le=0xFFFF)] | None = Field(
+    alias: Address | None = Field(
         None, description="Expected station alias (register 0x0012), checked in INIT->PREOP")
     rx_pdos: list[Index] | None = Field(None, description="RxPDOs to assign (default: ESI)")
     tx_pdos: list[Index] | None = Field(None, description="TxPDOs to assign (default: ESI)")
-    pdo_mapping: dict[Index, list[MappingEntry]] = Field(
+    # At least one entry: an empty PDO is left out of rx_pdos/tx_pdos, not assigned.
+    pdo_mapping: dict[Index, Annotated[list[MappingEntry], Field(min_length=1)]] = Field(
         default_factory=dict, description="PDO index -> [[index, subindex, bit length], ...]")
-    modules: dict[Annotated[int, BeforeValidator(_number), Field(ge=1)],
-                  Annotated[int, BeforeValidator(_number), Field(ge=0, le=0xFFFFFFFF)]] = Field(
+    modules: dict[SlotNumber, ModuleIdent] = Field(
         default_factory=dict, description="Slot number (from 1) -> module ident")
     sdos: list[Sdo] = Field(default_factory=list)
     dc: str | None = Field(None, description="DC OpMode name from the ESI")
@@ -183,6 +217,9 @@ class _Walker:
         if self.count > MAX_NODES:
             raise EcatcfgError(f"more than {MAX_NODES} values (YAML aliases expanding?)",
                                self.file, node.start_mark.line + 1)
+        if len(path) > MAX_DEPTH:       # aliases can nest deeper than the text shows
+            raise EcatcfgError(f"values nested more than {MAX_DEPTH} levels deep",
+                               self.file, node.start_mark.line + 1)
         self.lines.setdefault(path, node.start_mark.line + 1)
         if isinstance(node, yaml.MappingNode):
             out: dict[Any, Any] = {}
@@ -205,7 +242,12 @@ class _Walker:
             return out
         if isinstance(node, yaml.SequenceNode):
             return [self.value(v, path + (i,)) for i, v in enumerate(node.value)]
-        return self.loader.construct_object(node, deep=True)
+        try:
+            return self.loader.construct_object(node, deep=True)
+        except yaml.YAMLError as exc:        # a tag SafeLoader does not know (!foo, !!python/..)
+            problem = getattr(exc, "problem", None) or str(exc)
+            raise EcatcfgError(f"not valid here: {problem}", self.file,
+                               node.start_mark.line + 1) from None
 
 
 def load(path: str | Path, shown_as: str | None = None) -> LoadedTopology:
@@ -224,10 +266,14 @@ def loads(data: bytes | str, shown: str) -> LoadedTopology:
         except UnicodeDecodeError as exc:
             raise EcatcfgError(f"not UTF-8 text (byte {exc.start})", shown) from None
     try:
+        _prescan(data, shown)
         node = yaml.compose(data, Loader=_LOADER)
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark or exc.context_mark
-        raise EcatcfgError(f"not valid YAML/JSON: {exc.problem or exc.context}", shown,
+        problem = exc.problem or exc.context
+        if mark and data[mark.index:mark.index + 1] == "\t":     # the usual cause
+            problem = "a tab; YAML indents with spaces"
+        raise EcatcfgError(f"not valid YAML/JSON: {problem}", shown,
                            mark.line + 1 if mark else None,
                            mark.column + 1 if mark else None) from None
     except yaml.YAMLError as exc:
@@ -244,6 +290,23 @@ def loads(data: bytes | str, shown: str) -> LoadedTopology:
         raise TopologyError([_problem(err, shown, walker.lines)
                              for err in exc.errors()]) from None
     return LoadedTopology(topology, shown, walker.lines)
+
+
+def _prescan(data: str, shown: str) -> None:
+    """Refuse huge or deeply nested input from the parser's event stream, before composing
+    builds a node for every value (a 100 MB file would take minutes and gigabytes)."""
+    events = depth = 0
+    for event in yaml.parse(data, Loader=_LOADER):
+        events += 1
+        if isinstance(event, yaml.CollectionStartEvent):
+            depth += 1
+        elif isinstance(event, yaml.CollectionEndEvent):
+            depth -= 1
+        if events > MAX_NODES or depth > MAX_DEPTH:
+            what = (f"more than {MAX_NODES} values" if events > MAX_NODES
+                    else f"values nested more than {MAX_DEPTH} levels deep")
+            raise EcatcfgError(f"{what}; this is not a topology", shown,
+                               event.start_mark.line + 1)
 
 
 def _problem(err: Any, shown: str, lines: dict[Path_, int]) -> EcatcfgError:
