@@ -8,6 +8,7 @@ import os
 from pathlib import Path
 
 import pytest
+from rig import pysoem_module, tshark_path, veth_netns  # noqa: F401  (runtime test rig fixtures)
 
 ROOT = Path(__file__).resolve().parent.parent
 EXAMPLES = ROOT / "examples"

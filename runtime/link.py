@@ -1,0 +1,423 @@
+"""Frame links: how the master and the virtual segment put whole Ethernet frames on a wire.
+
+A link moves complete Ethernet frames (destination MAC, source MAC, EtherType, payload; no FCS)
+and nothing else: no parsing, no padding, no scapy.  This is the per-frame hot path.
+
+- :class:`RawLink`: an ``AF_PACKET``/``SOCK_RAW`` socket bound to one interface and EtherType
+  0x88A4 (a NIC, or one end of a veth pair).  It never returns the copies of frames sent on the
+  same interface (``PACKET_OUTGOING``), accepts frames shorter than 60 bytes (veth does not pad)
+  and sends bytes exactly as given (use :func:`pad60` to pad the way a NIC would).
+- :class:`MemoryLink`: an in-memory, thread-safe pair of ends for unit tests of the master and
+  the virtual segment without sockets or privileges.
+
+Both have ``fileno()`` for ``select``/``poll``: it is readable while a frame is waiting.
+``recv(timeout)`` waits at most ``timeout`` seconds (``None``: forever, ``0``: just look) and
+returns ``None`` when nothing came.  Errors a user can cause (a missing interface, no
+privileges, a frame larger than the MTU, a closed link) raise :class:`LinkError` or
+:class:`~ecatcfg.errors.UsageError` with a one-line message naming the interface.
+"""
+
+from __future__ import annotations
+
+import errno
+import fcntl
+import os
+import select
+import socket
+import struct
+import threading
+import time
+from collections import deque
+from typing import Protocol, runtime_checkable
+
+from ..errors import EcatcfgError, UsageError
+from ..esc import ETHERTYPE
+
+__all__ = ["Link", "RawLink", "MemoryLink", "LinkError", "pad60", "ETH_HEADER", "MIN_FRAME"]
+
+ETH_HEADER = 14          # destination MAC, source MAC, EtherType
+MIN_FRAME = 60           # minimum Ethernet frame without FCS (what a NIC pads short frames to)
+DEFAULT_MTU = 1500
+
+_SOL_PACKET = getattr(socket, "SOL_PACKET", 263)
+_PACKET_IGNORE_OUTGOING = getattr(socket, "PACKET_IGNORE_OUTGOING", 23)   # Linux >= 4.20
+_SO_RCVBUFFORCE = getattr(socket, "SO_RCVBUFFORCE", 33)
+_SIOCGIFMTU = 0x8921
+_RCVBUF = 4 << 20        # room for bursts while the receiving thread is not scheduled
+
+
+class LinkError(EcatcfgError):
+    """A frame could not be sent or received (oversized frame, interface down, closed link)."""
+
+
+@runtime_checkable
+class Link(Protocol):
+    """What the master and the virtual segment need from a wire."""
+
+    def send(self, frame: bytes) -> None: ...
+
+    def recv(self, timeout: float | None) -> bytes | None: ...
+
+    def fileno(self) -> int: ...
+
+    def close(self) -> None: ...
+
+
+def pad60(frame: bytes) -> bytes:
+    """``frame`` padded with zero bytes to the 60-byte Ethernet minimum, as a NIC sends it."""
+    n = len(frame)
+    return frame if n >= MIN_FRAME else frame + bytes(MIN_FRAME - n)
+
+
+def _too_big(iface: str, size: int, mtu: int) -> LinkError:
+    return LinkError(f"{iface}: frame of {size} bytes is too large for the MTU of {mtu} "
+                     f"bytes (at most {mtu + ETH_HEADER} bytes per frame, Ethernet header "
+                     f"included)")
+
+
+def _too_short(iface: str, size: int) -> LinkError:
+    return LinkError(f"{iface}: frame of {size} bytes is shorter than an Ethernet header "
+                     f"({ETH_HEADER} bytes)")
+
+
+class _Base:
+    """Context-manager support shared by the links."""
+
+    __slots__ = ()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()  # type: ignore[attr-defined]
+
+
+# --------------------------------------------------------------------------- raw sockets
+
+class RawLink(_Base):
+    """EtherType-0x88A4 frames on one network interface through an ``AF_PACKET`` socket.
+
+    The socket lives in the network namespace of the thread that opens it (see
+    ``tests/rig.py`` for opening one inside another namespace).
+    """
+
+    __slots__ = ("iface", "ethertype", "mtu", "_sock", "_fd", "_bufsize", "_closed")
+
+    def __init__(self, iface: str, *, ethertype: int = ETHERTYPE, rcvbuf: int = _RCVBUF) -> None:
+        self.iface = iface
+        self.ethertype = ethertype
+        self._closed = True
+        try:
+            sock = socket.socket(socket.AF_PACKET, socket.SOCK_RAW, socket.htons(ethertype))
+        except PermissionError as exc:
+            raise UsageError(f"{iface}: opening a raw Ethernet socket needs root or the "
+                             f"CAP_NET_RAW capability ({exc.strerror})") from None
+        except (AttributeError, OSError) as exc:
+            raise UsageError(f"{iface}: raw Ethernet sockets (AF_PACKET) are not available "
+                             f"here: {exc}") from None
+        try:
+            try:
+                sock.bind((iface, ethertype))
+            except OSError as exc:
+                if exc.errno in (errno.ENODEV, errno.ENXIO, None):
+                    raise UsageError(f"no such network interface: {iface!r}"
+                                     f"{_available_interfaces()}") from None
+                raise UsageError(f"{iface}: cannot bind a raw socket: {exc}") from None
+            for level, opt, value in ((_SOL_PACKET, _PACKET_IGNORE_OUTGOING, 1),
+                                      (socket.SOL_SOCKET, socket.SO_RCVBUF, rcvbuf)):
+                try:
+                    sock.setsockopt(level, opt, value)
+                except OSError:
+                    pass      # old kernel: outgoing copies are still filtered in recv()
+            if os.geteuid() == 0:       # root may exceed net.core.rmem_max
+                try:
+                    sock.setsockopt(socket.SOL_SOCKET, _SO_RCVBUFFORCE, rcvbuf)
+                except OSError:
+                    pass
+            self.mtu = _interface_mtu(sock, iface)
+        except BaseException:
+            sock.close()
+            raise
+        self._sock = sock
+        self._fd = sock.fileno()
+        # A frame never exceeds MTU + header (+ 4 for a VLAN tag); keep room for larger MTUs.
+        self._bufsize = max(self.mtu + ETH_HEADER + 4, 2048)
+        self._closed = False
+
+    def __repr__(self) -> str:
+        state = "closed" if self._closed else f"fd={self._fd}"
+        return f"RawLink({self.iface!r}, {state})"
+
+    def fileno(self) -> int:
+        return self._fd
+
+    def send(self, frame: bytes) -> None:
+        """Send ``frame`` (bytes-like) exactly as given; blocks only while the send buffer is
+        full."""
+        try:
+            self._sock.send(frame)
+        except OSError as exc:
+            raise self._send_error(exc, len(frame)) from None
+
+    def _send_error(self, exc: OSError, size: int) -> Exception:
+        if self._closed:
+            return LinkError(f"{self.iface}: link is closed")
+        if exc.errno == errno.EMSGSIZE:
+            mtu = _interface_mtu(self._sock, self.iface, self.mtu)
+            return _too_big(self.iface, size, mtu)
+        if exc.errno == errno.EINVAL and size < ETH_HEADER:
+            return _too_short(self.iface, size)
+        if exc.errno in (errno.ENETDOWN, errno.ENXIO):
+            return LinkError(f"{self.iface}: interface is down ({exc.strerror})")
+        if exc.errno == errno.ENODEV:
+            return LinkError(f"{self.iface}: interface has gone away ({exc.strerror})")
+        return LinkError(f"{self.iface}: sending a frame of {size} bytes failed: {exc}")
+
+    def recv(self, timeout: float | None = None) -> bytes | None:
+        """The next received frame, or ``None`` after ``timeout`` seconds.
+
+        Timeouts are rounded up to whole milliseconds (``poll``); never returns early.
+        """
+        sock, bufsize = self._sock, self._bufsize
+        deadline = None
+        while True:
+            try:
+                data, addr = sock.recvfrom(bufsize, socket.MSG_DONTWAIT)
+            except BlockingIOError:
+                pass
+            except OSError as exc:
+                raise self._recv_error(exc) from None
+            else:
+                if addr[2] != socket.PACKET_OUTGOING:
+                    return data
+                continue
+            # Nothing waiting: sleep in poll() until a frame arrives or the time is up.
+            if timeout is None:
+                wait = None
+            else:
+                now = time.monotonic()
+                if deadline is None:
+                    deadline = now + timeout
+                remaining = deadline - now
+                if remaining <= 0:
+                    return None
+                wait = remaining * 1000.0
+            # A poll object per wait (not one shared): threads may wait on one link together.
+            poller = select.poll()
+            poller.register(self._fd, select.POLLIN)
+            if not poller.poll(wait):
+                if timeout is not None and time.monotonic() >= deadline:  # type: ignore[operator]
+                    return None
+            elif self._closed:
+                raise LinkError(f"{self.iface}: link is closed")
+
+    def recv_many(self, max_frames: int, timeout: float | None = None) -> list[bytes]:
+        """Up to ``max_frames`` frames: waits up to ``timeout`` for the first one, then takes
+        whatever else is already waiting without blocking.  ``[]`` on timeout."""
+        first = self.recv(timeout)
+        if first is None:
+            return []
+        frames = [first]
+        sock, bufsize, outgoing = self._sock, self._bufsize, socket.PACKET_OUTGOING
+        while len(frames) < max_frames:
+            try:
+                data, addr = sock.recvfrom(bufsize, socket.MSG_DONTWAIT)
+            except BlockingIOError:
+                break
+            except OSError as exc:
+                raise self._recv_error(exc) from None
+            if addr[2] != outgoing:
+                frames.append(data)
+        return frames
+
+    def _recv_error(self, exc: OSError) -> Exception:
+        if self._closed or exc.errno == errno.EBADF:
+            return LinkError(f"{self.iface}: link is closed")
+        if exc.errno in (errno.ENETDOWN, errno.ENODEV, errno.ENXIO):
+            return LinkError(f"{self.iface}: interface is down or has gone away "
+                             f"({exc.strerror})")
+        return LinkError(f"{self.iface}: receiving failed: {exc}")
+
+    def close(self) -> None:
+        if not self._closed:
+            self._closed = True
+            self._sock.close()
+
+
+def _interface_mtu(sock: socket.socket, iface: str, default: int = DEFAULT_MTU) -> int:
+    """The MTU of ``iface`` as seen from the socket's network namespace."""
+    try:
+        req = struct.pack("16si12x", iface.encode()[:15], 0)
+        return struct.unpack_from("16si", fcntl.ioctl(sock.fileno(), _SIOCGIFMTU, req))[1]
+    except (OSError, UnicodeEncodeError):
+        return default
+
+
+def _available_interfaces() -> str:
+    try:
+        names = sorted(name for _, name in socket.if_nameindex())
+    except OSError:
+        return ""
+    return f" (interfaces here: {', '.join(names)})" if names else ""
+
+
+# --------------------------------------------------------------------------- in memory
+
+class MemoryLink(_Base):
+    """One end of an in-memory wire; make both ends with :meth:`pair`.
+
+    What one end sends the other receives, in order.  Each end's receive queue holds at most
+    ``capacity`` frames; a frame arriving at a full queue is dropped and counted in
+    :attr:`dropped` (a NIC ring overflowing), so a sender never blocks.  Frames sent after the
+    peer closed are lost, as on a cable with nothing at the other end.  Frames longer than
+    ``mtu + 14`` bytes raise the same :class:`LinkError` as :class:`RawLink` does.
+    """
+
+    def __init__(self, name: str = "mem", *, capacity: int = 1024, mtu: int = DEFAULT_MTU) -> None:
+        if capacity < 1:
+            raise ValueError("capacity must be at least 1")
+        self.iface = name
+        self.capacity = capacity
+        self.mtu = mtu
+        self.dropped = 0
+        self._queue: deque[bytes] = deque()
+        self._cv = threading.Condition(threading.Lock())
+        self._peer: MemoryLink | None = None
+        self._closed = False
+        self._wake_r = -1           # created on the first fileno() call
+        self._wake_w = -1
+        self._signalled = False
+
+    @classmethod
+    def pair(cls, *, capacity: int = 1024, mtu: int = DEFAULT_MTU,
+             names: tuple[str, str] = ("mem-a", "mem-b")) -> tuple[MemoryLink, MemoryLink]:
+        a = cls(names[0], capacity=capacity, mtu=mtu)
+        b = cls(names[1], capacity=capacity, mtu=mtu)
+        a._peer, b._peer = b, a
+        return a, b
+
+    def __repr__(self) -> str:
+        state = "closed" if self._closed else f"{len(self._queue)} queued"
+        return f"MemoryLink({self.iface!r}, {state})"
+
+    def __len__(self) -> int:
+        """Frames waiting to be received."""
+        return len(self._queue)
+
+    def send(self, frame: bytes) -> None:
+        if self._closed:
+            raise LinkError(f"{self.iface}: link is closed")
+        size = len(frame)
+        if size > self.mtu + ETH_HEADER:
+            raise _too_big(self.iface, size, self.mtu)
+        if size < ETH_HEADER:
+            raise _too_short(self.iface, size)
+        peer = self._peer
+        if peer is not None:
+            peer._deliver(bytes(frame))
+
+    def _deliver(self, frame: bytes) -> None:
+        with self._cv:
+            if self._closed:
+                return
+            queue = self._queue
+            if len(queue) >= self.capacity:
+                self.dropped += 1
+                return
+            queue.append(frame)
+            if len(queue) == 1:
+                self._cv.notify()
+                self._set_wakeup()
+
+    def recv(self, timeout: float | None = None) -> bytes | None:
+        with self._cv:
+            queue = self._queue
+            if not queue:
+                if self._closed:
+                    raise LinkError(f"{self.iface}: link is closed")
+                if timeout is None:
+                    while not queue and not self._closed:
+                        self._cv.wait()
+                elif timeout > 0:
+                    deadline = time.monotonic() + timeout
+                    while not queue and not self._closed:
+                        remaining = deadline - time.monotonic()
+                        if remaining <= 0:
+                            break
+                        self._cv.wait(remaining)
+                if not queue:
+                    if self._closed:
+                        raise LinkError(f"{self.iface}: link is closed")
+                    return None
+            frame = queue.popleft()
+            if not queue:
+                self._clear_wakeup()
+            if queue:
+                self._cv.notify()       # another receiving thread may take the next one
+            return frame
+
+    def recv_many(self, max_frames: int, timeout: float | None = None) -> list[bytes]:
+        """Up to ``max_frames`` frames: waits up to ``timeout`` for the first one, then takes
+        whatever else is waiting.  ``[]`` on timeout."""
+        first = self.recv(timeout)
+        if first is None:
+            return []
+        frames = [first]
+        with self._cv:
+            queue = self._queue
+            while queue and len(frames) < max_frames:
+                frames.append(queue.popleft())
+            if not queue:
+                self._clear_wakeup()
+        return frames
+
+    def fileno(self) -> int:
+        """A descriptor that is readable while a frame is waiting (for ``select``)."""
+        with self._cv:
+            if self._closed:
+                raise LinkError(f"{self.iface}: link is closed")
+            if self._wake_r < 0:
+                if hasattr(os, "eventfd"):
+                    fd = os.eventfd(0, os.EFD_NONBLOCK | os.EFD_CLOEXEC)
+                    self._wake_r = self._wake_w = fd
+                else:                       # not Linux
+                    self._wake_r, self._wake_w = os.pipe()
+                    os.set_blocking(self._wake_r, False)
+                    os.set_blocking(self._wake_w, False)
+                if self._queue:
+                    self._set_wakeup()
+            return self._wake_r
+
+    # Both helpers run with self._cv held; the descriptor is readable exactly while the queue
+    # is not empty.
+    def _set_wakeup(self) -> None:
+        if self._wake_w >= 0 and not self._signalled:
+            self._signalled = True
+            if self._wake_w == self._wake_r:
+                os.eventfd_write(self._wake_w, 1)
+            else:
+                os.write(self._wake_w, b"\0")
+
+    def _clear_wakeup(self) -> None:
+        if self._signalled:
+            self._signalled = False
+            try:
+                if self._wake_w == self._wake_r:
+                    os.eventfd_read(self._wake_r)
+                else:
+                    os.read(self._wake_r, 1)
+            except BlockingIOError:
+                pass
+
+    def close(self) -> None:
+        with self._cv:
+            if self._closed:
+                return
+            self._closed = True
+            self._queue.clear()
+            self._cv.notify_all()
+            fds = {self._wake_r, self._wake_w} - {-1}
+            self._wake_r = self._wake_w = -1
+            self._signalled = False
+        for fd in fds:
+            os.close(fd)

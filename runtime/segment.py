@@ -1,0 +1,364 @@
+"""A virtual EtherCAT segment: emulated slaves in a line, answering frames on a link.
+
+A frame passes every slave in bus order and returns to the master.  Each datagram is
+processed in place in the frame's buffer with the addressing and working-counter rules of
+ETG.1000.4 (``ethercat-facts.md`` §1): auto-increment (ADP counts up at each slave; the one
+that sees 0 acts), configured station address (or alias with 0x0103 bit 0), broadcast (every
+slave; reads OR into the data), logical (every slave whose FMMUs overlap, down to single
+bits), and ARMW/FRMW (one slave reads, all others write).  Processing datagram by datagram
+over all slaves gives the same result as slave by slave over all datagrams: slaves only
+meet through the frame's bytes, and each slave still sees the datagrams in order.
+
+Logical datagrams are the hot path of a running network: for each (command, address,
+length) the segment works out once which bytes or bits of which slave it touches, and
+keeps that plan until an FMMU or SyncManager register changes.
+"""
+
+from __future__ import annotations
+
+import heapq
+import random
+import struct
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from ecatcfg.esc import AlState, Cmd, FmmuType, Reg
+from ecatcfg.runtime.slave import PROCESS_RAM, EmulatedSlave, StateChange
+from ecatcfg.runtime.syncman import SmKind, SmState
+from ecatcfg.runtime.wire import DG_HEADER_LEN, FrameError, datagram_offsets
+
+# Propagation through one slave in the emulated line (ns): processing on the way out
+# (port 0 -> 3 -> 1) and forwarding on the way back (ethercat-facts.md §8).
+FORWARD_DELAY_NS = 600
+RETURN_DELAY_NS = 200
+
+_READS = {Cmd.APRD, Cmd.FPRD, Cmd.BRD, Cmd.LRD}
+_WRITES = {Cmd.APWR, Cmd.FPWR, Cmd.BWR, Cmd.LWR}
+_AUTO_INC = {Cmd.APRD, Cmd.APWR, Cmd.APRW, Cmd.ARMW}
+_CONFIGURED = {Cmd.FPRD, Cmd.FPWR, Cmd.FPRW, Cmd.FRMW}
+_BROADCAST = {Cmd.BRD, Cmd.BWR, Cmd.BRW}
+_LOGICAL = {Cmd.LRD: (True, False), Cmd.LWR: (False, True), Cmd.LRW: (True, True)}
+_ADDRESS_REGISTERS = (Reg.STATION_ADDRESS, Reg.DL_CONTROL_2 + 1)
+_AL_STATUS = int(Reg.AL_STATUS)
+
+
+@dataclass(frozen=True, slots=True)
+class Faults:
+    """Seeded fault injection on the wire: a share of frames is lost (half of them on the
+    way to the slaves, half on the way back, after processing), corrupted (one bit of
+    the returned EtherCAT data flipped) or delayed by ``delay_s``."""
+
+    drop: float = 0.0
+    corrupt: float = 0.0
+    delay: float = 0.0
+    delay_s: float = 0.005
+    seed: int = 0
+
+
+@dataclass(slots=True)
+class _LogicalOp:
+    """One slave's part of a logical datagram: a byte run or a list of single bits."""
+
+    slave: EmulatedSlave
+    write: bool                     # frame -> slave memory (else memory -> frame)
+    frame_offset: int               # byte offset in the datagram's data
+    phys: int
+    length: int                     # bytes (byte run); 0 for a bit op
+    bits: tuple[tuple[int, int, int, int], ...] = ()   # (frame byte, phys byte, shift, mask)
+    sm: SmState | None = None       # the process-data SM the access goes through
+    completes_sm: bool = False      # writes the SM's last byte (a complete buffer)
+
+
+class VirtualSegment:
+    """Emulated slaves in bus order (position 0 is the first after the master)."""
+
+    def __init__(self, slaves: list[EmulatedSlave], faults: Faults | None = None) -> None:
+        self.slaves = slaves
+        self.faults = faults or Faults()
+        self._rng = random.Random(self.faults.seed)
+        self._plans: dict[tuple[int, int, int], list[list[_LogicalOp]]] = {}
+        self._by_address: dict[int, list[EmulatedSlave]] | None = None
+        self.frames = 0
+        self.on_state_change: Callable[[StateChange], None] | None = None
+        for pos, slave in enumerate(slaves):
+            slave.position = pos
+            slave.set_links(True, pos + 1 < len(slaves))
+            slave.on_mapping_change = self._plans.clear
+            slave.on_state_change = self._state_changed
+
+    def _state_changed(self, change: StateChange) -> None:
+        if self.on_state_change:
+            self.on_state_change(change)
+
+    # -- one frame ---------------------------------------------------------------------------
+
+    def process(self, frame: bytes | bytearray) -> bytearray:
+        """The frame as it comes back to the master after passing every slave."""
+        buf = bytearray(frame)
+        self.frames += 1
+        try:
+            offsets = datagram_offsets(buf)
+        except FrameError:
+            return buf                  # an ESC forwards what it cannot process
+        view = memoryview(buf)
+        for pos, n in offsets:
+            self._datagram(buf, view, pos, n)
+        view.release()
+        if self.slaves:
+            buf[6] |= 0x02              # the first ESC sets the U/L bit of the source MAC
+        return buf
+
+    def _datagram(self, buf: bytearray, view: memoryview, pos: int, n: int) -> None:
+        cmd = buf[pos]
+        data = view[pos + DG_HEADER_LEN:pos + DG_HEADER_LEN + n]
+        wkc_at = pos + DG_HEADER_LEN + n
+        if cmd in _LOGICAL:
+            address, = struct.unpack_from("<I", buf, pos + 2)
+            added = self._logical(cmd, address, data)
+        else:
+            adp, ado = struct.unpack_from("<HH", buf, pos + 2)
+            if cmd in _AUTO_INC:
+                index = -adp & 0xFFFF
+                targets = [self.slaves[index]] if index < len(self.slaves) else []
+                added = self._physical(cmd, targets, ado, data, index)
+            elif cmd in _CONFIGURED:
+                targets = self._addressed(adp)
+                added = self._physical(cmd, targets, ado, data,
+                                       targets[0].position if targets else -1)
+            elif cmd in _BROADCAST:
+                added = self._broadcast(cmd, ado, data)
+            else:
+                return                  # NOP and unknown commands pass untouched
+            if cmd in _AUTO_INC or cmd in _BROADCAST:
+                struct.pack_into("<H", buf, pos + 2, (adp + len(self.slaves)) & 0xFFFF)
+        if added:
+            wkc, = struct.unpack_from("<H", buf, wkc_at)
+            struct.pack_into("<H", buf, wkc_at, (wkc + added) & 0xFFFF)
+
+    def _addressed(self, address: int) -> list[EmulatedSlave]:
+        if self._by_address is None:
+            table: dict[int, list[EmulatedSlave]] = {}
+            for s in self.slaves:
+                table.setdefault(s.station_address, []).append(s)
+                if s.alias_enabled and s.alias and s.alias != s.station_address:
+                    table.setdefault(s.alias, []).append(s)
+            self._by_address = table
+        return self._by_address.get(address, [])
+
+    def _physical(self, cmd: int, targets: list[EmulatedSlave], ado: int,
+                  data: memoryview, reader: int) -> int:
+        """APxx/FPxx on ``targets``; ARMW/FRMW: slave ``reader`` reads, the others write."""
+        n = len(data)
+        if cmd in (Cmd.ARMW, Cmd.FRMW):
+            if not 0 <= reader < len(self.slaves):
+                return 0
+            added = 0
+            received = bytes(data)
+            for s in self.slaves:
+                if s.position == reader:
+                    got = s.read(ado, n)
+                    if got is not None:
+                        data[:] = got
+                        added += 1
+                elif s.write(ado, bytes(data) if s.position > reader else received):
+                    added += 1
+            return added
+        added = 0
+        for s in targets:
+            if cmd in _READS:
+                got = s.read(ado, n)
+                if got is not None:
+                    data[:] = got
+                    added += 1
+            elif cmd in _WRITES:
+                if self._write(s, ado, data):
+                    added += 1
+            else:                                       # APRW / FPRW
+                old = s.read(ado, n)
+                wrote = self._write(s, ado, data)
+                if old is not None:
+                    data[:] = old
+                added += (1 if old is not None else 0) + (2 if wrote else 0)
+        return added
+
+    def _broadcast(self, cmd: int, ado: int, data: memoryview) -> int:
+        n = len(data)
+        if cmd == Cmd.BRD and ado + n <= PROCESS_RAM and not (
+                ado < Reg.DC_SYSTEM_TIME + 8 and ado + n > Reg.DC_SYSTEM_TIME):
+            # Plain registers (a cyclic BRD of AL status): no side effects, just OR them.
+            end = ado + n
+            merged = int.from_bytes(data, "little")
+            for s in self.slaves:
+                merged |= int.from_bytes(s.mem[ado:end], "little")
+            data[:] = merged.to_bytes(n, "little")
+            return len(self.slaves)
+        added = 0
+        for s in self.slaves:
+            if cmd == Cmd.BWR:
+                added += self._write(s, ado, data)
+                continue
+            got = s.read(ado, n)
+            wrote = self._write(s, ado, data) if cmd == Cmd.BRW else False
+            if got is not None:
+                merged = int.from_bytes(data, "little") | int.from_bytes(got, "little")
+                data[:] = merged.to_bytes(n, "little")
+                added += 1
+            added += 2 if wrote else 0
+        return added
+
+    def _write(self, slave: EmulatedSlave, ado: int, data: memoryview) -> bool:
+        n = len(data)
+        ok = slave.write(ado, bytes(data))
+        if ok and ado < _ADDRESS_REGISTERS[1] and ado + n > _ADDRESS_REGISTERS[0]:
+            self._by_address = None
+        if ok and ado <= Reg.DC_RECEIVE_TIME_PORT0 < ado + n:
+            self._latch(slave)
+        return ok
+
+    def _latch(self, slave: EmulatedSlave) -> None:
+        """Receive times of a 0x0900 write: the frame reaches slave k's port 0 after the
+        slaves before it and comes back to its port 1 after the rest of the line."""
+        pos = slave.position
+        downstream = len(self.slaves) - pos - 1
+        port0 = slave.local_time() + pos * FORWARD_DELAY_NS
+        port1 = (port0 + downstream * (FORWARD_DELAY_NS + RETURN_DELAY_NS)
+                 if downstream else None)
+        slave.latch_receive_times(port0, port1)
+
+    # -- logical addressing ------------------------------------------------------------------
+
+    def _logical(self, cmd: int, address: int, data: memoryview) -> int:
+        key = (cmd, address, len(data))
+        plan = self._plans.get(key)
+        if plan is None:
+            plan = self._plans[key] = self._plan(cmd, address, len(data))
+        lrw = cmd == Cmd.LRW
+        added = 0
+        for slave, writes, reads in plan:
+            mem = slave.mem
+            running = mem[_AL_STATUS] & 0x0F >= AlState.SAFEOP
+            hit_write = hit_read = False
+            for op in writes:                   # writes first: an LRW carries the outputs
+                sm = op.sm
+                if sm is not None and not (running and sm.enabled and sm.length):
+                    continue
+                if op.length:
+                    offset = op.frame_offset
+                    mem[op.phys:op.phys + op.length] = data[offset:offset + op.length]
+                else:
+                    for fbyte, pbyte, shift, mask in op.bits:
+                        value = data[fbyte] >> shift if shift >= 0 else data[fbyte] << -shift
+                        mem[pbyte] = mem[pbyte] & ~mask & 0xFF | value & mask
+                if op.completes_sm:
+                    slave.outputs_written()
+                hit_write = True
+            for op in reads:
+                sm = op.sm
+                if sm is not None and not (running and sm.enabled and sm.length):
+                    continue
+                if op.length:
+                    offset = op.frame_offset
+                    data[offset:offset + op.length] = mem[op.phys:op.phys + op.length]
+                else:
+                    for fbyte, pbyte, shift, mask in op.bits:
+                        value = mem[pbyte] << shift if shift >= 0 else mem[pbyte] >> -shift
+                        data[fbyte] = data[fbyte] & ~mask & 0xFF | value & mask
+                hit_read = True
+            if lrw:
+                added += (1 if hit_read else 0) + (2 if hit_write else 0)
+            elif hit_read or hit_write:
+                added += 1
+        return added
+
+    def _plan(self, cmd: int, address: int, n: int) -> list[tuple[EmulatedSlave, list[_LogicalOp],
+                                                                  list[_LogicalOp]]]:
+        reads, writes = _LOGICAL[cmd]
+        lo, hi = address * 8, (address + n) * 8           # the datagram's logical bits
+        plan = []
+        for slave in self.slaves:
+            ops: tuple[list[_LogicalOp], list[_LogicalOp]] = ([], [])
+            for f in slave.fmmus:
+                first = f.logical_start * 8 + f.logical_start_bit
+                last = first + f.bit_length                 # exclusive
+                b0, b1 = max(lo, first), min(hi, last)
+                if b0 >= b1:
+                    continue
+                phys0 = f.physical_start * 8 + f.physical_start_bit + (b0 - first)
+                if writes and f.type & FmmuType.WRITE:
+                    ops[1].append(_op(slave, True, b0 - lo, phys0, b1 - b0))
+                if reads and f.type & FmmuType.READ:
+                    ops[0].append(_op(slave, False, b0 - lo, phys0, b1 - b0))
+            if ops[0] or ops[1]:
+                plan.append((slave, ops[1], ops[0]))
+        return plan
+
+    # -- running on a link -------------------------------------------------------------------
+
+    def serve(self, link, *, duration: float | None = None,
+              stop: threading.Event | None = None,
+              on_ready: Callable[[], None] | None = None) -> None:
+        """Answer frames from ``link`` until ``stop`` is set or ``duration`` has passed."""
+        faults = self.faults
+        end = time.monotonic() + duration if duration is not None else None
+        delayed: list[tuple[float, int, bytes]] = []
+        sequence = 0
+        next_tick = 0.0
+        if on_ready:
+            on_ready()
+        while not (stop is not None and stop.is_set()):
+            now = time.monotonic()
+            if end is not None and now >= end:
+                break
+            while delayed and delayed[0][0] <= now:
+                link.send(heapq.heappop(delayed)[2])
+            if now >= next_tick:
+                for s in self.slaves:
+                    s.check_watchdog(now)
+                next_tick = now + 0.002
+            wait = 0.002
+            if delayed:
+                wait = min(wait, max(0.0, delayed[0][0] - now))
+            frame = link.recv(wait)
+            if frame is None:
+                continue
+            if faults.drop and self._rng.random() < faults.drop / 2:
+                continue                                   # lost on the way out
+            reply = self.process(frame)
+            if faults.drop and self._rng.random() < faults.drop / 2:
+                continue                                   # lost on the way back
+            if faults.corrupt and self._rng.random() < faults.corrupt and len(reply) > 16:
+                bit = self._rng.randrange((len(reply) - 16) * 8)
+                reply[16 + bit // 8] ^= 1 << bit % 8
+            if faults.delay and self._rng.random() < faults.delay:
+                sequence += 1
+                heapq.heappush(delayed, (now + faults.delay_s, sequence, bytes(reply)))
+                continue
+            link.send(bytes(reply))
+
+
+def _op(slave: EmulatedSlave, write: bool, frame_bit: int, phys_bit: int,
+        bits: int) -> _LogicalOp:
+    """The access of ``bits`` bits from datagram bit ``frame_bit`` to physical bit
+    ``phys_bit``: a byte run when both sides are byte-aligned, otherwise masked byte
+    operations (one per pair of frame and memory bytes the bits meet in)."""
+    phys = phys_bit // 8
+    sm = next((s for s in slave.sms if s.active and not s.is_mailbox
+               and s.start <= phys < s.end), None)
+    last_phys = (phys_bit + bits - 1) // 8
+    completes = sm is not None and sm.kind is SmKind.OUTPUTS and last_phys >= sm.end - 1
+    if frame_bit % 8 == 0 and phys_bit % 8 == 0 and bits % 8 == 0:
+        return _LogicalOp(slave, write, frame_bit // 8, phys, bits // 8, sm=sm,
+                          completes_sm=completes)
+    # Group the bits by (frame byte, memory byte): within a pair the shift between frame
+    # bit and memory bit is constant (it differs by 8 between neighbouring pairs).
+    groups: dict[tuple[int, int, int], int] = {}
+    for i in range(bits):
+        fb, pb = frame_bit + i, phys_bit + i
+        key = (fb // 8, pb // 8, fb % 8 - pb % 8)
+        groups[key] = groups.get(key, 0) | 1 << (pb % 8 if write else fb % 8)
+    # write: memory bits = frame byte >> shift; read: frame bits = memory byte << shift
+    masked = [(fbyte, pbyte, shift, mask) for (fbyte, pbyte, shift), mask in groups.items()]
+    return _LogicalOp(slave, write, frame_bit // 8, phys, 0, tuple(masked), sm=sm,
+                      completes_sm=completes)

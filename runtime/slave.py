@@ -1,0 +1,562 @@
+"""One emulated EtherCAT slave: an ESC's registers and memory plus the firmware behind them.
+
+Built from the device's ESI: the SII EEPROM image (``esi/sii.py``) backs the SII interface
+(0x0500-0x050F) and loads the configured alias and PDI control at power-on; the object
+dictionary (``runtime/objects.py``) backs the CoE SDO server and decides which
+SyncManager lengths the slave accepts in SAFEOP.  Register addresses and the rules the
+firmware applies are those of ``ethercat-facts.md`` §2-§4 (ETG.1000.4/.6, SOES, KickCAT).
+
+The ESC's 64 KiB address space is one ``bytearray``: registers below 0x1000, process memory
+above.  Reads and writes from the wire go through :meth:`EmulatedSlave.read` and
+:meth:`EmulatedSlave.write`, which refuse what a real ESC refuses (no working counter) and
+run the side effects of the registers written.  The segment (``runtime/segment.py``) does
+the addressing and logical (FMMU) accesses.
+"""
+
+from __future__ import annotations
+
+import struct
+import time
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from ecatcfg.esc import (FMMU_SIZE, AL_ERROR_ACK, AlState, FmmuConfig, FmmuType, Reg,
+                         fmmu_register, sm_register)
+from ecatcfg.esi.model import Device
+from ecatcfg.runtime.syncman import (ACTIVATE_REPEAT, WATCHDOG_ENABLE, SmKind, SmState)
+
+MEMORY_SIZE = 0x10000
+PROCESS_RAM = 0x1000
+N_FMMU = 8
+N_SM = 8
+
+ESC_TYPE = 0x11                    # reported ESC type (an ET1100-class device)
+ESC_FEATURES = 0x01CC              # DC, 64-bit DC, EBUS/MII link detection, enhanced DC SYNC
+DEFAULT_WD_DIVIDER = 0x09C2        # (0x09C2 + 2) x 40 ns = 100 us watchdog time base
+DEFAULT_WD_TIME = 1000             # x 100 us = 100 ms
+EEPROM_R64 = 0x0040                # 0x0502 bit 6: reads return 8 bytes
+EEPROM_BUSY = 0x8000
+
+AL_ERROR = 0x10
+
+# AL status codes the emulated firmware gives (ETG.1000.6; ethercat-facts.md §4).
+AL_INVALID_STATE_CHANGE = 0x0011
+AL_UNKNOWN_STATE = 0x0012
+AL_BOOT_NOT_SUPPORTED = 0x0013
+AL_INVALID_MAILBOX = 0x0016
+AL_SM_WATCHDOG = 0x001B
+AL_INVALID_OUTPUTS = 0x001D
+AL_INVALID_INPUTS = 0x001E
+AL_INVALID_DC_CYCLE = 0x0035
+
+# Transitions the state machine allows (SOES ESC_state, KickCAT ESMStates); any -> INIT too.
+_ALLOWED = {(AlState.INIT, AlState.PREOP), (AlState.PREOP, AlState.SAFEOP),
+            (AlState.SAFEOP, AlState.OP), (AlState.OP, AlState.SAFEOP),
+            (AlState.OP, AlState.PREOP), (AlState.SAFEOP, AlState.PREOP)}
+_LETTER = {AlState.INIT: "I", AlState.PREOP: "P", AlState.BOOT: "B", AlState.SAFEOP: "S",
+           AlState.OP: "O"}
+
+# Registers the master cannot write (device information, status, EEPROM-loaded values).
+_READ_ONLY = [(0x0000, 0x0010), (0x0110, 0x0112), (0x0130, 0x0136), (0x0140, 0x0142),
+              (0x0150, 0x0154), (0x0440, 0x0444), (0x0982, 0x0985)]
+_READ_ONLY += [(sm_register(n) + 5, sm_register(n) + 6) for n in range(N_SM)]
+_READ_ONLY += [(sm_register(n) + 7, sm_register(n) + 8) for n in range(N_SM)]
+
+
+@dataclass(frozen=True, slots=True)
+class StateChange:
+    """What the segment reports: a slave that moved, or refused to."""
+
+    position: int
+    name: str
+    state: AlState
+    error: bool
+    code: int
+
+
+def _overlaps(a: int, n: int, start: int, end: int) -> bool:
+    return a < end and a + n > start
+
+
+class EmulatedSlave:
+    """An ESC and its firmware, emulated from the device's ESI."""
+
+    def __init__(self, device: Device, sii_image: bytes, *, name: str = "",
+                 od=None, sdo_server=None) -> None:
+        self.device = device
+        self.name = name or device.type_name
+        self.eeprom = bytearray(sii_image)
+        self.od = od
+        self.sdo_server = sdo_server
+        self.mem = bytearray(MEMORY_SIZE)
+        self.position = 0
+        self.sms = [SmState(n) for n in range(N_SM)]
+        self.fmmus: list[FmmuConfig] = []
+        self.mailbox_queue: deque[bytes] = deque()
+        self.last_mailbox: bytes | None = None
+        self.refuse: dict[str, int] = {}       # fault injection: transition ("PS") -> code
+        self.on_state_change: Callable[[StateChange], None] | None = None
+        self.on_mapping_change: Callable[[], None] | None = None
+        self.outputs_valid = False
+        self._last_output_write = 0.0
+        self._clock_base = 0
+        self._ro = bytearray(PROCESS_RAM)
+        for start, end in _READ_ONLY:
+            self._ro[start:end] = b"\x01" * (end - start)
+        self._expected_pd = self._default_pd_bits()
+        self._power_on()
+
+    # -- power-on ---------------------------------------------------------------------------
+
+    def _power_on(self) -> None:
+        m = self.mem
+        m[0x0000] = ESC_TYPE
+        m[0x0004] = N_FMMU
+        m[0x0005] = N_SM
+        m[0x0006] = (MEMORY_SIZE - PROCESS_RAM) // 1024 - 1
+        m[0x0007] = self._port_descriptor()
+        struct.pack_into("<H", m, 0x0008, ESC_FEATURES)
+        struct.pack_into("<H", m, Reg.AL_STATUS, AlState.INIT)
+        struct.pack_into("<H", m, Reg.WATCHDOG_DIVIDER, DEFAULT_WD_DIVIDER)
+        struct.pack_into("<H", m, Reg.WATCHDOG_PDI, DEFAULT_WD_TIME)
+        struct.pack_into("<H", m, Reg.WATCHDOG_SM, DEFAULT_WD_TIME)
+        m[0x0440] = 1                               # SM watchdog status: OK
+        struct.pack_into("<H", m, Reg.EEPROM_CONTROL, EEPROM_R64)
+        struct.pack_into("<HH", m, 0x0934, 0x0C00, 0x1000)
+        self._load_eeprom()
+        # Each slave's local clock starts somewhere else, as on a real line.
+        self._clock_base = (hash(self.name) & 0xFFFF_FFFF) * 1000
+
+    def _port_descriptor(self) -> int:
+        """0x0007: two bits per port from the ESI's Physics ("YY" = MII, "KK" = E-Bus)."""
+        physics = (self.device.physics or "YY")[:4]
+        value = 0
+        for port, char in enumerate(physics):
+            value |= {"Y": 3, "H": 3, "K": 2, "E": 2}.get(char.upper(), 0) << 2 * port
+        return value
+
+    def _load_eeprom(self) -> None:
+        """What an ESC copies from the SII config area (words 0-4) after reset or reload."""
+        words = struct.unpack_from("<5H", self.eeprom, 0) if len(self.eeprom) >= 10 \
+            else (0,) * 5
+        struct.pack_into("<H", self.mem, 0x0140, words[0])
+        struct.pack_into("<H", self.mem, 0x0150, words[1])
+        struct.pack_into("<H", self.mem, 0x0982, words[2])
+        struct.pack_into("<H", self.mem, 0x0152, words[3])
+        struct.pack_into("<H", self.mem, Reg.STATION_ALIAS, words[4])
+        self.mem[0x0110] |= 0x01                    # DL status: EEPROM loaded
+
+    def set_links(self, upstream: bool, downstream: bool) -> None:
+        """DL status 0x0110: port 0 towards the master, port 1 to the next slave; ports
+        2 and 3 closed.  A port with communication has its loop open (SOEM: bits 9+2n, 8+2n
+        = 1, 0 means active)."""
+        status = 0x01 | 0x02
+        if upstream:
+            status |= 0x0010 | 0x0200
+        else:
+            status |= 0x0100
+        if downstream:
+            status |= 0x0020 | 0x0800
+        else:
+            status |= 0x0400
+        status |= 0x1000 | 0x4000
+        struct.pack_into("<H", self.mem, 0x0110, status)
+
+    # -- state ------------------------------------------------------------------------------
+
+    @property
+    def state(self) -> AlState:
+        return AlState(self.mem[Reg.AL_STATUS] & 0x0F)
+
+    @property
+    def error(self) -> bool:
+        return bool(self.mem[Reg.AL_STATUS] & AL_ERROR)
+
+    @property
+    def status_code(self) -> int:
+        return struct.unpack_from("<H", self.mem, 0x0134)[0]
+
+    @property
+    def station_address(self) -> int:
+        return struct.unpack_from("<H", self.mem, Reg.STATION_ADDRESS)[0]
+
+    @property
+    def alias(self) -> int:
+        return struct.unpack_from("<H", self.mem, Reg.STATION_ALIAS)[0]
+
+    @property
+    def alias_enabled(self) -> bool:
+        return bool(self.mem[Reg.DL_CONTROL_2] & 0x01)
+
+    # -- register access from the wire -------------------------------------------------------
+
+    def read(self, ado: int, n: int) -> bytes | None:
+        """``n`` bytes at ``ado`` as the ESC returns them, or ``None`` when it refuses
+        (an empty mailbox, for example): the datagram then gets no working counter."""
+        end = ado + n
+        if end > MEMORY_SIZE:
+            return None
+        if ado < PROCESS_RAM:
+            if _overlaps(ado, n, Reg.DC_SYSTEM_TIME, Reg.DC_SYSTEM_TIME + 8):
+                struct.pack_into("<Q", self.mem, Reg.DC_SYSTEM_TIME, self.system_time())
+            return bytes(self.mem[ado:end])
+        for sm in self.sms:
+            if sm.covers(ado, n) and sm.is_mailbox:
+                return self._read_mailbox(sm, ado, n)
+        return bytes(self.mem[ado:end])
+
+    def write(self, ado: int, data: bytes | memoryview) -> bool:
+        """Write from the wire; ``False`` when the ESC refuses (a full mailbox)."""
+        n = len(data)
+        end = ado + n
+        if end > MEMORY_SIZE:
+            return False
+        if ado >= PROCESS_RAM:
+            for sm in self.sms:
+                if sm.covers(ado, n):
+                    return self._write_sm_area(sm, ado, data)
+            self.mem[ado:end] = data
+            return True
+        ro = self._ro[ado:min(end, PROCESS_RAM)]
+        if any(ro):
+            for i, byte in enumerate(data):
+                if ado + i >= PROCESS_RAM or not ro[i]:
+                    self.mem[ado + i] = byte
+        else:
+            self.mem[ado:end] = data
+        self._after_register_write(ado, n)
+        return True
+
+    def _after_register_write(self, ado: int, n: int) -> None:
+        if _overlaps(ado, n, 0x0502, 0x0504):
+            self._eeprom_command()
+        if _overlaps(ado, n, Reg.FMMU0, Reg.FMMU0 + FMMU_SIZE * N_FMMU):
+            self._load_fmmus()
+        if _overlaps(ado, n, Reg.SM0, sm_register(N_SM)):
+            for sm in self.sms:
+                reg = sm_register(sm.number)
+                if _overlaps(ado, n, reg, reg + 8):
+                    self._sm_registers_written(sm, ado, n)
+        if _overlaps(ado, n, Reg.DC_RECEIVE_TIME_PORT0, Reg.DC_RECEIVE_TIME_PORT0 + 4):
+            pass    # receive-time latch: done by the segment, which knows the line
+        if _overlaps(ado, n, Reg.DC_SYSTEM_TIME, Reg.DC_SYSTEM_TIME + 8):
+            self._system_time_written()
+        if _overlaps(ado, n, Reg.AL_CONTROL, Reg.AL_CONTROL + 2):
+            self._al_control()
+
+    # -- SII EEPROM interface (0x0500-0x050F) -----------------------------------------------
+
+    def _eeprom_command(self) -> None:
+        control = struct.unpack_from("<H", self.mem, Reg.EEPROM_CONTROL)[0]
+        command = control >> 8 & 0x07
+        address = struct.unpack_from("<I", self.mem, 0x0504)[0]
+        if command == 0x01:                                   # read 4 words
+            data = bytes(self.eeprom[2 * address:2 * address + 8])
+            self.mem[Reg.EEPROM_DATA:Reg.EEPROM_DATA + 8] = data + b"\xff" * (8 - len(data))
+        elif command == 0x02 and control & 0x01:              # write one word (write enable)
+            if 2 * address + 2 <= len(self.eeprom):
+                self.eeprom[2 * address:2 * address + 2] = self.mem[Reg.EEPROM_DATA:
+                                                                   Reg.EEPROM_DATA + 2]
+        elif command in (0x04, 0x03):                         # reload (SOEM sends 0x03)
+            self._load_eeprom()
+        # Commands complete at once: busy, command and write-enable bits read back clear.
+        struct.pack_into("<H", self.mem, Reg.EEPROM_CONTROL, EEPROM_R64)
+
+    # -- FMMUs and SyncManagers --------------------------------------------------------------
+
+    def _load_fmmus(self) -> None:
+        fmmus = []
+        for n in range(N_FMMU):
+            reg = fmmu_register(n)
+            cfg = FmmuConfig.from_bytes(self.mem[reg:reg + FMMU_SIZE])
+            if cfg.active and cfg.type != FmmuType.UNUSED and cfg.length:
+                fmmus.append(cfg)
+        self.fmmus = fmmus
+        if self.on_mapping_change:
+            self.on_mapping_change()
+
+    def _sm_registers_written(self, sm: SmState, ado: int, n: int) -> None:
+        reg = sm_register(sm.number)
+        was_repeat = sm.repeat_request
+        sm.load(self.mem)
+        request = bool(self.mem[reg + 6] & ACTIVATE_REPEAT)
+        if sm.is_mailbox and not sm.master_writes and request != was_repeat:
+            # Repeat: post the last message again (the master lost it) and acknowledge.
+            sm.repeat_request = request
+            if self.last_mailbox is not None:
+                self._post(sm, self.last_mailbox)
+        if not sm.full and sm.kind is SmKind.MAILBOX_IN:
+            self._post_next()
+        sm.store_status(self.mem)
+        if self.on_mapping_change:
+            self.on_mapping_change()
+
+    def _write_sm_area(self, sm: SmState, ado: int, data: bytes | memoryview) -> bool:
+        n = len(data)
+        if ado < sm.start or ado + n > sm.end:
+            return False                       # an access must lie inside the SM window
+        if sm.is_mailbox:
+            if not sm.master_writes or sm.full:
+                return False
+            self.mem[ado:ado + n] = data
+            if ado + n == sm.end:
+                self._mailbox_received(bytes(self.mem[sm.start:sm.end]))
+            return True
+        if not sm.master_writes:
+            return False
+        self.mem[ado:ado + n] = data
+        if ado + n == sm.end:
+            self.outputs_written()
+        return True
+
+    def _read_mailbox(self, sm: SmState, ado: int, n: int) -> bytes | None:
+        if sm.master_writes or not sm.full or ado < sm.start or ado + n > sm.end:
+            return None
+        data = bytes(self.mem[ado:ado + n])
+        if ado + n == sm.end:
+            sm.full = False
+            sm.store_status(self.mem)
+            self._post_next()
+        return data
+
+    def _mailbox_in_sm(self) -> SmState | None:
+        return next((s for s in self.sms if s.active and s.kind is SmKind.MAILBOX_IN), None)
+
+    def _mailbox_received(self, message: bytes) -> None:
+        """The firmware takes the message out of SM0 at once (the buffer is empty again)
+        and queues its answers for SM1."""
+        if self.state in (AlState.INIT, AlState.BOOT) or self.sdo_server is None:
+            return
+        replies = self.sdo_server.handle(message, self.state)
+        self.mailbox_queue.extend(replies)
+        self._post_next()
+
+    def _post_next(self) -> None:
+        sm = self._mailbox_in_sm()
+        if sm is None or sm.full or not self.mailbox_queue:
+            return
+        self._post(sm, self.mailbox_queue.popleft())
+
+    def _post(self, sm: SmState, message: bytes) -> None:
+        body = message[:sm.length]
+        self.mem[sm.start:sm.end] = body + bytes(sm.length - len(body))
+        self.last_mailbox = message
+        sm.full = True
+        sm.store_status(self.mem)
+
+    # -- process data ------------------------------------------------------------------------
+
+    def outputs_written(self) -> None:
+        """A complete write of an output SM (feeds the SM watchdog)."""
+        self._last_output_write = time.monotonic()
+        self.outputs_valid = True
+        self.mem[0x0440] = 1
+
+    def process_sms(self, kind: SmKind) -> list[SmState]:
+        return [sm for sm in self.sms if sm.active and sm.kind is kind]
+
+    def outputs(self) -> bytes:
+        """The outputs the application sees: the output SMs' data in OP, zeros otherwise
+        (a slave keeps its outputs safe below OP)."""
+        sms = self.process_sms(SmKind.OUTPUTS)
+        data = b"".join(bytes(self.mem[sm.start:sm.end]) for sm in sms)
+        return data if self.state == AlState.OP else bytes(len(data))
+
+    def set_inputs(self, data: bytes) -> None:
+        """Fill the input SMs (in SM order) with ``data``, as the application would."""
+        pos = 0
+        for sm in self.input_areas():
+            chunk = data[pos:pos + sm[1]]
+            self.mem[sm[0]:sm[0] + len(chunk)] = chunk
+            pos += sm[1]
+
+    def input_areas(self) -> list[tuple[int, int]]:
+        """(start, length) of each input SM: configured ones, or the ESI's before that."""
+        active = self.process_sms(SmKind.INPUTS)
+        if active:
+            return [(sm.start, sm.length) for sm in active]
+        return [(sm.start_address or 0, (bits + 7) // 8) for sm in self.device.sms
+                if sm.type == "Inputs" and (bits := self._expected_pd.get(sm.number, 0))]
+
+    def check_watchdog(self, now: float) -> None:
+        """SM watchdog: in OP, outputs that stop arriving for longer than the watchdog time
+        drop the slave to SAFEOP+ERR 0x001B and clear its outputs."""
+        if self.state != AlState.OP:
+            return
+        sms = [sm for sm in self.process_sms(SmKind.OUTPUTS) if sm.control & WATCHDOG_ENABLE]
+        if not sms:
+            return
+        divider, = struct.unpack_from("<H", self.mem, Reg.WATCHDOG_DIVIDER)
+        time_units, = struct.unpack_from("<H", self.mem, Reg.WATCHDOG_SM)
+        if not time_units:
+            return
+        limit = time_units * (divider + 2) * 40e-9
+        if now - self._last_output_write > limit:
+            self.mem[0x0440] = 0
+            for sm in sms:
+                self.mem[sm.start:sm.end] = bytes(sm.length)
+            self._set_state(AlState.SAFEOP, AL_SM_WATCHDOG)
+
+    # -- AL state machine --------------------------------------------------------------------
+
+    def _al_control(self) -> None:
+        control = struct.unpack_from("<H", self.mem, Reg.AL_CONTROL)[0]
+        requested = control & 0x0F
+        ack = bool(control & AL_ERROR_ACK)
+        current = self.state
+        if self.error:
+            if not ack and requested != AlState.INIT:
+                return              # an error must be acknowledged first (SOES, KickCAT)
+            if ack:
+                self.mem[Reg.AL_STATUS] &= ~AL_ERROR & 0xFF
+        if requested not in AlState.__members__.values():
+            self._set_state(AlState.SAFEOP if current == AlState.OP else current,
+                            AL_UNKNOWN_STATE)
+            return
+        target = AlState(requested)
+        if target == current:
+            return
+        if target == AlState.BOOT:
+            self._set_state(current, AL_BOOT_NOT_SUPPORTED if current == AlState.INIT
+                            else AL_INVALID_STATE_CHANGE)
+            return
+        if target != AlState.INIT and (current, target) not in _ALLOWED:
+            self._set_state(current, AL_INVALID_STATE_CHANGE)
+            return
+        transition = _LETTER[current] + _LETTER[target]
+        code = self.refuse.get(transition) or self._check(current, target)
+        if code:
+            self._set_state(current if target > current else target, code)
+            return
+        self._enter(target)
+
+    def _check(self, current: AlState, target: AlState) -> int:
+        """The AL status code that refuses ``current`` -> ``target``, or 0."""
+        if current == AlState.INIT and target == AlState.PREOP:
+            return self._check_mailbox()
+        if current == AlState.PREOP and target == AlState.SAFEOP:
+            return self._check_process_data(op=False) or self._check_dc()
+        if current == AlState.SAFEOP and target == AlState.OP:
+            return self._check_process_data(op=True)
+        return 0
+
+    def _check_mailbox(self) -> int:
+        """INIT->PREOP: SM0/SM1 as the slave's own mailbox (start, length, mode and
+        direction), enabled (SOES ESC_checkmbx: otherwise 0x0016)."""
+        for esi_sm in self.device.sms:
+            if esi_sm.type not in ("MBoxOut", "MBoxIn"):
+                continue
+            sm = self.sms[esi_sm.number]
+            want = (esi_sm.start_address, esi_sm.default_size,
+                    (esi_sm.control_byte or 0) & 0x0F)
+            if not sm.enabled or (sm.start, sm.length, sm.control & 0x0F) != want:
+                return AL_INVALID_MAILBOX
+        return 0
+
+    def _pd_bits(self) -> dict[int, int | None]:
+        """Process-data bits per SM that the slave's current PDO assignment needs."""
+        if self.od is None:
+            return dict(self._expected_pd)
+        return {n: self.od.sm_bits(n) for n in self._expected_pd}
+
+    def _default_pd_bits(self) -> dict[int, int]:
+        bits: dict[int, int] = {sm.number: 0 for sm in self.device.sms
+                                if sm.type in ("Outputs", "Inputs") and not sm.virtual}
+        for pdo in self.device.rx_pdos + self.device.tx_pdos:
+            if pdo.sm in bits and not pdo.virtual:
+                bits[pdo.sm] += sum(e.bit_len or 0 for e in pdo.entries)
+        return bits
+
+    def _check_process_data(self, op: bool) -> int:
+        """PREOP->SAFEOP (and SAFEOP->OP for OpOnly SMs): each process-data SM as the ESI
+        places it, with the length the assigned PDOs need, enabled exactly when there is
+        data, and an FMMU of the right direction over it (SOES ESC_checkSM23: 0x001D for
+        outputs, 0x001E for inputs).  Control bytes are compared on mode and direction."""
+        needed = self._pd_bits()
+        for esi_sm in self.device.sms:
+            if esi_sm.number not in needed:
+                continue
+            code = AL_INVALID_OUTPUTS if esi_sm.type == "Outputs" else AL_INVALID_INPUTS
+            bits = needed[esi_sm.number]
+            if bits is None:
+                return code
+            length = (bits + 7) // 8
+            sm = self.sms[esi_sm.number]
+            if esi_sm.op_only and not op and not sm.enabled:
+                continue               # enabled only in SAFEOP->OP (ESI OpOnly)
+            if not length:
+                if sm.active:
+                    return code
+                continue
+            if (not sm.enabled or sm.start != esi_sm.start_address or sm.length != length
+                    or sm.control & 0x0F != (esi_sm.control_byte or 0) & 0x0F):
+                return code
+            kind = FmmuType.WRITE if esi_sm.type == "Outputs" else FmmuType.READ
+            if not self._fmmus_cover(sm.start, sm.length, kind):
+                return code
+        return 0
+
+    def _fmmus_cover(self, start: int, length: int, kind: FmmuType) -> bool:
+        covered = set()
+        for f in self.fmmus:
+            if f.type & kind:
+                first = f.physical_start
+                covered.update(range(first, first + (f.bit_length + f.physical_start_bit
+                                                     + 7) // 8))
+        return all(a in covered for a in range(start, start + length))
+
+    def _check_dc(self) -> int:
+        activation = self.mem[0x0981]
+        if activation & 0x03 == 0x03:       # cyclic operation with SYNC0
+            cycle, = struct.unpack_from("<I", self.mem, Reg.DC_SYNC0_CYCLE_TIME)
+            if not cycle:
+                return AL_INVALID_DC_CYCLE
+        return 0
+
+    def _enter(self, target: AlState) -> None:
+        if target < AlState.SAFEOP:
+            self.outputs_valid = False
+        if target == AlState.OP:
+            self._last_output_write = time.monotonic()
+        if target <= AlState.INIT:
+            self.mailbox_queue.clear()
+        self._set_state(target, 0)
+
+    def _set_state(self, state: AlState, code: int) -> None:
+        status = int(state) | (AL_ERROR if code else 0)
+        struct.pack_into("<H", self.mem, Reg.AL_STATUS, status)
+        struct.pack_into("<H", self.mem, 0x0134, code)
+        if self.on_state_change:
+            self.on_state_change(StateChange(self.position, self.name, state, bool(code),
+                                             code))
+
+    # -- distributed clocks ------------------------------------------------------------------
+
+    def local_time(self) -> int:
+        return time.monotonic_ns() + self._clock_base
+
+    def system_time(self) -> int:
+        offset, = struct.unpack_from("<q", self.mem, 0x0920)
+        return (self.local_time() + offset) & 0xFFFF_FFFF_FFFF_FFFF
+
+    def latch_receive_times(self, port0: int, port1: int | None) -> None:
+        """A write to 0x0900 passed: the ESC latches when the frame arrived at each port
+        (local time) and at the processing unit (0x0918)."""
+        struct.pack_into("<I", self.mem, 0x0900, port0 & 0xFFFF_FFFF)
+        struct.pack_into("<I", self.mem, 0x0904, (port1 or 0) & 0xFFFF_FFFF)
+        struct.pack_into("<Q", self.mem, 0x0918, port0 & 0xFFFF_FFFF_FFFF_FFFF)
+
+    def _system_time_written(self) -> None:
+        """An ECAT write to 0x0910 (ARMW/FRMW from the reference clock) feeds the drift
+        loop: the difference to this slave's own system time (minus the delay 0x0928)
+        goes to 0x092C, and the loop pulls the clock onto the reference at once."""
+        received, = struct.unpack_from("<Q", self.mem, Reg.DC_SYSTEM_TIME)
+        delay, = struct.unpack_from("<I", self.mem, 0x0928)
+        own = self.system_time() - delay
+        diff = own - received
+        if abs(diff) < 1 << 62:
+            offset, = struct.unpack_from("<q", self.mem, 0x0920)
+            struct.pack_into("<q", self.mem, 0x0920, offset - diff)
+        magnitude = min(abs(diff), 0x7FFF_FFFF)
+        struct.pack_into("<I", self.mem, 0x092C, magnitude | (0x8000_0000 if diff < 0 else 0))

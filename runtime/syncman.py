@@ -1,0 +1,101 @@
+"""SyncManager behaviour of an emulated ESC, as the EtherCAT side sees it.
+
+Each SM is 8 register bytes at 0x0800 + 8·n (start, length, control, status, activate, PDI
+control; ``ethercat-facts.md`` §2-§3):
+
+* **mailbox** (control bits 1:0 = 10, one buffer): a write is taken only while the buffer is
+  empty, and writing its last byte makes it *full* (status bit 3); a read is served only
+  while it is full, and reading the last byte empties it.  Anything else gets no working
+  counter, which is how masters learn "try later".
+* **buffered** (bits 1:0 = 00, three buffers): the master always addresses ``start ..
+  start + length - 1``; the ESC keeps the newest complete buffer.  The emulated firmware
+  consumes writes at once, so one buffer in memory gives the same view from the wire.
+  Writing the last byte is a complete write: it feeds the SM watchdog.
+* **repeat** (activate bit 1 toggled by the master): the slave posts its last mailbox
+  message again and acknowledges in PDI control bit 1.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import Enum
+
+from ecatcfg.esc import SM_SIZE, SmConfig, sm_register
+
+MODE_MASK = 0x03
+MODE_MAILBOX = 0x02
+DIRECTION_MASK = 0x0C
+DIRECTION_ECAT_WRITES = 0x04       # bits 3:2 = 01: the master writes, the slave reads
+WATCHDOG_ENABLE = 0x40             # control bit 6
+STATUS_MAILBOX_FULL = 0x08         # status bit 3
+STATUS_WRITE_EVENT = 0x01          # status bit 0: buffer completely written
+STATUS_BUFFER_NONE = 0x30          # status bits 5:4 = 3: no buffer written yet
+ACTIVATE_ENABLE = 0x01
+ACTIVATE_REPEAT = 0x02
+PDI_REPEAT_ACK = 0x02
+
+
+class SmKind(Enum):
+    MAILBOX_OUT = "mailbox out"        # master -> slave (SM0)
+    MAILBOX_IN = "mailbox in"          # slave -> master (SM1)
+    OUTPUTS = "outputs"
+    INPUTS = "inputs"
+
+
+@dataclass(slots=True)
+class SmState:
+    """One SM as configured by the master, plus the buffer state the ESC keeps."""
+
+    number: int
+    start: int = 0
+    length: int = 0
+    control: int = 0
+    enabled: bool = False
+    full: bool = False
+    repeat_request: bool = False
+
+    @property
+    def end(self) -> int:
+        return self.start + self.length
+
+    @property
+    def is_mailbox(self) -> bool:
+        return self.control & MODE_MASK == MODE_MAILBOX
+
+    @property
+    def master_writes(self) -> bool:
+        return self.control & DIRECTION_MASK == DIRECTION_ECAT_WRITES
+
+    @property
+    def kind(self) -> SmKind:
+        if self.is_mailbox:
+            return SmKind.MAILBOX_OUT if self.master_writes else SmKind.MAILBOX_IN
+        return SmKind.OUTPUTS if self.master_writes else SmKind.INPUTS
+
+    @property
+    def active(self) -> bool:
+        return self.enabled and self.length > 0
+
+    def covers(self, address: int, length: int) -> bool:
+        return self.active and address < self.end and address + length > self.start
+
+    def load(self, mem: bytearray) -> None:
+        """Read the configuration the master wrote into the SM's registers."""
+        cfg = SmConfig.from_bytes(mem[sm_register(self.number):sm_register(self.number)
+                                      + SM_SIZE])
+        changed = (cfg.start, cfg.length, cfg.control) != (self.start, self.length,
+                                                           self.control)
+        if changed or not cfg.enable:
+            self.full = False               # a disabled or moved mailbox starts empty
+        self.start, self.length, self.control, self.enabled = (
+            cfg.start, cfg.length, cfg.control, cfg.enable)
+
+    def store_status(self, mem: bytearray) -> None:
+        """Keep the status byte (read-only for the master) in step with the buffer."""
+        reg = sm_register(self.number)
+        if self.is_mailbox:
+            mem[reg + 5] = STATUS_MAILBOX_FULL if self.full else 0
+        elif not mem[reg + 5]:
+            mem[reg + 5] = STATUS_BUFFER_NONE
+        pdi = mem[reg + 7] & ~PDI_REPEAT_ACK
+        mem[reg + 7] = pdi | (PDI_REPEAT_ACK if self.repeat_request else 0)

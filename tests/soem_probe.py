@@ -1,0 +1,88 @@
+"""SOEM (pysoem) as an independent master, run in its own process inside the test's network
+namespace: ``python soem_probe.py IFACE JSON_OPTIONS``; prints one JSON object.
+
+Options: ``outputs`` (hex, written to every slave with outputs once in SAFEOP and OP),
+``assign`` ({"slave": N, "index": 0x1C13, "pdos": [...]}: an SDO download of a PDO
+assignment after config_map, i.e. after SOEM sized the SyncManagers), ``cycles`` (process
+data cycles in OP).
+"""
+
+from __future__ import annotations
+
+import json
+import struct
+import sys
+import time
+
+import pysoem
+
+STATE_TIMEOUT_US = 2_000_000
+
+
+def main() -> None:
+    iface, options = sys.argv[1], json.loads(sys.argv[2] if len(sys.argv) > 2 else "{}")
+    master = pysoem.Master()
+    master.open(iface)
+    result: dict = {}
+    try:
+        start = time.monotonic()
+        found = master.config_init()
+        result["found"] = found
+        result["init_s"] = round(time.monotonic() - start, 3)
+        result["slaves"] = [{"name": s.name, "vendor": s.man, "product": s.id,
+                             "revision": s.rev} for s in master.slaves]
+        if found <= 0:
+            return
+        result["iomap"] = master.config_map()
+        result["sizes"] = [(len(s.output), len(s.input)) for s in master.slaves]
+        assign = options.get("assign")
+        if assign:
+            slave = master.slaves[assign["slave"]]
+            pdos = assign["pdos"]
+            try:
+                slave.sdo_write(assign["index"], 0, b"\x00")
+                for i, pdo in enumerate(pdos, 1):
+                    slave.sdo_write(assign["index"], i, struct.pack("<H", pdo))
+                slave.sdo_write(assign["index"], 0, bytes([len(pdos)]))
+                result["assign"] = "written"
+            except pysoem.SdoError as exc:
+                result["assign"] = f"abort 0x{exc.abort_code:08X}"
+        master.state = pysoem.SAFEOP_STATE
+        master.write_state()
+        result["safeop"] = master.state_check(pysoem.SAFEOP_STATE, STATE_TIMEOUT_US)
+        master.read_state()
+        result["al"] = [(s.state, s.al_status) for s in master.slaves]
+        if result["safeop"] != pysoem.SAFEOP_STATE:
+            return
+        pattern = bytes.fromhex(options.get("outputs", ""))
+        for s in master.slaves:
+            if len(s.output) and pattern:
+                s.output = (pattern * len(s.output))[:len(s.output)]
+        master.send_processdata()
+        master.receive_processdata(10_000)
+        master.state = pysoem.OP_STATE
+        master.write_state()
+        wkc = 0
+        for _ in range(200):
+            master.send_processdata()
+            wkc = master.receive_processdata(10_000)
+            if master.state_check(pysoem.OP_STATE, 5_000) == pysoem.OP_STATE:
+                break
+        for _ in range(options.get("cycles", 20)):
+            master.send_processdata()
+            wkc = master.receive_processdata(10_000)
+            time.sleep(0.001)
+        result["op"] = master.read_state()
+        result["wkc"] = wkc
+        result["expected_wkc"] = master.expected_wkc
+        result["al_op"] = [(s.state, s.al_status) for s in master.slaves]
+        result["inputs"] = [bytes(s.input).hex() for s in master.slaves]
+        master.state = pysoem.INIT_STATE
+        master.write_state()
+    finally:
+        master.close()
+        print(json.dumps(result), flush=True)
+
+
+if __name__ == "__main__":
+    main()
