@@ -1,5 +1,23 @@
-"""Wire codec, links, master and virtual segment.
+"""The runtime: wire codec, links, the master that applies an ENI, the virtual segment.
 
-Empty until the runtime issues land.  Nothing here may be imported by ``ecatcfg --help``
-or ``ecatcfg devices`` (scapy alone costs 1.7 s to import).
+Masters: ``master.py`` (verify, replay, DC, cyclic) under ``network.py`` (the application's
+:class:`Network`); slaves: ``segment.py`` with ``slave.py`` (an emulated ESC), built from
+ESI files by ``emulate.py``.  Both sides share ``wire.py`` (frames and datagrams),
+``mailbox.py`` (mailbox, CoE, SDO) and ``link.py``.
+
+Nothing here is imported by ``ecatcfg --help`` or ``ecatcfg devices``; ``Network`` is
+loaded on first use.
 """
+
+from __future__ import annotations
+
+from typing import Any
+
+__all__ = ["Network"]
+
+
+def __getattr__(name: str) -> Any:
+    if name == "Network":
+        from ecatcfg.runtime.network import Network
+        return Network
+    raise AttributeError(f"module 'ecatcfg.runtime' has no attribute {name!r}")

@@ -5,7 +5,8 @@ length of all datagrams, bits 12-15 type, 1 = DLPDU) + datagrams.  A datagram is
 header (cmd, idx, address, length/flags, irq), its data and a 2-byte working counter
 (ETG.1000.4; ``ethercat-facts.md`` §1).  Everything is built and taken apart with ``struct``:
 this runs once per frame on both sides, where scapy would cost a millisecond a frame.
-scapy describes the same layout for pcap files and dissection (``runtime/pcap.py``).
+scapy (``scapy.contrib.ethercat``) describes the same layout and serves the tests as an
+independent dissector.
 
 The virtual segment works on a frame *in place*: :func:`datagram_offsets` says where each
 datagram's header, data and WKC sit in the frame's ``bytearray``, so processing a datagram

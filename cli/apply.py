@@ -1,0 +1,85 @@
+"""``ecatcfg apply``: bring a network up from an ENI (ours, TwinCAT's, EC-Engineer's)."""
+
+from __future__ import annotations
+
+import argparse
+
+STATES = {"init": 1, "preop": 2, "safeop": 4, "op": 8}
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "apply", help="bring a network up from an ENI over raw Ethernet",
+        description="Check that the slaves on the line are the ones the ENI describes (no "
+                    "configuration write before that), replay its InitCmds transition by "
+                    "transition, then run its cyclic frames.  After --cycles N (default: "
+                    "until Ctrl-C) the slaves go back to INIT unless --stay.")
+    p.add_argument("eni", metavar="ENI", help="ENI file (ETG.2100 XML)")
+    target = p.add_mutually_exclusive_group(required=True)
+    target.add_argument("--iface", metavar="IF", help="network interface of the EtherCAT line")
+    target.add_argument("--virtual", action="store_true",
+                        help="a virtual segment emulating the ENI's slaves (needs --esi)")
+    p.add_argument("--esi", action="append", metavar="PATH",
+                   help="ESI file or folder for --virtual; repeatable")
+    p.add_argument("--state", choices=list(STATES), default="op",
+                   help="state to bring the slaves to (default: op)")
+    p.add_argument("--cycles", type=int, metavar="N",
+                   help="run N bus cycles, then stop (default: until Ctrl-C)")
+    p.add_argument("--stay", action="store_true",
+                   help="leave the slaves in the state reached instead of going to INIT")
+    p.add_argument("--accept-newer-revision", action="store_true",
+                   help="accept a slave whose revision is newer than the ENI's")
+    p.add_argument("--pcap", metavar="FILE", help="record every frame as pcapng")
+    p.add_argument("--format", choices=["text", "json"], default="text")
+    p.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    import json
+    from pathlib import Path
+
+    from ecatcfg.cli.report import ApplyReport
+    from ecatcfg.compiler import eni_reader
+    from ecatcfg.errors import EcatcfgError, UsageError
+    from ecatcfg.esc import AlState
+    from ecatcfg.runtime.network import Network
+
+    if not Path(args.eni).exists():
+        raise UsageError(f"{args.eni}: no such file")
+    if args.virtual and not args.esi:
+        raise UsageError("--virtual needs --esi (the ESI files of the slaves to emulate)")
+    if args.cycles is not None and args.cycles < 0:
+        raise UsageError(f"--cycles {args.cycles}: must be 0 or more")
+    if args.pcap and not Path(args.pcap).resolve().parent.is_dir():
+        raise UsageError(f"{args.pcap}: folder does not exist")
+    plan = eni_reader.read_file(args.eni)
+    report = ApplyReport(plan, args.eni, json_output=args.format == "json")
+    if args.virtual:
+        net = Network.virtual(plan, args.esi, pcap=args.pcap, on_event=report.event)
+    else:
+        from ecatcfg.runtime.link import RawLink
+        net = Network(plan, RawLink(args.iface), pcap=args.pcap, on_event=report.event)
+    target = AlState(STATES[args.state])
+    failure: EcatcfgError | None = None
+    try:
+        try:
+            net.up(target, accept_newer_revision=args.accept_newer_revision)
+            if target >= AlState.SAFEOP and args.cycles != 0:
+                report.cycling(args.cycles)
+                net.run(args.cycles, report.cycle_callback(net))
+        except EcatcfgError as exc:
+            failure = exc
+        except KeyboardInterrupt:
+            report.note("interrupted")
+        report.final_states(net.master.read_states(), net.master.progress)
+        if not args.stay and net.state > AlState.INIT:
+            try:
+                net.down()
+            except EcatcfgError as exc:
+                failure = failure or exc
+    finally:
+        net.close()
+    report.finish(net, failure, target)
+    if args.format == "json":
+        print(json.dumps(report.as_json(), indent=2))
+    return 1 if failure else 0

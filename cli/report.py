@@ -1,0 +1,101 @@
+"""What ``ecatcfg apply`` (and ``demo``) show: progress per transition, a final table per
+slave, cycle statistics; or one JSON document for scripts.
+
+Drawn with rich on a terminal; rich falls back to plain text when the output is a pipe.
+"""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Callable
+
+from ecatcfg.compiler.plan import NetworkPlan
+from ecatcfg.esc import AlState, al_status_name
+
+_TRANSITION_TEXT = {"IP": "INIT -> PREOP", "PS": "PREOP -> SAFEOP", "SO": "SAFEOP -> OP",
+                    "OS": "OP -> SAFEOP", "SP": "SAFEOP -> PREOP", "PI": "PREOP -> INIT"}
+
+
+class ApplyReport:
+    def __init__(self, plan: NetworkPlan, eni: str, json_output: bool = False) -> None:
+        from rich.console import Console
+
+        self.plan = plan
+        self.eni = eni
+        self.json_output = json_output
+        # Progress goes to stderr for JSON output, so stdout stays one document.
+        self.console = Console(file=sys.stderr if json_output else sys.stdout,
+                               highlight=False)
+        self.events: list[str] = []
+        self.rows: list[dict] = []
+        self.summary: dict = {}
+
+    def event(self, event) -> None:
+        text = event.text
+        for code, words in _TRANSITION_TEXT.items():
+            text = text.replace(f"{code}: {code} ...", f"{words} ...").replace(
+                f"{code}: ", f"{words}: ")
+        self.events.append(text)
+        self.console.print(text)
+
+    def note(self, text: str) -> None:
+        self.events.append(text)
+        self.console.print(text)
+
+    def cycling(self, cycles: int | None) -> None:
+        self.note(f"cycling ({cycles} cycles)" if cycles else "cycling until Ctrl-C")
+
+    def cycle_callback(self, net) -> Callable:
+        return lambda _net: None
+
+    def final_states(self, states, progress) -> None:
+        self.rows = []
+        for slave, st in zip(sorted(self.plan.slaves, key=lambda s: s.position), states):
+            row = {"position": slave.position, "name": slave.name,
+                   "address": slave.phys_addr,
+                   "state": st.name if st else "no answer",
+                   "al_status_code": st.code if st else None,
+                   "al_status": al_status_name(st.code) if st and st.code else None,
+                   "last_command": progress[slave.name].last_command}
+            self.rows.append(row)
+
+    def finish(self, net, failure, target: AlState) -> None:
+        stats = net.run_stats or net.master.cyclic.stats
+        counters = net.master.transport.counters
+        jitter = stats.jitter()
+        self.summary = {
+            "eni": self.eni, "target": target.name, "ok": failure is None,
+            "error": str(failure) if failure else None,
+            "slaves": self.rows,
+            "cycles": {"count": stats.cycles, "lost_frames": stats.lost_frames,
+                       "wkc_errors": stats.wkc_errors,
+                       "wkc_error_commands": stats.wkc_error_cmds,
+                       "jitter_us": {k: round(v, 1) for k, v in jitter.items()}},
+            "frames": {"sent": counters.frames_sent, "lost": counters.frames_lost},
+        }
+        if self.json_output:
+            if failure:
+                print(f"ecatcfg apply: {failure}", file=sys.stderr)
+            return
+        from rich.table import Table
+
+        table = Table(title=f"{self.eni}: slaves")
+        for col in ("pos", "name", "addr", "state", "AL status", "last InitCmd"):
+            table.add_column(col)
+        for r in self.rows:
+            code = r["al_status_code"]
+            table.add_row(str(r["position"]), r["name"], str(r["address"]), r["state"],
+                          f"0x{code:04X} {r['al_status']}" if code else "-",
+                          r["last_command"] or "-")
+        self.console.print(table)
+        if stats.cycles:
+            self.console.print(
+                f"{stats.cycles} cycles, {stats.lost_frames} lost frames, "
+                f"{stats.wkc_errors} working-counter errors; cycle jitter p50 "
+                f"{jitter['p50']:.0f} us, p99 {jitter['p99']:.0f} us, max "
+                f"{jitter['max']:.0f} us")
+        if failure:
+            self.console.print(f"[bold red]failed:[/] {failure}", markup=True)
+
+    def as_json(self) -> dict:
+        return dict(self.summary, events=self.events)

@@ -1,0 +1,221 @@
+"""``ecatcfg sii build|show``: write the SII (EEPROM) image of an ESI device; decode an image.
+
+    ecatcfg sii build ESI --device SELECTOR -o FILE.bin [--serial N] [--alias N]
+    ecatcfg sii show FILE.bin [--format text|json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from typing import TextIO
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("sii", help="build an SII (EEPROM) image from an ESI device, or "
+                                   "decode one",
+                       description="SII (slave EEPROM) images: build the image an ESI device "
+                                   "describes, or decode an image (ours or a dump of a real "
+                                   "EEPROM).")
+    actions = p.add_subparsers(dest="sii_action", metavar="ACTION", required=True)
+
+    b = actions.add_parser("build", help="write the SII image of one ESI device",
+                           description="Write the EEPROM image of one device: config area "
+                                       "and checksum, identity, mailbox, STRINGS, GENERAL, "
+                                       "FMMU, SYNCM, the default PDO assignment and DC op "
+                                       "modes, padded with 0xFF to Eeprom/ByteSize (2 KiB "
+                                       "by default).")
+    b.add_argument("esi", nargs="+", metavar="ESI", help="ESI file or folder (searched "
+                                                         "recursively)")
+    b.add_argument("--device", required=True, metavar="SELECTOR",
+                   help="Type name or VENDOR:PRODUCT[:REVISION] (hex 0x.. or decimal)")
+    b.add_argument("-o", "--output", required=True, metavar="FILE.bin",
+                   help="image file to write")
+    b.add_argument("--serial", type=_number(0xFFFFFFFF), default=0, metavar="N",
+                   help="serial number, SII words 0x0E-0x0F (default 0)")
+    b.add_argument("--alias", type=_number(0xFFFF), default=0, metavar="N",
+                   help="configured station alias, SII word 4 (default 0)")
+    b.add_argument("--no-cache", action="store_true",
+                   help="do not read or write the ESI index cache")
+    b.set_defaults(run=run)
+
+    s = actions.add_parser("show", help="decode an SII image",
+                           description="Decode an SII image: identity, config area and "
+                                       "checksum, mailbox, strings, general, FMMUs, "
+                                       "SyncManagers, PDOs and DC modes.")
+    s.add_argument("image", metavar="FILE.bin", help="SII image (raw binary)")
+    s.add_argument("--format", choices=("text", "json"), default="text")
+    s.set_defaults(run=run)
+
+
+def _number(maximum: int):
+    def parse(text: str) -> int:
+        try:
+            value = int(text, 0)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"not a number: {text!r} (decimal or 0x..)") \
+                from None
+        if not 0 <= value <= maximum:
+            raise argparse.ArgumentTypeError(f"{text} is not between 0 and 0x{maximum:X}")
+        return value
+    return parse
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.sii_action == "build":
+        return _build(args)
+    return _show(args)
+
+
+def _build(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from ecatcfg.errors import EcatcfgError, UsageError
+    from ecatcfg.esi import sii
+    from ecatcfg.esi.library import Library
+    from ecatcfg.fileio import write_atomic
+
+    out = Path(args.output)
+    if not out.parent.is_dir():
+        raise UsageError(f"{args.output}: folder {str(out.parent)!r} does not exist")
+    if out.is_dir():
+        raise UsageError(f"{args.output}: is a folder, not a file to write")
+    lib = Library(args.esi, cache=not args.no_cache)
+    if lib.problems:
+        for problem in lib.problems:
+            print(f"error: {problem}", file=sys.stderr)
+        raise EcatcfgError(f"{len(lib.problems)} ESI file problem(s); nothing written")
+    selection = lib.find(args.device)
+    if selection.note:
+        print(f"note: {selection.note}", file=sys.stderr)
+    device = lib.device(selection.entry)
+    result = sii.build_image(device, serial=args.serial, alias=args.alias)
+    where = f"{device.source.file}:{device.source.line}"
+    for note in result.notes:
+        level = "warning" if "more than" in note else "note"
+        print(f"{level}: {where}: {device.type_name}: {note}", file=sys.stderr)
+    try:
+        write_atomic(out, result.data)
+    except OSError as exc:          # name the user's file, not the temporary one beside it
+        raise UsageError(f"cannot write {args.output}: {exc.strerror}") from None
+    img = sii.decode(result.data)
+    print(f"wrote {args.output}: {len(result.data)} bytes, {device.selector} "
+          f"{device.type_name!r}, {len(img.categories)} categories, "
+          f"{len(img.txpdos)} TxPDO / {len(img.rxpdos)} RxPDO")
+    return 0
+
+
+def _show(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from ecatcfg.errors import EcatcfgError, UsageError
+    from ecatcfg.esi import sii
+
+    path = Path(args.image)
+    if not path.exists():
+        raise UsageError(f"{args.image}: no such file")
+    if path.is_dir():
+        raise UsageError(f"{args.image}: is a folder, not an SII image")
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        raise EcatcfgError(f"cannot read: {exc.strerror}", args.image) from None
+    img = sii.decode(data, source=args.image)
+    if args.format == "json":
+        json.dump({"file": args.image, **sii.to_json(img)}, sys.stdout, indent=1)
+        sys.stdout.write("\n")
+    else:
+        render(img, args.image, sys.stdout)
+    return 0
+
+
+# -- text -----------------------------------------------------------------------------------
+
+def render(img, name: str, out: TextIO) -> None:
+    """The text form of a decoded image (``img`` is an ``ecatcfg.esi.sii.SiiImage``)."""
+    from ecatcfg.esi import sii
+
+    w = out.write
+    w(f"{name}: {img.data_size} bytes\n")
+    w(f"identity     vendor 0x{img.vendor_id:08X}  product 0x{img.product_code:08X}  "
+      f"revision 0x{img.revision:08X}  serial 0x{img.serial:08X}\n")
+    crc = "ok" if img.checksum_ok else f"BAD, the config area gives 0x{img.checksum_computed:02X}"
+    w(f"config area  PDI control 0x{img.pdi_control:04X}  PDI config 0x{img.pdi_config:04X}  "
+      f"SYNC impulse {img.sync_impulse} x 10 ns  PDI config 2 0x{img.pdi_config2:04X}  "
+      f"alias {img.alias}  checksum 0x{img.checksum:02X} {crc}\n")
+    w(f"mailbox      standard rx (SM0) {_box(img.std_rx)}  tx (SM1) {_box(img.std_tx)};  "
+      f"bootstrap rx {_box(img.bootstrap_rx)}  tx {_box(img.bootstrap_tx)}\n")
+    w(f"protocols    {', '.join(img.protocols) or '-'} (0x{img.mailbox_protocols:04X})\n")
+    end = f"END at 0x{img.end_offset:X}" if img.end_offset is not None else "no END marker"
+    w(f"size         {img.eeprom_size_bytes} bytes (word 0x3E), version {img.version}; "
+      f"{len(img.categories)} categories, {end}\n")
+    w(f"strings      {len(img.strings)}\n")
+    for n, text in enumerate(img.strings, 1):
+        w(f"  {n:3}  {text!r}\n")
+    g = img.general
+    if g is not None:
+        w("general\n")
+        w(f"  group {_s(g.group, g.group_index)}  image {_s(g.image, g.image_index)}  "
+          f"order {_s(g.order, g.order_index)}  name {_s(g.name, g.name_index)}\n")
+        w(f"  CoE details 0x{g.coe_details:02X} ({_bits(g.coe_details, sii.COE_DETAIL_NAMES)})"
+          f"  FoE {g.foe_details}  EoE {g.eoe_details}  SoE channels {g.soe_channels}  "
+          f"DS402 channels {g.ds402_channels}  SysmanClass {g.sysman_class}\n")
+        w(f"  flags 0x{g.flags:02X} ({_bits(g.flags, sii.GENERAL_FLAG_NAMES)})  EBus current "
+          f"{g.ebus_current} mA  ports 0x{g.physical_ports:04X} ({' '.join(g.ports)})\n")
+    if img.fmmus:
+        w("FMMUs        " + ", ".join(f"{n} {sii.FMMU_TYPE_NAMES.get(t, f'0x{t:02X}')}"
+                                      for n, t in enumerate(img.fmmus)) + "\n")
+    if img.syncms:
+        w("SyncManagers\n")
+        for n, sm in enumerate(img.syncms):
+            w(f"  SM{n}  0x{sm.start:04X}  length {sm.length:5}  control 0x{sm.control:02X}  "
+              f"enable 0x{sm.enable:02X}  {sii.SM_TYPE_NAMES.get(sm.type, f'type {sm.type}')}"
+              "\n")
+    for label, pdos in (("TxPDO", img.txpdos), ("RxPDO", img.rxpdos)):
+        for pdo in pdos:
+            sm = "no SM" if pdo.sm == sii.SM_UNASSIGNED else f"SM{pdo.sm}"
+            flags = _bits(pdo.flags, sii.PDO_FLAG_NAMES)
+            w(f"{label} 0x{pdo.index:04X}  {sm}  {pdo.bit_length} bits  "
+              f"{_s(pdo.name, pdo.name_index)}" + (f"  [{flags}]" if pdo.flags else "")
+              + (f"  DC sync {pdo.dc_sync}" if pdo.dc_sync else "") + "\n")
+            for e in pdo.entries:
+                dtype = sii.COE_TYPE_NAMES.get(e.data_type, f"0x{e.data_type:02X}")
+                entry = "gap" if e.index == 0 else f"0x{e.index:04X}:{e.subindex:02X}"
+                w(f"    {entry:12} {e.bit_len:3} bits  {dtype:8} {_s(e.name, e.name_index)}\n")
+    if img.dc:
+        w("DC modes\n")
+        for mode in img.dc:
+            w(f"  {_s(mode.name, mode.name_index)}  AssignActivate 0x{mode.assign_activate:04X}"
+              f"  SYNC0 cycle {mode.cycle_time0} ns x{mode.sync0_cycle_factor} shift "
+              f"{mode.shift_time0} ns  SYNC1 x{mode.sync1_cycle_factor} shift "
+              f"{mode.shift_time1} ns\n")
+    other = iter(img.other_categories)
+    for cat in img.categories:
+        if cat.decoded:
+            continue
+        _, data = next(other)
+        label = sii.CATEGORY_NAMES.get(cat.type) or (
+            "device specific" if 1 <= cat.type <= 9 else "vendor specific")
+        more = " ..." if len(data) > 32 else ""
+        w(f"category {cat.type} (0x{cat.type:04X}, {label}) at 0x{cat.offset:X}, "
+          f"{cat.size} bytes: {data[:32].hex(' ')}{more}\n")
+
+
+def _box(pair: tuple[int, int]) -> str:
+    offset, size = pair
+    return f"0x{offset:04X}/{size}" if offset or size else "-"
+
+
+def _s(text: str | None, index: int) -> str:
+    if index == 0:
+        return "-"
+    return f"{text!r} ({index})" if text is not None else f"#{index} (no such string)"
+
+
+def _bits(value: int, names: dict[int, str]) -> str:
+    parts = [name for bit, name in names.items() if value & bit]
+    rest = value & ~sum(names)
+    if rest:
+        parts.append(f"0x{rest:X}")
+    return ", ".join(parts) or "-"

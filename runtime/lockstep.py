@@ -1,0 +1,59 @@
+"""Many slaves' command chains on one wire, in lockstep rounds.
+
+Each slave's work in a step (its InitCmds of a transition, its mailbox transfers, the
+identity reading of a scan) is a *job*: a generator that yields the datagrams it needs next
+and is sent back the same datagrams as they returned (``None`` when their frame was lost).
+A job that has nothing to send this round but is not finished yields an empty list.
+
+Every round the scheduler takes the pending datagrams of all jobs, packs them into as few
+frames as the 1486-byte limit allows and hands each job its replies.  Commands of different
+slaves that do not depend on each other thus share frames, and the number of frames a step
+costs is about the length of its longest per-slave chain.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Generator
+
+from ecatcfg.runtime.transport import Transport, pack
+from ecatcfg.runtime.wire import Datagram
+
+Job = Generator[list[Datagram], "list[Datagram] | None", None]
+
+IDLE_S = 0.0005     # when every job only waits, do not spin the wire
+
+
+def run_jobs(transport: Transport, jobs: list[Job],
+             on_round: Callable[[], None] | None = None) -> None:
+    """Run ``jobs`` to completion; an exception from any job ends the step and propagates."""
+    active: list[tuple[Job, list[Datagram]]] = []
+    for job in jobs:
+        try:
+            active.append((job, next(job)))
+        except StopIteration:
+            pass
+    while active:
+        if on_round is not None:
+            on_round()
+        owned = [(i, dg) for i, (_, request) in enumerate(active) for dg in request]
+        replies: dict[int, list[Datagram] | None] = {i: [] for i in range(len(active))}
+        if not owned:
+            time.sleep(IDLE_S)
+        for frame in pack([dg for _, dg in owned]):
+            owners = [owner for owner, dg in owned[:len(frame)]]
+            owned = owned[len(frame):]
+            back = transport.exchange(frame)
+            for k, owner in enumerate(owners):
+                got = replies[owner]
+                if back is None or got is None:
+                    replies[owner] = None
+                else:
+                    got.append(back[k])
+        still = []
+        for i, (job, _) in enumerate(active):
+            try:
+                still.append((job, job.send(replies[i])))
+            except StopIteration:
+                pass
+        active = still

@@ -1,0 +1,233 @@
+"""Bringing a network up from its ENI: verify, replay the InitCmds, DC, cyclic frames.
+
+The order follows what TwinCAT and EC-Engineer do (``eni-observations.md`` §2-§3):
+
+1. scan the line and compare it with the ENI before any configuration write;
+2. per transition (INIT->PREOP, PREOP->SAFEOP, SAFEOP->OP; OP->SAFEOP->PREOP->INIT on the
+   way down): the master's ``BeforeSlave`` InitCmds, every slave's InitCmds (in lockstep,
+   see ``lockstep.py``), then the master's other InitCmds;
+3. before PREOP->SAFEOP, for slaves with DC: propagation delays, system time offsets and
+   static drift compensation (not in the ENI; ``ethercat-facts.md`` §8);
+4. from PREOP->SAFEOP on (the ENI's ``Requires=cycle``) the cyclic frames run between the
+   rounds of InitCmds, so slaves see process data before OP and their SM watchdogs are fed.
+"""
+
+from __future__ import annotations
+
+import struct
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from ecatcfg.compiler.plan import NetworkPlan, SlavePlan
+from ecatcfg.esc import AlState, Cmd, Reg, Transition
+from ecatcfg.runtime.cyclic import CyclicFrames
+from ecatcfg.runtime.lockstep import Job, run_jobs
+from ecatcfg.runtime.replay import (TIMEOUT_COMMAND, ApplyError, SlaveProgress, master_job,
+                                    slave_transition_job)
+from ecatcfg.runtime.scan import FoundSlave, Mismatch, scan, verify
+from ecatcfg.runtime.transport import Transport
+from ecatcfg.runtime.wire import Datagram
+
+UP = [Transition.IP, Transition.PS, Transition.SO]
+DOWN = {AlState.OP: [Transition.OS, Transition.SP, Transition.PI],
+        AlState.SAFEOP: [Transition.SP, Transition.PI],
+        AlState.PREOP: [Transition.PI]}
+# EtherCAT system time counts nanoseconds from 2000-01-01 (ETG.1000.4; SOEM, KickCAT).
+EPOCH_2000_NS = 946_684_800 * 1_000_000_000
+DRIFT_FRAMES = 200             # static drift compensation (ESC datasheets: ~15 000 on
+                               # hardware; the emulated clocks need only a few)
+
+
+class VerifyError(ApplyError):
+    """The line does not match the ENI; nothing was configured."""
+
+    def __init__(self, mismatches: list[Mismatch]) -> None:
+        lines = [f"  {m.position:>3}  {m.expected:48} {m.found:32} {m.problem}"
+                 for m in mismatches]
+        super().__init__("the slaves on the line do not match the ENI; nothing was "
+                         "configured\n  pos  expected (ENI)" + " " * 35 + "found" + " " * 28
+                         + "problem\n" + "\n".join(lines))
+        self.mismatches = mismatches
+
+
+@dataclass(frozen=True, slots=True)
+class SlaveState:
+    state: int                 # AL status bits 0-3
+    error: bool
+    code: int                  # AL status code (0x0134)
+
+    @property
+    def name(self) -> str:
+        known = AlState._value2member_map_.get(self.state)
+        return (known.name if known else f"0x{self.state:X}") + ("+ERR" if self.error else "")
+
+
+@dataclass(slots=True)
+class Event:
+    """Progress for the reporter: a step that starts or ends."""
+
+    kind: str                  # "scan", "transition", "dc", "done"
+    text: str
+
+
+class Master:
+    """Runs one ENI on one link."""
+
+    def __init__(self, plan: NetworkPlan, link, *,
+                 recorder: Callable[[bytes, bool], None] | None = None,
+                 on_event: Callable[[Event], None] | None = None) -> None:
+        self.plan = plan
+        self.slaves = sorted(plan.slaves, key=lambda s: s.position)
+        self.transport = Transport(link, recorder=recorder)
+        self.cyclic = CyclicFrames(plan)
+        self.state = AlState.INIT
+        self.progress = {s.name: SlaveProgress(s.name) for s in self.slaves}
+        self.on_event = on_event
+        self._cycling = False
+        self._next_cycle = 0.0
+
+    def _event(self, kind: str, text: str) -> None:
+        if self.on_event:
+            self.on_event(Event(kind, text))
+
+    # -- scan -------------------------------------------------------------------------------
+
+    def scan_and_verify(self, accept_newer_revision: bool = False) -> list[FoundSlave]:
+        self._event("scan", "scanning the line")
+        found = scan(self.transport)
+        problems = verify(self.plan, found, accept_newer_revision)
+        if problems:
+            raise VerifyError(problems)
+        self._event("scan", f"{len(found)} slaves match the ENI")
+        return found
+
+    # -- state changes ----------------------------------------------------------------------
+
+    def bring_up(self, target: AlState = AlState.OP) -> None:
+        for transition in UP:
+            if self.state >= target:
+                return
+            if transition == Transition.PS:
+                self.setup_dc()
+            self.run_transition(transition)
+
+    def bring_down(self, target: AlState = AlState.INIT) -> None:
+        for transition in DOWN.get(self.state, []):
+            if self.state <= target:
+                return
+            self.run_transition(transition)
+
+    def run_transition(self, transition: Transition) -> None:
+        start = time.monotonic()
+        frames = self.transport.counters.frames_sent
+        self._event("transition", f"{transition.value}: {transition.name} ...")
+        # Requires=cycle: from PREOP->SAFEOP on, process data runs while slaves change state.
+        self._cycling = transition in (Transition.PS, Transition.SO, Transition.OS,
+                                       Transition.SP)
+        tick = self._tick if self._cycling else None
+        master = self.plan.master.init_cmds
+        run_jobs(self.transport, [master_job(master, transition, True)], tick)
+        run_jobs(self.transport,
+                 [slave_transition_job(s, transition, self.progress[s.name])
+                  for s in self.slaves], tick)
+        run_jobs(self.transport, [master_job(master, transition, False)], tick)
+        self.state = transition.target
+        self._event("transition", f"{transition.value}: {self.state.name} in "
+                    f"{(time.monotonic() - start) * 1000:.0f} ms, "
+                    f"{self.transport.counters.frames_sent - frames} frames")
+
+    def _tick(self) -> None:
+        now = time.monotonic()
+        if now >= self._next_cycle:
+            self._next_cycle = now + self.cyclic.cycle_time_us / 1e6
+            self.cyclic.exchange(self.transport, self.state)
+
+    def read_states(self) -> list[SlaveState | None]:
+        """Each slave's AL status and status code (by position, so it works before the
+        station addresses are set); ``None`` for a slave that did not answer."""
+        out: dict[int, SlaveState] = {}
+        run_jobs(self.transport, [_read_state(s.position, out) for s in self.slaves])
+        return [out.get(s.position) for s in self.slaves]
+
+    # -- cyclic -----------------------------------------------------------------------------
+
+    def cycle(self) -> bool:
+        """One cycle of the ENI's cyclic frames in the current state."""
+        return self.cyclic.exchange(self.transport, self.state)
+
+    # -- distributed clocks ------------------------------------------------------------------
+
+    def setup_dc(self) -> None:
+        dc = [s for s in self.slaves if s.dc is not None]
+        if not dc:
+            return
+        self._event("dc", f"DC: {len(dc)} slaves")
+        reference = next((s for s in dc if s.dc.reference_clock), dc[0])
+        self._broadcast_write(Reg.DC_RECEIVE_TIME_PORT0, bytes(4))
+        times: dict[str, tuple[int, int, int]] = {}
+        run_jobs(self.transport, [_read_receive_times(s, times) for s in dc])
+        # Line topology: the loop time below slave k is port1 - port0 (0 at the line's end);
+        # the frame needs half the difference to get from the reference to k.
+        loop = {name: (p1 - p0) & 0xFFFF_FFFF if p1 else 0
+                for name, (p0, p1, _) in times.items()}
+        ref_rx = times[reference.name][2]
+        master_time = time.time_ns() - EPOCH_2000_NS
+        writes = []
+        for s in dc:
+            delay = 0
+            if s.position > reference.position:
+                delay = max(0, (loop[reference.name] - loop[s.name]) // 2)
+            offset = (master_time + delay - times[s.name][2]) if s is not reference else \
+                master_time - ref_rx
+            writes.append(_write_until_ok(s, Reg.DC_SYSTEM_TIME + 0x10,
+                                          struct.pack("<qI", offset, delay)))
+        run_jobs(self.transport, writes)
+        run_jobs(self.transport, [_write_until_ok(s, Reg.DC_SPEED_COUNTER_START,
+                                                  struct.pack("<H", 0x1000)) for s in dc])
+        armw = Datagram.physical(Cmd.ARMW, -reference.position & 0xFFFF,
+                                 Reg.DC_SYSTEM_TIME, 8)
+        for _ in range(DRIFT_FRAMES):
+            self.transport.exchange([armw])
+
+    def _broadcast_write(self, ado: int, data: bytes) -> None:
+        deadline = time.monotonic() + TIMEOUT_COMMAND
+        while self.transport.exchange([Datagram.physical(Cmd.BWR, 0, ado, data)]) is None:
+            if time.monotonic() > deadline:
+                raise ApplyError("no frame came back for the DC receive-time latch")
+
+
+def _read_receive_times(slave: SlavePlan, out: dict[str, tuple[int, int, int]]) -> Job:
+    deadline = time.monotonic() + TIMEOUT_COMMAND
+    ports = Datagram.physical(Cmd.FPRD, slave.phys_addr, Reg.DC_RECEIVE_TIME_PORT0, 8)
+    unit = Datagram.physical(Cmd.FPRD, slave.phys_addr, 0x0918, 8)
+    while True:
+        reply = yield [ports, unit]
+        if reply is not None and reply[0].wkc == 1 and reply[1].wkc == 1:
+            p0, p1 = struct.unpack("<II", reply[0].data)
+            rx, = struct.unpack("<Q", reply[1].data)
+            out[slave.name] = (p0, p1, rx)
+            return
+        if time.monotonic() > deadline:
+            raise ApplyError("cannot read the DC receive times", slave.name)
+
+
+def _read_state(position: int, out: dict[int, SlaveState]) -> Job:
+    dg = Datagram.physical(Cmd.APRD, -position & 0xFFFF, Reg.AL_STATUS, 6)
+    for _ in range(5):
+        reply = yield [dg]
+        if reply is not None and reply[0].wkc == 1:
+            status, _, code = struct.unpack("<HHH", reply[0].data)
+            out[position] = SlaveState(status & 0x0F, bool(status & 0x10), code)
+            return
+
+
+def _write_until_ok(slave: SlavePlan, ado: int, data: bytes) -> Job:
+    deadline = time.monotonic() + TIMEOUT_COMMAND
+    dg = Datagram.physical(Cmd.FPWR, slave.phys_addr, ado, data)
+    while True:
+        reply = yield [dg]
+        if reply is not None and reply[0].wkc == 1:
+            return
+        if time.monotonic() > deadline:
+            raise ApplyError(f"cannot write DC register 0x{ado:04X}", slave.name)

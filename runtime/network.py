@@ -1,0 +1,238 @@
+"""The application's view of a running network: open an ENI, bring it up, use its variables.
+
+::
+
+    from ecatcfg.runtime import Network
+
+    with Network.virtual("line.eni.xml", esi=["esi/"]) as net:    # or Network("x.xml", RawLink("eth1"))
+        net.up()                                                   # scan, verify, INIT -> OP
+        for _ in range(1000):
+            net["lamps.Channel 1-8.Output 1"] = True
+            net.cycle()                                            # one bus cycle
+            print(net["buttons.Channel 1.Input"])
+
+Variables are the ENI's process image names (``<slave>.<pdo>.<entry>``) with their IEC
+types: BOOL/BIT as ``bool``, integers as ``int``, REAL/LREAL as ``float``.  ``run()``
+cycles at the ENI's cycle time, on the caller's thread or a thread of its own, calling a
+callback between the frames.
+"""
+
+from __future__ import annotations
+
+import struct
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+from ecatcfg.compiler.plan import NetworkPlan, Variable
+from ecatcfg.errors import EcatcfgError
+from ecatcfg.esc import AlState
+from ecatcfg.runtime.master import Event, Master
+
+_FLOATS = {"REAL": "<f", "LREAL": "<d"}
+_SIGNED = {"SINT", "INT", "DINT", "LINT", "INT24", "INT40", "INT48", "INT56"}
+
+
+@dataclass(frozen=True, slots=True)
+class _Var:
+    variable: Variable
+    output: bool
+
+    @property
+    def type(self) -> str:
+        return (self.variable.data_type or "").upper()
+
+
+class Network:
+    """An ENI running on a link (see the module docstring)."""
+
+    def __init__(self, eni: NetworkPlan | str | Path, link, *, pcap: str | Path | None = None,
+                 on_event: Callable[[Event], None] | None = None, _closers=()) -> None:
+        if not isinstance(eni, NetworkPlan):
+            from ecatcfg.compiler import eni_reader
+            eni = eni_reader.read_file(eni)
+        self.plan = eni
+        self.recorder = None
+        if pcap is not None:
+            from ecatcfg.runtime.pcap import PcapRecorder
+            self.recorder = PcapRecorder(pcap)
+        self.master = Master(eni, link, recorder=self.recorder, on_event=on_event)
+        self._vars = {v.name: _Var(v, False) for v in eni.process_image.inputs}
+        self._vars.update({v.name: _Var(v, True) for v in eni.process_image.outputs})
+        self._closers = list(_closers)
+        self.run_stats = None
+        self._thread: threading.Thread | None = None
+        self._stop = threading.Event()
+        self._lock = threading.Lock()
+
+    @classmethod
+    def virtual(cls, eni: NetworkPlan | str | Path, esi: list[str | Path], *,
+                faults=None, **kwargs) -> Network:
+        """The ENI on a virtual segment that emulates its slaves from the ESI files."""
+        from ecatcfg.compiler import eni_reader
+        from ecatcfg.esi.library import Library
+        from ecatcfg.runtime import emulate
+        from ecatcfg.runtime.link import MemoryLink
+
+        shown = str(eni) if not isinstance(eni, NetworkPlan) else "the ENI"
+        plan = eni if isinstance(eni, NetworkPlan) else eni_reader.read_file(eni)
+        library = Library([str(p) for p in esi])
+        segment = emulate.segment(emulate.specs_from_eni(plan, library, shown), faults)
+        ours, theirs = MemoryLink.pair()
+        stop = threading.Event()
+        thread = threading.Thread(target=segment.serve, args=(theirs,),
+                                  kwargs={"stop": stop}, daemon=True, name="virtual-segment")
+        thread.start()
+
+        def close_segment() -> None:
+            stop.set()
+            thread.join(2)
+            theirs.close()
+
+        net = cls(plan, ours, _closers=[close_segment], **kwargs)
+        net.segment = segment
+        return net
+
+    # -- state ------------------------------------------------------------------------------
+
+    @property
+    def state(self) -> AlState:
+        return self.master.state
+
+    def up(self, state: AlState = AlState.OP, *, accept_newer_revision: bool = False) -> None:
+        """Scan and verify the line, then bring it to ``state`` (default OP)."""
+        self.master.scan_and_verify(accept_newer_revision)
+        self.master.bring_up(state)
+
+    def down(self, state: AlState = AlState.INIT) -> None:
+        self.stop()
+        self.master.bring_down(state)
+
+    # -- process data -----------------------------------------------------------------------
+
+    @property
+    def variables(self) -> list[str]:
+        return list(self._vars)
+
+    def cycle(self) -> bool:
+        """One bus cycle; ``True`` if every working counter was as the ENI expects."""
+        with self._lock:
+            return self.master.cycle()
+
+    def __getitem__(self, name: str) -> bool | int | float:
+        var = self._var(name)
+        image = self.master.cyclic.outputs if var.output else self.master.cyclic.inputs
+        return _decode(image, var)
+
+    def __setitem__(self, name: str, value: bool | int | float) -> None:
+        var = self._var(name)
+        if not var.output:
+            raise EcatcfgError(f"{name!r} is an input; only outputs can be set")
+        with self._lock:
+            _encode(self.master.cyclic.outputs, var, value)
+
+    def _var(self, name: str) -> _Var:
+        try:
+            return self._vars[name]
+        except KeyError:
+            import difflib
+            close = difflib.get_close_matches(name, self._vars, 3)
+            raise EcatcfgError(f"no process variable {name!r}" + (
+                f"; did you mean {', '.join(map(repr, close))}?" if close else "")) from None
+
+    def run(self, cycles: int | None = None, callback: Callable[[Network], None] | None = None,
+            *, background: bool = False) -> None:
+        """Cycle at the ENI's cycle time (``cycles`` times, or until :meth:`stop`), calling
+        ``callback(network)`` after every cycle."""
+        if background:
+            self._stop.clear()
+            self._thread = threading.Thread(target=self._loop, args=(cycles, callback),
+                                            daemon=True, name="ecat-cycle")
+            self._thread.start()
+        else:
+            self._stop.clear()
+            self._loop(cycles, callback)
+
+    def _loop(self, cycles: int | None, callback) -> None:
+        from ecatcfg.runtime.cyclic import CycleStats
+        # The statistics of this run: kept apart from the cycles of state changes.
+        self.run_stats = self.master.cyclic.stats = CycleStats()
+        period = self.master.cyclic.cycle_time_us / 1e6
+        next_at = time.perf_counter()
+        done = 0
+        while not self._stop.is_set() and (cycles is None or done < cycles):
+            self.cycle()
+            done += 1
+            if callback is not None:
+                callback(self)
+            next_at += period
+            delay = next_at - time.perf_counter()
+            if delay > 0:
+                time.sleep(delay)
+            else:
+                next_at = time.perf_counter()       # late: do not try to catch up
+        self.master.cyclic.stats = CycleStats()
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread is not None and self._thread is not threading.current_thread():
+            self._thread.join(5)
+            self._thread = None
+
+    def close(self) -> None:
+        self.stop()
+        if self.recorder is not None:
+            self.recorder.close()
+        for close in self._closers:
+            close()
+        self._closers = []
+
+    def __enter__(self) -> Network:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        try:
+            if self.master.state > AlState.INIT and exc[0] is None:
+                self.down()
+        finally:
+            self.close()
+
+
+def _bits(var: _Var) -> tuple[int, int]:
+    return var.variable.bit_offs, var.variable.bit_size
+
+
+def _decode(image: bytearray, var: _Var) -> bool | int | float:
+    offs, size = _bits(var)
+    first, last = offs // 8, (offs + size - 1) // 8
+    raw = int.from_bytes(image[first:last + 1], "little") >> offs % 8 & ((1 << size) - 1)
+    kind = var.type
+    if size == 1 and kind in ("BOOL", "BIT", ""):
+        return bool(raw)
+    if kind in _FLOATS:
+        return struct.unpack(_FLOATS[kind], raw.to_bytes(size // 8, "little"))[0]
+    if kind in _SIGNED and raw >> size - 1:
+        return raw - (1 << size)
+    return raw
+
+
+def _encode(image: bytearray, var: _Var, value: bool | int | float) -> None:
+    offs, size = _bits(var)
+    kind = var.type
+    if kind in _FLOATS:
+        raw = int.from_bytes(struct.pack(_FLOATS[kind], float(value)), "little")
+    else:
+        number = int(value)
+        lo = -(1 << size - 1) if kind in _SIGNED else 0
+        hi = (1 << size - 1) - 1 if kind in _SIGNED else (1 << size) - 1
+        if not lo <= number <= hi:
+            raise EcatcfgError(f"{var.variable.name!r}: {value} is outside {kind or 'the'} "
+                               f"range {lo}..{hi}")
+        raw = number & ((1 << size) - 1)
+    first, last = offs // 8, (offs + size - 1) // 8
+    chunk = int.from_bytes(image[first:last + 1], "little")
+    mask = ((1 << size) - 1) << offs % 8
+    chunk = chunk & ~mask | raw << offs % 8
+    image[first:last + 1] = chunk.to_bytes(last - first + 1, "little")

@@ -1,0 +1,67 @@
+"""Recording every frame a master sends and receives as pcapng (opens in Wireshark).
+
+scapy writes the file (its pcapng writer, fed the raw frame bytes: nothing is dissected on
+the way).  The file is written beside its final name and renamed when the recording closes,
+so a reader never sees half a capture under that name.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+import time
+from pathlib import Path
+
+LINKTYPE_ETHERNET = 1
+DIRECTION_INBOUND, DIRECTION_OUTBOUND = 1, 2     # pcapng EPB flags, bits 0-1
+
+
+class _Frame(bytes):
+    """Frame bytes that can carry scapy's ``direction`` attribute."""
+
+    direction: int
+
+
+class PcapRecorder:
+    """``recorder(frame, sent)`` appends one frame; ``close()`` publishes the file."""
+
+    def __init__(self, path: str | os.PathLike) -> None:
+        from scapy.utils import RawPcapNgWriter
+
+        self.path = Path(path)
+        fd, tmp = tempfile.mkstemp(dir=self.path.parent, prefix=f".{self.path.name}.",
+                                   suffix=".tmp")
+        os.close(fd)
+        self._tmp = Path(tmp)
+        self._writer = RawPcapNgWriter(str(self._tmp))
+        self._writer.linktype = LINKTYPE_ETHERNET
+        self._writer.write_header(None)          # section and interface blocks
+        self.frames = 0
+
+    def __call__(self, frame: bytes, sent: bool) -> None:
+        # scapy's writer takes the pcapng direction flag from the packet's ``direction``
+        # attribute, and the time as float seconds.
+        packet = _Frame(frame)
+        packet.direction = DIRECTION_OUTBOUND if sent else DIRECTION_INBOUND
+        self._writer.write_packet(packet, sec=time.time())
+        self.frames += 1
+
+    def close(self) -> None:
+        if self._writer is None:
+            return
+        self._writer.close()
+        self._writer = None
+        os.chmod(self._tmp, 0o644)
+        os.replace(self._tmp, self.path)
+
+    def discard(self) -> None:
+        if self._writer is not None:
+            self._writer.close()
+            self._writer = None
+        self._tmp.unlink(missing_ok=True)
+
+    def __enter__(self) -> PcapRecorder:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()

@@ -1,0 +1,313 @@
+"""Replaying an ENI's InitCmds: one job per command, chained per slave and transition.
+
+The ENI says what to send (Cmd, Adp/Ado or Addr, Data or DataLength) and what must come
+back: ``Cnt`` (the working counter; resent up to ``Retries`` times otherwise) and
+``Validate`` (data under a mask; polled until it matches or its timeout runs out).  Where
+the file gives no timeout (ours carry them only in Validate), the defaults below apply.
+A frame that is lost is sent again until the command's timeout; register writes are
+idempotent and mailbox messages carry a counter, so resending is safe.
+
+Within a transition each slave runs its register commands in file order; its CoE
+InitCmds for that transition run after the SyncManager/FMMU writes and before the
+AL-control request (ETG.2100; PDO assignment needs the mailbox up and must precede SAFEOP).
+"""
+
+from __future__ import annotations
+
+import struct
+import time
+from dataclasses import dataclass, field
+
+from ecatcfg.compiler.plan import CoeInitCmd, InitCmd, MailboxPlan, SlavePlan
+from ecatcfg.errors import EcatcfgError
+from ecatcfg.esc import AlState, Cmd, Reg, Transition, al_status_name
+from ecatcfg.runtime.lockstep import Job
+from ecatcfg.runtime.wire import Datagram
+
+# Defaults where the ENI gives no timeout (seconds).
+TIMEOUT_COMMAND = 1.0          # a plain register command, lost frames included
+TIMEOUT_STATE = 5.0            # an AL state check (SOEM waits 2 s, IgH 5 s)
+TIMEOUT_VALIDATE = 0.5         # any other Validate without Timeout
+TIMEOUT_MAILBOX = 3.0          # one SDO transfer (SOEM: 700 ms per response)
+RETRIES = 3                    # working-counter retries when Retries is not given
+ERROR_GRACE = 0.02             # s an AL error flag must persist before we give up early
+DC_START_DELAY_NS = 100_000_000    # SYNC start this far ahead of the reference (IgH, SOEM)
+
+SM1_STATUS_BLOCK = 0x080D      # SM1 status, activate, PDI control: 3 bytes
+REPEAT_BIT = 0x02
+MAILBOX_FULL = 0x08
+
+
+class ApplyError(EcatcfgError):
+    """A slave or command that did not do what the ENI expects."""
+
+    def __init__(self, message: str, slave: str | None = None,
+                 command: str | None = None, al_code: int | None = None) -> None:
+        where = " ".join(x for x in (f"slave {slave!r}" if slave else "",
+                                     f"[{command}]" if command else "") if x)
+        super().__init__(f"{where}: {message}" if where else message)
+        self.slave = slave
+        self.command = command
+        self.al_code = al_code
+
+
+@dataclass(slots=True)
+class SlaveProgress:
+    """What the report shows per slave: the last command run."""
+
+    name: str
+    last_command: str = ""
+
+
+def datagram_for(cmd: InitCmd, data: bytes | None = None) -> Datagram:
+    payload = data if data is not None else (cmd.data if cmd.data is not None
+                                             else bytes(cmd.length))
+    if cmd.cmd in (Cmd.LRD, Cmd.LWR, Cmd.LRW):
+        return Datagram.logical(cmd.cmd, cmd.addr or 0, payload)
+    return Datagram.physical(cmd.cmd, cmd.adp or 0, cmd.ado or 0, payload)
+
+
+def _is_state_check(cmd: InitCmd) -> bool:
+    return cmd.validate is not None and cmd.ado == Reg.AL_STATUS
+
+
+def command_timeout(cmd: InitCmd) -> float:
+    if cmd.timeout:
+        return cmd.timeout / 1000
+    if cmd.validate is not None:
+        if cmd.validate.timeout:
+            return cmd.validate.timeout / 1000
+        return TIMEOUT_STATE if _is_state_check(cmd) else TIMEOUT_VALIDATE
+    return TIMEOUT_COMMAND
+
+
+def _matches(data: bytes, want: bytes, mask: bytes | None) -> bool:
+    n = len(want)
+    got = data[:n]
+    if mask is None:
+        return got == want
+    return all(g & m == w & m for g, w, m in zip(got, want, mask[:n].ljust(n, b"\xff")))
+
+
+def init_cmd_job(cmd: InitCmd, who: str | None, data: bytes | None = None,
+                 progress: SlaveProgress | None = None) -> Job:
+    """Send one InitCmd until its working counter and Validate are satisfied."""
+    if progress is not None:
+        progress.last_command = cmd.comment
+    dg = datagram_for(cmd, data)
+    deadline = time.monotonic() + command_timeout(cmd)
+    retries = RETRIES if cmd.retries is None else cmd.retries
+    wrong_wkc = 0
+    error_since: float | None = None
+    last = "no reply (frames lost)"
+    while True:
+        reply = yield [dg]
+        now = time.monotonic()
+        if reply is not None:
+            got = reply[0]
+            if cmd.cnt is not None and got.wkc != cmd.cnt:
+                wrong_wkc += 1
+                last = f"working counter {got.wkc}, expected {cmd.cnt}"
+                if wrong_wkc > retries:
+                    raise ApplyError(f"{last} ({wrong_wkc} attempts)", who, cmd.comment)
+            elif cmd.validate is not None and not _matches(got.data, cmd.validate.data,
+                                                           cmd.validate.mask):
+                last = f"read {got.data.hex()}, expected {cmd.validate.data.hex()}" + (
+                    f" under mask {cmd.validate.mask.hex()}" if cmd.validate.mask else "")
+                if _is_state_check(cmd) and len(got.data) >= 2 and got.data[0] & 0x10 \
+                        and not cmd.validate.data[0] & 0x10:
+                    # The slave refused the state: an error flag that stays is final.
+                    error_since = error_since or now
+                    if now - error_since >= ERROR_GRACE:
+                        raise _refused(got.data, who, cmd.comment)
+                else:
+                    error_since = None
+            else:
+                return
+        if now > deadline:
+            if _is_state_check(cmd) and reply is not None and len(reply[0].data) >= 6:
+                raise _refused(reply[0].data, who, cmd.comment, timed_out=True)
+            raise ApplyError(f"{last} after {command_timeout(cmd):g} s", who, cmd.comment)
+
+
+def _refused(status: bytes, who: str | None, comment: str, timed_out: bool = False) -> ApplyError:
+    al_status, = struct.unpack_from("<H", status, 0)
+    code = struct.unpack_from("<H", status, 4)[0] if len(status) >= 6 else 0
+    state = al_status & 0x0F
+    name = AlState(state).name if state in AlState._value2member_map_ else f"state {state}"
+    flag = "+ERR" if al_status & 0x10 else ""
+    text = (f"slave stays in {name}{flag}, AL status code 0x{code:04X} ({al_status_name(code)})"
+            if code or flag else f"slave stays in {name}")
+    if timed_out:
+        text += " (timed out)"
+    return ApplyError(text, who, comment, al_code=code)
+
+
+# -- mailbox ----------------------------------------------------------------------------------
+
+@dataclass(slots=True)
+class MailboxChannel:
+    """The master's side of one slave's mailbox: where SM0/SM1 are, the message counter
+    and the repeat toggle (ETG.1000.4 mailbox repeat)."""
+
+    address: int
+    plan: MailboxPlan
+    counter_value: int = 0
+    repeat: bool = False
+    sent_messages: int = field(default=0)
+
+    def counter(self) -> int:
+        """The next mailbox counter, 1..7 (0 means 'not used'; SOEM never sends it)."""
+        self.counter_value = self.counter_value % 7 + 1
+        return self.counter_value
+
+    def send(self, message: bytes, deadline: float, who: str | None, what: str) -> Job:
+        """Write one request into SM0 (the whole SM, so the ESC sees the buffer complete)."""
+        sm0 = self.plan.send
+        dg = Datagram.physical(Cmd.FPWR, self.address, sm0.start,
+                               message.ljust(sm0.length, b"\x00")[:sm0.length])
+        while True:
+            reply = yield [dg]
+            if reply is not None and reply[0].wkc == 1:
+                self.sent_messages += 1
+                return
+            if time.monotonic() > deadline:
+                raise ApplyError("the mailbox (SM0) did not take the request", who, what)
+
+    def receive(self, deadline: float, who: str | None, what: str) -> Job:
+        """Read the slave's next message from SM1.  Reading an empty mailbox gets working
+        counter 0 and changes nothing, so SM1 is read directly instead of polling its
+        status first; if a read's frame was lost, the message may have been taken out of
+        SM1 on the way: then the repeat toggle asks the slave to post it again."""
+        sm1 = self.plan.recv
+        read = Datagram.physical(Cmd.FPRD, self.address, sm1.start, sm1.length)
+        lost = False
+        while True:
+            reply = yield [read]
+            if reply is not None and reply[0].wkc == 1:
+                return bytes(reply[0].data)
+            if time.monotonic() > deadline:
+                raise ApplyError("no mailbox response in time", who, what)
+            if reply is None:
+                lost = True
+            elif lost:
+                yield from self._repeat(deadline, who, what)
+                lost = False
+
+    def _repeat(self, deadline: float, who: str | None, what: str) -> Job:
+        self.repeat = not self.repeat
+        status = Datagram.physical(Cmd.FPRD, self.address, SM1_STATUS_BLOCK, 3)
+        while True:
+            reply = yield [status]
+            if reply is not None and reply[0].wkc == 1:
+                activate = reply[0].data[1]
+                break
+            if time.monotonic() > deadline:
+                raise ApplyError("mailbox repeat request failed", who, what)
+        value = activate & ~REPEAT_BIT & 0xFF | (REPEAT_BIT if self.repeat else 0)
+        toggle = Datagram.physical(Cmd.FPWR, self.address, SM1_STATUS_BLOCK + 1,
+                                   bytes([value]))
+        while True:
+            reply = yield [toggle]
+            if reply is not None and reply[0].wkc == 1:
+                return
+            if time.monotonic() > deadline:
+                raise ApplyError("mailbox repeat request failed", who, what)
+
+
+def sdo_job(channel: MailboxChannel, transaction, who: str | None, what: str,
+            timeout: float = TIMEOUT_MAILBOX) -> Job:
+    """One SDO transfer (``runtime/sdo_client.py`` transaction) through the mailbox."""
+    from ecatcfg.runtime.mailbox import MailboxProtocolError, SdoAbort
+
+    deadline = time.monotonic() + timeout
+    request: bytes | None = transaction.first_request()
+    try:
+        while True:
+            if request is not None:
+                yield from channel.send(request, deadline, who, what)
+            response = yield from channel.receive(deadline, who, what)
+            request = transaction.on_response(response)
+            if request is None and transaction.done:
+                return transaction
+    except SdoAbort as abort:
+        raise ApplyError(str(abort), who, what) from None
+    except MailboxProtocolError as error:
+        raise ApplyError(f"mailbox protocol error: {error}", who, what) from None
+
+
+def coe_init_cmd_job(channel: MailboxChannel, cmd: CoeInitCmd, who: str | None,
+                     progress: SlaveProgress | None = None) -> Job:
+    from ecatcfg.runtime.sdo_client import SdoDownload, SdoUpload
+
+    if progress is not None:
+        progress.last_command = cmd.comment
+    size = channel.plan.send.length
+    timeout = cmd.timeout / 1000 if cmd.timeout else TIMEOUT_MAILBOX
+    if cmd.ccs == 2:                              # upload (rare in ENIs: a read check)
+        t = SdoUpload(cmd.index, cmd.subindex, cmd.complete_access, size,
+                      channel.counter)
+    else:
+        t = SdoDownload(cmd.index, cmd.subindex, cmd.data, cmd.complete_access, size,
+                        channel.counter)
+    yield from sdo_job(channel, t, who, cmd.comment or f"SDO 0x{cmd.index:04X}:"
+                       f"{cmd.subindex:02X}", timeout)
+
+
+# -- one slave, one transition ---------------------------------------------------------------
+
+def _writes_al_control(cmd: InitCmd) -> bool:
+    return cmd.cmd in (Cmd.APWR, Cmd.FPWR, Cmd.BWR) and cmd.ado == Reg.AL_CONTROL
+
+
+def slave_transition_job(slave: SlavePlan, transition: Transition,
+                         progress: SlaveProgress | None = None) -> Job:
+    who = slave.name
+    cmds = [c for c in slave.init_cmds if transition in c.transitions]
+    coe = []
+    if slave.mailbox is not None:
+        coe = [c for c in slave.mailbox.coe_init_cmds
+               if transition in c.transitions and not c.disabled]
+    split = len(cmds)
+    if coe and transition != Transition.IP:
+        split = next((i for i, c in enumerate(cmds) if _writes_al_control(c)), len(cmds))
+    for cmd in cmds[:split]:
+        yield from _register_cmd(slave, cmd, who, progress)
+    if coe:
+        channel = MailboxChannel(slave.phys_addr, slave.mailbox)
+        for c in coe:
+            yield from coe_init_cmd_job(channel, c, who, progress)
+    for cmd in cmds[split:]:
+        yield from _register_cmd(slave, cmd, who, progress)
+
+
+def _register_cmd(slave: SlavePlan, cmd: InitCmd, who: str,
+                  progress: SlaveProgress | None) -> Job:
+    data = None
+    if (cmd.cmd == Cmd.FPWR and cmd.ado == Reg.DC_START_TIME_CYCLIC and cmd.data is not None
+            and not any(cmd.data) and slave.dc is not None):
+        data = yield from _dc_start_time(slave, cmd, who)
+    yield from init_cmd_job(cmd, who, data, progress)
+
+
+def _dc_start_time(slave: SlavePlan, cmd: InitCmd, who: str) -> Job:
+    """The ENI's start time is a zero placeholder: start SYNC0 100 ms after the slave's
+    (reference-synchronised) system time, on a cycle boundary plus the shift (IgH, SOEM)."""
+    read = Datagram.physical(Cmd.FPRD, slave.phys_addr, Reg.DC_SYSTEM_TIME, 8)
+    deadline = time.monotonic() + TIMEOUT_COMMAND
+    while True:
+        reply = yield [read]
+        if reply is not None and reply[0].wkc == 1:
+            now, = struct.unpack("<Q", reply[0].data)
+            break
+        if time.monotonic() > deadline:
+            raise ApplyError("cannot read the DC system time (0x0910)", who, cmd.comment)
+    cycle = slave.dc.cycle_time0 or 1
+    start = (now + DC_START_DELAY_NS) // cycle * cycle + cycle + slave.dc.shift_time
+    return struct.pack("<Q", start & 0xFFFF_FFFF_FFFF_FFFF)[:len(cmd.data)]
+
+
+def master_job(cmds: list[InitCmd], transition: Transition, before_slave: bool) -> Job:
+    for cmd in cmds:
+        if transition in cmd.transitions and bool(cmd.before_slave) == before_slave:
+            yield from init_cmd_job(cmd, None)

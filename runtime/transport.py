@@ -1,0 +1,88 @@
+"""The master's side of the wire: datagrams out in frames, replies matched back in.
+
+One frame is in flight at a time (ping-pong, as SOEM and IgH do at startup); a frame whose
+reply does not come back within the timeout counts as lost and the caller decides what to
+resend.  Replies are matched on the datagram index the master chose (slaves never change
+it) plus the command and length of every datagram, so a late reply to an earlier frame is
+never taken for the current one.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from ecatcfg.esc import MAX_DATAGRAM_DATA
+from ecatcfg.runtime import wire
+from ecatcfg.runtime.wire import Datagram, FrameError
+
+DEFAULT_TIMEOUT = 0.02          # s: a frame through even a long line returns within this
+# Datagram bytes one frame carries: 1500 - 2 (EtherCAT header) = 1486 data + 12 overhead.
+FRAME_DATA_LIMIT = MAX_DATAGRAM_DATA + wire.DG_HEADER_LEN + wire.WKC.size
+
+
+@dataclass(slots=True)
+class Counters:
+    frames_sent: int = 0
+    frames_lost: int = 0
+    stray_replies: int = 0
+
+
+class Transport:
+    """Send datagrams in one frame and wait for that frame to come back."""
+
+    def __init__(self, link, *, recorder: Callable[[bytes, bool], None] | None = None,
+                 timeout: float = DEFAULT_TIMEOUT) -> None:
+        self.link = link
+        self.recorder = recorder             # (frame, sent?) for pcap recording
+        self.timeout = timeout
+        self.counters = Counters()
+        self._idx = 0
+
+    def exchange(self, datagrams: list[Datagram],
+                 timeout: float | None = None) -> list[Datagram] | None:
+        """The datagrams as they came back, or ``None`` if the frame was lost."""
+        self._idx = (self._idx + 1) & 0xFF
+        idx = self._idx
+        for dg in datagrams:
+            dg.idx = idx
+        frame = wire.encode(datagrams)
+        shape = [(dg.cmd, len(dg.data)) for dg in datagrams]
+        self.link.send(frame)
+        self.counters.frames_sent += 1
+        if self.recorder:
+            self.recorder(frame, True)
+        deadline = time.monotonic() + (self.timeout if timeout is None else timeout)
+        while True:
+            left = deadline - time.monotonic()
+            if left <= 0:
+                self.counters.frames_lost += 1
+                return None
+            reply = self.link.recv(left)
+            if reply is None:
+                continue
+            if self.recorder:
+                self.recorder(reply, False)
+            try:
+                back = wire.decode(reply).datagrams
+            except FrameError:
+                self.counters.stray_replies += 1
+                continue
+            if back and back[0].idx == idx and [(d.cmd, len(d.data)) for d in back] == shape:
+                return back
+            self.counters.stray_replies += 1
+
+
+def pack(datagrams: list[Datagram]) -> list[list[Datagram]]:
+    """Split datagrams, in order, into frames that respect the 1486-byte data limit."""
+    frames: list[list[Datagram]] = [[]]
+    used = 0
+    for dg in datagrams:
+        size = dg.size
+        if frames[-1] and used + size > FRAME_DATA_LIMIT:
+            frames.append([])
+            used = 0
+        frames[-1].append(dg)
+        used += size
+    return [f for f in frames if f]
