@@ -35,20 +35,22 @@ DC_START_DELAY_NS = 100_000_000    # SYNC start this far ahead of the reference 
 
 SM1_STATUS_BLOCK = 0x080D      # SM1 status, activate, PDI control: 3 bytes
 REPEAT_BIT = 0x02
-MAILBOX_FULL = 0x08
+REPEAT_AFTER = 0.05            # s SM1 must stay empty after a lost read before a repeat
 
 
 class ApplyError(EcatcfgError):
     """A slave or command that did not do what the ENI expects."""
 
     def __init__(self, message: str, slave: str | None = None,
-                 command: str | None = None, al_code: int | None = None) -> None:
+                 command: str | None = None, al_code: int | None = None,
+                 abort_code: int | None = None) -> None:
         where = " ".join(x for x in (f"slave {slave!r}" if slave else "",
                                      f"[{command}]" if command else "") if x)
         super().__init__(f"{where}: {message}" if where else message)
         self.slave = slave
         self.command = command
         self.al_code = al_code
+        self.abort_code = abort_code
 
 
 @dataclass(slots=True)
@@ -153,7 +155,6 @@ class MailboxChannel:
     address: int
     plan: MailboxPlan
     counter_value: int = 0
-    repeat: bool = False
     sent_messages: int = field(default=0)
 
     def counter(self) -> int:
@@ -177,25 +178,29 @@ class MailboxChannel:
     def receive(self, deadline: float, who: str | None, what: str) -> Job:
         """Read the slave's next message from SM1.  Reading an empty mailbox gets working
         counter 0 and changes nothing, so SM1 is read directly instead of polling its
-        status first; if a read's frame was lost, the message may have been taken out of
-        SM1 on the way: then the repeat toggle asks the slave to post it again."""
+        status first.  If a read's frame was lost, the message may have been taken out of
+        SM1 on the way: when SM1 then stays empty for ``REPEAT_AFTER`` (a slow firmware
+        may simply not have answered yet), the repeat toggle asks the slave to post its
+        last message again (ETG.1000.4 mailbox repeat)."""
         sm1 = self.plan.recv
         read = Datagram.physical(Cmd.FPRD, self.address, sm1.start, sm1.length)
-        lost = False
+        lost_at: float | None = None
         while True:
             reply = yield [read]
+            now = time.monotonic()
             if reply is not None and reply[0].wkc == 1:
                 return bytes(reply[0].data)
-            if time.monotonic() > deadline:
+            if now > deadline:
                 raise ApplyError("no mailbox response in time", who, what)
             if reply is None:
-                lost = True
-            elif lost:
+                lost_at = lost_at or now
+            elif lost_at is not None and now - lost_at >= REPEAT_AFTER:
                 yield from self._repeat(deadline, who, what)
-                lost = False
+                lost_at = None
 
     def _repeat(self, deadline: float, who: str | None, what: str) -> Job:
-        self.repeat = not self.repeat
+        """Toggle the repeat request (0x080E bit 1) from what the register holds, then wait
+        for the slave's acknowledge in 0x080F bit 1."""
         status = Datagram.physical(Cmd.FPRD, self.address, SM1_STATUS_BLOCK, 3)
         while True:
             reply = yield [status]
@@ -204,15 +209,23 @@ class MailboxChannel:
                 break
             if time.monotonic() > deadline:
                 raise ApplyError("mailbox repeat request failed", who, what)
-        value = activate & ~REPEAT_BIT & 0xFF | (REPEAT_BIT if self.repeat else 0)
+        value = activate ^ REPEAT_BIT
         toggle = Datagram.physical(Cmd.FPWR, self.address, SM1_STATUS_BLOCK + 1,
                                    bytes([value]))
         while True:
             reply = yield [toggle]
             if reply is not None and reply[0].wkc == 1:
-                return
+                break
             if time.monotonic() > deadline:
                 raise ApplyError("mailbox repeat request failed", who, what)
+        while True:                                  # the slave acknowledges the toggle
+            reply = yield [status]
+            if reply is not None and reply[0].wkc == 1 and \
+                    reply[0].data[2] & REPEAT_BIT == value & REPEAT_BIT:
+                return
+            if time.monotonic() > deadline:
+                raise ApplyError("the slave did not acknowledge the mailbox repeat", who,
+                                 what)
 
 
 def sdo_job(channel: MailboxChannel, transaction, who: str | None, what: str,
@@ -231,7 +244,7 @@ def sdo_job(channel: MailboxChannel, transaction, who: str | None, what: str,
             if request is None and transaction.done:
                 return transaction
     except SdoAbort as abort:
-        raise ApplyError(str(abort), who, what) from None
+        raise ApplyError(str(abort), who, what, abort_code=abort.code) from None
     except MailboxProtocolError as error:
         raise ApplyError(f"mailbox protocol error: {error}", who, what) from None
 

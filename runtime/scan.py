@@ -48,7 +48,7 @@ def count_slaves(transport: Transport) -> int:
     raise ApplyError("no frame came back: is the interface connected to an EtherCAT line?")
 
 
-def _sii_words(position: int, word: int, deadline: float) -> Job:
+def sii_words(position: int, word: int, deadline: float) -> Job:
     """Four SII words from ``word`` on (two reads on ESCs that return 4 bytes at a time)."""
     adp = -position & 0xFFFF
     data = b""
@@ -93,8 +93,8 @@ def _identity_job(position: int, out: dict[int, FoundSlave]) -> Job:
             break
         if time.monotonic() > deadline:
             raise ApplyError(f"position {position}: no answer")
-    first = yield from _sii_words(position, SII_VENDOR_ID, deadline)
-    second = yield from _sii_words(position, SII_REVISION, deadline)
+    first = yield from sii_words(position, SII_VENDOR_ID, deadline)
+    second = yield from sii_words(position, SII_REVISION, deadline)
     vendor, product = struct.unpack("<II", first)
     revision, serial = struct.unpack("<II", second)
     out[position] = FoundSlave(position, vendor, product, revision, serial)

@@ -42,6 +42,7 @@ _BROADCAST = {Cmd.BRD, Cmd.BWR, Cmd.BRW}
 _LOGICAL = {Cmd.LRD: (True, False), Cmd.LWR: (False, True), Cmd.LRW: (True, True)}
 _ADDRESS_REGISTERS = (Reg.STATION_ADDRESS, Reg.DL_CONTROL_2 + 1)
 _AL_STATUS = int(Reg.AL_STATUS)
+_SAFEOP = int(AlState.SAFEOP)
 
 
 @dataclass(frozen=True, slots=True)
@@ -55,20 +56,6 @@ class Faults:
     delay: float = 0.0
     delay_s: float = 0.005
     seed: int = 0
-
-
-@dataclass(slots=True)
-class _LogicalOp:
-    """One slave's part of a logical datagram: a byte run or a list of single bits."""
-
-    slave: EmulatedSlave
-    write: bool                     # frame -> slave memory (else memory -> frame)
-    frame_offset: int               # byte offset in the datagram's data
-    phys: int
-    length: int                     # bytes (byte run); 0 for a bit op
-    bits: tuple[tuple[int, int, int, int], ...] = ()   # (frame byte, phys byte, shift, mask)
-    sm: SmState | None = None       # the process-data SM the access goes through
-    completes_sm: bool = False      # writes the SM's last byte (a complete buffer)
 
 
 class VirtualSegment:
@@ -235,34 +222,35 @@ class VirtualSegment:
         if plan is None:
             plan = self._plans[key] = self._plan(cmd, address, len(data))
         lrw = cmd == Cmd.LRW
+        now = time.monotonic()
         added = 0
-        for slave, writes, reads in plan:
-            mem = slave.mem
-            running = mem[_AL_STATUS] & 0x0F >= AlState.SAFEOP
+        # Plain tuples and locals: this loop runs for every slave of every cyclic frame.
+        for slave, mem, writes, reads in plan:
+            running = mem[_AL_STATUS] & 0x0F >= _SAFEOP
             hit_write = hit_read = False
-            for op in writes:                   # writes first: an LRW carries the outputs
-                sm = op.sm
+            for offset, phys, length, bits, sm, completes in writes:   # outputs first (LRW)
                 if sm is not None and not (running and sm.enabled and sm.length):
                     continue
-                if op.length:
-                    offset = op.frame_offset
-                    mem[op.phys:op.phys + op.length] = data[offset:offset + op.length]
+                if length == 1:
+                    mem[phys] = data[offset]
+                elif length:
+                    mem[phys:phys + length] = data[offset:offset + length]
                 else:
-                    for fbyte, pbyte, shift, mask in op.bits:
+                    for fbyte, pbyte, shift, mask in bits:
                         value = data[fbyte] >> shift if shift >= 0 else data[fbyte] << -shift
                         mem[pbyte] = mem[pbyte] & ~mask & 0xFF | value & mask
-                if op.completes_sm:
-                    slave.outputs_written()
+                if completes:
+                    slave.outputs_written(now)
                 hit_write = True
-            for op in reads:
-                sm = op.sm
+            for offset, phys, length, bits, sm, _ in reads:
                 if sm is not None and not (running and sm.enabled and sm.length):
                     continue
-                if op.length:
-                    offset = op.frame_offset
-                    data[offset:offset + op.length] = mem[op.phys:op.phys + op.length]
+                if length == 1:
+                    data[offset] = mem[phys]
+                elif length:
+                    data[offset:offset + length] = mem[phys:phys + length]
                 else:
-                    for fbyte, pbyte, shift, mask in op.bits:
+                    for fbyte, pbyte, shift, mask in bits:
                         value = mem[pbyte] << shift if shift >= 0 else mem[pbyte] >> -shift
                         data[fbyte] = data[fbyte] & ~mask & 0xFF | value & mask
                 hit_read = True
@@ -272,13 +260,16 @@ class VirtualSegment:
                 added += 1
         return added
 
-    def _plan(self, cmd: int, address: int, n: int) -> list[tuple[EmulatedSlave, list[_LogicalOp],
-                                                                  list[_LogicalOp]]]:
+    def _plan(self, cmd: int, address: int, n: int) -> list[tuple]:
+        """Per slave whose FMMUs the datagram meets: (slave, its memory, write ops, read
+        ops), each op a tuple (frame offset, physical address, byte length or 0, bit
+        groups, SM gate, completes the SM)."""
         reads, writes = _LOGICAL[cmd]
         lo, hi = address * 8, (address + n) * 8           # the datagram's logical bits
         plan = []
         for slave in self.slaves:
-            ops: tuple[list[_LogicalOp], list[_LogicalOp]] = ([], [])
+            read_ops: list[tuple] = []
+            write_ops: list[tuple] = []
             for f in slave.fmmus:
                 first = f.logical_start * 8 + f.logical_start_bit
                 last = first + f.bit_length                 # exclusive
@@ -287,11 +278,11 @@ class VirtualSegment:
                     continue
                 phys0 = f.physical_start * 8 + f.physical_start_bit + (b0 - first)
                 if writes and f.type & FmmuType.WRITE:
-                    ops[1].append(_op(slave, True, b0 - lo, phys0, b1 - b0))
+                    write_ops.append(_op(slave, True, b0 - lo, phys0, b1 - b0))
                 if reads and f.type & FmmuType.READ:
-                    ops[0].append(_op(slave, False, b0 - lo, phys0, b1 - b0))
-            if ops[0] or ops[1]:
-                plan.append((slave, ops[1], ops[0]))
+                    read_ops.append(_op(slave, False, b0 - lo, phys0, b1 - b0))
+            if read_ops or write_ops:
+                plan.append((slave, slave.mem, write_ops, read_ops))
         return plan
 
     # -- running on a link -------------------------------------------------------------------
@@ -339,18 +330,20 @@ class VirtualSegment:
 
 
 def _op(slave: EmulatedSlave, write: bool, frame_bit: int, phys_bit: int,
-        bits: int) -> _LogicalOp:
+        bits: int) -> tuple:
     """The access of ``bits`` bits from datagram bit ``frame_bit`` to physical bit
     ``phys_bit``: a byte run when both sides are byte-aligned, otherwise masked byte
-    operations (one per pair of frame and memory bytes the bits meet in)."""
+    operations (one per pair of frame and memory bytes the bits meet in).  The op is gated
+    by the process-data SM it goes through (no working counter while that SM is off or
+    the slave is below SAFEOP) and says whether it completes that SM's buffer."""
     phys = phys_bit // 8
     sm = next((s for s in slave.sms if s.active and not s.is_mailbox
                and s.start <= phys < s.end), None)
     last_phys = (phys_bit + bits - 1) // 8
-    completes = sm is not None and sm.kind is SmKind.OUTPUTS and last_phys >= sm.end - 1
+    completes = (write and sm is not None and sm.kind is SmKind.OUTPUTS
+                 and last_phys >= sm.end - 1)
     if frame_bit % 8 == 0 and phys_bit % 8 == 0 and bits % 8 == 0:
-        return _LogicalOp(slave, write, frame_bit // 8, phys, bits // 8, sm=sm,
-                          completes_sm=completes)
+        return (frame_bit // 8, phys, bits // 8, (), sm, completes)
     # Group the bits by (frame byte, memory byte): within a pair the shift between frame
     # bit and memory bit is constant (it differs by 8 between neighbouring pairs).
     groups: dict[tuple[int, int, int], int] = {}
@@ -359,6 +352,6 @@ def _op(slave: EmulatedSlave, write: bool, frame_bit: int, phys_bit: int,
         key = (fb // 8, pb // 8, fb % 8 - pb % 8)
         groups[key] = groups.get(key, 0) | 1 << (pb % 8 if write else fb % 8)
     # write: memory bits = frame byte >> shift; read: frame bits = memory byte << shift
-    masked = [(fbyte, pbyte, shift, mask) for (fbyte, pbyte, shift), mask in groups.items()]
-    return _LogicalOp(slave, write, frame_bit // 8, phys, 0, tuple(masked), sm=sm,
-                      completes_sm=completes)
+    masked = tuple((fbyte, pbyte, shift, mask)
+                   for (fbyte, pbyte, shift), mask in groups.items())
+    return (frame_bit // 8, phys, 0, masked, sm, completes)

@@ -100,6 +100,7 @@ class EmulatedSlave:
         self.on_mapping_change: Callable[[], None] | None = None
         self.outputs_valid = False
         self._last_output_write = 0.0
+        self._watchdog_limit: float | None = None
         self._clock_base = 0
         self._ro = bytearray(PROCESS_RAM)
         for start, end in _READ_ONLY:
@@ -242,6 +243,10 @@ class EmulatedSlave:
             pass    # receive-time latch: done by the segment, which knows the line
         if _overlaps(ado, n, Reg.DC_SYSTEM_TIME, Reg.DC_SYSTEM_TIME + 8):
             self._system_time_written()
+        if (self.mem[Reg.AL_STATUS] & 0x0F == AlState.OP
+                and (_overlaps(ado, n, Reg.WATCHDOG_DIVIDER, Reg.WATCHDOG_SM + 2)
+                     or _overlaps(ado, n, Reg.SM0, sm_register(N_SM)))):
+            self._arm_watchdog()
         if _overlaps(ado, n, Reg.AL_CONTROL, Reg.AL_CONTROL + 2):
             self._al_control()
 
@@ -347,9 +352,9 @@ class EmulatedSlave:
 
     # -- process data ------------------------------------------------------------------------
 
-    def outputs_written(self) -> None:
+    def outputs_written(self, now: float | None = None) -> None:
         """A complete write of an output SM (feeds the SM watchdog)."""
-        self._last_output_write = time.monotonic()
+        self._last_output_write = time.monotonic() if now is None else now
         self.outputs_valid = True
         self.mem[0x0440] = 1
 
@@ -381,22 +386,27 @@ class EmulatedSlave:
 
     def check_watchdog(self, now: float) -> None:
         """SM watchdog: in OP, outputs that stop arriving for longer than the watchdog time
-        drop the slave to SAFEOP+ERR 0x001B and clear its outputs."""
-        if self.state != AlState.OP:
+        drop the slave to SAFEOP+ERR 0x001B and clear its outputs.  Runs every few
+        milliseconds for every slave: the limit is worked out when the slave enters OP."""
+        limit = self._watchdog_limit
+        if limit is None or self.mem[Reg.AL_STATUS] & 0x0F != AlState.OP:
             return
-        sms = [sm for sm in self.process_sms(SmKind.OUTPUTS) if sm.control & WATCHDOG_ENABLE]
-        if not sms:
-            return
-        divider, = struct.unpack_from("<H", self.mem, Reg.WATCHDOG_DIVIDER)
-        time_units, = struct.unpack_from("<H", self.mem, Reg.WATCHDOG_SM)
-        if not time_units:
-            return
-        limit = time_units * (divider + 2) * 40e-9
         if now - self._last_output_write > limit:
             self.mem[0x0440] = 0
-            for sm in sms:
+            for sm in self.process_sms(SmKind.OUTPUTS):
                 self.mem[sm.start:sm.end] = bytes(sm.length)
             self._set_state(AlState.SAFEOP, AL_SM_WATCHDOG)
+
+    def _arm_watchdog(self) -> None:
+        """The SM watchdog time (0x0420 x (0x0400 + 2) x 40 ns), or None when no output SM
+        has its watchdog enabled (control bit 6) or the time is 0."""
+        self._watchdog_limit = None
+        watched = [sm for sm in self.process_sms(SmKind.OUTPUTS)
+                   if sm.control & WATCHDOG_ENABLE]
+        divider, = struct.unpack_from("<H", self.mem, Reg.WATCHDOG_DIVIDER)
+        time_units, = struct.unpack_from("<H", self.mem, Reg.WATCHDOG_SM)
+        if watched and time_units:
+            self._watchdog_limit = time_units * (divider + 2) * 40e-9
 
     # -- AL state machine --------------------------------------------------------------------
 
@@ -519,8 +529,13 @@ class EmulatedSlave:
             self.outputs_valid = False
         if target == AlState.OP:
             self._last_output_write = time.monotonic()
+            self._arm_watchdog()
         if target <= AlState.INIT:
             self.mailbox_queue.clear()
+        if target == AlState.PREOP and self.state == AlState.INIT:
+            self.last_mailbox = None
+            if self.sdo_server is not None:
+                self.sdo_server.reset()
         self._set_state(target, 0)
 
     def _set_state(self, state: AlState, code: int) -> None:

@@ -2,8 +2,9 @@
 namespace: ``python soem_probe.py IFACE JSON_OPTIONS``; prints one JSON object.
 
 Options: ``outputs`` (hex, written to every slave with outputs once in SAFEOP and OP),
-``assign`` ({"slave": N, "index": 0x1C13, "pdos": [...]}: an SDO download of a PDO
-assignment after config_map, i.e. after SOEM sized the SyncManagers), ``cycles`` (process
+``assign`` ({"slave": N, "index": 0x1C13, "pdos": [...]}: after config_map, i.e. after
+SOEM sized the SyncManagers, the slave goes back to PREOP and gets this PDO assignment by
+SDO download), ``cycles`` (process
 data cycles in OP).
 """
 
@@ -37,7 +38,11 @@ def main() -> None:
         result["sizes"] = [(len(s.output), len(s.input)) for s in master.slaves]
         assign = options.get("assign")
         if assign:
+            # config_map ends by requesting SAFEOP; PDO assignment is writable in PREOP.
             slave = master.slaves[assign["slave"]]
+            slave.state = pysoem.PREOP_STATE
+            slave.write_state()
+            result["back_to_preop"] = slave.state_check(pysoem.PREOP_STATE, STATE_TIMEOUT_US)
             pdos = assign["pdos"]
             try:
                 slave.sdo_write(assign["index"], 0, b"\x00")

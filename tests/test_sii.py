@@ -676,11 +676,17 @@ def test_cli_build_unknown_device_and_size_warning(tmp_path):
                 str(tmp_path / "o.bin"))
     assert r.returncode == 1 and "no device with Type name 'NOPE'" in r.stderr
     assert not (tmp_path / "o.bin").exists()
-    r = ecatcfg("sii", "build", "examples/esi", "--device", "EX1004", "-o",
+    # An ESI whose Eeprom/ByteSize is too small for its own image: built, with a warning.
+    small = tmp_path / "esi"
+    small.mkdir()
+    (small / "io.xml").write_text(
+        (ROOT / "examples/esi/ecatcfg-EXxxxx-digital-io.xml").read_text().replace(
+            "<ByteSize>2048</ByteSize>", "<ByteSize>256</ByteSize>"))
+    r = ecatcfg("sii", "build", str(small), "--device", "EX1004", "-o",
                 str(tmp_path / "o.bin"))
     assert r.returncode == 0, r.stderr
     assert "warning: " in r.stderr and "more than Eeprom/ByteSize 256" in r.stderr
-    assert "ecatcfg-EXxxxx-digital-io.xml:" in r.stderr
+    assert "io.xml:" in r.stderr
 
 
 def test_help_lists_sii_and_stays_light():

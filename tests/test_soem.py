@@ -113,8 +113,8 @@ def test_outputs_reach_the_slaves_in_op(veth_netns, pysoem_module, corpus_lib):
     with serving(veth_netns, seg):
         original = seg.slaves[1].outputs_written
 
-        def record() -> None:
-            original()
+        def record(now: float | None = None) -> None:
+            original(now)
             if seg.slaves[1].state == 8:
                 seen.append(seg.slaves[1].outputs())
         seg.slaves[1].outputs_written = record
@@ -141,7 +141,7 @@ def test_wrong_pdo_assignment_is_refused_like_a_real_slave(veth_netns, pysoem_mo
     with serving(veth_netns, seg):
         report = soem(veth_netns, {"assign": {"slave": 0, "index": 0x1C13,
                                               "pdos": tx_default[:1] + [0x1A03]}})
-    assert report["assign"] == "written", report
+    assert report["back_to_preop"] == 2 and report["assign"] == "written", report
     assert report["safeop"] != 4
     state, code = report["al"][0]
     assert (state & 0x0F, state & 0x10, code) == (2, 0x10, 0x001E)
@@ -161,7 +161,12 @@ def test_64_slave_mixed_segment(veth_netns, pysoem_module, corpus_lib):
     assert [tuple(x) for x in report["sizes"]] == sizes
     assert report["iomap"] == sum(o + i for o, i in sizes)
     assert report["op"] == 8, report["al_op"]
-    assert report["wkc"] == report["expected_wkc"]
+    # The working counter of SOEM's LRW by the ESC rule: +2 per slave with outputs, +1 per
+    # slave with inputs.  (SOEM's own expected_wkc leaves out slaves whose inputs are
+    # only bits, e.g. EL1004: measured 71 expected against this rule's count.)
+    want = sum(2 * (o > 0) + (i > 0) for o, i in sizes)
+    assert report["wkc"] == want
+    assert report["expected_wkc"] <= want
 
 
 def test_simulate_command_serves_soem(veth_netns, pysoem_module, corpus, tmp_path):

@@ -1,0 +1,129 @@
+"""``ecatcfg scan``: which slaves are on the line, by their SII identity."""
+
+from __future__ import annotations
+
+import argparse
+import re
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "scan", help="list the slaves on a line (SII identity, ESI names)",
+        description="Count the slaves on the line and read each one's identity (vendor, "
+                    "product, revision, serial) from its SII EEPROM, addressed by position: "
+                    "nothing but the SII interface registers is written.  With --esi the "
+                    "devices are named from the ESI files; --topology-out writes a topology "
+                    "file for the line found.",
+        epilog="Exit 1 when no frame comes back (nothing on the interface, or not an "
+               "EtherCAT line).")
+    p.add_argument("--iface", required=True, metavar="IF",
+                   help="network interface of the EtherCAT line")
+    p.add_argument("--esi", action="append", default=[], metavar="PATH",
+                   help="ESI file or folder (searched recursively) to name the devices; "
+                        "repeatable")
+    p.add_argument("--topology-out", metavar="FILE",
+                   help="write a topology (YAML) for the slaves found")
+    p.add_argument("--format", choices=["text", "json"], default="text")
+    p.add_argument("--no-cache", action="store_true",
+                   help="do not read or write the ESI index cache")
+    p.set_defaults(run=run)
+
+
+def slave_name(type_name: str | None, used: dict[str, int]) -> str:
+    """A unique topology name: the ESI Type lower-cased (runs of other characters become
+    '_') and a number counting that type from 1; 'slave' when the device is unknown."""
+    base = re.sub(r"[^a-z0-9]+", "_", (type_name or "").strip().lower()).strip("_")
+    base = base or "slave"
+    used[base] = used.get(base, 0) + 1
+    return f"{base}_{used[base]}"
+
+
+def topology_yaml(rows: list[dict], iface: str) -> str:
+    """The topology text for the slaves found (names and exact device selectors)."""
+    lines = [f"# Written by 'ecatcfg scan --iface {iface}': the slaves found, in bus order.",
+             "# Devices are VENDOR:PRODUCT:REVISION from each slave's SII EEPROM.",
+             "slaves:"]
+    for row in rows:
+        shown = " ".join((row["type"] or "").split())
+        note = f"  # {shown}" if shown else "  # not in the ESI files given"
+        lines.append(f"  - {{name: {row['topology_name']}, device: \"{row['selector']}\"}}"
+                     f"{note}")
+    return "\n".join(lines) + "\n"
+
+
+def run(args: argparse.Namespace) -> int:
+    import json
+    import sys
+    from pathlib import Path
+
+    from ecatcfg.errors import UsageError
+
+    if args.topology_out and not Path(args.topology_out).resolve().parent.is_dir():
+        raise UsageError(f"{args.topology_out}: folder does not exist")
+    lib = None
+    if args.esi:
+        from ecatcfg.esi.library import Library
+        lib = Library(args.esi, cache=not args.no_cache)
+        for problem in lib.problems:
+            print(f"warning: {problem}", file=sys.stderr)
+
+    from ecatcfg.runtime.link import RawLink
+    from ecatcfg.runtime.scan import scan
+    from ecatcfg.runtime.transport import Transport
+
+    with RawLink(args.iface) as link:
+        found = scan(Transport(link))
+
+    used: dict[str, int] = {}
+    rows = []
+    for s in found:
+        exact = other = None
+        if lib is not None:
+            same = [e for e in lib.entries
+                    if (e.vendor_id, e.product_code) == (s.vendor_id, s.product_code)]
+            exact = next((e for e in same if e.revision == s.revision), None)
+            if exact is None and same:
+                other = max(same, key=lambda e: e.revision if e.revision is not None else -1)
+        entry = exact or other
+        note = None
+        if other is not None:
+            note = (f"revision 0x{s.revision:x} is not in the ESI files; they have "
+                    + ", ".join(sorted({f"0x{e.revision:x}" for e in lib.entries
+                                        if (e.vendor_id, e.product_code) ==
+                                        (s.vendor_id, s.product_code)
+                                        and e.revision is not None})))
+        rows.append({
+            "position": s.position, "vendor_id": s.vendor_id,
+            "product_code": s.product_code, "revision": s.revision, "serial_no": s.serial_no,
+            "type": entry.type.strip() if entry else None,
+            "name": entry.name.strip() if entry else None,
+            "file": entry.file if entry else None, "line": entry.line if entry else None,
+            "exact": exact is not None, "note": note,
+            "selector": f"0x{s.vendor_id:x}:0x{s.product_code:x}:0x{s.revision:x}",
+            "topology_name": slave_name(entry.type if entry else None, used),
+        })
+
+    if args.topology_out:
+        if not rows:
+            from ecatcfg.errors import EcatcfgError
+            raise EcatcfgError(f"no slaves answered on {args.iface}: no topology written to "
+                               f"{args.topology_out}")
+        from ecatcfg.fileio import write_atomic
+        write_atomic(args.topology_out, topology_yaml(rows, args.iface).encode())
+
+    if args.format == "json":
+        print(json.dumps({"slaves": rows, "count": len(rows),
+                          "topology": args.topology_out}, indent=2))
+        return 0
+    print(f"{len(rows)} slave{'s' if len(rows) != 1 else ''} on {args.iface}")
+    if rows:
+        print(f"{'pos':>3}  {'vendor':10} {'product':10} {'revision':10} {'serial':10}  "
+              f"{'type':14} name")
+        for r in rows:
+            print(f"{r['position']:>3}  0x{r['vendor_id']:08x} 0x{r['product_code']:08x} "
+                  f"0x{r['revision']:08x} 0x{r['serial_no']:08x}  "
+                  f"{(r['type'] or '-')[:14]:14} {r['name'] or '-'}"
+                  + (f"  ({r['note']})" if r["note"] else ""))
+    if args.topology_out:
+        print(f"topology written to {args.topology_out}")
+    return 0

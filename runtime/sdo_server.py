@@ -1,0 +1,227 @@
+"""The CoE SDO server of an emulated slave: mailbox messages in (SM0), messages out (SM1).
+
+Handles expedited, normal and segmented upload and download, complete access, toggle
+checks and aborts (ETG.1000.6 §5.6.2; facts sheet §5 mailbox, §6 CoE).  Mailbox-level
+problems get a mailbox error reply (type 0), as SOES ``MBX_error`` does.
+
+Choices where the facts sheet is silent:
+
+- SDO information requests (service 8) are answered with an SDO information error
+  (opcode 7) carrying abort 0x06010000, as SOES answers opcodes it does not implement; the
+  emulation has no OD list / object descriptions.
+- Other CoE services (emergency, PDO over mailbox, an SDO *response* sent to the slave) get a
+  mailbox error reply with detail 4 (service not supported).
+- A channel other than 0 gets detail 3 (invalid channel).
+- Responses are padded to the SM1 length: the slave writes the whole SM1 area, because writing
+  its last byte is what marks the mailbox full (facts §3).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from ecatcfg.esc import AlState
+from ecatcfg.runtime.mailbox import (
+    ABORT_TOGGLE, ABORT_TYPE_MISMATCH, ABORT_UNKNOWN_COMMAND, ABORT_UNSUPPORTED_ACCESS,
+    COE_HEADER, MBX_HEADER_SIZE, NORMAL_OVERHEAD, SEGMENT_OVERHEAD, Abort, CoeMessage,
+    CoeService, DownloadSegment, InitiateDownload, InitiateUpload, MailboxCounter,
+    MailboxHeader, MailboxProtocolError, MbxErrorDetail, MbxType, SdoAbort, UnknownSdo,
+    UploadSegmentRequest, decode_coe, encode_abort, encode_download_response,
+    encode_download_segment_response, encode_mailbox_error, encode_sdo_info_error,
+    encode_upload_expedited, encode_upload_normal, encode_upload_segment, pad_to,
+)
+from ecatcfg.runtime.objects import ObjectDictionary
+
+
+@dataclass(slots=True)
+class _Download:
+    """A segmented download in progress."""
+
+    index: int
+    subindex: int
+    complete_access: bool
+    size: int
+    data: bytearray = field(default_factory=bytearray)
+    toggle: bool = False            # the toggle the next segment must carry
+
+
+@dataclass(slots=True)
+class _Upload:
+    """A segmented upload in progress."""
+
+    index: int
+    subindex: int
+    data: bytes
+    offset: int
+    toggle: bool = False
+
+
+class SdoServer:
+    """SDO server over one slave's mailbox.
+
+    ``mbx_out_size`` / ``mbx_in_size`` are the SM0 (master -> slave) and SM1 (slave ->
+    master) lengths: they bound the messages accepted and the segment sizes sent
+    (SM1 size - 16 bytes of data in an initiate upload response, SM1 size - 9 per segment).
+    """
+
+    def __init__(self, od: ObjectDictionary, mbx_out_size: int, mbx_in_size: int) -> None:
+        if mbx_out_size < MBX_HEADER_SIZE + 10 or mbx_in_size < NORMAL_OVERHEAD + 1:
+            raise ValueError(f"mailbox too small for CoE: SM0 {mbx_out_size}, SM1 "
+                             f"{mbx_in_size} bytes")
+        self.od = od
+        self.mbx_out_size = mbx_out_size
+        self.mbx_in_size = mbx_in_size
+        self._counter = MailboxCounter()
+        self._last_counter: int | None = None
+        self._transfer: _Download | _Upload | None = None
+
+    def reset(self) -> None:
+        """The mailbox starts afresh (INIT -> PREOP): forget the last counter and any
+        transfer in progress, as SOES does when it starts the mailbox."""
+        self._last_counter = None
+        self._transfer = None
+
+    def handle(self, request: bytes, state: AlState) -> list[bytes]:
+        """The messages (headers included, padded to SM1) answering one mailbox message
+        as the master wrote it into SM0 (the whole SM area, padding included)."""
+        if len(request) < MBX_HEADER_SIZE:
+            return [self._error(MbxErrorDetail.SIZE_TOO_SHORT)]
+        header = MailboxHeader.unpack(request)
+        # A repeated message (non-zero counter equal to the last one) is dropped, as SOES
+        # does with mbxincnt (facts §5).
+        if header.counter and header.counter == self._last_counter:
+            return []
+        self._last_counter = header.counter
+        if header.length == 0 or header.length > min(len(request),
+                                                     self.mbx_out_size) - MBX_HEADER_SIZE:
+            return [self._error(MbxErrorDetail.INVALID_HEADER)]
+        if header.channel != 0:
+            return [self._error(MbxErrorDetail.INVALID_CHANNEL)]
+        if header.type != MbxType.COE:
+            return [self._error(MbxErrorDetail.UNSUPPORTED_PROTOCOL)]
+        data = request[MBX_HEADER_SIZE:MBX_HEADER_SIZE + header.length]
+        try:
+            msg = decode_coe(data)
+        except MailboxProtocolError as error:
+            return [self._error(error.detail or MbxErrorDetail.SYNTAX)]
+        service = COE_HEADER.unpack_from(data)[0] >> 12
+        if service == CoeService.SDO_INFO:
+            return [self._out(encode_sdo_info_error(ABORT_UNSUPPORTED_ACCESS,
+                                                    self._counter()))]
+        if service != CoeService.SDO_REQUEST:
+            return [self._error(MbxErrorDetail.SERVICE_NOT_SUPPORTED)]
+        return self._sdo(msg, state)
+
+    # -- SDO ---------------------------------------------------------------------------
+
+    def _sdo(self, msg: CoeMessage, state: AlState) -> list[bytes]:
+        if isinstance(msg, Abort):
+            self._transfer = None                # the master gave up: nothing to answer
+            return []
+        if isinstance(msg, InitiateDownload):
+            self._transfer = None
+            return self._initiate_download(msg, state)
+        if isinstance(msg, DownloadSegment):
+            return self._download_segment(msg, state)
+        if isinstance(msg, InitiateUpload):
+            self._transfer = None
+            return self._initiate_upload(msg, state)
+        if isinstance(msg, UploadSegmentRequest):
+            return self._upload_segment(msg)
+        # An unknown client command specifier (block transfer, ...).
+        self._transfer = None
+        if isinstance(msg, UnknownSdo):
+            return [self._abort(msg.index, msg.subindex, ABORT_UNKNOWN_COMMAND)]
+        return [self._abort(0, 0, ABORT_UNKNOWN_COMMAND)]
+
+    def _initiate_download(self, msg: InitiateDownload, state: AlState) -> list[bytes]:
+        index, sub, ca = msg.index, msg.subindex, msg.complete_access
+        try:
+            if msg.expedited:
+                data = msg.data
+                if msg.size is None:
+                    # Expedited without the size indicator: as many of the 4 bytes as the
+                    # entry holds.
+                    current = self.od.read(index, sub, None, complete_access=ca)
+                    data = data[:len(current) or 4]
+                self.od.write(index, sub, data, state, complete_access=ca)
+            elif msg.size is None or len(msg.data) >= msg.size:
+                self.od.write(index, sub, msg.data if msg.size is None
+                              else msg.data[:msg.size], state, complete_access=ca)
+            else:
+                # Segments follow: refuse now what can be refused without the data.
+                self.od.check_write(index, sub, msg.size, state, complete_access=ca)
+                self._transfer = _Download(index, sub, ca, msg.size, bytearray(msg.data))
+        except SdoAbort as abort:
+            return [self._abort(index, sub, abort.code)]
+        return [self._out(encode_download_response(index, sub, self._counter(),
+                                                   complete_access=ca))]
+
+    def _download_segment(self, msg: DownloadSegment, state: AlState) -> list[bytes]:
+        transfer = self._transfer
+        if not isinstance(transfer, _Download):
+            self._transfer = None
+            return [self._abort(0, 0, ABORT_UNKNOWN_COMMAND)]
+        if msg.toggle != transfer.toggle:
+            self._transfer = None
+            return [self._abort(transfer.index, transfer.subindex, ABORT_TOGGLE)]
+        transfer.data += msg.data
+        if len(transfer.data) > transfer.size or (msg.last
+                                                  and len(transfer.data) != transfer.size):
+            # More (or, at the end, less) data than the initiate announced.
+            self._transfer = None
+            return [self._abort(transfer.index, transfer.subindex, ABORT_TYPE_MISMATCH)]
+        if msg.last:
+            self._transfer = None
+            try:
+                self.od.write(transfer.index, transfer.subindex, bytes(transfer.data), state,
+                              complete_access=transfer.complete_access)
+            except SdoAbort as abort:
+                return [self._abort(transfer.index, transfer.subindex, abort.code)]
+        else:
+            transfer.toggle = not transfer.toggle
+        return [self._out(encode_download_segment_response(msg.toggle, self._counter()))]
+
+    def _initiate_upload(self, msg: InitiateUpload, state: AlState) -> list[bytes]:
+        index, sub, ca = msg.index, msg.subindex, msg.complete_access
+        try:
+            data = self.od.read(index, sub, state, complete_access=ca)
+        except SdoAbort as abort:
+            return [self._abort(index, sub, abort.code)]
+        if 1 <= len(data) <= 4:
+            # Expedited, also with complete access, as SOES answers (facts §6).
+            return [self._out(encode_upload_expedited(index, sub, data, self._counter(),
+                                                      complete_access=ca))]
+        first = self.mbx_in_size - NORMAL_OVERHEAD
+        if len(data) > first:
+            self._transfer = _Upload(index, sub, data, first)
+        return [self._out(encode_upload_normal(index, sub, len(data), data[:first],
+                                               self._counter(), complete_access=ca))]
+
+    def _upload_segment(self, msg: UploadSegmentRequest) -> list[bytes]:
+        transfer = self._transfer
+        if not isinstance(transfer, _Upload):
+            self._transfer = None
+            return [self._abort(0, 0, ABORT_UNKNOWN_COMMAND)]
+        if msg.toggle != transfer.toggle:
+            self._transfer = None
+            return [self._abort(transfer.index, transfer.subindex, ABORT_TOGGLE)]
+        chunk = self.mbx_in_size - SEGMENT_OVERHEAD
+        part = transfer.data[transfer.offset:transfer.offset + chunk]
+        transfer.offset += len(part)
+        last = transfer.offset >= len(transfer.data)
+        transfer.toggle = not transfer.toggle
+        if last:
+            self._transfer = None
+        return [self._out(encode_upload_segment(part, msg.toggle, last, self._counter()))]
+
+    # -- replies -------------------------------------------------------------------------
+
+    def _out(self, msg: bytes) -> bytes:
+        return pad_to(msg, self.mbx_in_size)
+
+    def _abort(self, index: int, subindex: int, code: int) -> bytes:
+        return self._out(encode_abort(index, subindex, code, self._counter()))
+
+    def _error(self, detail: int) -> bytes:
+        return self._out(encode_mailbox_error(detail, self._counter()))
