@@ -78,6 +78,8 @@ def run(args: argparse.Namespace) -> int:
 
 def _apply(eni, esi, cycles: int) -> int:
     """Apply the compiled ENI to a virtual segment of the example devices and show it run."""
+    import struct
+
     from ecatcfg.cli.report import ApplyReport
     from ecatcfg.compiler import eni_reader
     from ecatcfg.esc import AlState
@@ -93,20 +95,28 @@ def _apply(eni, esi, cycles: int) -> int:
         inputs = {s.name: s for s in net.segment.slaves if s.device.type_name == "EX1004"}
         lamps = [v for v in net.variables if v.startswith("lamps.")]
         shown = [v for v in net.variables if v.startswith(("buttons.", "sensors."))]
-        status = next((v for v in net.variables if v.endswith("Status word")), None)
+        drive = next((s for s in net.segment.slaves if s.name == "axis1"), None)
+        status = next((v for v in net.variables if v.startswith("axis1.")
+                       and v.lower().replace(" ", "").endswith("statusword")), None)
+        position = next((v for v in net.variables if v.startswith("axis1.")
+                         and v.lower().endswith("position actual value")), None)
         print(f"\n{'cycle':>5}  {'lamps (out)':12} {'buttons+sensors (in)':20} "
-              f"{'axis1 status word' if status else ''}")
+              f"{'axis1 status word, position (in)' if status else ''}")
         for n in range(cycles):
-            # The emulated terminals "see" inputs; the master drives a running light.
+            # The emulated terminals "see" inputs and the emulated drive reports a status
+            # word ("operation enabled") and a moving position, as its application would;
+            # the master drives a running light.
             for i, slave in enumerate(inputs.values()):
                 slave.set_inputs(bytes([(n >> i) & 0x0F]))
+            if drive is not None:
+                drive.set_inputs(struct.pack("<Hi", 0x0237, 1000 * n))
             for k, name in enumerate(lamps):
                 net[name] = k == n % len(lamps)
             net.cycle()
             net.cycle()            # the inputs of this cycle come back with the next frame
             out = "".join("1" if net[v] else "0" for v in lamps)
             got = "".join("1" if net[v] else "0" for v in shown)
-            word = f"0x{net[status]:04X}" if status else ""
+            word = f"0x{net[status]:04X} {net[position]:>7}" if status and position else ""
             print(f"{n + 1:>5}  {out:12} {got:20} {word}")
         print()
     return 0

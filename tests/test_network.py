@@ -1,0 +1,201 @@
+"""The master side in memory (no root needed): the Network API, typed process variables,
+the lockstep replay, failures that name the slave and command, timeouts, the mailbox repeat,
+and the two ENI conventions for process image offsets."""
+
+from __future__ import annotations
+
+import struct
+import subprocess
+import sys
+import threading
+import time
+
+import pytest
+
+from conftest import EXAMPLES
+from ecatcfg.compiler import build, eni_reader, eni_writer, topology
+from ecatcfg.compiler.plan import InitCmd, Validate
+from ecatcfg.errors import EcatcfgError
+from ecatcfg.esc import AlState, Cmd, Transition
+from ecatcfg.esi.library import Library
+from ecatcfg.runtime import Network
+from ecatcfg.runtime.cyclic import CyclicFrames
+from ecatcfg.runtime.link import MemoryLink
+from ecatcfg.runtime.lockstep import run_jobs
+from ecatcfg.runtime.master import Master
+from ecatcfg.runtime.replay import ApplyError, init_cmd_job
+from ecatcfg.runtime.segment import Faults
+from ecatcfg.runtime.transport import Transport
+
+ESI = EXAMPLES / "esi"
+
+
+@pytest.fixture(scope="module")
+def example_plan():
+    plan = build.compile_topology(topology.load(EXAMPLES / "topology.yaml"),
+                                  Library([ESI], cache=False)).plan
+    # What the runtime gets is what the file says: read our own ENI back.
+    return eni_reader.read_bytes(eni_writer.to_bytes(plan), "example.eni.xml")
+
+
+def line_plan(kinds: list[str]):
+    text = "slaves:\n" + "".join(f"  - {{name: s{i}, device: {k}}}\n"
+                                 for i, k in enumerate(kinds))
+    plan = build.compile_topology(topology.loads(text, "t.yaml"),
+                                  Library([ESI], cache=False)).plan
+    return eni_reader.read_bytes(eni_writer.to_bytes(plan), "t.eni.xml")
+
+
+def test_process_data_both_ways(example_plan):
+    with Network.virtual(example_plan, esi=[ESI]) as net:
+        net.up()
+        assert net.state == AlState.OP
+        assert [s.state for s in net.segment.slaves] == [AlState.OP] * 5
+        net["lamps.Channel 1-8.Output 3"] = True
+        net["axis1.RxPDO 2 (CSV).Target velocity"] = -123456
+        net.cycle()
+        lamps, drive = net.segment.slaves[3], net.segment.slaves[4]
+        assert lamps.outputs() == b"\x04"
+        # RxPDO 2 (CSV): control word (16 bit), then the target velocity (DINT).
+        assert struct.unpack_from("<i", drive.outputs(), 2)[0] == -123456
+        net.segment.slaves[2].set_inputs(b"\x09")         # sensors: channels 1 and 4
+        drive.set_inputs(struct.pack("<Hi", 0x1237, -5))
+        net.cycle()
+        net.cycle()
+        assert [net[f"sensors.Channel {c}.Input"] for c in (1, 2, 3, 4)] == [
+            True, False, False, True]
+        assert net["axis1.TxPDO 1 (CSP).Statusword"] == 0x1237
+        assert net["axis1.TxPDO 1 (CSP).Position actual value"] == -5
+    # Leaving the block took the line down.
+    assert [s.state for s in net.segment.slaves] == [AlState.INIT] * 5
+
+
+def test_variables_are_typed_and_checked(example_plan):
+    with Network.virtual(example_plan, esi=[ESI]) as net:
+        with pytest.raises(EcatcfgError, match="outside DINT range"):
+            net["axis1.RxPDO 2 (CSV).Target velocity"] = 1 << 31
+        with pytest.raises(EcatcfgError, match="is an input"):
+            net["buttons.Channel 1.Input"] = True
+        with pytest.raises(EcatcfgError, match="did you mean 'lamps.Channel 1-8.Output 1'"):
+            net["lamps.Channel 1-8.Output1"]
+        assert net["lamps.Channel 1-8.Output 1"] is False
+
+
+def test_cycles_run_on_their_own_thread(example_plan):
+    seen = []
+    with Network.virtual(example_plan, esi=[ESI]) as net:
+        net.up()
+        net.run(cycles=20, callback=lambda n: seen.append(n.state), background=True)
+        deadline = time.monotonic() + 5
+        while len(seen) < 20 and time.monotonic() < deadline:
+            time.sleep(0.01)
+        net.stop()
+        assert len(seen) == 20 and net.run_stats.wkc_errors == 0
+        assert net.run_stats.lost_frames == 0
+
+
+def test_commands_of_different_slaves_share_frames():
+    plan = line_plan(["EX1100"] + ["EX1004", "EX2008"] * 20)
+    with Network.virtual(plan, esi=[ESI]) as net:
+        counters = net.master.transport.counters
+        net.master.scan_and_verify()
+        before = counters.frames_sent
+        net.master.run_transition(Transition.IP)
+        longest = max(sum(Transition.IP in c.transitions for c in s.init_cmds)
+                      for s in plan.slaves)
+        master = sum(Transition.IP in c.transitions for c in plan.master.init_cmds)
+        # One round per command of the longest chain (41 slaves' commands share frames).
+        assert counters.frames_sent - before <= longest + master + 2
+
+
+def test_refused_state_names_slave_command_and_code(example_plan):
+    with Network.virtual(example_plan, esi=[ESI]) as net:
+        net.segment.slaves[4].refuse["PS"] = 0x001E
+        start = time.monotonic()
+        with pytest.raises(ApplyError) as err:
+            net.up()
+        # The error flag is final: no waiting out the 10 s state timeout.
+        assert time.monotonic() - start < 2
+    text = str(err.value)
+    assert "slave 'axis1'" in text and "check device state for SAFEOP" in text
+    assert "0x001E (invalid input configuration)" in text
+    assert err.value.al_code == 0x001E
+
+
+def test_swapped_slaves_stop_before_any_configuration():
+    plan = line_plan(["EX1100", "EX1004", "EX2008"])
+    swapped = line_plan(["EX1100", "EX2008", "EX1004"])
+    from ecatcfg.runtime import emulate
+    lib = Library([ESI], cache=False)
+    seg = emulate.segment(emulate.specs_from_eni(swapped, lib, "x"))
+    a, b = MemoryLink.pair()
+    stop = threading.Event()
+    thread = threading.Thread(target=seg.serve, args=(b,), kwargs={"stop": stop}, daemon=True)
+    thread.start()
+    written = []
+    master = Master(plan, a, recorder=lambda f, sent: written.append(f) if sent else None)
+    try:
+        with pytest.raises(EcatcfgError, match="other device .*swapped") as err:
+            master.scan_and_verify()
+    finally:
+        stop.set()
+        thread.join(2)
+    assert "nothing was configured" in str(err.value)
+    from ecatcfg.runtime import wire
+    targets = {(d.cmd, d.ado) for f in written for d in wire.decode(f).datagrams
+               if d.cmd in (Cmd.APWR, Cmd.FPWR, Cmd.BWR)}
+    assert all(0x0500 <= ado < 0x0510 for _, ado in targets), targets
+    assert [s.station_address for s in seg.slaves] == [0, 0, 0]
+
+
+def test_a_silent_line_fails_within_the_timeout():
+    a, _b = MemoryLink.pair()                   # nobody answers
+    transport = Transport(a, timeout=0.005)
+    cmd = InitCmd([Transition.IP], "check device state for PREOP", Cmd.APRD, 2, adp=0,
+                  ado=0x0130, validate=Validate(b"\x02\x00", timeout=200))
+    start = time.monotonic()
+    with pytest.raises(ApplyError, match=r"\[check device state for PREOP\]: no reply"):
+        run_jobs(transport, [init_cmd_job(cmd, "s0")])
+    assert 0.2 <= time.monotonic() - start < 1.0
+
+
+def test_lost_mailbox_reads_are_recovered_with_the_repeat_request(example_plan):
+    # 20 % of frames lost, half of them after the slave processed them: mailbox reads
+    # whose answer was lost on the way back need the repeat toggle (ETG.1000.4).
+    from ecatcfg.runtime import wire
+    repeats = 0
+    for seed in range(5):
+        sent: list[bytes] = []
+        with Network.virtual(example_plan, esi=[ESI], faults=Faults(drop=0.2, seed=seed)) \
+                as net:
+            net.master.transport.recorder = lambda f, out: sent.append(f) if out else None
+            net.up()
+            assert net.state == AlState.OP
+            assert [s.state for s in net.segment.slaves] == [AlState.OP] * 5
+        repeats += sum(d.cmd == Cmd.FPWR and d.ado == 0x080E
+                       for f in sent for d in wire.decode(f).datagrams)
+    assert repeats > 0              # the seeds do lose mailbox answers (5 repeats)
+
+
+def test_twincat_offsets_are_frame_shaped(corpus):
+    """TwinCAT writes the datagram header's position in the frame; the data sits 10 bytes
+    later, where its variables' bit offsets point (eni-observations.md §4)."""
+    plan = eni_reader.read_file(corpus / "eni/jn-ec-master/mega_master_eni.xml")
+    frames = CyclicFrames(plan)
+    lwr = next(s for s in frames.frames[0] if s.cmd.cmd == Cmd.LWR)
+    assert (lwr.cmd.output_offs, lwr.out_at) == (29, 39)
+    el4002 = next(v for v in plan.process_image.outputs if "EL4002" in v.name)
+    assert el4002.bit_offs == lwr.out_at * 8
+    ours = CyclicFrames(line_plan(["EX1100", "EX2008"]))
+    assert all(s.in_at == s.cmd.input_offs for s in ours.frames[0])
+
+
+def test_example_program_runs():
+    done = subprocess.run([sys.executable, "-m", "ecatcfg.examples.toggle"],
+                          capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    lines = done.stdout.splitlines()
+    assert len(lines) == 6
+    assert lines[0].startswith("cycle 1: lamp 1 on   button 1 pressed")
+    assert "outputs 0x01" in lines[0] and "outputs 0x00" in lines[1]
+    assert "button 1 pressed" in lines[3]
