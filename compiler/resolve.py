@@ -38,6 +38,7 @@ class ResolvedSlave:
     remapped: set[int] = field(default_factory=set)
     pdo_prefix: dict[int, str] = field(default_factory=dict)  # module PDOs: "Module 2 (X)"
     module_dicts: list[tuple[int, Dictionary]] = field(default_factory=list)  # (offset, dic)
+    modules: list[PluggedModule] = field(default_factory=list)     # plugged, in slot order
     note: str | None = None                  # e.g. which revision was taken
 
     @property
@@ -121,6 +122,7 @@ def _resolve(cfg: Slave, pos: int, phys: int, library: Library,
     slave = ResolvedSlave(cfg, pos, device, phys, [],
                           note=selection.note if len(choices) > 1 else None)
     modules = _plug_modules(slave, library.modules_for(selection.entry), errors)
+    slave.modules = modules
     slave.module_dicts = [(p.index_offset, p.module.profile.dictionary) for p in modules
                           if p.module.profile and p.module.profile.dictionary]
     _choose_pdos(slave, modules, errors)
@@ -134,7 +136,7 @@ def _resolve(cfg: Slave, pos: int, phys: int, library: Library,
 # -- modules ------------------------------------------------------------------------------
 
 @dataclass(slots=True)
-class _Plugged:
+class PluggedModule:
     slot: int                     # 1-based
     module: Module
     pdo_offset: int
@@ -142,7 +144,7 @@ class _Plugged:
 
 
 def _plug_modules(slave: ResolvedSlave, library_modules: dict[int, Module],
-                  errors: _Errors) -> list[_Plugged]:
+                  errors: _Errors) -> list[PluggedModule]:
     dev, cfg = slave.device, slave.cfg
     where = ("slaves", slave.position, "modules")
     if dev.slots is None:
@@ -151,7 +153,7 @@ def _plug_modules(slave: ResolvedSlave, library_modules: dict[int, Module],
                        "(its ESI has no Slots)", *where)
         return []
     slots = dev.slots.slots
-    plugged: list[_Plugged] = []
+    plugged: list[PluggedModule] = []
     for number in cfg.modules:
         if not 1 <= number <= len(slots):
             errors.add(f"slave {cfg.name!r}: slot {number} does not exist; {dev.type_name} "
@@ -175,13 +177,20 @@ def _plug_modules(slave: ResolvedSlave, library_modules: dict[int, Module],
                        f"{allowed or 'module classes ' + ', '.join(slot.module_classes)}",
                        *where, number)
             continue
-        pdo_inc = slot.slot_pdo_increment if slot.slot_pdo_increment is not None \
-            else dev.slots.slot_pdo_increment
-        idx_inc = slot.slot_index_increment if slot.slot_index_increment is not None \
-            else dev.slots.slot_index_increment
-        plugged.append(_Plugged(number, module, (number - 1) * (pdo_inc or 0),
-                                (number - 1) * (idx_inc or 0)))
+        plugged.append(plugged_module(dev, number, module))
     return plugged
+
+
+def plugged_module(device: Device, number: int, module: Module) -> PluggedModule:
+    """``module`` in slot ``number`` (from 1) of ``device``: its PDO and object offsets are
+    (number - 1) x the slot's (or all slots') SlotPdoIncrement / SlotIndexIncrement."""
+    slot = device.slots.slots[number - 1]
+    pdo_inc = slot.slot_pdo_increment if slot.slot_pdo_increment is not None \
+        else device.slots.slot_pdo_increment
+    idx_inc = slot.slot_index_increment if slot.slot_index_increment is not None \
+        else device.slots.slot_index_increment
+    return PluggedModule(number, module, (number - 1) * (pdo_inc or 0),
+                         (number - 1) * (idx_inc or 0))
 
 
 # -- PDO choice ---------------------------------------------------------------------------
@@ -205,7 +214,7 @@ def default_sm(device: Device, direction: str) -> SyncManager | None:
     return next((sm for sm in device.sms if sm.type == wanted and not sm.virtual), None)
 
 
-def _choose_pdos(slave: ResolvedSlave, modules: list[_Plugged], errors: _Errors) -> None:
+def _choose_pdos(slave: ResolvedSlave, modules: list[PluggedModule], errors: _Errors) -> None:
     dev, cfg = slave.device, slave.cfg
     # ESI document order (the ENI lists PDOs, and EC-Engineer clears them, in that order).
     pdos = [_desc(p) for p in sorted(dev.rx_pdos + dev.tx_pdos, key=lambda p: p.source.line)]
@@ -417,7 +426,7 @@ def _coe_cmd(cmd, offset: int = 0) -> CoeInitCmd:
                       complete_access=cmd.complete_access, fixed=cmd.fixed)
 
 
-def _sdos(slave: ResolvedSlave, modules: list[_Plugged], errors: _Errors) -> None:
+def _sdos(slave: ResolvedSlave, modules: list[PluggedModule], errors: _Errors) -> None:
     dev, cfg = slave.device, slave.cfg
     esi = [_coe_cmd(c) for c in (dev.mailbox.coe.init_cmds
                                  if dev.mailbox and dev.mailbox.coe else [])]

@@ -6,11 +6,11 @@ object dictionary with an SDO server (``runtime/objects.py``, ``runtime/sdo_serv
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from ecatcfg.esi import sii
 from ecatcfg.esi.coe import has_coe
-from ecatcfg.esi.model import Device
+from ecatcfg.esi.model import Device, Dictionary, Pdo, PdoEntry, Profile
 from ecatcfg.runtime.segment import Faults, VirtualSegment
 from ecatcfg.runtime.slave import EmulatedSlave
 
@@ -23,6 +23,9 @@ class SlaveSpec:
     name: str = ""
     serial: int = 0
     alias: int = 0
+    # (index, subindex, data) the configuration writes that the dictionary may not have:
+    # a modular device from an ENI whose modules cannot be told (see specs_from_eni).
+    extra_writes: tuple[tuple[int, int, bytes], ...] = ()
 
 
 def emulated_slave(spec: SlaveSpec) -> EmulatedSlave:
@@ -32,6 +35,10 @@ def emulated_slave(spec: SlaveSpec) -> EmulatedSlave:
         from ecatcfg.runtime.objects import ObjectDictionary
         from ecatcfg.runtime.sdo_server import SdoServer
         od = ObjectDictionary.from_device(dev)
+        esi_cmds = dev.mailbox.coe.init_cmds if dev.mailbox and dev.mailbox.coe else []
+        _add_written_objects(od, [(c.index, c.subindex or 0, c.data) for c in esi_cmds
+                                  if c.index is not None and c.data is not None
+                                  and not c.complete_access] + list(spec.extra_writes))
         out = next((s for s in dev.sms if s.type == "MBoxOut"), None)
         inp = next((s for s in dev.sms if s.type == "MBoxIn"), None)
         server = SdoServer(od, (out.default_size if out else None) or 128,
@@ -40,38 +47,52 @@ def emulated_slave(spec: SlaveSpec) -> EmulatedSlave:
     return EmulatedSlave(dev, image, name=spec.name, od=od, sdo_server=server)
 
 
+def _add_written_objects(od, writes: list[tuple[int, int, bytes]]) -> None:
+    """Objects that startup commands write but the dictionary does not describe: the ESI's
+    own CoE InitCmds (Weidmueller UR20-FBC writes 0xF810:01, lint ESI301; the vendor's
+    configurator writes it, so the real device has it) and ``SlaveSpec.extra_writes``.
+    They are created as writable octets of the written length."""
+    from ecatcfg.runtime.objects import OdEntry, OdObject
+
+    for index, sub, data in writes:
+        obj = od[index] if index in od else None
+        if obj is None:
+            obj = od.add(OdObject(index, f"0x{index:04X}", variable=sub == 0))
+            if sub:
+                obj.add(OdEntry(0, "Number of entries", "USINT", 8, bytes([sub]),
+                                access="ro"))
+        if sub not in obj.entries:
+            obj.add(OdEntry(sub, f"subindex {sub}", "OCTET_STRING", 8 * len(data),
+                            bytes(len(data))))
+            if sub and not obj.variable and 0 in obj.entries and obj[0].as_int() < sub:
+                obj[0].value = bytes([sub])
+
+
 def segment(specs: list[SlaveSpec], faults: Faults | None = None) -> VirtualSegment:
     """A line of emulated slaves in the order given."""
     return VirtualSegment([emulated_slave(s) for s in specs], faults)
 
 
 def specs_from_topology(loaded, library) -> list[SlaveSpec]:
-    """The slaves of a topology file (``compiler/topology.py``), each with its ESI device.
-    An unknown device is an error at the slave's line."""
-    from ecatcfg.errors import EcatcfgError
+    """The slaves of a topology file, each with its ESI device; a modular device gets the
+    modules the topology plugs into its slots.  The compiler's checks apply (an unknown
+    device or a module that does not fit its slot is an error at the topology line)."""
+    from ecatcfg.compiler.resolve import resolve_all
+    from ecatcfg.compiler.topology import TopologyError
 
-    specs, errors = [], []
-    for i, cfg in enumerate(loaded.topology.slaves):
-        try:
-            device = library.device(library.find(cfg.device).entry)
-        except EcatcfgError as exc:
-            errors.append(loaded.error(f"slave {cfg.name!r}: {exc.message}", "slaves", i,
-                                       "device"))
-            continue
-        if cfg.modules:
-            errors.append(loaded.error(f"slave {cfg.name!r}: modules are not emulated yet; "
-                                       "the virtual segment runs devices without slots",
-                                       "slaves", i, "modules"))
-            continue
-        specs.append(SlaveSpec(device, cfg.name, alias=cfg.alias or 0))
+    resolved, errors = resolve_all(loaded, library)
     if errors:
-        raise EcatcfgError("\n".join(str(e) for e in errors))
-    return specs
+        raise TopologyError(errors)
+    return [SlaveSpec(with_modules(r.device, r.modules, r.module_dicts), r.name,
+                      alias=r.cfg.alias or 0) for r in resolved]
 
 
 def specs_from_eni(plan, library, shown: str) -> list[SlaveSpec]:
     """The slaves an ENI describes (identity and order); their behaviour comes from the
-    ESI devices with exactly that vendor, product and revision."""
+    ESI devices with exactly that vendor, product and revision.  A modular device gets the
+    modules of the ENI's module ident list (CoE 0xF030, written in PREOP->SAFEOP) and the
+    PDOs the ENI lists for it; when the ENI names no modules (UR20 keeps its idents in
+    vendor objects), the objects its startup SDOs write are accepted as they are."""
     from ecatcfg.errors import EcatcfgError
 
     specs, missing = [], []
@@ -82,7 +103,103 @@ def specs_from_eni(plan, library, shown: str) -> list[SlaveSpec]:
         except EcatcfgError as exc:
             missing.append(f"slave {s.name!r} (position {s.position}): {exc.message}")
             continue
-        specs.append(SlaveSpec(device, s.name, serial=s.serial_no))
+        extra: tuple[tuple[int, int, bytes], ...] = ()
+        if device.slots is not None:
+            device, known = _eni_modules(device, s, library.modules_for(
+                library.find(selector).entry))
+            if not known and s.mailbox is not None:
+                # Modules the ENI does not name: accept the objects its startup SDOs write.
+                extra = tuple((c.index, c.subindex, c.data) for c in s.mailbox.coe_init_cmds
+                              if not c.complete_access and not _pdo_object(c.index))
+        specs.append(SlaveSpec(device, s.name, serial=s.serial_no, extra_writes=extra))
     if missing:
         raise EcatcfgError(f"{shown}: no ESI for " + "; ".join(missing))
     return specs
+
+
+# -- modular devices --------------------------------------------------------------------------
+
+def with_modules(device: Device, modules, module_dicts) -> Device:
+    """``device`` with the PDOs and dictionaries of its plugged modules: PDO and object
+    indices marked DependOnSlot move by the slot's increments (ETG.2000 Slots)."""
+    if not modules:
+        return device
+    rx, tx = list(device.rx_pdos), list(device.tx_pdos)
+    for plugged in modules:
+        for pdo in plugged.module.rx_pdos + plugged.module.tx_pdos:
+            moved = _moved_pdo(device, pdo, plugged.pdo_offset, plugged.index_offset)
+            (rx if pdo.direction == "rx" else tx).append(moved)
+    profiles = list(device.profiles) + [
+        Profile(dic.source, dictionary=_moved_dictionary(dic, offset))
+        for offset, dic in module_dicts]
+    return replace(device, rx_pdos=rx, tx_pdos=tx, profiles=profiles)
+
+
+def _default_sm(device: Device, direction: str) -> int | None:
+    wanted = "Outputs" if direction == "rx" else "Inputs"
+    return next((sm.number for sm in device.sms if sm.type == wanted and not sm.virtual),
+                None)
+
+
+def _moved_pdo(device: Device, pdo: Pdo, pdo_offset: int, index_offset: int) -> Pdo:
+    entries = [replace(e, index=(e.index or 0) + (index_offset if e.depend_on_slot and e.index
+                                                   else 0)) for e in pdo.entries]
+    return replace(pdo, index=(pdo.index or 0) + (pdo_offset if pdo.depend_on_slot else 0),
+                   sm=pdo.sm if pdo.sm is not None else _default_sm(device, pdo.direction),
+                   entries=entries)
+
+
+def _moved_dictionary(dic: Dictionary, offset: int) -> Dictionary:
+    objects = {}
+    for index, obj in dic.objects.items():
+        moved = index + offset if obj.depend_on_slot else index
+        objects[moved] = replace(obj, index=moved)
+    return Dictionary(dic.data_types, objects, dic.source)
+
+
+MODULE_IDENT_LIST = 0xF030
+
+
+def _pdo_object(index: int) -> bool:
+    return 0x1600 <= index <= 0x1BFF or 0x1C10 <= index <= 0x1C2F
+
+
+def _eni_modules(device: Device, slave, library_modules) -> tuple[Device, bool]:
+    """A modular device as an ENI configures it: the modules named by its 0xF030 InitCmds
+    (one subindex per slot, or the whole list with CompleteAccess) bring their dictionaries;
+    the PDOs are the ENI's."""
+    from ecatcfg.compiler.resolve import plugged_module
+
+    idents: dict[int, int] = {}
+    coe = slave.mailbox.coe_init_cmds if slave.mailbox else []
+    for cmd in coe:
+        if cmd.index != MODULE_IDENT_LIST or not cmd.data:
+            continue
+        if cmd.complete_access:              # count, pad byte, then one u32 per slot
+            words = cmd.data[2:] if cmd.subindex == 0 else cmd.data
+            for n in range(len(words) // 4):
+                idents[n + 1] = int.from_bytes(words[4 * n:4 * n + 4], "little")
+        elif cmd.subindex and len(cmd.data) >= 4:
+            idents[cmd.subindex] = int.from_bytes(cmd.data[:4], "little")
+    plugged = [plugged_module(device, n, library_modules[ident])
+               for n, ident in sorted(idents.items())
+               if 1 <= n <= len(device.slots.slots) and ident in library_modules]
+    dicts = [(p.index_offset, p.module.profile.dictionary) for p in plugged
+             if p.module.profile and p.module.profile.dictionary]
+    device = with_modules(device, plugged, dicts)
+    if slave.process_data is not None and slave.process_data.pdos:
+        device = _with_eni_pdos(device, slave.process_data.pdos)
+    return device, bool(plugged)
+
+
+def _with_eni_pdos(device: Device, pdos) -> Device:
+    """The ENI's PDO list as the device's own (module PDOs included)."""
+    rx, tx = [], []
+    for p in pdos:
+        entries = [PdoEntry(e.index, e.subindex, e.bit_len, e.data_type, {1033: e.name},
+                            device.source) for e in p.entries]
+        pdo = Pdo(p.direction, p.index, {1033: p.name}, device.source, sm=p.sm,
+                  fixed=p.fixed, mandatory=p.mandatory, virtual=p.virtual,
+                  excludes=list(p.excludes), entries=entries)
+        (rx if p.direction == "rx" else tx).append(pdo)
+    return replace(device, rx_pdos=rx, tx_pdos=tx)

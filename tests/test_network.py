@@ -199,3 +199,42 @@ def test_example_program_runs():
     assert lines[0].startswith("cycle 1: lamp 1 on   button 1 pressed")
     assert "outputs 0x01" in lines[0] and "outputs 0x00" in lines[1]
     assert "button 1 pressed" in lines[3]
+
+
+@pytest.mark.parametrize("slave", [
+    "{name: d, device: Drive1, modules: {1: 0x100, 2: 0x200}}",      # Copley XE2: 2 axes
+    "{name: c, device: 'UR20-FBC-EC', modules: {1: 0x91f84}}",       # Weidmueller + 4DI
+], ids=["copley", "ur20"])
+@pytest.mark.parametrize("source", ["topology", "eni"])
+def test_modular_devices_are_emulated_with_their_modules(corpus, slave, source):
+    """simulate --topology plugs the topology's modules; simulate --eni takes the modules
+    from the ENI (its 0xF030 list, else accepting what its startup SDOs write) and the PDOs
+    it lists.  Either way the compiled ENI brings the slave to OP."""
+    from ecatcfg.runtime import emulate
+    lib = Library([corpus / "esi"], cache=False)
+    loaded = topology.loads(f"slaves:\n  - {slave}\n", "t.yaml")
+    plan = eni_reader.read_bytes(eni_writer.to_bytes(
+        build.compile_topology(loaded, lib).plan), "t.eni.xml")
+    specs = (emulate.specs_from_topology(loaded, lib) if source == "topology"
+             else emulate.specs_from_eni(plan, lib, "t.eni.xml"))
+    device = specs[0].device
+    assigned = sorted(p.index for p in device.rx_pdos + device.tx_pdos if p.sm is not None)
+    assert assigned == sorted(p.index for p in plan.slaves[0].process_data.pdos
+                              if p.sm is not None)
+    link, close = _serve(emulate.segment(specs))
+    with Network(plan, link, _closers=[close]) as net:
+        net.up()
+        assert net.state == AlState.OP and net.cycle()
+
+
+def _serve(seg):
+    a, b = MemoryLink.pair()
+    stop = threading.Event()
+    thread = threading.Thread(target=seg.serve, args=(b,), kwargs={"stop": stop},
+                              daemon=True)
+    thread.start()
+
+    def close() -> None:
+        stop.set()
+        thread.join(2)
+    return a, close
