@@ -52,6 +52,10 @@ def test_wheel_installs_and_runs(tmp_path):
     assert out.returncode == 0 and "0 errors, 0 warnings" in out.stdout, out.stderr
     out = run("demo", cwd=tmp_path)        # the embedded default: package data only
     assert out.returncode == 0 and "LRW (WKC 7)" in out.stdout, out.stderr
+    # ... and applied on the virtual segment: every slave in OP, process data both ways.
+    assert "SAFEOP -> OP: OP" in out.stdout and out.stdout.count("│ OP ") == 5, out.stdout
+    assert "0x0237    7000" in out.stdout and "00000001     11101100" in out.stdout
+    assert "PREOP -> INIT: INIT" in out.stdout
     assert (tmp_path / "ecatcfg-demo" / "demo.h").is_file()     # template from the wheel
     out = run("compile", str(ROOT / "examples" / "topology.yaml"), "--esi",
               str(ROOT / "examples" / "esi"), "-o", str(tmp_path / "w.xml"))
