@@ -4,7 +4,8 @@
 
     from ecatcfg.runtime import Network
 
-    with Network.virtual("line.eni.xml", esi=["esi/"]) as net:    # or Network("x.xml", RawLink("eth1"))
+    # Network("line.eni.xml", RawLink("eth1")) on hardware; here a virtual segment:
+    with Network.virtual("line.eni.xml", esi=["esi/"]) as net:
         net.up()                                                   # scan, verify, INIT -> OP
         for _ in range(1000):
             net["lamps.Channel 1-8.Output 1"] = True

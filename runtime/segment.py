@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 from ecatcfg.esc import AlState, Cmd, FmmuType, Reg
 from ecatcfg.runtime.slave import PROCESS_RAM, EmulatedSlave, StateChange
-from ecatcfg.runtime.syncman import SmKind, SmState
+from ecatcfg.runtime.syncman import SmKind
 from ecatcfg.runtime.wire import DG_HEADER_LEN, FrameError, datagram_offsets
 
 # Propagation through one slave in the emulated line (ns): processing on the way out
@@ -65,7 +65,7 @@ class VirtualSegment:
         self.slaves = slaves
         self.faults = faults or Faults()
         self._rng = random.Random(self.faults.seed)
-        self._plans: dict[tuple[int, int, int], list[list[_LogicalOp]]] = {}
+        self._plans: dict[tuple[int, int, int], list[tuple]] = {}
         self._by_address: dict[int, list[EmulatedSlave]] | None = None
         self.frames = 0
         self.on_state_change: Callable[[StateChange], None] | None = None
