@@ -52,6 +52,8 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"--cycles {args.cycles}: must be 0 or more")
     if args.pcap and not Path(args.pcap).resolve().parent.is_dir():
         raise UsageError(f"{args.pcap}: folder does not exist")
+    if args.pcap and Path(args.pcap).is_dir():
+        raise UsageError(f"{args.pcap}: is a folder, not a file to write")
     plan = eni_reader.read_file(args.eni)
     report = ApplyReport(plan, args.eni, json_output=args.format == "json")
     if args.virtual:

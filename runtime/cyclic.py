@@ -16,7 +16,7 @@ import time
 from dataclasses import dataclass, field
 
 from ecatcfg.compiler.plan import CyclicCmd, NetworkPlan
-from ecatcfg.esc import AlState, Cmd
+from ecatcfg.esc import AlState, Cmd, Reg
 from ecatcfg.runtime import wire
 from ecatcfg.runtime.transport import Transport
 from ecatcfg.runtime.wire import Datagram
@@ -43,7 +43,8 @@ class CycleStats:
         """p50/p99/max of the cycle period's deviation from the nominal, in us."""
         if len(self.periods_us) < 2:
             return {"p50": 0.0, "p99": 0.0, "max": 0.0}
-        devs = sorted(abs(p - statistics.median(self.periods_us)) for p in self.periods_us)
+        middle = statistics.median(self.periods_us)
+        devs = sorted(abs(p - middle) for p in self.periods_us)
         return {"p50": devs[len(devs) // 2], "p99": devs[min(len(devs) - 1,
                                                              int(len(devs) * 0.99))],
                 "max": devs[-1]}
@@ -64,13 +65,21 @@ class CyclicFrames:
     def __init__(self, plan: NetworkPlan) -> None:
         image = plan.process_image
         frames = [f for cyc in plan.cyclic for f in cyc.frames]
+        # The ENI's cycle time; TwinCAT files often have none, then the DC SYNC0 cycle
+        # the slaves were given; 1 ms without either.
+        dc_cycle = next((s.dc.cycle_time0 // 1000 for s in plan.slaves
+                         if s.dc is not None and s.dc.cycle_time0), None)
         self.cycle_time_us = next((c.cycle_time for c in plan.cyclic if c.cycle_time), None) \
-            or 1000
+            or dc_cycle or 1000
         self.frames: list[list[_Slot]] = []
         in_size, out_size = image.inputs_size, image.outputs_size
         for f in frames:
             shift = wire.DG_HEADER_LEN if _frame_shaped(f.cmds) else 0
-            slots = [_Slot(c, c.input_offs + shift, c.output_offs + shift) for c in f.cmds]
+            # "Bus shift" (APWR/FPWR of 0x0910) writes the master's own clock into the
+            # reference clock; this master follows the reference instead (ARMW), and sending
+            # the file's zeros would feed the reference's drift loop a huge error.
+            slots = [_Slot(c, c.input_offs + shift, c.output_offs + shift) for c in f.cmds
+                     if not (c.cmd in (Cmd.APWR, Cmd.FPWR) and c.ado == Reg.DC_SYSTEM_TIME)]
             for s in slots:
                 in_size = max(in_size, s.in_at + s.cmd.length)
                 out_size = max(out_size, s.out_at + s.cmd.length)

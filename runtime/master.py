@@ -23,8 +23,8 @@ from ecatcfg.compiler.plan import NetworkPlan, SlavePlan
 from ecatcfg.esc import AlState, Cmd, Reg, Transition
 from ecatcfg.runtime.cyclic import CyclicFrames
 from ecatcfg.runtime.lockstep import Job, run_jobs
-from ecatcfg.runtime.replay import (TIMEOUT_COMMAND, ApplyError, SlaveProgress, master_job,
-                                    slave_transition_job)
+from ecatcfg.runtime.replay import (TIMEOUT_COMMAND, ApplyError, MailboxChannel,
+                                    SlaveProgress, master_job, slave_transition_job)
 from ecatcfg.runtime.scan import FoundSlave, Mismatch, scan, verify
 from ecatcfg.runtime.transport import Transport
 from ecatcfg.runtime.wire import Datagram
@@ -83,6 +83,8 @@ class Master:
         self.cyclic = CyclicFrames(plan)
         self.state = AlState.INIT
         self.progress = {s.name: SlaveProgress(s.name) for s in self.slaves}
+        self.mailboxes = {s.name: MailboxChannel(s.phys_addr, s.mailbox)
+                          for s in self.slaves if s.mailbox is not None}
         self.on_event = on_event
         self._cycling = False
         self._next_cycle = 0.0
@@ -113,10 +115,31 @@ class Master:
             self.run_transition(transition)
 
     def bring_down(self, target: AlState = AlState.INIT) -> None:
+        """Down to ``target`` in order (OP->SAFEOP->PREOP->INIT).  Slaves with an AL error
+        are acknowledged first (a slave ignores requests while its error is not
+        acknowledged); a failed step does not stop the way down: the first failure is
+        raised at the end."""
+        self._acknowledge_errors()
+        first: ApplyError | None = None
         for transition in DOWN.get(self.state, []):
             if self.state <= target:
-                return
-            self.run_transition(transition)
+                break
+            try:
+                self.run_transition(transition)
+            except ApplyError as exc:
+                first = first or exc
+                self.state = transition.target
+                self._acknowledge_errors()
+        if first is not None:
+            raise first
+
+    def _acknowledge_errors(self) -> None:
+        states = self.read_states()
+        jobs = [_write_by_position(s.position, Reg.AL_CONTROL,
+                                   struct.pack("<H", st.state | 0x10))
+                for s, st in zip(self.slaves, states) if st is not None and st.error]
+        if jobs:
+            run_jobs(self.transport, jobs)
 
     def run_transition(self, transition: Transition) -> None:
         start = time.monotonic()
@@ -127,11 +150,18 @@ class Master:
                                        Transition.SP)
         tick = self._tick if self._cycling else None
         master = self.plan.master.init_cmds
-        run_jobs(self.transport, [master_job(master, transition, True)], tick)
-        run_jobs(self.transport,
-                 [slave_transition_job(s, transition, self.progress[s.name])
-                  for s in self.slaves], tick)
-        run_jobs(self.transport, [master_job(master, transition, False)], tick)
+        try:
+            run_jobs(self.transport, [master_job(master, transition, True)], tick)
+            run_jobs(self.transport,
+                     [slave_transition_job(s, transition, self.progress[s.name],
+                                           self.mailboxes.get(s.name))
+                      for s in self.slaves], tick)
+            run_jobs(self.transport, [master_job(master, transition, False)], tick)
+        except ApplyError:
+            # Some slaves may have changed state: going down must cover them too.
+            if transition.target > self.state:
+                self.state = transition.target
+            raise
         self.state = transition.target
         self._event("transition", f"{transition.value}: {self.state.name} in "
                     f"{(time.monotonic() - start) * 1000:.0f} ms, "
@@ -219,6 +249,14 @@ def _read_state(position: int, out: dict[int, SlaveState]) -> Job:
         if reply is not None and reply[0].wkc == 1:
             status, _, code = struct.unpack("<HHH", reply[0].data)
             out[position] = SlaveState(status & 0x0F, bool(status & 0x10), code)
+            return
+
+
+def _write_by_position(position: int, ado: int, data: bytes) -> Job:
+    dg = Datagram.physical(Cmd.APWR, -position & 0xFFFF, ado, data)
+    for _ in range(5):
+        reply = yield [dg]
+        if reply is not None and reply[0].wkc == 1:
             return
 
 

@@ -194,9 +194,15 @@ class Network:
         return self
 
     def __exit__(self, *exc) -> None:
+        """Leaving the block brings the line back to INIT, also after an error (whose
+        exception then wins over one from the way down)."""
         try:
-            if self.master.state > AlState.INIT and exc[0] is None:
-                self.down()
+            if self.master.state > AlState.INIT:
+                try:
+                    self.down()
+                except EcatcfgError:
+                    if exc[0] is None:
+                        raise
         finally:
             self.close()
 

@@ -31,6 +31,10 @@ TIMEOUT_VALIDATE = 0.5         # any other Validate without Timeout
 TIMEOUT_MAILBOX = 3.0          # one SDO transfer (SOEM: 700 ms per response)
 RETRIES = 3                    # working-counter retries when Retries is not given
 ERROR_GRACE = 0.02             # s an AL error flag must persist before we give up early
+# Polling (Validate, SM1): the first polls go out at once (emulated and fast slaves answer
+# within microseconds), then every POLL_INTERVAL, so a slow slave is not flooded.
+FAST_POLLS = 3
+POLL_INTERVAL = 0.001
 DC_START_DELAY_NS = 100_000_000    # SYNC start this far ahead of the reference (IgH, SOEM)
 
 SM1_STATUS_BLOCK = 0x080D      # SM1 status, activate, PDI control: 3 bytes
@@ -59,6 +63,13 @@ class SlaveProgress:
 
     name: str
     last_command: str = ""
+
+
+def _pause(seconds: float) -> Job:
+    """Let the other jobs' rounds go by for ``seconds`` without sending anything."""
+    until = time.monotonic() + seconds
+    while time.monotonic() < until:
+        yield []
 
 
 def datagram_for(cmd: InitCmd, data: bytes | None = None) -> Datagram:
@@ -100,6 +111,7 @@ def init_cmd_job(cmd: InitCmd, who: str | None, data: bytes | None = None,
     deadline = time.monotonic() + command_timeout(cmd)
     retries = RETRIES if cmd.retries is None else cmd.retries
     wrong_wkc = 0
+    polls = 0
     error_since: float | None = None
     last = "no reply (frames lost)"
     while True:
@@ -124,6 +136,9 @@ def init_cmd_job(cmd: InitCmd, who: str | None, data: bytes | None = None,
                         raise _refused(got.data, who, cmd.comment)
                 else:
                     error_since = None
+                polls += 1
+                if polls > FAST_POLLS and now < deadline:
+                    yield from _pause(POLL_INTERVAL)
             else:
                 return
         if now > deadline:
@@ -156,6 +171,7 @@ class MailboxChannel:
     plan: MailboxPlan
     counter_value: int = 0
     sent_messages: int = field(default=0)
+    last_received: int = 0       # counter of the slave's last message taken
 
     def counter(self) -> int:
         """The next mailbox counter, 1..7 (0 means 'not used'; SOEM never sends it)."""
@@ -185,11 +201,19 @@ class MailboxChannel:
         sm1 = self.plan.recv
         read = Datagram.physical(Cmd.FPRD, self.address, sm1.start, sm1.length)
         lost_at: float | None = None
+        empty = 0
         while True:
             reply = yield [read]
             now = time.monotonic()
             if reply is not None and reply[0].wkc == 1:
-                return bytes(reply[0].data)
+                message = bytes(reply[0].data)
+                counter = message[5] >> 4 & 0x07 if len(message) >= 6 else 0
+                if counter and counter == self.last_received:
+                    # A repeat that came before the answer: the slave re-posted the
+                    # message we already have (ETG.1000.4: equal counters are repeats).
+                    continue
+                self.last_received = counter
+                return message
             if now > deadline:
                 raise ApplyError("no mailbox response in time", who, what)
             if reply is None:
@@ -197,6 +221,10 @@ class MailboxChannel:
             elif lost_at is not None and now - lost_at >= REPEAT_AFTER:
                 yield from self._repeat(deadline, who, what)
                 lost_at = None
+            else:
+                empty += 1
+                if empty > FAST_POLLS:
+                    yield from _pause(POLL_INTERVAL)
 
     def _repeat(self, deadline: float, who: str | None, what: str) -> Job:
         """Toggle the repeat request (0x080E bit 1) from what the register holds, then wait
@@ -274,7 +302,10 @@ def _writes_al_control(cmd: InitCmd) -> bool:
 
 
 def slave_transition_job(slave: SlavePlan, transition: Transition,
-                         progress: SlaveProgress | None = None) -> Job:
+                         progress: SlaveProgress | None = None,
+                         channel: MailboxChannel | None = None) -> Job:
+    """``channel``: the slave's mailbox, kept from one transition to the next so message
+    counters go on 1..7 (a slave drops a message whose counter equals the previous one)."""
     who = slave.name
     cmds = [c for c in slave.init_cmds if transition in c.transitions]
     coe = []
@@ -287,7 +318,7 @@ def slave_transition_job(slave: SlavePlan, transition: Transition,
     for cmd in cmds[:split]:
         yield from _register_cmd(slave, cmd, who, progress)
     if coe:
-        channel = MailboxChannel(slave.phys_addr, slave.mailbox)
+        channel = channel or MailboxChannel(slave.phys_addr, slave.mailbox)
         for c in coe:
             yield from coe_init_cmd_job(channel, c, who, progress)
     for cmd in cmds[split:]:

@@ -241,8 +241,8 @@ class EmulatedSlave:
                     self._sm_registers_written(sm, ado, n)
         if _overlaps(ado, n, Reg.DC_RECEIVE_TIME_PORT0, Reg.DC_RECEIVE_TIME_PORT0 + 4):
             pass    # receive-time latch: done by the segment, which knows the line
-        if _overlaps(ado, n, Reg.DC_SYSTEM_TIME, Reg.DC_SYSTEM_TIME + 8):
-            self._system_time_written()
+        if ado == Reg.DC_SYSTEM_TIME:
+            self._system_time_written(n)
         if (self.mem[Reg.AL_STATUS] & 0x0F == AlState.OP
                 and (_overlaps(ado, n, Reg.WATCHDOG_DIVIDER, Reg.WATCHDOG_SM + 2)
                      or _overlaps(ado, n, Reg.SM0, sm_register(N_SM)))):
@@ -288,8 +288,11 @@ class EmulatedSlave:
         request = bool(self.mem[reg + 6] & ACTIVATE_REPEAT)
         if sm.is_mailbox and not sm.master_writes and request != was_repeat:
             # Repeat: post the last message again (the master lost it) and acknowledge.
+            # Before PREOP the mailbox is not running: the bit is only taken over
+            # (SOES ESC_startmbx copies it when the mailbox starts).
             sm.repeat_request = request
-            if self.last_mailbox is not None:
+            if self.last_mailbox is not None and self.state in (AlState.PREOP,
+                                                                AlState.SAFEOP, AlState.OP):
                 self._post(sm, self.last_mailbox)
         if not sm.full and sm.kind is SmKind.MAILBOX_IN:
             self._post_next()
@@ -532,6 +535,7 @@ class EmulatedSlave:
             self._arm_watchdog()
         if target <= AlState.INIT:
             self.mailbox_queue.clear()
+            self.last_mailbox = None
         if target == AlState.PREOP and self.state == AlState.INIT:
             self.last_mailbox = None
             if self.sdo_server is not None:
@@ -562,16 +566,21 @@ class EmulatedSlave:
         struct.pack_into("<I", self.mem, 0x0904, (port1 or 0) & 0xFFFF_FFFF)
         struct.pack_into("<Q", self.mem, 0x0918, port0 & 0xFFFF_FFFF_FFFF_FFFF)
 
-    def _system_time_written(self) -> None:
+    def _system_time_written(self, n: int) -> None:
         """An ECAT write to 0x0910 (ARMW/FRMW from the reference clock) feeds the drift
         loop: the difference to this slave's own system time (minus the delay 0x0928)
-        goes to 0x092C, and the loop pulls the clock onto the reference at once."""
-        received, = struct.unpack_from("<Q", self.mem, Reg.DC_SYSTEM_TIME)
+        goes to 0x092C, and the loop pulls the clock onto the reference at once.  A 4-byte
+        write (the ENIs' cyclic ARMW) compares the low 32 bits only."""
         delay, = struct.unpack_from("<I", self.mem, 0x0928)
         own = self.system_time() - delay
-        diff = own - received
-        if abs(diff) < 1 << 62:
-            offset, = struct.unpack_from("<q", self.mem, 0x0920)
-            struct.pack_into("<q", self.mem, 0x0920, offset - diff)
+        if n >= 8:
+            received, = struct.unpack_from("<Q", self.mem, Reg.DC_SYSTEM_TIME)
+            diff = (own - received + (1 << 63)) % (1 << 64) - (1 << 63)
+        else:
+            received, = struct.unpack_from("<I", self.mem, Reg.DC_SYSTEM_TIME)
+            diff = (own - received + (1 << 31)) % (1 << 32) - (1 << 31)
+        offset, = struct.unpack_from("<q", self.mem, 0x0920)
+        corrected = (offset - diff + (1 << 63)) % (1 << 64) - (1 << 63)
+        struct.pack_into("<q", self.mem, 0x0920, corrected)
         magnitude = min(abs(diff), 0x7FFF_FFFF)
         struct.pack_into("<I", self.mem, 0x092C, magnitude | (0x8000_0000 if diff < 0 else 0))

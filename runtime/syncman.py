@@ -94,7 +94,9 @@ class SmState:
         """Keep the status byte (read-only for the master) in step with the buffer."""
         reg = sm_register(self.number)
         if self.is_mailbox:
-            mem[reg + 5] = STATUS_MAILBOX_FULL if self.full else 0
+            # A full mailbox has its buffer written (bit 0) and full (bit 3); the ENIs'
+            # mailbox-state FMMU maps bit 0 of SM1's status (eni-observations §3).
+            mem[reg + 5] = STATUS_MAILBOX_FULL | STATUS_WRITE_EVENT if self.full else 0
         elif not mem[reg + 5]:
             mem[reg + 5] = STATUS_BUFFER_NONE
         pdi = mem[reg + 7] & ~PDI_REPEAT_ACK
