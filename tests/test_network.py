@@ -238,3 +238,40 @@ def _serve(seg):
         stop.set()
         thread.join(2)
     return a, close
+
+
+def test_mailbox_counters_go_on_across_transitions():
+    # 15 mailbox messages in PS (counters 1..7, 1..7, 1), then one in SO: a master that
+    # restarts at 1 there sends a counter equal to the last one, which the slave drops as
+    # a repeat (ETG.1000.4; SOES mbxincnt).  The SO SDO must still arrive.
+    import copy
+    text = ("slaves:\n  - {name: coupler, device: EX1100}\n  - name: axis1\n"
+            "    device: '0xE0000ECA:0x7201'\n    sdos:\n"
+            + "".join(f"      - {{index: 0x{i:04X}, value: 0, transition: PS}}\n"
+                      for i in (0x607A, 0x60FF, 0x6040))
+            + "      - {index: 0x60C2, subindex: 1, value: 1}\n"
+              "      - {index: 0x60C2, subindex: 2, value: -3}\n"
+              "      - {index: 0x6060, value: 9, transition: SO}\n")
+    plan = build.compile_topology(topology.loads(text, "t.yaml"),
+                                  Library([ESI], cache=False)).plan
+    cmds = plan.slaves[1].mailbox.coe_init_cmds
+    cmds.insert(len(cmds) - 1, copy.deepcopy(next(c for c in cmds if c.index == 0x60C2)))
+    assert [c.transitions for c in cmds].count([Transition.PS]) == 15
+    with Network.virtual(plan, esi=[ESI]) as net:
+        net.up()
+        assert net.segment.slaves[1].od.int_value(0x6060) == 9
+
+
+def test_going_down_acknowledges_errors(example_plan):
+    # An SM-watchdog fault leaves slaves in SAFEOP+ERR 0x001B; requests without the
+    # acknowledge are ignored, so the way down must acknowledge first.
+    with Network.virtual(example_plan, esi=[ESI]) as net:
+        net.up()
+        net.run(cycles=5)
+        time.sleep(0.3)                       # no cycles for longer than the 100 ms watchdog
+        for s in net.segment.slaves:
+            s.check_watchdog(time.monotonic())
+        assert any(s.error and s.status_code == 0x001B for s in net.segment.slaves)
+        net.down()
+        assert net.state == AlState.INIT
+        assert [(s.state, s.error) for s in net.segment.slaves] == [(AlState.INIT, False)] * 5
