@@ -108,7 +108,10 @@ class RawLink(_Base):
         self.ethertype = ethertype
         self._closed = True
         try:
-            sock = socket.socket(socket.AF_PACKET, socket.SOCK_RAW, socket.htons(ethertype))
+            # Protocol 0 receives nothing until bind() names the EtherType; a socket created
+            # with the protocol costs the kernel an RCU grace period (6-16 ms) at creation
+            # and again at release (measured in bench/startup.py).
+            sock = socket.socket(socket.AF_PACKET, socket.SOCK_RAW, 0)
         except PermissionError as exc:
             raise UsageError(f"{iface}: opening a raw Ethernet socket needs root or the "
                              f"CAP_NET_RAW capability ({exc.strerror})") from None
