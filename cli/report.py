@@ -16,16 +16,27 @@ _TRANSITION_TEXT = {"IP": "INIT -> PREOP", "PS": "PREOP -> SAFEOP", "SO": "SAFEO
                     "OS": "OP -> SAFEOP", "SP": "SAFEOP -> PREOP", "PI": "PREOP -> INIT"}
 
 
+class _PlainConsole:
+    """The part of rich's Console the JSON mode uses."""
+
+    def __init__(self, file) -> None:
+        self.file = file
+
+    def print(self, text: str, **_: object) -> None:
+        print(text, file=self.file, flush=True)
+
+
 class ApplyReport:
     def __init__(self, plan: NetworkPlan, eni: str, json_output: bool = False) -> None:
-        from rich.console import Console
-
         self.plan = plan
         self.eni = eni
         self.json_output = json_output
-        # Progress goes to stderr for JSON output, so stdout stays one document.
-        self.console = Console(file=sys.stderr if json_output else sys.stdout,
-                               highlight=False)
+        if json_output:
+            # Progress goes to stderr, so stdout stays one document; no rich (18 ms import).
+            self.console = _PlainConsole(sys.stderr)
+        else:
+            from rich.console import Console
+            self.console = Console(highlight=False)
         self.events: list[str] = []
         self.rows: list[dict] = []
         self.summary: dict = {}

@@ -8,9 +8,22 @@ Typical use::
     for pdo in device.tx_pdos: ...
 """
 
-from ecatcfg.esi.library import Library, Selection, SelectorError
-from ecatcfg.esi.model import Device, EsiFile, Module, Pdo, PdoEntry, SyncManager
-from ecatcfg.esi.reader import read_file
+from __future__ import annotations
 
-__all__ = ["Device", "EsiFile", "Library", "Module", "Pdo", "PdoEntry", "Selection",
-           "SelectorError", "SyncManager", "read_file"]
+from importlib import import_module
+from typing import Any
+
+# Loaded on first use: importing a submodule (the ENI reader needs only ``xmlsafe``) must
+# not pay for the library, reader and model (35 ms, measured for `ecatcfg apply`).
+_EXPORTS = {"Library": "library", "Selection": "library", "SelectorError": "library",
+            "Device": "model", "EsiFile": "model", "Module": "model", "Pdo": "model",
+            "PdoEntry": "model", "SyncManager": "model", "read_file": "reader"}
+
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str) -> Any:
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f"module 'ecatcfg.esi' has no attribute {name!r}")
+    return getattr(import_module(f"ecatcfg.esi.{module}"), name)
