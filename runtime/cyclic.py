@@ -127,6 +127,4 @@ class CyclicFrames:
             data = bytes(self.outputs[s.out_at:s.out_at + c.length])
         else:
             data = c.data if c.data is not None else bytes(c.length)
-        if c.cmd in (Cmd.LRD, Cmd.LWR, Cmd.LRW):
-            return Datagram.logical(c.cmd, c.addr or 0, data)
-        return Datagram.physical(c.cmd, c.adp or 0, c.ado or 0, data)
+        return wire.datagram_for(c, data)

@@ -135,18 +135,17 @@ def with_modules(device: Device, modules, module_dicts) -> Device:
     return replace(device, rx_pdos=rx, tx_pdos=tx, profiles=profiles)
 
 
-def _default_sm(device: Device, direction: str) -> int | None:
-    wanted = "Outputs" if direction == "rx" else "Inputs"
-    return next((sm.number for sm in device.sms if sm.type == wanted and not sm.virtual),
-                None)
-
-
 def _moved_pdo(device: Device, pdo: Pdo, pdo_offset: int, index_offset: int) -> Pdo:
     entries = [replace(e, index=(e.index or 0) + (index_offset if e.depend_on_slot and e.index
                                                    else 0)) for e in pdo.entries]
+    from ecatcfg.compiler.resolve import default_sm
+
+    sm = pdo.sm
+    if sm is None:                       # a module PDO without Sm: the direction's SM
+        found = default_sm(device, pdo.direction)
+        sm = found.number if found else None
     return replace(pdo, index=(pdo.index or 0) + (pdo_offset if pdo.depend_on_slot else 0),
-                   sm=pdo.sm if pdo.sm is not None else _default_sm(device, pdo.direction),
-                   entries=entries)
+                   sm=sm, entries=entries)
 
 
 def _moved_dictionary(dic: Dictionary, offset: int) -> Dictionary:

@@ -57,3 +57,15 @@ def run_jobs(transport: Transport, jobs: list[Job],
             except StopIteration:
                 pass
         active = still
+
+
+def until_answered(datagrams: list[Datagram], deadline: float, error: Exception) -> Job:
+    """A job step: send ``datagrams`` every round until each comes back with working
+    counter 1 (lost frames and refusals are sent again); returns the replies, or raises
+    ``error`` once ``deadline`` (``time.monotonic()``) has passed."""
+    while True:
+        reply = yield datagrams
+        if reply is not None and all(d.wkc == 1 for d in reply):
+            return reply
+        if time.monotonic() > deadline:
+            raise error

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 from ecatcfg.compiler.plan import NetworkPlan, SlavePlan
 from ecatcfg.esc import AlState, Cmd, Reg, Transition
 from ecatcfg.runtime.cyclic import CyclicFrames
-from ecatcfg.runtime.lockstep import Job, run_jobs
+from ecatcfg.runtime.lockstep import Job, run_jobs, until_answered
 from ecatcfg.runtime.replay import (TIMEOUT_COMMAND, ApplyError, MailboxChannel,
                                     SlaveProgress, master_job, slave_transition_job)
 from ecatcfg.runtime.scan import FoundSlave, Mismatch, scan, verify
@@ -228,18 +228,13 @@ class Master:
 
 
 def _read_receive_times(slave: SlavePlan, out: dict[str, tuple[int, int, int]]) -> Job:
-    deadline = time.monotonic() + TIMEOUT_COMMAND
     ports = Datagram.physical(Cmd.FPRD, slave.phys_addr, Reg.DC_RECEIVE_TIME_PORT0, 8)
     unit = Datagram.physical(Cmd.FPRD, slave.phys_addr, 0x0918, 8)
-    while True:
-        reply = yield [ports, unit]
-        if reply is not None and reply[0].wkc == 1 and reply[1].wkc == 1:
-            p0, p1 = struct.unpack("<II", reply[0].data)
-            rx, = struct.unpack("<Q", reply[1].data)
-            out[slave.name] = (p0, p1, rx)
-            return
-        if time.monotonic() > deadline:
-            raise ApplyError("cannot read the DC receive times", slave.name)
+    got = yield from until_answered([ports, unit], time.monotonic() + TIMEOUT_COMMAND,
+                                    ApplyError("cannot read the DC receive times", slave.name))
+    p0, p1 = struct.unpack("<II", got[0].data)
+    rx, = struct.unpack("<Q", got[1].data)
+    out[slave.name] = (p0, p1, rx)
 
 
 def _read_state(position: int, out: dict[int, SlaveState]) -> Job:
@@ -261,11 +256,6 @@ def _write_by_position(position: int, ado: int, data: bytes) -> Job:
 
 
 def _write_until_ok(slave: SlavePlan, ado: int, data: bytes) -> Job:
-    deadline = time.monotonic() + TIMEOUT_COMMAND
     dg = Datagram.physical(Cmd.FPWR, slave.phys_addr, ado, data)
-    while True:
-        reply = yield [dg]
-        if reply is not None and reply[0].wkc == 1:
-            return
-        if time.monotonic() > deadline:
-            raise ApplyError(f"cannot write DC register 0x{ado:04X}", slave.name)
+    yield from until_answered([dg], time.monotonic() + TIMEOUT_COMMAND,
+                              ApplyError(f"cannot write DC register 0x{ado:04X}", slave.name))

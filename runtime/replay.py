@@ -21,8 +21,8 @@ from dataclasses import dataclass, field
 from ecatcfg.compiler.plan import CoeInitCmd, InitCmd, MailboxPlan, SlavePlan
 from ecatcfg.errors import EcatcfgError
 from ecatcfg.esc import AlState, Cmd, Reg, Transition, al_status_name
-from ecatcfg.runtime.lockstep import Job
-from ecatcfg.runtime.wire import Datagram
+from ecatcfg.runtime.lockstep import Job, until_answered
+from ecatcfg.runtime.wire import Datagram, datagram_for
 
 # Defaults where the ENI gives no timeout (seconds).
 TIMEOUT_COMMAND = 1.0          # a plain register command, lost frames included
@@ -72,14 +72,6 @@ def _pause(seconds: float) -> Job:
         yield []
 
 
-def datagram_for(cmd: InitCmd, data: bytes | None = None) -> Datagram:
-    payload = data if data is not None else (cmd.data if cmd.data is not None
-                                             else bytes(cmd.length))
-    if cmd.cmd in (Cmd.LRD, Cmd.LWR, Cmd.LRW):
-        return Datagram.logical(cmd.cmd, cmd.addr or 0, payload)
-    return Datagram.physical(cmd.cmd, cmd.adp or 0, cmd.ado or 0, payload)
-
-
 def _is_state_check(cmd: InitCmd) -> bool:
     return cmd.validate is not None and cmd.ado == Reg.AL_STATUS
 
@@ -107,7 +99,8 @@ def init_cmd_job(cmd: InitCmd, who: str | None, data: bytes | None = None,
     """Send one InitCmd until its working counter and Validate are satisfied."""
     if progress is not None:
         progress.last_command = cmd.comment
-    dg = datagram_for(cmd, data)
+    dg = datagram_for(cmd, data if data is not None else
+                      cmd.data if cmd.data is not None else bytes(cmd.length))
     deadline = time.monotonic() + command_timeout(cmd)
     retries = RETRIES if cmd.retries is None else cmd.retries
     wrong_wkc = 0
@@ -183,13 +176,9 @@ class MailboxChannel:
         sm0 = self.plan.send
         dg = Datagram.physical(Cmd.FPWR, self.address, sm0.start,
                                message.ljust(sm0.length, b"\x00")[:sm0.length])
-        while True:
-            reply = yield [dg]
-            if reply is not None and reply[0].wkc == 1:
-                self.sent_messages += 1
-                return
-            if time.monotonic() > deadline:
-                raise ApplyError("the mailbox (SM0) did not take the request", who, what)
+        yield from until_answered([dg], deadline, ApplyError(
+            "the mailbox (SM0) did not take the request", who, what))
+        self.sent_messages += 1
 
     def receive(self, deadline: float, who: str | None, what: str) -> Job:
         """Read the slave's next message from SM1.  Reading an empty mailbox gets working
@@ -230,22 +219,12 @@ class MailboxChannel:
         """Toggle the repeat request (0x080E bit 1) from what the register holds, then wait
         for the slave's acknowledge in 0x080F bit 1."""
         status = Datagram.physical(Cmd.FPRD, self.address, SM1_STATUS_BLOCK, 3)
-        while True:
-            reply = yield [status]
-            if reply is not None and reply[0].wkc == 1:
-                activate = reply[0].data[1]
-                break
-            if time.monotonic() > deadline:
-                raise ApplyError("mailbox repeat request failed", who, what)
-        value = activate ^ REPEAT_BIT
+        failed = ApplyError("mailbox repeat request failed", who, what)
+        [got] = yield from until_answered([status], deadline, failed)
+        value = got.data[1] ^ REPEAT_BIT
         toggle = Datagram.physical(Cmd.FPWR, self.address, SM1_STATUS_BLOCK + 1,
                                    bytes([value]))
-        while True:
-            reply = yield [toggle]
-            if reply is not None and reply[0].wkc == 1:
-                break
-            if time.monotonic() > deadline:
-                raise ApplyError("mailbox repeat request failed", who, what)
+        yield from until_answered([toggle], deadline, failed)
         while True:                                  # the slave acknowledges the toggle
             reply = yield [status]
             if reply is not None and reply[0].wkc == 1 and \
@@ -338,14 +317,9 @@ def _dc_start_time(slave: SlavePlan, cmd: InitCmd, who: str) -> Job:
     """The ENI's start time is a zero placeholder: start SYNC0 100 ms after the slave's
     (reference-synchronised) system time, on a cycle boundary plus the shift (IgH, SOEM)."""
     read = Datagram.physical(Cmd.FPRD, slave.phys_addr, Reg.DC_SYSTEM_TIME, 8)
-    deadline = time.monotonic() + TIMEOUT_COMMAND
-    while True:
-        reply = yield [read]
-        if reply is not None and reply[0].wkc == 1:
-            now, = struct.unpack("<Q", reply[0].data)
-            break
-        if time.monotonic() > deadline:
-            raise ApplyError("cannot read the DC system time (0x0910)", who, cmd.comment)
+    [got] = yield from until_answered([read], time.monotonic() + TIMEOUT_COMMAND, ApplyError(
+        "cannot read the DC system time (0x0910)", who, cmd.comment))
+    now, = struct.unpack("<Q", got.data)
     cycle = slave.dc.cycle_time0 or 1
     start = (now + DC_START_DELAY_NS) // cycle * cycle + cycle + slave.dc.shift_time
     return struct.pack("<Q", start & 0xFFFF_FFFF_FFFF_FFFF)[:len(cmd.data)]

@@ -13,8 +13,8 @@ import time
 from dataclasses import dataclass
 
 from ecatcfg.compiler.plan import NetworkPlan
-from ecatcfg.esc import SII_REVISION, SII_VENDOR_ID, Cmd, Reg
-from ecatcfg.runtime.lockstep import Job, run_jobs
+from ecatcfg.esc import SII_REVISION, SII_VENDOR_ID, Cmd, Reg, eeprom_read_request
+from ecatcfg.runtime.lockstep import Job, run_jobs, until_answered
 from ecatcfg.runtime.replay import ApplyError
 from ecatcfg.runtime.transport import Transport
 from ecatcfg.runtime.wire import Datagram
@@ -54,7 +54,7 @@ def sii_words(position: int, word: int, deadline: float) -> Job:
     data = b""
     while len(data) < 8:
         request = Datagram.physical(Cmd.APWR, adp, Reg.EEPROM_CONTROL,
-                                    struct.pack("<HI", 0x0100, word + len(data) // 2))
+                                    eeprom_read_request(word + len(data) // 2))
         status = Datagram.physical(Cmd.APRD, adp, Reg.EEPROM_CONTROL, 2)
         value = Datagram.physical(Cmd.APRD, adp, Reg.EEPROM_DATA, 8)
         phase = "request"
@@ -87,12 +87,7 @@ def _identity_job(position: int, out: dict[int, FoundSlave]) -> Job:
     adp = -position & 0xFFFF
     # The EEPROM belongs to the EtherCAT side for the reading (0x0500 = 0).
     owner = Datagram.physical(Cmd.APWR, adp, Reg.EEPROM_CONFIG, b"\x00")
-    while True:
-        reply = yield [owner]
-        if reply is not None and reply[0].wkc == 1:
-            break
-        if time.monotonic() > deadline:
-            raise ApplyError(f"position {position}: no answer")
+    yield from until_answered([owner], deadline, ApplyError(f"position {position}: no answer"))
     first = yield from sii_words(position, SII_VENDOR_ID, deadline)
     second = yield from sii_words(position, SII_REVISION, deadline)
     vendor, product = struct.unpack("<II", first)

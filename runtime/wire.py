@@ -85,6 +85,14 @@ class Datagram:
         return DG_HEADER_LEN + len(self.data) + WKC.size
 
 
+def datagram_for(cmd, data: bytes) -> Datagram:
+    """The datagram an ENI command describes (an InitCmd or a cyclic Cmd: ``cmd`` with
+    ``addr`` for logical commands, ``adp``/``ado`` otherwise), carrying ``data``."""
+    if cmd.cmd in LOGICAL_CMDS:
+        return Datagram.logical(cmd.cmd, cmd.addr or 0, data)
+    return Datagram.physical(cmd.cmd, cmd.adp or 0, cmd.ado or 0, data)
+
+
 @dataclass(slots=True)
 class Frame:
     """A decoded EtherCAT frame."""

@@ -268,6 +268,22 @@ def _stop(proc: subprocess.Popen, grace: float = 2.0) -> None:
 
 
 @contextlib.contextmanager
+def serving(rig: VethRig, segment) -> Iterator:
+    """``segment`` (a ``VirtualSegment``) answering frames on the rig's end in namespace B,
+    in a thread of this process; stopped when the block ends."""
+    link = rig.socket_in(rig.ns_b)
+    stop = threading.Event()
+    thread = threading.Thread(target=segment.serve, args=(link,), kwargs={"stop": stop},
+                              daemon=True, name="segment-ns-b")
+    thread.start()
+    try:
+        yield segment
+    finally:
+        stop.set()
+        thread.join(5)
+
+
+@contextlib.contextmanager
 def veth_pair(prefix: str = "ecat") -> Iterator[VethRig]:
     """Two fresh network namespaces joined by a veth pair (see the module docstring)."""
     tag = f"{prefix}-{os.getpid()}-{secrets.token_hex(3)}"

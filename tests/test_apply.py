@@ -29,10 +29,10 @@ import sys
 import threading
 import time
 from collections.abc import Callable, Iterator
-from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
+from rig import serving
 
 from conftest import EXAMPLES
 from rig import require_tshark, tshark_malformed
@@ -46,7 +46,7 @@ from ecatcfg.runtime.network import Network
 from ecatcfg.runtime.replay import (TIMEOUT_COMMAND, TIMEOUT_MAILBOX, ApplyError,
                                     command_timeout)
 from ecatcfg.runtime.scan import EEPROM_TIMEOUT
-from ecatcfg.runtime.segment import Faults, VirtualSegment
+from ecatcfg.runtime.segment import Faults
 
 EK1100 = "0x2:0x44c2c52:0x120000"
 EL2008 = "0x2:0x7d83052:0x120000"
@@ -106,21 +106,6 @@ def write_line(tmp_path: Path, lib: Library, kinds: list[str],
 def specs_for(lib: Library, kinds: list[str], names: list[str] | None = None):
     names = names or [f"s{i}" for i in range(len(kinds))]
     return [emulate.SlaveSpec(lib.device(lib.find(k).entry), n) for k, n in zip(kinds, names)]
-
-
-@contextmanager
-def serving(rig, seg: VirtualSegment) -> Iterator[VirtualSegment]:
-    """``seg`` answering frames on the rig's end in namespace B, in a thread of this process."""
-    link = rig.socket_in(rig.ns_b)
-    stop = threading.Event()
-    thread = threading.Thread(target=seg.serve, args=(link,), kwargs={"stop": stop},
-                              daemon=True, name="segment-ns-b")
-    thread.start()
-    try:
-        yield seg
-    finally:
-        stop.set()
-        thread.join(5)
 
 
 class Simulator:

@@ -19,6 +19,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
+from rig import serving
 
 from ecatcfg.compiler import sdo as sdo_values
 from ecatcfg.compiler import topology
@@ -45,20 +46,6 @@ def build(lib: Library, selectors: list[str], faults: Faults | None = None) -> V
     # Distinct serial numbers: the scan must report each slave's own.
     return segment([SlaveSpec(lib.device(lib.find(s).entry), f"s{i}", serial=0x100 + i)
                     for i, s in enumerate(selectors)], faults)
-
-
-@contextmanager
-def serving(rig, seg: VirtualSegment) -> Iterator[VirtualSegment]:
-    link = rig.socket_in(rig.ns_b)
-    stop = threading.Event()
-    thread = threading.Thread(target=seg.serve, args=(link,), kwargs={"stop": stop},
-                              daemon=True)
-    thread.start()
-    try:
-        yield seg
-    finally:
-        stop.set()
-        thread.join(5)
 
 
 def ecatcfg_in(rig, *argv: str, timeout: float = 30) -> subprocess.CompletedProcess:

@@ -11,12 +11,10 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
-import threading
-from collections.abc import Iterator
-from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
+from rig import serving
 
 from ecatcfg.esi.library import Library
 from ecatcfg.runtime.emulate import SlaveSpec, segment
@@ -40,20 +38,6 @@ def corpus_lib(corpus: Path) -> Library:
 def build(lib: Library, selectors: list[str]) -> VirtualSegment:
     return segment([SlaveSpec(lib.device(lib.find(s).entry), f"s{i}")
                     for i, s in enumerate(selectors)])
-
-
-@contextmanager
-def serving(rig, seg: VirtualSegment) -> Iterator[VirtualSegment]:
-    link = rig.socket_in(rig.ns_b)
-    stop = threading.Event()
-    thread = threading.Thread(target=seg.serve, args=(link,), kwargs={"stop": stop},
-                              daemon=True)
-    thread.start()
-    try:
-        yield seg
-    finally:
-        stop.set()
-        thread.join(5)
 
 
 def soem(rig, options: dict | None = None, timeout: float = 120) -> dict:
