@@ -1,3 +1,3 @@
-from ecatcfg.cli import main
+from ecatcfg.cli import console
 
-raise SystemExit(main())
+console()

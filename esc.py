@@ -10,7 +10,7 @@ Register addresses and bit meanings follow ETG.1000.4 and the ESC datasheets (se
 from __future__ import annotations
 
 import struct
-from dataclasses import dataclass
+from ecatcfg.record import record
 from enum import Enum, IntEnum
 
 
@@ -127,7 +127,7 @@ class FmmuType(IntEnum):
     READ_WRITE = 3
 
 
-@dataclass(frozen=True, slots=True)
+@record(frozen=True)
 class FmmuConfig:
     """One FMMU's 16-byte register image (0x0600 + 16·n)."""
 
@@ -160,7 +160,7 @@ class FmmuConfig:
         return (self.length - 1) * 8 + self.logical_stop_bit - self.logical_start_bit + 1
 
 
-@dataclass(frozen=True, slots=True)
+@record(frozen=True)
 class SmConfig:
     """One SyncManager's 8-byte register image (0x0800 + 8·n)."""
 

@@ -31,6 +31,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="accept a slave whose revision is newer than the ENI's")
     p.add_argument("--pcap", metavar="FILE", help="record every frame as pcapng")
     p.add_argument("--format", choices=["text", "json"], default="text")
+    p.add_argument("--no-cache", action="store_true",
+                   help="parse the ENI (and with --virtual the ESI files) even if cached "
+                        "in $XDG_CACHE_HOME/ecatcfg")
     p.set_defaults(run=run)
 
 
@@ -39,7 +42,7 @@ def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from ecatcfg.cli.report import ApplyReport
-    from ecatcfg.compiler import eni_reader
+    from ecatcfg.compiler import eni_cache
     from ecatcfg.errors import EcatcfgError, UsageError
     from ecatcfg.esc import AlState
     from ecatcfg.runtime.network import Network
@@ -54,10 +57,15 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"{args.pcap}: folder does not exist")
     if args.pcap and Path(args.pcap).is_dir():
         raise UsageError(f"{args.pcap}: is a folder, not a file to write")
-    plan = eni_reader.read_file(args.eni)
+    if args.no_cache:
+        from ecatcfg.compiler import eni_reader
+        plan = eni_reader.read_file(args.eni)
+    else:
+        plan = eni_cache.read_file(args.eni)
     report = ApplyReport(plan, args.eni, json_output=args.format == "json")
     if args.virtual:
-        net = Network.virtual(plan, args.esi, pcap=args.pcap, on_event=report.event)
+        net = Network.virtual(plan, args.esi, pcap=args.pcap, on_event=report.event,
+                              esi_cache=not args.no_cache)
     else:
         from ecatcfg.runtime.link import RawLink
         net = Network(plan, RawLink(args.iface), pcap=args.pcap, on_event=report.event)

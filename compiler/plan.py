@@ -11,12 +11,12 @@ values), transitions are :class:`ecatcfg.esc.Transition`.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from ecatcfg.record import field, record
 
 from ecatcfg.esc import Transition
 
 
-@dataclass(slots=True)
+@record
 class Validate:
     """An InitCmd read's expected data: ``(read & mask) == data & mask``, polled until
     ``timeout`` ms."""
@@ -26,7 +26,7 @@ class Validate:
     timeout: int = 0
 
 
-@dataclass(slots=True)
+@record
 class InitCmd:
     """A register command for a state transition (ENI ``ECatCmdType``).
 
@@ -55,7 +55,7 @@ class InitCmd:
         return self.data if self.data is not None else bytes(self.length)
 
 
-@dataclass(slots=True)
+@record
 class CoeInitCmd:
     """A CoE SDO download (or upload) in a transition (ENI ``Mailbox/CoE/InitCmds``)."""
 
@@ -71,7 +71,7 @@ class CoeInitCmd:
     disabled: bool = False
 
 
-@dataclass(slots=True)
+@record
 class PdoEntryDesc:
     index: int
     subindex: int
@@ -80,7 +80,7 @@ class PdoEntryDesc:
     data_type: str | None = None
 
 
-@dataclass(slots=True)
+@record
 class PdoDesc:
     """``ProcessData/RxPdo`` or ``TxPdo``: a PDO as configured (``sm`` set when assigned)."""
 
@@ -95,7 +95,7 @@ class PdoDesc:
     excludes: list[int] = field(default_factory=list)
 
 
-@dataclass(slots=True)
+@record
 class SmSettings:
     """``ProcessData/SmN``: a process-data SyncManager and the PDOs assigned to it."""
 
@@ -112,7 +112,7 @@ class SmSettings:
     watchdog: int | None = None
 
 
-@dataclass(slots=True)
+@record
 class BitRange:
     """``ProcessData/Send`` or ``Recv``: where a slave's data sits in the process image."""
 
@@ -120,7 +120,7 @@ class BitRange:
     bit_length: int
 
 
-@dataclass(slots=True)
+@record
 class ProcessData:
     send: list[BitRange] = field(default_factory=list)      # outputs
     recv: list[BitRange] = field(default_factory=list)      # inputs
@@ -128,13 +128,13 @@ class ProcessData:
     pdos: list[PdoDesc] = field(default_factory=list)
 
 
-@dataclass(slots=True)
+@record
 class MailboxArea:
     start: int
     length: int
 
 
-@dataclass(slots=True)
+@record
 class MailboxPlan:
     send: MailboxArea                         # SM0, master -> slave
     recv: MailboxArea                         # SM1, slave -> master
@@ -148,7 +148,7 @@ class MailboxPlan:
     data_link_layer: bool | None = None
 
 
-@dataclass(slots=True)
+@record
 class DcPlan:
     reference_clock: bool
     cycle_time0: int                          # ns
@@ -156,14 +156,14 @@ class DcPlan:
     shift_time: int
 
 
-@dataclass(slots=True)
+@record
 class PreviousPort:
     port: str
     phys_addr: int | None = None
     selected: bool | None = None
 
 
-@dataclass(slots=True)
+@record
 class SlavePlan:
     name: str
     phys_addr: int
@@ -185,7 +185,7 @@ class SlavePlan:
         return (-self.auto_inc_addr) & 0xFFFF
 
 
-@dataclass(slots=True)
+@record
 class CyclicCmd:
     states: list[str]                         # INIT / PREOP / SAFEOP / OP
     comment: str
@@ -200,20 +200,20 @@ class CyclicCmd:
     output_offs: int = 0                      # ... and in the output image
 
 
-@dataclass(slots=True)
+@record
 class Frame:
     cmds: list[CyclicCmd] = field(default_factory=list)
     comment: str | None = None
 
 
-@dataclass(slots=True)
+@record
 class Cyclic:
     frames: list[Frame] = field(default_factory=list)
     cycle_time: int | None = None             # µs
     comment: str | None = None
 
 
-@dataclass(slots=True)
+@record
 class Variable:
     name: str
     bit_size: int
@@ -222,7 +222,7 @@ class Variable:
     comment: str | None = None
 
 
-@dataclass(slots=True)
+@record
 class ProcessImage:
     inputs_size: int = 0                      # bytes
     outputs_size: int = 0
@@ -230,7 +230,7 @@ class ProcessImage:
     outputs: list[Variable] = field(default_factory=list)
 
 
-@dataclass(slots=True)
+@record
 class MasterPlan:
     name: str
     destination: bytes = b"\xff" * 6
@@ -240,7 +240,7 @@ class MasterPlan:
     init_cmds: list[InitCmd] = field(default_factory=list)
 
 
-@dataclass(slots=True)
+@record
 class NetworkPlan:
     master: MasterPlan
     slaves: list[SlavePlan] = field(default_factory=list)

@@ -9,7 +9,7 @@ value range).  Errors are collected, not raised one at a time: the user sees all
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 from ecatcfg.compiler import sdo as sdo_codec
 from ecatcfg.compiler.plan import CoeInitCmd, PdoDesc, PdoEntryDesc
@@ -20,6 +20,7 @@ from ecatcfg.esi import datatypes
 from ecatcfg.esi.coe import TRANSITION_STATE, DictEntry, device_dictionary, has_coe, lookup
 from ecatcfg.esi.library import Library, SelectorError
 from ecatcfg.esi.model import DcOpMode, Device, Dictionary, Module, Pdo, SyncManager
+from ecatcfg.record import replace
 
 
 @dataclass(slots=True)

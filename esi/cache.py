@@ -23,12 +23,8 @@ from pathlib import Path
 from typing import Any
 
 from ecatcfg.esi.index import SUMMARY_VERSION, FileSummary
+from ecatcfg.fileio import cache_dir as default_cache_dir
 from ecatcfg.fileio import write_atomic
-
-
-def default_cache_dir() -> Path:
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return Path(base) / "ecatcfg"
 
 
 def content_digest(data: bytes) -> str:

@@ -14,7 +14,7 @@ its data, *not* padded; a writer pads it to the SyncManager length with :func:`p
 from __future__ import annotations
 
 import struct
-from dataclasses import dataclass
+from ecatcfg.record import record
 from enum import IntEnum
 
 from ecatcfg.errors import EcatcfgError
@@ -200,7 +200,7 @@ class MailboxProtocolError(EcatcfgError):
 
 # -- mailbox header ----------------------------------------------------------------------
 
-@dataclass(frozen=True, slots=True)
+@record(frozen=True)
 class MailboxHeader:
     length: int                  # bytes after the 6-byte header
     address: int = 0             # 0 = master (SOES answers with 0; facts §5)
@@ -272,7 +272,7 @@ def pad_to(msg: bytes, length: int) -> bytes:
 
 # -- mailbox error reply ----------------------------------------------------------------
 
-@dataclass(frozen=True, slots=True)
+@record(frozen=True)
 class MailboxError:
     """A mailbox error reply (type 0): body 0x0001 + detail (facts §5)."""
 
@@ -290,7 +290,7 @@ def encode_mailbox_error(detail: int, counter: int = 0, address: int = 0) -> byt
 
 # -- CoE messages -----------------------------------------------------------------------
 
-@dataclass(frozen=True, slots=True)
+@record(frozen=True)
 class InitiateDownload:
     """Initiate download request (ccs 1).  Expedited: ``data`` is the whole value.  Normal:
     ``size`` is the complete size and ``data`` the part carried in this message."""
@@ -303,7 +303,7 @@ class InitiateDownload:
     complete_access: bool = False
 
 
-@dataclass(frozen=True, slots=True)
+@record(frozen=True)
 class DownloadResponse:
     """Initiate download response (scs 3), index and subindex echoed."""
 
@@ -312,19 +312,19 @@ class DownloadResponse:
     complete_access: bool = False
 
 
-@dataclass(frozen=True, slots=True)
+@record(frozen=True)
 class DownloadSegment:
     data: bytes
     toggle: bool
     last: bool
 
 
-@dataclass(frozen=True, slots=True)
+@record(frozen=True)
 class DownloadSegmentResponse:
     toggle: bool
 
 
-@dataclass(frozen=True, slots=True)
+@record(frozen=True)
 class InitiateUpload:
     """Initiate upload request (ccs 2)."""
 
@@ -333,7 +333,7 @@ class InitiateUpload:
     complete_access: bool = False
 
 
-@dataclass(frozen=True, slots=True)
+@record(frozen=True)
 class UploadResponse:
     """Initiate upload response (scs 2).  Normal: ``size`` is the complete size and ``data``
     the part carried in this message; segments follow while data is short of size."""
@@ -346,19 +346,19 @@ class UploadResponse:
     complete_access: bool = False
 
 
-@dataclass(frozen=True, slots=True)
+@record(frozen=True)
 class UploadSegmentRequest:
     toggle: bool
 
 
-@dataclass(frozen=True, slots=True)
+@record(frozen=True)
 class UploadSegment:
     data: bytes
     toggle: bool
     last: bool
 
 
-@dataclass(frozen=True, slots=True)
+@record(frozen=True)
 class Abort:
     index: int
     subindex: int
@@ -369,7 +369,7 @@ class Abort:
         return abort_name(self.code)
 
 
-@dataclass(frozen=True, slots=True)
+@record(frozen=True)
 class UnknownSdo:
     """An SDO message whose command specifier this codec does not know (e.g. block
     transfer): a server answers it with abort 0x05040001."""
@@ -380,7 +380,7 @@ class UnknownSdo:
     subindex: int
 
 
-@dataclass(frozen=True, slots=True)
+@record(frozen=True)
 class Emergency:
     """CoE emergency (service 1): error code, error register, 5 bytes manufacturer data."""
 
@@ -389,7 +389,7 @@ class Emergency:
     data: bytes
 
 
-@dataclass(frozen=True, slots=True)
+@record(frozen=True)
 class SdoInfo:
     """SDO information (service 8): opcode (bits 0-6), incomplete flag, fragments left and
     the rest of the message.  For opcode 7 (error) ``abort_code`` is set."""
@@ -406,7 +406,7 @@ class SdoInfo:
         return struct.unpack_from("<I", self.body)[0]
 
 
-@dataclass(frozen=True, slots=True)
+@record(frozen=True)
 class OtherCoe:
     """A CoE service this codec does not decode (PDO over mailbox, ...)."""
 

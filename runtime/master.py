@@ -17,7 +17,7 @@ from __future__ import annotations
 import struct
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from ecatcfg.record import record
 
 from ecatcfg.compiler.plan import NetworkPlan, SlavePlan
 from ecatcfg.esc import AlState, Cmd, Reg, Transition
@@ -51,7 +51,7 @@ class VerifyError(ApplyError):
         self.mismatches = mismatches
 
 
-@dataclass(frozen=True, slots=True)
+@record(frozen=True)
 class SlaveState:
     state: int                 # AL status bits 0-3
     error: bool
@@ -63,7 +63,7 @@ class SlaveState:
         return (known.name if known else f"0x{self.state:X}") + ("+ERR" if self.error else "")
 
 
-@dataclass(slots=True)
+@record
 class Event:
     """Progress for the reporter: a step that starts or ends."""
 

@@ -24,7 +24,7 @@ import struct
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from ecatcfg.record import record
 from pathlib import Path
 
 from ecatcfg.compiler.plan import NetworkPlan, Variable
@@ -36,7 +36,7 @@ _FLOATS = {"REAL": "<f", "LREAL": "<d"}
 _SIGNED = {"SINT", "INT", "DINT", "LINT", "INT24", "INT40", "INT48", "INT56"}
 
 
-@dataclass(frozen=True, slots=True)
+@record(frozen=True)
 class _Var:
     variable: Variable
     output: bool
@@ -70,8 +70,9 @@ class Network:
 
     @classmethod
     def virtual(cls, eni: NetworkPlan | str | Path, esi: list[str | Path], *,
-                faults=None, **kwargs) -> Network:
-        """The ENI on a virtual segment that emulates its slaves from the ESI files."""
+                faults=None, esi_cache: bool = True, **kwargs) -> Network:
+        """The ENI on a virtual segment that emulates its slaves from the ESI files
+        (``esi_cache``: through the ESI index cache)."""
         from ecatcfg.compiler import eni_reader
         from ecatcfg.esi.library import Library
         from ecatcfg.runtime import emulate
@@ -79,7 +80,7 @@ class Network:
 
         shown = str(eni) if not isinstance(eni, NetworkPlan) else "the ENI"
         plan = eni if isinstance(eni, NetworkPlan) else eni_reader.read_file(eni)
-        library = Library([str(p) for p in esi])
+        library = Library([str(p) for p in esi], cache=esi_cache)
         segment = emulate.segment(emulate.specs_from_eni(plan, library, shown), faults)
         ours, theirs = MemoryLink.pair()
         stop = threading.Event()

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import struct
 import time
-from dataclasses import dataclass, field
+from ecatcfg.record import field, record
 
 from ecatcfg.compiler.plan import CoeInitCmd, InitCmd, MailboxPlan, SlavePlan
 from ecatcfg.errors import EcatcfgError
@@ -57,7 +57,7 @@ class ApplyError(EcatcfgError):
         self.abort_code = abort_code
 
 
-@dataclass(slots=True)
+@record
 class SlaveProgress:
     """What the report shows per slave: the last command run."""
 
@@ -155,7 +155,7 @@ def _refused(status: bytes, who: str | None, comment: str, timed_out: bool = Fal
 
 # -- mailbox ----------------------------------------------------------------------------------
 
-@dataclass(slots=True)
+@record
 class MailboxChannel:
     """The master's side of one slave's mailbox: where SM0/SM1 are, the message counter
     and the repeat toggle (ETG.1000.4 mailbox repeat)."""
@@ -163,7 +163,7 @@ class MailboxChannel:
     address: int
     plan: MailboxPlan
     counter_value: int = 0
-    sent_messages: int = field(default=0)
+    sent_messages: int = 0
     last_received: int = 0       # counter of the slave's last message taken
 
     def counter(self) -> int:

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import struct
 import time
-from dataclasses import dataclass
+from ecatcfg.record import record
 
 from ecatcfg.compiler.plan import NetworkPlan
 from ecatcfg.esc import SII_REVISION, SII_VENDOR_ID, Cmd, Reg, eeprom_read_request
@@ -26,7 +26,7 @@ EEPROM_R64 = 0x0040
 COUNT_ATTEMPTS = 5
 
 
-@dataclass(frozen=True, slots=True)
+@record(frozen=True)
 class FoundSlave:
     position: int
     vendor_id: int
@@ -103,7 +103,7 @@ def scan(transport: Transport) -> list[FoundSlave]:
     return [found[p] for p in range(n)]
 
 
-@dataclass(frozen=True, slots=True)
+@record(frozen=True)
 class Mismatch:
     position: int
     expected: str

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from ecatcfg.record import record
 
 from ecatcfg.esc import MAX_DATAGRAM_DATA
 from ecatcfg.runtime import wire
@@ -22,7 +22,7 @@ DEFAULT_TIMEOUT = 0.02          # s: a frame through even a long line returns wi
 FRAME_DATA_LIMIT = MAX_DATAGRAM_DATA + wire.DG_HEADER_LEN + wire.WKC.size
 
 
-@dataclass(slots=True)
+@record
 class Counters:
     frames_sent: int = 0
     frames_lost: int = 0

@@ -16,7 +16,7 @@ is slicing, not copying.
 from __future__ import annotations
 
 import struct
-from dataclasses import dataclass, field
+from ecatcfg.record import field, record
 
 from ecatcfg.errors import EcatcfgError
 from ecatcfg.esc import ETHERTYPE, Cmd
@@ -47,7 +47,7 @@ class FrameError(EcatcfgError):
     """A frame that is not a well-formed EtherCAT frame (too short, lengths that disagree)."""
 
 
-@dataclass(slots=True)
+@record
 class Datagram:
     """One datagram.  ``address`` is ADP | ADO << 16 for physical and broadcast commands and
     the 32-bit logical address for LRD/LWR/LRW, as it sits on the wire."""
@@ -93,7 +93,7 @@ def datagram_for(cmd, data: bytes) -> Datagram:
     return Datagram.physical(cmd.cmd, cmd.adp or 0, cmd.ado or 0, data)
 
 
-@dataclass(slots=True)
+@record
 class Frame:
     """A decoded EtherCAT frame."""
 

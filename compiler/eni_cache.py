@@ -1,0 +1,132 @@
+"""Parsed ENIs on disk, so a machine that applies the same ENI at every start parses it once.
+
+Reading an ENI is lxml's parse plus a Python walk over every InitCmd: about 4 ms for one
+slave and 120 ms for 64 (1812 InitCmds), against about 1 and 6 ms to load the pickled plan.
+``ecatcfg apply`` reads through this cache (docs/BENCHMARKS.md, "Startup").
+
+Layout under ``$XDG_CACHE_HOME/ecatcfg`` (default ``~/.cache/ecatcfg``)::
+
+    eni-plan-v<N>/<key>.pickle      (ENI bytes, NetworkPlan read from them)
+
+Never stale: an entry is used only if its ENI bytes equal the file's, byte for byte, and
+the key also covers the source of the reader and of the plan model, so a changed ecatcfg
+is a miss.  (The key is a CRC-32 with the length: it only names the entry; hashlib would
+cost 3 ms of OpenSSL start-up.)  Only plans that read without error are stored; errors are
+reported fresh on every run.  Loading builds nothing but plan classes (the unpickler
+refuses any other), and only from a folder of the current user that nobody else can write
+to (created 0700).  Safe to delete at any time; writes are atomic, and an unreadable entry
+is a miss.  The newest ``KEEP`` entries are kept.
+"""
+
+from __future__ import annotations
+
+import os
+import pickle
+import stat
+import zlib
+from pathlib import Path
+
+from ecatcfg.compiler import plan as plan_model
+from ecatcfg.compiler.plan import NetworkPlan
+from ecatcfg.esc import Transition
+from ecatcfg.fileio import cache_dir, write_atomic
+
+FORMAT_VERSION = 1
+KEEP = 32                                   # entries; the oldest go when a new one is written
+_FINGERPRINTED = ("eni_reader.py", "plan.py")  # a change to these changes every key
+
+
+def _fingerprint() -> int:
+    here = Path(__file__).parent
+    crc = FORMAT_VERSION
+    for path in [here / name for name in _FINGERPRINTED] + [here.parent / "esc.py"]:
+        crc = zlib.crc32(path.read_bytes(), crc)        # esc.py: the Transition values
+    return crc
+
+
+class _PlanUnpickler(pickle.Unpickler):
+    """Builds plan objects and nothing else: a pickle naming any other class is refused."""
+
+    def find_class(self, module: str, name: str) -> type:
+        if module == plan_model.__name__ and isinstance(getattr(plan_model, name, None), type) \
+                and hasattr(getattr(plan_model, name), "__record_fields__"):
+            return getattr(plan_model, name)
+        if (module, name) == (Transition.__module__, "Transition"):
+            return Transition
+        raise pickle.UnpicklingError(f"{module}.{name} is not part of a plan")
+
+
+class PlanCache:
+    def __init__(self, root: Path | None = None) -> None:
+        self.dir = (root or cache_dir()) / f"eni-plan-v{FORMAT_VERSION}"
+
+    def key(self, data: bytes) -> str:
+        return f"{_fingerprint():08x}-{len(data):x}-{zlib.crc32(data):08x}"
+
+    def get(self, key: str, data: bytes) -> NetworkPlan | None:
+        """The plan stored under ``key`` for exactly the ENI bytes ``data``."""
+        path = self.dir / f"{key}.pickle"
+        if not self._trusted_dir():
+            return None
+        try:
+            with open(path, "rb") as f:
+                st = os.fstat(f.fileno())
+                if st.st_uid != os.geteuid() or st.st_mode & 0o022:
+                    return None
+                stored, plan = _PlanUnpickler(f).load()
+            if stored != data:
+                return None
+            os.utime(path)                  # most recently used: kept longest
+        except FileNotFoundError:
+            return None
+        # A damaged entry can fail to unpickle in many ways (UnpicklingError, EOFError,
+        # TypeError, ValueError, ...); every one of them only means "parse again".
+        except Exception:                   # noqa: BLE001
+            return None
+        return plan if isinstance(plan, NetworkPlan) else None
+
+    def put(self, key: str, data: bytes, plan: NetworkPlan) -> None:
+        # A cache that cannot be written (read-only home, full disk) only costs speed.
+        try:
+            self.dir.mkdir(mode=0o700, parents=True, exist_ok=True)
+            if not self._trusted_dir():
+                return
+            write_atomic(self.dir / f"{key}.pickle",
+                         pickle.dumps((data, plan), protocol=pickle.HIGHEST_PROTOCOL),
+                         mode=0o600)
+            self._prune()
+        except OSError:
+            pass
+
+    def _trusted_dir(self) -> bool:
+        try:
+            st = os.stat(self.dir)
+        except OSError:
+            return False
+        return (stat.S_ISDIR(st.st_mode) and st.st_uid == os.geteuid()
+                and not st.st_mode & 0o022)
+
+    def _prune(self) -> None:
+        entries = sorted(self.dir.glob("*.pickle"), key=lambda p: p.stat().st_mtime_ns)
+        for old in entries[:-KEEP]:
+            old.unlink(missing_ok=True)
+
+
+def read_file(path: str | Path, shown_as: str | None = None,
+              cache: PlanCache | None = None) -> NetworkPlan:
+    """:func:`ecatcfg.compiler.eni_reader.read_file` through ``cache`` (the default one if
+    ``None``).  lxml and the reader are imported only on a miss."""
+    name = shown_as or str(path)
+    try:
+        data = Path(path).read_bytes()
+    except OSError as exc:
+        from ecatcfg.compiler.eni_reader import EniReadError
+        raise EniReadError(f"cannot read: {exc.strerror}", name) from None
+    cache = cache or PlanCache()
+    key = cache.key(data)
+    plan = cache.get(key, data)
+    if plan is None:
+        from ecatcfg.compiler import eni_reader
+        plan = eni_reader.read_bytes(data, name)
+        cache.put(key, data, plan)
+    return plan
