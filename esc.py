@@ -10,8 +10,9 @@ Register addresses and bit meanings follow ETG.1000.4 and the ESC datasheets (se
 from __future__ import annotations
 
 import struct
-from ecatcfg.record import record
 from enum import Enum, IntEnum
+
+from ecatcfg.record import record
 
 
 class Cmd(IntEnum):

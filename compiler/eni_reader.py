@@ -56,6 +56,8 @@ class EniReadError(EcatcfgError):
 
 def _parse_int(text: str) -> int | None:
     """Decimal (signed), ``#x`` (ESI style) or ``0x`` hex; ``None`` if it is none of those."""
+    if len(text) <= 20 and text.isdigit() and text.isascii():     # the common case, fast
+        return int(text)
     text = text.strip()
     if not _NUMBER.fullmatch(text):
         return None
@@ -82,6 +84,33 @@ def read_bytes(data: bytes, shown_as: str) -> NetworkPlan:
     return _Reader(shown_as).network(tree.getroot())
 
 
+class _Children:
+    """An element whose children are looked up by tag many times (an InitCmd: a dozen).
+
+    ``find``, ``iterchildren``, ``get``, ``tag`` and ``sourceline`` answer as the element's
+    own would (``find`` for a plain tag: the first such child), but ``find`` is a dict
+    lookup built in one pass over the children, not a search per call.
+    """
+
+    __slots__ = ("el", "tag", "sourceline", "_first")
+
+    def __init__(self, el: Element) -> None:
+        self.el, self.tag, self.sourceline = el, el.tag, el.sourceline
+        first: dict = {}
+        for child in el:
+            first.setdefault(child.tag, child)
+        self._first = first
+
+    def find(self, tag: str) -> Element | None:
+        return self._first.get(tag)
+
+    def iterchildren(self, tag: str):
+        return self.el.iterchildren(tag)
+
+    def get(self, name: str) -> str | None:
+        return self.el.get(name)
+
+
 class _Reader:
     """Element-to-plan conversion; every error carries the file and the element's line."""
 
@@ -96,6 +125,8 @@ class _Reader:
     @staticmethod
     def text(el: Element) -> str:
         """An element's text, CDATA included, comments left out."""
+        if len(el) == 0:            # no child elements or comments: the text is all of it
+            return el.text or ""
         return "".join(el.itertext())
 
     def child(self, parent: Element, tag: str) -> Element:
@@ -222,6 +253,7 @@ class _Reader:
         return None, length
 
     def init_cmd(self, el: Element) -> InitCmd:
+        el = _Children(el)
         adp, ado, addr = self.address(el)
         data, length = self.payload(el)
         validate = el.find("Validate")
@@ -363,6 +395,7 @@ class _Reader:
         return [self.coe_init_cmd(c) for c in cmds.iterchildren("InitCmd")]
 
     def coe_init_cmd(self, el: Element) -> CoeInitCmd:
+        el = _Children(el)
         return CoeInitCmd(
             transitions=self.transitions(el),
             comment=self.opt_text(el, "Comment") or "",
@@ -413,6 +446,7 @@ class _Reader:
                      comment=self.opt_text(el, "Comment"))
 
     def cyclic_cmd(self, el: Element) -> CyclicCmd:
+        el = _Children(el)
         adp, ado, addr = self.address(el)
         data, length = self.payload(el)
         return CyclicCmd(

@@ -11,9 +11,8 @@ values), transitions are :class:`ecatcfg.esc.Transition`.
 
 from __future__ import annotations
 
-from ecatcfg.record import field, record
-
 from ecatcfg.esc import Transition
+from ecatcfg.record import field, record
 
 
 @record

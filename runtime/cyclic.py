@@ -12,10 +12,10 @@ offsets are exactly its datagrams' header positions is read the TwinCAT way.
 from __future__ import annotations
 
 import time
-from ecatcfg.record import field, record
 
 from ecatcfg.compiler.plan import CyclicCmd, NetworkPlan
 from ecatcfg.esc import AlState, Cmd, Reg
+from ecatcfg.record import field, record
 from ecatcfg.runtime import wire
 from ecatcfg.runtime.transport import Transport
 from ecatcfg.runtime.wire import Datagram

@@ -14,10 +14,10 @@ its data, *not* padded; a writer pads it to the SyncManager length with :func:`p
 from __future__ import annotations
 
 import struct
-from ecatcfg.record import record
 from enum import IntEnum
 
 from ecatcfg.errors import EcatcfgError
+from ecatcfg.record import record
 
 # -- mailbox header (facts §5) -----------------------------------------------------------
 

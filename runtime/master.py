@@ -17,10 +17,10 @@ from __future__ import annotations
 import struct
 import time
 from collections.abc import Callable
-from ecatcfg.record import record
 
 from ecatcfg.compiler.plan import NetworkPlan, SlavePlan
 from ecatcfg.esc import AlState, Cmd, Reg, Transition
+from ecatcfg.record import record
 from ecatcfg.runtime.cyclic import CyclicFrames
 from ecatcfg.runtime.lockstep import Job, run_jobs, until_answered
 from ecatcfg.runtime.replay import (TIMEOUT_COMMAND, ApplyError, MailboxChannel,

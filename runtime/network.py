@@ -24,12 +24,12 @@ import struct
 import threading
 import time
 from collections.abc import Callable
-from ecatcfg.record import record
 from pathlib import Path
 
 from ecatcfg.compiler.plan import NetworkPlan, Variable
 from ecatcfg.errors import EcatcfgError
 from ecatcfg.esc import AlState
+from ecatcfg.record import record
 from ecatcfg.runtime.master import Event, Master
 
 _FLOATS = {"REAL": "<f", "LREAL": "<d"}

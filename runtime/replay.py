@@ -16,11 +16,11 @@ from __future__ import annotations
 
 import struct
 import time
-from ecatcfg.record import field, record
 
 from ecatcfg.compiler.plan import CoeInitCmd, InitCmd, MailboxPlan, SlavePlan
 from ecatcfg.errors import EcatcfgError
 from ecatcfg.esc import AlState, Cmd, Reg, Transition, al_status_name
+from ecatcfg.record import record
 from ecatcfg.runtime.lockstep import Job, until_answered
 from ecatcfg.runtime.wire import Datagram, datagram_for
 

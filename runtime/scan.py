@@ -10,10 +10,10 @@ from __future__ import annotations
 
 import struct
 import time
-from ecatcfg.record import record
 
 from ecatcfg.compiler.plan import NetworkPlan
 from ecatcfg.esc import SII_REVISION, SII_VENDOR_ID, Cmd, Reg, eeprom_read_request
+from ecatcfg.record import record
 from ecatcfg.runtime.lockstep import Job, run_jobs, until_answered
 from ecatcfg.runtime.replay import ApplyError
 from ecatcfg.runtime.transport import Transport

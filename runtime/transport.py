@@ -11,9 +11,9 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from ecatcfg.record import record
 
 from ecatcfg.esc import MAX_DATAGRAM_DATA
+from ecatcfg.record import record
 from ecatcfg.runtime import wire
 from ecatcfg.runtime.wire import Datagram, FrameError
 

@@ -16,10 +16,10 @@ is slicing, not copying.
 from __future__ import annotations
 
 import struct
-from ecatcfg.record import field, record
 
 from ecatcfg.errors import EcatcfgError
 from ecatcfg.esc import ETHERTYPE, Cmd
+from ecatcfg.record import field, record
 
 ETH_HEADER = struct.Struct("!6s6sH")
 ECAT_HEADER = struct.Struct("<H")

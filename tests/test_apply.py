@@ -22,6 +22,7 @@ checked:
 from __future__ import annotations
 
 import json
+import os
 import queue
 import struct
 import subprocess
@@ -614,11 +615,29 @@ def _compile_example(tmp_path: Path) -> Path:
     return eni
 
 
-def _apply_virtual(eni: Path, *args: str) -> tuple[int, dict, str]:
+def _apply_virtual(eni: Path, *args: str, env: dict | None = None) -> tuple[int, dict, str]:
     done = subprocess.run([sys.executable, "-m", "ecatcfg", "apply", str(eni), "--virtual",
                            "--esi", str(EXAMPLES / "esi"), "--format", "json", *args],
-                          capture_output=True, text=True, timeout=APPLY_TIMEOUT)
+                          capture_output=True, text=True, timeout=APPLY_TIMEOUT, env=env)
     return done.returncode, json.loads(done.stdout), done.stderr
+
+
+def test_apply_with_a_cached_plan_is_the_same_apply(tmp_path):
+    """The first apply stores the parsed ENI (compiler/eni_cache.py), the next one starts
+    from it; --no-cache parses again.  All three configure the same slaves the same way."""
+    eni = _compile_example(tmp_path)
+    env = dict(os.environ, XDG_CACHE_HOME=str(tmp_path / "xdg"))
+    reports = []
+    for args in ((), (), ("--no-cache",)):
+        rc, report, err = _apply_virtual(eni, "--cycles", "0", *args, env=env)
+        assert rc == 0, err
+        reports.append(report)
+        if not reports[1:]:
+            assert len(list((tmp_path / "xdg").rglob("*.pickle"))) == 1
+    assert reports[0]["slaves"] == reports[1]["slaves"] == reports[2]["slaves"]
+    assert [r["slaves"][-1]["state"] for r in reports] == ["OP"] * 3
+    transitions = [[e.split(" in ")[0] for e in r["events"] if " -> " in e] for r in reports]
+    assert transitions[0] == transitions[1] == transitions[2]
 
 
 def test_virtual_apply_of_the_example_reaches_op(tmp_path):

@@ -7,6 +7,7 @@ import subprocess
 import sys
 
 from conftest import EXAMPLES, ROOT, device_xml, esi_xml, write
+from ecatcfg.cli import SUBCOMMANDS
 
 CONTRACT_KEYS = {"file", "line", "vendor_id", "product_code", "revision", "type", "name",
                  "group", "rx_pdos", "tx_pdos", "rx_entries", "tx_entries", "mailbox",
@@ -51,6 +52,30 @@ def test_usage_error_exits_2():
     out = ecatcfg("devices", "--format", "yaml", "examples")
     assert out.returncode == 2 and "invalid choice" in out.stderr
     assert ecatcfg().returncode == 2
+
+
+def test_a_subcommand_parses_alone_as_in_the_whole_parser(capsys):
+    """``main`` builds only the invoked subcommand's parser (startup time); its help, its
+    errors and an unknown command read as with the whole command line."""
+    from ecatcfg.cli import build_parser
+    for name in SUBCOMMANDS:
+        alone = build_parser(name)._subparsers._group_actions[0].choices[name]
+        whole = build_parser()._subparsers._group_actions[0].choices[name]
+        assert alone.format_help() == whole.format_help()
+    out = ecatcfg("aply", "x.eni.xml")
+    assert out.returncode == 2 and "invalid choice: 'aply'" in out.stderr
+    assert "apply" in out.stderr and "simulate" in out.stderr      # the whole list
+
+
+def test_console_flushes_everything_before_its_fast_exit(tmp_path):
+    """``python -m ecatcfg`` ends with os._exit: output larger than a pipe's buffer must
+    still arrive whole, and the exit code must be main's."""
+    devices = [device_xml(f"FX{n}", product=f"#x{n + 1:x}") for n in range(400)]
+    write(tmp_path, "many.xml", esi_xml(*devices))
+    out = ecatcfg("devices", "--format", "json", "--no-cache", str(tmp_path))
+    assert out.returncode == 0 and len(out.stdout) > 65536
+    assert len(json.loads(out.stdout)["devices"]) == 400     # complete JSON document
+    assert ecatcfg("devices", "no/such/dir").returncode == 2
 
 
 def test_malformed_file_exits_1_naming_file_and_line(tmp_path):
