@@ -32,7 +32,12 @@ Method (targets: apply's whole process no slower than SOEM's, and apply's frames
        SOEM:  ``python -c SOEM va``: import pysoem, config_init, config_map, SAFEOP
               request + state_check, one process data exchange, OP request, process data
               + state_check until OP; it times itself from before config_init to OP.
-     Runs alternate apply, SOEM, apply, SOEM, ...; the first pair is a warm-up, not
+     apply cold: the same command with an empty plan cache ($XDG_CACHE_HOME a new folder
+              per run): the first apply of an ENI, which parses it and stores the plan
+              (compiler/eni_cache.py).  The plain apply runs share this run's cache
+              folder, filled by the warm-up run: a machine that applies its ENI at every
+              start.  Both are reported; neither touches the user's own cache.
+     Runs alternate apply, SOEM, apply cold, apply, ...; the first round is a warm-up, not
      timed (the first layout's is recorded: a recorder in B keeps every frame the
      master sent, so the frames can be sorted: process data = frames with a logical
      datagram; mailbox; SII; AL status reads).  Per CPU layout (``free``: not pinned;
@@ -64,8 +69,8 @@ Method (targets: apply's whole process no slower than SOEM's, and apply's frames
      (for its final report).  The ratio is given for apply's configuration frames
      (frames sent minus those two) and for all frames sent.
 
-Reported per line: wall time min / median over the timed runs for apply and SOEM, apply /
-SOEM (min / median), frames (apply: sent, configuration, cyclic; SOEM: the segment's
+Reported per line: wall time min / median over the timed runs for apply, apply cold and
+SOEM, apply / SOEM (min / median), frames (apply: sent, configuration, cyclic; SOEM: the segment's
 count), the minimum and the ratios.  Benchmarks are not tests: nothing is asserted.
 """
 
