@@ -55,6 +55,7 @@ class Network:
             from ecatcfg.compiler import eni_reader
             eni = eni_reader.read_file(eni)
         self.plan = eni
+        self.link = link                    # the Network's from here on: close() closes it
         self.recorder = None
         if pcap is not None:
             from ecatcfg.runtime.pcap import PcapRecorder
@@ -184,9 +185,11 @@ class Network:
             self._thread = None
 
     def close(self) -> None:
+        """Stop cycling, finish the pcap and close the link (a raw socket is released)."""
         self.stop()
         if self.recorder is not None:
             self.recorder.close()
+        self.link.close()
         for close in self._closers:
             close()
         self._closers = []

@@ -298,3 +298,18 @@ def test_going_down_acknowledges_errors(example_plan):
         net.down()
         assert net.state == AlState.INIT
         assert [(s.state, s.error) for s in net.segment.slaves] == [(AlState.INIT, False)] * 5
+
+
+def test_close_closes_the_link_it_was_given(example_plan):
+    """The Network owns its link: closing it releases the socket (RawLink) or the
+    in-memory end, also when the caller handed the link in."""
+    from ecatcfg.runtime import emulate
+    from ecatcfg.runtime.link import LinkError
+    lib = Library([ESI], cache=False)
+    link, close = _serve(emulate.segment(emulate.specs_from_eni(example_plan, lib, "x")))
+    with Network(example_plan, link, _closers=[close]) as net:
+        net.up()
+        assert net.state == AlState.OP
+    with pytest.raises(LinkError, match="closed"):
+        link.send(bytes(60))
+    net.close()                                   # a second close is harmless
