@@ -112,8 +112,13 @@ def _frozen_delattr(self: Any, name: str) -> None:
 def _build(cls: type, frozen: bool) -> type:
     if any(hasattr(base, "__record_fields__") for base in cls.__mro__[1:]):
         raise TypeError(f"{cls.__name__}: records do not inherit from records")
+    generated = {"__init__", "__repr__", "__eq__", "__hash__", "__setattr__", "__delattr__",
+                 "__reduce__", "__slots__"} & set(cls.__dict__)
+    if generated:
+        raise TypeError(f"{cls.__name__}: @record writes {', '.join(sorted(generated))} "
+                        "itself; use a plain class for your own")
     annotations = cls.__dict__.get("__annotations__", {})
-    names = tuple(n for n, a in annotations.items() if not str(a).startswith("ClassVar"))
+    names = tuple(n for n, a in annotations.items() if not _is_classvar(a))
     defaults = {n: cls.__dict__[n] for n in names if n in cls.__dict__}
     seen_default = None
     for name in names:
@@ -123,9 +128,11 @@ def _build(cls: type, frozen: bool) -> type:
                             f"{seen_default!r}, which has one")
         if value is not _NO_DEFAULT:
             seen_default = name
-        if isinstance(value, (list, dict, set)):
-            raise ValueError(f"{cls.__name__}.{name}: mutable default; use "
-                             "field(default_factory=...)")
+        if not isinstance(value, _Factory) and type(value).__hash__ is None:
+            # dataclasses' rule: an unhashable default (list, dict, bytearray ...) would be
+            # one object shared by every instance.
+            raise ValueError(f"{cls.__name__}.{name}: mutable default "
+                             f"{type(value).__name__}; use field(default_factory=...)")
 
     body = {k: v for k, v in cls.__dict__.items()
             if k not in defaults and k not in ("__dict__", "__weakref__")}
@@ -139,6 +146,12 @@ def _build(cls: type, frozen: bool) -> type:
     new.__qualname__ = cls.__qualname__
     new.__init__ = _make_init(new, names, defaults, frozen)    # type: ignore[misc]
     return new
+
+
+def _is_classvar(annotation: Any) -> bool:
+    """``ClassVar[...]`` as a string (postponed annotations) or as the typing object."""
+    text = annotation if isinstance(annotation, str) else repr(annotation)
+    return text.startswith(("ClassVar", "typing.ClassVar"))
 
 
 def _make_init(cls: type, names: tuple[str, ...], defaults: dict[str, Any],

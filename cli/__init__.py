@@ -76,9 +76,13 @@ def console() -> None:
     standard streams are flushed; no part of ecatcfg registers atexit handlers.
     """
     code = main()
-    try:
-        sys.stdout.flush()
-        sys.stderr.flush()
-    except BrokenPipeError:      # `ecatcfg devices ... | head`: nothing more can be said
-        pass
+    for stream in (sys.stdout, sys.stderr):
+        # `ecatcfg devices ... | head`: main may have closed stderr after a broken pipe,
+        # and a stream whose reader is gone cannot take the rest; either way, nothing
+        # more can be said, and the exit code stays main's.
+        try:
+            if stream is not None and not stream.closed:
+                stream.flush()
+        except (OSError, ValueError):
+            pass
     os._exit(code)

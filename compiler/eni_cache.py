@@ -9,8 +9,8 @@ Layout under ``$XDG_CACHE_HOME/ecatcfg`` (default ``~/.cache/ecatcfg``)::
     eni-plan-v<N>/<key>.pickle      (ENI bytes, NetworkPlan read from them)
 
 Never stale: an entry is used only if its ENI bytes equal the file's, byte for byte, and
-the key also covers the source of the reader and of the plan model, so a changed ecatcfg
-is a miss.  (The key is a CRC-32 with the length: it only names the entry; hashlib would
+the key also covers ecatcfg's version, the source of the reader, the plan model and the
+safe XML parser, and lxml's version, so a changed ecatcfg or lxml is a miss.  (The key is a CRC-32 with the length: it only names the entry; hashlib would
 cost 3 ms of OpenSSL start-up.)  Only plans that read without error are stored; errors are
 reported fresh on every run.  Loading builds nothing but plan classes (the unpickler
 refuses any other), and only from a folder of the current user that nobody else can write
@@ -20,12 +20,14 @@ is a miss.  The newest ``KEEP`` entries are kept.
 
 from __future__ import annotations
 
+import importlib.util
 import os
 import pickle
 import stat
 import zlib
 from pathlib import Path
 
+from ecatcfg import __version__
 from ecatcfg.compiler import plan as plan_model
 from ecatcfg.compiler.plan import NetworkPlan
 from ecatcfg.esc import Transition
@@ -33,14 +35,25 @@ from ecatcfg.fileio import cache_dir, write_atomic
 
 FORMAT_VERSION = 1
 KEEP = 32                                   # entries; the oldest go when a new one is written
-_FINGERPRINTED = ("eni_reader.py", "plan.py")  # a change to these changes every key
+# A change to any of these changes every key (esc.py: the Transition values; xmlsafe.py:
+# how the XML is parsed and its namespaces stripped).
+_FINGERPRINTED = ("compiler/eni_reader.py", "compiler/plan.py", "esc.py", "esi/xmlsafe.py")
 
 
 def _fingerprint() -> int:
-    here = Path(__file__).parent
-    crc = FORMAT_VERSION
-    for path in [here / name for name in _FINGERPRINTED] + [here.parent / "esc.py"]:
-        crc = zlib.crc32(path.read_bytes(), crc)        # esc.py: the Transition values
+    """The reader's code: its source and the plan's (in an install without sources, the
+    version alone), and lxml's ``__init__.py``, which names its version (read, not
+    imported: a cache hit does without lxml)."""
+    sources = [Path(__file__).parent.parent / name for name in _FINGERPRINTED]
+    lxml = importlib.util.find_spec("lxml")
+    if lxml is not None and lxml.origin:
+        sources.append(Path(lxml.origin))
+    crc = zlib.crc32(f"{FORMAT_VERSION} {__version__}".encode())
+    for path in sources:
+        try:
+            crc = zlib.crc32(path.read_bytes(), crc)
+        except OSError:                     # only .pyc files installed
+            pass
     return crc
 
 
@@ -74,16 +87,19 @@ class PlanCache:
                 if st.st_uid != os.geteuid() or st.st_mode & 0o022:
                     return None
                 stored, plan = _PlanUnpickler(f).load()
-            if stored != data:
-                return None
-            os.utime(path)                  # most recently used: kept longest
         except FileNotFoundError:
             return None
         # A damaged entry can fail to unpickle in many ways (UnpicklingError, EOFError,
         # TypeError, ValueError, ...); every one of them only means "parse again".
         except Exception:                   # noqa: BLE001
             return None
-        return plan if isinstance(plan, NetworkPlan) else None
+        if stored != data or not isinstance(plan, NetworkPlan):
+            return None
+        try:
+            os.utime(path)                  # most recently used: kept longest
+        except OSError:                     # a read-only cache still serves its plans
+            pass
+        return plan
 
     def put(self, key: str, data: bytes, plan: NetworkPlan) -> None:
         # A cache that cannot be written (read-only home, full disk) only costs speed.

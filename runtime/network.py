@@ -187,12 +187,14 @@ class Network:
     def close(self) -> None:
         """Stop cycling, finish the pcap and close the link (a raw socket is released)."""
         self.stop()
-        if self.recorder is not None:
-            self.recorder.close()
-        self.link.close()
-        for close in self._closers:
-            close()
-        self._closers = []
+        closers, self._closers = self._closers, []
+        try:
+            if self.recorder is not None:
+                self.recorder.close()
+            for close in closers:
+                close()
+        finally:
+            self.link.close()
 
     def __enter__(self) -> Network:
         return self

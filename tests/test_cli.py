@@ -76,6 +76,14 @@ def test_console_flushes_everything_before_its_fast_exit(tmp_path):
     assert out.returncode == 0 and len(out.stdout) > 65536
     assert len(json.loads(out.stdout)["devices"]) == 400     # complete JSON document
     assert ecatcfg("devices", "no/such/dir").returncode == 2
+    # A reader that goes away early (`| head`): exit 0, nothing on stderr, as before.
+    proc = subprocess.Popen([sys.executable, "-m", "ecatcfg", "devices", "--format", "json",
+                             "--no-cache", str(tmp_path)], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, cwd=ROOT)
+    proc.stdout.read(10)
+    proc.stdout.close()
+    assert proc.wait(30) == 0
+    assert proc.stderr.read() == b""
 
 
 def test_malformed_file_exits_1_naming_file_and_line(tmp_path):

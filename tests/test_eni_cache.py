@@ -77,6 +77,29 @@ def test_a_new_reader_source_changes_every_key(tmp_path, monkeypatch):
     before = cache.key(b"<EtherCATConfig/>")
     monkeypatch.setattr(eni_cache, "FORMAT_VERSION", eni_cache.FORMAT_VERSION + 1)
     assert cache.key(b"<EtherCATConfig/>") != before
+    # Every source the key covers is really read (a typo would silently cover nothing).
+    root = Path(eni_cache.__file__).parent.parent
+    assert all((root / name).is_file() for name in eni_cache._FINGERPRINTED)
+    assert "esi/xmlsafe.py" in eni_cache._FINGERPRINTED
+
+
+def test_an_install_without_sources_still_caches(tmp_path, monkeypatch, parses):
+    """Only .pyc files installed: the key falls back to the version, apply still works."""
+    monkeypatch.setattr(eni_cache, "_FINGERPRINTED", ("compiler/no_such_file.py",))
+    eni, cache = _eni(tmp_path), PlanCache(tmp_path / "cache")
+    assert eni_cache.read_file(eni, cache=cache) == eni_cache.read_file(eni, cache=cache)
+    assert len(parses) == 1
+
+
+def test_a_read_only_cache_still_serves_its_plans(tmp_path, monkeypatch, parses):
+    eni, cache = _eni(tmp_path), PlanCache(tmp_path / "cache")
+    eni_cache.read_file(eni, cache=cache)
+
+    def read_only(*_args, **_kwargs):
+        raise OSError(30, "Read-only file system")
+    monkeypatch.setattr(eni_cache.os, "utime", read_only)
+    assert eni_cache.read_file(eni, cache=cache) == rich_plan()
+    assert len(parses) == 1
 
 
 def test_errors_are_not_cached(tmp_path, parses):

@@ -113,6 +113,29 @@ def test_declaration_errors_as_dataclasses():
         @record
         class Sub(Point):
             z: int = 0
+    with pytest.raises(ValueError, match="bytearray"):
+        @record
+        class SharedBuffer:
+            buf: bytearray = bytearray(4)
+    with pytest.raises(TypeError, match="__repr__"):
+        @record
+        class OwnRepr:
+            x: int
+
+            def __repr__(self) -> str:
+                return "mine"
+
+
+def test_class_variables_are_not_fields():
+    import typing
+
+    @record
+    class Limits:
+        x: int
+        limit: typing.ClassVar[int] = 5
+        _LAYOUT = "<HH"                                    # not annotated: a class attribute
+
+    assert fields(Limits) == ("x",) and Limits.limit == 5 and Limits(1)._LAYOUT == "<HH"
 
 
 def test_the_apply_path_imports_no_dataclasses():
