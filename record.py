@@ -3,7 +3,10 @@
 ``@record`` reads a class the way ``@dataclass(slots=True)`` does (annotated fields, in
 order, with optional defaults or ``field(default_factory=...)``) and gives it
 ``__slots__``, ``__init__``, ``__repr__``, ``__eq__``, ``__match_args__`` and pickling;
-``@record(frozen=True)`` also makes instances read-only and hashable.
+``@record(frozen=True)`` also makes instances read-only and hashable.  Like dataclasses it
+refuses a field without a default after one with, and an unhashable default (use
+``field(default_factory=...)``); unlike them it refuses a class body that defines one of
+the methods it writes (a class that needs its own ``__eq__`` is better a plain class).
 
 Why not ``dataclasses``: in Python 3.11 ``@dataclass`` compiles three to six methods per
 class from source text at import time, 0.25-0.6 ms per class.  The plan model, the mailbox
