@@ -1,7 +1,8 @@
 """Parsed ENIs on disk, so a machine that applies the same ENI at every start parses it once.
 
-Reading an ENI is lxml's parse plus a Python walk over every InitCmd: about 4 ms for one
-slave and 120 ms for 64 (1812 InitCmds), against about 1 and 6 ms to load the pickled plan.
+Reading an ENI is lxml's import (about 10 ms), its parse and a Python walk over every
+InitCmd: about 4 ms for one slave and 44 ms for 64 (1812 InitCmds), against about 1 and
+6 ms to load the pickled plan, which needs no lxml.
 ``ecatcfg apply`` reads through this cache (docs/BENCHMARKS.md, "Startup").
 
 Layout under ``$XDG_CACHE_HOME/ecatcfg`` (default ``~/.cache/ecatcfg``)::
