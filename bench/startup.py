@@ -85,20 +85,18 @@ import os
 import platform
 import queue
 import re
-import shutil
 import signal
 import statistics
 import subprocess
 import sys
-import tempfile
 import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from timing import ms
-from virtual_segment import (IF_A, IF_B, RECORD, Bench, line, read_frames, signal_group,
-                             stop, wait_for)
+from virtual_segment import (IF_A, IF_B, RECORD, Bench, line, read_frames, run_as_root,
+                             signal_group, stop, wait_for)
 
 ROOT = Path(__file__).resolve().parent.parent
 ESI_DIR = ROOT / "examples" / "esi"
@@ -499,22 +497,7 @@ def main() -> None:
                          "modules from source)")
     ap.add_argument("--keep", action="store_true", help="keep the temporary directory")
     args = ap.parse_args()
-    unknown = set(args.layouts.split(",")) - set(LAYOUTS)
-    if unknown:
-        ap.error(f"--layouts: unknown {', '.join(sorted(unknown))} (known: {', '.join(LAYOUTS)})")
-    if os.geteuid() != 0:
-        sys.exit("needs root (network namespaces, veth, AF_PACKET)")
-    sys.path.insert(0, str(ROOT.parent))
-    tmp = Path(tempfile.mkdtemp(prefix="ecatcfg-bench-startup-"))
-    try:
-        run(args, tmp)
-    except KeyboardInterrupt:
-        sys.exit("interrupted (namespaces and processes removed)")
-    finally:
-        if args.keep:
-            print(f"kept {tmp}")
-        else:
-            shutil.rmtree(tmp, ignore_errors=True)
+    run_as_root(ap, args, LAYOUTS, "startup", run)
 
 
 def run(args: argparse.Namespace, tmp: Path) -> None:

@@ -68,6 +68,7 @@ import sys
 import tempfile
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -512,13 +513,20 @@ def main() -> None:
                     help="keep the temporary directory (line.yaml, soem.frames: SOEM's "
                          "configuration frames, 2-byte length + frame each) for profiling")
     args = ap.parse_args()
-    unknown = set(args.layouts.split(",")) - set(LAYOUTS)
+    run_as_root(ap, args, LAYOUTS, "vseg", run)
+
+
+def run_as_root(ap: argparse.ArgumentParser, args: argparse.Namespace, layouts: dict,
+                name: str, run: Callable[[argparse.Namespace, Path], None]) -> None:
+    """The common frame of the namespace benchmarks: check ``--layouts`` and root, then
+    ``run(args, tmp)`` in a temporary folder removed afterwards (kept with ``--keep``)."""
+    unknown = set(args.layouts.split(",")) - set(layouts)
     if unknown:
-        ap.error(f"--layouts: unknown {', '.join(sorted(unknown))} (known: {', '.join(LAYOUTS)})")
+        ap.error(f"--layouts: unknown {', '.join(sorted(unknown))} (known: {', '.join(layouts)})")
     if os.geteuid() != 0:
         sys.exit("needs root (network namespaces, veth, AF_PACKET)")
     sys.path.insert(0, str(ROOT.parent))
-    tmp = Path(tempfile.mkdtemp(prefix="ecatcfg-bench-vseg-"))
+    tmp = Path(tempfile.mkdtemp(prefix=f"ecatcfg-bench-{name}-"))
     try:
         run(args, tmp)
     except KeyboardInterrupt:

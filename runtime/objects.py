@@ -453,17 +453,7 @@ class _Builder:
             capacity = max(len(values), obj.max_subindex,
                            CONFIGURABLE_MAPPING_CAPACITY
                            if configurable and not obj.entries else 0)
-            self._si0(obj, len(values), writes)
-            for sub in range(1, capacity + 1):
-                entry = obj.entries.get(sub)
-                if entry is None:
-                    entry = obj.add(OdEntry(sub, f"SubIndex {sub:03d}", "UDINT", 32,
-                                            bytes(4)))
-                _standard(entry, "UDINT", 32)
-                entry.access = "rw" if configurable else "ro"
-                entry.read_states, entry.write_states = MAILBOX_STATES, writes
-                value = values[sub - 1] if sub <= len(values) else 0
-                entry.value = _int_bytes(value, entry.byte_size)
+            self._array(obj, values, capacity, "UDINT", 32, writes)
 
     def sm_objects(self, pdos: list[Pdo]) -> None:
         """0x1C00 (SM communication types) and 0x1C10+n (PDO assignment of each
@@ -498,17 +488,23 @@ class _Builder:
                 # Room for every PDO that could go to this SM (our choice).
                 candidates = {p.index for p in pdos if p.direction == direction}
                 capacity = max(len(assigned), len(candidates), 1)
-            self._si0(obj, len(assigned), writes)
-            for sub in range(1, capacity + 1):
-                entry = obj.entries.get(sub)
-                if entry is None:
-                    entry = obj.add(OdEntry(sub, f"SubIndex {sub:03d}", "UINT", 16,
-                                            bytes(2)))
-                _standard(entry, "UINT", 16)
-                entry.access = "rw" if writes else "ro"
-                entry.read_states, entry.write_states = MAILBOX_STATES, writes
-                value = assigned[sub - 1] if sub <= len(assigned) else 0
-                entry.value = _int_bytes(value, entry.byte_size)
+            self._array(obj, assigned, capacity, "UINT", 16, writes)
+
+    def _array(self, obj: OdObject, values: list[int], capacity: int, data_type: str,
+               bits: int, writes: frozenset[AlState]) -> None:
+        """A PDO mapping or assignment: subindex 0 = ``len(values)``, subindexes 1..capacity
+        of ``data_type`` holding ``values`` and zeros after them, writable in ``writes``."""
+        self._si0(obj, len(values), writes)
+        for sub in range(1, capacity + 1):
+            entry = obj.entries.get(sub)
+            if entry is None:
+                entry = obj.add(OdEntry(sub, f"SubIndex {sub:03d}", data_type, bits,
+                                        bytes(bits // 8)))
+            _standard(entry, data_type, bits)
+            entry.access = "rw" if writes else "ro"
+            entry.read_states, entry.write_states = MAILBOX_STATES, writes
+            value = values[sub - 1] if sub <= len(values) else 0
+            entry.value = _int_bytes(value, entry.byte_size)
 
     def identity(self) -> None:
         """0x1000 (ESI default, else AddInfo<<16 | ProfileNo) and 0x1018 with the device's
