@@ -109,7 +109,8 @@ def main() -> None:
     print(f"warm compile (index cache):             {ms(warm)} ms; ratio {ratio(base, warm)}")
 
     sys.path.insert(0, str(ROOT.parent))
-    from ecatcfg.compiler import build, eni_writer, topology as topo_mod
+    from ecatcfg.compiler import build, topology as topo_mod
+    from ecatcfg.eni import writer as eni_writer
     from ecatcfg.esi.library import Library
     lib = Library(esi, cache=False)
     loaded = topo_mod.load(topo)

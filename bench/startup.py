@@ -34,7 +34,7 @@ Method (targets: apply's whole process no slower than SOEM's, and apply's frames
               + state_check until OP; it times itself from before config_init to OP.
      apply cold: the same command with an empty plan cache ($XDG_CACHE_HOME a new folder
               per run): the first apply of an ENI, which parses it and stores the plan
-              (compiler/eni_cache.py).  The plain apply runs share this run's cache
+              (eni/cache.py).  The plain apply runs share this run's cache
               folder, filled by the warm-up run: a machine that applies its ENI at every
               start.  Both are reported; neither touches the user's own cache.
      Runs alternate apply, SOEM, apply cold, apply, ...; the first round is a warm-up, not
@@ -49,7 +49,7 @@ Method (targets: apply's whole process no slower than SOEM's, and apply's frames
   4a. Breakdown: ``python -c BREAKDOWN`` runs the steps of cli/apply.py one by one with
      time stamps (imports, ENI read, report, socket, scan, IP, PS, SO, final read), plus
      the interpreter start-up before and the teardown after, from power-on as above.
-  5. Minimum frames, from the compiled ENI (``compiler.eni_reader``):
+  5. Minimum frames, from the compiled ENI (``eni.reader``):
        scan:  1 (BRD slave count) + 7 (each slave's identity chain, all slaves in
               parallel: 1 EEPROM-owner write + 2 x (SII read request, status poll, data
               read), 8-byte SII reads);
@@ -153,7 +153,7 @@ def mark(what):
     marks[what] = round((time.perf_counter() - T0) * 1e3, 1)
 import ecatcfg.cli
 ecatcfg.cli.build_parser("apply").parse_args(["apply", sys.argv[1], "--iface", sys.argv[2]])
-from ecatcfg.compiler import eni_cache
+from ecatcfg.eni import cache as eni_cache
 from ecatcfg.cli.report import ApplyReport
 from ecatcfg.esc import AlState, Transition
 from ecatcfg.runtime.network import Network
@@ -502,13 +502,13 @@ def main() -> None:
 
 def run(args: argparse.Namespace, tmp: Path) -> None:
     import pysoem
-    from ecatcfg.compiler import eni_reader
+    from ecatcfg.eni import reader as eni_reader
 
     inherited = os.environ.get("PYTHONDONTWRITEBYTECODE")
     if args.bytecode == "cache":            # inherited by every process started here
         os.environ.pop("PYTHONDONTWRITEBYTECODE", None)
         os.environ["PYTHONPYCACHEPREFIX"] = str(tmp / "pycache")
-    # apply's ENI plan cache (compiler/eni_cache.py) and the ESI index cache: a folder of
+    # apply's ENI plan cache (eni/cache.py) and the ESI index cache: a folder of
     # this run's, filled by the warm-up run, so the timed "apply" runs find the plan
     # cached, as on a machine that applies its ENI at every start.  "apply cold" runs
     # get a new empty folder each: the first apply of an ENI (parse + store).

@@ -657,10 +657,12 @@ def run(args: argparse.Namespace, tmp: Path) -> None:
 
     # In process: the same line configured by replaying SOEM's frames, process() alone.
     from ecatcfg.compiler import topology
+    from ecatcfg.compiler.resolve import plugged_devices
     from ecatcfg.esi.library import Library
     from ecatcfg.runtime import emulate
     lib = Library([str(ESI_DIR)], cache=False)
-    seg = emulate.segment(emulate.specs_from_topology(topology.load(topo), lib))
+    seg = emulate.segment([emulate.SlaveSpec(d.device, d.name, alias=d.alias)
+                           for d in plugged_devices(topology.load(topo), lib)])
     for frame in recorded:
         seg.process(frame)
     states = {s.state.name + ("+ERR" if s.error else "") for s in seg.slaves}

@@ -42,7 +42,7 @@ def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from ecatcfg.cli.report import ApplyReport
-    from ecatcfg.compiler import eni_cache
+    from ecatcfg.eni import cache as eni_cache
     from ecatcfg.errors import EcatcfgError, UsageError
     from ecatcfg.esc import AlState
     from ecatcfg.runtime.network import Network
@@ -58,7 +58,7 @@ def run(args: argparse.Namespace) -> int:
     if args.pcap and Path(args.pcap).is_dir():
         raise UsageError(f"{args.pcap}: is a folder, not a file to write")
     if args.no_cache:
-        from ecatcfg.compiler import eni_reader
+        from ecatcfg.eni import reader as eni_reader
         plan = eni_reader.read_file(args.eni)
     else:
         plan = eni_cache.read_file(args.eni)

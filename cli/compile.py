@@ -28,7 +28,8 @@ def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from ecatcfg import __version__
-    from ecatcfg.compiler import build, eni_writer, header, topology
+    from ecatcfg.compiler import build, header, topology
+    from ecatcfg.eni import writer as eni_writer
     from ecatcfg.errors import EcatcfgError, UsageError
     from ecatcfg.esi.library import Library
     from ecatcfg.fileio import write_atomic

@@ -28,7 +28,8 @@ def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from ecatcfg import __version__
-    from ecatcfg.compiler import build, eni_writer, header, topology
+    from ecatcfg.compiler import build, header, topology
+    from ecatcfg.eni import writer as eni_writer
     from ecatcfg.errors import UsageError
     from ecatcfg.esi.library import Library
     from ecatcfg.examples import example_dir
@@ -81,7 +82,7 @@ def _apply(eni, esi, cycles: int) -> int:
     import struct
 
     from ecatcfg.cli.report import ApplyReport
-    from ecatcfg.compiler import eni_reader
+    from ecatcfg.eni import reader as eni_reader
     from ecatcfg.esc import AlState
     from ecatcfg.runtime.network import Network
 

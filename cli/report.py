@@ -9,7 +9,7 @@ from __future__ import annotations
 import sys
 from collections.abc import Callable
 
-from ecatcfg.compiler.plan import NetworkPlan
+from ecatcfg.eni.plan import NetworkPlan
 from ecatcfg.esc import AlState, al_status_name
 
 _TRANSITION_TEXT = {"IP": "INIT -> PREOP", "PS": "PREOP -> SAFEOP", "SO": "SAFEOP -> OP",

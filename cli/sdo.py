@@ -83,10 +83,10 @@ def run(args: argparse.Namespace) -> int:
             if type_name is None:
                 raise UsageError("write needs --type to encode VALUE (or give the bytes as "
                                  "hex:0a00)")
-            from ecatcfg.compiler.sdo import SdoValueError, encode
+            from ecatcfg.esi.datatypes import ValueTypeError, encode
             try:
                 data = encode(value, type_name)
-            except SdoValueError as exc:
+            except ValueTypeError as exc:
                 raise UsageError(f"VALUE {value!r}: {exc}") from None
         if not data:
             raise UsageError("nothing to write: VALUE encodes to 0 bytes")
@@ -110,7 +110,7 @@ def run(args: argparse.Namespace) -> int:
         if type_name:
             out["type"] = type_name
             try:
-                out["value"] = sdo_tool.decode(result, type_name)
+                out["value"] = datatypes.decode(result, type_name)
             except ValueError as exc:
                 decoded_error = f"{where}: cannot decode as {type_name}: {exc}"
     else:

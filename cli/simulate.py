@@ -58,10 +58,14 @@ def run(args: argparse.Namespace) -> int:
             print(f"error: {problem}", file=sys.stderr)
         raise EcatcfgError(f"{len(lib.problems)} ESI file problem(s)")
     if args.topology:
+        # The compiler resolves the topology (its checks, the modules in the slots); the
+        # segment emulates the devices it resolved.
         from ecatcfg.compiler import topology
-        specs = emulate.specs_from_topology(topology.load(args.topology), lib)
+        from ecatcfg.compiler.resolve import plugged_devices
+        specs = [emulate.SlaveSpec(d.device, d.name, alias=d.alias)
+                 for d in plugged_devices(topology.load(args.topology), lib)]
     else:
-        from ecatcfg.compiler import eni_reader
+        from ecatcfg.eni import reader as eni_reader
         specs = emulate.specs_from_eni(eni_reader.read_file(args.eni), lib, args.eni)
     if not specs:
         raise EcatcfgError(f"{source}: no slaves to emulate")

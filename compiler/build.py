@@ -11,7 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from ecatcfg.compiler import initcmds, layout as layout_mod, pdocmds
-from ecatcfg.compiler.plan import (Cyclic, DcPlan, MailboxArea, MailboxPlan, MasterPlan,
+from ecatcfg.eni.plan import (Cyclic, DcPlan, MailboxArea, MailboxPlan, MasterPlan,
                                    NetworkPlan, PreviousPort, ProcessData, ProcessImage,
                                    SlavePlan, SmSettings, Variable)
 from ecatcfg.compiler.resolve import ResolvedSlave, resolve_all

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import jinja2
 
-from ecatcfg.compiler.plan import NetworkPlan, Variable
+from ecatcfg.eni.plan import NetworkPlan, Variable
 from ecatcfg.esi import datatypes
 from ecatcfg.fileio import write_atomic
 

@@ -17,7 +17,7 @@ from __future__ import annotations
 import struct
 
 from ecatcfg.compiler.layout import SlaveLayout, pd_bits
-from ecatcfg.compiler.plan import DcPlan, InitCmd, Validate
+from ecatcfg.eni.plan import DcPlan, InitCmd, Validate
 from ecatcfg.compiler.resolve import ResolvedSlave
 from ecatcfg.esc import (AL_ERROR_ACK, SII_PRODUCT_CODE, SII_VENDOR_ID, AlState, Cmd,
                          Reg, SmConfig, Transition as T, eeprom_read_request, fmmu_register,

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from ecatcfg.compiler.plan import BitRange, CyclicCmd, Frame, Variable
+from ecatcfg.eni.plan import BitRange, CyclicCmd, Frame, Variable
 from ecatcfg.compiler.resolve import ResolvedSlave
 from ecatcfg.errors import EcatcfgError
 from ecatcfg.esc import (DATAGRAM_OVERHEAD, FRAME_HEADER, FRAME_PAYLOAD, MAILBOX_STATE_ADDR,

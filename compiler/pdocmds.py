@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import struct
 
-from ecatcfg.compiler.plan import CoeInitCmd, PdoDesc
+from ecatcfg.eni.plan import CoeInitCmd, PdoDesc
 from ecatcfg.compiler.resolve import ResolvedSlave
 from ecatcfg.esc import Transition
 from ecatcfg.esi.coe import DictEntry, lookup

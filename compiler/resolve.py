@@ -11,15 +11,15 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from ecatcfg.compiler import sdo as sdo_codec
-from ecatcfg.compiler.plan import CoeInitCmd, PdoDesc, PdoEntryDesc
-from ecatcfg.compiler.topology import LoadedTopology, Slave
+from ecatcfg.eni.plan import CoeInitCmd, PdoDesc, PdoEntryDesc
+from ecatcfg.compiler.topology import LoadedTopology, Slave, TopologyError
 from ecatcfg.errors import EcatcfgError
 from ecatcfg.esc import Transition
 from ecatcfg.esi import datatypes
 from ecatcfg.esi.coe import TRANSITION_STATE, DictEntry, device_dictionary, has_coe, lookup
 from ecatcfg.esi.library import Library, SelectorError
 from ecatcfg.esi.model import DcOpMode, Device, Dictionary, Module, Pdo, SyncManager
+from ecatcfg.esi.slots import PluggedModule, module_dictionaries, plugged_module, with_modules
 from ecatcfg.record import replace
 
 
@@ -103,6 +103,26 @@ def resolve_all(loaded: LoadedTopology, library: Library) -> tuple[list[Resolved
     return resolved, errors.items
 
 
+@dataclass(frozen=True, slots=True)
+class PluggedDevice:
+    """A topology slave's device as it sits on the line: with the PDOs and dictionaries of
+    the modules the topology plugs into its slots (what a virtual segment emulates)."""
+
+    name: str
+    device: Device
+    alias: int = 0
+
+
+def plugged_devices(loaded: LoadedTopology, library: Library) -> list[PluggedDevice]:
+    """The devices of a topology's slaves in bus order, after the same checks as a compile
+    (an unknown device or a module that does not fit its slot is an error at its line)."""
+    resolved, errors = resolve_all(loaded, library)
+    if errors:
+        raise TopologyError(errors)
+    return [PluggedDevice(r.name, with_modules(r.device, r.modules), r.cfg.alias or 0)
+            for r in resolved]
+
+
 def _resolve(cfg: Slave, pos: int, phys: int, library: Library,
              errors: _Errors) -> ResolvedSlave | None:
     where = ("slaves", pos)
@@ -124,8 +144,7 @@ def _resolve(cfg: Slave, pos: int, phys: int, library: Library,
                           note=selection.note if len(choices) > 1 else None)
     modules = _plug_modules(slave, library.modules_for(selection.entry), errors)
     slave.modules = modules
-    slave.module_dicts = [(p.index_offset, p.module.profile.dictionary) for p in modules
-                          if p.module.profile and p.module.profile.dictionary]
+    slave.module_dicts = module_dictionaries(modules)
     _choose_pdos(slave, modules, errors)
     _apply_mappings(slave, errors)
     _check_sm_sizes(slave, errors)          # after the mappings: they change the sizes
@@ -135,14 +154,6 @@ def _resolve(cfg: Slave, pos: int, phys: int, library: Library,
 
 
 # -- modules ------------------------------------------------------------------------------
-
-@dataclass(slots=True)
-class PluggedModule:
-    slot: int                     # 1-based
-    module: Module
-    pdo_offset: int
-    index_offset: int
-
 
 def _plug_modules(slave: ResolvedSlave, library_modules: dict[int, Module],
                   errors: _Errors) -> list[PluggedModule]:
@@ -182,18 +193,6 @@ def _plug_modules(slave: ResolvedSlave, library_modules: dict[int, Module],
     return plugged
 
 
-def plugged_module(device: Device, number: int, module: Module) -> PluggedModule:
-    """``module`` in slot ``number`` (from 1) of ``device``: its PDO and object offsets are
-    (number - 1) x the slot's (or all slots') SlotPdoIncrement / SlotIndexIncrement."""
-    slot = device.slots.slots[number - 1]
-    pdo_inc = slot.slot_pdo_increment if slot.slot_pdo_increment is not None \
-        else device.slots.slot_pdo_increment
-    idx_inc = slot.slot_index_increment if slot.slot_index_increment is not None \
-        else device.slots.slot_index_increment
-    return PluggedModule(number, module, (number - 1) * (pdo_inc or 0),
-                         (number - 1) * (idx_inc or 0))
-
-
 # -- PDO choice ---------------------------------------------------------------------------
 
 def _desc(pdo: Pdo, pdo_offset: int = 0, index_offset: int = 0) -> PdoDesc:
@@ -210,11 +209,6 @@ def _desc(pdo: Pdo, pdo_offset: int = 0, index_offset: int = 0) -> PdoDesc:
                              for x in pdo.excludes])
 
 
-def default_sm(device: Device, direction: str) -> SyncManager | None:
-    wanted = "Outputs" if direction == "rx" else "Inputs"
-    return next((sm for sm in device.sms if sm.type == wanted and not sm.virtual), None)
-
-
 def _choose_pdos(slave: ResolvedSlave, modules: list[PluggedModule], errors: _Errors) -> None:
     dev, cfg = slave.device, slave.cfg
     # ESI document order (the ENI lists PDOs, and EC-Engineer clears them, in that order).
@@ -229,7 +223,7 @@ def _choose_pdos(slave: ResolvedSlave, modules: list[PluggedModule], errors: _Er
     can_assign = bool(coe and coe.pdo_assign)
     for direction, chosen, key in (("rx", cfg.rx_pdos, "rx_pdos"), ("tx", cfg.tx_pdos, "tx_pdos")):
         mine = [p for p in pdos if p.direction == direction]
-        sm = default_sm(dev, direction)
+        sm = dev.default_sm(direction)
         # SMs of this direction: a PDO the ESI puts on a missing SM, a mailbox SM or one of
         # the other direction goes to the direction's first SM instead.
         wanted = "Outputs" if direction == "rx" else "Inputs"
@@ -496,8 +490,8 @@ def _sdo_data(slave: ResolvedSlave, dic: Dictionary | None, local: int, user, st
                    f"in its ESI; give 'type' (e.g. UINT) or 'data' for {target}", *where)
         return None
     try:
-        return sdo_codec.encode(user.value, type_name, bit_size)
-    except sdo_codec.SdoValueError as exc:
+        return datatypes.encode(user.value, type_name, bit_size)
+    except datatypes.ValueTypeError as exc:
         errors.add(f"slave {slave.name!r}: {target}: {exc}", *where, "value")
         return None
 

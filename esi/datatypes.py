@@ -1,4 +1,5 @@
-"""ETG.2000 / CoE base data type names: their bit sizes and the spellings that mean the same.
+"""ETG.2000 / CoE base data types: names, bit sizes, the spellings that mean the same, and how a
+value of each type is written on the wire (:func:`encode`, :func:`decode`).
 
 ESI files name types in IEC 61131 style (``UINT``, ``UDINT``, ``STRING(12)``,
 ``ARRAY [0..3] OF BYTE``); some generators use the CoE (ETG.1000.6) spellings (``UNSIGNED16``,
@@ -8,7 +9,9 @@ ESI files name types in IEC 61131 style (``UINT``, ``UDINT``, ``STRING(12)``,
 
 from __future__ import annotations
 
+import math
 import re
+import struct
 
 # Canonical IEC name -> bit size (None: variable length).
 BASE_TYPES: dict[str, int | None] = {
@@ -82,3 +85,96 @@ def bit_size(name: str) -> int | None:
         count = int(m.group(2)) - int(m.group(1)) + 1
         return element * count if element is not None and count > 0 else None
     return None
+
+
+# -- values on the wire ----------------------------------------------------------------------
+
+_SIGNED = {"SINT", "INT", "INT24", "DINT", "INT40", "INT48", "INT56", "LINT"}
+_FLOATS = {"REAL": "<f", "LREAL": "<d"}
+_SIZED_STRING = re.compile(r"^W?STRING(?:\((\d+)\))?$")
+
+
+class ValueTypeError(ValueError):
+    """A value that does not fit its type (message says why)."""
+
+
+def encode(value: int | float | str, type_name: str, bits: int | None = None) -> bytes:
+    """The wire bytes of ``value`` as ``type_name`` (a base type; records are not values).
+
+    CoE transfers data little-endian (ETG.1000.6); integers are range-checked against their
+    type, so ``value: 300`` for a USINT is an error where the value was given, not a
+    surprise on the bus."""
+    base = canonical(type_name)
+    if base is None:
+        raise ValueTypeError(f"type {type_name!r} is not a base type; give 'data' as hex bytes")
+    if base in _FLOATS:
+        try:
+            # YAML 1.1 reads 1e-3 (no dot) as a string: accept numbers written that way.
+            number = float(value)
+            return struct.pack(_FLOATS[base], number)
+        except ValueError:
+            raise ValueTypeError(f"{value!r} is not a number for {base}") from None
+        except OverflowError:
+            raise ValueTypeError(f"{value} is outside the range of {base}") from None
+    m = _SIZED_STRING.match(base)
+    if m:
+        if not isinstance(value, str):
+            raise ValueTypeError(f"{base} takes a string value")
+        codec = "utf-16-le" if base.startswith("W") else "latin-1"
+        try:
+            data = value.encode(codec, errors="strict")
+        except UnicodeEncodeError as exc:
+            raise ValueTypeError(f"{value!r} has a character {base} cannot hold "
+                                 f"({exc.object[exc.start]!r}); give 'data' as hex "
+                                 "bytes") from None
+        limit = (bits or 0) // 8 or (int(m.group(1)) if m.group(1) else 0)
+        if limit and len(data) > limit:
+            raise ValueTypeError(f"{value!r} is {len(data)} bytes, more than {base} "
+                                 f"holds ({limit})")
+        return data
+    size = bit_size(base) or bits
+    if size is None or base.startswith("ARRAY"):
+        raise ValueTypeError(f"type {base} has no fixed size; give 'data' as hex bytes")
+    if isinstance(value, float):
+        if not value.is_integer():
+            raise ValueTypeError(f"{value} is not an integer ({base})")
+        value = int(value)
+    if isinstance(value, str):
+        try:
+            value = int(value, 0)
+        except ValueError:
+            raise ValueTypeError(f"{value!r} is not an integer ({base})") from None
+    signed = base in _SIGNED
+    lo, hi = ((-(1 << (size - 1)), (1 << (size - 1)) - 1) if signed else (0, (1 << size) - 1))
+    if not lo <= value <= hi:
+        raise ValueTypeError(f"value {value} is outside {base} ({lo}..{hi})")
+    return (value & ((1 << size) - 1)).to_bytes((size + 7) // 8, "little")
+
+def decode(data: bytes, type_name: str) -> int | float | str | bool:
+    """The value of ``data`` (CoE wire bytes, little-endian) as the base type ``type_name``:
+    the inverse of :func:`encode`.  Raises :class:`ValueTypeError` saying why when the bytes
+    do not fit the type."""
+    base = canonical(type_name)
+    if base is None:
+        raise ValueTypeError(f"{type_name!r} is not a base data type (USINT, UINT, UDINT, "
+                             "SINT, INT, DINT, REAL, STRING, ...)")
+    if base.startswith(("STRING", "WSTRING", "UNICODE_STRING")):
+        codec = "latin-1" if base.startswith("STRING") else "utf-16-le"
+        text = data.decode(codec, errors="replace")
+        return text.split("\x00", 1)[0]          # padded with NULs up to the object size
+    if base in ("OCTET_STRING", "DOMAIN"):
+        return data.hex()
+    bits = bit_size(base)
+    if bits is None or base.startswith("ARRAY"):
+        raise ValueTypeError(f"type {base} has no single value; read it as hex bytes")
+    size = (bits + 7) // 8
+    if len(data) != size:
+        raise ValueTypeError(f"{len(data)} byte{'s' if len(data) != 1 else ''} came back; "
+                             f"{base} has {size}")
+    if base in _FLOATS:
+        value = struct.unpack(_FLOATS[base], data)[0]
+        return value if math.isfinite(value) else repr(value)
+    number = int.from_bytes(data, "little", signed=base in _SIGNED)
+    if bits < 8 * size:                           # BOOL, BITn: the low bits only
+        number &= (1 << bits) - 1
+    return bool(number) if base in ("BOOL", "BIT") else number

@@ -494,6 +494,13 @@ class Device:
     def sm_by_type(self, sm_type: str) -> list[SyncManager]:
         return [sm for sm in self.sms if sm.type == sm_type]
 
+    def default_sm(self, direction: str) -> SyncManager | None:
+        """The process-data SyncManager of a PDO direction (``rx`` = outputs, ``tx`` =
+        inputs): the first non-virtual ``Outputs`` or ``Inputs`` SM.  A PDO without ``Sm``,
+        or whose ``Sm`` is not of its direction, is assigned here."""
+        wanted = "Outputs" if direction == "rx" else "Inputs"
+        return next((sm for sm in self.sms if sm.type == wanted and not sm.virtual), None)
+
 
 @dataclass(slots=True)
 class EsiFile:

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import time
 
-from ecatcfg.compiler.plan import CyclicCmd, NetworkPlan
+from ecatcfg.eni.plan import CyclicCmd, NetworkPlan
 from ecatcfg.esc import AlState, Cmd, Reg
 from ecatcfg.record import field, record
 from ecatcfg.runtime import wire

@@ -10,7 +10,8 @@ from dataclasses import dataclass, replace
 
 from ecatcfg.esi import sii
 from ecatcfg.esi.coe import has_coe
-from ecatcfg.esi.model import Device, Dictionary, Pdo, PdoEntry, Profile
+from ecatcfg.esi.model import Device, Pdo, PdoEntry
+from ecatcfg.esi.slots import plugged_module, with_modules
 from ecatcfg.runtime.segment import Faults, VirtualSegment
 from ecatcfg.runtime.slave import EmulatedSlave
 
@@ -73,20 +74,6 @@ def segment(specs: list[SlaveSpec], faults: Faults | None = None) -> VirtualSegm
     return VirtualSegment([emulated_slave(s) for s in specs], faults)
 
 
-def specs_from_topology(loaded, library) -> list[SlaveSpec]:
-    """The slaves of a topology file, each with its ESI device; a modular device gets the
-    modules the topology plugs into its slots.  The compiler's checks apply (an unknown
-    device or a module that does not fit its slot is an error at the topology line)."""
-    from ecatcfg.compiler.resolve import resolve_all
-    from ecatcfg.compiler.topology import TopologyError
-
-    resolved, errors = resolve_all(loaded, library)
-    if errors:
-        raise TopologyError(errors)
-    return [SlaveSpec(with_modules(r.device, r.modules, r.module_dicts), r.name,
-                      alias=r.cfg.alias or 0) for r in resolved]
-
-
 def specs_from_eni(plan, library, shown: str) -> list[SlaveSpec]:
     """The slaves an ENI describes (identity and order); their behaviour comes from the
     ESI devices with exactly that vendor, product and revision.  A modular device gets the
@@ -119,43 +106,6 @@ def specs_from_eni(plan, library, shown: str) -> list[SlaveSpec]:
 
 # -- modular devices --------------------------------------------------------------------------
 
-def with_modules(device: Device, modules, module_dicts) -> Device:
-    """``device`` with the PDOs and dictionaries of its plugged modules: PDO and object
-    indices marked DependOnSlot move by the slot's increments (ETG.2000 Slots)."""
-    if not modules:
-        return device
-    rx, tx = list(device.rx_pdos), list(device.tx_pdos)
-    for plugged in modules:
-        for pdo in plugged.module.rx_pdos + plugged.module.tx_pdos:
-            moved = _moved_pdo(device, pdo, plugged.pdo_offset, plugged.index_offset)
-            (rx if pdo.direction == "rx" else tx).append(moved)
-    profiles = list(device.profiles) + [
-        Profile(dic.source, dictionary=_moved_dictionary(dic, offset))
-        for offset, dic in module_dicts]
-    return replace(device, rx_pdos=rx, tx_pdos=tx, profiles=profiles)
-
-
-def _moved_pdo(device: Device, pdo: Pdo, pdo_offset: int, index_offset: int) -> Pdo:
-    entries = [replace(e, index=(e.index or 0) + (index_offset if e.depend_on_slot and e.index
-                                                   else 0)) for e in pdo.entries]
-    from ecatcfg.compiler.resolve import default_sm
-
-    sm = pdo.sm
-    if sm is None:                       # a module PDO without Sm: the direction's SM
-        found = default_sm(device, pdo.direction)
-        sm = found.number if found else None
-    return replace(pdo, index=(pdo.index or 0) + (pdo_offset if pdo.depend_on_slot else 0),
-                   sm=sm, entries=entries)
-
-
-def _moved_dictionary(dic: Dictionary, offset: int) -> Dictionary:
-    objects = {}
-    for index, obj in dic.objects.items():
-        moved = index + offset if obj.depend_on_slot else index
-        objects[moved] = replace(obj, index=moved)
-    return Dictionary(dic.data_types, objects, dic.source)
-
-
 MODULE_IDENT_LIST = 0xF030
 
 
@@ -167,8 +117,6 @@ def _eni_modules(device: Device, slave, library_modules) -> tuple[Device, bool]:
     """A modular device as an ENI configures it: the modules named by its 0xF030 InitCmds
     (one subindex per slot, or the whole list with CompleteAccess) bring their dictionaries;
     the PDOs are the ENI's."""
-    from ecatcfg.compiler.resolve import plugged_module
-
     idents: dict[int, int] = {}
     coe = slave.mailbox.coe_init_cmds if slave.mailbox else []
     for cmd in coe:
@@ -183,9 +131,7 @@ def _eni_modules(device: Device, slave, library_modules) -> tuple[Device, bool]:
     plugged = [plugged_module(device, n, library_modules[ident])
                for n, ident in sorted(idents.items())
                if 1 <= n <= len(device.slots.slots) and ident in library_modules]
-    dicts = [(p.index_offset, p.module.profile.dictionary) for p in plugged
-             if p.module.profile and p.module.profile.dictionary]
-    device = with_modules(device, plugged, dicts)
+    device = with_modules(device, plugged)
     if slave.process_data is not None and slave.process_data.pdos:
         device = _with_eni_pdos(device, slave.process_data.pdos)
     return device, bool(plugged)

@@ -18,7 +18,7 @@ import struct
 import time
 from collections.abc import Callable
 
-from ecatcfg.compiler.plan import NetworkPlan, SlavePlan
+from ecatcfg.eni.plan import NetworkPlan, SlavePlan
 from ecatcfg.esc import AlState, Cmd, Reg, Transition
 from ecatcfg.record import record
 from ecatcfg.runtime.cyclic import CyclicFrames

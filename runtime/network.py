@@ -26,7 +26,7 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-from ecatcfg.compiler.plan import NetworkPlan, Variable
+from ecatcfg.eni.plan import NetworkPlan, Variable
 from ecatcfg.errors import EcatcfgError
 from ecatcfg.esc import AlState
 from ecatcfg.record import record
@@ -52,7 +52,7 @@ class Network:
     def __init__(self, eni: NetworkPlan | str | Path, link, *, pcap: str | Path | None = None,
                  on_event: Callable[[Event], None] | None = None, _closers=()) -> None:
         if not isinstance(eni, NetworkPlan):
-            from ecatcfg.compiler import eni_reader
+            from ecatcfg.eni import reader as eni_reader
             eni = eni_reader.read_file(eni)
         self.plan = eni
         self.link = link                    # the Network's from here on: close() closes it
@@ -74,7 +74,7 @@ class Network:
                 faults=None, esi_cache: bool = True, **kwargs) -> Network:
         """The ENI on a virtual segment that emulates its slaves from the ESI files
         (``esi_cache``: through the ESI index cache)."""
-        from ecatcfg.compiler import eni_reader
+        from ecatcfg.eni import reader as eni_reader
         from ecatcfg.esi.library import Library
         from ecatcfg.runtime import emulate
         from ecatcfg.runtime.link import MemoryLink

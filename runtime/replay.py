@@ -17,7 +17,7 @@ from __future__ import annotations
 import struct
 import time
 
-from ecatcfg.compiler.plan import CoeInitCmd, InitCmd, MailboxPlan, SlavePlan
+from ecatcfg.eni.plan import CoeInitCmd, InitCmd, MailboxPlan, SlavePlan
 from ecatcfg.errors import EcatcfgError
 from ecatcfg.esc import AlState, Cmd, Reg, Transition, al_status_name
 from ecatcfg.record import record

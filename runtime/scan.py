@@ -11,7 +11,7 @@ from __future__ import annotations
 import struct
 import time
 
-from ecatcfg.compiler.plan import NetworkPlan
+from ecatcfg.eni.plan import NetworkPlan
 from ecatcfg.esc import SII_REVISION, SII_VENDOR_ID, Cmd, Reg, eeprom_read_request
 from ecatcfg.record import record
 from ecatcfg.runtime.lockstep import Job, run_jobs, until_answered

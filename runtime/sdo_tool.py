@@ -24,16 +24,14 @@ may well have ended on counter 1.  Later messages of the transfer count 1..7.
 
 from __future__ import annotations
 
-import math
 import re
 import struct
 import time
 from dataclasses import dataclass
 
-from ecatcfg.compiler.plan import MailboxArea, MailboxPlan
+from ecatcfg.eni.plan import MailboxArea, MailboxPlan
 from ecatcfg.errors import EcatcfgError
 from ecatcfg.esc import AL_ERROR_ACK, AlState, Cmd, Reg, SmConfig, al_status_name
-from ecatcfg.esi import datatypes
 from ecatcfg.runtime.lockstep import Job, run_jobs
 from ecatcfg.runtime.mailbox import NORMAL_OVERHEAD, abort_name
 from ecatcfg.runtime.replay import (
@@ -98,40 +96,6 @@ def parse_address(text: str) -> tuple[int, int]:
         raise ValueError(f"{text!r} is not INDEX:SUB (hexadecimal, e.g. 0x1018:01 or "
                          "0x6060:0)")
     return int(m.group(1), 16), int(m.group(2), 16)
-
-
-_SIGNED = {"SINT", "INT", "INT24", "DINT", "INT40", "INT48", "INT56", "LINT"}
-_FLOATS = {"REAL": "<f", "LREAL": "<d"}
-
-
-def decode(data: bytes, type_name: str) -> int | float | str | bool:
-    """The value of ``data`` (CoE wire bytes, little-endian) as the base type ``type_name``:
-    the inverse of :func:`ecatcfg.compiler.sdo.encode`.  Raises ``ValueError`` saying why
-    when the bytes do not fit the type."""
-    base = datatypes.canonical(type_name)
-    if base is None:
-        raise ValueError(f"{type_name!r} is not a base data type (USINT, UINT, UDINT, SINT, "
-                         "INT, DINT, REAL, STRING, ...)")
-    if base.startswith(("STRING", "WSTRING", "UNICODE_STRING")):
-        codec = "latin-1" if base.startswith("STRING") else "utf-16-le"
-        text = data.decode(codec, errors="replace")
-        return text.split("\x00", 1)[0]          # padded with NULs up to the object size
-    if base in ("OCTET_STRING", "DOMAIN"):
-        return data.hex()
-    bits = datatypes.bit_size(base)
-    if bits is None or base.startswith("ARRAY"):
-        raise ValueError(f"type {base} has no single value; read it as hex bytes")
-    size = (bits + 7) // 8
-    if len(data) != size:
-        raise ValueError(f"{len(data)} byte{'s' if len(data) != 1 else ''} came back; "
-                         f"{base} has {size}")
-    if base in _FLOATS:
-        value = struct.unpack(_FLOATS[base], data)[0]
-        return value if math.isfinite(value) else repr(value)
-    number = int.from_bytes(data, "little", signed=base in _SIGNED)
-    if bits < 8 * size:                           # BOOL, BITn: the low bits only
-        number &= (1 << bits) - 1
-    return bool(number) if base in ("BOOL", "BIT") else number
 
 
 def protocol_names(word: int) -> str:

@@ -37,8 +37,10 @@ from rig import serving
 
 from conftest import EXAMPLES
 from rig import require_tshark, tshark_malformed
-from ecatcfg.compiler import build, eni_reader, eni_writer, topology
-from ecatcfg.compiler.plan import NetworkPlan
+from ecatcfg.compiler import build, topology
+from ecatcfg.eni import reader as eni_reader
+from ecatcfg.eni import writer as eni_writer
+from ecatcfg.eni.plan import NetworkPlan
 from ecatcfg.esc import AlState, Cmd, Transition
 from ecatcfg.esi.library import Library
 from ecatcfg.runtime import emulate
@@ -623,7 +625,7 @@ def _apply_virtual(eni: Path, *args: str, env: dict | None = None) -> tuple[int,
 
 
 def test_apply_with_a_cached_plan_is_the_same_apply(tmp_path):
-    """The first apply stores the parsed ENI (compiler/eni_cache.py), the next one starts
+    """The first apply stores the parsed ENI (eni/cache.py), the next one starts
     from it; --no-cache parses again.  All three configure the same slaves the same way."""
     eni = _compile_example(tmp_path)
     env = dict(os.environ, XDG_CACHE_HOME=str(tmp_path / "xdg"))

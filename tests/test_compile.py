@@ -10,8 +10,10 @@ import pytest
 
 from conftest import EXAMPLES, write
 from ecatcfg.cli import main
-from ecatcfg.compiler import build, eni_reader, eni_writer, topology
-from ecatcfg.compiler.plan import NetworkPlan
+from ecatcfg.compiler import build, topology
+from ecatcfg.eni import reader as eni_reader
+from ecatcfg.eni import writer as eni_writer
+from ecatcfg.eni.plan import NetworkPlan
 from ecatcfg.compiler.topology import TopologyError
 from ecatcfg.esc import Cmd, FmmuConfig, FmmuType, SmConfig
 from ecatcfg.esi.library import Library

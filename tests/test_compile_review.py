@@ -11,7 +11,8 @@ import pytest
 
 from conftest import EXAMPLES, device_xml, esi_xml, write
 from ecatcfg.cli import main
-from ecatcfg.compiler import build, sdo, topology
+from ecatcfg.compiler import build, topology
+from ecatcfg.esi import datatypes
 from ecatcfg.compiler.topology import TopologyError
 from ecatcfg.errors import EcatcfgError
 from ecatcfg.esc import Cmd, FmmuConfig, FmmuType, SmConfig
@@ -102,7 +103,7 @@ def test_every_corpus_device_compiles_or_fails_with_a_line(tmp_path, corpus, eni
     """Each device of the corpus alone in a line, with its defaults: a schema-valid ENI or a
     line-numbered error, never an exception of another kind."""
     from lxml import etree
-    from ecatcfg.compiler import eni_writer
+    from ecatcfg.eni import writer as eni_writer
     lib = Library([corpus / "esi"], cache=False)
     ok, failed = 0, []
     for e in lib.entries:
@@ -189,8 +190,8 @@ def test_real_values_written_the_yaml_1_1_way(tmp_path):
     ("\u20ac", "STRING(4)", "has a character STRING(4) cannot hold"),
 ])
 def test_sdo_values_that_do_not_fit_their_type(value, type_name, message):
-    with pytest.raises(sdo.SdoValueError, match=message.replace("(", r"\(").replace(")", r"\)")):
-        sdo.encode(value, type_name)
+    with pytest.raises(datatypes.ValueTypeError, match=message.replace("(", r"\(").replace(")", r"\)")):
+        datatypes.encode(value, type_name)
 
 
 def test_sdo_value_out_of_real_range_is_a_topology_error(tmp_path, capsys):

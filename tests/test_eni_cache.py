@@ -1,4 +1,4 @@
-"""The parsed-ENI cache (``compiler/eni_cache.py``): a hit gives the plan the reader gives, a
+"""The parsed-ENI cache (``eni/cache.py``): a hit gives the plan the reader gives, a
 changed file is never served stale, and nothing it loads can be anything but a plan."""
 
 from __future__ import annotations
@@ -9,9 +9,10 @@ from pathlib import Path
 
 import pytest
 
-from ecatcfg.compiler import eni_cache, eni_reader
-from ecatcfg.compiler.eni_cache import PlanCache
-from ecatcfg.compiler.eni_writer import to_bytes
+from ecatcfg.eni import cache as eni_cache
+from ecatcfg.eni import reader as eni_reader
+from ecatcfg.eni.cache import PlanCache
+from ecatcfg.eni.writer import to_bytes
 from ecatcfg.errors import EcatcfgError
 from test_eni_io import rich_plan
 

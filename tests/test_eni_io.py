@@ -10,9 +10,9 @@ from pathlib import Path
 import pytest
 from lxml import etree
 
-from ecatcfg.compiler.eni_reader import EniReadError, read_bytes, read_file
-from ecatcfg.compiler.eni_writer import to_bytes, write
-from ecatcfg.compiler.plan import (
+from ecatcfg.eni.reader import EniReadError, read_bytes, read_file
+from ecatcfg.eni.writer import to_bytes, write
+from ecatcfg.eni.plan import (
     BitRange,
     CoeInitCmd,
     Cyclic,

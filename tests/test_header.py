@@ -13,7 +13,7 @@ import subprocess
 import pytest
 
 from ecatcfg.compiler import header
-from ecatcfg.compiler.plan import Cyclic, MasterPlan, NetworkPlan, ProcessImage, Variable
+from ecatcfg.eni.plan import Cyclic, MasterPlan, NetworkPlan, ProcessImage, Variable
 
 V = Variable
 INPUTS = [                                      # in offset order, as the header lists them

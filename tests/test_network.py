@@ -13,8 +13,10 @@ import time
 import pytest
 
 from conftest import EXAMPLES
-from ecatcfg.compiler import build, eni_reader, eni_writer, topology
-from ecatcfg.compiler.plan import InitCmd, Validate
+from ecatcfg.compiler import build, topology
+from ecatcfg.eni import reader as eni_reader
+from ecatcfg.eni import writer as eni_writer
+from ecatcfg.eni.plan import InitCmd, Validate
 from ecatcfg.errors import EcatcfgError
 from ecatcfg.esc import AlState, Cmd, Transition
 from ecatcfg.esi.library import Library
@@ -233,13 +235,14 @@ def test_modular_devices_are_emulated_with_their_modules(corpus, slave, source):
     """simulate --topology plugs the topology's modules; simulate --eni takes the modules
     from the ENI (its 0xF030 list, else accepting what its startup SDOs write) and the PDOs
     it lists.  Either way the compiled ENI brings the slave to OP."""
+    from ecatcfg.compiler.resolve import plugged_devices
     from ecatcfg.runtime import emulate
     lib = Library([corpus / "esi"], cache=False)
     loaded = topology.loads(f"slaves:\n  - {slave}\n", "t.yaml")
     plan = eni_reader.read_bytes(eni_writer.to_bytes(
         build.compile_topology(loaded, lib).plan), "t.eni.xml")
-    specs = (emulate.specs_from_topology(loaded, lib) if source == "topology"
-             else emulate.specs_from_eni(plan, lib, "t.eni.xml"))
+    specs = ([emulate.SlaveSpec(d.device, d.name) for d in plugged_devices(loaded, lib)]
+             if source == "topology" else emulate.specs_from_eni(plan, lib, "t.eni.xml"))
     device = specs[0].device
     assigned = sorted(p.index for p in device.rx_pdos + device.tx_pdos if p.sm is not None)
     assert assigned == sorted(p.index for p in plan.slaves[0].process_data.pdos

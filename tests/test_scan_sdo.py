@@ -21,7 +21,7 @@ from pathlib import Path
 import pytest
 from rig import serving
 
-from ecatcfg.compiler import sdo as sdo_values
+from ecatcfg.esi import datatypes
 from ecatcfg.compiler import topology
 from ecatcfg.esi.library import Library
 from ecatcfg.runtime import sdo_tool
@@ -266,7 +266,7 @@ def test_a_message_left_in_sm1_is_taken_out_first(lib):
     from ecatcfg.runtime.mailbox import encode_upload_request, pad_to
     from ecatcfg.runtime.replay import MailboxChannel
     from ecatcfg.runtime.lockstep import run_jobs
-    from ecatcfg.compiler.plan import MailboxArea, MailboxPlan
+    from ecatcfg.eni.plan import MailboxArea, MailboxPlan
 
     seg = build(lib, ["EXD-402"])
     with memory_line(seg) as t:
@@ -320,13 +320,13 @@ def test_parse_address(text, expected):
     (-0.25, "LREAL"), ("EXD-402", "STRING"), (1, "BOOL"),
 ])
 def test_decode_inverts_encode(value, type_name):
-    data = sdo_values.encode(value, type_name)
-    assert sdo_tool.decode(data, type_name) == value
+    data = datatypes.encode(value, type_name)
+    assert datatypes.decode(data, type_name) == value
 
 
 def test_decode_refuses_what_does_not_fit():
     with pytest.raises(ValueError, match="4 bytes came back; UINT has 2"):
-        sdo_tool.decode(b"\x01\x02\x03\x04", "UINT")
+        datatypes.decode(b"\x01\x02\x03\x04", "UINT")
     with pytest.raises(ValueError, match="not a base data type"):
-        sdo_tool.decode(b"\x01", "DT1018")
-    assert sdo_tool.decode(b"abc\x00\x00", "STRING") == "abc"
+        datatypes.decode(b"\x01", "DT1018")
+    assert datatypes.decode(b"abc\x00\x00", "STRING") == "abc"

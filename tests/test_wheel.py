@@ -16,15 +16,46 @@ from conftest import ROOT
 from ecatcfg.cli import main
 
 
-def test_wheel_installs_and_runs(tmp_path):
-    # Build from a clean copy: pip builds in-tree, and a stale build/lib in the checkout
-    # would both hide missing files and leave litter behind.
+SUBPACKAGES = ("cli", "esi", "esi.lint", "esi.lint.checks", "esi.lint.formats", "eni",
+               "compiler", "runtime", "templates", "examples")
+NOT_PACKAGES = ("tests", "bench", "docs", "build_backend")
+CHECK_IMPORTS = f"""
+import importlib
+for name in {SUBPACKAGES!r}:
+    importlib.import_module("ecatcfg." + name)
+for name in {NOT_PACKAGES!r}:
+    try:
+        importlib.import_module("ecatcfg." + name)
+    except ModuleNotFoundError:
+        continue
+    raise SystemExit("ecatcfg." + name + " imports")
+import ecatcfg
+print(ecatcfg.__file__)
+"""
+
+
+def clean_copy(tmp_path) -> tuple:
+    """A copy of the checkout without build products, and a listing of what it holds."""
     src = tmp_path / "src"
     shutil.copytree(ROOT, src, ignore=shutil.ignore_patterns(
-        ".git", "build", "dist", "*.egg-info", "__pycache__", ".pytest_cache"))
+        ".git", "build", "dist", "*.egg-info", "__pycache__", "*_cache", ".hypothesis",
+        "ecatcfg-demo"))
+    return src, sorted(p.relative_to(src) for p in src.rglob("*") if "__pycache__" not in p.parts)
+
+
+def listing(src) -> list:
+    return sorted(p.relative_to(src) for p in src.rglob("*") if "__pycache__" not in p.parts)
+
+
+def test_wheel_installs_and_runs(tmp_path):
+    # Build from a clean copy, so that nothing from the checkout's own installs hides a
+    # missing file, and check that the build leaves nothing behind in the source folder
+    # (no build/ with a stale copy of the sources, no egg-info).
+    src, before = clean_copy(tmp_path)
     dist = tmp_path / "dist"
     subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", str(dist),
                     str(src)], check=True, capture_output=True)
+    assert listing(src) == before, set(listing(src)) - set(before)
     wheel, = dist.glob("ecatcfg-*.whl")
     names = zipfile.ZipFile(wheel).namelist()
     top = {n.split("/")[0] for n in names if not n.split("/")[0].endswith(".dist-info")}
@@ -67,7 +98,29 @@ def test_wheel_installs_and_runs(tmp_path):
     assert main(["compile", str(ROOT / "examples" / "topology.yaml"), "--esi",
                  str(ROOT / "examples" / "esi"), "-o", str(tmp_path / "c.xml")]) == 0
     assert wheel_eni == (tmp_path / "c.xml").read_bytes()
-    # the installed module is the wheel's, not the checkout's
-    where = subprocess.run([str(py), "-c", "import ecatcfg; print(ecatcfg.__file__)"],
-                           capture_output=True, text=True, cwd=tmp_path, check=True)
+    # the installed module is the wheel's, not the checkout's, and only its real
+    # subpackages import
+    where = subprocess.run([str(py), "-c", CHECK_IMPORTS], capture_output=True, text=True,
+                           cwd=tmp_path)
+    assert where.returncode == 0, where.stdout + where.stderr
     assert str(env_dir) in where.stdout
+
+
+def test_editable_install_imports_only_real_subpackages_and_leaves_no_litter(tmp_path):
+    """``pip install -e .`` maps ``ecatcfg`` onto the source folder, where tests/, bench/ and
+    docs/ sit beside the subpackages: they must not import as namespace packages, and the
+    install must leave no egg-info behind."""
+    src, before = clean_copy(tmp_path)
+    env_dir = tmp_path / "venv"
+    # the dependencies come from this interpreter's site-packages; the venv's own editable
+    # finder for the copy comes first
+    venv.create(env_dir, with_pip=True, system_site_packages=True)
+    py = env_dir / "bin" / "python"
+    out = subprocess.run([str(py), "-m", "pip", "install", "-q", "--no-deps", "-e", str(src)],
+                         capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    assert listing(src) == before, set(listing(src)) - set(before)
+    where = subprocess.run([str(py), "-c", CHECK_IMPORTS], capture_output=True, text=True,
+                           cwd=tmp_path)
+    assert where.returncode == 0, where.stdout + where.stderr
+    assert where.stdout.strip() == str(src / "__init__.py")

@@ -1,7 +1,8 @@
 """The NetworkPlan: everything an ENI (ETG.2100) says, as plain objects.
 
-The compiler produces a plan, ``eni_writer`` turns it into XML and ``eni_reader`` turns any ENI
-(ours, TwinCAT's, EC-Engineer's) back into the same objects; reading our own output back gives
+The compiler produces a plan, :mod:`ecatcfg.eni.writer` turns it into XML and
+:mod:`ecatcfg.eni.reader` turns any ENI (ours, TwinCAT's, EC-Engineer's) back into the same
+objects; reading our own output back gives
 an equal plan.  So the plan holds exactly what the file holds: anything the runtime needs must
 be representable here, and nothing here exists only in memory.
 

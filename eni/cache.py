@@ -29,8 +29,8 @@ import zlib
 from pathlib import Path
 
 from ecatcfg import __version__
-from ecatcfg.compiler import plan as plan_model
-from ecatcfg.compiler.plan import NetworkPlan
+from ecatcfg.eni import plan as plan_model
+from ecatcfg.eni.plan import NetworkPlan
 from ecatcfg.esc import Transition
 from ecatcfg.fileio import cache_dir, write_atomic
 
@@ -38,7 +38,7 @@ FORMAT_VERSION = 1
 KEEP = 32                                   # entries; the oldest go when a new one is written
 # A change to any of these changes every key (esc.py: the Transition values; xmlsafe.py:
 # how the XML is parsed and its namespaces stripped).
-_FINGERPRINTED = ("compiler/eni_reader.py", "compiler/plan.py", "esc.py", "esi/xmlsafe.py")
+_FINGERPRINTED = ("eni/reader.py", "eni/plan.py", "esc.py", "esi/xmlsafe.py")
 
 
 def _fingerprint() -> int:
@@ -131,19 +131,19 @@ class PlanCache:
 
 def read_file(path: str | Path, shown_as: str | None = None,
               cache: PlanCache | None = None) -> NetworkPlan:
-    """:func:`ecatcfg.compiler.eni_reader.read_file` through ``cache`` (the default one if
+    """:func:`ecatcfg.eni.reader.read_file` through ``cache`` (the default one if
     ``None``).  lxml and the reader are imported only on a miss."""
     name = shown_as or str(path)
     try:
         data = Path(path).read_bytes()
     except OSError as exc:
-        from ecatcfg.compiler.eni_reader import EniReadError
+        from ecatcfg.eni.reader import EniReadError
         raise EniReadError(f"cannot read: {exc.strerror}", name) from None
     cache = cache or PlanCache()
     key = cache.key(data)
     plan = cache.get(key, data)
     if plan is None:
-        from ecatcfg.compiler import eni_reader
+        from ecatcfg.eni import reader as eni_reader
         plan = eni_reader.read_bytes(data, name)
         cache.put(key, data, plan)
     return plan

@@ -18,7 +18,7 @@ from pathlib import Path
 
 from lxml import etree
 
-from ecatcfg.compiler.plan import (
+from ecatcfg.eni.plan import (
     BitRange,
     CoeInitCmd,
     Cyclic,

@@ -1,0 +1,46 @@
+"""The layers of the package (docs/architecture.md): esi at the bottom, eni above it, the
+compiler and the runtime above those and never importing each other, cli on top.
+
+import-linter checks the contract in pyproject.toml over every import statement, relative
+and inside functions included.  The second test shows the check can fail: the same contract
+over a copy of the package in which the runtime imports the compiler is broken.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+from conftest import ROOT
+
+
+def lint_imports(package_parent: Path | None = None) -> subprocess.CompletedProcess:
+    env = dict(os.environ)
+    if package_parent is not None:          # import ``ecatcfg`` from there, not the checkout
+        env["PYTHONPATH"] = str(package_parent)
+    return subprocess.run(
+        [sys.executable, "-c", "import sys; from importlinter.cli import lint_imports_command;"
+         " sys.exit(lint_imports_command())", "--config", str(ROOT / "pyproject.toml"),
+         "--no-cache"], capture_output=True, text=True, env=env, timeout=300)
+
+
+def test_layers_are_kept():
+    out = lint_imports()
+    assert out.returncode == 0, out.stdout + out.stderr
+    assert "1 kept, 0 broken" in out.stdout, out.stdout
+
+
+def test_a_runtime_module_importing_the_compiler_breaks_the_contract(tmp_path):
+    copy = tmp_path / "ecatcfg"
+    shutil.copytree(ROOT, copy, ignore=shutil.ignore_patterns(
+        ".git", "tests", "bench", "docs", "__pycache__", "*_cache", "*.egg-info"))
+    scan = copy / "runtime" / "scan.py"
+    # a relative import inside a function, the kind a grep for "ecatcfg.compiler" misses
+    scan.write_text(scan.read_text() + "\n\ndef _sneak():\n    from ..compiler import build\n"
+                    "    return build\n")
+    out = lint_imports(tmp_path)
+    assert out.returncode == 1, out.stdout + out.stderr
+    assert "ecatcfg.runtime.scan -> ecatcfg.compiler.build" in out.stdout, out.stdout
