@@ -50,6 +50,7 @@ class Reg(IntEnum):
     WATCHDOG_SM = 0x0420
     EEPROM_CONFIG = 0x0500        # 0 = EEPROM to ECAT, 1 = to PDI
     EEPROM_CONTROL = 0x0502
+    EEPROM_ADDRESS = 0x0504
     EEPROM_DATA = 0x0508
     FMMU0 = 0x0600
     SM0 = 0x0800
@@ -68,8 +69,38 @@ SM_SIZE = 8
 # Logical address of the mailbox-state bits both TwinCAT and EC-Engineer use.
 MAILBOX_STATE_ADDR = 0x09000000
 # SM1 (mailbox in) status register: the mailbox-state FMMU maps its bit 0 (see
-# eni-observations §3: both tools map bit 0 of 0x080D, reproduced as is).
+# eni-observations §3: both tools map bit 0 of 0x080D, reproduced as is).  The master also
+# reads status, activate and PDI control of SM1 together (3 bytes from here) to repeat a
+# lost mailbox message.
 SM1_STATUS = 0x080D
+
+# -- SyncManager register bits (0x0800 + 8·n: +4 control, +5 status, +6 activate, +7 PDI
+# control; ETG.1000.4 and the ESC datasheets; SOES esc.h, SOEM ec_type.h) ------------------
+
+SM_MODE_MASK = 0x03               # control bits 1:0
+SM_MODE_BUFFERED = 0x00           # 3-buffer mode, process data
+SM_MODE_MAILBOX = 0x02            # 1-buffer mode, mailbox
+SM_DIR_MASK = 0x0C                # control bits 3:2
+SM_DIR_ECAT_READS = 0x00          # the master reads, the slave writes (MBoxIn, Inputs)
+SM_DIR_ECAT_WRITES = 0x04         # the master writes, the slave reads (MBoxOut, Outputs)
+SM_ECAT_EVENT = 0x10              # control bit 4: interrupt in the ECAT event register
+SM_PDI_EVENT = 0x20               # control bit 5: interrupt in the AL event register
+SM_WATCHDOG_ENABLE = 0x40         # control bit 6
+# The standard mailbox control bytes (SOEM's EC_DEFAULTMBXSM0/1): mailbox mode, direction,
+# PDI interrupt.  A mailbox SM whose ESI gives no ControlByte is programmed with these.
+SM_CONTROL_MBOX_OUT = SM_MODE_MAILBOX | SM_DIR_ECAT_WRITES | SM_PDI_EVENT     # 0x26
+SM_CONTROL_MBOX_IN = SM_MODE_MAILBOX | SM_DIR_ECAT_READS | SM_PDI_EVENT       # 0x22
+SM_STATUS_WRITE_EVENT = 0x01      # status bit 0: a buffer was completely written
+SM_STATUS_MAILBOX_FULL = 0x08     # status bit 3 (1-buffer mode)
+SM_STATUS_BUFFER_NONE = 0x30      # status bits 5:4 = 3: no buffer written yet (3-buffer mode)
+SM_ACTIVATE_ENABLE = 0x01         # activate bit 0
+SM_ACTIVATE_REPEAT = 0x02         # activate bit 1: the master toggles it to get a repeat
+SM_PDI_REPEAT_ACK = 0x02          # PDI control bit 1: the slave's acknowledge of a repeat
+
+# The type of each SM as SII SYNCM category byte 7 and CoE object 0x1C00 write it
+# (ETG.2010; ETG.1000.6 "sync manager communication type"): the same codes in both.
+SM_TYPE_CODES: dict[str | None, int] = {None: 0, "MBoxOut": 1, "MBoxIn": 2, "Outputs": 3,
+                                        "Inputs": 4}
 
 
 def fmmu_register(n: int) -> int:
@@ -89,6 +120,8 @@ class AlState(IntEnum):
 
 
 AL_ERROR_ACK = 0x10           # AL control bit 4: acknowledge an error indication
+AL_STATUS_ERROR = 0x10        # AL status bit 4: error indication (code in 0x0134)
+AL_STATE_MASK = 0x0F          # AL control / status bits 3:0: the state
 
 
 class Transition(str, Enum):
@@ -117,6 +150,15 @@ class Transition(str, Enum):
 
 _STATE_BY_LETTER = {"I": AlState.INIT, "P": AlState.PREOP, "S": AlState.SAFEOP,
                     "O": AlState.OP, "B": AlState.BOOT}
+
+
+def al_state_name(al_status: int) -> str:
+    """The state in an AL status (or control) value as the tools print it: ``OP``,
+    ``SAFEOP+ERR``, or ``state 0x5`` for a code that is no state."""
+    state = al_status & AL_STATE_MASK
+    known = AlState._value2member_map_.get(state)
+    name = known.name if known is not None else f"state 0x{state:X}"
+    return name + ("+ERR" if al_status & AL_STATUS_ERROR else "")
 
 
 class FmmuType(IntEnum):
@@ -185,20 +227,82 @@ class SmConfig:
         return cls(start, length, control, bool(activate & 1), status, pdi)
 
 
+# -- the EEPROM (SII) interface: control/status register 0x0502 (ETG.1000.4; SOEM's
+# ethercattype.h EC_ECMD_* and EC_ESTAT_*, IgH's master/fsm_sii.c) -------------------------
+
+EEPROM_WRITE_ENABLE = 0x0001      # bit 0: write enable (self-clearing)
+EEPROM_R64 = 0x0040               # bit 6: a read returns 8 bytes (else 4)
+EEPROM_CMD_MASK = 0x0700          # bits 10:8: the command
+EEPROM_CMD_READ = 0x0100
+EEPROM_CMD_WRITE = 0x0200
+EEPROM_CMD_RELOAD = 0x0400        # (SOEM's EC_ECMD_RELOAD is 0x0300; the emulated ESC
+                                  # takes both as a reload)
+EEPROM_ERRORS = 0x7800            # bits 14:11: checksum, loading, acknowledge, write enable
+EEPROM_BUSY = 0x8000              # bit 15
+
+
 def eeprom_read_request(word_address: int) -> bytes:
     """EEPROM control/status + address (0x0502, 6 bytes): 'read' at ``word_address``."""
-    return struct.pack("<HI", 0x0100, word_address)
+    return struct.pack("<HI", EEPROM_CMD_READ, word_address)
 
 
-# SII word addresses of the identity (ETG.1000.6 / ETG.2010).
+# SII word addresses (ETG.2010 header; esi/sii.py builds and decodes the whole image and
+# checks its layout against these).
 SII_VENDOR_ID = 0x0008
 SII_PRODUCT_CODE = 0x000A
 SII_REVISION = 0x000C
 SII_SERIAL = 0x000E
+SII_BOOTSTRAP_MAILBOX = 0x0014    # receive offset, size, send offset, size (4 words)
+SII_STD_MAILBOX = 0x0018          # receive (SM0) offset, size, send (SM1) offset, size
+SII_MAILBOX_PROTOCOLS = 0x001C
+SII_SIZE = 0x003E                 # EEPROM size in kbit - 1
+SII_VERSION = 0x003F
+SII_FIRST_CATEGORY = 0x0040
+
+# Word 0x1C, the mailbox protocols a slave supports (ETG.2010; a different encoding from the
+# protocol type of the mailbox header, runtime/mailbox.py).
+MAILBOX_PROTOCOL_BITS: dict[str, int] = {"AoE": 0x01, "EoE": 0x02, "CoE": 0x04, "FoE": 0x08,
+                                         "SoE": 0x10, "VoE": 0x20}
+
+
+def mailbox_protocol_names(word: int) -> list[str]:
+    """The protocols set in SII word 0x1C."""
+    return [name for name, bit in MAILBOX_PROTOCOL_BITS.items() if word & bit]
+
+
+# -- the mailbox: the smallest message that carries an SDO (ETG.1000.4 mailbox header,
+# ETG.1000.6 CoE header and SDO command).  runtime/mailbox.py lays out the headers; these
+# sizes are what lint and the compiler need without the codec. -----------------------------
+
+MAILBOX_HEADER_SIZE = 6           # length, address, channel/priority, type/counter
+SDO_MIN_SIZE = 2 + 8              # CoE header + SDO command, index, subindex, 4 data bytes
+MIN_MAILBOX_SIZE = MAILBOX_HEADER_SIZE + SDO_MIN_SIZE       # 16
+
+# -- CoE communication area (ETG.1000.6 object dictionary) ---------------------------------
+
+RX_PDO_MAPPING = range(0x1600, 0x1800)        # RxPDO (outputs) mapping objects
+TX_PDO_MAPPING = range(0x1A00, 0x1C00)        # TxPDO (inputs) mapping objects
+SM_COMM_TYPE = 0x1C00                         # communication type of each SM
+SM_PDO_ASSIGN = 0x1C10                        # + SM number: the PDOs assigned to that SM
+SM_PDO_ASSIGN_RANGE = range(0x1C10, 0x1C30)   # 32 SyncManagers
+MODULE_IDENT_LIST = 0xF030                    # configured module ident list (modular devices)
+DETECTED_MODULE_IDENT_LIST = 0xF050           # the modules the device detected
+
+
+def pdo_mapping_range(direction: str) -> range:
+    """The mapping objects of a PDO direction: ``rx`` (outputs) or ``tx`` (inputs)."""
+    return RX_PDO_MAPPING if direction == "rx" else TX_PDO_MAPPING
+
+
+def is_pdo_object(index: int) -> bool:
+    """A PDO mapping or assignment object: the ones a PDO configuration writes."""
+    return index in RX_PDO_MAPPING or index in TX_PDO_MAPPING or index in SM_PDO_ASSIGN_RANGE
 
 # Ethernet: EtherType, and how much datagram data one frame can carry (ethercat-facts §frame:
 # 1500 payload − 2 EtherCAT header; every datagram costs a 10-byte header and a 2-byte WKC).
 ETHERTYPE = 0x88A4
+ETH_HEADER_SIZE = 14          # destination MAC, source MAC, EtherType
+MIN_FRAME = 60                # Ethernet minimum without FCS: shorter frames are padded
 FRAME_PAYLOAD = 1500
 FRAME_HEADER = 2
 DATAGRAM_OVERHEAD = 12
@@ -242,6 +346,20 @@ AL_STATUS_CODES: dict[int, str] = {
     0x0082: "temperature too low", 0x0083: "temperature too high",
     0x00F0: "application controller available",
 }
+
+
+class AlStatusCode(IntEnum):
+    """The AL status codes (0x0134) the emulated firmware gives; their texts are above."""
+
+    NO_ERROR = 0x0000
+    INVALID_STATE_CHANGE = 0x0011
+    UNKNOWN_STATE = 0x0012
+    BOOT_NOT_SUPPORTED = 0x0013
+    INVALID_MAILBOX = 0x0016                # invalid mailbox configuration (PREOP)
+    SM_WATCHDOG = 0x001B
+    INVALID_OUTPUTS = 0x001D
+    INVALID_INPUTS = 0x001E
+    DC_INVALID_SYNC_CYCLE = 0x0035
 
 
 def al_status_name(code: int) -> str:

@@ -196,8 +196,8 @@ def _bootstrap(s: ResolvedSlave) -> tuple[SmConfig, SmConfig] | None:
                                       for i in range(0, 8, 2))
     if not o_len or not i_len:
         return None
-    return (SmConfig(o_start, o_len, mailboxes[0].control_byte or 0x26, True),
-            SmConfig(i_start, i_len, mailboxes[1].control_byte or 0x22, True))
+    return (SmConfig(o_start, o_len, mailboxes[0].mailbox_control, True),
+            SmConfig(i_start, i_len, mailboxes[1].mailbox_control, True))
 
 
 def _process_data(s: ResolvedSlave, sl: layout_mod.SlaveLayout) -> ProcessData | None:
@@ -229,8 +229,8 @@ def _mailbox(s: ResolvedSlave, sl: layout_mod.SlaveLayout) -> MailboxPlan | None
     boot = _bootstrap(s)
     coe = pdocmds.pdo_cmds(s) + s.esi_cmds + s.module_cmds + s.user_cmds
     return MailboxPlan(
-        send=MailboxArea(out.start_address or 0, out.default_size or out.max_size or 0),
-        recv=MailboxArea(inp.start_address or 0, inp.default_size or inp.max_size or 0),
+        send=MailboxArea(out.start_address or 0, out.mailbox_size),
+        recv=MailboxArea(inp.start_address or 0, inp.mailbox_size),
         protocols=list(dev.mailbox.protocols),
         poll_time=None if sl.status_bit is not None else MAILBOX_POLL_TIME,
         status_bit_addr=sl.status_bit,

@@ -146,10 +146,9 @@ def slave_init_cmds(slave: ResolvedSlave, lay: SlaveLayout, dc: DcPlan | None,
         if bootstrap:
             c.ap([T.BI], "clear sm 0/1 (mailbox out/in)", Cmd.APWR, Reg.SM0, bytes(16))
         for sm, label in ((mailbox[0], "mailbox out"), (mailbox[1], "mailbox in")):
-            length = sm.default_size or sm.max_size or sm.min_size or 0
             c.fp([T.IP], f"set sm {sm.number} ({label})", Cmd.FPWR, sm_register(sm.number),
-                 SmConfig(sm.start_address or 0, length, sm.control_byte or 0, True).to_bytes(),
-                 cnt=1)
+                 SmConfig(sm.start_address or 0, sm.mailbox_size, sm.mailbox_control,
+                          True).to_bytes(), cnt=1)
         if bootstrap:
             for n, (cfg, label) in enumerate(zip(bootstrap, ("bootstrap out", "bootstrap in"))):
                 c.fp([T.IB], f"set sm {n} ({label})", Cmd.FPWR, sm_register(n), cfg.to_bytes(),

@@ -19,11 +19,10 @@ import struct
 
 from ecatcfg.eni.plan import CoeInitCmd, PdoDesc
 from ecatcfg.compiler.resolve import ResolvedSlave
-from ecatcfg.esc import Transition
+from ecatcfg.esc import SM_PDO_ASSIGN, Transition
 from ecatcfg.esi.coe import DictEntry, lookup
 from ecatcfg.esi.model import Dictionary
 
-ASSIGN_BASE = 0x1C10          # 0x1C10 + n: PDO assignment of SM n (ETG.1000.6)
 
 
 def _cmd(comment: str, index: int, subindex: int, data: bytes,
@@ -58,7 +57,7 @@ def pdo_cmds(slave: ResolvedSlave) -> list[CoeInitCmd]:
     # PdoConfig without PdoAssign (a fixed assignment of configurable PDOs): a remapped PDO
     # is still downloaded, or the slave would keep its old entries while the SMs are sized
     # for the new ones.
-    cmds = [_cmd(f"clear sm pdos (0x{ASSIGN_BASE + n:04X})", ASSIGN_BASE + n, 0, b"\x00")
+    cmds = [_cmd(f"clear sm pdos (0x{SM_PDO_ASSIGN + n:04X})", SM_PDO_ASSIGN + n, 0, b"\x00")
             for n in sms] if coe.pdo_assign else []
     if coe.pdo_config:
         # TxPDOs first, as EC-Engineer lists and clears them.
@@ -73,7 +72,7 @@ def pdo_cmds(slave: ResolvedSlave) -> list[CoeInitCmd]:
                 cmds += _mapping(p, ca)
     if coe.pdo_assign:
         for n in sms:
-            cmds += _assignment(ASSIGN_BASE + n, slave.assigned(n), ca)
+            cmds += _assignment(SM_PDO_ASSIGN + n, slave.assigned(n), ca)
     return cmds
 
 

@@ -18,7 +18,7 @@ from ecatcfg.esc import Transition
 from ecatcfg.esi import datatypes
 from ecatcfg.esi.coe import TRANSITION_STATE, DictEntry, device_dictionary, has_coe, lookup
 from ecatcfg.esi.library import Library, SelectorError
-from ecatcfg.esi.model import DcOpMode, Device, Dictionary, Module, Pdo, SyncManager
+from ecatcfg.esi.model import DcOpMode, Device, Dictionary, Module, Pdo
 from ecatcfg.esi.slots import PluggedModule, module_dictionaries, plugged_module, with_modules
 from ecatcfg.record import replace
 

@@ -10,7 +10,6 @@ lacks or misspells is an :class:`EniReadError` naming the file and the element's
 
 from __future__ import annotations
 
-import re
 from pathlib import Path
 
 from lxml import etree
@@ -40,13 +39,11 @@ from ecatcfg.eni.plan import (
 from ecatcfg.errors import EcatcfgError
 from ecatcfg.esc import Transition
 from ecatcfg.esi import xmlsafe
+from ecatcfg.esi.values import parse_bool, parse_hex_bytes, parse_int
 
 Element = etree._Element
 
 _ROOTS = ("EtherCATConfig", "EncryptedEtherCATConfig")
-# Bounded lengths: no ENI number needs more, and Python refuses int() of > 4300 digits.
-_NUMBER = re.compile(r"[+-]?(?:[0-9]{1,20}|#x[0-9a-f]{1,16}|0x[0-9a-f]{1,16})", re.IGNORECASE)
-_BOOLEANS = {"1": True, "true": True, "0": False, "false": False}
 _DC_VALUES = ("ReferenceClock", "CycleTime0", "CycleTime1", "ShiftTime")
 
 
@@ -55,17 +52,19 @@ class EniReadError(EcatcfgError):
 
 
 def _parse_int(text: str) -> int | None:
-    """Decimal (signed), ``#x`` (ESI style) or ``0x`` hex; ``None`` if it is none of those."""
-    if len(text) <= 20 and text.isdigit() and text.isascii():     # the common case, fast
-        return int(text)
-    text = text.strip()
-    if not _NUMBER.fullmatch(text):
+    """A number as ESI and ENI files write it (:func:`ecatcfg.esi.values.parse_int`: decimal,
+    ``#x`` or ``0x`` hex); ``None`` if it is none of those."""
+    try:
+        return parse_int(text)
+    except ValueError:
         return None
-    sign = -1 if text[0] == "-" else 1
-    digits = text.lstrip("+-")
-    if digits[:2].lower() in ("#x", "0x"):
-        return sign * int(digits[2:], 16)
-    return sign * int(digits, 10)
+
+
+def _parse_bool(text: str) -> bool | None:
+    try:
+        return parse_bool(text)
+    except ValueError:
+        return None
 
 
 def read_file(path: str | Path, shown_as: str | None = None) -> NetworkPlan:
@@ -167,7 +166,7 @@ class _Reader:
         return value
 
     def boolean(self, el: Element) -> bool:
-        value = _BOOLEANS.get(self.text(el).strip().lower())
+        value = _parse_bool(self.text(el))
         if value is None:
             raise self.error(f"<{el.tag}> is not a boolean: {self.text(el).strip()!r}", el)
         return value
@@ -180,17 +179,16 @@ class _Reader:
         text = el.get(name)
         if text is None:
             return None
-        value = _BOOLEANS.get(text.strip().lower())
+        value = _parse_bool(text)
         if value is None:
             raise self.error(f"attribute {name} of <{el.tag}> is not a boolean: {text!r}", el)
         return value
 
     def hex_bytes(self, el: Element) -> bytes:
-        text = "".join(self.text(el).split())
         try:
-            return bytes.fromhex(text)
-        except ValueError:
-            raise self.error(f"<{el.tag}> is not hex bytes: {text[:40]!r}", el) from None
+            return parse_hex_bytes(self.text(el))
+        except ValueError as exc:
+            raise self.error(f"<{el.tag}>: {exc}", el) from None
 
     def opt_hex(self, parent: Element, tag: str) -> bytes | None:
         el = parent.find(tag)

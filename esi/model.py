@@ -15,10 +15,12 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Literal, NamedTuple
 
+from ecatcfg.esc import SM_CONTROL_MBOX_IN, SM_CONTROL_MBOX_OUT
+
 # LcId 1033 is English (US); ETG.2000 makes it the default language of a NameType.
 ENGLISH = 1033
 
-MAILBOX_PROTOCOLS = ("AoE", "EoE", "CoE", "FoE", "SoE", "VoE")
+MAILBOX_PROTOCOLS = ("AoE", "EoE", "CoE", "FoE", "SoE", "VoE")   # the elements under Mailbox
 
 # AL state names used in ETG.2000 access restrictions (Flags/Access ReadRestrictions,
 # WriteRestrictions: e.g. "PreOp_SafeOp").
@@ -284,6 +286,30 @@ class SyncManager:
     @property
     def is_mailbox(self) -> bool:
         return self.type in ("MBoxOut", "MBoxIn")
+
+    @property
+    def mailbox_size(self) -> int:
+        """The length of a mailbox SM, the one rule every part of ecatcfg follows: the ENI's
+        SM0/SM1 InitCmds and ``Mailbox/Send|Recv/Length``, the SII's standard mailbox words
+        and SYNCM category, the emulated slave's mailbox check and lint.
+
+        ETG.2000 (``Device/Sm``) gives ``DefaultSize`` as the size to configure and
+        ``MinSize``/``MaxSize`` as the sizes the slave accepts.  Without ``DefaultSize`` the
+        file still bounds the size: ``MaxSize`` is the largest mailbox the slave takes (the
+        fewest segments per transfer), else ``MinSize`` is the one size the file vouches for;
+        with none of them the size is 0 (lint ESI212 and ESI213 report both cases)."""
+        for size in (self.default_size, self.max_size, self.min_size):
+            if size is not None:
+                return size
+        return 0
+
+    @property
+    def mailbox_control(self) -> int:
+        """The control byte of a mailbox SM: ``ControlByte``, else the standard mailbox
+        control (0x26 for MBoxOut, 0x22 for MBoxIn; esc.py)."""
+        if self.control_byte is not None:
+            return self.control_byte
+        return SM_CONTROL_MBOX_OUT if self.type == "MBoxOut" else SM_CONTROL_MBOX_IN
 
 
 @dataclass(slots=True)

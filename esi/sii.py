@@ -21,6 +21,9 @@ import struct
 from dataclasses import asdict, dataclass, field
 
 from ecatcfg.errors import EcatcfgError
+from ecatcfg.esc import (MAILBOX_PROTOCOL_BITS, SII_BOOTSTRAP_MAILBOX, SII_FIRST_CATEGORY,
+                         SII_MAILBOX_PROTOCOLS, SII_SIZE, SII_STD_MAILBOX, SII_VENDOR_ID,
+                         SM_TYPE_CODES, mailbox_protocol_names)
 from ecatcfg.esi import datatypes
 from ecatcfg.esi.model import Device, DcOpMode, Pdo, SyncManager
 
@@ -33,6 +36,13 @@ from ecatcfg.esi.model import Device, DcOpMode, Pdo, SyncManager
 # 0x3E EEPROM size (kbit - 1), 0x3F version.
 HEADER = struct.Struct("<7HH4I8x8HH66xHH")
 HEADER_SIZE = HEADER.size                       # 128 bytes = 64 words
+# The word addresses the master reads one by one (esc.py) are the fields of this layout.
+assert (struct.calcsize("<7HH") == 2 * SII_VENDOR_ID
+        and struct.calcsize("<7HH4I8x") == 2 * SII_BOOTSTRAP_MAILBOX
+        and struct.calcsize("<7HH4I8x4H") == 2 * SII_STD_MAILBOX
+        and struct.calcsize("<7HH4I8x8H") == 2 * SII_MAILBOX_PROTOCOLS
+        and struct.calcsize("<7HH4I8x8HH66x") == 2 * SII_SIZE
+        and HEADER_SIZE == 2 * SII_FIRST_CATEGORY)
 CONFIG_AREA = 14                                # words 0-6: what the CRC covers
 CATEGORY_HEADER = struct.Struct("<HH")          # type, data length in words
 GENERAL = struct.Struct("<12BhBBHH12x")         # exactly 32 bytes (IgH rejects others)
@@ -58,8 +68,6 @@ REPEATABLE = frozenset((CAT_TXPDO, CAT_RXPDO, CAT_DC))
 GENERATED = frozenset((CAT_STRINGS, CAT_GENERAL, CAT_FMMU, CAT_SYNCM, CAT_TXPDO, CAT_RXPDO,
                        CAT_DC))
 
-# Word 0x1C mailbox protocol bits (facts §5: a different encoding from the mailbox header).
-PROTOCOL_BITS = {"AoE": 0x01, "EoE": 0x02, "CoE": 0x04, "FoE": 0x08, "SoE": 0x10, "VoE": 0x20}
 
 # GENERAL byte 5, CoE details.
 COE_SDO, COE_SDO_INFO, COE_PDO_ASSIGN, COE_PDO_CONFIG, COE_UPLOAD, COE_COMPLETE_ACCESS = (
@@ -83,8 +91,7 @@ PHYSICS_PORTS = {"Y": 1, "F": 1, "H": 1, "K": 3, "E": 3}
 # Beckhoff dumps show 0x09 for the OpOnly output SMs of EL2004/EL2828/EL2889), b1 fixed
 # content (ETG.2010, not set by the builder: the ESI has no matching flag).
 SM_ENABLE, SM_FIXED, SM_VIRTUAL, SM_OP_ONLY = 0x01, 0x02, 0x04, 0x08
-SM_TYPES = {None: 0, "MBoxOut": 1, "MBoxIn": 2, "Outputs": 3, "Inputs": 4}
-SM_TYPE_NAMES = {0: "unused", 1: "MBoxOut", 2: "MBoxIn", 3: "Outputs", 4: "Inputs"}
+SM_TYPE_NAMES = {code: name or "unused" for name, code in SM_TYPE_CODES.items()}
 # FMMU usage byte; an odd count is padded with 0xFF.
 FMMU_TYPES = {"Outputs": 1, "Inputs": 2, "MBoxState": 3}
 FMMU_TYPE_NAMES = {0: "unused", 1: "outputs", 2: "inputs", 3: "SyncM status", 0xFF: "unused"}
@@ -269,7 +276,7 @@ class SiiImage:
 
     @property
     def protocols(self) -> list[str]:
-        return [name for name, bit in PROTOCOL_BITS.items() if self.mailbox_protocols & bit]
+        return mailbox_protocol_names(self.mailbox_protocols)
 
     def string(self, index: int) -> str | None:
         """The 1-based string ``index``; ``None`` for 0 or an index past the list."""
@@ -616,7 +623,7 @@ def _header(device: Device, serial: int, alias: int, size: int) -> bytes:
     protocols = 0
     if device.mailbox is not None:
         for name in device.mailbox.protocols:
-            protocols |= PROTOCOL_BITS.get(name, 0)
+            protocols |= MAILBOX_PROTOCOL_BITS.get(name, 0)
     return HEADER.pack(*words, crc8(bytes(config)), device.vendor.id, device.product_code,
                        device.revision, serial, *boot, *rx, *tx, protocols,
                        size // SIZE_STEP - 1, 1)
@@ -630,12 +637,17 @@ def _mailbox_sm(device: Device, sm_type: str) -> tuple[int, int]:
 
 
 def sm_length(sm: SyncManager) -> int:
-    """The SYNCM length: DefaultSize, else 0 (the master sizes process data from the PDOs);
-    a mailbox SM without DefaultSize gets its MaxSize, as a mailbox cannot be empty."""
-    size = sm.default_size
-    if size is None:
-        size = (sm.max_size or 0) if sm.is_mailbox else 0
+    """The SYNCM length: a mailbox SM's size (:attr:`SyncManager.mailbox_size`, the rule the
+    ENI follows too); for process data DefaultSize, else 0 (the master sizes process data
+    from the PDOs)."""
+    size = sm.mailbox_size if sm.is_mailbox else sm.default_size or 0
     return size & 0xFFFF
+
+
+def sm_control(sm: SyncManager) -> int:
+    """The SYNCM control byte: a mailbox SM's (:attr:`SyncManager.mailbox_control`), else
+    the ESI's ControlByte (0 without one)."""
+    return (sm.mailbox_control if sm.is_mailbox else sm.control_byte or 0) & 0xFF
 
 
 def _general(device: Device, group: int, order: int, name: int) -> bytes:
@@ -676,8 +688,8 @@ def _fmmu(device: Device) -> bytes:
 
 def _syncm(device: Device) -> bytes:
     return b"".join(SYNCM.pack((sm.start_address or 0) & 0xFFFF, sm_length(sm),
-                               (sm.control_byte or 0) & 0xFF, 0, sm_enable(sm),
-                               SM_TYPES.get(sm.type, 0))
+                               sm_control(sm), 0, sm_enable(sm),
+                               SM_TYPE_CODES.get(sm.type, 0))
                     for sm in device.sms)
 
 

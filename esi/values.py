@@ -11,34 +11,35 @@ from __future__ import annotations
 import re
 
 # [0-9] and [0-9A-Fa-f] are ASCII-only in Python's re: no Arabic-Indic digits, no "1_000"
-# (both of which int() alone would accept).  Surrounding white space is tolerated.
-_DEC = re.compile(r"\s*([+-]?[0-9]+)\s*\Z")
-_HEX = re.compile(r"\s*(?:#x|#X|0x|0X)([0-9A-Fa-f]+)\s*\Z")
+# (both of which int() alone would accept).  Surrounding white space and a sign are tolerated
+# (ENI exporters write negative numbers in decimal; a sign before hex digits costs nothing).
+# The value is not range-checked here: each reader checks it against the field it fills
+# (an absurd ByteSize is a lint finding of its own).  Only the length is bounded, below the
+# 4300 digits beyond which int() refuses a string.
+_NUMBER = re.compile(
+    r"\s*([+-]?)(?:([0-9]{1,4000})|(?:#x|#X|0x|0X)([0-9A-Fa-f]{1,4000}))\s*\Z")
 
-_TRUE = frozenset(("1", "true"))
-_FALSE = frozenset(("0", "false"))
+_BOOLEANS = {"1": True, "true": True, "0": False, "false": False}
 
 
 def parse_int(text: str) -> int:
-    """A HexDecValue: ``#x1A00``, ``0x1A00`` or decimal (optionally signed)."""
-    if text.isascii() and text.isdigit():      # the common "8", "16", "1033": no regex
+    """A HexDecValue: ``#x1A00``, ``0x1A00`` or decimal (optionally signed).  The one number
+    syntax of the project: the ESI reader, the ENI reader and the topology file use it."""
+    if len(text) <= 20 and text.isascii() and text.isdigit():   # "8", "16", "1033": fast
         return int(text)
-    m = _DEC.match(text)
-    if m is not None:
-        return int(m.group(1))
-    m = _HEX.match(text)
-    if m is not None:
-        return int(m.group(1), 16)
-    raise ValueError(f"not a number: {text!r} (expected #x1A00, 0x1A00 or decimal)")
+    m = _NUMBER.match(text)
+    if m is None:
+        raise ValueError(f"not a number: {text!r} (expected #x1A00, 0x1A00 or decimal)")
+    sign, dec, hexa = m.groups()
+    value = int(dec) if dec is not None else int(hexa, 16)
+    return -value if sign == "-" else value
 
 
 def parse_bool(text: str) -> bool:
     """An xs:boolean as vendors write it: ``1``, ``0``, ``true``, ``false`` (any case)."""
-    s = text.strip().lower()
-    if s in _TRUE:
-        return True
-    if s in _FALSE:
-        return False
+    value = _BOOLEANS.get(text.strip().lower())
+    if value is not None:
+        return value
     raise ValueError(f"not a boolean: {text!r} (expected 1, 0, true or false)")
 
 

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 
+from ecatcfg.esc import MIN_MAILBOX_SIZE, MODULE_IDENT_LIST, is_pdo_object
 from ecatcfg.esi import sii
 from ecatcfg.esi.coe import has_coe
 from ecatcfg.esi.model import Device, Pdo, PdoEntry
@@ -40,10 +41,14 @@ def emulated_slave(spec: SlaveSpec) -> EmulatedSlave:
         _add_written_objects(od, [(c.index, c.subindex or 0, c.data) for c in esi_cmds
                                   if c.index is not None and c.data is not None
                                   and not c.complete_access] + list(spec.extra_writes))
-        out = next((s for s in dev.sms if s.type == "MBoxOut"), None)
-        inp = next((s for s in dev.sms if s.type == "MBoxIn"), None)
-        server = SdoServer(od, (out.default_size if out else None) or 128,
-                           (inp.default_size if inp else None) or 128)
+        out, inp = (next((s for s in dev.sms if s.type == t), None)
+                    for t in ("MBoxOut", "MBoxIn"))
+        sizes = (out.mailbox_size if out else 0, inp.mailbox_size if inp else 0)
+        # The slave's mailbox is the size its SMs get (the rule the ENI and the SII follow).
+        # One too small for an SDO (lint ESI204, ESI213): no SDO server, as such firmware
+        # could not answer one either.
+        if min(sizes) >= MIN_MAILBOX_SIZE:
+            server = SdoServer(od, *sizes)
     image = sii.build(dev, serial=spec.serial, alias=spec.alias)
     return EmulatedSlave(dev, image, name=spec.name, od=od, sdo_server=server)
 
@@ -97,7 +102,7 @@ def specs_from_eni(plan, library, shown: str) -> list[SlaveSpec]:
             if not known and s.mailbox is not None:
                 # Modules the ENI does not name: accept the objects its startup SDOs write.
                 extra = tuple((c.index, c.subindex, c.data) for c in s.mailbox.coe_init_cmds
-                              if not c.complete_access and not _pdo_object(c.index))
+                              if not c.complete_access and not is_pdo_object(c.index))
         specs.append(SlaveSpec(device, s.name, serial=s.serial_no, extra_writes=extra))
     if missing:
         raise EcatcfgError(f"{shown}: no ESI for " + "; ".join(missing))
@@ -105,13 +110,6 @@ def specs_from_eni(plan, library, shown: str) -> list[SlaveSpec]:
 
 
 # -- modular devices --------------------------------------------------------------------------
-
-MODULE_IDENT_LIST = 0xF030
-
-
-def _pdo_object(index: int) -> bool:
-    return 0x1600 <= index <= 0x1BFF or 0x1C10 <= index <= 0x1C2F
-
 
 def _eni_modules(device: Device, slave, library_modules) -> tuple[Device, bool]:
     """A modular device as an ENI configures it: the modules named by its 0xF030 InitCmds

@@ -31,12 +31,10 @@ from collections import deque
 from typing import Protocol, runtime_checkable
 
 from ..errors import EcatcfgError, UsageError
-from ..esc import ETHERTYPE
+from ..esc import ETH_HEADER_SIZE, ETHERTYPE, MIN_FRAME
 
-__all__ = ["Link", "RawLink", "MemoryLink", "LinkError", "pad60", "ETH_HEADER", "MIN_FRAME"]
-
-ETH_HEADER = 14          # destination MAC, source MAC, EtherType
-MIN_FRAME = 60           # minimum Ethernet frame without FCS (what a NIC pads short frames to)
+__all__ = ["Link", "RawLink", "MemoryLink", "LinkError", "pad60", "ETH_HEADER_SIZE",
+           "MIN_FRAME"]
 DEFAULT_MTU = 1500
 
 _SOL_PACKET = getattr(socket, "SOL_PACKET", 263)
@@ -71,13 +69,13 @@ def pad60(frame: bytes) -> bytes:
 
 def _too_big(iface: str, size: int, mtu: int) -> LinkError:
     return LinkError(f"{iface}: frame of {size} bytes is too large for the MTU of {mtu} "
-                     f"bytes (at most {mtu + ETH_HEADER} bytes per frame, Ethernet header "
+                     f"bytes (at most {mtu + ETH_HEADER_SIZE} bytes per frame, Ethernet header "
                      f"included)")
 
 
 def _too_short(iface: str, size: int) -> LinkError:
     return LinkError(f"{iface}: frame of {size} bytes is shorter than an Ethernet header "
-                     f"({ETH_HEADER} bytes)")
+                     f"({ETH_HEADER_SIZE} bytes)")
 
 
 class _Base:
@@ -144,7 +142,7 @@ class RawLink(_Base):
         self._sock = sock
         self._fd = sock.fileno()
         # A frame never exceeds MTU + header (+ 4 for a VLAN tag); keep room for larger MTUs.
-        self._bufsize = max(self.mtu + ETH_HEADER + 4, 2048)
+        self._bufsize = max(self.mtu + ETH_HEADER_SIZE + 4, 2048)
         self._closed = False
 
     def __repr__(self) -> str:
@@ -168,7 +166,7 @@ class RawLink(_Base):
         if exc.errno == errno.EMSGSIZE:
             mtu = _interface_mtu(self._sock, self.iface, self.mtu)
             return _too_big(self.iface, size, mtu)
-        if exc.errno == errno.EINVAL and size < ETH_HEADER:
+        if exc.errno == errno.EINVAL and size < ETH_HEADER_SIZE:
             return _too_short(self.iface, size)
         if exc.errno in (errno.ENETDOWN, errno.ENXIO):
             return LinkError(f"{self.iface}: interface is down ({exc.strerror})")
@@ -311,9 +309,9 @@ class MemoryLink(_Base):
         if self._closed:
             raise LinkError(f"{self.iface}: link is closed")
         size = len(frame)
-        if size > self.mtu + ETH_HEADER:
+        if size > self.mtu + ETH_HEADER_SIZE:
             raise _too_big(self.iface, size, self.mtu)
-        if size < ETH_HEADER:
+        if size < ETH_HEADER_SIZE:
             raise _too_short(self.iface, size)
         peer = self._peer
         if peer is not None:

@@ -17,6 +17,7 @@ import struct
 from enum import IntEnum
 
 from ecatcfg.errors import EcatcfgError
+from ecatcfg.esc import MAILBOX_HEADER_SIZE, MIN_MAILBOX_SIZE, SDO_MIN_SIZE
 from ecatcfg.record import record
 
 # -- mailbox header (facts §5) -----------------------------------------------------------
@@ -33,6 +34,9 @@ SDO_MIN_LENGTH = COE_HEADER_SIZE + SDO_HEADER.size      # 10: mailbox length of 
 NORMAL_OVERHEAD = MBX_HEADER_SIZE + SDO_MIN_LENGTH      # 16: first data at SM size - 16
 SEGMENT_OVERHEAD = MBX_HEADER_SIZE + COE_HEADER_SIZE + 1   # 9: segment data = SM size - 9
 SEGMENT_MIN_DATA = 7                      # a shorter segment is padded to mailbox length 10
+# The sizes esc.py gives lint and the compiler (the smallest useful mailbox) are these.
+assert (MBX_HEADER_SIZE, SDO_MIN_LENGTH, NORMAL_OVERHEAD) == (
+    MAILBOX_HEADER_SIZE, SDO_MIN_SIZE, MIN_MAILBOX_SIZE)
 
 
 class MbxType(IntEnum):

@@ -19,7 +19,8 @@ import time
 from collections.abc import Callable
 
 from ecatcfg.eni.plan import NetworkPlan, SlavePlan
-from ecatcfg.esc import AlState, Cmd, Reg, Transition
+from ecatcfg.esc import (AL_ERROR_ACK, AL_STATE_MASK, AL_STATUS_ERROR, AlState, Cmd, Reg,
+                         Transition, al_state_name)
 from ecatcfg.record import record
 from ecatcfg.runtime.cyclic import CyclicFrames
 from ecatcfg.runtime.lockstep import Job, run_jobs, until_answered
@@ -59,8 +60,7 @@ class SlaveState:
 
     @property
     def name(self) -> str:
-        known = AlState._value2member_map_.get(self.state)
-        return (known.name if known else f"0x{self.state:X}") + ("+ERR" if self.error else "")
+        return al_state_name(self.state | (AL_STATUS_ERROR if self.error else 0))
 
 
 @record
@@ -136,7 +136,7 @@ class Master:
     def _acknowledge_errors(self) -> None:
         states = self.read_states()
         jobs = [_write_by_position(s.position, Reg.AL_CONTROL,
-                                   struct.pack("<H", st.state | 0x10))
+                                   struct.pack("<H", st.state | AL_ERROR_ACK))
                 for s, st in zip(self.slaves, states) if st is not None and st.error]
         if jobs:
             run_jobs(self.transport, jobs)
@@ -243,7 +243,7 @@ def _read_state(position: int, out: dict[int, SlaveState]) -> Job:
         reply = yield [dg]
         if reply is not None and reply[0].wkc == 1:
             status, _, code = struct.unpack("<HHH", reply[0].data)
-            out[position] = SlaveState(status & 0x0F, bool(status & 0x10), code)
+            out[position] = SlaveState(status & AL_STATE_MASK, bool(status & AL_STATUS_ERROR), code)
             return
 
 

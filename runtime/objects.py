@@ -18,7 +18,8 @@ from __future__ import annotations
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 
-from ecatcfg.esc import AlState
+from ecatcfg.esc import (RX_PDO_MAPPING, SM_COMM_TYPE, SM_PDO_ASSIGN, SM_TYPE_CODES, TX_PDO_MAPPING,
+                         AlState, is_pdo_object)
 from ecatcfg.esi.coe import device_dictionary
 from ecatcfg.esi.datatypes import bit_size as base_bit_size
 from ecatcfg.esi.datatypes import canonical
@@ -37,15 +38,6 @@ _STATE_BY_NAME = {"PreOp": AlState.PREOP, "SafeOp": AlState.SAFEOP, "Op": AlStat
 MAILBOX_STATES = frozenset((AlState.PREOP, AlState.SAFEOP, AlState.OP))
 PREOP_ONLY = frozenset((AlState.PREOP,))
 
-# Communication area (ETG.1000.6): PDO mapping and assignment object ranges.
-RX_MAPPING = range(0x1600, 0x1800)
-TX_MAPPING = range(0x1A00, 0x1C00)
-SM_COMM_TYPE = 0x1C00
-SM_ASSIGN = 0x1C10                # + SM number
-SM_ASSIGN_RANGE = range(0x1C10, 0x1C30)
-
-# 0x1C00 values per ESI Sm type (ETG.1000.6; same codes as the SII SYNCM type, facts §7).
-SM_TYPE_CODES = {"MBoxOut": 1, "MBoxIn": 2, "Outputs": 3, "Inputs": 4}
 
 # Capacity of a configurable mapping object the ESI does not describe (no dictionary
 # entry): our choice, large enough for the mappings seen in the corpus ENIs (EC-murr maps
@@ -459,7 +451,7 @@ class _Builder:
         """0x1C00 (SM communication types) and 0x1C10+n (PDO assignment of each
         process-data SM n; default = the PDOs whose ``Sm`` is n, in ESI order)."""
         sms = self.device.sms
-        types = [SM_TYPE_CODES.get(sm.type or "", 0) for sm in sms]
+        types = [SM_TYPE_CODES.get(sm.type, 0) for sm in sms]
         obj = self._object(SM_COMM_TYPE, "Sync manager type")
         if (SM_COMM_TYPE, 0) not in self.esi_defaults:
             self._si0(obj, len(types), frozenset())
@@ -480,7 +472,7 @@ class _Builder:
             for p in pdos:
                 if p.sm == sm.number and p.index is not None and p.index not in assigned:
                     assigned.append(p.index)
-            obj = self._object(SM_ASSIGN + sm.number, f"SM{sm.number} PDO assignment")
+            obj = self._object(SM_PDO_ASSIGN + sm.number, f"SM{sm.number} PDO assignment")
             if obj.entries:
                 # Declared in the ESI dictionary: its size, unless the default needs more.
                 capacity = max(len(assigned), obj.max_subindex)
@@ -719,7 +711,7 @@ class ObjectDictionary:
     def _check_si0_rule(obj: OdObject, sub: int) -> None:
         # PDO mapping and assignment objects: entries may only be written while SI0 is 0
         # (SOES ESC_download_pre_objecthandler; facts §6 abort 0x06010003).
-        if sub >= 1 and _is_pdo_comm(obj.index) and obj.count != 0:
+        if sub >= 1 and is_pdo_object(obj.index) and obj.count != 0:
             raise SdoAbort(ABORT_SUBINDEX0_NOT_ZERO, obj.index, sub)
 
     @staticmethod
@@ -831,7 +823,7 @@ class ObjectDictionary:
         """(index, subindex, bit length) of every mapped entry of SM ``sm``, in process
         image order (padding gaps have index 0); ``None`` when the current assignment
         (0x1C10+sm) or a mapping it names is invalid."""
-        assign = self.objects.get(SM_ASSIGN + sm)
+        assign = self.objects.get(SM_PDO_ASSIGN + sm)
         if assign is None or assign.variable:
             return None
         out: list[tuple[int, int, int]] = []
@@ -840,9 +832,9 @@ class ObjectDictionary:
             if slot is None:
                 return None
             pdo_index = slot.as_int() & 0xFFFF
-            if pdo_index in RX_MAPPING:
+            if pdo_index in RX_PDO_MAPPING:
                 direction = "R"
-            elif pdo_index in TX_MAPPING:
+            elif pdo_index in TX_PDO_MAPPING:
                 direction = "T"
             else:
                 return None
@@ -880,6 +872,3 @@ class ObjectDictionary:
         """The input (TxPDO) entries of SM ``sm``; empty when its assignment is invalid."""
         return self.sm_entries(sm) or []
 
-
-def _is_pdo_comm(index: int) -> bool:
-    return index in RX_MAPPING or index in TX_MAPPING or index in SM_ASSIGN_RANGE

@@ -19,7 +19,8 @@ import time
 
 from ecatcfg.eni.plan import CoeInitCmd, InitCmd, MailboxPlan, SlavePlan
 from ecatcfg.errors import EcatcfgError
-from ecatcfg.esc import AlState, Cmd, Reg, Transition, al_status_name
+from ecatcfg.esc import (AL_STATUS_ERROR, SM1_STATUS, SM_ACTIVATE_REPEAT, SM_PDI_REPEAT_ACK, Cmd,
+                         Reg, Transition, al_state_name, al_status_name)
 from ecatcfg.record import record
 from ecatcfg.runtime.lockstep import Job, until_answered
 from ecatcfg.runtime.wire import Datagram, datagram_for
@@ -37,8 +38,6 @@ FAST_POLLS = 3
 POLL_INTERVAL = 0.001
 DC_START_DELAY_NS = 100_000_000    # SYNC start this far ahead of the reference (IgH, SOEM)
 
-SM1_STATUS_BLOCK = 0x080D      # SM1 status, activate, PDI control: 3 bytes
-REPEAT_BIT = 0x02
 REPEAT_AFTER = 0.05            # s SM1 must stay empty after a lost read before a repeat
 
 
@@ -121,8 +120,9 @@ def init_cmd_job(cmd: InitCmd, who: str | None, data: bytes | None = None,
                                                            cmd.validate.mask):
                 last = f"read {got.data.hex()}, expected {cmd.validate.data.hex()}" + (
                     f" under mask {cmd.validate.mask.hex()}" if cmd.validate.mask else "")
-                if _is_state_check(cmd) and len(got.data) >= 2 and got.data[0] & 0x10 \
-                        and not cmd.validate.data[0] & 0x10:
+                if _is_state_check(cmd) and len(got.data) >= 2 \
+                        and got.data[0] & AL_STATUS_ERROR \
+                        and not cmd.validate.data[0] & AL_STATUS_ERROR:
                     # The slave refused the state: an error flag that stays is final.
                     error_since = error_since or now
                     if now - error_since >= ERROR_GRACE:
@@ -143,11 +143,9 @@ def init_cmd_job(cmd: InitCmd, who: str | None, data: bytes | None = None,
 def _refused(status: bytes, who: str | None, comment: str, timed_out: bool = False) -> ApplyError:
     al_status, = struct.unpack_from("<H", status, 0)
     code = struct.unpack_from("<H", status, 4)[0] if len(status) >= 6 else 0
-    state = al_status & 0x0F
-    name = AlState(state).name if state in AlState._value2member_map_ else f"state {state}"
-    flag = "+ERR" if al_status & 0x10 else ""
-    text = (f"slave stays in {name}{flag}, AL status code 0x{code:04X} ({al_status_name(code)})"
-            if code or flag else f"slave stays in {name}")
+    text = f"slave stays in {al_state_name(al_status)}"
+    if code or al_status & AL_STATUS_ERROR:
+        text += f", AL status code 0x{code:04X} ({al_status_name(code)})"
     if timed_out:
         text += " (timed out)"
     return ApplyError(text, who, comment, al_code=code)
@@ -218,17 +216,18 @@ class MailboxChannel:
     def _repeat(self, deadline: float, who: str | None, what: str) -> Job:
         """Toggle the repeat request (0x080E bit 1) from what the register holds, then wait
         for the slave's acknowledge in 0x080F bit 1."""
-        status = Datagram.physical(Cmd.FPRD, self.address, SM1_STATUS_BLOCK, 3)
+        # SM1 status, activate and PDI control: 3 bytes from 0x080D
+        status = Datagram.physical(Cmd.FPRD, self.address, SM1_STATUS, 3)
         failed = ApplyError("mailbox repeat request failed", who, what)
         [got] = yield from until_answered([status], deadline, failed)
-        value = got.data[1] ^ REPEAT_BIT
-        toggle = Datagram.physical(Cmd.FPWR, self.address, SM1_STATUS_BLOCK + 1,
+        value = got.data[1] ^ SM_ACTIVATE_REPEAT
+        toggle = Datagram.physical(Cmd.FPWR, self.address, SM1_STATUS + 1,
                                    bytes([value]))
         yield from until_answered([toggle], deadline, failed)
         while True:                                  # the slave acknowledges the toggle
             reply = yield [status]
             if reply is not None and reply[0].wkc == 1 and \
-                    reply[0].data[2] & REPEAT_BIT == value & REPEAT_BIT:
+                    bool(reply[0].data[2] & SM_PDI_REPEAT_ACK) == bool(value & SM_ACTIVATE_REPEAT):
                 return
             if time.monotonic() > deadline:
                 raise ApplyError("the slave did not acknowledge the mailbox repeat", who,

@@ -12,7 +12,8 @@ import struct
 import time
 
 from ecatcfg.eni.plan import NetworkPlan
-from ecatcfg.esc import SII_REVISION, SII_VENDOR_ID, Cmd, Reg, eeprom_read_request
+from ecatcfg.esc import (EEPROM_BUSY, EEPROM_ERRORS, EEPROM_R64, SII_REVISION, SII_VENDOR_ID, Cmd,
+                         Reg, eeprom_read_request)
 from ecatcfg.record import record
 from ecatcfg.runtime.lockstep import Job, run_jobs, until_answered
 from ecatcfg.runtime.replay import ApplyError
@@ -20,9 +21,6 @@ from ecatcfg.runtime.transport import Transport
 from ecatcfg.runtime.wire import Datagram
 
 EEPROM_TIMEOUT = 0.5           # s per slave (IgH: 20 ms per access, 500 ms for loading)
-EEPROM_BUSY = 0x8000
-EEPROM_ERRORS = 0x7800         # checksum, loading, acknowledge, write-enable errors
-EEPROM_R64 = 0x0040
 COUNT_ATTEMPTS = 5
 
 

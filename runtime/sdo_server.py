@@ -65,7 +65,7 @@ class SdoServer:
     """
 
     def __init__(self, od: ObjectDictionary, mbx_out_size: int, mbx_in_size: int) -> None:
-        if mbx_out_size < MBX_HEADER_SIZE + 10 or mbx_in_size < NORMAL_OVERHEAD + 1:
+        if min(mbx_out_size, mbx_in_size) < NORMAL_OVERHEAD:
             raise ValueError(f"mailbox too small for CoE: SM0 {mbx_out_size}, SM1 "
                              f"{mbx_in_size} bytes")
         self.od = od

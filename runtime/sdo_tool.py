@@ -31,29 +31,22 @@ from dataclasses import dataclass
 
 from ecatcfg.eni.plan import MailboxArea, MailboxPlan
 from ecatcfg.errors import EcatcfgError
-from ecatcfg.esc import AL_ERROR_ACK, AlState, Cmd, Reg, SmConfig, al_status_name
+from ecatcfg.esc import (AL_ERROR_ACK, AL_STATE_MASK, AL_STATUS_ERROR, MAILBOX_PROTOCOL_BITS,
+                         SII_MAILBOX_PROTOCOLS, SII_STD_MAILBOX, SM1_STATUS, SM_CONTROL_MBOX_IN,
+                         SM_CONTROL_MBOX_OUT, SM_DIR_ECAT_READS, SM_DIR_ECAT_WRITES, SM_DIR_MASK,
+                         SM_MODE_MAILBOX, SM_MODE_MASK, SM_STATUS_MAILBOX_FULL, AlState, Cmd, Reg,
+                         SmConfig, al_state_name, al_status_name, mailbox_protocol_names)
 from ecatcfg.runtime.lockstep import Job, run_jobs
 from ecatcfg.runtime.mailbox import NORMAL_OVERHEAD, abort_name
 from ecatcfg.runtime.replay import (
-    SM1_STATUS_BLOCK, TIMEOUT_MAILBOX, ApplyError, MailboxChannel, sdo_job,
+    ERROR_GRACE, TIMEOUT_COMMAND, TIMEOUT_MAILBOX, TIMEOUT_STATE, ApplyError, MailboxChannel,
+    sdo_job,
 )
 from ecatcfg.runtime.scan import count_slaves, sii_words
-from ecatcfg.runtime.syncman import STATUS_MAILBOX_FULL as MAILBOX_FULL
 from ecatcfg.runtime.transport import Transport
 from ecatcfg.runtime.wire import Datagram
 
-SII_STD_MAILBOX = 0x0018       # rx offset, rx size, tx offset, tx size (4 words)
-SII_MAILBOX_PROTOCOLS = 0x001C
-COE_BIT = 0x04
-PROTOCOL_BITS = {0x01: "AoE", 0x02: "EoE", 0x04: "CoE", 0x08: "FoE", 0x10: "SoE",
-                 0x20: "VoE"}
-SM0_CONTROL = 0x26             # mailbox, ECAT writes, PDI event
-SM1_CONTROL = 0x22             # mailbox, ECAT reads, PDI event
 FIRST_STATION_ADDRESS = 0x1000  # + position + 1, as SOEM and ENIs number them
-
-TIMEOUT_COMMAND = 1.0          # s: one register access, lost frames included
-TIMEOUT_STATE = 5.0            # s: INIT -> PREOP (IgH 5 s, SOEM 2 s)
-ERROR_GRACE = 0.02             # s an AL error flag must persist before it is final
 STALE_MESSAGES = 16            # at most this many old messages are taken out of SM1
 
 
@@ -99,7 +92,7 @@ def parse_address(text: str) -> tuple[int, int]:
 
 
 def protocol_names(word: int) -> str:
-    names = [name for bit, name in PROTOCOL_BITS.items() if word & bit]
+    names = mailbox_protocol_names(word)
     return ", ".join(names) if names else "none"
 
 
@@ -196,7 +189,7 @@ def _prepare(info: SlaveMailbox) -> Job:
                                 f"{who}: reading the AL status (0x0130)")
     al_status = struct.unpack_from("<H", status.data)[0]
     info.state_before = al_status
-    state = al_status & 0x0F
+    state = al_status & AL_STATE_MASK
     if state == AlState.BOOT:
         raise SdoToolError(f"{who} is in BOOT; CoE needs PREOP, SAFEOP or OP (request INIT "
                            "first)")
@@ -216,7 +209,7 @@ def _prepare(info: SlaveMailbox) -> Job:
         raise SdoToolError(str(exc)) from None
     rx_start, rx_size, tx_start, tx_size = struct.unpack("<4H", mbx)
     info.protocols = protocols = struct.unpack_from("<H", proto)[0]
-    if not protocols & COE_BIT:
+    if not protocols & MAILBOX_PROTOCOL_BITS["CoE"]:
         if pdi_owned:
             yield from _access(Datagram.physical(Cmd.APWR, adp, Reg.EEPROM_CONFIG, b"\x01"),
                                deadline, f"{who}: handing the SII EEPROM back (0x0500)")
@@ -241,7 +234,7 @@ def _prepare(info: SlaveMailbox) -> Job:
                                              "PDI (0x0500)")
             info.send, info.recv, info.state = sm0, sm1, state
             return
-        if state != AlState.PREOP or al_status & 0x10 == 0:
+        if state != AlState.PREOP or not al_status & AL_STATUS_ERROR:
             raise SdoToolError(f"{who} is in {AlState(state).name} but SM0/SM1 are not "
                                f"configured as its mailbox (SM0 {_sm_text(sm0)}, SM1 "
                                f"{_sm_text(sm1)}); bring it to INIT first")
@@ -252,8 +245,8 @@ def _prepare(info: SlaveMailbox) -> Job:
                            f"0x{tx_start:04X}/{tx_size})")
     if rx_size < NORMAL_OVERHEAD + 1:
         raise SdoToolError(f"{who}: a {rx_size}-byte receive mailbox cannot carry an SDO")
-    sm0 = SmConfig(rx_start, rx_size, SM0_CONTROL, True)
-    sm1 = SmConfig(tx_start, tx_size, SM1_CONTROL, True)
+    sm0 = SmConfig(rx_start, rx_size, SM_CONTROL_MBOX_OUT, True)
+    sm1 = SmConfig(tx_start, tx_size, SM_CONTROL_MBOX_IN, True)
     deadline = time.monotonic() + TIMEOUT_COMMAND
     if state != AlState.INIT:
         # PREOP+ERR without a mailbox: back to INIT before the SMs change.
@@ -268,9 +261,9 @@ def _prepare(info: SlaveMailbox) -> Job:
 
 
 def _is_mailbox(sm: SmConfig, master_writes: bool) -> bool:
-    # Control bits 1:0 = 10 (mailbox), bits 3:2 = direction (01 = ECAT writes).
-    return (sm.enable and sm.length > 0 and sm.control & 0x03 == 0x02
-            and bool(sm.control & 0x04) == master_writes)
+    direction = SM_DIR_ECAT_WRITES if master_writes else SM_DIR_ECAT_READS
+    return (sm.enable and sm.length > 0 and sm.control & SM_MODE_MASK == SM_MODE_MAILBOX
+            and sm.control & SM_DIR_MASK == direction)
 
 
 def _sm_text(sm: SmConfig) -> str:
@@ -334,7 +327,7 @@ def _request_state(address: int, target: AlState, who: str) -> Job:
             code = struct.unpack_from("<H", reply[0].data, 4)[0]
             if al_status & 0x1F == target:
                 return
-            if al_status & 0x10:
+            if al_status & AL_STATUS_ERROR:
                 error_since = error_since or now
                 if now - error_since >= ERROR_GRACE:
                     raise _refused(who, target, al_status, code)
@@ -348,11 +341,8 @@ def _request_state(address: int, target: AlState, who: str) -> Job:
 
 def _refused(who: str, target: AlState, al_status: int, code: int,
              timed_out: bool = False) -> SdoToolError:
-    state = al_status & 0x0F
-    name = AlState(state).name if state in AlState._value2member_map_ else f"state {state}"
-    flag = "+ERR" if al_status & 0x10 else ""
-    text = f"{who} refused {target.name}: it stays in {name}{flag}"
-    if code or flag:
+    text = f"{who} refused {target.name}: it stays in {al_state_name(al_status)}"
+    if code or al_status & AL_STATUS_ERROR:
         text += f", AL status code 0x{code:04X} ({al_status_name(code)})"
     if timed_out:
         text += f" (after {TIMEOUT_STATE:g} s)"
@@ -364,13 +354,13 @@ def _empty_sm1(info: SlaveMailbox, channel: MailboxChannel) -> Job:
     than one, e.g. two answers to a request that was written twice)."""
     deadline = time.monotonic() + TIMEOUT_COMMAND
     who = f"slave {info.position}"
-    status_dg = Datagram.physical(Cmd.FPRD, channel.address, SM1_STATUS_BLOCK, 3)
+    status_dg = Datagram.physical(Cmd.FPRD, channel.address, SM1_STATUS, 3)
     recv = channel.plan.recv
     read = Datagram.physical(Cmd.FPRD, channel.address, recv.start, recv.length)
     for _ in range(STALE_MESSAGES):
         status = yield from _access(status_dg, deadline,
                                     f"{who}: reading the SM1 status (0x080D)")
-        if not status.data[0] & MAILBOX_FULL:
+        if not status.data[0] & SM_STATUS_MAILBOX_FULL:
             return
         info.stale_messages += 1
         # Any reply will do: a read whose frame was lost on the way back may have emptied
@@ -385,5 +375,5 @@ def _empty_sm1(info: SlaveMailbox, channel: MailboxChannel) -> Job:
                        "read): is another master using this slave's mailbox?")
 
 
-__all__ = ["SdoToolError", "SlaveMailbox", "abort_name", "decode", "parse_address",
-           "protocol_names", "sdo_transfer"]
+__all__ = ["SdoToolError", "SlaveMailbox", "abort_name", "parse_address", "protocol_names",
+           "sdo_transfer"]

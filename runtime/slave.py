@@ -21,10 +21,13 @@ from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from ecatcfg.esc import (FMMU_SIZE, AL_ERROR_ACK, AlState, FmmuConfig, FmmuType, Reg,
-                         fmmu_register, sm_register)
+from ecatcfg.esc import (AL_ERROR_ACK, AL_STATE_MASK, AL_STATUS_ERROR, EEPROM_CMD_MASK,
+                         EEPROM_CMD_READ, EEPROM_CMD_RELOAD, EEPROM_CMD_WRITE, EEPROM_R64,
+                         EEPROM_WRITE_ENABLE, FMMU_SIZE, SM_ACTIVATE_REPEAT, SM_DIR_MASK,
+                         SM_MODE_MASK, SM_WATCHDOG_ENABLE, AlState, AlStatusCode, FmmuConfig,
+                         FmmuType, Reg, fmmu_register, sm_register)
 from ecatcfg.esi.model import Device
-from ecatcfg.runtime.syncman import (ACTIVATE_REPEAT, WATCHDOG_ENABLE, SmKind, SmState)
+from ecatcfg.runtime.syncman import SmKind, SmState
 
 MEMORY_SIZE = 0x10000
 PROCESS_RAM = 0x1000
@@ -35,20 +38,8 @@ ESC_TYPE = 0x11                    # reported ESC type (an ET1100-class device)
 ESC_FEATURES = 0x01CC              # DC, 64-bit DC, EBUS/MII link detection, enhanced DC SYNC
 DEFAULT_WD_DIVIDER = 0x09C2        # (0x09C2 + 2) x 40 ns = 100 us watchdog time base
 DEFAULT_WD_TIME = 1000             # x 100 us = 100 ms
-EEPROM_R64 = 0x0040                # 0x0502 bit 6: reads return 8 bytes
-EEPROM_BUSY = 0x8000
-
-AL_ERROR = 0x10
-
-# AL status codes the emulated firmware gives (ETG.1000.6; ethercat-facts.md §4).
-AL_INVALID_STATE_CHANGE = 0x0011
-AL_UNKNOWN_STATE = 0x0012
-AL_BOOT_NOT_SUPPORTED = 0x0013
-AL_INVALID_MAILBOX = 0x0016
-AL_SM_WATCHDOG = 0x001B
-AL_INVALID_OUTPUTS = 0x001D
-AL_INVALID_INPUTS = 0x001E
-AL_INVALID_DC_CYCLE = 0x0035
+# SM control bits a slave checks against its own SM configuration: mode and direction.
+SM_MODE_AND_DIRECTION = SM_MODE_MASK | SM_DIR_MASK
 
 # Transitions the state machine allows (SOES ESC_state, KickCAT ESMStates); any -> INIT too.
 _ALLOWED = {(AlState.INIT, AlState.PREOP), (AlState.PREOP, AlState.SAFEOP),
@@ -168,11 +159,11 @@ class EmulatedSlave:
 
     @property
     def state(self) -> AlState:
-        return AlState(self.mem[Reg.AL_STATUS] & 0x0F)
+        return AlState(self.mem[Reg.AL_STATUS] & AL_STATE_MASK)
 
     @property
     def error(self) -> bool:
-        return bool(self.mem[Reg.AL_STATUS] & AL_ERROR)
+        return bool(self.mem[Reg.AL_STATUS] & AL_STATUS_ERROR)
 
     @property
     def status_code(self) -> int:
@@ -243,7 +234,7 @@ class EmulatedSlave:
             pass    # receive-time latch: done by the segment, which knows the line
         if ado == Reg.DC_SYSTEM_TIME:
             self._system_time_written(n)
-        if (self.mem[Reg.AL_STATUS] & 0x0F == AlState.OP
+        if (self.mem[Reg.AL_STATUS] & AL_STATE_MASK == AlState.OP
                 and (_overlaps(ado, n, Reg.WATCHDOG_DIVIDER, Reg.WATCHDOG_SM + 2)
                      or _overlaps(ado, n, Reg.SM0, sm_register(N_SM)))):
             self._arm_watchdog()
@@ -254,16 +245,16 @@ class EmulatedSlave:
 
     def _eeprom_command(self) -> None:
         control = struct.unpack_from("<H", self.mem, Reg.EEPROM_CONTROL)[0]
-        command = control >> 8 & 0x07
-        address = struct.unpack_from("<I", self.mem, 0x0504)[0]
-        if command == 0x01:                                   # read 4 words
+        command = control & EEPROM_CMD_MASK
+        address = struct.unpack_from("<I", self.mem, Reg.EEPROM_ADDRESS)[0]
+        if command == EEPROM_CMD_READ:                        # read 4 words
             data = bytes(self.eeprom[2 * address:2 * address + 8])
             self.mem[Reg.EEPROM_DATA:Reg.EEPROM_DATA + 8] = data + b"\xff" * (8 - len(data))
-        elif command == 0x02 and control & 0x01:              # write one word (write enable)
+        elif command == EEPROM_CMD_WRITE and control & EEPROM_WRITE_ENABLE:   # one word
             if 2 * address + 2 <= len(self.eeprom):
                 self.eeprom[2 * address:2 * address + 2] = self.mem[Reg.EEPROM_DATA:
                                                                    Reg.EEPROM_DATA + 2]
-        elif command in (0x04, 0x03):                         # reload (SOEM sends 0x03)
+        elif command in (EEPROM_CMD_RELOAD, EEPROM_CMD_READ | EEPROM_CMD_WRITE):  # SOEM: 0x0300
             self._load_eeprom()
         # Commands complete at once: busy, command and write-enable bits read back clear.
         struct.pack_into("<H", self.mem, Reg.EEPROM_CONTROL, EEPROM_R64)
@@ -285,7 +276,7 @@ class EmulatedSlave:
         reg = sm_register(sm.number)
         was_repeat = sm.repeat_request
         sm.load(self.mem)
-        request = bool(self.mem[reg + 6] & ACTIVATE_REPEAT)
+        request = bool(self.mem[reg + 6] & SM_ACTIVATE_REPEAT)
         if sm.is_mailbox and not sm.master_writes and request != was_repeat:
             # Repeat: post the last message again (the master lost it) and acknowledge.
             # Before PREOP the mailbox is not running: the bit is only taken over
@@ -392,20 +383,20 @@ class EmulatedSlave:
         drop the slave to SAFEOP+ERR 0x001B and clear its outputs.  Runs every few
         milliseconds for every slave: the limit is worked out when the slave enters OP."""
         limit = self._watchdog_limit
-        if limit is None or self.mem[Reg.AL_STATUS] & 0x0F != AlState.OP:
+        if limit is None or self.mem[Reg.AL_STATUS] & AL_STATE_MASK != AlState.OP:
             return
         if now - self._last_output_write > limit:
             self.mem[0x0440] = 0
             for sm in self.process_sms(SmKind.OUTPUTS):
                 self.mem[sm.start:sm.end] = bytes(sm.length)
-            self._set_state(AlState.SAFEOP, AL_SM_WATCHDOG)
+            self._set_state(AlState.SAFEOP, AlStatusCode.SM_WATCHDOG)
 
     def _arm_watchdog(self) -> None:
         """The SM watchdog time (0x0420 x (0x0400 + 2) x 40 ns), or None when no output SM
         has its watchdog enabled (control bit 6) or the time is 0."""
         self._watchdog_limit = None
         watched = [sm for sm in self.process_sms(SmKind.OUTPUTS)
-                   if sm.control & WATCHDOG_ENABLE]
+                   if sm.control & SM_WATCHDOG_ENABLE]
         divider, = struct.unpack_from("<H", self.mem, Reg.WATCHDOG_DIVIDER)
         time_units, = struct.unpack_from("<H", self.mem, Reg.WATCHDOG_SM)
         if watched and time_units:
@@ -415,27 +406,27 @@ class EmulatedSlave:
 
     def _al_control(self) -> None:
         control = struct.unpack_from("<H", self.mem, Reg.AL_CONTROL)[0]
-        requested = control & 0x0F
+        requested = control & AL_STATE_MASK
         ack = bool(control & AL_ERROR_ACK)
         current = self.state
         if self.error:
             if not ack and requested != AlState.INIT:
                 return              # an error must be acknowledged first (SOES, KickCAT)
             if ack:
-                self.mem[Reg.AL_STATUS] &= ~AL_ERROR & 0xFF
+                self.mem[Reg.AL_STATUS] &= ~AL_STATUS_ERROR & 0xFF
         if requested not in AlState.__members__.values():
             self._set_state(AlState.SAFEOP if current == AlState.OP else current,
-                            AL_UNKNOWN_STATE)
+                            AlStatusCode.UNKNOWN_STATE)
             return
         target = AlState(requested)
         if target == current:
             return
         if target == AlState.BOOT:
-            self._set_state(current, AL_BOOT_NOT_SUPPORTED if current == AlState.INIT
-                            else AL_INVALID_STATE_CHANGE)
+            self._set_state(current, AlStatusCode.BOOT_NOT_SUPPORTED if current == AlState.INIT
+                            else AlStatusCode.INVALID_STATE_CHANGE)
             return
         if target != AlState.INIT and (current, target) not in _ALLOWED:
-            self._set_state(current, AL_INVALID_STATE_CHANGE)
+            self._set_state(current, AlStatusCode.INVALID_STATE_CHANGE)
             return
         transition = _LETTER[current] + _LETTER[target]
         code = self.refuse.get(transition) or self._check(current, target)
@@ -461,10 +452,11 @@ class EmulatedSlave:
             if esi_sm.type not in ("MBoxOut", "MBoxIn"):
                 continue
             sm = self.sms[esi_sm.number]
-            want = (esi_sm.start_address, esi_sm.default_size,
-                    (esi_sm.control_byte or 0) & 0x0F)
-            if not sm.enabled or (sm.start, sm.length, sm.control & 0x0F) != want:
-                return AL_INVALID_MAILBOX
+            want = (esi_sm.start_address, esi_sm.mailbox_size,
+                    esi_sm.mailbox_control & SM_MODE_AND_DIRECTION)
+            got = (sm.start, sm.length, sm.control & SM_MODE_AND_DIRECTION)
+            if not sm.enabled or got != want:
+                return AlStatusCode.INVALID_MAILBOX
         return 0
 
     def _pd_bits(self) -> dict[int, int | None]:
@@ -490,7 +482,8 @@ class EmulatedSlave:
         for esi_sm in self.device.sms:
             if esi_sm.number not in needed:
                 continue
-            code = AL_INVALID_OUTPUTS if esi_sm.type == "Outputs" else AL_INVALID_INPUTS
+            code = (AlStatusCode.INVALID_OUTPUTS if esi_sm.type == "Outputs"
+                    else AlStatusCode.INVALID_INPUTS)
             bits = needed[esi_sm.number]
             if bits is None:
                 return code
@@ -503,7 +496,8 @@ class EmulatedSlave:
                     return code
                 continue
             if (not sm.enabled or sm.start != esi_sm.start_address or sm.length != length
-                    or sm.control & 0x0F != (esi_sm.control_byte or 0) & 0x0F):
+                    or sm.control & SM_MODE_AND_DIRECTION
+                    != (esi_sm.control_byte or 0) & SM_MODE_AND_DIRECTION):
                 return code
             kind = FmmuType.WRITE if esi_sm.type == "Outputs" else FmmuType.READ
             if not self._fmmus_cover(sm.start, sm.length, kind):
@@ -524,7 +518,7 @@ class EmulatedSlave:
         if activation & 0x03 == 0x03:       # cyclic operation with SYNC0
             cycle, = struct.unpack_from("<I", self.mem, Reg.DC_SYNC0_CYCLE_TIME)
             if not cycle:
-                return AL_INVALID_DC_CYCLE
+                return AlStatusCode.DC_INVALID_SYNC_CYCLE
         return 0
 
     def _enter(self, target: AlState) -> None:
@@ -543,7 +537,7 @@ class EmulatedSlave:
         self._set_state(target, 0)
 
     def _set_state(self, state: AlState, code: int) -> None:
-        status = int(state) | (AL_ERROR if code else 0)
+        status = int(state) | (AL_STATUS_ERROR if code else 0)
         struct.pack_into("<H", self.mem, Reg.AL_STATUS, status)
         struct.pack_into("<H", self.mem, 0x0134, code)
         if self.on_state_change:

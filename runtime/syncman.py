@@ -20,19 +20,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 from enum import Enum
 
-from ecatcfg.esc import SM_SIZE, SmConfig, sm_register
-
-MODE_MASK = 0x03
-MODE_MAILBOX = 0x02
-DIRECTION_MASK = 0x0C
-DIRECTION_ECAT_WRITES = 0x04       # bits 3:2 = 01: the master writes, the slave reads
-WATCHDOG_ENABLE = 0x40             # control bit 6
-STATUS_MAILBOX_FULL = 0x08         # status bit 3
-STATUS_WRITE_EVENT = 0x01          # status bit 0: buffer completely written
-STATUS_BUFFER_NONE = 0x30          # status bits 5:4 = 3: no buffer written yet
-ACTIVATE_ENABLE = 0x01
-ACTIVATE_REPEAT = 0x02
-PDI_REPEAT_ACK = 0x02
+from ecatcfg.esc import (SM_DIR_ECAT_WRITES, SM_DIR_MASK, SM_MODE_MAILBOX, SM_MODE_MASK,
+                         SM_PDI_REPEAT_ACK, SM_SIZE, SM_STATUS_BUFFER_NONE, SM_STATUS_MAILBOX_FULL,
+                         SM_STATUS_WRITE_EVENT, SmConfig, sm_register)
 
 
 class SmKind(Enum):
@@ -60,11 +50,11 @@ class SmState:
 
     @property
     def is_mailbox(self) -> bool:
-        return self.control & MODE_MASK == MODE_MAILBOX
+        return self.control & SM_MODE_MASK == SM_MODE_MAILBOX
 
     @property
     def master_writes(self) -> bool:
-        return self.control & DIRECTION_MASK == DIRECTION_ECAT_WRITES
+        return self.control & SM_DIR_MASK == SM_DIR_ECAT_WRITES
 
     @property
     def kind(self) -> SmKind:
@@ -96,8 +86,8 @@ class SmState:
         if self.is_mailbox:
             # A full mailbox has its buffer written (bit 0) and full (bit 3); the ENIs'
             # mailbox-state FMMU maps bit 0 of SM1's status (eni-observations §3).
-            mem[reg + 5] = STATUS_MAILBOX_FULL | STATUS_WRITE_EVENT if self.full else 0
+            mem[reg + 5] = SM_STATUS_MAILBOX_FULL | SM_STATUS_WRITE_EVENT if self.full else 0
         elif not mem[reg + 5]:
-            mem[reg + 5] = STATUS_BUFFER_NONE
-        pdi = mem[reg + 7] & ~PDI_REPEAT_ACK
-        mem[reg + 7] = pdi | (PDI_REPEAT_ACK if self.repeat_request else 0)
+            mem[reg + 5] = SM_STATUS_BUFFER_NONE
+        pdi = mem[reg + 7] & ~SM_PDI_REPEAT_ACK
+        mem[reg + 7] = pdi | (SM_PDI_REPEAT_ACK if self.repeat_request else 0)

@@ -18,7 +18,8 @@ from __future__ import annotations
 import struct
 
 from ecatcfg.errors import EcatcfgError
-from ecatcfg.esc import ETHERTYPE, Cmd
+from ecatcfg.esc import (DATAGRAM_OVERHEAD, ETH_HEADER_SIZE, ETHERTYPE, FRAME_HEADER, MIN_FRAME,
+                         Cmd)
 from ecatcfg.record import field, record
 
 ETH_HEADER = struct.Struct("!6s6sH")
@@ -31,11 +32,13 @@ ETH_LEN = ETH_HEADER.size                        # 14
 FRAME_HEADER_END = ETH_LEN + ECAT_HEADER.size    # 16: the first datagram starts here
 DG_HEADER_LEN = DATAGRAM_HEADER.size             # 10
 ECAT_TYPE_DLPDU = 1
+# The sizes esc.py gives the compiler (frame budgets) are these layouts' sizes.
+assert (ETH_LEN, ECAT_HEADER.size, DG_HEADER_LEN + WKC.size) == (
+    ETH_HEADER_SIZE, FRAME_HEADER, DATAGRAM_OVERHEAD)
 
 LEN_MASK = 0x07FF            # datagram length, bits 0-10
 CIRCULATING = 0x4000         # bit 14: the frame has passed a closed port 0 once
 MORE = 0x8000                # bit 15: another datagram follows
-MIN_FRAME = 60               # Ethernet minimum without FCS; shorter frames are padded
 
 MASTER_MAC = bytes.fromhex("010101010101")     # SOEM's source address (test-bench.md §3)
 BROADCAST_MAC = b"\xff" * 6

@@ -174,6 +174,9 @@ CASES: list[Case] = [
     Case("ESI211", esi(drive(fmmus=FMMUS + "\n<Fmmu>Outputs</Fmmu>" * 13
                              + f"\n{M}<Fmmu>Inputs</Fmmu>")),
          esi(drive(fmmus=FMMUS + "\n<Fmmu>Outputs</Fmmu>" * 13))),
+    Case("ESI212", esi(drive(sm1=M + SM1.replace('DefaultSize="128"', 'MinSize="128"'))),
+         esi(drive(sm1=SM1.replace('DefaultSize="128"', 'MinSize="64" DefaultSize="128"')))),
+    Case("ESI213", esi(drive(sm0=M + SM0.replace('DefaultSize="128" ', ''))), esi()),
 
     Case("ESI301", esi(drive(mailbox=init_cmd("#x8001", "0100", mark=True))), esi()),
     Case("ESI302", esi(drive(mailbox=init_cmd("#x8000", "0100", "SO", mark=True))),

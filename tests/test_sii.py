@@ -14,6 +14,7 @@ from pathlib import Path
 import pytest
 
 from conftest import EXAMPLES, ROOT, device_xml, esi_xml, write
+from ecatcfg.esc import MAILBOX_PROTOCOL_BITS, SM_TYPE_CODES
 from ecatcfg.esi import sii
 from ecatcfg.esi.library import Library
 from ecatcfg.esi.model import Device
@@ -312,11 +313,11 @@ def check_round_trip(device: Device) -> None:
             assert box == (sms[0].start_address, sii.sm_length(sms[0]))
         else:
             assert box == (0, 0)
-    assert img.protocols == [p for p in sii.PROTOCOL_BITS
+    assert img.protocols == [p for p in MAILBOX_PROTOCOL_BITS
                              if device.mailbox and p in device.mailbox.protocols], where
     assert [(s.start, s.length, s.control, s.enable, s.type) for s in img.syncms] == [
         (sm.start_address or 0, sm.default_size or 0, sm.control_byte or 0, sii.sm_enable(sm),
-         sii.SM_TYPES[sm.type]) for sm in device.sms], where    # (no mailbox SM lacks DefaultSize)
+         SM_TYPE_CODES[sm.type]) for sm in device.sms], where    # (no mailbox SM lacks DefaultSize)
     assert img.fmmus == [sii.FMMU_TYPES.get(f.type, 0) for f in device.fmmus], where
     for built, pdos in ((img.txpdos, device.tx_pdos), (img.rxpdos, device.rx_pdos)):
         expected = sii.assigned_pdos(pdos)
@@ -473,15 +474,17 @@ def test_full_device(tmp_path):
     assert [c.type for c in img.categories].count(sii.CAT_SYNCM) == 1
 
 
-def test_mailbox_sm_without_default_size_takes_max_size(tmp_path):
+def test_mailbox_sm_without_default_size_takes_max_then_min_size(tmp_path):
+    """The mailbox size rule (MaxSize, else MinSize, without DefaultSize); a MinSize-only
+    MBoxIn used to get 0 here while the ENI's SM1 InitCmd said MinSize."""
     dev = one_device(tmp_path, '<Sm StartAddress="#x1800" MaxSize="#x100" ControlByte="#x26" '
                                'Enable="1">MBoxOut</Sm><Sm StartAddress="#x1C00" MinSize="34" '
                                'ControlByte="#x22" Enable="1">MBoxIn</Sm>'
                                '<Sm StartAddress="#x1100" MaxSize="64" ControlByte="#x64" '
                                'Enable="1">Outputs</Sm>')
     img = sii.decode(sii.build(dev))
-    assert (img.std_rx, img.std_tx) == ((0x1800, 0x100), (0x1C00, 0))
-    assert [s.length for s in img.syncms] == [0x100, 0, 0]
+    assert (img.std_rx, img.std_tx) == ((0x1800, 0x100), (0x1C00, 34))
+    assert [s.length for s in img.syncms] == [0x100, 34, 0]
 
 
 def test_physics_to_ports():

@@ -9,12 +9,12 @@ from ecatcfg.esi import datatypes
 from ecatcfg.esi.coe import (
     DictEntry, device_dictionary, dictionary_with_objects, has_coe, lookup,
 )
+from ecatcfg.esc import pdo_mapping_range
 from ecatcfg.esi.lint.checks.common import hex4, repeats
 from ecatcfg.esi.lint.context import FileContext
 from ecatcfg.esi.lint.rules import Hit, device_rule
 from ecatcfg.esi.model import Device, Pdo, PdoEntry
 
-PDO_RANGE = {"rx": (0x1600, 0x17FF), "tx": (0x1A00, 0x1BFF)}
 SM_TYPE_FOR = {"rx": "Outputs", "tx": "Inputs"}
 # A PDO mapping entry (0x16xx/0x1Axx subindex value) holds the bit length in 8 bits.
 MAX_ENTRY_BITS = 255
@@ -48,9 +48,10 @@ def pdo_index_range(dev: Device, ctx: FileContext) -> Iterator[Hit]:
     if not has_coe(dev):
         return
     for pdo in dev.pdos:
-        lo, hi = PDO_RANGE[pdo.direction]
-        if pdo.index is not None and not pdo.virtual and not lo <= pdo.index <= hi:
-            yield Hit(pdo.source, f"{_tag(pdo)} is outside 0x{lo:04X}-0x{hi:04X}")
+        allowed = pdo_mapping_range(pdo.direction)
+        if pdo.index is not None and not pdo.virtual and pdo.index not in allowed:
+            yield Hit(pdo.source, f"{_tag(pdo)} is outside 0x{allowed.start:04X}-"
+                      f"0x{allowed.stop - 1:04X}")
 
 
 @device_rule("ESI102", "error", "two PDOs of a device have the same index", """

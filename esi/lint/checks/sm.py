@@ -4,10 +4,11 @@ from __future__ import annotations
 
 from typing import Iterator
 
+from ecatcfg.esc import (MIN_MAILBOX_SIZE, SM_CONTROL_MBOX_IN, SM_CONTROL_MBOX_OUT,
+                         SM_DIR_ECAT_READS, SM_DIR_ECAT_WRITES, SM_DIR_MASK, SM_MODE_BUFFERED,
+                         SM_MODE_MAILBOX, SM_MODE_MASK)
 from ecatcfg.esi.lint.checks.common import (
-    ADDRESS_SPACE_END, DIGITAL_OUTPUT_AREA, MIN_MAILBOX_SIZE, PROCESS_RAM_START,
-    SM_DIR_ECAT_READS, SM_DIR_ECAT_WRITES, SM_DIR_MASK, SM_MODE_BUFFERED, SM_MODE_MAILBOX,
-    SM_MODE_MASK, sm_length,
+    ADDRESS_SPACE_END, DIGITAL_OUTPUT_AREA, PROCESS_RAM_START, sm_length,
 )
 from ecatcfg.esi.lint.context import FileContext
 from ecatcfg.esi.lint.rules import Hit, device_rule
@@ -36,6 +37,10 @@ def _real_sms(dev: Device) -> list[tuple[SyncManager, int]]:
         if length > 0:
             out.append((sm, length))
     return out
+
+
+def _has_size(sm: SyncManager) -> bool:
+    return (sm.default_size, sm.min_size, sm.max_size) != (None, None, None)
 
 
 def _is_buffered(sm: SyncManager) -> bool:
@@ -101,8 +106,8 @@ def sm_outside_memory(dev: Device, ctx: FileContext) -> Iterator[Hit]:
 def mailbox_too_small(dev: Device, ctx: FileContext) -> Iterator[Hit]:
     for sm in dev.sms:
         if sm.is_mailbox and not sm.virtual:
-            size = sm.default_size if sm.default_size is not None else sm.max_size
-            if size is not None and size < MIN_MAILBOX_SIZE:
+            size = sm.mailbox_size
+            if _has_size(sm) and size < MIN_MAILBOX_SIZE:      # no size at all: ESI213
                 yield Hit(sm.source, f"{sm.type} Sm {sm.number} is {size} bytes; a mailbox "
                           f"needs at least {MIN_MAILBOX_SIZE}")
 
@@ -118,7 +123,7 @@ def mailbox_control_byte(dev: Device, ctx: FileContext) -> Iterator[Hit]:
             continue
         cb = sm.control_byte
         if cb & SM_MODE_MASK != SM_MODE_MAILBOX or cb & SM_DIR_MASK != SM_DIRECTION[sm.type]:
-            want = "0x26" if sm.type == "MBoxOut" else "0x22"
+            want = f"0x{SM_CONTROL_MBOX_OUT if sm.type == 'MBoxOut' else SM_CONTROL_MBOX_IN:02X}"
             yield Hit(sm.source, f"{sm.type} Sm {sm.number} has ControlByte 0x{cb:02X}, not "
                       f"a {sm.type} mailbox mode (e.g. {want})")
 
@@ -215,3 +220,32 @@ def too_many_units(dev: Device, ctx: FileContext) -> Iterator[Hit]:
         if len(units) > MAX_UNITS:
             yield Hit(units[MAX_UNITS].source, f"the device lists {len(units)} {what} "
                       f"elements; an ESC has at most {MAX_UNITS}")
+
+
+@device_rule("ESI212", "warning", "a mailbox SyncManager has no DefaultSize", """
+    ETG.2000 gives a mailbox SM's DefaultSize as the size a configurator programs, and
+    MinSize/MaxSize as the sizes the slave accepts.  Without DefaultSize every tool must
+    choose: ecatcfg takes MaxSize, else MinSize, for the ENI's SM0/SM1 settings and mailbox
+    lengths and for the SII's standard mailbox words alike; another configurator may choose
+    differently, and a slave whose firmware expects another size refuses PREOP with AL
+    status 0x0016 (invalid mailbox configuration).  Give DefaultSize, the size the
+    firmware's mailbox has.""")
+def mailbox_without_default_size(dev: Device, ctx: FileContext) -> Iterator[Hit]:
+    for sm in dev.sms:
+        if sm.is_mailbox and not sm.virtual and sm.default_size is None \
+                and (sm.max_size is not None or sm.min_size is not None):
+            taken = "MaxSize" if sm.max_size is not None else "MinSize"
+            yield Hit(sm.source, f"{sm.type} Sm {sm.number} has no DefaultSize; configurators "
+                      f"must guess (ecatcfg takes {taken}, {sm.mailbox_size} bytes)")
+
+
+@device_rule("ESI213", "error", "a mailbox SyncManager has no size", """
+    A mailbox SM without DefaultSize, MinSize or MaxSize has no length: the ENI would
+    program SM0/SM1 with 0 bytes and the SII's standard mailbox words would say 0, so no
+    master can exchange a mailbox message and the slave refuses PREOP (AL status 0x0016).
+    Give DefaultSize, the size of the firmware's mailbox.""")
+def mailbox_without_size(dev: Device, ctx: FileContext) -> Iterator[Hit]:
+    for sm in dev.sms:
+        if sm.is_mailbox and not sm.virtual and not _has_size(sm):
+            yield Hit(sm.source, f"{sm.type} Sm {sm.number} has no DefaultSize, MinSize or "
+                      "MaxSize: the mailbox would be 0 bytes")
