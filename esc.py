@@ -3,8 +3,9 @@
 One module, as python-canopen keeps its SDO constants: the compiler writes SyncManager and
 FMMU images into ENI InitCmds with these layouts, the runtime's master replays them and the
 virtual segment decodes them, so the byte layout lives in exactly one place.
-Register addresses and bit meanings follow ETG.1000.4 and the ESC datasheets (see
-``docs/ethercat-facts.md`` in the shared docs for the sources).
+Register addresses and bit meanings follow ETG.1000.4 and the ESC datasheets as the open
+masters and slaves implement them; ``docs/protocol-notes.md`` §1-§2 names the file of each
+project (SOEM, IgH, SOES, KickCAT, Wireshark) where a layout can be checked.
 """
 
 from __future__ import annotations
@@ -68,10 +69,10 @@ FMMU_SIZE = 16
 SM_SIZE = 8
 # Logical address of the mailbox-state bits both TwinCAT and EC-Engineer use.
 MAILBOX_STATE_ADDR = 0x09000000
-# SM1 (mailbox in) status register: the mailbox-state FMMU maps its bit 0 (see
-# eni-observations §3: both tools map bit 0 of 0x080D, reproduced as is).  The master also
-# reads status, activate and PDI control of SM1 together (3 bytes from here) to repeat a
-# lost mailbox message.
+# SM1 (mailbox in) status register: the mailbox-state FMMU maps its bit 0 (TwinCAT and
+# EC-Engineer both map bit 0 of 0x080D, reproduced as is: docs/eni-exports.md §3).  The
+# master also reads status, activate and PDI control of SM1 together (3 bytes from here) to
+# repeat a lost mailbox message.
 SM1_STATUS = 0x080D
 
 # -- SyncManager register bits (0x0800 + 8·n: +4 control, +5 status, +6 activate, +7 PDI
@@ -298,8 +299,9 @@ def is_pdo_object(index: int) -> bool:
     """A PDO mapping or assignment object: the ones a PDO configuration writes."""
     return index in RX_PDO_MAPPING or index in TX_PDO_MAPPING or index in SM_PDO_ASSIGN_RANGE
 
-# Ethernet: EtherType, and how much datagram data one frame can carry (ethercat-facts §frame:
-# 1500 payload − 2 EtherCAT header; every datagram costs a 10-byte header and a 2-byte WKC).
+# Ethernet: EtherType, and how much datagram data one frame can carry (1500 payload − 2
+# EtherCAT header; every datagram costs a 10-byte header and a 2-byte WKC: IgH
+# EC_MAX_DATA_SIZE, SOEM EC_MAXLRWDATA; docs/protocol-notes.md §1).
 ETHERTYPE = 0x88A4
 ETH_HEADER_SIZE = 14          # destination MAC, source MAC, EtherType
 MIN_FRAME = 60                # Ethernet minimum without FCS: shorter frames are padded
@@ -309,8 +311,8 @@ DATAGRAM_OVERHEAD = 12
 MAX_DATAGRAM_DATA = FRAME_PAYLOAD - FRAME_HEADER - DATAGRAM_OVERHEAD     # 1486
 
 
-# AL status codes (register 0x0134; ETG.1000.6, as SOEM, IgH, SOES and KickCAT name them:
-# ethercat-facts.md §4).
+# AL status codes (register 0x0134; ETG.1000.6, as SOEM ec_print.c, IgH fsm_change.c, SOES
+# and KickCAT name them: docs/protocol-notes.md §4).
 AL_STATUS_CODES: dict[int, str] = {
     0x0000: "no error", 0x0001: "unspecified error", 0x0002: "no memory",
     0x0003: "invalid device setup", 0x0004: "invalid revision",

@@ -9,7 +9,7 @@ run, interleaved (baseline, candidate, ...), min and median of N:
   1. `ecatcfg compile` as a new process, cold (``--no-cache``: index every ESI file, read
      the six that are used, compile, write the ENI) against a new process that only parses
      the same ESI files with lxml and writes an ENI-sized XML tree (the floor for any
-     ESI-reading configurator).  Target (issue 4): under 2 s.
+     ESI-reading configurator).  Target: under 2 s.
   2. the same compile with a warm index cache.
   3. in-process, the compile step alone (``compile_topology``, devices already loaded) and
      the ENI writer, to show where the time goes.

@@ -4,7 +4,7 @@ Run from the checkout:  python3 bench/esi_load.py [CORPUS_ESI_DIR] [--repeat N]
 
 All three comparisons are measured in the same run against a baseline from the same run,
 interleaved (baseline, candidate, baseline, ...) so machine noise hits both; min and median of
-N repeats are reported.  Targets (issue 2):
+N repeats are reported.  Targets:
   1. cold `ecatcfg devices` over the corpus (new process, empty cache)
      within 2.0x of a new process that only parses the same files with lxml;
   2. a full model of every device within 4x of bare lxml.etree.parse (in-process);

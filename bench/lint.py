@@ -5,7 +5,7 @@ Run from the checkout:  python3 bench/lint.py [CORPUS_DIR] [--repeat N]
 Measured in the same run, interleaved (baseline, candidate, ...), min and median of N:
   1. `ecatcfg lint CORPUS/esi --schema-dir ... --format json` as a new process (default
      --jobs = CPU count), against a new process that only parses every file with lxml and
-     validates it with XMLSchema (the floor for any schema-checking linter).  Target (issue 3):
+     validates it with XMLSchema (the floor for any schema-checking linter).  Target:
      under 10 s on this 2-core machine.
   2. the same lint with --jobs 1, to show what the parallel run buys.
   3. per file, for the largest files: `lint_file` (parse + schema + model + all rules) against

@@ -1,5 +1,5 @@
 """Startup benchmark: time to OP and frames for 1, 8 and 64 emulated slaves, ``ecatcfg
-apply`` against SOEM (pysoem) on the same virtual segment, in the same run (issue 6).
+apply`` against SOEM (pysoem) on the same virtual segment, in the same run.
 
 Run from the checkout, as root:
     python3 bench/startup.py [-n N] [--sizes 1,8,64] [--corpus] [--layouts free,same,split]

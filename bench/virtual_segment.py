@@ -4,7 +4,7 @@ against a bare raw-socket echo on the same veth pair, in the same run.
 Run from the checkout, as root:
     python3 bench/virtual_segment.py [-n N] [--rounds R] [--layouts same,split] [--profile]
 
-Method (issue 5; target: median round trip within 3x of the bare echo):
+Method (target: median round trip within 3x of the bare echo):
 
   1. Two fresh network namespaces ``ecatbench-<pid>-a`` / ``-b`` with a veth pair ``va`` (A)
      / ``vb`` (B), IPv6 off.  Both are deleted at the end, also on errors and Ctrl-C.

@@ -1,12 +1,12 @@
 """Register InitCmds: the master's own list and each slave's, in the order real configurators use.
 
-The order and comments are those of TwinCAT and EC-Engineer exports (eni-observations §2–§3):
-a runtime filters a slave's list by transition and runs it in file order, so the list below
-is arranged so that every transition's commands come out in the right order, e.g. for I→P:
-INIT + check, EEPROM identity checks, station address, mailbox SMs, clear process-data SMs,
-mailbox-state FMMU, EEPROM to PDI, PREOP + check.  Before the station address is set the
-commands are auto-increment addressed (APxx, ADP = position), afterwards configured-address
-(FPxx, ADP = station address).
+The order and comments are those of TwinCAT and EC-Engineer exports (``docs/eni-exports.md``
+§2–§3, cited below as "eni-exports §N"): a runtime filters a slave's list by transition and
+runs it in file order, so the list below is arranged so that every transition's commands
+come out in the right order, e.g. for I→P: INIT + check, EEPROM identity checks, station
+address, mailbox SMs, clear process-data SMs, mailbox-state FMMU, EEPROM to PDI, PREOP +
+check.  Before the station address is set the commands are auto-increment addressed (APxx,
+ADP = position), afterwards configured-address (FPxx, ADP = station address).
 
 The 2011 ENI schema has no ``Timeout`` on these commands: poll timeouts go into
 ``Validate/Timeout``; how long to keep retrying a state write is left to the runtime.
@@ -34,7 +34,7 @@ PREOP_RETRIES = 300          # both tools retry the PREOP request this often
 
 
 def master_init_cmds() -> list[InitCmd]:
-    """The twelve commands every TwinCAT and EC-Engineer export starts with (§2)."""
+    """The twelve commands every TwinCAT and EC-Engineer export starts with (eni-exports §2)."""
     def bwr(comment: str, ado: int, data: bytes | None = None, length: int = 0,
             transitions: list[T] | None = None) -> InitCmd:
         return InitCmd(transitions or [T.IP], comment, Cmd.BWR, len(data) if data else length,
@@ -107,7 +107,7 @@ def slave_init_cmds(slave: ResolvedSlave, lay: SlaveLayout, dc: DcPlan | None,
                 if label != "mailbox state"]
     mbx_fmmu = [(i, f) for i, (f, label) in enumerate(lay.fmmus) if label == "mailbox state"]
 
-    # Back to INIT from any state (§3 PI/BI/SI/OI).
+    # Back to INIT from any state (eni-exports §3 PI/BI/SI/OI).
     c.ap([T.PI, *([T.BI] if bootstrap else []), T.SI, T.OI], "set device state to INIT",
          Cmd.APWR, Reg.AL_CONTROL, _al(AlState.INIT, has_mbx), requires="cycle")
     if dc:
@@ -119,7 +119,7 @@ def slave_init_cmds(slave: ResolvedSlave, lay: SlaveLayout, dc: DcPlan | None,
         c.ap([T.BI], "check device state for INIT", Cmd.APRD, Reg.AL_STATUS, bytes(2),
              validate=Validate(b"\x01\x00", b"\x0f\x00", 2 * init_to), requires="cycle")
 
-    # INIT -> PREOP: identity, address, mailbox (§3 I→P).
+    # INIT -> PREOP: identity, address, mailbox (eni-exports §3 I→P).
     c.ap([T.IP, *boot], "set device state to INIT", Cmd.APWR, Reg.AL_CONTROL,
          _al(AlState.INIT, has_mbx), cnt=1, requires="cycle")
     c.ap([T.IP, *boot], "check device state for INIT", Cmd.APRD, Reg.AL_STATUS, bytes(2), cnt=1,
@@ -171,7 +171,7 @@ def slave_init_cmds(slave: ResolvedSlave, lay: SlaveLayout, dc: DcPlan | None,
             c.fp([T.SO], f"set sm {n} ({_kind(slave, n)}s)", Cmd.FPWR, sm_register(n),
                  sm_data[n], cnt=1)
 
-    # PREOP -> SAFEOP: DC, process-data SMs, FMMUs (§3 P→S, §6).
+    # PREOP -> SAFEOP: DC, process-data SMs, FMMUs (eni-exports §3 P→S, §6).
     if dc:
         c.fp([T.PS], "set DC cycle time", Cmd.FPWR, Reg.DC_SYNC0_CYCLE_TIME,
              struct.pack("<II", dc.cycle_time0, dc.cycle_time1), cnt=1, requires="cycle")
@@ -192,7 +192,7 @@ def slave_init_cmds(slave: ResolvedSlave, lay: SlaveLayout, dc: DcPlan | None,
         c.fp([T.IP, *boot], f"set fmmu {i} (mailbox state)", Cmd.FPWR, fmmu_register(i),
              f.to_bytes(), cnt=1)
 
-    # Going down (§3 OS, SP/OP, SI/OI, PI).
+    # Going down (eni-exports §3 OS, SP/OP, SI/OI, PI).
     c.fp([T.OS], "set device state to SAFEOP", Cmd.FPWR, Reg.AL_CONTROL,
          _al(AlState.SAFEOP, False), requires="cycle")
     for i, _, _ in pd_fmmus:

@@ -1,6 +1,6 @@
 """The logical process image: FMMUs, cyclic frames, working counters and variables.
 
-Two layouts (eni-observations §4):
+Two layouts (``docs/eni-exports.md`` §4):
 
 * ``lrw`` (EC-Engineer): one LRW per frame from 0x10000000; a slave's outputs and inputs
   share one region of max(outputs, inputs) bits, so the next slave's data never overlaps.
@@ -220,7 +220,8 @@ def build(slaves: list[ResolvedSlave], layout: str, uses_dc: bool,
 
 def _wkc(d: _Datagram, sizes: list) -> int:
     """Expected working counter: LRW +2 per slave written, +1 per slave read; LWR +1 per
-    slave with outputs; LRD +1 per slave with inputs (ETG.1000.4, ethercat-facts)."""
+    slave with outputs; LRD +1 per slave with inputs (ETG.1000.4; IgH ``datagram_pair.c``,
+    ``docs/protocol-notes.md`` §1)."""
     total = 0
     for r in d.regions:
         out, inp = sizes[r.slave]

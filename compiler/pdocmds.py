@@ -1,11 +1,11 @@
 """CoE InitCmds for PDO assignment (0x1C1n) and mapping (0x16xx / 0x1Axx), PREOP→SAFEOP.
 
 The sequence is ETG.1020's 6-step procedure, in the order TwinCAT and EC-Engineer write it
-(eni-observations §5): stop every assignment (``0x1C12:00 = 0``), clear the configurable PDOs
-that stay unassigned, write each remapped PDO (``:00 = 0``, entries, count), then write each
-assignment (entries, then the count, which re-enables it).  With CoE CompleteAccess in the
-ESI, a whole assignment or mapping is one download at subindex 0 (count, a padding byte,
-then the entries).
+(``docs/eni-exports.md`` §5): stop every assignment (``0x1C12:00 = 0``), clear the
+configurable PDOs that stay unassigned, write each remapped PDO (``:00 = 0``, entries,
+count), then write each assignment (entries, then the count, which re-enables it).  With CoE
+CompleteAccess in the ESI, a whole assignment or mapping is one download at subindex 0
+(count, a padding byte, then the entries).
 
 Clearing unassigned configurable PDOs: EC-Engineer does it (``clear pdo 0x1A07 entries`` for
 the Elmo Gold) and so do we, so a mapping some earlier tool left in the slave cannot linger on

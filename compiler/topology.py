@@ -2,8 +2,9 @@
 
 YAML (or JSON, which YAML reads too) is composed into nodes first, so every value keeps the
 line it was written on: pydantic's error locations (``slaves.2.rx_pdos.0``) and the
-compiler's own errors map back to ``topology.yaml:14``.  Keys follow the contract in
-ARCHITECTURE.md; unknown keys are errors (a typo must not be silently ignored).
+compiler's own errors map back to ``topology.yaml:14``.  Keys are those of
+``docs/compile.md`` (the topology section; ``ecatcfg schema topology`` prints the JSON
+Schema); unknown keys are errors (a typo must not be silently ignored).
 """
 
 from __future__ import annotations

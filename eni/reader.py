@@ -1,6 +1,6 @@
 """Read an ENI file (ETG.2100 ``EtherCATConfig``) into a :class:`NetworkPlan`.
 
-Tolerant of what real exporters write (eni-observations §1, §8): booleans ``1``/``0`` or
+Tolerant of what real exporters write (``docs/eni-exports.md`` §1, §8): booleans ``1``/``0`` or
 ``true``/``false``, numbers decimal or ``#x``/``0x`` hex, ``InitCmd/Timeout`` (newer than the
 2011 schema), an ``EncryptedEtherCATConfig`` root with a clear-text body, and any element this
 reader does not know (Elmo Application Studio's ``ElmoSpecialResources``, ``HotConnect``,
@@ -241,7 +241,7 @@ class _Reader:
         return adp, ado, addr
 
     def payload(self, el: Element) -> tuple[bytes | None, int]:
-        """``(data, length)``: ``Data``, or ``DataLength`` zero bytes (eni-observations §2)."""
+        """``(data, length)``: ``Data``, or ``DataLength`` zero bytes (eni-exports §2)."""
         data = self.opt_hex(el, "Data")
         if data is not None:
             return data, len(data)
@@ -305,7 +305,7 @@ class _Reader:
             name=self.opt_text(info, "Name") or "",
             phys_addr=self.req_int(info, "PhysAddr") & 0xFFFF,
             auto_inc_addr=self.req_int(info, "AutoIncAddr") & 0xFFFF,     # -1 -> 65535
-            # EAS writes Physics as an attribute of Slave as well (eni-observations §8).
+            # EAS writes Physics as an attribute of Slave as well (eni-exports §8).
             physics=self.opt_text(info, "Physics") or el.get("Physics") or "YY",
             vendor_id=self.uint32(info, "VendorId"),
             product_code=self.uint32(info, "ProductCode"),
@@ -427,7 +427,7 @@ class _Reader:
         )
 
     def previous_port(self, el: Element) -> PreviousPort:
-        # Selected is xs:int in the 2011 schema; TwinCAT writes "true" (eni-observations §1).
+        # Selected is xs:int in the 2011 schema; TwinCAT writes "true" (eni-exports §1).
         return PreviousPort(port=self.text(self.child(el, "Port")).strip(),
                             phys_addr=self.opt_int(el, "PhysAddr"),
                             selected=self.attr_bool(el, "Selected"))

@@ -1,14 +1,14 @@
 """Write a :class:`NetworkPlan` as an ENI file (ETG.2100 ``EtherCATConfig``, version 1.3).
 
 Element order follows the 2011 schema (``schemas/eni-1.3/EtherCATConfig.xsd``); the spelling
-follows what TwinCAT and EC-Engineer write (eni-observations §1): integers in decimal (uint32
-values from 2^31 up in their signed spelling, see :func:`_uint32`), ``Data``
-as lowercase hex bytes in wire order, PDO and entry indices ESI style (``#x1a00``), booleans
+follows what TwinCAT and EC-Engineer write (``docs/eni-exports.md`` §1): integers in decimal
+(uint32 values from 2^31 up in their signed spelling, see :func:`_uint32`), ``Data`` as
+lowercase hex bytes in wire order, PDO and entry indices ESI style (``#x1a00``), booleans
 ``1``/``0`` (EC-Engineer's spelling, and the only one ``PreviousPort/@Selected``, an xs:int,
 accepts).  The output is deterministic: the same plan gives the same bytes.
 
 The slave/master InitCmd ``timeout`` is not written: the 2011 schema's ``ECatCmdType`` has no
-``Timeout`` (eni-observations §3), so the compiler carries poll timeouts in ``Validate``.
+``Timeout`` (eni-exports §3), so the compiler carries poll timeouts in ``Validate``.
 """
 
 from __future__ import annotations
@@ -121,7 +121,7 @@ def _opt_text(parent: Element, tag: str, value: str | None) -> None:
 
 
 def _index(value: int) -> str:
-    """PDO and entry indices as ESI writes them (eni-observations §1)."""
+    """PDO and entry indices as ESI writes them (eni-exports §1)."""
     return f"#x{value:04x}"
 
 

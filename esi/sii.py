@@ -10,9 +10,10 @@ for one, sizes the process image of slaves without CoE from the PDO categories a
 * :func:`decode` reads any image, ours or a dump of a real EEPROM, and raises
   :class:`SiiError` naming the byte offset for anything that is not one.
 
-All layouts below cite docs/ethercat-facts.md ("facts §7"), which names the open-source
-implementations they were read from; all fields are little-endian.  Addresses in the SII
-are 16-bit words: byte offset = 2 x word.
+All layouts below follow ``docs/protocol-notes.md`` ("protocol-notes §7"), which names the
+open-source implementations they were read from (siitool, KickCAT, EtherCrab, IgH, SOEM) and
+the real EEPROM dumps they were checked against; all fields are little-endian.  Addresses in
+the SII are 16-bit words: byte offset = 2 x word.
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ from ecatcfg.esc import (MAILBOX_PROTOCOL_BITS, SII_BOOTSTRAP_MAILBOX, SII_FIRST
 from ecatcfg.esi import datatypes
 from ecatcfg.esi.model import Device, DcOpMode, Pdo, SyncManager
 
-# -- layouts (facts §7), declared once -------------------------------------------------------
+# -- layouts (protocol-notes §7), declared once ----------------------------------------------
 
 # Words 0x00-0x3F.  0x00-0x06 config area (PDI control, PDI configuration, SYNC impulse,
 # PDI configuration 2, station alias, 2 reserved), 0x07 checksum (low byte), 0x08-0x0F
@@ -52,7 +53,7 @@ PDO_ENTRY = struct.Struct("<HBBBBH")            # index, subindex, name, type, b
 DC_MODE = struct.Struct("<IIIhHhBB4x")          # ETG.2010 Table 12: 24 bytes per op mode
 assert HEADER_SIZE == 128 and GENERAL.size == 32 and DC_MODE.size == 24
 
-# Category types (facts §7).
+# Category types (protocol-notes §7).
 CAT_NOP, CAT_STRINGS, CAT_DATATYPES, CAT_GENERAL = 0, 10, 20, 30
 CAT_FMMU, CAT_SYNCM, CAT_FMMU_EX, CAT_SYNC_UNIT = 40, 41, 42, 43
 CAT_TXPDO, CAT_RXPDO, CAT_DC, CAT_END = 50, 51, 60, 0xFFFF
@@ -87,7 +88,7 @@ PORT_TYPES = {0: "-", 1: "MII", 2: "reserved", 3: "EBUS"}
 # K (and E) = E-Bus (LVDS); a blank or anything else = port not used.
 PHYSICS_PORTS = {"Y": 1, "F": 1, "H": 1, "K": 3, "E": 3}
 
-# SYNCM enable byte: b0 enable (facts §7), b2 virtual SM (IgH), b3 OpOnly (ETG.2010; the
+# SYNCM enable byte: b0 enable (protocol-notes §7), b2 virtual SM (IgH), b3 OpOnly (ETG.2010; the
 # Beckhoff dumps show 0x09 for the OpOnly output SMs of EL2004/EL2828/EL2889), b1 fixed
 # content (ETG.2010, not set by the builder: the ESI has no matching flag).
 SM_ENABLE, SM_FIXED, SM_VIRTUAL, SM_OP_ONLY = 0x01, 0x02, 0x04, 0x08
@@ -102,7 +103,7 @@ PDO_MANDATORY, PDO_FIXED, PDO_VIRTUAL = 0x0001, 0x0010, 0x0020
 PDO_FLAG_NAMES = {PDO_MANDATORY: "mandatory", PDO_FIXED: "fixed", PDO_VIRTUAL: "virtual"}
 SM_UNASSIGNED = 0xFF
 
-# CoE data type codes (facts §6, SOEM ec_datatype; GUID and BITARR8/16/32 from the CoE
+# CoE data type codes (protocol-notes §6, SOEM ec_datatype; GUID and BITARR8/16/32 from the CoE
 # DEFTYPE tables of slave stacks) and the ESI base type names (canonical spelling,
 # esi.datatypes) written with them.
 COE_TYPE_NAMES: dict[int, str] = {
@@ -153,7 +154,7 @@ class SiiError(EcatcfgError):
 
 @dataclass(slots=True)
 class SiiGeneral:
-    """The GENERAL category (facts §7); ``*_index`` are 1-based STRINGS indices."""
+    """The GENERAL category (protocol-notes §7); ``*_index`` are 1-based STRINGS indices."""
 
     group_index: int
     image_index: int
@@ -566,7 +567,7 @@ def _categories(device: Device, names: int) -> bytes:
     """Everything after the header, up to and including the END marker."""
     source = device.source
     strings = _Strings()
-    # GENERAL's strings come first: order number (the Type), group, name (facts §7).
+    # GENERAL's strings come first: order number (the Type), group, name (protocol-notes §7).
     order_index = strings.add(device.type_name)
     group_index = strings.add(device.group_type)
     name_index = strings.add(device.name or device.type_name)

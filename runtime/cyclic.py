@@ -2,7 +2,7 @@
 
 ``Cyclic/Frame/Cmd`` gives each cyclic datagram, the states it runs in, its expected
 working counter (``Cnt``) and where its data sits in the process image (``InputOffs`` /
-``OutputOffs``).  Two conventions exist (``eni-observations.md`` §4): EC-Engineer and
+``OutputOffs``).  Two conventions exist (``docs/eni-exports.md`` §4): EC-Engineer and
 ecatcfg write offsets into a compact image (the data starts at the offset); TwinCAT's image
 is shaped like the frame, and its offsets are those of the datagram *header* in the
 Ethernet frame (16 for the first), so the data starts 10 bytes later.  A frame whose

@@ -5,8 +5,9 @@ One module for the constants and byte layouts, the way python-canopen's ``sdo/co
 serves its client and server: both sides import the same encoders and decoders, so a layout
 lives in exactly one place.  Plain ``struct``: this runs per mailbox message.
 
-Layouts follow ETG.1000.6 (mailbox §5.5, CoE §5.6) as the shared facts sheet records them
-from SOEM, SOES, IgH, KickCAT and Wireshark (``ethercat-facts.md`` §5 mailbox, §6 CoE).
+Layouts follow ETG.1000.6 (mailbox §5.5, CoE §5.6) as SOEM, SOES, IgH, KickCAT and
+Wireshark implement them; ``docs/protocol-notes.md`` ("protocol-notes §5" mailbox, "§6" CoE)
+names the file of each project where a layout can be checked.
 Every ``encode_*`` function returns a whole mailbox message: the 6-byte mailbox header plus
 its data, *not* padded; a writer pads it to the SyncManager length with :func:`pad_to`.
 """
@@ -20,13 +21,14 @@ from ecatcfg.errors import EcatcfgError
 from ecatcfg.esc import MAILBOX_HEADER_SIZE, MIN_MAILBOX_SIZE, SDO_MIN_SIZE
 from ecatcfg.record import record
 
-# -- mailbox header (facts §5) -----------------------------------------------------------
+# -- mailbox header (protocol-notes §5) --------------------------------------------------
 
 MBX_HEADER = struct.Struct("<HHBB")       # length, address, channel|priority, type|counter
 MBX_HEADER_SIZE = MBX_HEADER.size         # 6
 COE_HEADER = struct.Struct("<H")          # number bits 0-8, service bits 12-15
 COE_HEADER_SIZE = COE_HEADER.size         # 2
-# SDO frame after the CoE header: command, index, subindex, data/size/abort code (facts §6).
+# SDO frame after the CoE header: command, index, subindex, data/size/abort code
+# (protocol-notes §6).
 SDO_HEADER = struct.Struct("<BHBI")
 SDO_MIN_LENGTH = COE_HEADER_SIZE + SDO_HEADER.size      # 10: mailbox length of an SDO
 # Bytes of mailbox (header included) in front of the data of a normal initiate download or
@@ -40,7 +42,7 @@ assert (MBX_HEADER_SIZE, SDO_MIN_LENGTH, NORMAL_OVERHEAD) == (
 
 
 class MbxType(IntEnum):
-    """Mailbox header byte 5, bits 0-3 (facts §5)."""
+    """Mailbox header byte 5, bits 0-3 (protocol-notes §5)."""
 
     ERROR = 0
     AOE = 1
@@ -52,7 +54,7 @@ class MbxType(IntEnum):
 
 
 class MbxErrorDetail(IntEnum):
-    """Detail word of a mailbox error reply (type 0, body 0x0001 + detail; facts §5)."""
+    """Detail word of a mailbox error reply (type 0, body 0x0001 + detail; protocol-notes §5)."""
 
     SYNTAX = 1
     UNSUPPORTED_PROTOCOL = 2
@@ -62,7 +64,7 @@ class MbxErrorDetail(IntEnum):
     SIZE_TOO_SHORT = 6
     NO_MORE_MEMORY = 7
     INVALID_SIZE = 8
-    SERVICE_IN_WORK = 9          # KickCAT only (facts §5: one source)
+    SERVICE_IN_WORK = 9          # KickCAT only (protocol-notes §5: one source)
 
 
 MBX_ERROR_DETAILS: dict[int, str] = {
@@ -74,7 +76,7 @@ MBX_ERROR_TYPE = 0x0001          # the u16 in front of the detail
 
 
 class CoeService(IntEnum):
-    """CoE header bits 12-15 (facts §6)."""
+    """CoE header bits 12-15 (protocol-notes §6)."""
 
     EMERGENCY = 1
     SDO_REQUEST = 2
@@ -86,7 +88,7 @@ class CoeService(IntEnum):
     SDO_INFO = 8
 
 
-# -- SDO command byte (facts §6 table) ---------------------------------------------------
+# -- SDO command byte (protocol-notes §6 table) ------------------------------------------
 
 CS_SHIFT = 5                     # top 3 bits: command specifier
 # Client (master) command specifiers, CoE service 2.
@@ -207,7 +209,7 @@ class MailboxProtocolError(EcatcfgError):
 @record(frozen=True)
 class MailboxHeader:
     length: int                  # bytes after the 6-byte header
-    address: int = 0             # 0 = master (SOES answers with 0; facts §5)
+    address: int = 0             # 0 = master (SOES answers with 0; protocol-notes §5)
     channel: int = 0             # bits 0-5 of byte 4
     priority: int = 0            # bits 6-7 of byte 4
     type: int = MbxType.COE      # bits 0-3 of byte 5
@@ -255,7 +257,7 @@ def decode_mailbox(msg: bytes) -> tuple[MailboxHeader, bytes]:
     """The header and the data of one mailbox message (trailing SM padding ignored).
 
     A length of 0 or one that runs past the bytes given is an invalid header (SOES sends
-    detail 5 for length 0 or > SM0 size - 6; facts §5).
+    detail 5 for length 0 or > SM0 size - 6; protocol-notes §5).
     """
     header = MailboxHeader.unpack(msg)
     if header.length == 0 or header.length > len(msg) - MBX_HEADER_SIZE:
@@ -267,7 +269,7 @@ def decode_mailbox(msg: bytes) -> tuple[MailboxHeader, bytes]:
 
 def pad_to(msg: bytes, length: int) -> bytes:
     """``msg`` padded with zeros to ``length`` bytes: masters write the whole SM0 area,
-    because writing its last byte is what marks the mailbox full (facts §3)."""
+    because writing its last byte is what marks the mailbox full (protocol-notes §3)."""
     if len(msg) > length:
         raise ValueError(f"mailbox message of {len(msg)} bytes does not fit a "
                          f"{length}-byte SyncManager")
@@ -278,7 +280,7 @@ def pad_to(msg: bytes, length: int) -> bytes:
 
 @record(frozen=True)
 class MailboxError:
-    """A mailbox error reply (type 0): body 0x0001 + detail (facts §5)."""
+    """A mailbox error reply (type 0): body 0x0001 + detail (protocol-notes §5)."""
 
     detail: int
 
@@ -439,7 +441,7 @@ def _sdo(service: int, command: int, index: int, subindex: int, word: int, extra
 
 def _segment(service: int, command: int, data: bytes, counter: int, address: int) -> bytes:
     # Segment data from +3; fewer than 7 bytes: pad to mailbox length 10 and give the number
-    # of unused bytes in bits 1-3 (facts §6).
+    # of unused bytes in bits 1-3 (protocol-notes §6).
     if len(data) < SEGMENT_MIN_DATA:
         command |= (SEGMENT_MIN_DATA - len(data)) << 1
         data = data + bytes(SEGMENT_MIN_DATA - len(data))
@@ -481,7 +483,7 @@ def encode_download_segment(data: bytes, toggle: bool, last: bool, counter: int 
 
 def encode_download_response(index: int, subindex: int, counter: int = 0, *,
                              complete_access: bool = False, address: int = 0) -> bytes:
-    """0x60, plus 0x10 with complete access as SOES answers (facts §6)."""
+    """0x60, plus 0x10 with complete access as SOES answers (protocol-notes §6)."""
     command = SCS_INITIATE_DOWNLOAD << CS_SHIFT | (COMPLETE_ACCESS if complete_access else 0)
     return _sdo(CoeService.SDO_RESPONSE, command, index, subindex, 0, b"", counter, address)
 
@@ -534,7 +536,7 @@ def encode_upload_segment(data: bytes, toggle: bool, last: bool, counter: int = 
 
 def encode_abort(index: int, subindex: int, code: int, counter: int = 0, *,
                  address: int = 0) -> bytes:
-    """Abort (0x80, code at +6), always with CoE service 2, by either side (facts §6)."""
+    """Abort (0x80, code at +6), always with CoE service 2, by either side (protocol-notes §6)."""
     return _sdo(CoeService.SDO_REQUEST, CS_ABORT << CS_SHIFT, index, subindex, code, b"",
                 counter, address)
 
@@ -604,7 +606,7 @@ def _decode_sdo(service: int, body: bytes) -> SdoMessage:
             return DownloadSegmentResponse(toggle)
         data = body[1:]
         if len(body) == SDO_HEADER.size:
-            # Only a minimum-length segment gives its unused bytes (IgH; facts §6).
+            # Only a minimum-length segment gives its unused bytes (IgH; protocol-notes §6).
             data = data[:SEGMENT_MIN_DATA - ((command >> 1) & 0x07)]
         last = bool(command & LAST_SEGMENT)
         return (DownloadSegment(data, toggle, last) if request

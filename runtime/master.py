@@ -1,13 +1,13 @@
 """Bringing a network up from its ENI: verify, replay the InitCmds, DC, cyclic frames.
 
-The order follows what TwinCAT and EC-Engineer do (``eni-observations.md`` §2-§3):
+The order follows what TwinCAT and EC-Engineer do (``docs/eni-exports.md`` §2-§3):
 
 1. scan the line and compare it with the ENI before any configuration write;
 2. per transition (INIT->PREOP, PREOP->SAFEOP, SAFEOP->OP; OP->SAFEOP->PREOP->INIT on the
    way down): the master's ``BeforeSlave`` InitCmds, every slave's InitCmds (in lockstep,
    see ``lockstep.py``), then the master's other InitCmds;
 3. before PREOP->SAFEOP, for slaves with DC: propagation delays, system time offsets and
-   static drift compensation (not in the ENI; ``ethercat-facts.md`` §8);
+   static drift compensation (not in the ENI; ``docs/protocol-notes.md`` §8);
 4. from PREOP->SAFEOP on (the ENI's ``Requires=cycle``) the cyclic frames run between the
    rounds of InitCmds, so slaves see process data before OP and their SM watchdogs are fed.
 """

@@ -7,8 +7,8 @@ the objects a master needs exist (many ESIs declare CoE but give no dictionary):
 0x1000, 0x1018, the PDO mapping objects 0x16xx/0x1Axx, 0x1C00 and the PDO assignment objects
 0x1C1n, plus every object an ESI PDO maps.
 
-Access rules and abort codes follow the facts sheet (``ethercat-facts.md`` §6) and SOES
-(``esc_coe.c``, ``ESC_download_pre_objecthandler``); where both are silent the choice is
+Access rules and abort codes follow ``docs/protocol-notes.md`` §6 ("protocol-notes §6") and
+SOES (``esc_coe.c``, ``ESC_download_pre_objecthandler``); where both are silent the choice is
 commented where it is made.  The SDO server (``sdo_server``) is the wire side; this module
 only knows objects, bytes and AL states.
 """
@@ -41,7 +41,7 @@ PREOP_ONLY = frozenset((AlState.PREOP,))
 
 # Capacity of a configurable mapping object the ESI does not describe (no dictionary
 # entry): our choice, large enough for the mappings seen in the corpus ENIs (EC-murr maps
-# 32 entries with one complete-access download, eni-observations §5).
+# 32 entries with one complete-access download, docs/eni-exports.md §5).
 CONFIGURABLE_MAPPING_CAPACITY = 32
 
 _SIGNED = frozenset(("SINT", "INT", "INT24", "DINT", "INT40", "INT48", "INT56", "LINT"))
@@ -710,7 +710,7 @@ class ObjectDictionary:
     @staticmethod
     def _check_si0_rule(obj: OdObject, sub: int) -> None:
         # PDO mapping and assignment objects: entries may only be written while SI0 is 0
-        # (SOES ESC_download_pre_objecthandler; facts §6 abort 0x06010003).
+        # (SOES ESC_download_pre_objecthandler; protocol-notes §6 abort 0x06010003).
         if sub >= 1 and is_pdo_object(obj.index) and obj.count != 0:
             raise SdoAbort(ABORT_SUBINDEX0_NOT_ZERO, obj.index, sub)
 
@@ -731,7 +731,7 @@ class ObjectDictionary:
         if entry.min_value is not None and number < entry.min_value:
             raise SdoAbort(ABORT_VALUE_TOO_LOW, obj.index, entry.subindex)
 
-    # -- complete access (facts §6) ---------------------------------------------------------
+    # -- complete access (protocol-notes §6) ------------------------------------------------
 
     def _ca_entries(self, obj: OdObject, sub: int, *, upload: bool = False) -> list[OdEntry]:
         """The entries a complete access starting at ``sub`` covers, in order.
@@ -860,7 +860,7 @@ class ObjectDictionary:
     def sm_bits(self, sm: int) -> int | None:
         """Process-data size of SM ``sm`` in bits from the current 0x1C1n assignment and
         mapping objects; ``None`` if that assignment is invalid (the ESC then refuses
-        SAFEOP with 0x001D / 0x001E, facts §3)."""
+        SAFEOP with 0x001D / 0x001E, protocol-notes §3)."""
         entries = self.sm_entries(sm)
         return None if entries is None else sum(bits for _, _, bits in entries)
 

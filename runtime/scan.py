@@ -3,7 +3,7 @@
 Nothing but the SII interface registers (0x0500-0x050F) is written, and slaves are
 addressed by position (auto-increment), so a scan can run before any configuration and
 changes nothing a later configuration relies on.  Identity words: vendor 0x08, product
-0x0A, revision 0x0C, serial 0x0E (ETG.1000.6 / ETG.2010; ``ethercat-facts.md`` §7).
+0x0A, revision 0x0C, serial 0x0E (ETG.1000.6 / ETG.2010; ``docs/protocol-notes.md`` §7).
 """
 
 from __future__ import annotations

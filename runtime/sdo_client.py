@@ -13,7 +13,8 @@ puts into SM1; the caller moves the bytes (mailbox SyncManagers, polling, timeou
 
 Mirrors ``sdo_server`` and uses the same codec (``mailbox``).  Expedited transfer for
 up to 4 bytes without complete access, normal (plus segments) otherwise: the first message
-carries up to SM0 size - 16 bytes, each segment up to SM0 size - 9 (facts sheet §6).
+carries up to SM0 size - 16 bytes, each segment up to SM0 size - 9 (IgH ``fsm_coe.c``, SOEM
+``ec_coe.c``; ``docs/protocol-notes.md`` §6).
 CoE emergencies that arrive in between are kept in ``emergencies`` and otherwise ignored
 (IgH ``ec_fsm_coe_check_emergency``); messages of other mailbox protocols must be
 dispatched by the caller before they reach a transaction.

@@ -1,10 +1,11 @@
 """The CoE SDO server of an emulated slave: mailbox messages in (SM0), messages out (SM1).
 
 Handles expedited, normal and segmented upload and download, complete access, toggle
-checks and aborts (ETG.1000.6 §5.6.2; facts sheet §5 mailbox, §6 CoE).  Mailbox-level
-problems get a mailbox error reply (type 0), as SOES ``MBX_error`` does.
+checks and aborts (ETG.1000.6 §5.6.2; ``docs/protocol-notes.md`` §5 mailbox, §6 CoE, cited
+below as "protocol-notes §N").  Mailbox-level problems get a mailbox error reply (type 0), as
+SOES ``MBX_error`` does.
 
-Choices where the facts sheet is silent:
+Choices where those sources are silent:
 
 - SDO information requests (service 8) are answered with an SDO information error
   (opcode 7) carrying abort 0x06010000, as SOES answers opcodes it does not implement; the
@@ -13,7 +14,7 @@ Choices where the facts sheet is silent:
   mailbox error reply with detail 4 (service not supported).
 - A channel other than 0 gets detail 3 (invalid channel).
 - Responses are padded to the SM1 length: the slave writes the whole SM1 area, because writing
-  its last byte is what marks the mailbox full (facts §3).
+  its last byte is what marks the mailbox full (protocol-notes §3).
 """
 
 from __future__ import annotations
@@ -88,7 +89,7 @@ class SdoServer:
             return [self._error(MbxErrorDetail.SIZE_TOO_SHORT)]
         header = MailboxHeader.unpack(request)
         # A repeated message (non-zero counter equal to the last one) is dropped, as SOES
-        # does with mbxincnt (facts §5).
+        # does with mbxincnt (protocol-notes §5).
         if header.counter and header.counter == self._last_counter:
             return []
         self._last_counter = header.counter
@@ -189,7 +190,7 @@ class SdoServer:
         except SdoAbort as abort:
             return [self._abort(index, sub, abort.code)]
         if 1 <= len(data) <= 4:
-            # Expedited, also with complete access, as SOES answers (facts §6).
+            # Expedited, also with complete access, as SOES answers (protocol-notes §6).
             return [self._out(encode_upload_expedited(index, sub, data, self._counter(),
                                                       complete_access=ca))]
         first = self.mbx_in_size - NORMAL_OVERHEAD

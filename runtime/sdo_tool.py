@@ -2,7 +2,7 @@
 
 There is no ENI here: the mailbox comes from the slave's own SII, the way a master finds it
 while scanning (ETG.2010 words 0x18/0x1A standard receive/send mailbox offset and size,
-word 0x1C protocols; ``ethercat-facts.md`` §7).  The slave is addressed by its position
+word 0x1C protocols; ``docs/protocol-notes.md`` §7).  The slave is addressed by its position
 until it has a station address, then by that address:
 
 1. count the slaves (BRD), read AL status and station address of the one asked for;
@@ -18,8 +18,8 @@ The slave stays in the state it was brought to (PREOP, or the one it was in).
 
 The first request of the transfer goes out with mailbox counter 0 ("not used", as IgH sends
 all of its messages): a slave drops a message whose counter equals the previous one it got
-(SOES ``mbxincnt``, facts §5), and an earlier run of this tool on a slave still in PREOP
-may well have ended on counter 1.  Later messages of the transfer count 1..7.
+(SOES ``mbxincnt``; ``docs/protocol-notes.md`` §5), and an earlier run of this tool on a
+slave still in PREOP may well have ended on counter 1.  Later messages of the transfer count 1..7.
 """
 
 from __future__ import annotations

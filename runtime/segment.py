@@ -2,7 +2,7 @@
 
 A frame passes every slave in bus order and returns to the master.  Each datagram is
 processed in place in the frame's buffer with the addressing and working-counter rules of
-ETG.1000.4 (``ethercat-facts.md`` §1): auto-increment (ADP counts up at each slave; the one
+ETG.1000.4 (``docs/protocol-notes.md`` §1): auto-increment (ADP counts up at each slave; the one
 that sees 0 acts), configured station address (or alias with 0x0103 bit 0), broadcast (every
 slave; reads OR into the data), logical (every slave whose FMMUs overlap, down to single
 bits), and ARMW/FRMW (one slave reads, all others write).  Processing datagram by datagram
@@ -30,7 +30,7 @@ from ecatcfg.runtime.syncman import SmKind
 from ecatcfg.runtime.wire import DG_HEADER_LEN, FrameError, datagram_offsets
 
 # Propagation through one slave in the emulated line (ns): processing on the way out
-# (port 0 -> 3 -> 1) and forwarding on the way back (ethercat-facts.md §8).
+# (port 0 -> 3 -> 1) and forwarding on the way back (docs/protocol-notes.md §8).
 FORWARD_DELAY_NS = 600
 RETURN_DELAY_NS = 200
 

@@ -1,7 +1,7 @@
 """SyncManager behaviour of an emulated ESC, as the EtherCAT side sees it.
 
 Each SM is 8 register bytes at 0x0800 + 8·n (start, length, control, status, activate, PDI
-control; ``ethercat-facts.md`` §2-§3):
+control; ``docs/protocol-notes.md`` §2-§3):
 
 * **mailbox** (control bits 1:0 = 10, one buffer): a write is taken only while the buffer is
   empty, and writing its last byte makes it *full* (status bit 3); a read is served only
@@ -85,7 +85,7 @@ class SmState:
         reg = sm_register(self.number)
         if self.is_mailbox:
             # A full mailbox has its buffer written (bit 0) and full (bit 3); the ENIs'
-            # mailbox-state FMMU maps bit 0 of SM1's status (eni-observations §3).
+            # mailbox-state FMMU maps bit 0 of SM1's status (docs/eni-exports.md §3).
             mem[reg + 5] = SM_STATUS_MAILBOX_FULL | SM_STATUS_WRITE_EVENT if self.full else 0
         elif not mem[reg + 5]:
             mem[reg + 5] = SM_STATUS_BUFFER_NONE

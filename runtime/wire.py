@@ -3,7 +3,7 @@
 A frame is Ethernet (dst, src, EtherType 0x88A4) + a 2-byte EtherCAT header (bits 0-10
 length of all datagrams, bits 12-15 type, 1 = DLPDU) + datagrams.  A datagram is a 10-byte
 header (cmd, idx, address, length/flags, irq), its data and a 2-byte working counter
-(ETG.1000.4; ``ethercat-facts.md`` §1).  Everything is built and taken apart with ``struct``:
+(ETG.1000.4; ``docs/protocol-notes.md`` §1).  Everything is built and taken apart with ``struct``:
 this runs once per frame on both sides, where scapy would cost a millisecond a frame.
 scapy (``scapy.contrib.ethercat``) describes the same layout and serves the tests as an
 independent dissector.
@@ -40,7 +40,7 @@ LEN_MASK = 0x07FF            # datagram length, bits 0-10
 CIRCULATING = 0x4000         # bit 14: the frame has passed a closed port 0 once
 MORE = 0x8000                # bit 15: another datagram follows
 
-MASTER_MAC = bytes.fromhex("010101010101")     # SOEM's source address (test-bench.md §3)
+MASTER_MAC = bytes.fromhex("010101010101")     # SOEM's source address (priMAC, nicdrv.c)
 BROADCAST_MAC = b"\xff" * 6
 
 LOGICAL_CMDS = frozenset({Cmd.LRD, Cmd.LWR, Cmd.LRW})

@@ -1,4 +1,4 @@
-"""Acceptance tests of ``ecatcfg apply`` (issue 6).
+"""Acceptance tests of ``ecatcfg apply`` (docs/runtime.md).
 
 The master (``ecatcfg apply`` as a process, or the Network API in-process) runs in one private
 network namespace, the slaves it configures (``ecatcfg simulate`` as a process, or a virtual

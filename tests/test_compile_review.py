@@ -421,8 +421,8 @@ def test_remapping_without_pdo_assign_is_still_downloaded(tmp_path):
 
 
 def test_schema_accepts_numbers_written_as_text_and_keeps_bounds(capsys):
-    # Was: the issue's own example `modules: {1: "0x00001111"}` failed the schema (type
-    # integer only), and bounds came out as non-standard 'ge'/'le' keys no editor checks.
+    # Was: a module ident written as text, `modules: {1: "0x00001111"}`, failed the schema
+    # (type integer only), and bounds came out as non-standard 'ge'/'le' keys no editor checks.
     import jsonschema
     assert main(["schema", "topology"]) == 0
     schema = json.loads(capsys.readouterr().out)

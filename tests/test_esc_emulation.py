@@ -1,8 +1,9 @@
 """The emulated ESC and the virtual segment, driven with real frames in memory.
 
-Expected values come from ETG.1000.4 as summarised (with sources) in the shared
-``ethercat-facts.md``: working-counter rules per command, auto-increment addressing, the AL
-state machine's refusals and codes, SyncManager mailbox rules, FMMU bit mapping.
+Expected values come from ETG.1000.4 as the open masters and slaves implement it (sources
+per rule in docs/protocol-notes.md §1-§4): working-counter rules per command, auto-increment
+addressing, the AL state machine's refusals and codes, SyncManager mailbox rules, FMMU bit
+mapping.
 """
 
 from __future__ import annotations

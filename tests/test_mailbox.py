@@ -1,7 +1,7 @@
-"""The mailbox/CoE codec against byte-exact references: the facts sheet's tables
-(ethercat-facts.md §5, §6), SOEM's own SDO upload request as captured on the test bench
-(test-bench.md §3) and the tshark example (test-bench.md §4); and, when tshark is
-installed, Wireshark's EtherCAT mailbox dissector reading our bytes."""
+"""The mailbox/CoE codec against byte-exact references: the tables of docs/protocol-notes.md
+§5 and §6 ("protocol-notes §N"), SOEM's own first SDO upload request as pysoem sent it to an
+emulated slave, SOEM's list of abort codes (from the pysoem source in the corpus); and, when
+tshark is installed, Wireshark's EtherCAT mailbox dissector reading our bytes."""
 
 from __future__ import annotations
 
@@ -11,8 +11,10 @@ import re
 import shutil
 import struct
 import subprocess
+import tarfile
 
 import pytest
+from conftest import _require
 
 from ecatcfg.runtime import mailbox as mbx
 from ecatcfg.runtime.mailbox import (
@@ -28,11 +30,12 @@ def h(text: str) -> bytes:
     return bytes.fromhex(text.replace(" ", ""))
 
 
-# -- references from the test bench ------------------------------------------------------
+# -- references from SOEM and Wireshark --------------------------------------------------
 
 def test_soem_upload_request_for_1c00_is_byte_identical():
-    # test-bench.md §3: SOEM writes mailbox `0a00 0000 00 13`, then `0020 40 001c 00` and
-    # four zero bytes into SM0 for its first SDO (upload 0x1C00:00, counter 1).
+    # pysoem 1.1.13 (SOEM's ecx_SDOread, ethercatcoe.c), captured on a veth pair: SOEM writes
+    # mailbox `0a00 0000 00 13`, then `0020 40 001c 00` and four zero bytes into SM0 for its
+    # first SDO (upload 0x1C00:00, counter 1).
     soem = h("0a00 0000 00 13") + h("0020 40 001c 00") + bytes(4)
     assert mbx.encode_upload_request(0x1C00, 0, 1) == soem
     header, msg = decode(pad_to(soem, 128))
@@ -41,13 +44,14 @@ def test_soem_upload_request_for_1c00_is_byte_identical():
 
 
 def test_tshark_example_expedited_download_of_1c12():
-    # test-bench.md §4: SDO `2F 12 1C 00 01000000` (CoE, counter 1) = 0x1C12:00 = 1.
+    # Wireshark decodes SDO `2F 12 1C 00 01000000` (CoE, counter 1) as an expedited
+    # 'Initiate Download' of 0x1C12:00 = 1 (packet-ecatmb.c).
     msg = mbx.encode_download_expedited(0x1C12, 0, b"\x01", 1)
     assert msg == h("0a00 0000 00 13 0020") + h("2F 12 1C 00 01000000")
     assert decode(msg)[1] == InitiateDownload(0x1C12, 0, b"\x01", 1, True, False)
 
 
-# -- header and counter (facts §5) -------------------------------------------------------
+# -- header and counter (protocol-notes §5) ----------------------------------------------
 
 def test_header_bit_fields():
     header = MailboxHeader(length=0x1234, address=0x1001, channel=5, priority=3,
@@ -70,7 +74,7 @@ def test_counter_runs_1_to_7_and_never_0():
 
 
 def test_mailbox_error_reply():
-    # Type 0, length 4, body 0x0001 + detail (facts §5: SOES MBX_error, SOEM ec_mbxerrort).
+    # Type 0, length 4, body 0x0001 + detail (SOES MBX_error, SOEM ec_mbxerrort).
     msg = mbx.encode_mailbox_error(MbxErrorDetail.UNSUPPORTED_PROTOCOL, 3)
     assert msg == h("0400 0000 00 30 0100 0200")
     header, content = decode(msg)
@@ -102,7 +106,7 @@ def test_bad_headers_name_the_mailbox_error_detail():
     assert err.value.detail == MbxErrorDetail.SIZE_TOO_SHORT
 
 
-# -- SDO command bytes (facts §6 table) ---------------------------------------------------
+# -- SDO command bytes (protocol-notes §6 table) ------------------------------------------
 
 @pytest.mark.parametrize("n,command", [(1, 0x2F), (2, 0x2B), (3, 0x27), (4, 0x23)])
 def test_expedited_download_command_byte(n, command):
@@ -128,7 +132,7 @@ def test_expedited_upload_without_size_indicator_is_4_bytes():
 
 
 def test_normal_download_with_complete_access():
-    # ENI example (eni-observations §5): 0x1C12 complete access = 02 00 0016 0116.
+    # As EC-Engineer writes it (docs/eni-exports.md §5): 0x1C12 complete access = 02 00 0016 0116.
     data = h("020000160116")
     msg = mbx.encode_download_normal(0x1C12, 0, len(data), data, 4, complete_access=True)
     assert msg == h("1000 0000 00 43 0020 31 121C 00 06000000") + data
@@ -201,7 +205,7 @@ def test_other_protocols_are_returned_raw():
     assert decode(msg) == (MailboxHeader(6, 0, 0, 0, MbxType.FOE, 2), (4, b"\x01\x00abcd"))
 
 
-# -- abort codes (facts §6) ------------------------------------------------------------------
+# -- abort codes (protocol-notes §6) ---------------------------------------------------------
 
 def test_abort_code_names_follow_the_facts_sheet():
     assert len(ABORT_CODES) == 36
@@ -215,16 +219,25 @@ def test_abort_code_names_follow_the_facts_sheet():
     assert error.code == 0x06090011 and error.exit_code == 1
 
 
-def test_abort_codes_cover_the_facts_sheet_list():
-    # Every code the shared facts sheet lists, when the sheet is at hand.
-    sheet = os.path.join(os.path.dirname(__file__), "..", "..", "shared", "docs",
-                         "ethercat-facts.md")
-    if not os.path.exists(sheet):
-        pytest.skip("shared docs not found")
-    text = open(sheet, encoding="utf-8").read()
-    section = text.split("**SDO abort codes**", 1)[1].split("**CoE data types**", 1)[0]
-    listed = {int(code, 16) for code in re.findall(r"0x([0-9A-F]{8}) ", section)}
-    assert listed == set(ABORT_CODES)
+# Codes that SOES defines (soes/esc_coe.h, ABORT_*) and SOEM's list lacks.
+SOES_ONLY_ABORT_CODES = {0x05040002, 0x05040003, 0x05040004, 0x06090033, 0x060A0023,
+                         0x08000024}
+
+
+def test_abort_codes_are_soems_list_plus_soes_extras(corpus):
+    # SOEM's own table (ec_sdoerrorlist in ethercatprint.c, as bundled in pysoem's source
+    # distribution), read from the corpus: every code it names, without its "no error" (0)
+    # and "unknown" (0xFFFFFFFF) entries.
+    tarball = corpus / "third-party" / "pysoem-1.1.13.tar.gz"
+    if not tarball.is_file():
+        _require(str(tarball))
+    with tarfile.open(tarball) as tar:
+        member = next(m for m in tar.getmembers() if m.name.endswith("/ethercatprint.c"))
+        source = tar.extractfile(member).read().decode("latin-1")
+    table = source.split("ec_sdoerrorlist[]", 1)[1].split("};", 1)[0]
+    soem = {int(code, 16) for code in re.findall(r"\{\s*0x([0-9a-fA-F]{8})\s*,", table)}
+    assert len(soem) == 32 and 0x06020000 in soem
+    assert set(ABORT_CODES) == (soem - {0, 0xFFFFFFFF}) | SOES_ONLY_ABORT_CODES
 
 
 # -- Wireshark as an independent decoder ------------------------------------------------------

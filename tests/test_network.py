@@ -204,7 +204,7 @@ def test_a_lost_mailbox_answer_is_recovered_with_the_repeat_request(example_plan
 
 def test_twincat_offsets_are_frame_shaped(corpus):
     """TwinCAT writes the datagram header's position in the frame; the data sits 10 bytes
-    later, where its variables' bit offsets point (eni-observations.md §4)."""
+    later, where its variables' bit offsets point (docs/eni-exports.md §4)."""
     plan = eni_reader.read_file(corpus / "eni/jn-ec-master/mega_master_eni.xml")
     frames = CyclicFrames(plan)
     lwr = next(s for s in frames.frames[0] if s.cmd.cmd == Cmd.LWR)

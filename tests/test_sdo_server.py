@@ -271,7 +271,7 @@ def test_short_string_write_and_empty_string(slave):
 def test_complete_access_read_and_write_of_the_pdo_assignment(slave):
     assert slave.upload(0x1C12, 0, ca=True) == bytes.fromhex("01000016")
     assert slave.upload(0x1C13, 0, ca=True) == bytes.fromhex("0100001a")
-    # As an ENI writes it (eni-observations §5): count 2 + pad, then 0x1600, 0x1601.
+    # As an ENI writes it (docs/eni-exports.md §5): count 2 + pad, then 0x1600, 0x1601.
     slave.download(0x1C12, 0, bytes.fromhex("020000160116"), ca=True)
     assert slave.upload(0x1C12, 0, ca=True) == bytes.fromhex("020000160116")
     assert slave.upload(0x1C12, 1, ca=True) == bytes.fromhex("00160116")
@@ -611,7 +611,7 @@ def test_elmo_gold_drive(corpus):
     # what SOEM reads them into.
     assert [s.upload(0x1C00, i) for i in range(5)] == [b"\x04", b"\x01", b"\x02", b"\x03",
                                                        b"\x04"]
-    # The assignment a TwinCAT ENI downloads for this drive (eni-observations §5).
+    # The assignment a TwinCAT ENI downloads for this drive (docs/eni-exports.md §5).
     s.download(0x1C12, 0, b"\x00")
     s.download(0x1C12, 1, struct.pack("<H", 0x160A))
     s.download(0x1C12, 0, b"\x01")

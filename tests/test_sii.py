@@ -1,6 +1,7 @@
 """SII (EEPROM) images: CRC, decoding real dumps, building from ESI, round trips, the CLI.
 
-Facts checked against docs/ethercat-facts.md §7 (values it lists from the real dumps).
+Layouts from docs/protocol-notes.md §7; the expected values of the real EEPROM dumps (from
+EtherCrab's ``dumps/`` folder, read from the corpus) were read off their bytes by hand.
 """
 
 from __future__ import annotations
@@ -83,8 +84,8 @@ def test_akd_facts(corpus):
     img = dump(corpus, "ethercrab-dumps/akd.hex")
     assert (img.vendor_id, img.product_code, img.revision) == (0x6A, 0x414B44, 2)
     assert img.pdi_control == 0x0009
-    # facts §7: `1800/0400 ctl 26 en 1 type 1`, `1C00/0400 22 1 2`, `1100/0 24 1 3`,
-    # `1140/0 20 1 4`.
+    # The dump's SYNCM category: `1800/0400 ctl 26 en 1 type 1`, `1C00/0400 22 1 2`,
+    # `1100/0 24 1 3`, `1140/0 20 1 4`.
     assert [(s.start, s.length, s.control, s.enable, s.type) for s in img.syncms] == [
         (0x1800, 0x400, 0x26, 1, 1), (0x1C00, 0x400, 0x22, 1, 2), (0x1100, 0, 0x24, 1, 3),
         (0x1140, 0, 0x20, 1, 4)]
