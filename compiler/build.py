@@ -37,6 +37,17 @@ class CompileResult:
 
 
 def compile_topology(loaded: LoadedTopology, library: Library) -> CompileResult:
+    """The :class:`NetworkPlan` of a loaded topology, its devices taken from ``library``.
+
+    Every slave is resolved first (device, modules, PDO choice, DC mode, SDOs) and every
+    mistake is collected: if there is any, all of them are raised together as one
+    :class:`TopologyError`, each naming its topology line, and nothing is laid out.  Then
+    the process image, FMMUs and cyclic frames are laid out (``layout``) and the DC settings
+    and InitCmds of every slave are written; a layout or a SYNC cycle that cannot be made is
+    a :class:`TopologyError` too.  The result carries the plan with the warnings (E-bus
+    current budget) and notes (which revision a selector took) for the user.  The plan is
+    written as an ENI by :mod:`ecatcfg.eni.writer`.
+    """
     resolved, errors = resolve_all(loaded, library)
     errors += _esi_value_errors(loaded, resolved)
     errors += _fmmu_errors(loaded, resolved)

@@ -1,4 +1,10 @@
-"""ESI (ETG.2000) side: reader, device model, device library; later lint rules and SII.
+"""ESI (ETG.2000) side, the bottom layer of the package (``docs/architecture.md``).
+
+The reader (``reader.py``, over ``xmlsafe.py``) into the device model (``model.py``); value
+syntax (``values.py``), typed data values (``datatypes.py``), CoE facts of a device
+(``coe.py``) and modules in slots (``slots.py``); the device library with its index and
+cache (``library.py``, ``index.py``, ``cache.py``); SII images (``sii.py``); ``ecatcfg lint``
+(``lint/``).  Nothing here imports the ENI model, the compiler or the runtime.
 
 Typical use::
 

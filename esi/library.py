@@ -2,7 +2,7 @@
 
 ``Library(paths)`` walks the given files and folders (recursively, ``*.xml``), summarises each
 file (from the on-disk cache when the content is known) and answers selectors as the
-command-line contract defines them::
+command-line contract (``docs/architecture.md``) defines them::
 
     VENDOR:PRODUCT[:REVISION]   hex (0x..) or decimal; no revision = the highest, said so
     Type name                   compared with surrounding white space trimmed
@@ -44,12 +44,29 @@ class LibraryFile:
 
 
 class Library:
-    def __init__(self, paths: list[str | Path], cache: IndexCache | None | bool = True) -> None:
-        """Index ``paths``.
+    """The devices of a set of ESI files and folders, found by selector.
 
-        ``cache``: an :class:`IndexCache`, ``True`` for the default one, ``False``/``None`` for
-        none.  Files named directly must be ESI files; inside folders, XML files with another
-        root element (an ENI beside the ESIs, say) are skipped and listed in ``skipped``.
+    Indexing reads only a summary of each file (identity, names, counts; from the
+    :class:`IndexCache` when the file's content is known), so a library over a vendor's
+    whole download is quick to build.  :meth:`find` answers a selector with the device it
+    names (and a note when it had to choose a revision), :meth:`device` gives that device's
+    full model, read from its file on first use and kept.  Module libraries an ESI names by
+    ``InfoReference`` are looked up beside it (:meth:`modules_for`).
+
+    Attributes: ``files`` (every ESI file indexed), ``entries`` (every device, in file
+    order), ``skipped`` (XML files inside folders that are not ESI files) and ``problems``
+    (what could not be read, each an error naming file and line; the library holds the
+    rest).
+    """
+
+    def __init__(self, paths: list[str | Path], cache: IndexCache | None | bool = True) -> None:
+        """Index ``paths``: ESI files, and folders searched recursively for ``*.xml``.
+
+        ``cache``: an :class:`IndexCache`, ``True`` for the default one
+        (``$XDG_CACHE_HOME/ecatcfg``), ``False``/``None`` for none.  Files named directly
+        must be ESI files (a file that is not one is a problem); inside folders, XML files
+        with another root element (an ENI beside the ESIs, say) are skipped and listed in
+        ``skipped``.  A path that does not exist raises :class:`UsageError`.
         """
         self.cache = IndexCache() if cache is True else (cache or None)
         self.files: list[LibraryFile] = []

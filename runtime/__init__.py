@@ -5,8 +5,9 @@ Masters: ``master.py`` (verify, replay, DC, cyclic) under ``network.py`` (the ap
 ESI files by ``emulate.py``.  Both sides share ``wire.py`` (frames and datagrams),
 ``mailbox.py`` (mailbox, CoE, SDO) and ``link.py``.
 
-Nothing here is imported by ``ecatcfg --help`` or ``ecatcfg devices``; ``Network`` is
-loaded on first use.
+The runtime consumes ENIs (:mod:`ecatcfg.eni`), never the compiler's objects, and never
+imports :mod:`ecatcfg.compiler` (``docs/architecture.md``).  Nothing here is imported by
+``ecatcfg --help`` or ``ecatcfg devices``; ``Network`` is loaded on first use.
 """
 
 from __future__ import annotations
