@@ -3,8 +3,9 @@
 A summary is taken straight from the lxml tree (one pass over each Device's children, counts
 done by lxml in C), not from the full model: listing the 16 MB corpus then costs little more
 than parsing it, and the summary is small enough to cache as JSON (``esi.cache``).
-Counts follow the ``devices --format json`` contract: ``rx_pdos``/``tx_pdos`` are the
-Device's own RxPdo/TxPdo elements, ``rx_entries``/``tx_entries`` their Entry elements.
+Counts follow the ``devices --format json`` contract (``docs/architecture.md``):
+``rx_pdos``/``tx_pdos`` are the Device's own RxPdo/TxPdo elements, ``rx_entries``/``tx_entries``
+their Entry elements.
 """
 
 from __future__ import annotations

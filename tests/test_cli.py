@@ -1,4 +1,5 @@
-"""The command-line contract: exit codes, JSON shape, messages, and light imports."""
+"""The command-line contract (docs/architecture.md): exit codes, JSON shape, messages, and light
+imports."""
 
 from __future__ import annotations
 

@@ -1,4 +1,5 @@
-"""``{"findings": [...], "summary": {...}}`` as the command-line contract defines it."""
+"""``{"findings": [...], "summary": {...}}`` as the command-line contract defines it
+(``docs/architecture.md``)."""
 
 from __future__ import annotations
 
