@@ -6,6 +6,7 @@ wheel) and generic top-level modules leaking into site-packages.
 
 from __future__ import annotations
 
+import os
 import shutil
 import subprocess
 import sys
@@ -32,6 +33,11 @@ for name in {NOT_PACKAGES!r}:
 import ecatcfg
 print(ecatcfg.__file__)
 """
+
+
+# The venvs must see their own install only: a PYTHONPATH (a worktree's) would put another
+# ecatcfg in front of it.
+VENV_ENV = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
 
 
 def clean_copy(tmp_path) -> tuple:
@@ -71,10 +77,10 @@ def test_wheel_installs_and_runs(tmp_path):
     venv.create(env_dir, with_pip=True)
     py = env_dir / "bin" / "python"
     subprocess.run([str(py), "-m", "pip", "install", "-q", str(wheel)], check=True,
-                   capture_output=True)
+                   capture_output=True, env=VENV_ENV)
     exe = env_dir / "bin" / "ecatcfg"
     run = lambda *a, cwd=ROOT: subprocess.run([str(exe), *a], capture_output=True, text=True,
-                                              cwd=cwd)
+                                              cwd=cwd, env=VENV_ENV)
     out = run("--help")
     assert out.returncode == 0 and "devices" in out.stdout
     out = run("devices", "examples/")
@@ -101,7 +107,7 @@ def test_wheel_installs_and_runs(tmp_path):
     # the installed module is the wheel's, not the checkout's, and only its real
     # subpackages import
     where = subprocess.run([str(py), "-c", CHECK_IMPORTS], capture_output=True, text=True,
-                           cwd=tmp_path)
+                           cwd=tmp_path, env=VENV_ENV)
     assert where.returncode == 0, where.stdout + where.stderr
     assert str(env_dir) in where.stdout
 
@@ -117,10 +123,10 @@ def test_editable_install_imports_only_real_subpackages_and_leaves_no_litter(tmp
     venv.create(env_dir, with_pip=True, system_site_packages=True)
     py = env_dir / "bin" / "python"
     out = subprocess.run([str(py), "-m", "pip", "install", "-q", "--no-deps", "-e", str(src)],
-                         capture_output=True, text=True)
+                         capture_output=True, text=True, env=VENV_ENV)
     assert out.returncode == 0, out.stderr
     assert listing(src) == before, set(listing(src)) - set(before)
     where = subprocess.run([str(py), "-c", CHECK_IMPORTS], capture_output=True, text=True,
-                           cwd=tmp_path)
+                           cwd=tmp_path, env=VENV_ENV)
     assert where.returncode == 0, where.stdout + where.stderr
     assert where.stdout.strip() == str(src / "__init__.py")
