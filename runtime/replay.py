@@ -111,6 +111,12 @@ def init_cmd_job(cmd: InitCmd, who: str | None, data: bytes | None = None,
         now = time.monotonic()
         if reply is not None:
             got = reply[0]
+            if cmd.cnt is not None and got.wkc > cmd.cnt:
+                # More slaves answered than the ENI expects (two with one station address
+                # or alias, a logical window mapped twice): no resend can change that.
+                raise ApplyError(f"working counter {got.wkc}, expected {cmd.cnt}: more "
+                                 "slaves answered than the ENI expects (two slaves with "
+                                 "one address?)", who, cmd.comment)
             if cmd.cnt is not None and got.wkc != cmd.cnt:
                 wrong_wkc += 1
                 last = f"working counter {got.wkc}, expected {cmd.cnt}"

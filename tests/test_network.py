@@ -20,7 +20,7 @@ from ecatcfg.eni.plan import InitCmd, Validate
 from ecatcfg.errors import EcatcfgError
 from ecatcfg.esc import AlState, Cmd, Transition
 from ecatcfg.esi.library import Library
-from ecatcfg.runtime import Network
+from ecatcfg.runtime import Network, wire
 from ecatcfg.runtime.cyclic import CyclicFrames
 from ecatcfg.runtime.link import MemoryLink
 from ecatcfg.runtime.lockstep import run_jobs
@@ -316,3 +316,55 @@ def test_close_closes_the_link_it_was_given(example_plan):
     with pytest.raises(LinkError, match="closed"):
         link.send(bytes(60))
     net.close()                                   # a second close is harmless
+
+
+# -- working counters above the expected one ------------------------------------------------
+
+def test_two_slaves_answering_one_address_fail_the_command_at_once():
+    """The ENI's Cnt is the working counter a command must return (ETG.2100 InitCmd/Cnt).
+    Two slaves with one station address (an ENI that gives two slaves the same address)
+    answer an FPRD together: working counter 2 where the file says 1.  Resending cannot
+    change that; it is an error naming the slave and the command, never a success."""
+    from ecatcfg.runtime import emulate
+    plan = line_plan(["EX1100", "EX1004", "EX2008"])
+    link, close = _serve(emulate.segment(emulate.specs_from_eni(plan, Library([ESI],
+                                                                              cache=False), "x")))
+    transport = Transport(link)
+    try:
+        for pos in (1, 2):                           # both get station address 1002
+            run_jobs(transport, [init_cmd_job(InitCmd(
+                [Transition.IP], "set station address", Cmd.APWR, 2, adp=-pos & 0xFFFF,
+                ado=0x0010, data=struct.pack("<H", 1002), cnt=1), f"s{pos}")])
+        check = InitCmd([Transition.IP], "check device state for INIT", Cmd.FPRD, 2,
+                        adp=1002, ado=0x0130, cnt=1, retries=3)
+        sent = transport.counters.frames_sent
+        with pytest.raises(ApplyError) as err:
+            run_jobs(transport, [init_cmd_job(check, "s1")])
+        assert transport.counters.frames_sent - sent == 1      # no retries: they cannot help
+    finally:
+        close()
+    assert str(err.value).startswith(
+        "slave 's1' [check device state for INIT]: working counter 2, expected 1")
+    assert "more slaves answered" in str(err.value)
+
+
+def test_a_cyclic_working_counter_above_the_expected_one_is_a_bad_cycle(example_plan):
+    """A slave that should not answer the process-data LRW does (here the coupler, given
+    an FMMU over the first byte of the window): the working counter exceeds the ENI's Cnt,
+    the cycle is bad and the command is counted, as for a counter that is too low."""
+    from ecatcfg.esc import FmmuConfig, FmmuType, fmmu_register
+    lrw = next(c for f in example_plan.cyclic[0].frames for c in f.cmds if c.cmd == Cmd.LRW)
+    assert lrw.cnt == 7
+    with Network.virtual(example_plan, esi=[ESI]) as net:
+        net.up()
+        assert net.cycle() and net.master.cyclic.stats.wkc_errors == 0
+        coupler = net.segment.slaves[0]
+        assert coupler.fmmus == []
+        fmmu = FmmuConfig(lrw.addr, 1, 0, 7, 0x1000, 0, FmmuType.READ)
+        assert coupler.write(fmmu_register(0), fmmu.to_bytes())
+        back = wire.decode(net.segment.process(wire.encode(
+            [wire.datagram_for(lrw, bytes(lrw.length))]))).datagrams[0]
+        assert back.wkc == 8                          # the emulated line counts it
+        assert net.cycle() is False
+        stats = net.master.cyclic.stats
+        assert stats.wkc_errors == 1 and stats.wkc_error_cmds == {lrw.comment: 1}
