@@ -24,7 +24,7 @@ from ecatcfg.runtime import Network, wire
 from ecatcfg.runtime.cyclic import CyclicFrames
 from ecatcfg.runtime.link import MemoryLink
 from ecatcfg.runtime.lockstep import run_jobs
-from ecatcfg.runtime.master import Master
+from ecatcfg.runtime.master import Master, VerifyError
 from ecatcfg.runtime.replay import ApplyError, init_cmd_job
 from ecatcfg.runtime.segment import Faults
 from ecatcfg.runtime.transport import Transport
@@ -368,3 +368,86 @@ def test_a_cyclic_working_counter_above_the_expected_one_is_a_bad_cycle(example_
         assert net.cycle() is False
         stats = net.master.cyclic.stats
         assert stats.wkc_errors == 1 and stats.wkc_error_cmds == {lrw.comment: 1}
+
+
+# -- the line check -------------------------------------------------------------------------
+
+def _verify_on(eni_plan, line, accept_newer_revision: bool = False
+               ) -> tuple[VerifyError, list[bytes]]:
+    """Scan and verify ``eni_plan`` against a virtual line of ``line``'s slaves; the
+    VerifyError it must raise and the frames the master sent."""
+    from ecatcfg.runtime import emulate
+    seg = emulate.segment(emulate.specs_from_eni(line, Library([ESI], cache=False), "x")
+                          if line is not None else [])
+    link, close = _serve(seg)
+    sent: list[bytes] = []
+    master = Master(eni_plan, link, recorder=lambda f, out: sent.append(f) if out else None)
+    try:
+        with pytest.raises(VerifyError) as err:
+            master.scan_and_verify(accept_newer_revision)
+    finally:
+        close()
+    written = {d.ado for f in sent for d in wire.decode(f).datagrams
+               if d.cmd in (Cmd.APWR, Cmd.FPWR, Cmd.BWR)}
+    assert all(0x0500 <= ado < 0x0510 for ado in written), written   # nothing configured
+    assert "nothing was configured" in str(err.value)
+    return err.value, sent
+
+
+def _with_revision(plan, position: int, revision: int):
+    from lxml import etree
+    root = etree.fromstring(eni_writer.to_bytes(plan))
+    root.findall("Config/Slave")[position].find("Info/RevisionNo").text = str(revision)
+    return eni_reader.read_bytes(etree.tostring(root), "r.eni.xml")
+
+
+def test_a_missing_slave_at_the_end_of_the_line_is_reported():
+    eni = line_plan(["EX1100", "EX1004", "EX2008"])
+    err, _ = _verify_on(eni, line_plan(["EX1100", "EX1004"]))
+    assert [(m.position, m.found, m.problem) for m in err.mismatches] == [
+        (2, "-", "missing slave")]
+    assert err.mismatches[0].expected.startswith("s2 (0xe0000eca:0x3008:")
+    assert "    2  s2 (0xe0000eca:0x3008:0x10000)" in str(err)
+
+
+def test_an_empty_line_reports_every_slave_missing():
+    """The frame comes back with working counter 0 from the BRD: no slave at all.  Each
+    slave of the ENI is reported missing, by position; nothing crashes."""
+    eni = line_plan(["EX1100", "EX1004", "EX2008"])
+    err, _ = _verify_on(eni, None)
+    assert [(m.position, m.found, m.problem) for m in err.mismatches] == [
+        (0, "-", "missing slave"), (1, "-", "missing slave"), (2, "-", "missing slave")]
+
+
+def test_an_extra_slave_at_the_end_of_the_line_is_reported():
+    err, _ = _verify_on(line_plan(["EX1100", "EX1004"]),
+                        line_plan(["EX1100", "EX1004", "EX2008"]))
+    assert [(m.position, m.expected, m.problem) for m in err.mismatches] == [
+        (2, "-", "extra slave")]
+    assert err.mismatches[0].found == "0xe0000eca:0x3008:0x10000"
+
+
+def test_another_revision_is_reported_and_a_newer_one_taken_only_on_request():
+    line = line_plan(["EX1100", "EX1004", "EX2008"])
+    revision = line.slaves[1].revision
+    assert revision == 0x10000
+    # The ENI wants a newer revision than the slave has: a mismatch, even when newer
+    # revisions are accepted.
+    newer = _with_revision(line, 1, revision + 1)
+    for accept in (False, True):
+        err, _ = _verify_on(newer, line, accept_newer_revision=accept)
+        assert [(m.position, m.problem) for m in err.mismatches] == [(1, "other revision")]
+        assert err.mismatches[0].found == "0xe0000eca:0x2004:0x10000"
+    # The slave is newer than the ENI says: a mismatch unless the caller accepts it.
+    older = _with_revision(line, 1, revision - 1)
+    err, _ = _verify_on(older, line)
+    assert [(m.position, m.problem) for m in err.mismatches] == [
+        (1, "other revision (newer: --accept-newer-revision takes it)")]
+    from ecatcfg.runtime import emulate
+    link, close = _serve(emulate.segment(emulate.specs_from_eni(
+        line, Library([ESI], cache=False), "x")))
+    try:
+        found = Master(older, link).scan_and_verify(accept_newer_revision=True)
+    finally:
+        close()
+    assert [f.revision for f in found] == [revision] * 3
