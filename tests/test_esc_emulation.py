@@ -332,3 +332,52 @@ def test_bit_mapping_across_a_byte_boundary(lib):
     assert d.data[0] == 0x5F and d.data[1] & 0x0F == 0x0C
     # Outputs are bits 12..19: 0x7 from byte 1's high nibble, 0x9 from byte 2's low one.
     assert seg.slaves[1].outputs() == b"\x97"
+
+
+# -- the mailbox state a master polls ----------------------------------------------------------
+
+# FMMU images both configurators write (register 0x0600 + 16·n): logical 0x09000000, one bit,
+# read from physical 0x080D (SM1 status) bit 0.  TwinCAT: "set fmmu 1 (mailbox state)" in
+# jasper-node/jn-ec-master src/tests/fixtures/mega_master_eni.xml; EC-Engineer: "set fmmu 2
+# (mailbox state)" in the acontis training-slaves ENI, where the second slave takes logical
+# bit 1 (start and stop bit 1) of the same byte.
+MAILBOX_STATE_FMMUS = [bytes.fromhex("00000009010000000d08000101000000"),
+                       bytes.fromhex("00000009010001010d08000101000000")]
+# An SDO upload request of 0x1018:01 (ETG.1000.6): mailbox header (length 10, address 0,
+# channel/priority 0, type CoE, counter 1), CoE header (SDO request), initiate upload.
+SDO_UPLOAD_1018_01 = bytes.fromhex("0a00000000" "13" "0020" "40181001" "00000000")
+
+
+def test_sm1_status_bit_0_shows_a_full_mailbox_through_the_mailbox_state_fmmu(lib):
+    """ENIs of TwinCAT and EC-Engineer poll one LRD over the mailbox-state FMMUs instead of
+    reading every slave's SM1: bit 0 of SM1's status (0x080D; ESC datasheets: "interrupt
+    write", buffer completely written) is set while the slave's answer waits in the
+    mailbox (bit 3, mailbox full) and cleared when the master has read it."""
+    seg = line(lib, "EXD-402", "EXD-402")
+    address_all(seg)
+    for i, addr in enumerate((0x1001, 0x1002)):
+        sm0, sm1 = SmConfig(0x1000, 128, 0x26, True), SmConfig(0x1080, 128, 0x22, True)
+        run(seg, fp(Cmd.FPWR, addr, sm_register(0), sm0.to_bytes()),
+            fp(Cmd.FPWR, addr, sm_register(1), sm1.to_bytes()),
+            fp(Cmd.FPWR, addr, fmmu_register(2), MAILBOX_STATE_FMMUS[i]))
+        assert request(seg, addr, AlState.PREOP) == (AlState.PREOP, 0)
+
+    def states() -> tuple[int, int]:
+        [d] = run(seg, Datagram.logical(Cmd.LRD, 0x09000000, 1))
+        return d.data[0], d.wkc
+
+    def sm1_status(addr: int) -> int:
+        [d] = run(seg, fp(Cmd.FPRD, addr, 0x080D, 1))
+        return d.data[0]
+
+    assert states() == (0x00, 2) and sm1_status(0x1001) == sm1_status(0x1002) == 0
+    [d] = run(seg, fp(Cmd.FPWR, 0x1002, 0x1000, SDO_UPLOAD_1018_01.ljust(128, b"\0")))
+    assert d.wkc == 1
+    assert states() == (0x02, 2)                # the second slave's bit: its answer waits
+    assert sm1_status(0x1002) & 0x09 == 0x09 and sm1_status(0x1001) == 0
+    run(seg, fp(Cmd.FPWR, 0x1001, 0x1000, SDO_UPLOAD_1018_01.ljust(128, b"\0")))
+    assert states() == (0x03, 2)
+    [answer] = run(seg, fp(Cmd.FPRD, 0x1002, 0x1080, 128))
+    assert answer.wkc == 1 and answer.data[5] & 0x0F == 0x03       # a CoE message
+    assert answer.data[8] == 0x43 and answer.data[9:12] == b"\x18\x10\x01"  # expedited, 4 B
+    assert states() == (0x01, 2) and sm1_status(0x1002) & 0x09 == 0
