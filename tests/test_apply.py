@@ -525,16 +525,14 @@ def test_refused_safeop_names_slave_and_code(corpus_lib, corpus_esi):
                                     corpus_esi / "drives" / "Elmo_ECAT_00010420_V11.xml"]) \
             as net:
         net.segment.slaves[3].refuse["PS"] = 0x001E
-        start = time.monotonic()
         with pytest.raises(ApplyError) as err:
             net.up()
-        took = time.monotonic() - start
         assert net.segment.slaves[3].error and net.segment.slaves[3].status_code == 0x001E
     text = str(err.value)
     assert "slave 'drive'" in text and "0x001E" in text, text
     assert "check device state for SAFEOP" in text, text
     assert err.value.slave == "drive" and err.value.al_code == 0x001E
-    assert took < 2, "a refused state is final: no waiting out the state timeout"
+    assert "timed out" not in text, "a refused state is final: no waiting out the timeout"
 
 
 def test_refused_safeop_exit_1_from_the_cli(corpus_lib, corpus_esi, tmp_path, monkeypatch,

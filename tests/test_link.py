@@ -348,7 +348,6 @@ def test_pysoem_runs_inside_a_namespace(veth_netns, pysoem_module):
     assert out.returncode == 0, out.stderr
     result = json.loads(out.stdout.strip().splitlines()[-1])
     assert result["slaves"] <= 0                # nothing answers on the other side
-    assert result["seconds"] < 5
     assert r.if_a in result["adapters"]
 
 

@@ -144,12 +144,11 @@ def test_nested_array_type_is_unknown_not_a_crash(tmp_path):
 
 
 def test_thousands_of_sync_managers_are_cheap(tmp_path):
-    import time
+    # 3000 identical SMs overlap pairwise: a pairwise pass would report ~4.5 million
+    # overlaps.  Beyond the ESC's 16 SMs only ESI211 reports, and the pairwise rules skip.
     sms = "\n".join('<Sm ControlByte="#x64" DefaultSize="2" Enable="1" '
                     'StartAddress="#x1100">Outputs</Sm>' for _ in range(3000))
-    start = time.perf_counter()
     found = _findings(tmp_path, esi(drive(sm2=sms)))
-    assert time.perf_counter() - start < 1.0
     assert "ESI211" in {f.rule for f in found}
     assert not {"ESI201", "ESI202"} & {f.rule for f in found}     # no pairwise flood
     assert len(found) < 10

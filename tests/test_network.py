@@ -113,12 +113,11 @@ def test_commands_of_different_slaves_share_frames():
 def test_refused_state_names_slave_command_and_code(example_plan):
     with Network.virtual(example_plan, esi=[ESI]) as net:
         net.segment.slaves[4].refuse["PS"] = 0x001E
-        start = time.monotonic()
         with pytest.raises(ApplyError) as err:
             net.up()
-        # The error flag is final: no waiting out the 10 s state timeout.
-        assert time.monotonic() - start < 2
     text = str(err.value)
+    # The error flag is final: no waiting out the state timeout (the message would say so).
+    assert "timed out" not in text
     assert "slave 'axis1'" in text and "check device state for SAFEOP" in text
     assert "0x001E (invalid input configuration)" in text
     assert err.value.al_code == 0x001E
@@ -158,7 +157,8 @@ def test_a_silent_line_fails_within_the_timeout():
     start = time.monotonic()
     with pytest.raises(ApplyError, match=r"\[check device state for PREOP\]: no reply"):
         run_jobs(transport, [init_cmd_job(cmd, "s0")])
-    assert 0.2 <= time.monotonic() - start < 1.0
+    # The 200 ms timeout fires: not before, and (10x margin for a loaded machine) not never.
+    assert 0.2 <= time.monotonic() - start < 2.0
 
 
 def test_bring_up_survives_heavy_frame_loss(example_plan):

@@ -1,6 +1,5 @@
 """The reader's tolerance rules and its handling of malformed files, on self-written fixtures."""
 
-import time
 
 import pytest
 
@@ -148,10 +147,9 @@ def test_entity_bomb_is_rejected_fast(tmp_path):
     xml = f'<?xml version="1.0"?>\n<!DOCTYPE EtherCATInfo [{ents}]>\n' \
           "<EtherCATInfo><Vendor><Id>&l9;</Id></Vendor></EtherCATInfo>"
     path = write(tmp_path, "bomb.xml", xml)
-    start = time.perf_counter()
-    with pytest.raises(XmlError, match="bomb.xml"):
+    # Refused by libxml2's entity amplification limit, before the billion "lol"s exist.
+    with pytest.raises(XmlError, match=r"bomb.xml:1:\d+: .*entity amplification"):
         read_file(path)
-    assert time.perf_counter() - start < 0.5
 
 
 def test_external_entity_is_never_read(tmp_path):
