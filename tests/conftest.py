@@ -1,12 +1,13 @@
-"""Shared fixtures.  Corpus-dependent tests skip locally when ../shared/corpus is missing, but
-fail in CI (CI=true, or ECATCFG_REQUIRE_CORPUS=1 as `.ci/run` sets): nothing silently skips
-there."""
+"""Shared fixtures.  Corpus-dependent tests skip locally when the corpus is missing, but fail
+in CI (CI=true, or ECATCFG_REQUIRE_CORPUS=1 as `.ci/run` sets): nothing silently skips there
+(``prereq.py``)."""
 
 from __future__ import annotations
 
 import os
 from pathlib import Path
 
+import prereq
 import pytest
 from rig import pysoem_module, tshark_path, veth_netns  # noqa: F401  (runtime test rig fixtures)
 
@@ -17,9 +18,7 @@ CORPUS = Path(os.environ.get("ECATCFG_CORPUS", ROOT.parent / "shared" / "corpus"
 
 
 def _require(what: str) -> None:
-    if os.environ.get("ECATCFG_REQUIRE_CORPUS") == "1" or os.environ.get("CI") == "true":
-        pytest.fail(f"{what} is required in CI (ECATCFG_REQUIRE_CORPUS=1) but missing")
-    pytest.skip(f"{what} not found; tests on real vendor files skipped")
+    prereq.missing(what, "not found (set ECATCFG_CORPUS to its folder)", prereq.CORPUS)
 
 
 @pytest.fixture(scope="session")

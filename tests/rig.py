@@ -33,6 +33,7 @@ from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar
 
+import prereq
 import pytest
 
 if TYPE_CHECKING:       # imported when used: conftest imports this module for every test
@@ -40,7 +41,7 @@ if TYPE_CHECKING:       # imported when used: conftest imports this module for e
 
 T = TypeVar("T")
 
-REQUIRE_ENV = "ECATCFG_REQUIRE_RUNTIME"
+REQUIRE_ENV = prereq.RUNTIME
 CLONE_NEWNET = 0x40000000
 NETNS_DIR = Path("/run/netns")
 IF_A, IF_B = "va", "vb"
@@ -52,16 +53,13 @@ _CAPS = {12: "CAP_NET_ADMIN", 13: "CAP_NET_RAW", 21: "CAP_SYS_ADMIN"}
 
 def runtime_required() -> bool:
     """True in CI: missing runtime prerequisites fail instead of skipping."""
-    return os.environ.get(REQUIRE_ENV) == "1" or os.environ.get("CI") == "true"
+    return prereq.required(REQUIRE_ENV)
 
 
 def unavailable(what: str, reason: str) -> None:
-    """Skip (locally) or fail (in CI) a test whose prerequisite ``what`` is missing."""
-    if runtime_required():
-        pytest.fail(f"{what} is required in CI ({REQUIRE_ENV}=1 or CI=true) but unavailable: "
-                    f"{reason}", pytrace=False)
-    pytest.skip(f"{what} unavailable: {reason} (runtime tests skipped; set {REQUIRE_ENV}=1 "
-                f"to make this a failure)")
+    """Skip (locally) or fail (in CI) a test whose runtime prerequisite ``what`` is
+    missing (``prereq.py``)."""
+    prereq.missing(what, reason, REQUIRE_ENV)
 
 
 @functools.cache

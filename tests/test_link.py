@@ -19,6 +19,7 @@ import sys
 import threading
 import time
 
+import prereq
 import pytest
 import rig
 from conftest import ROOT
@@ -59,7 +60,9 @@ def test_ci_runs_the_readme_test_command_verbatim():
     assert command in ci, ".ci/run must run exactly the README's second set-up command"
     assert "export ECATCFG_REQUIRE_RUNTIME=1" in ci
     assert "export ECATCFG_REQUIRE_CORPUS=1" in ci
-    assert ci.index("export ECATCFG_REQUIRE_RUNTIME=1") < ci.index(command)
+    assert "export ECATCFG_REQUIRE_TOOLS=1" in ci
+    for kind in prereq.KINDS:
+        assert ci.index(f"export {kind}=1") < ci.index(command)
 
 
 def test_missing_prerequisites_skip_locally_and_fail_in_ci(monkeypatch):
@@ -72,6 +75,24 @@ def test_missing_prerequisites_skip_locally_and_fail_in_ci(monkeypatch):
             m.setenv(var, value)
             with pytest.raises(pytest.fail.Exception, match="required in CI"):
                 rig.unavailable("tshark", "gone")
+
+
+@pytest.mark.parametrize("kind", prereq.KINDS)
+def test_every_kind_of_prerequisite_skips_by_name_locally_and_fails_in_ci(monkeypatch, kind):
+    for other in prereq.KINDS + ("CI",):
+        monkeypatch.delenv(other, raising=False)
+    with pytest.raises(pytest.skip.Exception, match=f"a thing unavailable: gone .*{kind}=1"):
+        prereq.missing("a thing", "gone", kind)
+    for other in prereq.KINDS:                     # another kind's variable does not count
+        if other != kind:
+            monkeypatch.setenv(other, "1")
+    with pytest.raises(pytest.skip.Exception):
+        prereq.missing("a thing", "gone", kind)
+    for var, value in ((kind, "1"), ("CI", "true")):
+        with monkeypatch.context() as m:
+            m.setenv(var, value)
+            with pytest.raises(pytest.fail.Exception, match="a thing is required in CI"):
+                prereq.missing("a thing", "gone", kind)
 
 
 # --------------------------------------------------------------------------- MemoryLink

@@ -1,14 +1,13 @@
 """The mailbox/CoE codec against byte-exact references: the tables of docs/protocol-notes.md
 §5 and §6 ("protocol-notes §N"), SOEM's own first SDO upload request as pysoem sent it to an
-emulated slave, SOEM's list of abort codes (from the pysoem source in the corpus); and, when
-tshark is installed, Wireshark's EtherCAT mailbox dissector reading our bytes."""
+emulated slave, the abort codes of SOEM and SOES (SOEM's list also read from the pysoem
+source in the corpus); and, when tshark is installed, Wireshark's EtherCAT mailbox
+dissector reading our bytes."""
 
 from __future__ import annotations
 
 import logging
-import os
 import re
-import shutil
 import struct
 import subprocess
 import tarfile
@@ -219,7 +218,19 @@ def test_abort_code_names_follow_the_facts_sheet():
     assert error.code == 0x06090011 and error.exit_code == 1
 
 
-# Codes that SOES defines (soes/esc_coe.h, ABORT_*) and SOEM's list lacks.
+# SOEM's list of SDO abort codes (soem/ethercatprint.c, ec_sdoerrorlist, after ETG.1000.6's
+# table): 30 codes besides its "no error" and "unknown" entries ...
+SOEM_ABORT_CODES = {
+    0x05030000, 0x05040000, 0x05040001, 0x05040005, 0x06010000, 0x06010001, 0x06010002,
+    0x06010003, 0x06010004, 0x06010005, 0x06010006, 0x06020000, 0x06040041, 0x06040042,
+    0x06040043, 0x06040047, 0x06060000, 0x06070010, 0x06070012, 0x06070013, 0x06090011,
+    0x06090030, 0x06090031, 0x06090032, 0x06090036, 0x08000000, 0x08000020, 0x08000021,
+    0x08000022, 0x08000023,
+}
+# ... and the codes that SOES defines (soes/esc.h, ABORT_*) and SOEM's list lacks: the CiA 301
+# block-transfer codes (ABORT_INVALID_BLOCK_SIZE, _INVALID_SEQUENCE_NUMBER, _BLOCK_CRC_ERROR),
+# the module ident list mismatch of modular devices (ABORT_MODULE_LIST_MISMATCH),
+# ABORT_RESOURCE_NOT_AVAILABLE and ABORT_NO_DATA_AVAILABLE.
 SOES_ONLY_ABORT_CODES = {0x05040002, 0x05040003, 0x05040004, 0x06090033, 0x060A0023,
                          0x08000024}
 
@@ -237,20 +248,18 @@ def test_abort_codes_are_soems_list_plus_soes_extras(corpus):
     table = source.split("ec_sdoerrorlist[]", 1)[1].split("};", 1)[0]
     soem = {int(code, 16) for code in re.findall(r"\{\s*0x([0-9a-fA-F]{8})\s*,", table)}
     assert len(soem) == 32 and 0x06020000 in soem
+    assert soem - {0, 0xFFFFFFFF} == SOEM_ABORT_CODES          # the list written out above
     assert set(ABORT_CODES) == (soem - {0, 0xFFFFFFFF}) | SOES_ONLY_ABORT_CODES
 
 
+def test_abort_codes_cover_the_public_lists():
+    assert set(ABORT_CODES) == SOEM_ABORT_CODES | SOES_ONLY_ABORT_CODES
+    assert not SOEM_ABORT_CODES & SOES_ONLY_ABORT_CODES
+    assert ABORT_CODES[0x06090033] == "detected module ident list does not match"
+    assert ABORT_CODES[0x08000024] == "no data available"
+
+
 # -- Wireshark as an independent decoder ------------------------------------------------------
-
-def _tshark() -> str:
-    path = shutil.which("tshark")
-    if path is None:
-        reason = "tshark is not installed (CI installs it; see .ci/run)"
-        if os.environ.get("ECATCFG_REQUIRE_RUNTIME") == "1" or os.environ.get("CI") == "true":
-            pytest.fail(f"{reason}, but ECATCFG_REQUIRE_RUNTIME=1 requires it")
-        pytest.skip(reason)
-    return path
-
 
 FIELDS = ["ecat_mailbox.length", "ecat_mailbox.type", "ecat_mailbox.counter",
           "ecat_mailbox.coe.type", "ecat_mailbox.coe.sdoreq", "ecat_mailbox.coe.sdores",
@@ -263,8 +272,8 @@ FIELDS = ["ecat_mailbox.length", "ecat_mailbox.type", "ecat_mailbox.counter",
           "ecat_mailbox.invalid"]
 
 
-def test_tshark_decodes_our_mailbox_bytes(tmp_path):
-    tshark = _tshark()
+def test_tshark_decodes_our_mailbox_bytes(tmp_path, tshark_path):
+    tshark = tshark_path
     logging.getLogger("scapy.runtime").setLevel(logging.CRITICAL)
     from scapy.contrib.ethercat import EtherCat, EtherCatFPWR
     from scapy.layers.l2 import Ether
