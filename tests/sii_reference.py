@@ -9,6 +9,8 @@ data, up to type 0xFFFF.  Multi-byte values are little-endian.
 
 from __future__ import annotations
 
+from typing import Any
+
 
 def u16(data: bytes, at: int) -> int:
     return data[at] | data[at + 1] << 8
@@ -80,7 +82,7 @@ def _category(img: dict, kind: int, body: bytes) -> None:
         at = 0
         while at + 8 <= len(body):
             n = body[at + 2]
-            pdo = {"index": u16(body, at), "sm": body[at + 3], "name": body[at + 5],
+            pdo: dict[str, Any] = {"index": u16(body, at), "sm": body[at + 3], "name": body[at + 5],
                    "flags": u16(body, at + 6), "entries": []}
             at += 8
             for _ in range(n):
@@ -129,8 +131,8 @@ COE_TYPES = {"BOOL": 0x01, "SINT": 0x02, "INT": 0x03, "DINT": 0x04, "USINT": 0x0
              "BIT2": 0x31, "BYTE": 0x05, "WORD": 0x06}
 
 
-def number(text: str | None, default: int | None = None) -> int | None:
-    """ETG.2000 HexDecValue: ``#x`` hex, else decimal."""
+def number(text: str | None, default: int = 0) -> int:
+    """ETG.2000 HexDecValue: ``#x`` hex, else decimal (``default`` when absent or empty)."""
     if text is None or not text.strip():
         return default
     text = text.strip()
@@ -155,7 +157,7 @@ def english(el, tag: str = "Name") -> str | None:
     return (names[0].text or "").strip() if names else None
 
 
-def from_esi(device, vendor_id: int) -> dict:
+def from_esi(device: Any, vendor_id: int) -> dict:
     """What ETG.2010 puts in the image of ESI ``Device`` element ``device``."""
     sms = device.findall("Sm")
     mailbox = device.find("Mailbox")
@@ -178,7 +180,7 @@ def from_esi(device, vendor_id: int) -> dict:
                 dtype = text(e, "DataType")
                 entries.append({"index": index, "subindex": number(text(e, "SubIndex"), 0),
                                 "bit_len": number(text(e, "BitLen"), 0),
-                                "data_type": COE_TYPES[dtype] if index else 0,
+                                "data_type": COE_TYPES[dtype or ""] if index else 0,
                                 "name": english(e) or None if index else None})
             out.append({"index": number(text(p, "Index")), "sm": number(p.get("Sm")),
                         "flags": (0x0001 if flag(p, "Mandatory") else 0)
@@ -188,7 +190,7 @@ def from_esi(device, vendor_id: int) -> dict:
 
     modes = device.findall("Dc/OpMode")
     current = [m for m in modes if m.find("VendorSpecific/TwinCAT[@IgnoreFromBuildNo]") is None]
-    chosen: dict[str, object] = {}
+    chosen: dict[str | None, Any] = {}
     for m in current or modes:
         chosen.setdefault(text(m, "Name"), m)
     coe = mailbox.find("CoE") if mailbox is not None else None

@@ -30,6 +30,7 @@ import json
 import re
 import sys
 from pathlib import Path
+from typing import Any
 
 import xmlschema
 from lxml import etree
@@ -48,7 +49,7 @@ def _span(elem) -> tuple[int, int]:
     return min(lines), max(lines)
 
 
-def validate(schema: xmlschema.XMLSchema, tree) -> list[dict]:
+def validate(schema: xmlschema.XMLSchema, tree: Any) -> list[dict]:
     raw = list(schema.iter_errors(tree))
     rejected: dict = {}                  # parent element -> index of its rejected child
     for e in raw:
@@ -58,7 +59,7 @@ def validate(schema: xmlschema.XMLSchema, tree) -> list[dict]:
     errors = []
     for e in raw:
         reason = e.reason or ""
-        elem = e.elem
+        elem: Any = e.elem              # an lxml element: the tree given was lxml's
         out: dict = {"reason": reason, "line": elem.sourceline if elem is not None else None}
         if elem is not None:
             out["span"] = _span(elem)
@@ -68,8 +69,8 @@ def validate(schema: xmlschema.XMLSchema, tree) -> list[dict]:
             child = _children(elem)[int(m.group(2)) - 1]
             out.update(kind="unexpected", tag=m.group(1), line=child.sourceline,
                        parent_line=elem.sourceline)
-        elif _INCOMPLETE.match(reason):
-            out.update(kind="incomplete", tag=_INCOMPLETE.match(reason).group(1))
+        elif i := _INCOMPLETE.match(reason):
+            out.update(kind="incomplete", tag=i.group(1))
         elif k:
             out.update(kind="keyref", value=k.group(1), times=int(k.group(2) or 1))
         elif reason.startswith("invalid value"):
