@@ -12,9 +12,10 @@ needs to match it with a lint finding:
 * ``line``: where libxml2 would report it: the rejected *child* for ``unexpected``
   (xmlschema reports the parent whose content it checked), else the element's line;
 * ``parent_line`` (``unexpected``): the line of the parent whose content is rejected;
-* ``tag``: the rejected child (``unexpected``) or the incomplete element; ``value`` and ``times`` (``keyref``): the
-  missing key value and how often it is referenced (xmlschema reports a failed keyref once,
-  on the element that holds the key, with "(N times)"); ``span``: the first and last line of
+* ``tag``: the rejected child (``unexpected``) or the incomplete element;
+* ``value`` and ``times`` (``keyref``): the missing key value and how often it is referenced
+  (xmlschema reports a failed keyref once, on the element that holds the key, with "(N
+  times)"); ``span``: the first and last line of
   the element's subtree;
 * ``after_rejection``: the error lies in a child that comes at or after one its parent's
   content model rejected, or below such a child.  libxml2 stops validating an element's
