@@ -146,7 +146,8 @@ def init_cmd_job(cmd: InitCmd, who: str | None, data: bytes | None = None,
             raise ApplyError(f"{last} after {command_timeout(cmd):g} s", who, cmd.comment)
 
 
-def _refused(status: bytes | bytearray, who: str | None, comment: str, timed_out: bool = False) -> ApplyError:
+def _refused(status: bytes | bytearray, who: str | None, comment: str,
+             timed_out: bool = False) -> ApplyError:
     al_status, = struct.unpack_from("<H", status, 0)
     code = struct.unpack_from("<H", status, 4)[0] if len(status) >= 6 else 0
     text = f"slave stays in {al_state_name(al_status)}"
