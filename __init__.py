@@ -38,4 +38,4 @@ class _RealSubpackagesOnly:
 
 
 if not any(isinstance(f, type) and f.__name__ == "_RealSubpackagesOnly" for f in sys.meta_path):
-    sys.meta_path.insert(0, _RealSubpackagesOnly)          # type: ignore[arg-type]
+    sys.meta_path.insert(0, _RealSubpackagesOnly)

@@ -192,7 +192,7 @@ class FmmuConfig:
                                  self.physical_start_bit, int(self.type), int(self.active))
 
     @classmethod
-    def from_bytes(cls, data: bytes) -> FmmuConfig:
+    def from_bytes(cls, data: bytes | bytearray) -> FmmuConfig:
         (start, length, sbit, ebit, phys, pbit, kind,
          active) = cls._LAYOUT.unpack(bytes(data[:FMMU_SIZE]))
         return cls(start, length, sbit, ebit, phys, pbit, FmmuType(kind & 3), bool(active & 1))
@@ -222,7 +222,7 @@ class SmConfig:
                                  int(self.enable), self.pdi_control)
 
     @classmethod
-    def from_bytes(cls, data: bytes) -> SmConfig:
+    def from_bytes(cls, data: bytes | bytearray) -> SmConfig:
         start, length, control, status, activate, pdi = cls._LAYOUT.unpack(
             bytes(data[:SM_SIZE]))
         return cls(start, length, control, bool(activate & 1), status, pdi)

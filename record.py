@@ -23,7 +23,7 @@ startup path of ``apply``.
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any, TypeVar
+from typing import Any, TypeVar, dataclass_transform, overload
 
 T = TypeVar("T")
 
@@ -42,6 +42,11 @@ class FrozenInstanceError(AttributeError):
     """Assignment to a field of a ``@record(frozen=True)`` instance."""
 
 
+# Typed as :func:`dataclasses.field` is: the call stands for a value of the field's type.
+@overload
+def field(*, default: T) -> T: ...
+@overload
+def field(*, default_factory: Callable[[], T]) -> T: ...
 def field(*, default: Any = _NO_DEFAULT, default_factory: Callable[[], Any] | None = None) -> Any:
     """A field's default, as in :func:`dataclasses.field`: a value, or a factory called for
     every new instance (mutable defaults: ``field(default_factory=list)``)."""
@@ -52,7 +57,15 @@ def field(*, default: Any = _NO_DEFAULT, default_factory: Callable[[], Any] | No
     return default
 
 
-def record(cls: type[T] | None = None, *, frozen: bool = False) -> Any:
+# Type checkers learn from ``dataclass_transform`` (PEP 681) that a record class gets the
+# ``__init__``, ``__eq__`` and ``__match_args__`` a dataclass would, that ``frozen=True`` makes
+# it read-only, and that ``field()`` declares a field's default.
+@overload
+def record(cls: type[T], /) -> type[T]: ...
+@overload
+def record(*, frozen: bool = False) -> Callable[[type[T]], type[T]]: ...
+@dataclass_transform(field_specifiers=(field,))
+def record(cls: type[T] | None = None, /, *, frozen: bool = False) -> Any:
     """Class decorator: ``@record`` or ``@record(frozen=True)`` (see the module docstring)."""
     def wrap(c: type[T]) -> type[T]:
         return _build(c, frozen)
@@ -61,12 +74,13 @@ def record(cls: type[T] | None = None, *, frozen: bool = False) -> Any:
 
 def fields(obj: Any) -> tuple[str, ...]:
     """The field names of a record class or instance, in declaration order."""
-    return obj.__record_fields__
+    names: tuple[str, ...] = obj.__record_fields__
+    return names
 
 
 def replace(obj: T, **changes: Any) -> T:
     """A copy of the record ``obj`` with some fields changed (:func:`dataclasses.replace`)."""
-    values = {name: getattr(obj, name) for name in obj.__record_fields__}  # type: ignore[attr-defined]
+    values = {name: getattr(obj, name) for name in fields(obj)}
     unknown = set(changes) - set(values)
     if unknown:
         raise TypeError(f"{type(obj).__name__} has no field {', '.join(sorted(unknown))}")
@@ -76,7 +90,7 @@ def replace(obj: T, **changes: Any) -> T:
 
 # -- the shared methods ------------------------------------------------------------------------
 
-def _values(self: Any) -> tuple:
+def _values(self: Any) -> tuple[Any, ...]:
     return tuple(getattr(self, name) for name in self.__record_fields__)
 
 
@@ -95,7 +109,7 @@ def _hash(self: Any) -> int:
     return hash(_values(self))
 
 
-def _reduce(self: Any) -> tuple:
+def _reduce(self: Any) -> tuple[type, tuple[Any, ...]]:
     """Pickle and copy by calling the class with the field values."""
     return type(self), _values(self)
 
@@ -140,6 +154,7 @@ def _build(cls: type, frozen: bool) -> type:
     body = {k: v for k, v in cls.__dict__.items()
             if k not in defaults and k not in ("__dict__", "__weakref__")}
     body.update(__slots__=names, __match_args__=names, __record_fields__=names,
+                __init__=_make_init(cls, names, defaults, frozen),
                 __repr__=_repr, __eq__=_eq, __reduce__=_reduce)
     if frozen:
         body.update(__hash__=_hash, __setattr__=_frozen_setattr, __delattr__=_frozen_delattr)
@@ -147,7 +162,6 @@ def _build(cls: type, frozen: bool) -> type:
         body["__hash__"] = None             # mutable and compared by value: not hashable
     new = type(cls)(cls.__name__, cls.__bases__, body)
     new.__qualname__ = cls.__qualname__
-    new.__init__ = _make_init(new, names, defaults, frozen)    # type: ignore[misc]
     return new
 
 
@@ -177,7 +191,7 @@ def _make_init(cls: type, names: tuple[str, ...], defaults: dict[str, Any],
         lines.append(f"_set(self, {name!r}, {given})" if frozen else f"self.{name} = {given}")
     source = f"def __init__({', '.join(params)}):\n    " + "\n    ".join(lines or ["pass"])
     exec(source, env)                       # noqa: S102 - our own generated source
-    init = env["__init__"]
+    init: Callable[..., None] = env["__init__"]
     init.__qualname__ = f"{cls.__qualname__}.__init__"
     init.__module__ = cls.__module__
     return init

@@ -11,6 +11,7 @@ import argparse
 import importlib
 import os
 import sys
+from typing import NoReturn
 
 from ecatcfg import __version__
 from ecatcfg.errors import EcatcfgError
@@ -23,7 +24,7 @@ EXIT_OK, EXIT_INPUT, EXIT_USAGE = 0, 1, 2
 
 
 class _Parser(argparse.ArgumentParser):
-    def error(self, message: str) -> None:     # argparse's own exit code is already 2
+    def error(self, message: str) -> NoReturn:     # argparse's own exit code is already 2
         self.print_usage(sys.stderr)
         self.exit(EXIT_USAGE, f"{self.prog}: error: {message}\n")
 
@@ -56,7 +57,8 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help()
         return EXIT_USAGE
     try:
-        return args.run(args)
+        code: int = args.run(args)
+        return code
     except EcatcfgError as exc:
         print(f"ecatcfg {args.command}: {exc}", file=sys.stderr)
         return exc.exit_code

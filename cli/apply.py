@@ -7,7 +7,7 @@ import argparse
 STATES = {"init": 1, "preop": 2, "safeop": 4, "op": 8}
 
 
-def add_parser(sub: argparse._SubParsersAction) -> None:
+def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser(
         "apply", help="bring a network up from an ENI over raw Ethernet",
         description="Check that the slaves on the line are the ones the ENI describes (no "

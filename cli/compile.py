@@ -6,7 +6,7 @@ import argparse
 import sys
 
 
-def add_parser(sub: argparse._SubParsersAction) -> None:
+def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser("compile", help="compile a topology and ESI files into an ENI",
                        description="Compile a topology (YAML or JSON: slaves in bus order) "
                                    "with the vendor ESI files into an ENI (ETG.2100). "

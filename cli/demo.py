@@ -10,9 +10,13 @@ the output terminal), and back to INIT.
 from __future__ import annotations
 
 import argparse
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from pathlib import Path
 
 
-def add_parser(sub: argparse._SubParsersAction) -> None:
+def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser("demo", help="run the main job on the embedded example",
                        description="Compile the example topology shipped inside the package "
                                    "into an ENI and a C header, then apply it to a virtual "
@@ -77,7 +81,7 @@ def run(args: argparse.Namespace) -> int:
     return _apply(eni, folder / "esi", max(args.cycles, 0))
 
 
-def _apply(eni, esi, cycles: int) -> int:
+def _apply(eni: Path, esi: Path, cycles: int) -> int:
     """Apply the compiled ENI to a virtual segment of the example devices and show it run."""
     import struct
 

@@ -5,9 +5,13 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from typing import TYPE_CHECKING, TextIO
+
+if TYPE_CHECKING:
+    from ecatcfg.esi.library import Library
 
 
-def add_parser(sub: argparse._SubParsersAction) -> None:
+def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser("devices", help="list the devices in ESI files and folders",
                        description="List every device in the given ESI files and folders "
                                    "(searched recursively for *.xml).")
@@ -26,7 +30,7 @@ def run(args: argparse.Namespace) -> int:
     return 1 if lib.problems else 0
 
 
-def report(lib, fmt: str, out) -> None:
+def report(lib: Library, fmt: str, out: TextIO) -> None:
     """Print the listing; problems and warnings go to stderr, naming file and line."""
     for problem in lib.problems:
         print(f"error: {problem}", file=sys.stderr)

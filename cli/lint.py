@@ -13,11 +13,15 @@ import sys
 import textwrap
 from dataclasses import replace
 from pathlib import Path
+from typing import TYPE_CHECKING, TextIO
+
+if TYPE_CHECKING:
+    from ecatcfg.esi.lint.rules import Rule
 
 FORMATS = ("text", "json", "junit", "sarif")
 
 
-def add_parser(sub: argparse._SubParsersAction) -> None:
+def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser(
         "lint", help="validate ESI files: ETG.2000 schema and semantic rules",
         description="Validate ESI files and folders (searched recursively for *.xml) against "
@@ -84,9 +88,9 @@ def run(args: argparse.Namespace) -> int:
     if args.no_config:
         cfg = lint_config.LintConfig()
     else:
-        source = Path(args.config) if args.config else lint_config.find_pyproject(Path.cwd())
-        if args.config and not source.is_file():
+        if args.config and not Path(args.config).is_file():
             raise UsageError(f"--config {args.config}: no such file")
+        source = Path(args.config) if args.config else lint_config.find_pyproject(Path.cwd())
         cfg = lint_config.load(source)
     select = _ids(args.select) if args.select else cfg.select
     ignore = cfg.ignore + _ids(args.ignore or [])
@@ -106,7 +110,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _lint(args: argparse.Namespace, active: frozenset[str], schema_dir: Path | None,
-          jobs: int | None, rules: dict) -> int:
+          jobs: int | None, rules: dict[str, Rule]) -> int:
     from ecatcfg.esi.lint.formats import json as json_format, junit, sarif, text
     from ecatcfg.esi.lint.runner import LintOptions, collect, lint_paths
     from ecatcfg.errors import UsageError
@@ -157,7 +161,7 @@ class _ProgressBar:
 
     WIDTH = 30
 
-    def __init__(self, stream) -> None:
+    def __init__(self, stream: TextIO) -> None:
         self.stream = stream
 
     def __call__(self, done: int, total: int) -> None:

@@ -8,9 +8,18 @@ from __future__ import annotations
 
 import sys
 from collections.abc import Callable
+from typing import IO, TYPE_CHECKING, Any
 
 from ecatcfg.eni.plan import NetworkPlan
 from ecatcfg.esc import AlState, al_status_name
+
+if TYPE_CHECKING:                   # rich and the runtime are imported where they are used
+    from rich.console import Console
+
+    from ecatcfg.errors import EcatcfgError
+    from ecatcfg.runtime.master import Event, SlaveState
+    from ecatcfg.runtime.network import Network
+    from ecatcfg.runtime.replay import SlaveProgress
 
 _TRANSITION_TEXT = {"IP": "INIT -> PREOP", "PS": "PREOP -> SAFEOP", "SO": "SAFEOP -> OP",
                     "OS": "OP -> SAFEOP", "SP": "SAFEOP -> PREOP", "PI": "PREOP -> INIT"}
@@ -19,7 +28,7 @@ _TRANSITION_TEXT = {"IP": "INIT -> PREOP", "PS": "PREOP -> SAFEOP", "SO": "SAFEO
 class _PlainConsole:
     """The part of rich's Console the JSON mode uses."""
 
-    def __init__(self, file) -> None:
+    def __init__(self, file: IO[str]) -> None:
         self.file = file
 
     def print(self, text: str, **_: object) -> None:
@@ -31,6 +40,7 @@ class ApplyReport:
         self.plan = plan
         self.eni = eni
         self.json_output = json_output
+        self.console: _PlainConsole | Console
         if json_output:
             # Progress goes to stderr, so stdout stays one document; no rich (18 ms import).
             self.console = _PlainConsole(sys.stderr)
@@ -38,10 +48,10 @@ class ApplyReport:
             from rich.console import Console
             self.console = Console(highlight=False)
         self.events: list[str] = []
-        self.rows: list[dict] = []
-        self.summary: dict = {}
+        self.rows: list[dict[str, Any]] = []
+        self.summary: dict[str, Any] = {}
 
-    def event(self, event) -> None:
+    def event(self, event: Event) -> None:
         text = event.text
         for code, words in _TRANSITION_TEXT.items():
             text = text.replace(f"{code}: {code} ...", f"{words} ...").replace(
@@ -56,10 +66,11 @@ class ApplyReport:
     def cycling(self, cycles: int | None) -> None:
         self.note(f"cycling ({cycles} cycles)" if cycles else "cycling until Ctrl-C")
 
-    def cycle_callback(self, net) -> Callable:
+    def cycle_callback(self, net: Network) -> Callable[[Network], None]:
         return lambda _net: None
 
-    def final_states(self, states, progress) -> None:
+    def final_states(self, states: list[SlaveState | None],
+                     progress: dict[str, SlaveProgress]) -> None:
         self.rows = []
         for slave, st in zip(sorted(self.plan.slaves, key=lambda s: s.position), states):
             row = {"position": slave.position, "name": slave.name,
@@ -70,7 +81,7 @@ class ApplyReport:
                    "last_command": progress[slave.name].last_command}
             self.rows.append(row)
 
-    def finish(self, net, failure, target: AlState) -> None:
+    def finish(self, net: Network, failure: EcatcfgError | None, target: AlState) -> None:
         stats = net.run_stats or net.master.cyclic.stats
         counters = net.master.transport.counters
         jitter = stats.jitter()
@@ -90,6 +101,8 @@ class ApplyReport:
             return
         from rich.table import Table
 
+        console = self.console
+        assert not isinstance(console, _PlainConsole)      # the JSON mode returned above
         table = Table(title=f"{self.eni}: slaves")
         for col in ("pos", "name", "addr", "state", "AL status", "last InitCmd"):
             table.add_column(col)
@@ -98,15 +111,15 @@ class ApplyReport:
             table.add_row(str(r["position"]), r["name"], str(r["address"]), r["state"],
                           f"0x{code:04X} {r['al_status']}" if code else "-",
                           r["last_command"] or "-")
-        self.console.print(table)
+        console.print(table)
         if stats.cycles:
-            self.console.print(
+            console.print(
                 f"{stats.cycles} cycles, {stats.lost_frames} lost frames, "
                 f"{stats.wkc_errors} working-counter errors; cycle jitter p50 "
                 f"{jitter['p50']:.0f} us, p99 {jitter['p99']:.0f} us, max "
                 f"{jitter['max']:.0f} us")
         if failure:
-            self.console.print(f"[bold red]failed:[/] {failure}", markup=True)
+            console.print(f"[bold red]failed:[/] {failure}", markup=True)
 
-    def as_json(self) -> dict:
+    def as_json(self) -> dict[str, Any]:
         return dict(self.summary, events=self.events)

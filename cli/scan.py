@@ -4,9 +4,10 @@ from __future__ import annotations
 
 import argparse
 import re
+from typing import Any
 
 
-def add_parser(sub: argparse._SubParsersAction) -> None:
+def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser(
         "scan", help="list the slaves on a line (SII identity, ESI names)",
         description="Count the slaves on the line and read each one's identity (vendor, "
@@ -38,7 +39,7 @@ def slave_name(type_name: str | None, used: dict[str, int]) -> str:
     return f"{base}_{used[base]}"
 
 
-def topology_yaml(rows: list[dict], iface: str) -> str:
+def topology_yaml(rows: list[dict[str, Any]], iface: str) -> str:
     """The topology text for the slaves found (names and exact device selectors)."""
     lines = [f"# Written by 'ecatcfg scan --iface {iface}': the slaves found, in bus order.",
              "# Devices are VENDOR:PRODUCT:REVISION from each slave's SII EEPROM.",
@@ -75,7 +76,7 @@ def run(args: argparse.Namespace) -> int:
         found = scan(Transport(link))
 
     used: dict[str, int] = {}
-    rows = []
+    rows: list[dict[str, Any]] = []          # the JSON output's slaves
     for s in found:
         exact = other = None
         if lib is not None:
@@ -86,7 +87,7 @@ def run(args: argparse.Namespace) -> int:
                 other = max(same, key=lambda e: e.revision if e.revision is not None else -1)
         entry = exact or other
         note = None
-        if other is not None:
+        if lib is not None and other is not None:
             note = (f"revision 0x{s.revision:x} is not in the ESI files; they have "
                     + ", ".join(sorted({f"0x{e.revision:x}" for e in lib.entries
                                         if (e.vendor_id, e.product_code) ==

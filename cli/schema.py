@@ -7,7 +7,7 @@ import json
 import sys
 
 
-def add_parser(sub: argparse._SubParsersAction) -> None:
+def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser("schema", help="print a JSON Schema (topology)",
                        description="Print the JSON Schema of a file format, e.g. for editor "
                                    "completion of topology files (YAML language servers read "

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+from typing import Any
 
 EPILOG = ("INDEX:SUB is hexadecimal, '0x' optional: 0x1018:01, 0x6060:0, 1C12:0.  "
           "VALUE is encoded by --type (USINT, UINT, UDINT, SINT, INT, DINT, LINT, ULINT, REAL, "
@@ -12,7 +13,7 @@ EPILOG = ("INDEX:SUB is hexadecimal, '0x' optional: 0x1018:01, 0x6060:0, 1C12:0.
           "Exit 1 on an SDO abort (code and name on stderr), a refused state or no answer.")
 
 
-def add_parser(sub: argparse._SubParsersAction) -> None:
+def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser(
         "sdo", help="read or write one CoE object of one slave (SDO upload/download)",
         description="One SDO transfer with the slave at position --slave (0 = the first "
@@ -100,12 +101,12 @@ def run(args: argparse.Namespace) -> int:
                                        args.complete_access, timeout=args.timeout,
                                        info=info)
     where = f"0x{index:04X}:{sub:02X}"
-    out: dict = {"slave": args.slave, "station_address": info.station_address,
+    out: dict[str, Any] = {"slave": args.slave, "station_address": info.station_address,
                  "index": index, "subindex": sub, "complete_access": args.complete_access,
                  "action": args.action, "al_status_before": info.state_before,
                  "mailbox_configured": info.configured}
     decoded_error = None
-    if args.action == "read":
+    if data is None:                                    # a read
         out.update(size=len(result), hex=result.hex())
         if type_name:
             out["type"] = type_name
@@ -119,7 +120,7 @@ def run(args: argparse.Namespace) -> int:
         if decoded_error:
             out["error"] = decoded_error
         print(json.dumps(out, indent=2))
-    elif args.action == "read":
+    elif data is None:
         shown = " ".join(f"{b:02x}" for b in result) or "(no data)"
         print(f"{where} = {shown}  ({len(result)} byte{'s' if len(result) != 1 else ''})")
         if "value" in out:

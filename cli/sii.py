@@ -9,10 +9,14 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from typing import TextIO
+from collections.abc import Callable
+from typing import TYPE_CHECKING, TextIO
+
+if TYPE_CHECKING:
+    from ecatcfg.esi.sii import SiiImage
 
 
-def add_parser(sub: argparse._SubParsersAction) -> None:
+def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser("sii", help="build an SII (EEPROM) image from an ESI device, or "
                                    "decode one",
                        description="SII (slave EEPROM) images: build the image an ESI device "
@@ -49,7 +53,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     s.set_defaults(run=run)
 
 
-def _number(maximum: int):
+def _number(maximum: int) -> Callable[[str], int]:
     def parse(text: str) -> int:
         try:
             value = int(text, 0)
@@ -132,8 +136,8 @@ def _show(args: argparse.Namespace) -> int:
 
 # -- text -----------------------------------------------------------------------------------
 
-def render(img, name: str, out: TextIO) -> None:
-    """The text form of a decoded image (``img`` is an ``ecatcfg.esi.sii.SiiImage``)."""
+def render(img: SiiImage, name: str, out: TextIO) -> None:
+    """The text form of a decoded image."""
     from ecatcfg.esi import sii
 
     w = out.write
@@ -174,9 +178,9 @@ def render(img, name: str, out: TextIO) -> None:
               "\n")
     for label, pdos in (("TxPDO", img.txpdos), ("RxPDO", img.rxpdos)):
         for pdo in pdos:
-            sm = "no SM" if pdo.sm == sii.SM_UNASSIGNED else f"SM{pdo.sm}"
+            on = "no SM" if pdo.sm == sii.SM_UNASSIGNED else f"SM{pdo.sm}"
             flags = _bits(pdo.flags, sii.PDO_FLAG_NAMES)
-            w(f"{label} 0x{pdo.index:04X}  {sm}  {pdo.bit_length} bits  "
+            w(f"{label} 0x{pdo.index:04X}  {on}  {pdo.bit_length} bits  "
               f"{_s(pdo.name, pdo.name_index)}" + (f"  [{flags}]" if pdo.flags else "")
               + (f"  DC sync {pdo.dc_sync}" if pdo.dc_sync else "") + "\n")
             for e in pdo.entries:

@@ -4,9 +4,13 @@ from __future__ import annotations
 
 import argparse
 import sys
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from ecatcfg.runtime.slave import StateChange
 
 
-def add_parser(sub: argparse._SubParsersAction) -> None:
+def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser(
         "simulate", help="run a virtual EtherCAT segment on a network interface",
         description="Emulate a line of slaves from their ESI files and answer EtherCAT frames "
@@ -80,7 +84,7 @@ def run(args: argparse.Namespace) -> int:
               f"0x{dev.vendor.id or 0:08x} 0x{dev.product_code or 0:08x} "
               f"0x{dev.revision or 0:08x}  {mbx}")
 
-    def report(change) -> None:
+    def report(change: StateChange) -> None:
         flag = f" ERR 0x{change.code:04X}" if change.error else ""
         print(f"slave {change.position} ({change.name}): {change.state.name}{flag}",
               flush=True)

@@ -79,7 +79,8 @@ def compile_topology(loaded: LoadedTopology, library: Library) -> CompileResult:
         sl = lay.slaves[i]
         dc = dcs[i]
         init = initcmds.slave_init_cmds(
-            s, sl, dc, s.dc_mode.assign_activate if dc and s.dc_mode else 0, _bootstrap(s))
+            s, sl, dc, (s.dc_mode.assign_activate or 0) if dc and s.dc_mode else 0,
+            _bootstrap(s))
         slaves.append(SlavePlan(
             name=s.name, phys_addr=s.phys_addr, auto_inc_addr=(-s.position) & 0xFFFF,
             vendor_id=s.device.vendor.id or 0, product_code=s.device.product_code or 0,

@@ -65,15 +65,19 @@ class _SlaveCmds:
         self.phys = slave.phys_addr
         self.cmds: list[InitCmd] = []
 
-    def ap(self, transitions: list[T], comment: str, cmd: Cmd, ado: int, data: bytes,
-           **kw: object) -> None:
+    def ap(self, transitions: list[T], comment: str, cmd: Cmd, ado: int, data: bytes, *,
+           cnt: int | None = None, validate: Validate | None = None,
+           requires: str | None = None) -> None:
         self.cmds.append(InitCmd(transitions, comment, cmd, len(data), adp=self.auto, ado=ado,
-                                 data=data, retries=3, **kw))
+                                 data=data, cnt=cnt, retries=3, validate=validate,
+                                 requires=requires))
 
-    def fp(self, transitions: list[T], comment: str, cmd: Cmd, ado: int, data: bytes,
-           **kw: object) -> None:
+    def fp(self, transitions: list[T], comment: str, cmd: Cmd, ado: int, data: bytes, *,
+           cnt: int | None = None, validate: Validate | None = None,
+           requires: str | None = None) -> None:
         self.cmds.append(InitCmd(transitions, comment, cmd, len(data), adp=self.phys, ado=ado,
-                                 data=data, retries=3, **kw))
+                                 data=data, cnt=cnt, retries=3, validate=validate,
+                                 requires=requires))
 
 
 def _al(state: AlState, ack: bool) -> bytes:

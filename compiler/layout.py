@@ -83,9 +83,14 @@ class _Datagram:
         return (self.bits + 7) // 8
 
 
-def pd_bits(slave: ResolvedSlave) -> tuple[list[tuple[int, int]], list[tuple[int, int]]]:
+# ((SM, bits) of outputs, (SM, bits) of inputs) of one slave
+SlaveBits = tuple[list[tuple[int, int]], list[tuple[int, int]]]
+
+
+def pd_bits(slave: ResolvedSlave) -> SlaveBits:
     """((SM, bits) of outputs, (SM, bits) of inputs), SMs in number order."""
-    out, inp = [], []
+    out: list[tuple[int, int]] = []
+    inp: list[tuple[int, int]] = []
     for sm in sorted(slave.device.sms, key=lambda s: s.number):
         if sm.is_mailbox or sm.virtual or sm.type not in ("Outputs", "Inputs"):
             continue
@@ -218,7 +223,7 @@ def build(slaves: list[ResolvedSlave], layout: str, uses_dc: bool,
     return Layout(results, out_frames, offs, len(mailbox_state))
 
 
-def _wkc(d: _Datagram, sizes: list) -> int:
+def _wkc(d: _Datagram, sizes: list[SlaveBits]) -> int:
     """Expected working counter: LRW +2 per slave written, +1 per slave read; LWR +1 per
     slave with outputs; LRD +1 per slave with inputs (ETG.1000.4; IgH ``datagram_pair.c``,
     ``docs/protocol-notes.md`` §1)."""
@@ -235,7 +240,7 @@ def _wkc(d: _Datagram, sizes: list) -> int:
     return total
 
 
-def _map_region(result: SlaveLayout, slave: ResolvedSlave, size: tuple, d: _Datagram,
+def _map_region(result: SlaveLayout, slave: ResolvedSlave, size: SlaveBits, d: _Datagram,
                 r: _Region) -> None:
     out, inp = size
     directions = []

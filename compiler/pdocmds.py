@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import struct
 
-from ecatcfg.eni.plan import CoeInitCmd, PdoDesc
+from ecatcfg.eni.plan import CoeInitCmd, PdoDesc, PdoEntryDesc
 from ecatcfg.compiler.resolve import ResolvedSlave
 from ecatcfg.esc import SM_PDO_ASSIGN, Transition
 from ecatcfg.esi.coe import DictEntry, lookup
@@ -41,7 +41,7 @@ def _writable(dic: Dictionary | None, index: int) -> bool:
     return access is None or access.writable_in("PreOp")
 
 
-def _entry_word(e) -> bytes:
+def _entry_word(e: PdoEntryDesc) -> bytes:
     return struct.pack("<I", (e.index << 16) | (e.subindex << 8) | e.bit_len)
 
 

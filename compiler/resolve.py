@@ -12,12 +12,13 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from ecatcfg.eni.plan import CoeInitCmd, PdoDesc, PdoEntryDesc
-from ecatcfg.compiler.topology import LoadedTopology, Slave, TopologyError
+from ecatcfg.compiler.topology import LoadedTopology, Sdo, Slave, TopologyError
 from ecatcfg.errors import EcatcfgError
 from ecatcfg.esc import Transition
 from ecatcfg.esi import datatypes
 from ecatcfg.esi.coe import TRANSITION_STATE, DictEntry, device_dictionary, has_coe, lookup
 from ecatcfg.esi.library import Library, SelectorError
+from ecatcfg.esi.model import CoeInitCmd as EsiCoeInitCmd
 from ecatcfg.esi.model import DcOpMode, Device, Dictionary, Module, Pdo
 from ecatcfg.esi.slots import PluggedModule, module_dictionaries, plugged_module, with_modules
 from ecatcfg.record import replace
@@ -67,6 +68,9 @@ class ResolvedSlave:
             if offset and index in mod.objects and not mod.objects[index].depend_on_slot:
                 return mod, index
         return dic, index
+
+
+Where = tuple[str | int, ...]           # a place in the topology: ("slaves", 2, "sdos", 0)
 
 
 class _Errors:
@@ -214,8 +218,8 @@ def _choose_pdos(slave: ResolvedSlave, modules: list[PluggedModule], errors: _Er
     # ESI document order (the ENI lists PDOs, and EC-Engineer clears them, in that order).
     pdos = [_desc(p) for p in sorted(dev.rx_pdos + dev.tx_pdos, key=lambda p: p.source.line)]
     for plug in modules:
-        for p in plug.module.rx_pdos + plug.module.tx_pdos:
-            d = _desc(p, plug.pdo_offset, plug.index_offset)
+        for esi_pdo in plug.module.rx_pdos + plug.module.tx_pdos:
+            d = _desc(esi_pdo, plug.pdo_offset, plug.index_offset)
             slave.pdo_prefix[d.index] = f"Module {plug.slot} ({plug.module.name or plug.module.type_name})"
             pdos.append(d)
     slave.pdos = pdos
@@ -240,8 +244,8 @@ def _choose_pdos(slave: ResolvedSlave, modules: list[PluggedModule], errors: _Er
         seen: set[int] = set()
         ok = True
         for i, index in enumerate(chosen):
-            p = by_index.get(index)
-            if p is None:
+            pick = by_index.get(index)
+            if pick is None:
                 listed = ", ".join(f"0x{x:04X}" for x in sorted(by_index)[:16])
                 errors.add(f"slave {cfg.name!r}: {dev.type_name} has no "
                            f"{'RxPdo' if direction == 'rx' else 'TxPdo'} 0x{index:04X}"
@@ -250,7 +254,7 @@ def _choose_pdos(slave: ResolvedSlave, modules: list[PluggedModule], errors: _Er
             elif index in seen:
                 errors.add(f"slave {cfg.name!r}: PDO 0x{index:04X} is listed twice", *where, i)
                 ok = False
-            elif p.virtual:
+            elif pick.virtual:
                 errors.add(f"slave {cfg.name!r}: PDO 0x{index:04X} is virtual and cannot be "
                            "assigned", *where, i)
                 ok = False
@@ -346,7 +350,7 @@ def _apply_mappings(slave: ResolvedSlave, errors: _Errors) -> None:
 
 
 def _mapped_entry(slave: ResolvedSlave, pdo: PdoDesc, dic: Dictionary | None, obj: int,
-                  sub: int, bits: int, where: tuple, errors: _Errors) -> PdoEntryDesc | None:
+                  sub: int, bits: int, where: Where, errors: _Errors) -> PdoEntryDesc | None:
     if obj == 0:                                  # a gap (padding) of `bits` bits
         return PdoEntryDesc(0, 0, bits)
     if dic is None and slave.dictionary_for(obj)[0] is None:
@@ -355,7 +359,7 @@ def _mapped_entry(slave: ResolvedSlave, pdo: PdoDesc, dic: Dictionary | None, ob
         return None
     dic, local = slave.dictionary_for(obj)
     found = lookup(dic, local, sub) if dic is not None else None
-    if found is None:
+    if dic is None or found is None:
         errors.add(f"slave {slave.name!r}: object 0x{obj:04X} is not in the dictionary of "
                    f"{slave.device.type_name}", *where)
         return None
@@ -413,7 +417,7 @@ def _dc_mode(slave: ResolvedSlave, errors: _Errors) -> DcOpMode | None:
 
 # -- SDOs ---------------------------------------------------------------------------------
 
-def _coe_cmd(cmd, offset: int = 0) -> CoeInitCmd:
+def _coe_cmd(cmd: EsiCoeInitCmd, offset: int = 0) -> CoeInitCmd:
     index = (cmd.index or 0) + (offset if cmd.depend_on_slot else 0)
     transitions = [Transition(t) for t in cmd.transitions if t in Transition.__members__]
     return CoeInitCmd(transitions, cmd.comment or f"download 0x{index:04X}:{cmd.subindex or 0:02X}",
@@ -453,11 +457,13 @@ def _sdos(slave: ResolvedSlave, modules: list[PluggedModule], errors: _Errors) -
             complete_access=user.complete_access))
 
 
-def _sdo_data(slave: ResolvedSlave, dic: Dictionary | None, local: int, user, state: str,
-              where: tuple, errors: _Errors) -> bytes | None:
+def _sdo_data(slave: ResolvedSlave, dic: Dictionary | None, local: int, user: Sdo, state: str,
+              where: Where, errors: _Errors) -> bytes | None:
     """``local``: the object's index in ``dic`` (a module's own, for a slot object)."""
     if user.data is not None:
         return bytes.fromhex(user.data.replace(" ", ""))
+    value = user.value
+    assert value is not None                # Sdo's validator: one of value and data is given
     type_name, bit_size = user.type, None
     target = f"0x{user.index:04X}:{user.subindex:02X}"
     if dic is not None and dic.objects:
@@ -490,7 +496,7 @@ def _sdo_data(slave: ResolvedSlave, dic: Dictionary | None, local: int, user, st
                    f"in its ESI; give 'type' (e.g. UINT) or 'data' for {target}", *where)
         return None
     try:
-        return datatypes.encode(user.value, type_name, bit_size)
+        return datatypes.encode(value, type_name, bit_size)
     except datatypes.ValueTypeError as exc:
         errors.add(f"slave {slave.name!r}: {target}: {exc}", *where, "value")
         return None
@@ -499,7 +505,7 @@ def _sdo_data(slave: ResolvedSlave, dic: Dictionary | None, local: int, user, st
 def _sdo_comment(dic: Dictionary | None, local: int, index: int, subindex: int) -> str:
     """The object's name (and the subindex's) from the dictionary, as startup lists show it."""
     obj = dic.objects.get(local) if dic else None
-    if obj is None or not obj.name:
+    if dic is None or obj is None or not obj.name:
         return f"download 0x{index:04X}:{subindex:02X}"
     sub = _sub_name(dic, obj.type, subindex) if subindex else None
     return f"{obj.name}: {sub}" if sub else obj.name

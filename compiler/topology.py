@@ -70,27 +70,30 @@ def _xml_text(value: str) -> str:
     return value
 
 
-def _num(lo: int | None = None, hi: int | None = None) -> Any:
-    """An integer that may also be written "0x1A00", "#x1A00" or "26".  The JSON Schema
-    says so (and keeps the bounds): with the validator first, pydantic wrote ``type:
-    integer`` with non-standard ``ge``/``le`` keys, so editors flagged ``"0x00001111"``."""
+def _num(lo: int | None = None, hi: int | None = None) -> tuple[Any, ...]:
+    """The metadata of an integer that may also be written "0x1A00", "#x1A00" or "26", for
+    ``Annotated[int, *_num(lo, hi)]``.  The JSON Schema says so (and keeps the bounds): with
+    the validator first, pydantic wrote ``type: integer`` with non-standard ``ge``/``le``
+    keys, so editors flagged ``"0x00001111"``."""
     number: dict[str, Any] = {"type": "integer"}
     if lo is not None:
         number["minimum"] = lo
     if hi is not None:
         number["maximum"] = hi
     text = {"type": "string", "pattern": r"^\s*([+-]?[0-9]+|(0[xX]|#[xX])[0-9A-Fa-f]+)\s*$"}
-    return Annotated[int, Field(ge=lo, le=hi), BeforeValidator(_number),
-                     WithJsonSchema({"anyOf": [number, text]})]
+    return (Field(ge=lo, le=hi), BeforeValidator(_number),
+            WithJsonSchema({"anyOf": [number, text]}))
 
 
+# Type aliases (``Annotated[int, ...]`` is an int to a type checker, a validated number to
+# pydantic).
 XmlText = Annotated[str, AfterValidator(_xml_text)]
-Index = _num(0, 0xFFFF)
-SubIndex = _num(0, 0xFF)
-Address = _num(1, 0xFFFF)
-CycleTime = _num(1, 10_000_000)
-SlotNumber = _num(1)
-ModuleIdent = _num(0, 0xFFFFFFFF)
+Index = Annotated[int, *_num(0, 0xFFFF)]
+SubIndex = Annotated[int, *_num(0, 0xFF)]
+Address = Annotated[int, *_num(1, 0xFFFF)]
+CycleTime = Annotated[int, *_num(1, 10_000_000)]
+SlotNumber = Annotated[int, *_num(1)]
+ModuleIdent = Annotated[int, *_num(0, 0xFFFFFFFF)]
 
 
 class _Model(BaseModel):
@@ -100,11 +103,11 @@ class _Model(BaseModel):
 class Master(_Model):
     """The master and its cycle."""
 
-    name: XmlText = Field("ecatcfg", min_length=1, description="Master name in the ENI")
-    cycle_time_us: CycleTime = Field(1000, description="Bus cycle in microseconds "
+    name: XmlText = Field(default="ecatcfg", min_length=1, description="Master name in the ENI")
+    cycle_time_us: CycleTime = Field(default=1000, description="Bus cycle in microseconds "
                                                        "(DC SYNC0 factor 1)")
     layout: Literal["lrw", "lrd_lwr"] = Field(
-        "lrw", description="lrw: one LRW per frame, outputs and inputs of a slave overlap "
+        default="lrw", description="lrw: one LRW per frame, outputs and inputs of a slave overlap "
                            "(EC-Engineer style); lrd_lwr: separate LWR and LRD windows "
                            "(TwinCAT style)")
 
@@ -115,10 +118,14 @@ class Sdo(_Model):
     index: Index
     subindex: SubIndex = 0
     value: int | float | str | None = Field(
-        None, description="Value encoded by the object's data type (integers, REAL, STRING)")
-    data: str | None = Field(None, description="Raw bytes in hex (wire order) instead of value")
-    type: str | None = Field(None, description="Data type when the ESI has no dictionary")
-    transition: Transition = Field(Transition.PS, description="When to write it (IP, PS, SO, ...)")
+        default=None,
+        description="Value encoded by the object's data type (integers, REAL, STRING)")
+    data: str | None = Field(default=None,
+                             description="Raw bytes in hex (wire order) instead of value")
+    type: str | None = Field(default=None,
+                             description="Data type when the ESI has no dictionary")
+    transition: Transition = Field(default=Transition.PS,
+                                   description="When to write it (IP, PS, SO, ...)")
     complete_access: bool = False
     comment: XmlText | None = None
 
@@ -144,7 +151,7 @@ class Sdo(_Model):
         return self
 
 
-BitLen = _num(1, 0xFF)
+BitLen = Annotated[int, *_num(1, 0xFF)]
 MappingEntry = tuple[Index, SubIndex, BitLen]
 
 
@@ -155,18 +162,22 @@ class Slave(_Model):
                           description="Unique name; prefixes its process variables")
     device: str = Field(min_length=1,
                         description='ESI Type name or "VENDOR:PRODUCT[:REVISION]"')
-    station_address: Address | None = Field(None, description="Default 1001, 1002, ...")
+    station_address: Address | None = Field(default=None,
+                                            description="Default 1001, 1002, ...")
     alias: Address | None = Field(
-        None, description="Expected station alias (register 0x0012), checked in INIT->PREOP")
-    rx_pdos: list[Index] | None = Field(None, description="RxPDOs to assign (default: ESI)")
-    tx_pdos: list[Index] | None = Field(None, description="TxPDOs to assign (default: ESI)")
+        default=None,
+        description="Expected station alias (register 0x0012), checked in INIT->PREOP")
+    rx_pdos: list[Index] | None = Field(default=None,
+                                        description="RxPDOs to assign (default: ESI)")
+    tx_pdos: list[Index] | None = Field(default=None,
+                                        description="TxPDOs to assign (default: ESI)")
     # At least one entry: an empty PDO is left out of rx_pdos/tx_pdos, not assigned.
     pdo_mapping: dict[Index, Annotated[list[MappingEntry], Field(min_length=1)]] = Field(
         default_factory=dict, description="PDO index -> [[index, subindex, bit length], ...]")
     modules: dict[SlotNumber, ModuleIdent] = Field(
         default_factory=dict, description="Slot number (from 1) -> module ident")
     sdos: list[Sdo] = Field(default_factory=list)
-    dc: str | None = Field(None, description="DC OpMode name from the ESI")
+    dc: str | None = Field(default=None, description="DC OpMode name from the ESI")
 
 
 class Topology(_Model):
@@ -306,8 +317,9 @@ def _prescan(data: str, shown: str) -> None:
         if events > MAX_NODES or depth > MAX_DEPTH:
             what = (f"more than {MAX_NODES} values" if events > MAX_NODES
                     else f"values nested more than {MAX_DEPTH} levels deep")
+            mark = event.start_mark                 # always set by yaml's own parsers
             raise EcatcfgError(f"{what}; this is not a topology", shown,
-                               event.start_mark.line + 1)
+                               mark.line + 1 if mark is not None else None)
 
 
 def _problem(err: Any, shown: str, lines: dict[Path_, int]) -> EcatcfgError:

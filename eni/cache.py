@@ -62,9 +62,9 @@ class _PlanUnpickler(pickle.Unpickler):
     """Builds plan objects and nothing else: a pickle naming any other class is refused."""
 
     def find_class(self, module: str, name: str) -> type:
-        if module == plan_model.__name__ and isinstance(getattr(plan_model, name, None), type) \
-                and hasattr(getattr(plan_model, name), "__record_fields__"):
-            return getattr(plan_model, name)
+        found = getattr(plan_model, name, None) if module == plan_model.__name__ else None
+        if isinstance(found, type) and hasattr(found, "__record_fields__"):
+            return found
         if (module, name) == (Transition.__module__, "Transition"):
             return Transition
         raise pickle.UnpicklingError(f"{module}.{name} is not part of a plan")

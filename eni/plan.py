@@ -12,6 +12,8 @@ values), transitions are :class:`ecatcfg.esc.Transition`.
 
 from __future__ import annotations
 
+from typing import Literal
+
 from ecatcfg.esc import Transition
 from ecatcfg.record import field, record
 
@@ -84,7 +86,7 @@ class PdoEntryDesc:
 class PdoDesc:
     """``ProcessData/RxPdo`` or ``TxPdo``: a PDO as configured (``sm`` set when assigned)."""
 
-    direction: str                            # "rx" (outputs) / "tx" (inputs)
+    direction: Literal["rx", "tx"]            # "rx" (outputs) / "tx" (inputs)
     index: int
     name: str
     entries: list[PdoEntryDesc] = field(default_factory=list)

@@ -10,7 +10,9 @@ lacks or misspells is an :class:`EniReadError` naming the file and the element's
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from pathlib import Path
+from typing import Protocol
 
 from lxml import etree
 
@@ -42,6 +44,18 @@ from ecatcfg.esi import xmlsafe
 from ecatcfg.esi.values import parse_bool, parse_hex_bytes, parse_int
 
 Element = etree._Element
+
+
+class _Node(Protocol):
+    """What the lookups below use: an element, or its :class:`_Children` view."""
+
+    @property
+    def tag(self) -> object: ...
+    @property
+    def sourceline(self) -> int | None: ...
+    def find(self, tag: str, /) -> Element | None: ...
+    def iterchildren(self, tag: str, /) -> Iterator[Element]: ...
+    def get(self, name: str, /) -> str | None: ...
 
 _ROOTS = ("EtherCATConfig", "EncryptedEtherCATConfig")
 _DC_VALUES = ("ReferenceClock", "CycleTime0", "CycleTime1", "ShiftTime")
@@ -95,7 +109,7 @@ class _Children:
 
     def __init__(self, el: Element) -> None:
         self.el, self.tag, self.sourceline = el, el.tag, el.sourceline
-        first: dict = {}
+        first: dict[object, Element] = {}
         for child in el:
             first.setdefault(child.tag, child)
         self._first = first
@@ -103,7 +117,7 @@ class _Children:
     def find(self, tag: str) -> Element | None:
         return self._first.get(tag)
 
-    def iterchildren(self, tag: str):
+    def iterchildren(self, tag: str) -> Iterator[Element]:
         return self.el.iterchildren(tag)
 
     def get(self, name: str) -> str | None:
@@ -116,7 +130,7 @@ class _Reader:
     def __init__(self, file: str) -> None:
         self.file = file
 
-    def error(self, message: str, el: Element) -> EniReadError:
+    def error(self, message: str, el: _Node) -> EniReadError:
         return EniReadError(message, self.file, el.sourceline)
 
     # --- values ---------------------------------------------------------------------------
@@ -128,81 +142,81 @@ class _Reader:
             return el.text or ""
         return "".join(el.itertext())
 
-    def child(self, parent: Element, tag: str) -> Element:
+    def child(self, parent: _Node, tag: str) -> Element:
         el = parent.find(tag)
         if el is None:
-            raise self.error(f"<{parent.tag}> has no <{tag}>", parent)
+            raise self.error(f"<{parent.tag!s}> has no <{tag}>", parent)
         return el
 
     def number(self, el: Element) -> int:
         text = self.text(el)
         value = _parse_int(text)
         if value is None:
-            raise self.error(f"<{el.tag}> is not a number: {text.strip()!r}", el)
+            raise self.error(f"<{el.tag!s}> is not a number: {text.strip()!r}", el)
         return value
 
-    def req_int(self, parent: Element, tag: str) -> int:
+    def req_int(self, parent: _Node, tag: str) -> int:
         return self.number(self.child(parent, tag))
 
-    def opt_int(self, parent: Element, tag: str) -> int | None:
+    def opt_int(self, parent: _Node, tag: str) -> int | None:
         el = parent.find(tag)
         return None if el is None else self.number(el)
 
-    def int_or(self, parent: Element, tag: str, default: int) -> int:
+    def int_or(self, parent: _Node, tag: str, default: int) -> int:
         value = self.opt_int(parent, tag)
         return default if value is None else value
 
-    def uint32(self, parent: Element, tag: str) -> int:
+    def uint32(self, parent: _Node, tag: str) -> int:
         """A uint32 the schema types xs:int: negative values are its signed spelling."""
         return self.req_int(parent, tag) & 0xFFFFFFFF
 
-    def attr_int(self, el: Element, name: str) -> int | None:
+    def attr_int(self, el: _Node, name: str) -> int | None:
         text = el.get(name)
         if text is None:
             return None
         value = _parse_int(text)
         if value is None:
-            raise self.error(f"attribute {name} of <{el.tag}> is not a number: {text!r}", el)
+            raise self.error(f"attribute {name} of <{el.tag!s}> is not a number: {text!r}", el)
         return value
 
     def boolean(self, el: Element) -> bool:
         value = _parse_bool(self.text(el))
         if value is None:
-            raise self.error(f"<{el.tag}> is not a boolean: {self.text(el).strip()!r}", el)
+            raise self.error(f"<{el.tag!s}> is not a boolean: {self.text(el).strip()!r}", el)
         return value
 
-    def opt_bool(self, parent: Element, tag: str) -> bool | None:
+    def opt_bool(self, parent: _Node, tag: str) -> bool | None:
         el = parent.find(tag)
         return None if el is None else self.boolean(el)
 
-    def attr_bool(self, el: Element, name: str) -> bool | None:
+    def attr_bool(self, el: _Node, name: str) -> bool | None:
         text = el.get(name)
         if text is None:
             return None
         value = _parse_bool(text)
         if value is None:
-            raise self.error(f"attribute {name} of <{el.tag}> is not a boolean: {text!r}", el)
+            raise self.error(f"attribute {name} of <{el.tag!s}> is not a boolean: {text!r}", el)
         return value
 
     def hex_bytes(self, el: Element) -> bytes:
         try:
             return parse_hex_bytes(self.text(el))
         except ValueError as exc:
-            raise self.error(f"<{el.tag}>: {exc}", el) from None
+            raise self.error(f"<{el.tag!s}>: {exc}", el) from None
 
-    def opt_hex(self, parent: Element, tag: str) -> bytes | None:
+    def opt_hex(self, parent: _Node, tag: str) -> bytes | None:
         el = parent.find(tag)
         return None if el is None else self.hex_bytes(el)
 
-    def hex_or(self, parent: Element, tag: str, default: bytes) -> bytes:
+    def hex_or(self, parent: _Node, tag: str, default: bytes) -> bytes:
         value = self.opt_hex(parent, tag)
         return default if value is None else value
 
-    def opt_text(self, parent: Element, tag: str) -> str | None:
+    def opt_text(self, parent: _Node, tag: str) -> str | None:
         el = parent.find(tag)
         return None if el is None else self.text(el)
 
-    def transitions(self, parent: Element) -> list[Transition]:
+    def transitions(self, parent: _Node) -> list[Transition]:
         result = []
         for el in parent.iterchildren("Transition"):
             name = self.text(el).strip()
@@ -216,7 +230,7 @@ class _Reader:
 
     def network(self, root: Element) -> NetworkPlan:
         if root.tag not in _ROOTS:
-            raise self.error(f"not an ENI file: the root element is <{root.tag}>, "
+            raise self.error(f"not an ENI file: the root element is <{root.tag!s}>, "
                              "expected <EtherCATConfig>", root)
         config = self.child(root, "Config")
         image = config.find("ProcessImage")
@@ -230,28 +244,28 @@ class _Reader:
 
     # --- commands -------------------------------------------------------------------------
 
-    def address(self, el: Element) -> tuple[int | None, int | None, int | None]:
+    def address(self, el: _Node) -> tuple[int | None, int | None, int | None]:
         """``(adp, ado, addr)``: ``(Adp?, Ado) | Addr``."""
         adp, ado, addr = (self.opt_int(el, "Adp"), self.opt_int(el, "Ado"),
                           self.opt_int(el, "Addr"))
         if addr is not None:
             addr &= 0xFFFFFFFF
         if ado is None and addr is None:
-            raise self.error(f"<{el.tag}> has neither <Ado> nor <Addr>", el)
+            raise self.error(f"<{el.tag!s}> has neither <Ado> nor <Addr>", el)
         return adp, ado, addr
 
-    def payload(self, el: Element) -> tuple[bytes | None, int]:
+    def payload(self, el: _Node) -> tuple[bytes | None, int]:
         """``(data, length)``: ``Data``, or ``DataLength`` zero bytes (eni-exports §2)."""
         data = self.opt_hex(el, "Data")
         if data is not None:
             return data, len(data)
         length = self.opt_int(el, "DataLength")
         if length is None:
-            raise self.error(f"<{el.tag}> has neither <Data> nor <DataLength>", el)
+            raise self.error(f"<{el.tag!s}> has neither <Data> nor <DataLength>", el)
         return None, length
 
-    def init_cmd(self, el: Element) -> InitCmd:
-        el = _Children(el)
+    def init_cmd(self, element: Element) -> InitCmd:
+        el = _Children(element)
         adp, ado, addr = self.address(el)
         data, length = self.payload(el)
         validate = el.find("Validate")
@@ -392,8 +406,8 @@ class _Reader:
             return []
         return [self.coe_init_cmd(c) for c in cmds.iterchildren("InitCmd")]
 
-    def coe_init_cmd(self, el: Element) -> CoeInitCmd:
-        el = _Children(el)
+    def coe_init_cmd(self, element: Element) -> CoeInitCmd:
+        el = _Children(element)
         return CoeInitCmd(
             transitions=self.transitions(el),
             comment=self.opt_text(el, "Comment") or "",
@@ -443,8 +457,8 @@ class _Reader:
         return Frame(cmds=[self.cyclic_cmd(c) for c in el.iterchildren("Cmd")],
                      comment=self.opt_text(el, "Comment"))
 
-    def cyclic_cmd(self, el: Element) -> CyclicCmd:
-        el = _Children(el)
+    def cyclic_cmd(self, element: Element) -> CyclicCmd:
+        el = _Children(element)
         adp, ado, addr = self.address(el)
         data, length = self.payload(el)
         return CyclicCmd(

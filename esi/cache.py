@@ -52,7 +52,8 @@ class IndexCache:
     def known_digest(self, path: Path, st: os.stat_result) -> str | None:
         """The content digest recorded for ``path`` if the file is provably unchanged."""
         rec = self._stats().get(str(path))
-        if isinstance(rec, list) and len(rec) == 6 and rec[:5] == stat_key(st):
+        if isinstance(rec, list) and len(rec) == 6 and rec[:5] == stat_key(st) \
+                and isinstance(rec[5], str):
             return rec[5]
         return None
 

@@ -10,6 +10,7 @@ their Entry elements.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
@@ -95,7 +96,7 @@ def summarize(tree: etree._ElementTree, file: str) -> FileSummary:
         if id_el is not None:
             vendor_id = number(id_el.text, id_el, "Vendor/Id")
         vendor_name = _english(vendor_el.findall("Name"))
-    summary = FileSummary(root.tag, vendor_id, vendor_name, errors=errors)
+    summary = FileSummary(str(root.tag), vendor_id, vendor_name, errors=errors)
     summary.info_references = [(el.text or "").strip() for el in root.iterfind("InfoReference")]
     if root.tag == "EtherCATModule":
         summary.modules = len(root.findall("Modules/Module"))
@@ -106,7 +107,8 @@ def summarize(tree: etree._ElementTree, file: str) -> FileSummary:
     return summary
 
 
-def _device(dev: etree._Element, ordinal: int, number) -> dict[str, Any]:
+def _device(dev: etree._Element, ordinal: int,
+            number: Callable[[str | None, etree._Element, str], int | None]) -> dict[str, Any]:
     d: dict[str, Any] = {
         "line": dev.sourceline or 0, "ordinal": ordinal, "product_code": None,
         "revision": None, "type": "", "name": "", "group": "", "rx_pdos": 0, "tx_pdos": 0,

@@ -104,25 +104,23 @@ class Library:
             st = path.stat()
         except OSError as exc:
             raise xmlsafe.XmlError(f"cannot read: {exc.strerror}", shown) from None
-        digest = cache.known_digest(path, st) if cache else None
-        if digest is not None:
-            summary = cache.get(digest)
+        if cache is not None:
+            known = cache.known_digest(path, st)
+            summary = cache.get(known) if known is not None else None
             if summary is not None:
                 return summary
         try:
             data = path.read_bytes()
         except OSError as exc:
             raise xmlsafe.XmlError(f"cannot read: {exc.strerror}", shown) from None
-        summary = None
-        if cache is not None:
-            digest = content_digest(data)
-            summary = cache.get(digest)
+        if cache is None:
+            return summarize(xmlsafe.parse_bytes(data, shown), shown)
+        digest = content_digest(data)
+        summary = cache.get(digest)
         if summary is None:
             summary = summarize(xmlsafe.parse_bytes(data, shown), shown)
-            if cache is not None:
-                cache.put(digest, summary)
-        if cache is not None:
-            cache.remember(path, st, digest)
+            cache.put(digest, summary)
+        cache.remember(path, st, digest)
         return summary
 
     def _entries(self) -> list[DeviceEntry]:

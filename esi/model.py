@@ -37,6 +37,10 @@ class Source(NamedTuple):
         return f"{self.file}:{self.line}"
 
 
+Severity = Literal["error", "warning"]
+ProblemKind = Literal["number", "data", "flag", "text"]
+
+
 @dataclass(slots=True)
 class ReadProblem:
     """Something the reader could not take as written; the value is left as ``None``.
@@ -47,11 +51,11 @@ class ReadProblem:
 
     source: Source
     message: str
-    severity: Literal["error", "warning"] = "warning"
+    severity: Severity = "warning"
     column: int | None = None
     # What could not be read: "number" (hex/decimal), "data" (hexBinary), "flag" (boolean),
     # "text" (an enumerated word such as an AL state); lint maps them to its rules.
-    kind: Literal["number", "data", "flag", "text"] = "number"
+    kind: ProblemKind = "number"
 
 
 @dataclass(slots=True)

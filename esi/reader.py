@@ -21,7 +21,7 @@ from ecatcfg.esi.model import (
     Access, ArrayInfo, CoeInitCmd, CoeSettings, DataType, DataTypeSubItem, Dc, DcOpMode,
     Device, DeviceInfo, DictObject, Dictionary, Eeprom, EsiFile, Fmmu, Group, IgnoredElement,
     Mailbox, MAILBOX_PROTOCOLS, Module, ObjectFlags, ObjectInfo, Pdo, PdoEntry, Profile,
-    ReadProblem, Slot, Slots, Source, STATES, SyncManager, Vendor,
+    ProblemKind, ReadProblem, Severity, Slot, Slots, Source, STATES, SyncManager, Vendor,
 )
 from ecatcfg.esi.values import parse_bool, parse_hex_bytes, parse_int
 
@@ -100,7 +100,7 @@ def read_tree(tree: etree._ElementTree, file: str) -> EsiFile:
 
 def check_root(root: etree._Element, file: str) -> None:
     if root.tag not in ROOTS:
-        raise EsiReadError(f"root element is <{root.tag}>, expected <EtherCATInfo> or "
+        raise EsiReadError(f"root element is <{root.tag!s}>, expected <EtherCATInfo> or "
                            "<EtherCATModule>: not an ESI file", file, root.sourceline)
 
 
@@ -124,12 +124,12 @@ class _Reader:
         return _new_source(Source, (self.file, el.sourceline or 0))
 
     def _problem(self, el: etree._Element, what: str, exc: ValueError,
-                 severity: str, kind: str = "number") -> None:
+                 severity: Severity, kind: ProblemKind = "number") -> None:
         self.problems.append(ReadProblem(self.src(el), f"{what}: {exc}", severity, kind=kind))
 
     # int_/bool_/hex_ are the hot path of a full read (~150k calls on the corpus): kept flat.
     def int_(self, raw: str | None, el: etree._Element, what: str,
-             severity: str = "warning") -> int | None:
+             severity: Severity = "warning") -> int | None:
         if raw is None:
             return None
         try:
@@ -159,8 +159,9 @@ class _Reader:
 
     def unknown(self, ch: etree._Element, context: str, parent: etree._Element) -> None:
         """Record ``ch`` unless ETG.2000 allows it here (or it is a comment/PI)."""
-        if ch.tag.__class__ is str and ch.tag not in _SKIPPED[context]:
-            self.ignored.append(IgnoredElement(self.src(ch), ch.tag, parent.tag))
+        tag = ch.tag
+        if isinstance(tag, str) and tag not in _SKIPPED[context]:
+            self.ignored.append(IgnoredElement(self.src(ch), tag, str(parent.tag)))
 
     @staticmethod
     def add_name(names: dict[int, str], el: etree._Element) -> None:
@@ -177,7 +178,7 @@ class _Reader:
 
     def read_root(self, root: etree._Element) -> EsiFile:
         vendor = Vendor(None, {}, self.src(root))
-        esi = EsiFile(self.file, root.tag, vendor, version=root.get("Version"))
+        esi = EsiFile(self.file, str(root.tag), vendor, version=root.get("Version"))
         for ch in root:
             tag = ch.tag
             if tag == "Vendor":
@@ -286,14 +287,16 @@ class _Reader:
             tag = ch.tag
             if tag == "StateMachine":
                 for t in ch.iterfind("Timeout/*"):
-                    attr = _STATE_TIMEOUTS.get(t.tag)
+                    name = str(t.tag)
+                    attr = _STATE_TIMEOUTS.get(name)
                     if attr:
-                        setattr(info, attr, self.int_(t.text, t, f"StateMachine/Timeout/{t.tag}"))
+                        setattr(info, attr, self.int_(t.text, t, f"StateMachine/Timeout/{name}"))
             elif tag == "Mailbox":
                 for t in ch.iterfind("Timeout/*"):
-                    attr = _MAILBOX_TIMEOUTS.get(t.tag)
+                    name = str(t.tag)
+                    attr = _MAILBOX_TIMEOUTS.get(name)
                     if attr:
-                        setattr(info, attr, self.int_(t.text, t, f"Mailbox/Timeout/{t.tag}"))
+                        setattr(info, attr, self.int_(t.text, t, f"Mailbox/Timeout/{name}"))
             elif tag == "IdentificationAdo":
                 info.identification_ado = self.int_(ch.text, ch, "Info/IdentificationAdo")
             else:
@@ -338,7 +341,7 @@ class _Reader:
 
     def pdo(self, el: etree._Element) -> Pdo:
         g = el.get
-        tag = el.tag
+        tag = str(el.tag)
         pdo = Pdo("rx" if tag == "RxPdo" else "tx", None, {}, self.src(el),
                   sm=self.int_(g("Sm"), el, f"{tag}/@Sm"),
                   su=self.int_(g("Su"), el, f"{tag}/@Su"),

@@ -19,7 +19,9 @@ the SII are 16-bit words: byte offset = 2 x word.
 from __future__ import annotations
 
 import struct
+from collections.abc import Callable, Iterator
 from dataclasses import asdict, dataclass, field
+from typing import Any
 
 from ecatcfg.errors import EcatcfgError
 from ecatcfg.esc import (MAILBOX_PROTOCOL_BITS, SII_BOOTSTRAP_MAILBOX, SII_FIRST_CATEGORY,
@@ -362,7 +364,8 @@ def decode(data: bytes, *, source: str | None = None) -> SiiImage:
     return img
 
 
-def _walk(data: bytes, img: SiiImage, source: str | None):
+def _walk(data: bytes, img: SiiImage,
+          source: str | None) -> Iterator[tuple[SiiCategory, bytes]]:
     """Yield (category, data) from byte 0x80 to the END marker or the end of the data."""
     offset = HEADER_SIZE
     while offset < len(data):
@@ -444,7 +447,8 @@ def _category(img: SiiImage, cat: SiiCategory, body: bytes, source: str | None) 
                                     img.string(desc)))
 
 
-def _pdos(img: SiiImage, body: bytes, cat: SiiCategory, bad) -> list[SiiPdo]:
+def _pdos(img: SiiImage, body: bytes, cat: SiiCategory,
+          bad: Callable[[str], SiiError]) -> list[SiiPdo]:
     """One or more PDOs back to back (Beckhoff) or one per category (KickCAT)."""
     pdos, pos = [], 0
     while len(body) - pos >= PDO_HEADER.size:       # IgH: loop while a header fits
@@ -655,7 +659,7 @@ def _general(device: Device, group: int, order: int, name: int) -> bytes:
     mbx = device.mailbox
     protocols = set(mbx.protocols) if mbx is not None else set()
     coe = 0
-    if "CoE" in protocols:
+    if mbx is not None and "CoE" in protocols:
         coe = COE_SDO
         settings = mbx.coe
         if settings is not None:
@@ -722,12 +726,14 @@ def coe_type(name: str | None) -> int:
 def _pdo_category(pdos: list[Pdo], strings: _Strings, device: Device, names: int) -> bytes:
     out = bytearray()
     for pdo in assigned_pdos(pdos):
+        index, sm = pdo.index, pdo.sm
+        assert index is not None and sm is not None        # what assigned_pdos keeps
         if len(pdo.entries) > 0xFF:
             raise SiiError(f"device {device.type_name!r}: PDO 0x{pdo.index:04X} has "
                            f"{len(pdo.entries)} entries; the SII holds at most 255",
                            file=pdo.source.file, line=pdo.source.line)
         flags = ((PDO_MANDATORY if pdo.mandatory else 0) | (PDO_FIXED if pdo.fixed else 0))
-        out += PDO_HEADER.pack(pdo.index & 0xFFFF, len(pdo.entries), pdo.sm & 0xFF, 0,
+        out += PDO_HEADER.pack(index & 0xFFFF, len(pdo.entries), sm & 0xFF, 0,
                                strings.add(pdo.name) if names > NAMES_NONE else 0, flags)
         for e in pdo.entries:
             bits = e.bit_len or 0
@@ -778,7 +784,7 @@ def _i16(value: int | None) -> int:
 
 # -- JSON -----------------------------------------------------------------------------------
 
-def to_json(img: SiiImage) -> dict:
+def to_json(img: SiiImage) -> dict[str, Any]:
     """The decoded image as plain JSON types (``sii show --format json``); numbers stay
     numbers, category data is hex text."""
     out = asdict(img)

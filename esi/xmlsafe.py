@@ -9,10 +9,14 @@ from __future__ import annotations
 
 import re
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from lxml import etree
 
 from ecatcfg.errors import EcatcfgError
+
+if TYPE_CHECKING:                   # the opaque result of resolve_*(), named only in the stubs
+    from lxml.etree._docloader import _InputDocument
 
 
 class XmlError(EcatcfgError):
@@ -24,7 +28,8 @@ class _RefuseExternal(etree.Resolver):
     with an empty document: libxml2 asks even with ``load_dtd=False``, and would otherwise
     open the named local file."""
 
-    def resolve(self, url, public_id, context):
+    def resolve(self, system_url: str | None, public_id: str | None,
+                context: object) -> _InputDocument:
         return self.resolve_string("", context)
 
 

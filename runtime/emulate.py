@@ -7,14 +7,20 @@ object dictionary with an SDO server (``runtime/objects.py``, ``runtime/sdo_serv
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING
 
 from ecatcfg.esc import MIN_MAILBOX_SIZE, MODULE_IDENT_LIST, is_pdo_object
 from ecatcfg.esi import sii
 from ecatcfg.esi.coe import has_coe
-from ecatcfg.esi.model import Device, Pdo, PdoEntry
+from ecatcfg.eni.plan import NetworkPlan, PdoDesc, SlavePlan
+from ecatcfg.esi.model import Device, Module, Pdo, PdoEntry, Slots
 from ecatcfg.esi.slots import plugged_module, with_modules
 from ecatcfg.runtime.segment import Faults, VirtualSegment
 from ecatcfg.runtime.slave import EmulatedSlave
+
+if TYPE_CHECKING:
+    from ecatcfg.esi.library import Library
+    from ecatcfg.runtime.objects import ObjectDictionary
 
 
 @dataclass(frozen=True, slots=True)
@@ -53,7 +59,7 @@ def emulated_slave(spec: SlaveSpec) -> EmulatedSlave:
     return EmulatedSlave(dev, image, name=spec.name, od=od, sdo_server=server)
 
 
-def _add_written_objects(od, writes: list[tuple[int, int, bytes]]) -> None:
+def _add_written_objects(od: ObjectDictionary, writes: list[tuple[int, int, bytes]]) -> None:
     """Objects that startup commands write but the dictionary does not describe: the ESI's
     own CoE InitCmds (Weidmueller UR20-FBC writes 0xF810:01, lint ESI301; the vendor's
     configurator writes it, so the real device has it) and ``SlaveSpec.extra_writes``.
@@ -79,7 +85,7 @@ def segment(specs: list[SlaveSpec], faults: Faults | None = None) -> VirtualSegm
     return VirtualSegment([emulated_slave(s) for s in specs], faults)
 
 
-def specs_from_eni(plan, library, shown: str) -> list[SlaveSpec]:
+def specs_from_eni(plan: NetworkPlan, library: Library, shown: str) -> list[SlaveSpec]:
     """The slaves an ENI describes (identity and order); their behaviour comes from the
     ESI devices with exactly that vendor, product and revision.  A modular device gets the
     modules of the ENI's module ident list (CoE 0xF030, written in PREOP->SAFEOP) and the
@@ -97,7 +103,7 @@ def specs_from_eni(plan, library, shown: str) -> list[SlaveSpec]:
             continue
         extra: tuple[tuple[int, int, bytes], ...] = ()
         if device.slots is not None:
-            device, known = _eni_modules(device, s, library.modules_for(
+            device, known = _eni_modules(device, device.slots, s, library.modules_for(
                 library.find(selector).entry))
             if not known and s.mailbox is not None:
                 # Modules the ENI does not name: accept the objects its startup SDOs write.
@@ -111,7 +117,8 @@ def specs_from_eni(plan, library, shown: str) -> list[SlaveSpec]:
 
 # -- modular devices --------------------------------------------------------------------------
 
-def _eni_modules(device: Device, slave, library_modules) -> tuple[Device, bool]:
+def _eni_modules(device: Device, slots: Slots, slave: SlavePlan,
+                 library_modules: dict[int, Module]) -> tuple[Device, bool]:
     """A modular device as an ENI configures it: the modules named by its 0xF030 InitCmds
     (one subindex per slot, or the whole list with CompleteAccess) bring their dictionaries;
     the PDOs are the ENI's."""
@@ -128,16 +135,17 @@ def _eni_modules(device: Device, slave, library_modules) -> tuple[Device, bool]:
             idents[cmd.subindex] = int.from_bytes(cmd.data[:4], "little")
     plugged = [plugged_module(device, n, library_modules[ident])
                for n, ident in sorted(idents.items())
-               if 1 <= n <= len(device.slots.slots) and ident in library_modules]
+               if 1 <= n <= len(slots.slots) and ident in library_modules]
     device = with_modules(device, plugged)
     if slave.process_data is not None and slave.process_data.pdos:
         device = _with_eni_pdos(device, slave.process_data.pdos)
     return device, bool(plugged)
 
 
-def _with_eni_pdos(device: Device, pdos) -> Device:
+def _with_eni_pdos(device: Device, pdos: list[PdoDesc]) -> Device:
     """The ENI's PDO list as the device's own (module PDOs included)."""
-    rx, tx = [], []
+    rx: list[Pdo] = []
+    tx: list[Pdo] = []
     for p in pdos:
         entries = [PdoEntry(e.index, e.subindex, e.bit_len, e.data_type, {1033: e.name},
                             device.source) for e in p.entries]

@@ -28,7 +28,7 @@ import struct
 import threading
 import time
 from collections import deque
-from typing import Protocol, runtime_checkable
+from typing import Protocol, Self, runtime_checkable
 
 from ..errors import EcatcfgError, UsageError
 from ..esc import ETH_HEADER_SIZE, ETHERTYPE, MIN_FRAME
@@ -83,11 +83,14 @@ class _Base:
 
     __slots__ = ()
 
-    def __enter__(self):
+    def __enter__(self) -> Self:
         return self
 
-    def __exit__(self, *exc) -> None:
-        self.close()  # type: ignore[attr-defined]
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def close(self) -> None:
+        raise NotImplementedError           # each link closes its own way
 
 
 # --------------------------------------------------------------------------- raw sockets
@@ -207,7 +210,7 @@ class RawLink(_Base):
             poller = select.poll()
             poller.register(self._fd, select.POLLIN)
             if not poller.poll(wait):
-                if timeout is not None and time.monotonic() >= deadline:  # type: ignore[operator]
+                if deadline is not None and time.monotonic() >= deadline:
                     return None
             elif self._closed:
                 raise LinkError(f"{self.iface}: link is closed")
@@ -249,7 +252,8 @@ def _interface_mtu(sock: socket.socket, iface: str, default: int = DEFAULT_MTU) 
     """The MTU of ``iface`` as seen from the socket's network namespace."""
     try:
         req = struct.pack("16si12x", iface.encode()[:15], 0)
-        return struct.unpack_from("16si", fcntl.ioctl(sock.fileno(), _SIOCGIFMTU, req))[1]
+        mtu: int = struct.unpack_from("16si", fcntl.ioctl(sock.fileno(), _SIOCGIFMTU, req))[1]
+        return mtu
     except (OSError, UnicodeEncodeError):
         return default
 

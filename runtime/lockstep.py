@@ -4,6 +4,8 @@ Each slave's work in a step (its InitCmds of a transition, its mailbox transfers
 identity reading of a scan) is a *job*: a generator that yields the datagrams it needs next
 and is sent back the same datagrams as they returned (``None`` when their frame was lost).
 A job that has nothing to send this round but is not finished yields an empty list.
+A job is built from *steps*, generators of the same kind that return a value at the end
+(``reply = yield from until_answered(...)``); a job itself returns nothing.
 
 Every round the scheduler takes the pending datagrams of all jobs, packs them into as few
 frames as the 1486-byte limit allows and hands each job its replies.  Commands of different
@@ -15,11 +17,14 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Generator
+from typing import TypeVar
 
 from ecatcfg.runtime.transport import Transport, pack
 from ecatcfg.runtime.wire import Datagram
 
-Job = Generator[list[Datagram], "list[Datagram] | None", None]
+R = TypeVar("R")
+Step = Generator[list[Datagram], "list[Datagram] | None", R]     # a part of a job, returns R
+Job = Step[None]
 
 IDLE_S = 0.0005     # when every job only waits, do not spin the wire
 
@@ -59,7 +64,8 @@ def run_jobs(transport: Transport, jobs: list[Job],
         active = still
 
 
-def until_answered(datagrams: list[Datagram], deadline: float, error: Exception) -> Job:
+def until_answered(datagrams: list[Datagram], deadline: float,
+                   error: Exception) -> Step[list[Datagram]]:
     """A job step: send ``datagrams`` every round until each comes back with working
     counter 1 (lost frames and refusals are sent again); returns the replies, or raises
     ``error`` once ``deadline`` (``time.monotonic()``) has passed."""

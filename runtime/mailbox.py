@@ -409,7 +409,8 @@ class SdoInfo:
     def abort_code(self) -> int | None:
         if self.opcode != SDO_INFO_ERROR or len(self.body) < 4:
             return None
-        return struct.unpack_from("<I", self.body)[0]
+        code: int = struct.unpack_from("<I", self.body)[0]
+        return code
 
 
 @record(frozen=True)

@@ -17,6 +17,7 @@ from __future__ import annotations
 import struct
 import time
 from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 from ecatcfg.eni.plan import NetworkPlan, SlavePlan
 from ecatcfg.esc import (AL_ERROR_ACK, AL_STATE_MASK, AL_STATUS_ERROR, AlState, Cmd, Reg,
@@ -29,6 +30,9 @@ from ecatcfg.runtime.replay import (TIMEOUT_COMMAND, ApplyError, MailboxChannel,
 from ecatcfg.runtime.scan import FoundSlave, Mismatch, scan, verify
 from ecatcfg.runtime.transport import Transport
 from ecatcfg.runtime.wire import Datagram
+
+if TYPE_CHECKING:
+    from ecatcfg.runtime.link import Link
 
 UP = [Transition.IP, Transition.PS, Transition.SO]
 DOWN = {AlState.OP: [Transition.OS, Transition.SP, Transition.PI],
@@ -74,7 +78,7 @@ class Event:
 class Master:
     """Runs one ENI on one link."""
 
-    def __init__(self, plan: NetworkPlan, link, *,
+    def __init__(self, plan: NetworkPlan, link: Link, *,
                  recorder: Callable[[bytes, bool], None] | None = None,
                  on_event: Callable[[Event], None] | None = None) -> None:
         self.plan = plan
@@ -193,7 +197,7 @@ class Master:
         if not dc:
             return
         self._event("dc", f"DC: {len(dc)} slaves")
-        reference = next((s for s in dc if s.dc.reference_clock), dc[0])
+        reference = next((s for s in dc if s.dc is not None and s.dc.reference_clock), dc[0])
         self._broadcast_write(Reg.DC_RECEIVE_TIME_PORT0, bytes(4))
         times: dict[str, tuple[int, int, int]] = {}
         run_jobs(self.transport, [_read_receive_times(s, times) for s in dc])

@@ -23,14 +23,21 @@ from __future__ import annotations
 import struct
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from ecatcfg.eni.plan import NetworkPlan, Variable
 from ecatcfg.errors import EcatcfgError
 from ecatcfg.esc import AlState
 from ecatcfg.record import record
 from ecatcfg.runtime.master import Event, Master
+
+if TYPE_CHECKING:                   # imported where used: `import ecatcfg.runtime` stays light
+    from ecatcfg.runtime.cyclic import CycleStats
+    from ecatcfg.runtime.link import Link
+    from ecatcfg.runtime.pcap import PcapRecorder
+    from ecatcfg.runtime.segment import Faults, VirtualSegment
 
 _FLOATS = {"REAL": "<f", "LREAL": "<d"}
 _SIGNED = {"SINT", "INT", "DINT", "LINT", "INT24", "INT40", "INT48", "INT56"}
@@ -49,14 +56,18 @@ class _Var:
 class Network:
     """An ENI running on a link (see the module docstring)."""
 
-    def __init__(self, eni: NetworkPlan | str | Path, link, *, pcap: str | Path | None = None,
-                 on_event: Callable[[Event], None] | None = None, _closers=()) -> None:
+    segment: VirtualSegment     # the emulated slaves, set by Network.virtual only
+
+    def __init__(self, eni: NetworkPlan | str | Path, link: Link, *,
+                 pcap: str | Path | None = None,
+                 on_event: Callable[[Event], None] | None = None,
+                 _closers: Iterable[Callable[[], None]] = ()) -> None:
         if not isinstance(eni, NetworkPlan):
             from ecatcfg.eni import reader as eni_reader
             eni = eni_reader.read_file(eni)
         self.plan = eni
         self.link = link                    # the Network's from here on: close() closes it
-        self.recorder = None
+        self.recorder: PcapRecorder | None = None
         if pcap is not None:
             from ecatcfg.runtime.pcap import PcapRecorder
             self.recorder = PcapRecorder(pcap)
@@ -64,14 +75,16 @@ class Network:
         self._vars = {v.name: _Var(v, False) for v in eni.process_image.inputs}
         self._vars.update({v.name: _Var(v, True) for v in eni.process_image.outputs})
         self._closers = list(_closers)
-        self.run_stats = None
+        self.run_stats: CycleStats | None = None
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
         self._lock = threading.Lock()
 
     @classmethod
     def virtual(cls, eni: NetworkPlan | str | Path, esi: list[str | Path], *,
-                faults=None, esi_cache: bool = True, **kwargs) -> Network:
+                faults: Faults | None = None, esi_cache: bool = True,
+                pcap: str | Path | None = None,
+                on_event: Callable[[Event], None] | None = None) -> Network:
         """The ENI on a virtual segment that emulates its slaves from the ESI files
         (``esi_cache``: through the ESI index cache)."""
         from ecatcfg.eni import reader as eni_reader
@@ -94,7 +107,7 @@ class Network:
             thread.join(2)
             theirs.close()
 
-        net = cls(plan, ours, _closers=[close_segment], **kwargs)
+        net = cls(plan, ours, pcap=pcap, on_event=on_event, _closers=[close_segment])
         net.segment = segment
         return net
 
@@ -158,7 +171,7 @@ class Network:
             self._stop.clear()
             self._loop(cycles, callback)
 
-    def _loop(self, cycles: int | None, callback) -> None:
+    def _loop(self, cycles: int | None, callback: Callable[[Network], None] | None) -> None:
         from ecatcfg.runtime.cyclic import CycleStats
         # The statistics of this run: kept apart from the cycles of state changes.
         self.run_stats = self.master.cyclic.stats = CycleStats()
@@ -199,7 +212,7 @@ class Network:
     def __enter__(self) -> Network:
         return self
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         """Leaving the block brings the line back to INIT, also after an error (whose
         exception then wins over one from the way down)."""
         try:
@@ -225,7 +238,8 @@ def _decode(image: bytearray, var: _Var) -> bool | int | float:
     if size == 1 and kind in ("BOOL", "BIT", ""):
         return bool(raw)
     if kind in _FLOATS:
-        return struct.unpack(_FLOATS[kind], raw.to_bytes(size // 8, "little"))[0]
+        value: float = struct.unpack(_FLOATS[kind], raw.to_bytes(size // 8, "little"))[0]
+        return value
     if kind in _SIGNED and raw >> size - 1:
         return raw - (1 << size)
     return raw

@@ -15,7 +15,7 @@ only knows objects, bytes and AL states.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 
 from ecatcfg.esc import (RX_PDO_MAPPING, SM_COMM_TYPE, SM_PDO_ASSIGN, SM_TYPE_CODES, TX_PDO_MAPPING,
@@ -318,11 +318,11 @@ def _match_infos(specs: list[_EntrySpec],
         by_name.setdefault(spec.name.strip().lower(), spec)
     matched: dict[int, ObjectInfo] = {}
     for pos, (name, info) in enumerate(infos):
-        spec = by_name.get(name.strip().lower())
-        if spec is None or spec.subindex in matched:
-            spec = specs[pos] if pos < len(specs) else None
-        if spec is not None and spec.subindex not in matched:
-            matched[spec.subindex] = info
+        match = by_name.get(name.strip().lower())
+        if match is None or match.subindex in matched:
+            match = specs[pos] if pos < len(specs) else None
+        if match is not None and match.subindex not in matched:
+            matched[match.subindex] = info
     return matched
 
 
@@ -676,7 +676,8 @@ class ObjectDictionary:
     def _check_any(index: int, entries: list[OdEntry], state: AlState, write: bool) -> None:
         """Complete access: fine if some entry may be accessed now; else the code for the
         entry that comes closest (wrong state before no access at all)."""
-        able = (lambda e: e.writable(state)) if write else (lambda e: e.readable(state))
+        able: Callable[[OdEntry], bool] = ((lambda e: e.writable(state)) if write
+                                           else (lambda e: e.readable(state)))
         if not entries or any(able(e) for e in entries):
             return
         letter = "w" if write else "r"

@@ -11,6 +11,10 @@ import os
 import tempfile
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:                   # scapy is imported when a recording starts
+    from scapy.utils import RawPcapNgWriter
 
 LINKTYPE_ETHERNET = 1
 DIRECTION_INBOUND, DIRECTION_OUTBOUND = 1, 2     # pcapng EPB flags, bits 0-1
@@ -25,7 +29,7 @@ class _Frame(bytes):
 class PcapRecorder:
     """``recorder(frame, sent)`` appends one frame; ``close()`` publishes the file."""
 
-    def __init__(self, path: str | os.PathLike) -> None:
+    def __init__(self, path: str | os.PathLike[str]) -> None:
         from scapy.utils import RawPcapNgWriter
 
         self.path = Path(path)
@@ -33,14 +37,17 @@ class PcapRecorder:
                                    suffix=".tmp")
         os.close(fd)
         self._tmp = Path(tmp)
-        self._writer = RawPcapNgWriter(str(self._tmp))
-        self._writer.linktype = LINKTYPE_ETHERNET
-        self._writer.write_header(None)          # section and interface blocks
+        writer = RawPcapNgWriter(str(self._tmp))
+        writer.linktype = LINKTYPE_ETHERNET
+        writer.write_header(None)                # section and interface blocks
+        self._writer: RawPcapNgWriter | None = writer
         self.frames = 0
 
     def __call__(self, frame: bytes, sent: bool) -> None:
         # scapy's writer takes the pcapng direction flag from the packet's ``direction``
         # attribute, and the time as float seconds.
+        if self._writer is None:
+            raise ValueError(f"the pcap recording {self.path} is closed")
         packet = _Frame(frame)
         packet.direction = DIRECTION_OUTBOUND if sent else DIRECTION_INBOUND
         self._writer.write_packet(packet, sec=time.time())
@@ -63,5 +70,5 @@ class PcapRecorder:
     def __enter__(self) -> PcapRecorder:
         return self
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.close()

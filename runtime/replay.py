@@ -16,14 +16,20 @@ from __future__ import annotations
 
 import struct
 import time
+from typing import TYPE_CHECKING, TypeVar
 
-from ecatcfg.eni.plan import CoeInitCmd, InitCmd, MailboxPlan, SlavePlan
+from ecatcfg.eni.plan import CoeInitCmd, DcPlan, InitCmd, MailboxPlan, SlavePlan
 from ecatcfg.errors import EcatcfgError
 from ecatcfg.esc import (AL_STATUS_ERROR, SM1_STATUS, SM_ACTIVATE_REPEAT, SM_PDI_REPEAT_ACK, Cmd,
                          Reg, Transition, al_state_name, al_status_name)
 from ecatcfg.record import record
-from ecatcfg.runtime.lockstep import Job, until_answered
+from ecatcfg.runtime.lockstep import Job, Step, until_answered
 from ecatcfg.runtime.wire import Datagram, datagram_for
+
+if TYPE_CHECKING:     # imported where used: only ENIs with CoE InitCmds need the SDO client
+    from ecatcfg.runtime.sdo_client import SdoDownload, SdoUpload
+
+Transaction = TypeVar("Transaction", bound="SdoDownload | SdoUpload")
 
 # Defaults where the ENI gives no timeout (seconds).
 TIMEOUT_COMMAND = 1.0          # a plain register command, lost frames included
@@ -85,7 +91,7 @@ def command_timeout(cmd: InitCmd) -> float:
     return TIMEOUT_COMMAND
 
 
-def _matches(data: bytes, want: bytes, mask: bytes | None) -> bool:
+def _matches(data: bytes | bytearray, want: bytes, mask: bytes | None) -> bool:
     n = len(want)
     got = data[:n]
     if mask is None:
@@ -146,7 +152,8 @@ def init_cmd_job(cmd: InitCmd, who: str | None, data: bytes | None = None,
             raise ApplyError(f"{last} after {command_timeout(cmd):g} s", who, cmd.comment)
 
 
-def _refused(status: bytes, who: str | None, comment: str, timed_out: bool = False) -> ApplyError:
+def _refused(status: bytes | bytearray, who: str | None, comment: str,
+             timed_out: bool = False) -> ApplyError:
     al_status, = struct.unpack_from("<H", status, 0)
     code = struct.unpack_from("<H", status, 4)[0] if len(status) >= 6 else 0
     text = f"slave stays in {al_state_name(al_status)}"
@@ -175,7 +182,8 @@ class MailboxChannel:
         self.counter_value = self.counter_value % 7 + 1
         return self.counter_value
 
-    def send(self, message: bytes, deadline: float, who: str | None, what: str) -> Job:
+    def send(self, message: bytes, deadline: float, who: str | None,
+             what: str | None) -> Job:
         """Write one request into SM0 (the whole SM, so the ESC sees the buffer complete)."""
         sm0 = self.plan.send
         dg = Datagram.physical(Cmd.FPWR, self.address, sm0.start,
@@ -184,7 +192,7 @@ class MailboxChannel:
             "the mailbox (SM0) did not take the request", who, what))
         self.sent_messages += 1
 
-    def receive(self, deadline: float, who: str | None, what: str) -> Job:
+    def receive(self, deadline: float, who: str | None, what: str | None) -> Step[bytes]:
         """Read the slave's next message from SM1.  Reading an empty mailbox gets working
         counter 0 and changes nothing, so SM1 is read directly instead of polling its
         status first.  If a read's frame was lost, the message may have been taken out of
@@ -219,7 +227,7 @@ class MailboxChannel:
                 if empty > FAST_POLLS:
                     yield from _pause(POLL_INTERVAL)
 
-    def _repeat(self, deadline: float, who: str | None, what: str) -> Job:
+    def _repeat(self, deadline: float, who: str | None, what: str | None) -> Job:
         """Toggle the repeat request (0x080E bit 1) from what the register holds, then wait
         for the slave's acknowledge in 0x080F bit 1."""
         # SM1 status, activate and PDI control: 3 bytes from 0x080D
@@ -240,8 +248,8 @@ class MailboxChannel:
                                  what)
 
 
-def sdo_job(channel: MailboxChannel, transaction, who: str | None, what: str,
-            timeout: float = TIMEOUT_MAILBOX) -> Job:
+def sdo_job(channel: MailboxChannel, transaction: Transaction, who: str | None,
+            what: str | None, timeout: float = TIMEOUT_MAILBOX) -> Step[Transaction]:
     """One SDO transfer (``runtime/sdo_client.py`` transaction) through the mailbox."""
     from ecatcfg.runtime.mailbox import MailboxProtocolError, SdoAbort
 
@@ -269,6 +277,7 @@ def coe_init_cmd_job(channel: MailboxChannel, cmd: CoeInitCmd, who: str | None,
         progress.last_command = cmd.comment
     size = channel.plan.send.length
     timeout = cmd.timeout / 1000 if cmd.timeout else TIMEOUT_MAILBOX
+    t: SdoUpload | SdoDownload
     if cmd.ccs == 2:                              # upload (rare in ENIs: a read check)
         t = SdoUpload(cmd.index, cmd.subindex, cmd.complete_access, size,
                       channel.counter)
@@ -292,17 +301,16 @@ def slave_transition_job(slave: SlavePlan, transition: Transition,
     counters go on 1..7 (a slave drops a message whose counter equals the previous one)."""
     who = slave.name
     cmds = [c for c in slave.init_cmds if transition in c.transitions]
-    coe = []
-    if slave.mailbox is not None:
-        coe = [c for c in slave.mailbox.coe_init_cmds
-               if transition in c.transitions and not c.disabled]
+    mailbox = slave.mailbox
+    coe = [] if mailbox is None else [c for c in mailbox.coe_init_cmds
+                                      if transition in c.transitions and not c.disabled]
     split = len(cmds)
     if coe and transition != Transition.IP:
         split = next((i for i, c in enumerate(cmds) if _writes_al_control(c)), len(cmds))
     for cmd in cmds[:split]:
         yield from _register_cmd(slave, cmd, who, progress)
-    if coe:
-        channel = channel or MailboxChannel(slave.phys_addr, slave.mailbox)
+    if mailbox is not None and coe:
+        channel = channel or MailboxChannel(slave.phys_addr, mailbox)
         for c in coe:
             yield from coe_init_cmd_job(channel, c, who, progress)
     for cmd in cmds[split:]:
@@ -314,20 +322,22 @@ def _register_cmd(slave: SlavePlan, cmd: InitCmd, who: str,
     data = None
     if (cmd.cmd == Cmd.FPWR and cmd.ado == Reg.DC_START_TIME_CYCLIC and cmd.data is not None
             and not any(cmd.data) and slave.dc is not None):
-        data = yield from _dc_start_time(slave, cmd, who)
+        data = yield from _dc_start_time(slave, slave.dc, cmd, len(cmd.data), who)
     yield from init_cmd_job(cmd, who, data, progress)
 
 
-def _dc_start_time(slave: SlavePlan, cmd: InitCmd, who: str) -> Job:
-    """The ENI's start time is a zero placeholder: start SYNC0 100 ms after the slave's
-    (reference-synchronised) system time, on a cycle boundary plus the shift (IgH, SOEM)."""
+def _dc_start_time(slave: SlavePlan, dc: DcPlan, cmd: InitCmd, length: int,
+                   who: str) -> Step[bytes]:
+    """The ENI's start time is a zero placeholder (``length`` bytes): start SYNC0 100 ms
+    after the slave's (reference-synchronised) system time, on a cycle boundary plus the
+    shift (IgH, SOEM)."""
     read = Datagram.physical(Cmd.FPRD, slave.phys_addr, Reg.DC_SYSTEM_TIME, 8)
     [got] = yield from until_answered([read], time.monotonic() + TIMEOUT_COMMAND, ApplyError(
         "cannot read the DC system time (0x0910)", who, cmd.comment))
     now, = struct.unpack("<Q", got.data)
-    cycle = slave.dc.cycle_time0 or 1
-    start = (now + DC_START_DELAY_NS) // cycle * cycle + cycle + slave.dc.shift_time
-    return struct.pack("<Q", start & 0xFFFF_FFFF_FFFF_FFFF)[:len(cmd.data)]
+    cycle = dc.cycle_time0 or 1
+    start = (now + DC_START_DELAY_NS) // cycle * cycle + cycle + dc.shift_time
+    return struct.pack("<Q", start & 0xFFFF_FFFF_FFFF_FFFF)[:length]
 
 
 def master_job(cmds: list[InitCmd], transition: Transition, before_slave: bool) -> Job:

@@ -15,7 +15,7 @@ from ecatcfg.eni.plan import NetworkPlan
 from ecatcfg.esc import (EEPROM_BUSY, EEPROM_ERRORS, EEPROM_R64, SII_REVISION, SII_VENDOR_ID, Cmd,
                          Reg, eeprom_read_request)
 from ecatcfg.record import record
-from ecatcfg.runtime.lockstep import Job, run_jobs, until_answered
+from ecatcfg.runtime.lockstep import Job, Step, run_jobs, until_answered
 from ecatcfg.runtime.replay import ApplyError
 from ecatcfg.runtime.transport import Transport
 from ecatcfg.runtime.wire import Datagram
@@ -46,7 +46,7 @@ def count_slaves(transport: Transport) -> int:
     raise ApplyError("no frame came back: is the interface connected to an EtherCAT line?")
 
 
-def sii_words(position: int, word: int, deadline: float) -> Job:
+def sii_words(position: int, word: int, deadline: float) -> Step[bytes]:
     """Four SII words from ``word`` on (two reads on ESCs that return 4 bytes at a time)."""
     adp = -position & 0xFFFF
     data = b""

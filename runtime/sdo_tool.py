@@ -36,7 +36,7 @@ from ecatcfg.esc import (AL_ERROR_ACK, AL_STATE_MASK, AL_STATUS_ERROR, MAILBOX_P
                          SM_CONTROL_MBOX_OUT, SM_DIR_ECAT_READS, SM_DIR_ECAT_WRITES, SM_DIR_MASK,
                          SM_MODE_MAILBOX, SM_MODE_MASK, SM_STATUS_MAILBOX_FULL, AlState, Cmd, Reg,
                          SmConfig, al_state_name, al_status_name, mailbox_protocol_names)
-from ecatcfg.runtime.lockstep import Job, run_jobs
+from ecatcfg.runtime.lockstep import Job, Step, run_jobs
 from ecatcfg.runtime.mailbox import NORMAL_OVERHEAD, abort_name
 from ecatcfg.runtime.replay import (
     ERROR_GRACE, TIMEOUT_COMMAND, TIMEOUT_MAILBOX, TIMEOUT_STATE, ApplyError, MailboxChannel,
@@ -137,6 +137,7 @@ def _job(info: SlaveMailbox, index: int, sub: int, data: bytes | None,
     yield from _empty_sm1(info, channel)
     counter = _Counter()
     what = f"SDO {'upload' if data is None else 'download'} 0x{index:04X}:{sub:02X}"
+    t: SdoUpload | SdoDownload
     try:
         if data is None:
             t = SdoUpload(index, sub, complete_access, send.length, counter)
@@ -151,7 +152,7 @@ def _job(info: SlaveMailbox, index: int, sub: int, data: bytes | None,
             raise SdoToolError(f"slave {info.position}: {exc.message}",
                                abort_code=exc.abort_code) from None
         raise SdoToolError(f"slave {info.position}, {what}: {exc}") from None
-    result.append(t.result if data is None else b"")
+    result.append(t.result if isinstance(t, SdoUpload) else b"")
 
 
 class _Counter:
@@ -167,7 +168,7 @@ class _Counter:
 
 # -- preparing the slave ----------------------------------------------------------------------
 
-def _access(dg: Datagram, deadline: float, what: str, wkc: int = 1) -> Job:
+def _access(dg: Datagram, deadline: float, what: str, wkc: int = 1) -> Step[Datagram]:
     """Send ``dg`` until it comes back with working counter ``wkc``; the returned datagram."""
     last = "no reply (frames lost)"
     while True:
@@ -271,12 +272,12 @@ def _sm_text(sm: SmConfig) -> str:
             f"{' enabled' if sm.enable else ' disabled'}")
 
 
-def _station_address(info: SlaveMailbox, adp: int, who: str) -> Job:
+def _station_address(info: SlaveMailbox, adp: int, who: str) -> Step[int]:
     """The slave's configured station address; it gets one when it has none."""
     deadline = time.monotonic() + TIMEOUT_COMMAND
     reply = yield from _access(Datagram.physical(Cmd.APRD, adp, Reg.STATION_ADDRESS, 2),
                                deadline, f"{who}: reading the station address (0x0010)")
-    address = struct.unpack("<H", reply.data)[0]
+    address: int = struct.unpack("<H", reply.data)[0]
     if address:
         # Fixed addressing must reach this slave alone.
         probe = Datagram.physical(Cmd.FPRD, address, Reg.STATION_ADDRESS, 2)

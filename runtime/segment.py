@@ -23,11 +23,15 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 from ecatcfg.esc import AlState, Cmd, FmmuType, Reg
 from ecatcfg.runtime.slave import PROCESS_RAM, EmulatedSlave, StateChange
-from ecatcfg.runtime.syncman import SmKind
+from ecatcfg.runtime.syncman import SmKind, SmState
 from ecatcfg.runtime.wire import DG_HEADER_LEN, FrameError, datagram_offsets
+
+if TYPE_CHECKING:
+    from ecatcfg.runtime.link import Link
 
 # Propagation through one slave in the emulated line (ns): processing on the way out
 # (port 0 -> 3 -> 1) and forwarding on the way back (docs/protocol-notes.md §8).
@@ -39,7 +43,14 @@ _WRITES = {Cmd.APWR, Cmd.FPWR, Cmd.BWR, Cmd.LWR}
 _AUTO_INC = {Cmd.APRD, Cmd.APWR, Cmd.APRW, Cmd.ARMW}
 _CONFIGURED = {Cmd.FPRD, Cmd.FPWR, Cmd.FPRW, Cmd.FRMW}
 _BROADCAST = {Cmd.BRD, Cmd.BWR, Cmd.BRW}
-_LOGICAL = {Cmd.LRD: (True, False), Cmd.LWR: (False, True), Cmd.LRW: (True, True)}
+# An FMMU access of a logical datagram (see _op): frame offset, physical address, byte length
+# or 0, masked bit groups (frame byte, memory byte, shift, mask), SM gate, completes the SM.
+_Op = tuple[int, int, int, tuple[tuple[int, int, int, int], ...], "SmState | None", bool]
+# A slave a logical datagram meets: the slave, its memory, its write ops, its read ops.
+_Hit = tuple[EmulatedSlave, bytearray, list[_Op], list[_Op]]
+
+_LOGICAL: dict[int, tuple[bool, bool]] = {Cmd.LRD: (True, False), Cmd.LWR: (False, True),
+                                          Cmd.LRW: (True, True)}        # (reads, writes)
 _ADDRESS_REGISTERS = (Reg.STATION_ADDRESS, Reg.DL_CONTROL_2 + 1)
 _AL_STATUS = int(Reg.AL_STATUS)
 _SAFEOP = int(AlState.SAFEOP)
@@ -65,7 +76,7 @@ class VirtualSegment:
         self.slaves = slaves
         self.faults = faults or Faults()
         self._rng = random.Random(self.faults.seed)
-        self._plans: dict[tuple[int, int, int], list[tuple]] = {}
+        self._plans: dict[tuple[int, int, int], list[_Hit]] = {}
         self._by_address: dict[int, list[EmulatedSlave]] | None = None
         self.frames = 0
         self.on_state_change: Callable[[StateChange], None] | None = None
@@ -260,16 +271,16 @@ class VirtualSegment:
                 added += 1
         return added
 
-    def _plan(self, cmd: int, address: int, n: int) -> list[tuple]:
+    def _plan(self, cmd: int, address: int, n: int) -> list[_Hit]:
         """Per slave whose FMMUs the datagram meets: (slave, its memory, write ops, read
         ops), each op a tuple (frame offset, physical address, byte length or 0, bit
         groups, SM gate, completes the SM)."""
         reads, writes = _LOGICAL[cmd]
         lo, hi = address * 8, (address + n) * 8           # the datagram's logical bits
-        plan = []
+        plan: list[_Hit] = []
         for slave in self.slaves:
-            read_ops: list[tuple] = []
-            write_ops: list[tuple] = []
+            read_ops: list[_Op] = []
+            write_ops: list[_Op] = []
             for f in slave.fmmus:
                 first = f.logical_start * 8 + f.logical_start_bit
                 last = first + f.bit_length                 # exclusive
@@ -287,7 +298,7 @@ class VirtualSegment:
 
     # -- running on a link -------------------------------------------------------------------
 
-    def serve(self, link, *, duration: float | None = None,
+    def serve(self, link: Link, *, duration: float | None = None,
               stop: threading.Event | None = None,
               on_ready: Callable[[], None] | None = None) -> None:
         """Answer frames from ``link`` until ``stop`` is set or ``duration`` has passed."""
@@ -330,7 +341,7 @@ class VirtualSegment:
 
 
 def _op(slave: EmulatedSlave, write: bool, frame_bit: int, phys_bit: int,
-        bits: int) -> tuple:
+        bits: int) -> _Op:
     """The access of ``bits`` bits from datagram bit ``frame_bit`` to physical bit
     ``phys_bit``: a byte run when both sides are byte-aligned, otherwise masked byte
     operations (one per pair of frame and memory bytes the bits meet in).  The op is gated

@@ -20,6 +20,7 @@ import time
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 from ecatcfg.esc import (AL_ERROR_ACK, AL_STATE_MASK, AL_STATUS_ERROR, EEPROM_CMD_MASK,
                          EEPROM_CMD_READ, EEPROM_CMD_RELOAD, EEPROM_CMD_WRITE, EEPROM_R64,
@@ -28,6 +29,10 @@ from ecatcfg.esc import (AL_ERROR_ACK, AL_STATE_MASK, AL_STATUS_ERROR, EEPROM_CM
                          FmmuType, Reg, fmmu_register, sm_register)
 from ecatcfg.esi.model import Device
 from ecatcfg.runtime.syncman import SmKind, SmState
+
+if TYPE_CHECKING:                   # only slaves with a CoE dictionary bring these
+    from ecatcfg.runtime.objects import ObjectDictionary
+    from ecatcfg.runtime.sdo_server import SdoServer
 
 MEMORY_SIZE = 0x10000
 PROCESS_RAM = 0x1000
@@ -74,7 +79,8 @@ class EmulatedSlave:
     """An ESC and its firmware, emulated from the device's ESI."""
 
     def __init__(self, device: Device, sii_image: bytes, *, name: str = "",
-                 od=None, sdo_server=None) -> None:
+                 od: ObjectDictionary | None = None,
+                 sdo_server: SdoServer | None = None) -> None:
         self.device = device
         self.name = name or device.type_name
         self.eeprom = bytearray(sii_image)
@@ -167,15 +173,18 @@ class EmulatedSlave:
 
     @property
     def status_code(self) -> int:
-        return struct.unpack_from("<H", self.mem, 0x0134)[0]
+        code: int = struct.unpack_from("<H", self.mem, 0x0134)[0]
+        return code
 
     @property
     def station_address(self) -> int:
-        return struct.unpack_from("<H", self.mem, Reg.STATION_ADDRESS)[0]
+        address: int = struct.unpack_from("<H", self.mem, Reg.STATION_ADDRESS)[0]
+        return address
 
     @property
     def alias(self) -> int:
-        return struct.unpack_from("<H", self.mem, Reg.STATION_ALIAS)[0]
+        alias: int = struct.unpack_from("<H", self.mem, Reg.STATION_ALIAS)[0]
+        return alias
 
     @property
     def alias_enabled(self) -> bool:
@@ -505,7 +514,7 @@ class EmulatedSlave:
         return 0
 
     def _fmmus_cover(self, start: int, length: int, kind: FmmuType) -> bool:
-        covered = set()
+        covered: set[int] = set()
         for f in self.fmmus:
             if f.type & kind:
                 first = f.physical_start
@@ -550,7 +559,7 @@ class EmulatedSlave:
         return time.monotonic_ns() + self._clock_base
 
     def system_time(self) -> int:
-        offset, = struct.unpack_from("<q", self.mem, 0x0920)
+        offset: int = struct.unpack_from("<q", self.mem, 0x0920)[0]
         return (self.local_time() + offset) & 0xFFFF_FFFF_FFFF_FFFF
 
     def latch_receive_times(self, port0: int, port1: int | None) -> None:

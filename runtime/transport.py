@@ -11,11 +11,15 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 from ecatcfg.esc import MAX_DATAGRAM_DATA
 from ecatcfg.record import record
 from ecatcfg.runtime import wire
 from ecatcfg.runtime.wire import Datagram, FrameError
+
+if TYPE_CHECKING:
+    from ecatcfg.runtime.link import Link
 
 DEFAULT_TIMEOUT = 0.02          # s: a frame through even a long line returns within this
 # Datagram bytes one frame carries: 1500 - 2 (EtherCAT header) = 1486 data + 12 overhead.
@@ -32,7 +36,7 @@ class Counters:
 class Transport:
     """Send datagrams in one frame and wait for that frame to come back."""
 
-    def __init__(self, link, *, recorder: Callable[[bytes, bool], None] | None = None,
+    def __init__(self, link: Link, *, recorder: Callable[[bytes, bool], None] | None = None,
                  timeout: float = DEFAULT_TIMEOUT) -> None:
         self.link = link
         self.recorder = recorder             # (frame, sent?) for pcap recording

@@ -16,11 +16,15 @@ is slicing, not copying.
 from __future__ import annotations
 
 import struct
+from typing import TYPE_CHECKING
 
 from ecatcfg.errors import EcatcfgError
 from ecatcfg.esc import (DATAGRAM_OVERHEAD, ETH_HEADER_SIZE, ETHERTYPE, FRAME_HEADER, MIN_FRAME,
                          Cmd)
 from ecatcfg.record import field, record
+
+if TYPE_CHECKING:
+    from ecatcfg.eni.plan import CyclicCmd, InitCmd
 
 ETH_HEADER = struct.Struct("!6s6sH")
 ECAT_HEADER = struct.Struct("<H")
@@ -88,7 +92,7 @@ class Datagram:
         return DG_HEADER_LEN + len(self.data) + WKC.size
 
 
-def datagram_for(cmd, data: bytes) -> Datagram:
+def datagram_for(cmd: InitCmd | CyclicCmd, data: bytes) -> Datagram:
     """The datagram an ENI command describes (an InitCmd or a cyclic Cmd: ``cmd`` with
     ``addr`` for logical commands, ``adp``/``ado`` otherwise), carrying ``data``."""
     if cmd.cmd in LOGICAL_CMDS:

@@ -43,7 +43,8 @@ VENV_ENV = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
 def clean_copy(tmp_path) -> tuple:
     """A copy of the checkout without build products, and a listing of what it holds."""
     src = tmp_path / "src"
-    shutil.copytree(ROOT, src, ignore=shutil.ignore_patterns(
+    # symlinks=True: .mypy_path/ecatcfg links to the checkout itself (pyproject.toml, mypy)
+    shutil.copytree(ROOT, src, symlinks=True, ignore=shutil.ignore_patterns(
         ".git", "build", "dist", "*.egg-info", "__pycache__", "*_cache", ".hypothesis",
         "ecatcfg-demo"))
     return src, sorted(p.relative_to(src) for p in src.rglob("*") if "__pycache__" not in p.parts)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 from ecatcfg.esi.lint.rules import Severity
 from ecatcfg.esi.model import format_selector
@@ -22,7 +23,7 @@ class DeviceRef:
     def selector(self) -> str:
         return format_selector(self.vendor_id, self.product_code, self.revision)
 
-    def as_json(self) -> dict:
+    def as_json(self) -> dict[str, Any]:
         return {"vendor_id": self.vendor_id, "product_code": self.product_code,
                 "revision": self.revision, "type": self.type}
 
@@ -37,10 +38,10 @@ class Finding:
     message: str
     device: DeviceRef | None = None
 
-    def sort_key(self) -> tuple:
+    def sort_key(self) -> tuple[str, int, int, str, str]:
         return (self.file, self.line or 0, self.column or 0, self.rule, self.message)
 
-    def as_json(self) -> dict:
+    def as_json(self) -> dict[str, Any]:
         return {"file": self.file, "line": self.line, "column": self.column,
                 "rule": self.rule, "severity": self.severity, "message": self.message,
                 "device": self.device.as_json() if self.device else None}

@@ -68,19 +68,19 @@ def declare(rule_id: str, severity: Severity, summary: str, explain: str) -> Rul
 def file_rule(rule_id: str, severity: Severity, summary: str, explain: str
               ) -> Callable[[FileCheck], FileCheck]:
     """Declare a rule checked once per file: ``fn(ctx) -> Iterator[Hit]``."""
-    return _decorator(rule_id, severity, summary, explain, "file_check")
+    def wrap(fn: FileCheck) -> FileCheck:
+        _register(Rule(rule_id, severity, summary, textwrap.dedent(explain).strip(),
+                       file_check=fn))
+        return fn
+    return wrap
 
 
 def device_rule(rule_id: str, severity: Severity, summary: str, explain: str
                 ) -> Callable[[DeviceCheck], DeviceCheck]:
     """Declare a rule checked per device: ``fn(device, ctx) -> Iterator[Hit]``."""
-    return _decorator(rule_id, severity, summary, explain, "device_check")
-
-
-def _decorator(rule_id: str, severity: Severity, summary: str, explain: str, kind: str):
-    def wrap(fn):
+    def wrap(fn: DeviceCheck) -> DeviceCheck:
         _register(Rule(rule_id, severity, summary, textwrap.dedent(explain).strip(),
-                       **{kind: fn}))
+                       device_check=fn))
         return fn
     return wrap
 

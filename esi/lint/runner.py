@@ -40,7 +40,7 @@ class Target:
 
 def collect(paths: list[str]) -> list[Target]:
     """The files to lint; raises UsageError for a path that does not exist."""
-    targets = []
+    targets: list[Target] = []
     for given in paths:
         targets.extend(Target(p, shown, direct) for p, shown, direct in expand_paths(given))
     return targets
@@ -119,9 +119,10 @@ def lint_file(target: Target, options: LintOptions, others: list[Path]) -> FileR
         if not line or len(spans) != len(devices):
             return None
         i = bisect.bisect_right(starts, line) - 1
-        if i >= 0 and (spans[i][1] is None or line < spans[i][1]):
-            return devices[i]
-        return None
+        if i < 0:
+            return None
+        end = spans[i][1]
+        return devices[i] if end is None or line < end else None
 
     for line, column, message in schema_errors or ():
         out.add("XSD001", line, column, message, device_at(line))
@@ -147,9 +148,10 @@ def _done(result: FileResult, out: _Emitter, start: float) -> FileResult:
 
 def _device_spans(tree: etree._ElementTree) -> list[tuple[int, int | None]]:
     """(first line, first line after it) of each Device element, in document order."""
-    spans = []
+    spans: list[tuple[int, int | None]] = []
     for el in tree.getroot().iterfind("Descriptions/Devices/Device"):
-        node, end = el, None
+        node: etree._Element | None = el
+        end: int | None = None
         while node is not None and end is None:
             nxt = node.getnext()
             if nxt is not None:

@@ -17,8 +17,7 @@ from ecatcfg.esi.model import CoeInitCmd, Device, DictObject, Source
 def _init_cmds(dev: Device) -> list[CoeInitCmd]:
     if dev.mailbox is None or dev.mailbox.coe is None:
         return []
-    return [c for c in dev.mailbox.coe.init_cmds
-            if c.index is not None and not c.depend_on_slot]
+    return [c for c in dev.mailbox.coe.init_cmds if not c.depend_on_slot]
 
 
 def _init_cmd_targets(dev: Device) -> Iterator[tuple[CoeInitCmd, DictEntry | DictObject | None]]:
@@ -30,6 +29,8 @@ def _init_cmd_targets(dev: Device) -> Iterator[tuple[CoeInitCmd, DictEntry | Dic
     if dic is None:
         return
     for cmd in _init_cmds(dev):
+        if cmd.index is None:
+            continue
         found = lookup(dic, cmd.index, cmd.subindex)
         if cmd.complete_access and not cmd.subindex and isinstance(found, DictEntry) \
                 and found.flags is not None and found.flags.access is not None \

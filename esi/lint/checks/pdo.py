@@ -13,7 +13,7 @@ from ecatcfg.esc import pdo_mapping_range
 from ecatcfg.esi.lint.checks.common import hex4, repeats
 from ecatcfg.esi.lint.context import FileContext
 from ecatcfg.esi.lint.rules import Hit, device_rule
-from ecatcfg.esi.model import Device, Pdo, PdoEntry
+from ecatcfg.esi.model import Device, DictObject, Pdo, PdoEntry
 
 SM_TYPE_FOR = {"rx": "Outputs", "tx": "Inputs"}
 # A PDO mapping entry (0x16xx/0x1Axx subindex value) holds the bit length in 8 bits.
@@ -24,7 +24,7 @@ def _tag(pdo: Pdo) -> str:
     return f"{'RxPdo' if pdo.direction == 'rx' else 'TxPdo'} {hex4(pdo.index)}"
 
 
-def _mapped_entries(dev: Device) -> Iterator[tuple[Pdo, PdoEntry, DictEntry | object | None]]:
+def _mapped_entries(dev: Device) -> Iterator[tuple[Pdo, PdoEntry, DictEntry | DictObject | None]]:
     """(pdo, entry, dictionary lookup) for every non-padding entry of a device whose
     dictionary lists objects.  Slot-dependent entries are left out: their index is only known
     once a module sits in the slot."""

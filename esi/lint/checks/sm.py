@@ -23,10 +23,10 @@ DIRECTION_TEXT = {0x00: "master reads", 0x04: "master writes", 0x08: "reserved (
 MAX_UNITS = 16
 
 
-def _real_sms(dev: Device) -> list[tuple[SyncManager, int]]:
-    """(SM, programmed length) for the SMs that occupy ESC memory: not virtual, with a start
-    address and a non-zero length.  Empty beyond the ESC's 16 SMs (ESI211 reports those), so
-    the pairwise checks stay cheap on absurd input."""
+def _real_sms(dev: Device) -> list[tuple[SyncManager, int, int]]:
+    """(SM, start address, programmed length) for the SMs that occupy ESC memory: not
+    virtual, with a start address and a non-zero length.  Empty beyond the ESC's 16 SMs
+    (ESI211 reports those), so the pairwise checks stay cheap on absurd input."""
     if len(dev.sms) > MAX_UNITS:
         return []
     out = []
@@ -35,7 +35,7 @@ def _real_sms(dev: Device) -> list[tuple[SyncManager, int]]:
             continue
         length = sm_length(dev, sm)
         if length > 0:
-            out.append((sm, length))
+            out.append((sm, sm.start_address, length))
     return out
 
 
@@ -55,11 +55,11 @@ def _is_buffered(sm: SyncManager) -> bool:
     PDOs' size for process data, else DefaultSize.""")
 def sm_overlap(dev: Device, ctx: FileContext) -> Iterator[Hit]:
     sms = _real_sms(dev)
-    for i, (a, la) in enumerate(sms):
-        for b, lb in sms[i + 1:]:
-            if a.start_address < b.start_address + lb and b.start_address < a.start_address + la:
-                yield Hit(b.source, f"Sm {b.number} (0x{b.start_address:04X}, {lb} bytes) "
-                          f"overlaps Sm {a.number} (0x{a.start_address:04X}, {la} bytes)")
+    for i, (a, sa, la) in enumerate(sms):
+        for b, sb, lb in sms[i + 1:]:
+            if sa < sb + lb and sb < sa + la:
+                yield Hit(b.source, f"Sm {b.number} (0x{sb:04X}, {lb} bytes) "
+                          f"overlaps Sm {a.number} (0x{sa:04X}, {la} bytes)")
 
 
 @device_rule("ESI202", "warning", "a buffered SyncManager's three buffers reach into another SM",
@@ -71,17 +71,17 @@ def sm_overlap(dev: Device, ctx: FileContext) -> Iterator[Hit]:
     checked for the digital-output area 0x0F00, which has no buffers.""")
 def sm_triple_buffer_overlap(dev: Device, ctx: FileContext) -> Iterator[Hit]:
     sms = _real_sms(dev)
-    for a, la in sms:
-        if not _is_buffered(a) or a.start_address in DIGITAL_OUTPUT_AREA:
+    for a, sa, la in sms:
+        if not _is_buffered(a) or sa in DIGITAL_OUTPUT_AREA:
             continue
-        end = a.start_address + 3 * la
-        for b, lb in sms:
+        end = sa + 3 * la
+        for b, sb, _ in sms:
             if b is a:
                 continue
-            if a.start_address + la <= b.start_address < end:
-                yield Hit(a.source, f"Sm {a.number} at 0x{a.start_address:04X} with {la} bytes "
-                          f"uses 0x{a.start_address:04X}-0x{end - 1:04X} in 3-buffer mode, "
-                          f"reaching Sm {b.number} at 0x{b.start_address:04X}")
+            if sa + la <= sb < end:
+                yield Hit(a.source, f"Sm {a.number} at 0x{sa:04X} with {la} bytes "
+                          f"uses 0x{sa:04X}-0x{end - 1:04X} in 3-buffer mode, "
+                          f"reaching Sm {b.number} at 0x{sb:04X}")
 
 
 @device_rule("ESI203", "error", "a SyncManager area lies outside ESC process memory", """
@@ -90,8 +90,8 @@ def sm_triple_buffer_overlap(dev: Device, ctx: FileContext) -> Iterator[Hit]:
     of simple I/O ESCs may be used).  An SM there would overwrite registers or cannot be
     programmed at all.  Virtual SMs, which only describe data, are not checked.""")
 def sm_outside_memory(dev: Device, ctx: FileContext) -> Iterator[Hit]:
-    for sm, length in _real_sms(dev):
-        start, end = sm.start_address, sm.start_address + length
+    for sm, start, length in _real_sms(dev):
+        end = start + length
         low_ok = start >= PROCESS_RAM_START or (start in DIGITAL_OUTPUT_AREA
                                                 and end <= DIGITAL_OUTPUT_AREA.stop)
         if not low_ok or end > ADDRESS_SPACE_END:
@@ -122,7 +122,8 @@ def mailbox_control_byte(dev: Device, ctx: FileContext) -> Iterator[Hit]:
         if not sm.is_mailbox or sm.control_byte is None:
             continue
         cb = sm.control_byte
-        if cb & SM_MODE_MASK != SM_MODE_MAILBOX or cb & SM_DIR_MASK != SM_DIRECTION[sm.type]:
+        direction = SM_DIRECTION[sm.type or ""]       # a mailbox SM's type is MBoxOut/MBoxIn
+        if cb & SM_MODE_MASK != SM_MODE_MAILBOX or cb & SM_DIR_MASK != direction:
             want = f"0x{SM_CONTROL_MBOX_OUT if sm.type == 'MBoxOut' else SM_CONTROL_MBOX_IN:02X}"
             yield Hit(sm.source, f"{sm.type} Sm {sm.number} has ControlByte 0x{cb:02X}, not "
                       f"a {sm.type} mailbox mode (e.g. {want})")

@@ -6,7 +6,7 @@ from __future__ import annotations
 import json
 import re
 from pathlib import PurePath
-from typing import TextIO
+from typing import Any, TextIO
 from urllib.parse import quote
 
 from ecatcfg import __version__
@@ -37,7 +37,7 @@ def write(results: list[FileResult], rules: dict[str, Rule], out: TextIO) -> Non
                 region["startLine"] = f.line
                 if f.column:
                     region["startColumn"] = f.column
-            physical: dict = {"artifactLocation": {"uri": _uri(f.file)}}
+            physical: dict[str, Any] = {"artifactLocation": {"uri": _uri(f.file)}}
             if region:
                 physical["region"] = region
             item = {
