@@ -33,6 +33,7 @@ MAX_NODES = 200_000
 # A topology nests about six levels deep; much deeper input only exhausts the stack.
 MAX_DEPTH = 64
 # Characters XML 1.0 cannot carry (names and comments end up in the ENI).
+_TIMESTAMP = "tag:yaml.org,2002:timestamp"
 _NOT_XML = re.compile("[^\t\n\r\x20-\ud7ff\ue000-\ufffd\U00010000-\U0010ffff]")
 
 
@@ -254,12 +255,29 @@ class _Walker:
             return out
         if isinstance(node, yaml.SequenceNode):
             return [self.value(v, path + (i,)) for i, v in enumerate(node.value)]
+        if node.tag == _TIMESTAMP and not self.loader.timestamp_regexp.match(node.value):
+            # PyYAML's timestamp constructor assumes the text has the form of one.
+            raise self._not_valid(node, "timestamp", "expected YYYY-MM-DD[ hh:mm:ss]")
         try:
             return self.loader.construct_object(node, deep=True)
         except yaml.YAMLError as exc:        # a tag SafeLoader does not know (!foo, !!python/..)
             problem = getattr(exc, "problem", None) or str(exc)
             raise EcatcfgError(f"not valid here: {problem}", self.file,
                                node.start_mark.line + 1) from None
+        except (ValueError, KeyError) as exc:
+            # The constructor of the scalar's type refuses its text: an explicit tag the
+            # text does not fit (!!float abc, !!int zz, !!bool 0, !!timestamp 2001-13-45),
+            # or an integer longer than Python converts (sys.get_int_max_str_digits()).
+            kind = node.tag.rpartition(":")[2] or node.tag
+            reason = (f"{len(node.value)} characters, more than an integer may have"
+                      if kind == "int" and len(node.value) > 1000 else
+                      str(exc).strip("'") or type(exc).__name__)
+            raise self._not_valid(node, kind, reason) from None
+
+    def _not_valid(self, node: yaml.Node, kind: str, reason: str) -> EcatcfgError:
+        text = node.value if len(node.value) <= 40 else f"{node.value[:40]}..."
+        return EcatcfgError(f"{text!r} is not a valid {kind}: {reason}", self.file,
+                            node.start_mark.line + 1, node.start_mark.column + 1)
 
 
 def load(path: str | Path, shown_as: str | None = None) -> LoadedTopology:
@@ -276,7 +294,9 @@ def loads(data: bytes | str, shown: str) -> LoadedTopology:
         try:
             data = data.decode("utf-8")
         except UnicodeDecodeError as exc:
-            raise EcatcfgError(f"not UTF-8 text (byte {exc.start})", shown) from None
+            line = data.count(b"\n", 0, exc.start) + 1
+            raise EcatcfgError(f"not UTF-8 text (byte {exc.start})", shown, line,
+                               exc.start - data.rfind(b"\n", 0, exc.start)) from None
     try:
         _prescan(data, shown)
         node = yaml.compose(data, Loader=_LOADER)
@@ -288,6 +308,16 @@ def loads(data: bytes | str, shown: str) -> LoadedTopology:
         raise EcatcfgError(f"not valid YAML/JSON: {problem}", shown,
                            mark.line + 1 if mark else None,
                            mark.column + 1 if mark else None) from None
+    except yaml.reader.ReaderError as exc:
+        # A character YAML does not allow; libyaml gives a byte offset, PyYAML a character
+        # index, so the place is found again in the text.
+        bad = yaml.reader.Reader.NON_PRINTABLE.search(data)
+        at = bad.start() if bad else 0
+        raise EcatcfgError(f"not valid YAML/JSON: character U+{ord(data[at]):04X} is not "
+                           f"allowed ({exc.reason})" if bad else
+                           f"not valid YAML/JSON: {exc.reason}", shown,
+                           data.count("\n", 0, at) + 1,
+                           at - data.rfind("\n", 0, at)) from None
     except yaml.YAMLError as exc:
         raise EcatcfgError(f"not valid YAML/JSON: {exc}", shown) from None
     if node is None:

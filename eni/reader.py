@@ -39,7 +39,7 @@ from ecatcfg.eni.plan import (
     Variable,
 )
 from ecatcfg.errors import EcatcfgError
-from ecatcfg.esc import Transition
+from ecatcfg.esc import MAX_DATAGRAM_DATA, Transition
 from ecatcfg.esi import xmlsafe
 from ecatcfg.esi.values import parse_bool, parse_hex_bytes, parse_int
 
@@ -59,6 +59,29 @@ class _Node(Protocol):
 
 _ROOTS = ("EtherCATConfig", "EncryptedEtherCATConfig")
 _DC_VALUES = ("ReferenceClock", "CycleTime0", "CycleTime1", "ShiftTime")
+
+# What the plan can put on the wire (ETG.1000.4 datagram fields) or keep in memory; a value
+# outside is an error at its line, never a wrapped number or a crash of the master.
+# (lo, hi, what the field is)
+Bounds = tuple[int, int, str]
+U8: Bounds = (0, 0xFF, "one byte")
+U16: Bounds = (0, 0xFFFF, "16 bits")
+# xs:int fields that hold an unsigned value may spell it signed (TwinCAT: AutoIncAddr -1).
+S16: Bounds = (-0x8000, 0xFFFF, "16 bits")
+S32: Bounds = (-0x8000_0000, 0xFFFF_FFFF, "32 bits")
+I32: Bounds = (-0x8000_0000, 0x7FFF_FFFF, "a signed 32-bit number")
+COUNT: Bounds = (0, 0x7FFF_FFFF, "0 or more")
+# One datagram carries at most 1486 data bytes (a frame's 1500 minus the EtherCAT and the
+# datagram headers; SOEM's EC_MAXMBX): a command's data, and a mailbox, which is read and
+# written whole, in one datagram.
+DATAGRAM: Bounds = (0, MAX_DATAGRAM_DATA, "what one datagram carries")
+# The process image is kept in memory: sizes and offsets stay below 1 MiB (ETG.2100 sets no
+# limit; real images are a few KiB).
+IMAGE_BYTES = 1 << 20
+IMAGE: Bounds = (0, IMAGE_BYTES, "the process image this master keeps (1 MiB)")
+IMAGE_BITS: Bounds = (0, 8 * IMAGE_BYTES, "the process image this master keeps (1 MiB)")
+VARIABLE_BITS: Bounds = (1, 8 * IMAGE_BYTES, "1 bit or more, within the process image (1 MiB)")
+SM_NUMBER: Bounds = (0, 15, "an ESC has SyncManagers 0..15")
 
 
 class EniReadError(EcatcfgError):
@@ -148,35 +171,42 @@ class _Reader:
             raise self.error(f"<{parent.tag!s}> has no <{tag}>", parent)
         return el
 
-    def number(self, el: Element) -> int:
+    def number(self, el: Element, bounds: Bounds | None = None) -> int:
         text = self.text(el)
         value = _parse_int(text)
         if value is None:
             raise self.error(f"<{el.tag!s}> is not a number: {text.strip()!r}", el)
+        if bounds is not None and not bounds[0] <= value <= bounds[1]:
+            lo, hi, what = bounds
+            raise self.error(f"<{el.tag!s}> {value} is out of range: {what} ({lo}..{hi})", el)
         return value
 
-    def req_int(self, parent: _Node, tag: str) -> int:
-        return self.number(self.child(parent, tag))
+    def req_int(self, parent: _Node, tag: str, bounds: Bounds | None = None) -> int:
+        return self.number(self.child(parent, tag), bounds)
 
-    def opt_int(self, parent: _Node, tag: str) -> int | None:
+    def opt_int(self, parent: _Node, tag: str, bounds: Bounds | None = None) -> int | None:
         el = parent.find(tag)
-        return None if el is None else self.number(el)
+        return None if el is None else self.number(el, bounds)
 
-    def int_or(self, parent: _Node, tag: str, default: int) -> int:
-        value = self.opt_int(parent, tag)
+    def int_or(self, parent: _Node, tag: str, default: int, bounds: Bounds | None = None) -> int:
+        value = self.opt_int(parent, tag, bounds)
         return default if value is None else value
 
     def uint32(self, parent: _Node, tag: str) -> int:
         """A uint32 the schema types xs:int: negative values are its signed spelling."""
-        return self.req_int(parent, tag) & 0xFFFFFFFF
+        return self.req_int(parent, tag, S32) & 0xFFFFFFFF
 
-    def attr_int(self, el: _Node, name: str) -> int | None:
+    def attr_int(self, el: _Node, name: str, bounds: Bounds | None = None) -> int | None:
         text = el.get(name)
         if text is None:
             return None
         value = _parse_int(text)
         if value is None:
             raise self.error(f"attribute {name} of <{el.tag!s}> is not a number: {text!r}", el)
+        if bounds is not None and not bounds[0] <= value <= bounds[1]:
+            lo, hi, what = bounds
+            raise self.error(f"attribute {name} of <{el.tag!s}>: {value} is out of range: "
+                             f"{what} ({lo}..{hi})", el)
         return value
 
     def boolean(self, el: Element) -> bool:
@@ -246,8 +276,10 @@ class _Reader:
 
     def address(self, el: _Node) -> tuple[int | None, int | None, int | None]:
         """``(adp, ado, addr)``: ``(Adp?, Ado) | Addr``."""
-        adp, ado, addr = (self.opt_int(el, "Adp"), self.opt_int(el, "Ado"),
-                          self.opt_int(el, "Addr"))
+        adp, ado, addr = (self.opt_int(el, "Adp", S16), self.opt_int(el, "Ado", U16),
+                          self.opt_int(el, "Addr", S32))
+        if adp is not None:
+            adp &= 0xFFFF           # -1: the second slave's auto-increment address
         if addr is not None:
             addr &= 0xFFFFFFFF
         if ado is None and addr is None:
@@ -258,8 +290,13 @@ class _Reader:
         """``(data, length)``: ``Data``, or ``DataLength`` zero bytes (eni-exports §2)."""
         data = self.opt_hex(el, "Data")
         if data is not None:
+            if len(data) > MAX_DATAGRAM_DATA:
+                where = el.find("Data")
+                raise self.error(f"<Data> of {len(data)} bytes is more than one datagram "
+                                 f"carries ({MAX_DATAGRAM_DATA})",
+                                 el if where is None else where)
             return data, len(data)
-        length = self.opt_int(el, "DataLength")
+        length = self.opt_int(el, "DataLength", DATAGRAM)
         if length is None:
             raise self.error(f"<{el.tag!s}> has neither <Data> nor <DataLength>", el)
         return None, length
@@ -272,21 +309,21 @@ class _Reader:
         return InitCmd(
             transitions=self.transitions(el),
             comment=self.opt_text(el, "Comment") or "",
-            cmd=self.req_int(el, "Cmd"),
+            cmd=self.req_int(el, "Cmd", U8),
             length=length,
             adp=adp, ado=ado, addr=addr, data=data,
-            cnt=self.opt_int(el, "Cnt"),
-            retries=self.opt_int(el, "Retries"),
+            cnt=self.opt_int(el, "Cnt", U16),
+            retries=self.opt_int(el, "Retries", COUNT),
             validate=None if validate is None else self.validate(validate),
             requires=self.opt_text(el, "Requires"),
             before_slave=self.opt_bool(el, "BeforeSlave"),
-            timeout=self.opt_int(el, "Timeout"),
+            timeout=self.opt_int(el, "Timeout", COUNT),
         )
 
     def validate(self, el: Element) -> Validate:
         return Validate(data=self.hex_bytes(self.child(el, "Data")),
                         mask=self.opt_hex(el, "DataMask"),
-                        timeout=self.int_or(el, "Timeout", 0))
+                        timeout=self.int_or(el, "Timeout", 0, COUNT))
 
     def init_cmds(self, parent: Element) -> list[InitCmd]:
         cmds = parent.find("InitCmds")
@@ -304,7 +341,7 @@ class _Reader:
             source=self.hex_or(info, "Source", defaults.source),
             ether_type=self.hex_or(info, "EtherType", defaults.ether_type),
             mailbox_states=None if states is None else (self.uint32(states, "StartAddr"),
-                                                         self.req_int(states, "Count")),
+                                                         self.req_int(states, "Count", COUNT)),
             init_cmds=self.init_cmds(el),
         )
 
@@ -317,14 +354,14 @@ class _Reader:
         dc = el.find("DC")
         return SlavePlan(
             name=self.opt_text(info, "Name") or "",
-            phys_addr=self.req_int(info, "PhysAddr") & 0xFFFF,
-            auto_inc_addr=self.req_int(info, "AutoIncAddr") & 0xFFFF,     # -1 -> 65535
+            phys_addr=self.req_int(info, "PhysAddr", U16),
+            auto_inc_addr=self.req_int(info, "AutoIncAddr", S16) & 0xFFFF,     # -1 -> 65535
             # EAS writes Physics as an attribute of Slave as well (eni-exports §8).
             physics=self.opt_text(info, "Physics") or el.get("Physics") or "YY",
             vendor_id=self.uint32(info, "VendorId"),
             product_code=self.uint32(info, "ProductCode"),
             revision=self.uint32(info, "RevisionNo"),
-            serial_no=self.int_or(info, "SerialNo", 0) & 0xFFFFFFFF,
+            serial_no=self.int_or(info, "SerialNo", 0, S32) & 0xFFFFFFFF,
             process_data=None if pd is None else self.process_data(pd),
             mailbox=None if mailbox is None else self.mailbox(mailbox),
             init_cmds=self.init_cmds(el),
@@ -333,7 +370,8 @@ class _Reader:
         )
 
     def bit_range(self, el: Element) -> BitRange:
-        return BitRange(self.req_int(el, "BitStart"), self.req_int(el, "BitLength"))
+        return BitRange(self.req_int(el, "BitStart", IMAGE_BITS),
+                        self.req_int(el, "BitLength", IMAGE_BITS))
 
     def process_data(self, el: Element) -> ProcessData:
         return ProcessData(
@@ -347,41 +385,41 @@ class _Reader:
         return SmSettings(
             number=number,
             type=self.opt_text(el, "Type") or "",
-            start_address=self.req_int(el, "StartAddress"),
-            control_byte=self.req_int(el, "ControlByte"),
+            start_address=self.req_int(el, "StartAddress", U16),
+            control_byte=self.req_int(el, "ControlByte", U8),
             enable=self.boolean(self.child(el, "Enable")),
-            pdos=[self.number(p) for p in el.iterchildren("Pdo")],
-            min_size=self.opt_int(el, "MinSize"),
-            max_size=self.opt_int(el, "MaxSize"),
-            default_size=self.opt_int(el, "DefaultSize"),
+            pdos=[self.number(p, U16) for p in el.iterchildren("Pdo")],
+            min_size=self.opt_int(el, "MinSize", U16),
+            max_size=self.opt_int(el, "MaxSize", U16),
+            default_size=self.opt_int(el, "DefaultSize", U16),
             virtual=self.opt_bool(el, "Virtual"),
-            watchdog=self.opt_int(el, "Watchdog"),
+            watchdog=self.opt_int(el, "Watchdog", U16),
         )
 
     def pdo(self, el: Element) -> PdoDesc:
         return PdoDesc(
             direction="rx" if el.tag == "RxPdo" else "tx",
-            index=self.req_int(el, "Index"),
+            index=self.req_int(el, "Index", U16),
             name=self.opt_text(el, "Name") or "",        # the first Name (one per language)
             entries=[self.entry(e) for e in el.iterchildren("Entry")],
-            sm=self.attr_int(el, "Sm"),
+            sm=self.attr_int(el, "Sm", SM_NUMBER),
             fixed=bool(self.attr_bool(el, "Fixed")),
             mandatory=bool(self.attr_bool(el, "Mandatory")),
             virtual=bool(self.attr_bool(el, "Virtual")),
-            excludes=[self.number(x) for x in el.iterchildren("Exclude")],
+            excludes=[self.number(x, U16) for x in el.iterchildren("Exclude")],
         )
 
     def entry(self, el: Element) -> PdoEntryDesc:
         return PdoEntryDesc(
-            index=self.req_int(el, "Index"),
-            subindex=self.int_or(el, "SubIndex", 0),
-            bit_len=self.req_int(el, "BitLen"),
+            index=self.req_int(el, "Index", U16),
+            subindex=self.int_or(el, "SubIndex", 0, U8),
+            bit_len=self.req_int(el, "BitLen", U16),
             name=self.opt_text(el, "Name") or "",
             data_type=self.opt_text(el, "DataType"),
         )
 
     def mailbox_area(self, el: Element) -> MailboxArea:
-        return MailboxArea(self.req_int(el, "Start"), self.req_int(el, "Length"))
+        return MailboxArea(self.req_int(el, "Start", U16), self.req_int(el, "Length", DATAGRAM))
 
     def mailbox(self, el: Element) -> MailboxPlan:
         recv = self.child(el, "Recv")
@@ -391,8 +429,8 @@ class _Reader:
             send=self.mailbox_area(self.child(el, "Send")),
             recv=self.mailbox_area(recv),
             protocols=[self.text(p).strip() for p in el.iterchildren("Protocol")],
-            poll_time=self.opt_int(recv, "PollTime"),
-            status_bit_addr=self.opt_int(recv, "StatusBitAddr"),
+            poll_time=self.opt_int(recv, "PollTime", COUNT),
+            status_bit_addr=self.opt_int(recv, "StatusBitAddr", S32),
             bootstrap_send=None if boot is None else self.mailbox_area(self.child(boot, "Send")),
             bootstrap_recv=None if boot is None else self.mailbox_area(self.child(boot, "Recv")),
             coe_init_cmds=[] if coe is None else self.coe_init_cmds(coe),
@@ -411,11 +449,11 @@ class _Reader:
         return CoeInitCmd(
             transitions=self.transitions(el),
             comment=self.opt_text(el, "Comment") or "",
-            index=self.req_int(el, "Index"),
-            subindex=self.int_or(el, "SubIndex", 0),
+            index=self.req_int(el, "Index", U16),
+            subindex=self.int_or(el, "SubIndex", 0, U8),
             data=self.hex_or(el, "Data", b""),
-            ccs=self.int_or(el, "Ccs", 1),
-            timeout=self.int_or(el, "Timeout", 0),
+            ccs=self.int_or(el, "Ccs", 1, U8),
+            timeout=self.int_or(el, "Timeout", 0, COUNT),
             complete_access=bool(self.attr_bool(el, "CompleteAccess")),
             fixed=bool(self.attr_bool(el, "Fixed")),
             disabled=bool(self.opt_bool(el, "Disabled")),
@@ -425,7 +463,7 @@ class _Reader:
         profile = coe.find("Profile")
         if profile is None:
             return []
-        return [(self.req_int(ch, "ProfileNo"), self.opt_text(ch, "AddInfo"))
+        return [(self.req_int(ch, "ProfileNo", S32), self.opt_text(ch, "AddInfo"))
                 for ch in profile.iterchildren("ChannelInfo")]
 
     def dc(self, el: Element) -> DcPlan | None:
@@ -435,22 +473,22 @@ class _Reader:
             return None
         return DcPlan(
             reference_clock=bool(self.opt_bool(el, "ReferenceClock")),
-            cycle_time0=self.int_or(el, "CycleTime0", 0),
-            cycle_time1=self.int_or(el, "CycleTime1", 0),
-            shift_time=self.int_or(el, "ShiftTime", 0),
+            cycle_time0=self.int_or(el, "CycleTime0", 0, S32) & 0xFFFFFFFF,
+            cycle_time1=self.int_or(el, "CycleTime1", 0, S32) & 0xFFFFFFFF,
+            shift_time=self.int_or(el, "ShiftTime", 0, I32),
         )
 
     def previous_port(self, el: Element) -> PreviousPort:
         # Selected is xs:int in the 2011 schema; TwinCAT writes "true" (eni-exports §1).
         return PreviousPort(port=self.text(self.child(el, "Port")).strip(),
-                            phys_addr=self.opt_int(el, "PhysAddr"),
+                            phys_addr=self.opt_int(el, "PhysAddr", U16),
                             selected=self.attr_bool(el, "Selected"))
 
     # --- cyclic frames and process image --------------------------------------------------
 
     def cyclic(self, el: Element) -> Cyclic:
         return Cyclic(frames=[self.frame(f) for f in el.iterchildren("Frame")],
-                      cycle_time=self.opt_int(el, "CycleTime"),
+                      cycle_time=self.opt_int(el, "CycleTime", COUNT),
                       comment=self.opt_text(el, "Comment"))
 
     def frame(self, el: Element) -> Frame:
@@ -464,28 +502,28 @@ class _Reader:
         return CyclicCmd(
             states=[self.text(s).strip() for s in el.iterchildren("State")],
             comment=self.opt_text(el, "Comment") or "",
-            cmd=self.req_int(el, "Cmd"),
+            cmd=self.req_int(el, "Cmd", U8),
             length=length,
             adp=adp, ado=ado, addr=addr, data=data,
-            cnt=self.opt_int(el, "Cnt"),
-            input_offs=self.int_or(el, "InputOffs", 0),
-            output_offs=self.int_or(el, "OutputOffs", 0),
+            cnt=self.opt_int(el, "Cnt", U16),
+            input_offs=self.int_or(el, "InputOffs", 0, IMAGE),
+            output_offs=self.int_or(el, "OutputOffs", 0, IMAGE),
         )
 
     def process_image(self, el: Element) -> ProcessImage:
         image = ProcessImage()
         inputs, outputs = el.find("Inputs"), el.find("Outputs")
         if inputs is not None:
-            image.inputs_size = self.req_int(inputs, "ByteSize")
+            image.inputs_size = self.req_int(inputs, "ByteSize", IMAGE)
             image.inputs = [self.variable(v) for v in inputs.iterchildren("Variable")]
         if outputs is not None:
-            image.outputs_size = self.req_int(outputs, "ByteSize")
+            image.outputs_size = self.req_int(outputs, "ByteSize", IMAGE)
             image.outputs = [self.variable(v) for v in outputs.iterchildren("Variable")]
         return image
 
     def variable(self, el: Element) -> Variable:
         return Variable(name=self.text(self.child(el, "Name")),
-                        bit_size=self.req_int(el, "BitSize"),
-                        bit_offs=self.req_int(el, "BitOffs"),
+                        bit_size=self.req_int(el, "BitSize", VARIABLE_BITS),
+                        bit_offs=self.req_int(el, "BitOffs", IMAGE_BITS),
                         data_type=self.opt_text(el, "DataType"),
                         comment=self.opt_text(el, "Comment"))
