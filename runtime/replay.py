@@ -277,15 +277,18 @@ def coe_init_cmd_job(channel: MailboxChannel, cmd: CoeInitCmd, who: str | None,
         progress.last_command = cmd.comment
     size = channel.plan.send.length
     timeout = cmd.timeout / 1000 if cmd.timeout else TIMEOUT_MAILBOX
+    what = cmd.comment or f"SDO 0x{cmd.index:04X}:{cmd.subindex:02X}"
     t: SdoUpload | SdoDownload
-    if cmd.ccs == 2:                              # upload (rare in ENIs: a read check)
-        t = SdoUpload(cmd.index, cmd.subindex, cmd.complete_access, size,
-                      channel.counter)
-    else:
-        t = SdoDownload(cmd.index, cmd.subindex, cmd.data, cmd.complete_access, size,
-                        channel.counter)
-    yield from sdo_job(channel, t, who, cmd.comment or f"SDO 0x{cmd.index:04X}:"
-                       f"{cmd.subindex:02X}", timeout)
+    try:
+        if cmd.ccs == 2:                          # upload (rare in ENIs: a read check)
+            t = SdoUpload(cmd.index, cmd.subindex, cmd.complete_access, size,
+                          channel.counter)
+        else:
+            t = SdoDownload(cmd.index, cmd.subindex, cmd.data, cmd.complete_access, size,
+                            channel.counter)
+    except ValueError as exc:                     # the ENI's SM0 is too small for any SDO
+        raise ApplyError(f"the mailbox cannot carry this SDO: {exc}", who, what) from None
+    yield from sdo_job(channel, t, who, what, timeout)
 
 
 # -- one slave, one transition ---------------------------------------------------------------

@@ -103,6 +103,9 @@ class EmulatedSlave:
         for start, end in _READ_ONLY:
             self._ro[start:end] = b"\x01" * (end - start)
         self._expected_pd = self._default_pd_bits()
+        # The firmware's own mailbox: the SMs the ESI names MBoxOut/MBoxIn (SOES keeps
+        # them in its configuration, ESCvar.mb[0..1], and writes replies to its own SM1).
+        self._mbx_in = next((sm.number for sm in device.sms if sm.type == "MBoxIn"), None)
         self._power_on()
 
     # -- power-on ---------------------------------------------------------------------------
@@ -286,19 +289,33 @@ class EmulatedSlave:
         was_repeat = sm.repeat_request
         sm.load(self.mem)
         request = bool(self.mem[reg + 6] & SM_ACTIVATE_REPEAT)
-        if sm.is_mailbox and not sm.master_writes and request != was_repeat:
+        if self._mailbox_running() and self._check_mailbox():
+            # The mailbox SMs no longer as the firmware set them up: it stops the mailbox
+            # and falls back to INIT with 0x0016 (SOES ESC_sm_act_event, ESC_checkmbx).
+            # It never writes a reply into an area the master moved (over registers,
+            # past the end of memory).
+            self._stop_mailbox()
+            self._set_state(AlState.INIT, AlStatusCode.INVALID_MAILBOX)
+        elif sm.number == self._mbx_in and request != was_repeat:
             # Repeat: post the last message again (the master lost it) and acknowledge.
             # Before PREOP the mailbox is not running: the bit is only taken over
             # (SOES ESC_startmbx copies it when the mailbox starts).
             sm.repeat_request = request
-            if self.last_mailbox is not None and self.state in (AlState.PREOP,
-                                                                AlState.SAFEOP, AlState.OP):
+            if self.last_mailbox is not None and self._mailbox_running():
                 self._post(sm, self.last_mailbox)
-        if not sm.full and sm.kind is SmKind.MAILBOX_IN:
+        if not sm.full and sm.number == self._mbx_in:
             self._post_next()
         sm.store_status(self.mem)
         if self.on_mapping_change:
             self.on_mapping_change()
+
+    def _mailbox_running(self) -> bool:
+        return self.mem[Reg.AL_STATUS] & AL_STATE_MASK in (AlState.PREOP, AlState.SAFEOP,
+                                                            AlState.OP)
+
+    def _stop_mailbox(self) -> None:
+        self.mailbox_queue.clear()
+        self.last_mailbox = None
 
     def _write_sm_area(self, sm: SmState, ado: int, data: bytes | memoryview) -> bool:
         n = len(data)
@@ -329,7 +346,12 @@ class EmulatedSlave:
         return data
 
     def _mailbox_in_sm(self) -> SmState | None:
-        return next((s for s in self.sms if s.active and s.kind is SmKind.MAILBOX_IN), None)
+        """The firmware's mailbox-in SM while it is running (configured as the ESI says:
+        checked at INIT->PREOP and at every SM change after that)."""
+        if self._mbx_in is None or not self._mailbox_running():
+            return None
+        sm = self.sms[self._mbx_in]
+        return sm if sm.active and sm.kind is SmKind.MAILBOX_IN else None
 
     def _mailbox_received(self, message: bytes) -> None:
         """The firmware takes the message out of SM0 at once (the buffer is empty again)
@@ -537,8 +559,7 @@ class EmulatedSlave:
             self._last_output_write = time.monotonic()
             self._arm_watchdog()
         if target <= AlState.INIT:
-            self.mailbox_queue.clear()
-            self.last_mailbox = None
+            self._stop_mailbox()
         if target == AlState.PREOP and self.state == AlState.INIT:
             self.last_mailbox = None
             if self.sdo_server is not None:

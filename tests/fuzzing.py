@@ -499,55 +499,111 @@ REGISTERS = (0x0000, 0x0010, 0x0012, 0x0100, 0x0101, 0x0103, 0x0110, 0x0120, 0x0
              0x080D, 0x080E, 0x0810, 0x0818, 0x0820, 0x0838, 0x0900, 0x0910, 0x0918, 0x0920,
              0x0928, 0x0930, 0x0934, 0x0980, 0x0981, 0x0990, 0x09A0, 0x0FFF, 0x1000, 0x1080,
              0x1100, 0x1180, 0x1200, 0x1800, 0x1C00, 0xFFF0, 0xFFFF)
+# Station addresses of the seed lines (1001..), auto-increment positions (0, -1, ...), others.
 STATIONS = (0, 1, 1001, 1002, 1003, 1004, 1005, 0xFFFF, 0xFFFE, 0xFFFD, 0xFFFC, 0xFFFB)
-CONTROLS = (0x26, 0x22, 0x64, 0x20, 0x24, 0x02, 0x00, 0x06, 0x44, 0x66)
 AL_REQUESTS = (0x00, 0x01, 0x02, 0x03, 0x04, 0x05, 0x08, 0x0F, 0x11, 0x12, 0x14, 0x18, 0x1F,
                0x20, 0xFF)
+MAILBOX_OUT, MAILBOX_IN = 0x1000, 0x1080          # the example devices' mailboxes
+MAILBOX_SIZE = 128
+
+
+def _field(seed_values: tuple[int, ...], bits: int) -> st.SearchStrategy[int]:
+    return st.one_of(st.sampled_from(seed_values), st.integers(0, (1 << bits) - 1))
 
 
 def _sm_image() -> st.SearchStrategy[bytes]:
+    """One SyncManager's 8 registers, each field a value a real configuration holds (the
+    examples' SMs), a boundary (register space, end of memory), or anything; activate
+    with and without the repeat request."""
     return st.builds(lambda start, length, control, status, act, pdi: struct.pack(
         "<HHBBBB", start, length, control, status, act, pdi),
-        st.one_of(st.sampled_from(REGISTERS), st.integers(0, 0xFFFF)),
-        st.one_of(st.sampled_from((0, 1, 2, 6, 8, 16, 128, 256, 1024, 0xF000, 0xFFFF)),
-                  st.integers(0, 0xFFFF)),
-        st.one_of(st.sampled_from(CONTROLS), st.integers(0, 255)),
-        st.integers(0, 255), st.sampled_from((0, 1, 2, 3, 0xFE, 0xFF)), st.integers(0, 255))
+        _field((0x0130, 0x1080, 0x1000, 0x0000, 0xFFF0, 0x1100, 0x1180, 0x0F00, 0x0100,
+                0x0FFF, 0xFFFF), 16),
+        _field((128, 0xFFFF, 6, 1, 0, 2, 0x1000), 16),
+        _field((0x22, 0x26, 0x64, 0x20, 0x00, 0x44, 0x02), 8),
+        _field((0, 0x08, 0x09), 8), _field((3, 1, 2, 0), 8), _field((0, 1, 2), 8))
 
 
 def _fmmu_image() -> st.SearchStrategy[bytes]:
     return st.builds(lambda log, length, sbit, ebit, phys, pbit, kind, act: struct.pack(
         "<IHBBHBBB3x", log, length, sbit, ebit, phys, pbit, kind, act),
-        st.one_of(st.sampled_from((0, 1, 0x10000, 0x09000000, 0xFFFFFFFF)),
-                  st.integers(0, 2**32 - 1)),
-        st.one_of(st.sampled_from((0, 1, 2, 8, 0xFFFF)), st.integers(0, 0xFFFF)),
-        st.integers(0, 7), st.integers(0, 7),
-        st.one_of(st.sampled_from(REGISTERS), st.integers(0, 0xFFFF)),
-        st.integers(0, 7), st.integers(0, 3), st.integers(0, 1))
+        _field((0, 1, 0x10000, 0x09000000, 0xFFFFFFFF), 32), _field((0, 1, 2, 8, 0xFFFF), 16),
+        _field((0, 7), 3), _field((0, 7), 3),
+        _field((0x1000, 0x1100, 0x1180, 0x080D, 0x0130, 0x0000, 0xFFFF), 16),
+        _field((0, 7), 3), _field((1, 2, 3), 2), _field((1,), 1))
 
 
-def _payload() -> st.SearchStrategy[bytes]:
-    sms = st.lists(_sm_image(), min_size=1, max_size=8).map(b"".join)
-    fmmus = st.lists(_fmmu_image(), min_size=1, max_size=4).map(b"".join)
-    control = st.tuples(st.sampled_from(AL_REQUESTS), st.integers(0, 255)).map(bytes)
-    return st.one_of(st.binary(max_size=80), sms, fmmus, control,
-                     st.tuples(sms, st.binary(max_size=4)).map(b"".join),
-                     st.integers(0, 80).map(bytes))
+def _mailbox_message() -> st.SearchStrategy[bytes]:
+    """A mailbox message as a master writes it into SM0: header (length, address, channel
+    and priority, type and counter), then CoE and SDO headers, with any field odd."""
+    header = st.builds(lambda length, address, chan, kind, cnt: struct.pack(
+        "<HHBB", length, address, chan, kind | cnt << 4),
+        _field((10, 6, 0, 122, 128, 0xFFFF), 16), _field((0,), 16), _field((0,), 8),
+        _field((3, 0, 1, 2, 4, 5, 15), 4), st.integers(0, 7))
+    coe = _field((0x2000, 0x3000, 0x8000, 0x1000), 16).map(lambda w: struct.pack("<H", w))
+    sdo = st.builds(lambda command, index, sub, rest: struct.pack("<BHB", command, index, sub)
+                    + rest,
+                    _field((0x40, 0x23, 0x2B, 0x2F, 0x21, 0x60, 0x00, 0x10, 0x80, 0x01,
+                            0x51, 0x61), 8),
+                    _field((0x1000, 0x1018, 0x1C12, 0x1C13, 0x1600, 0x1A00, 0x6060, 0xF030,
+                            0x10F1), 16),
+                    _field((0, 1, 2, 0xFF), 8), st.binary(max_size=12))
+    body = st.one_of(st.tuples(coe, sdo).map(b"".join), st.binary(max_size=20))
+    return st.tuples(header, body).map(b"".join)
+
+
+def _sized(data: bytes, size: int) -> bytes:
+    return data[:size].ljust(size, b"\0")
 
 
 @st.composite
 def datagram(draw):
+    """One datagram of a kind a master sends (or a wrong one): register writes of SM, FMMU,
+    AL control, SII and DC blocks, mailbox messages into SM0, mailbox and register reads,
+    logical process data, or anything at all."""
     from ecatcfg.esc import Cmd
     from ecatcfg.runtime.wire import Datagram
-    cmd = draw(st.one_of(st.sampled_from(list(Cmd)), st.integers(0, 255)))
-    data = draw(_payload())
-    if cmd in (Cmd.LRD, Cmd.LWR, Cmd.LRW):
-        address = draw(st.one_of(st.sampled_from((0, 1, 0x10000, 0x09000000)),
-                                 st.integers(0, 2**32 - 1)))
-        return Datagram.logical(cmd, address, data, idx=draw(st.integers(0, 255)))
-    adp = draw(st.one_of(st.sampled_from(STATIONS), st.integers(0, 0xFFFF)))
-    ado = draw(st.one_of(st.sampled_from(REGISTERS), st.integers(0, 0xFFFF)))
-    return Datagram.physical(cmd, adp, ado, data, idx=draw(st.integers(0, 255)))
+    kind = draw(st.sampled_from(("sm", "fmmu", "al", "sii", "dc", "mailbox", "read",
+                                 "logical", "any")))
+    writes = (Cmd.BWR, Cmd.FPWR, Cmd.APWR, Cmd.BRW, Cmd.FPRW, Cmd.APRW, Cmd.FRMW, Cmd.ARMW)
+    cmd = draw(st.sampled_from(writes))
+    adp = draw(st.sampled_from(STATIONS))
+    if kind == "sm":
+        first = draw(st.integers(0, 7))
+        ado = 0x0800 + 8 * first
+        data = b"".join(draw(st.lists(_sm_image(), min_size=1, max_size=8 - first)))
+        data += draw(st.binary(max_size=2))
+    elif kind == "fmmu":
+        first = draw(st.integers(0, 7))
+        ado = 0x0600 + 16 * first
+        data = b"".join(draw(st.lists(_fmmu_image(), min_size=1, max_size=4)))
+    elif kind == "al":
+        ado, data = 0x0120, bytes([draw(st.sampled_from(AL_REQUESTS)), draw(st.integers(0, 255))])
+    elif kind == "sii":
+        ado = 0x0500
+        data = struct.pack("<BBHI", draw(_field((0, 1), 8)), draw(_field((0,), 8)),
+                           draw(_field((0x0100, 0x0201, 0x0300, 0x0400), 16)),
+                           draw(_field((0, 8, 0x40, 0xFFFF), 32)))
+    elif kind == "dc":
+        ado = draw(st.sampled_from((0x0900, 0x0910, 0x0920, 0x0928, 0x0930, 0x0980, 0x0981,
+                                    0x0990, 0x09A0)))
+        data = draw(st.binary(min_size=1, max_size=16))
+    elif kind == "mailbox":
+        ado = draw(_field((MAILBOX_OUT,), 16))
+        data = _sized(draw(_mailbox_message()), draw(_field((MAILBOX_SIZE, 6, 16), 8)))
+    elif kind == "read":
+        cmd = draw(st.sampled_from((Cmd.FPRD, Cmd.APRD, Cmd.BRD, Cmd.NOP)))
+        ado = draw(st.one_of(st.just(MAILBOX_IN), st.sampled_from(REGISTERS)))
+        data = bytes(draw(_field((MAILBOX_SIZE, 2, 6, 8), 7)))
+    elif kind == "logical":
+        cmd = draw(st.sampled_from((Cmd.LRD, Cmd.LWR, Cmd.LRW)))
+        return Datagram.logical(cmd, draw(_field((0, 1, 0x09000000), 32)),
+                                draw(st.binary(max_size=40)))
+    else:
+        cmd = draw(st.integers(0, 255))
+        ado = draw(_field(REGISTERS, 16))
+        data = draw(st.binary(max_size=80))
+    return Datagram.physical(cmd, adp, ado, data)
 
 
 @st.composite
@@ -555,7 +611,8 @@ def frame(draw) -> bytes:
     """An EtherCAT frame from the wire: well-formed datagrams, sometimes damaged."""
     from ecatcfg.runtime import wire
     dgs = draw(st.lists(datagram(), min_size=1, max_size=3))
-    for dg in dgs:
+    for i, dg in enumerate(dgs):
+        dg.idx = i
         dg.wkc = draw(st.sampled_from((0, 0, 0, 1, 0xFFFF)))
     data = wire.encode(dgs)
     if draw(st.integers(0, 9)) == 0:
@@ -784,7 +841,7 @@ class Tamper:
         pos, n = offsets[f.value % len(offsets)] if offsets else (wire.FRAME_HEADER_END, 0)
         if f.kind == "truncate":
             del frame[f.value % (len(frame) + 1):]
-        elif f.kind == "ecat_length":
+        elif f.kind == "ecat_length" and len(frame) >= wire.FRAME_HEADER_END:
             struct.pack_into("<H", frame, wire.ETH_LEN, (f.value & 0x7FF) | 0x1000)
         elif f.kind == "dg_length" and offsets:
             flags, = struct.unpack_from("<H", frame, pos + 6)
@@ -896,27 +953,27 @@ _IN_FILE = located_in_file
 
 TARGETS: dict[str, Target] = {t.name: t for t in (
     Target("esi_reader", "ESI files (example devices, values/elements/bytes mutated)",
-           lambda: xml_inputs("esi"), _esi, _IN_FILE("fuzz.xml"), 300),
+           lambda: xml_inputs("esi"), _esi, _IN_FILE("fuzz.xml"), 200),
     Target("lint", "ESI files through every lint rule", lambda: xml_inputs("esi"),
            _lint, _IN_FILE("fuzz.xml"), 120),
     Target("topology", "topology YAML/JSON (scalars, explicit tags, syntax mutated)",
-           lambda: yaml_inputs("topology"), _topology, _IN_FILE("fuzz.yaml"), 600),
+           lambda: yaml_inputs("topology"), _topology, _IN_FILE("fuzz.yaml"), 400),
     Target("compiler", "topologies compiled against the example ESI files, ENI written "
            "and read back", lambda: mutants("topology", yaml_values=2),
            _compile, _IN_FILE("fuzz.yaml"), 200),
     Target("eni_reader", "ENI files (compiled from the examples, mutated)",
-           lambda: xml_inputs("eni"), _eni, _IN_FILE("fuzz.eni.xml"), 300),
+           lambda: xml_inputs("eni"), _eni, _IN_FILE("fuzz.eni.xml"), 250),
     Target("eni_apply", "ENIs the reader accepts, applied on the virtual segment",
-           _eni_apply_inputs, _eni_apply, located_on_line, 250),
+           _eni_apply_inputs, _eni_apply, located_on_line, 200),
     Target("sii_decoder", "SII images built from the example devices, mutated",
-           sii_inputs, _sii, _IN_FILE("fuzz.bin"), 600),
+           sii_inputs, _sii, _IN_FILE("fuzz.bin"), 500),
     Target("frame_decoder", "Ethernet frames into the datagram decoder", _frame_inputs,
-           _frame_decode, lambda exc: True, 600),
+           _frame_decode, lambda exc: True, 300),
     Target("segment", "frames from the wire against a line in OP",
            lambda: st.tuples(st.integers(0, len(eni_seeds()) - 1), frames()),
-           feed_segment, located_on_line, 300),
+           feed_segment, located_on_line, 250),
     Target("master", "replies damaged on their way back to the master (bring-up, cycles, "
            "way down)", lambda: st.tuples(st.integers(0, len(eni_seeds()) - 1),
                                           reply_faults()),
-           master_with_faults, located_on_line, 120),
+           master_with_faults, located_on_line, 100),
 )}
