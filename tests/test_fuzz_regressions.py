@@ -1,0 +1,186 @@
+"""Minimal inputs of the crash classes the fuzz harness found (docs/fuzzing.md), each now a
+located error or handled as real hardware does.
+
+ENI inputs are written as the harness reports them: ``Mutant('eni', seed, edits)`` is the
+ENI compiled from a seed topology of ``tests/fuzzing.py`` with one value changed; the line
+an error must name is found in the mutated text independently of the reader.
+"""
+
+from __future__ import annotations
+
+import re
+import struct
+
+import pytest
+
+import fuzzing
+from ecatcfg.cli import main
+from ecatcfg.compiler import topology
+from ecatcfg.eni import reader
+from ecatcfg.eni.reader import EniReadError
+from ecatcfg.errors import EcatcfgError
+from ecatcfg.esc import AlState, Cmd
+from ecatcfg.runtime import wire
+from ecatcfg.runtime.replay import ApplyError
+from ecatcfg.runtime.slave import MEMORY_SIZE
+from ecatcfg.runtime.wire import Datagram
+
+TOPOLOGY = "master: {name: m}\nslaves:\n  - {name: a, device: EX1004}\n"
+
+
+# -- 1. topology: explicit tags that do not parse, integers too long to convert -----------
+
+@pytest.mark.parametrize("value, kind", [
+    ("!!float abc", "float"), ("!!timestamp 2001-13-45", "timestamp"), ("!!int zz", "int"),
+    ("!!bool 0", "bool"), ("!!timestamp 0", "timestamp"), ("1" * 4301, "int"),
+    ("2001-13-45", "timestamp"),            # no tag: YAML reads it as a date all the same
+])
+def test_topology_scalar_that_does_not_construct(value, kind):
+    text = TOPOLOGY + f"  - {{name: b, device: EX1004, station_address: {value}}}\n"
+    with pytest.raises(EcatcfgError) as err:
+        topology.loads(text, "t.yaml")
+    assert (err.value.file, err.value.line) == ("t.yaml", 4)
+    assert f"is not a valid {kind}" in err.value.message
+
+
+def test_topology_scalar_error_is_exit_1_without_traceback(tmp_path, capsys):
+    path = tmp_path / "t.yaml"
+    path.write_text(TOPOLOGY + "  - {name: b, device: !!float abc}\n")
+    code = main(["compile", str(path), "--esi", str(fuzzing.ESI_DIR),
+                 "-o", str(tmp_path / "x.eni.xml")])
+    err = capsys.readouterr().err
+    assert code == 1 and "Traceback" not in err
+    assert f"{path}:4:" in err and "'abc' is not a valid float" in err
+
+
+def test_topology_bytes_and_characters_yaml_refuses_have_a_line():
+    with pytest.raises(EcatcfgError) as err:
+        topology.loads(TOPOLOGY.encode() + b"  - {name: \xa3}\n", "t.yaml")
+    assert (err.value.line, err.value.message) == (4, "not UTF-8 text (byte 67)")
+    with pytest.raises(EcatcfgError) as err:
+        topology.loads(TOPOLOGY + "  - {name: \x1f}\n", "t.yaml")
+    assert (err.value.line, err.value.column) == (4, 12)
+    assert "U+001F" in err.value.message
+
+
+# -- 2.-4. ENI values the wire cannot carry: errors at their line ------------------------
+
+def line_of(data: bytes, group: str, index: int) -> int:
+    """The line of the index-th ``Parent/Tag`` value, found by the harness's text scan
+    (regular expressions over the bytes, not the reader)."""
+    start, _ = dict(fuzzing.xml_spans(data).groups)[group][index]
+    return data.count(b"\n", 0, start) + 1
+
+
+@pytest.mark.parametrize("seed, group, index, value, message", [
+    (1, "InitCmd/Cmd", 1, "32768", "<Cmd> 32768 is out of range: one byte (0..255)"),  # 2.
+    (0, "InitCmd/Cmd", 0, "256", "<Cmd> 256 is out of range"),
+    (0, "InitCmd/Index", 0, "-227", "<Index> -227 is out of range: 16 bits"),          # 3.
+    (0, "InitCmd/Index", 0, "65536", "<Index> 65536 is out of range"),
+    (0, "InitCmd/SubIndex", 0, "256", "<SubIndex> 256 is out of range: one byte"),
+    (0, "InitCmd/SubIndex", 0, "-1", "<SubIndex> -1 is out of range"),
+    (1, "Cmd/DataLength", 0, "-1", "<DataLength> -1 is out of range"),                # 4.
+    (1, "InitCmd/DataLength", 1, "5407", "<DataLength> 5407 is out of range: what one "
+                                          "datagram carries (0..1486)"),
+    (0, "InitCmd/Adp", 3, "65536", "<Adp> 65536 is out of range"),
+    (0, "InitCmd/Ado", 3, "-1", "<Ado> -1 is out of range"),
+    (0, "Cmd/InputOffs", 0, "4294967296", "<InputOffs> 4294967296 is out of range"),
+    (0, "Variable/BitSize", 0, "0", "<BitSize> 0 is out of range"),
+    (0, "Send/Length", 0, "-1172", "<Length> -1172 is out of range"),
+])
+def test_eni_value_out_of_range_is_an_error_at_its_line(seed, group, index, value, message):
+    data = fuzzing.Mutant("eni", seed, (("value", group, index, value),)).data()
+    with pytest.raises(EniReadError) as err:
+        reader.read_bytes(data, "x.eni.xml")
+    assert err.value.file == "x.eni.xml"
+    assert err.value.line == line_of(data, group, index)
+    assert err.value.message.startswith(message)
+
+
+def test_eni_signed_spellings_still_read():
+    """xs:int fields may spell an unsigned value signed (TwinCAT: AutoIncAddr -1)."""
+    data = fuzzing.Mutant("eni", 0, (("value", "InitCmd/Adp", 0, "-1"),
+                                     ("value", "Info/VendorId", 0, "-1"))).data()
+    plan = reader.read_bytes(data, "x.eni.xml")
+    assert plan.slaves[0].vendor_id == 0xFFFFFFFF
+    assert next(c.adp for s in plan.slaves for c in s.init_cmds if c.adp is not None) \
+        in (0, 0xFFFF)
+
+
+def test_eni_apply_of_cmd_above_255_is_exit_1(tmp_path, capsys):
+    data = fuzzing.Mutant("eni", 1, (("value", "InitCmd/Cmd", 1, "32768"),)).data()
+    path = tmp_path / "x.eni.xml"
+    path.write_bytes(data)
+    code = main(["apply", str(path), "--virtual", "--esi", str(fuzzing.ESI_DIR),
+                 "--no-cache"])
+    err = capsys.readouterr().err
+    assert code == 1 and "Traceback" not in err
+    assert f"{path}:{line_of(data, 'InitCmd/Cmd', 1)}: <Cmd> 32768 is out of range" in err
+
+
+def test_mailbox_too_small_for_an_sdo_names_slave_and_command():
+    data = fuzzing.Mutant("eni", 1, (("value", "Send/Length", 0, "1"),)).data()
+    plan = reader.read_bytes(data, "x.eni.xml")
+    with pytest.raises(ApplyError) as err:
+        fuzzing.apply_plan(plan)
+    assert err.value.slave == "drive" and err.value.command
+    assert "the mailbox cannot carry this SDO" in err.value.message
+
+
+# -- 5. frames from the wire against a line in OP ---------------------------------------
+
+def frame(*dgs: Datagram) -> bytes:
+    return wire.encode(list(dgs))
+
+
+def status(segment, position: int) -> tuple[int, int]:
+    mem = segment.slaves[position].mem
+    return struct.unpack_from("<H", mem, 0x0130)[0], struct.unpack_from("<H", mem, 0x0134)[0]
+
+
+def test_sm1_moved_over_the_registers_with_repeat_request_in_op():
+    """65 bytes broadcast over 0x0800..: SM0 cleared, SM1 a mailbox-in at 0x0130 with the
+    repeat request toggled; then an AL control request of state 0.  The firmware used to
+    post its last reply there, over AL status (``0 is not a valid AlState``); it checks its
+    mailbox on every SM change in PREOP and above instead (SOES ESC_sm_act_event ->
+    ESC_checkmbx) and falls back to INIT with error 0x0016."""
+    segment = fuzzing.line_in_op(fuzzing.eni_seeds()[1])      # in (1001), drive (1002)
+    junk = bytes(8) + struct.pack("<HHBBBB", 0x0130, 128, 0x22, 0, 0x03, 0) + bytes(49)
+    back = wire.decode(segment.process(frame(Datagram.physical(Cmd.BWR, 0, 0x0800, junk))))
+    assert back.datagrams[0].wkc == 2
+    assert status(segment, 1) == (AlState.INIT | 0x10, 0x0016)     # the drive: mailbox
+    assert status(segment, 0) == (AlState.OP, 0)                   # the I/O has none
+    back = wire.decode(segment.process(frame(Datagram.physical(Cmd.FPWR, 1002, 0x0120,
+                                                               b"\x00\x00"))))
+    assert back.datagrams[0].wkc == 1
+    # An unacknowledged error: the request is ignored (SOES, KickCAT).
+    assert status(segment, 1) == (AlState.INIT | 0x10, 0x0016)
+    assert all(len(s.mem) == MEMORY_SIZE for s in segment.slaves)
+
+
+def test_requested_state_that_is_no_state():
+    """AL control 0 (or 5, 6, 7, 9..15) is not a state: 0x0012 'unknown requested state',
+    OP falls back to SAFEOP (SOES ESC_state, default branch)."""
+    segment = fuzzing.line_in_op(fuzzing.eni_seeds()[1])
+    segment.process(frame(Datagram.physical(Cmd.FPWR, 1002, 0x0120, b"\x00\x00")))
+    assert status(segment, 1) == (AlState.SAFEOP | 0x10, 0x0012)
+
+
+def test_sm1_moved_past_the_end_of_memory():
+    segment = fuzzing.line_in_op(fuzzing.eni_seeds()[1])
+    image = struct.pack("<HHBBBB", 0xFFF0, 0xFFFF, 0x22, 0, 0x03, 0)
+    segment.process(frame(Datagram.physical(Cmd.FPWR, 1002, 0x0808, image)))
+    assert status(segment, 1) == (AlState.INIT | 0x10, 0x0016)
+    assert len(segment.slaves[1].mem) == MEMORY_SIZE
+
+
+def test_repeat_request_on_the_real_sm1_still_reposts():
+    """The fix leaves the mailbox repeat alone: toggling SM1's repeat bit in OP posts the
+    last reply again at 0x1080 and acknowledges in 0x080F."""
+    segment = fuzzing.line_in_op(fuzzing.eni_seeds()[1])
+    drive = segment.slaves[1]
+    assert drive.last_mailbox is not None
+    segment.process(frame(Datagram.physical(Cmd.FPWR, 1002, 0x080E, b"\x03")))
+    assert drive.state == AlState.OP and drive.mem[0x080F] & 0x02
+    assert bytes(drive.mem[0x1080:0x1080 + len(drive.last_mailbox)]) == drive.last_mailbox
+    assert drive.mem[0x080D] & 0x08                                 # SM1 full
