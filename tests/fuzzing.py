@@ -32,8 +32,13 @@ from pathlib import Path
 from typing import Any
 
 from hypothesis import strategies as st
+from hypothesis.configuration import set_hypothesis_home_dir
 
 from ecatcfg.errors import EcatcfgError
+
+# Hypothesis keeps caches (constants found in the source) under ./.hypothesis by default:
+# not in the checkout.
+set_hypothesis_home_dir(Path(tempfile.gettempdir()) / "ecatcfg-hypothesis")
 
 ROOT = Path(__file__).resolve().parent.parent
 EXAMPLES = ROOT / "examples"

@@ -158,6 +158,18 @@ def test_sm1_moved_over_the_registers_with_repeat_request_in_op():
     assert all(len(s.mem) == MEMORY_SIZE for s in segment.slaves)
 
 
+def test_minimal_frame_sm0_made_a_mailbox_in_over_al_status():
+    """The harness's minimal input, one frame: BWR of 8 bytes at 0x0800 making SM0 a
+    mailbox-in at 0x0130 of 128 bytes, enabled, repeat requested (crashed with
+    ``10 is not a valid AlState``)."""
+    segment = fuzzing.line_in_op(fuzzing.eni_seeds()[0])      # coupler .. axis1 (1005)
+    image = struct.pack("<HHBBBB", 0x0130, 0x0080, 0x22, 0, 0x03, 0)
+    back = wire.decode(segment.process(frame(Datagram.physical(Cmd.BWR, 0, 0x0800, image))))
+    assert back.datagrams[0].wkc == 5
+    assert status(segment, 4) == (AlState.INIT | 0x10, 0x0016)      # axis1: mailbox broken
+    assert [status(segment, i) for i in range(4)] == [(AlState.OP, 0)] * 4    # no mailbox
+
+
 def test_requested_state_that_is_no_state():
     """AL control 0 (or 5, 6, 7, 9..15) is not a state: 0x0012 'unknown requested state',
     OP falls back to SAFEOP (SOES ESC_state, default branch)."""
