@@ -773,21 +773,37 @@ REPLY_DAMAGE = ("truncate", "ecat_length", "dg_length", "wkc", "index", "cmd", "
                 "mailbox", "more_flag", "drop", "duplicate", "stale", "junk")
 
 
+# Fields of a mailbox message as it comes back in an SM1 read: (offset, size, mask) of the
+# header's length, type, counter; the CoE service; the SDO command, index, subindex and
+# size or data (ETG.1000.4 mailbox header, ETG.1000.6 CoE and SDO headers).
+MAILBOX_FIELDS = {"length": (0, 2, 0xFFFF), "type": (5, 1, 0x0F), "counter": (5, 1, 0x70),
+                  "service": (6, 2, 0xF000), "sdo_command": (8, 1, 0xFF),
+                  "index": (9, 2, 0xFFFF), "subindex": (11, 1, 0xFF), "size": (12, 4, 0xFFFF_FFFF),
+                  "bytes": (0, 0, 0)}
+
+
 @dataclass(frozen=True)
 class ReplyFault:
     """Damage done to one reply on its way back: the ``nth`` reply that ``kind`` applies
-    to (a mailbox read for ``mailbox``, any reply otherwise)."""
+    to (a mailbox read for ``mailbox``, any reply otherwise).  ``value`` picks a datagram
+    or a length, ``word`` is a value written, ``field`` the mailbox field it goes into."""
 
     kind: str
     nth: int
     value: int
+    word: int
+    field: str
     data: bytes
 
 
 def reply_faults() -> st.SearchStrategy[list[ReplyFault]]:
-    fault = st.builds(ReplyFault, st.sampled_from(REPLY_DAMAGE), st.integers(0, 320),
-                      st.one_of(st.sampled_from((0, 1, 2, 3, 0xFF, 0x7FF, 0xFFFF)),
-                                st.integers(0, 0xFFFF)),
+    # Half of the faults go to mailbox replies: a few per bring-up, but the most parsing.
+    kind = st.one_of(st.sampled_from(REPLY_DAMAGE), st.just("mailbox"))
+    fault = st.builds(ReplyFault, kind, st.integers(0, 320),
+                      _field((0, 1, 2, 3, 0xFF, 0x7FF, 0xFFFF), 16),
+                      _field((0, 1, 2, 3, 4, 6, 10, 0x7F, 0x80, 0xFF, 0x1000, 0x2000, 0x3000,
+                              0x8000, 0xFFFF, 0xFFFF_FFFF), 32),
+                      st.sampled_from(list(MAILBOX_FIELDS)),
                       st.binary(min_size=1, max_size=16))
     return st.lists(fault, min_size=1, max_size=4)
 
@@ -826,7 +842,7 @@ class Tamper:
         self.seen["mailbox"] += bool(mailbox)
         for f in self.faults:
             if f.kind == "mailbox":
-                hit = bool(mailbox) and f.nth % 40 == reads     # a line sends few of them
+                hit = bool(mailbox) and f.nth % 8 == reads      # a bring-up has ~10
             else:
                 hit = f.nth == replies
             if hit:
@@ -861,10 +877,17 @@ class Tamper:
             at = pos + wire.DG_HEADER_LEN + f.value % n
             frame[at:at + len(f.data)] = f.data[:pos + wire.DG_HEADER_LEN + n - at]
         elif f.kind == "mailbox" and mailbox:
-            # Garbage in the mailbox header (length, address, channel, type|counter) or
-            # in the CoE/SDO headers after it.
-            at = mailbox[0] + wire.DG_HEADER_LEN + f.value % 16
-            frame[at:at + len(f.data)] = f.data[:max(0, len(frame) - at - 2)]
+            # One field of the mailbox, CoE or SDO header set to an odd value, or bytes.
+            base = mailbox[0] + wire.DG_HEADER_LEN
+            offset, size, mask = MAILBOX_FIELDS[f.field]
+            if size:
+                shift = (mask & -mask).bit_length() - 1
+                old = int.from_bytes(frame[base + offset:base + offset + size], "little")
+                new = old & ~mask | (f.word << shift) & mask
+                frame[base + offset:base + offset + size] = new.to_bytes(size, "little")
+            else:
+                at = base + f.value % 16
+                frame[at:at + len(f.data)] = f.data[:max(0, len(frame) - at - 2)]
         elif f.kind == "more_flag" and offsets:
             frame[pos + 7] ^= 0x80
         elif f.kind == "drop":
@@ -980,5 +1003,5 @@ TARGETS: dict[str, Target] = {t.name: t for t in (
     Target("master", "replies damaged on their way back to the master (bring-up, cycles, "
            "way down)", lambda: st.tuples(st.integers(0, len(eni_seeds()) - 1),
                                           reply_faults()),
-           master_with_faults, located_on_line, 100),
+           master_with_faults, located_on_line, 120),
 )}
