@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import re
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Any, Literal
@@ -33,7 +34,12 @@ MAX_NODES = 200_000
 # A topology nests about six levels deep; much deeper input only exhausts the stack.
 MAX_DEPTH = 64
 # Characters XML 1.0 cannot carry (names and comments end up in the ENI).
-_TIMESTAMP = "tag:yaml.org,2002:timestamp"
+_INT = "tag:yaml.org,2002:int"
+# What a YAML 1.1 int, float, bool, null or timestamp looks like: the patterns PyYAML's
+# resolver tells untagged scalars by, so a tagged one is held to the same form.
+_SCALAR_SYNTAX = {tag: regexp for resolvers in yaml.resolver.Resolver.yaml_implicit_resolvers
+                  .values() for tag, regexp in resolvers
+                  if tag.rpartition(":")[2] in ("int", "float", "bool", "null", "timestamp")}
 _NOT_XML = re.compile("[^\t\n\r\x20-\ud7ff\ue000-\ufffd\U00010000-\U0010ffff]")
 
 
@@ -255,29 +261,30 @@ class _Walker:
             return out
         if isinstance(node, yaml.SequenceNode):
             return [self.value(v, path + (i,)) for i, v in enumerate(node.value)]
-        if node.tag == _TIMESTAMP and not self.loader.timestamp_regexp.match(node.value):
-            # PyYAML's timestamp constructor assumes the text has the form of one.
-            raise self._not_valid(node, "timestamp", "expected YYYY-MM-DD[ hh:mm:ss]")
+        syntax = _SCALAR_SYNTAX.get(node.tag)
+        if syntax is not None and not syntax.match(node.value):
+            # An explicit tag the text does not fit (!!float abc, !!int zz, !!bool 0,
+            # !!timestamp 0): refused before PyYAML's constructor, which assumes the text
+            # has the type's form and fails in its own ways when it has not.
+            raise self._not_valid(node)
+        digits = sum(map(str.isdigit, node.value)) if node.tag == _INT else 0
+        if digits > sys.get_int_max_str_digits():
+            raise self._not_valid(node, f"{digits} digits, more than Python converts")
         try:
             return self.loader.construct_object(node, deep=True)
         except yaml.YAMLError as exc:        # a tag SafeLoader does not know (!foo, !!python/..)
             problem = getattr(exc, "problem", None) or str(exc)
             raise EcatcfgError(f"not valid here: {problem}", self.file,
                                node.start_mark.line + 1) from None
-        except (ValueError, KeyError) as exc:
-            # The constructor of the scalar's type refuses its text: an explicit tag the
-            # text does not fit (!!float abc, !!int zz, !!bool 0, !!timestamp 2001-13-45),
-            # or an integer longer than Python converts (sys.get_int_max_str_digits()).
-            kind = node.tag.rpartition(":")[2] or node.tag
-            reason = (f"{len(node.value)} characters, more than an integer may have"
-                      if kind == "int" and len(node.value) > 1000 else
-                      str(exc).strip("'") or type(exc).__name__)
-            raise self._not_valid(node, kind, reason) from None
+        except ValueError as exc:            # a date outside the calendar (2001-13-45)
+            raise self._not_valid(node, str(exc)) from None
 
-    def _not_valid(self, node: yaml.Node, kind: str, reason: str) -> EcatcfgError:
+    def _not_valid(self, node: yaml.Node, reason: str = "") -> EcatcfgError:
+        kind = node.tag.rpartition(":")[2] or node.tag
         text = node.value if len(node.value) <= 40 else f"{node.value[:40]}..."
-        return EcatcfgError(f"{text!r} is not a valid {kind}: {reason}", self.file,
-                            node.start_mark.line + 1, node.start_mark.column + 1)
+        return EcatcfgError(f"{text!r} is not a valid {kind}" + (f": {reason}" if reason
+                                                                 else ""),
+                            self.file, node.start_mark.line + 1, node.start_mark.column + 1)
 
 
 def load(path: str | Path, shown_as: str | None = None) -> LoadedTopology:

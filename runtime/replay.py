@@ -212,6 +212,11 @@ class MailboxChannel:
                 if counter and counter == self.last_received:
                     # A repeat that came before the answer: the slave re-posted the
                     # message we already have (ETG.1000.4: equal counters are repeats).
+                    # A slave that only ever shows that message (its SM1 never emptied:
+                    # read shorter than the SM) must not keep the master here forever.
+                    if now > deadline:
+                        raise ApplyError("no mailbox response in time (SM1 keeps the "
+                                         "previous message)", who, what)
                     continue
                 self.last_received = counter
                 return message

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from ecatcfg.esc import AlState, Cmd, FmmuType, Reg
-from ecatcfg.runtime.slave import PROCESS_RAM, EmulatedSlave, StateChange
+from ecatcfg.runtime.slave import MEMORY_SIZE, PROCESS_RAM, EmulatedSlave, StateChange
 from ecatcfg.runtime.syncman import SmKind, SmState
 from ecatcfg.runtime.wire import DG_HEADER_LEN, FrameError, datagram_offsets
 
@@ -288,6 +288,11 @@ class VirtualSegment:
                 if b0 >= b1:
                     continue
                 phys0 = f.physical_start * 8 + f.physical_start_bit + (b0 - first)
+                # Physical addresses are 16 bits: what an FMMU maps past the ESC's last
+                # byte is not there to read or write (and a slave's memory never grows).
+                b1 = min(b1, b0 + MEMORY_SIZE * 8 - phys0)
+                if b0 >= b1:
+                    continue
                 if writes and f.type & FmmuType.WRITE:
                     write_ops.append(_op(slave, True, b0 - lo, phys0, b1 - b0))
                 if reads and f.type & FmmuType.READ:

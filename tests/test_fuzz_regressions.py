@@ -33,13 +33,14 @@ TOPOLOGY = "master: {name: m}\nslaves:\n  - {name: a, device: EX1004}\n"
 @pytest.mark.parametrize("value, kind", [
     ("!!float abc", "float"), ("!!timestamp 2001-13-45", "timestamp"), ("!!int zz", "int"),
     ("!!bool 0", "bool"), ("!!timestamp 0", "timestamp"), ("1" * 4301, "int"),
+    ("!!int", "int"), ("!!int #x0", "int"),  # empty text (PyYAML: IndexError), long campaign
     ("2001-13-45", "timestamp"),            # no tag: YAML reads it as a date all the same
 ])
 def test_topology_scalar_that_does_not_construct(value, kind):
-    text = TOPOLOGY + f"  - {{name: b, device: EX1004, station_address: {value}}}\n"
+    text = TOPOLOGY + f"  - name: b\n    device: EX1004\n    station_address: {value}\n"
     with pytest.raises(EcatcfgError) as err:
         topology.loads(text, "t.yaml")
-    assert (err.value.file, err.value.line) == ("t.yaml", 4)
+    assert (err.value.file, err.value.line, err.value.column) == ("t.yaml", 6, 22)
     assert f"is not a valid {kind}" in err.value.message
 
 
@@ -51,6 +52,8 @@ def test_topology_scalar_error_is_exit_1_without_traceback(tmp_path, capsys):
     err = capsys.readouterr().err
     assert code == 1 and "Traceback" not in err
     assert f"{path}:4:" in err and "'abc' is not a valid float" in err
+    assert "4301 digits, more than Python converts" in str(pytest.raises(
+        EcatcfgError, topology.loads, TOPOLOGY + "  - {name: " + "1" * 4301 + "}", "t").value)
 
 
 def test_topology_bytes_and_characters_yaml_refuses_have_a_line():
@@ -116,6 +119,17 @@ def test_eni_apply_of_cmd_above_255_is_exit_1(tmp_path, capsys):
     err = capsys.readouterr().err
     assert code == 1 and "Traceback" not in err
     assert f"{path}:{line_of(data, 'InitCmd/Cmd', 1)}: <Cmd> 32768 is out of range" in err
+
+
+def test_sm1_read_shorter_than_the_sm_does_not_hang_the_master():
+    """Long campaign: ``Recv/Length`` 16 where SM1 is 128 bytes.  Reading fewer bytes than
+    the SM never empties it, so the slave shows its previous message for ever; the master
+    skipped such repeats without looking at its deadline (6 minutes, then by chance)."""
+    data = fuzzing.Mutant("eni", 0, (("value", "Recv/Length", 0, "16"),)).data()
+    plan = reader.read_bytes(data, "x.eni.xml")
+    with fuzzing.watchdog(5.0), pytest.raises(ApplyError) as err:
+        fuzzing.apply_plan(plan)
+    assert err.value.slave == "axis1" and "no mailbox response in time" in err.value.message
 
 
 def test_mailbox_too_small_for_an_sdo_names_slave_and_command():
@@ -196,3 +210,22 @@ def test_repeat_request_on_the_real_sm1_still_reposts():
     assert drive.state == AlState.OP and drive.mem[0x080F] & 0x02
     assert bytes(drive.mem[0x1080:0x1080 + len(drive.last_mailbox)]) == drive.last_mailbox
     assert drive.mem[0x080D] & 0x08                                 # SM1 full
+
+
+@pytest.mark.parametrize("physical, bit", [(0xFFFF, 0), (0xFFFF, 3)])
+def test_fmmu_mapping_past_the_end_of_memory(physical, bit):
+    """Long campaign: an FMMU whose physical area runs past 0xFFFF.  A logical datagram
+    through it raised IndexError (bit-wise mapping) or grew the ESC's memory (byte-wise);
+    the bytes past the last address are not there: not read, not written."""
+    segment = fuzzing.line_in_op(fuzzing.eni_seeds()[1])
+    drive = segment.slaves[1]
+    fmmu = struct.pack("<IHBBHBBB3x", 0x100000, 8, 0, 7, physical, bit, 3, 1)
+    segment.process(frame(Datagram.physical(Cmd.FPWR, 1002, 0x0640, fmmu)))
+    before = bytes(drive.mem[0xFFF0:])
+    back = wire.decode(segment.process(frame(Datagram.logical(Cmd.LRW, 0x100000, b"\xaa" * 8))))
+    assert back.datagrams[0].wkc == 3                     # read and written: 1 + 2
+    assert len(drive.mem) == MEMORY_SIZE
+    # Only the last byte (from ``bit`` on) was in reach: it took the frame's first bits.
+    mask = (0xFF << bit) & 0xFF
+    assert drive.mem[0xFFFF] & mask == (0xAA << bit) & mask
+    assert bytes(drive.mem[0xFFF0:0xFFFF]) == before[:15]
