@@ -298,12 +298,13 @@ def load(path: str | Path, shown_as: str | None = None) -> LoadedTopology:
 
 def loads(data: bytes | str, shown: str) -> LoadedTopology:
     if isinstance(data, bytes):
+        raw = data
         try:
-            data = data.decode("utf-8")
+            data = raw.decode("utf-8")
         except UnicodeDecodeError as exc:
-            line = data.count(b"\n", 0, exc.start) + 1
+            line = raw.count(b"\n", 0, exc.start) + 1
             raise EcatcfgError(f"not UTF-8 text (byte {exc.start})", shown, line,
-                               exc.start - data.rfind(b"\n", 0, exc.start)) from None
+                               exc.start - raw.rfind(b"\n", 0, exc.start)) from None
     try:
         _prescan(data, shown)
         node = yaml.compose(data, Loader=_LOADER)
