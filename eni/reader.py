@@ -39,7 +39,8 @@ from ecatcfg.eni.plan import (
     Variable,
 )
 from ecatcfg.errors import EcatcfgError
-from ecatcfg.esc import MAX_DATAGRAM_DATA, Transition
+from ecatcfg.esc import (DATAGRAM_OVERHEAD, FRAME_HEADER, FRAME_PAYLOAD, MAX_DATAGRAM_DATA,
+                         Transition)
 from ecatcfg.esi import xmlsafe
 from ecatcfg.esi.values import parse_bool, parse_hex_bytes, parse_int
 
@@ -492,8 +493,15 @@ class _Reader:
                       comment=self.opt_text(el, "Comment"))
 
     def frame(self, el: Element) -> Frame:
-        return Frame(cmds=[self.cyclic_cmd(c) for c in el.iterchildren("Cmd")],
-                     comment=self.opt_text(el, "Comment"))
+        cmds = [self.cyclic_cmd(c) for c in el.iterchildren("Cmd")]
+        # A Frame is one Ethernet frame: its datagrams (header, data, WKC each) share the
+        # 1500-byte payload after the 2-byte EtherCAT header.
+        size = sum(DATAGRAM_OVERHEAD + c.length for c in cmds)
+        if size > FRAME_PAYLOAD - FRAME_HEADER:
+            raise self.error(f"<Frame> of {len(cmds)} commands needs {size} bytes of datagrams, "
+                             f"more than one Ethernet frame carries "
+                             f"({FRAME_PAYLOAD - FRAME_HEADER})", el)
+        return Frame(cmds=cmds, comment=self.opt_text(el, "Comment"))
 
     def cyclic_cmd(self, element: Element) -> CyclicCmd:
         el = _Children(element)

@@ -100,6 +100,21 @@ def test_eni_value_out_of_range_is_an_error_at_its_line(seed, group, index, valu
     assert err.value.message.startswith(message)
 
 
+def test_cyclic_frame_larger_than_an_ethernet_frame():
+    """Long campaign: two cyclic commands of one Frame, 494 + 1486 data bytes, each one a
+    datagram of allowed size but together more than one frame carries (the frame encoder's
+    unlocated FrameError at the first cycle).  Refused at the Frame's line."""
+    data = fuzzing.Mutant("eni", 0, (("value", "Cmd/DataLength", 0, "494"),
+                                     ("value", "Cmd/DataLength", 1, "1486"))).data()
+    with pytest.raises(EniReadError) as err:
+        reader.read_bytes(data, "x.eni.xml")
+    assert err.value.line == data.count(b"\n", 0, data.index(b"<Frame>")) + 1
+    # ARMW 494 (was 4), LRD 1486 (was 1), the LRW's 18 and the BRD's 2, with 12 bytes of
+    # header and WKC each: 494 + 1486 + 18 + 2 + 4 * 12 = 2048
+    assert err.value.message == ("<Frame> of 4 commands needs 2048 bytes of datagrams, more "
+                                 "than one Ethernet frame carries (1498)")
+
+
 def test_eni_signed_spellings_still_read():
     """xs:int fields may spell an unsigned value signed (TwinCAT: AutoIncAddr -1)."""
     data = fuzzing.Mutant("eni", 0, (("value", "InitCmd/Adp", 0, "-1"),
