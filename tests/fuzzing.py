@@ -25,6 +25,7 @@ import re
 import signal
 import struct
 import tempfile
+import threading
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
@@ -67,7 +68,7 @@ def watchdog(seconds: float = HANG_S) -> Iterator[None]:
     def fire(signum, frame):
         raise Hang(f"no result after {seconds:g} s")
 
-    main = signal.getsignal(signal.SIGALRM) is not None and _in_main_thread()
+    main = threading.current_thread() is threading.main_thread()    # signals go there
     if main:
         old = signal.signal(signal.SIGALRM, fire)
         signal.setitimer(signal.ITIMER_REAL, seconds)
@@ -80,11 +81,6 @@ def watchdog(seconds: float = HANG_S) -> Iterator[None]:
     took = time.monotonic() - start
     if took > seconds:
         raise Hang(f"the input took {took:.1f} s (limit {seconds:g} s)")
-
-
-def _in_main_thread() -> bool:
-    import threading
-    return threading.current_thread() is threading.main_thread()
 
 
 def located_in_file(shown: str) -> Callable[[EcatcfgError], bool]:

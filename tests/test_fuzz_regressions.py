@@ -8,7 +8,6 @@ an error must name is found in the mutated text independently of the reader.
 
 from __future__ import annotations
 
-import re
 import struct
 
 import pytest
