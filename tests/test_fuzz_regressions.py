@@ -89,6 +89,12 @@ def line_of(data: bytes, group: str, index: int) -> int:
     (0, "Cmd/InputOffs", 0, "4294967296", "<InputOffs> 4294967296 is out of range"),
     (0, "Variable/BitSize", 0, "0", "<BitSize> 0 is out of range"),
     (0, "Send/Length", 0, "-1172", "<Length> -1172 is out of range"),
+    # accepted before and wrapped or kept as nonsense: a station address of 70000 became
+    # 4464, a negative working counter could never match
+    (0, "Info/PhysAddr", 0, "70000", "<PhysAddr> 70000 is out of range: 16 bits"),
+    (0, "Cmd/Cnt", 0, "-1", "<Cnt> -1 is out of range: 16 bits"),
+    (0, "DC/CycleTime0", 0, "4294967296", "<CycleTime0> 4294967296 is out of range: 32 bits"),
+    (0, "Inputs/ByteSize", 0, "-1", "<ByteSize> -1 is out of range"),
 ])
 def test_eni_value_out_of_range_is_an_error_at_its_line(seed, group, index, value, message):
     data = fuzzing.Mutant("eni", seed, (("value", group, index, value),)).data()
