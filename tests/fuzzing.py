@@ -196,8 +196,9 @@ def interesting_value() -> st.SearchStrategy[str]:
 
 
 def number_value() -> st.SearchStrategy[str]:
+    # Negative numbers on their own too: the classic wrong value of an unsigned field.
     return st.one_of(st.sampled_from([n for n in NUMBERS if _NUMBER.fullmatch(n.encode())]),
-                     st.integers(-2**33, 2**33).map(str))
+                     st.integers(-2**33, 2**33).map(str), st.integers(-2**33, -1).map(str))
 
 
 @dataclass(frozen=True)
@@ -981,18 +982,18 @@ TARGETS: dict[str, Target] = {t.name: t for t in (
     Target("lint", "ESI files through every lint rule", lambda: xml_inputs("esi"),
            _lint, _IN_FILE("fuzz.xml"), 120),
     Target("topology", "topology YAML/JSON (scalars, explicit tags, syntax mutated)",
-           lambda: yaml_inputs("topology"), _topology, _IN_FILE("fuzz.yaml"), 400),
+           lambda: yaml_inputs("topology"), _topology, _IN_FILE("fuzz.yaml"), 300),
     Target("compiler", "topologies compiled against the example ESI files, ENI written "
            "and read back", lambda: mutants("topology", yaml_values=2),
            _compile, _IN_FILE("fuzz.yaml"), 200),
     Target("eni_reader", "ENI files (compiled from the examples, mutated)",
            lambda: xml_inputs("eni"), _eni, _IN_FILE("fuzz.eni.xml"), 250),
     Target("eni_apply", "ENIs the reader accepts, applied on the virtual segment",
-           _eni_apply_inputs, _eni_apply, located_on_line, 200),
+           _eni_apply_inputs, _eni_apply, located_on_line, 400),
     Target("sii_decoder", "SII images built from the example devices, mutated",
-           sii_inputs, _sii, _IN_FILE("fuzz.bin"), 500),
+           sii_inputs, _sii, _IN_FILE("fuzz.bin"), 400),
     Target("frame_decoder", "Ethernet frames into the datagram decoder", _frame_inputs,
-           _frame_decode, lambda exc: True, 300),
+           _frame_decode, lambda exc: True, 200),
     Target("segment", "frames from the wire against a line in OP",
            lambda: st.tuples(st.integers(0, len(eni_seeds()) - 1), frames()),
            feed_segment, located_on_line, 250),
