@@ -311,6 +311,12 @@ DATAGRAM_OVERHEAD = 12
 MAX_DATAGRAM_DATA = FRAME_PAYLOAD - FRAME_HEADER - DATAGRAM_OVERHEAD     # 1486
 
 
+def frame_bytes(data_lengths: list[int]) -> int:
+    """The Ethernet payload a frame of datagrams with these data lengths takes; it fits one
+    frame while this is at most ``FRAME_PAYLOAD``."""
+    return FRAME_HEADER + sum(DATAGRAM_OVERHEAD + n for n in data_lengths)
+
+
 # AL status codes (register 0x0134; ETG.1000.6, as SOEM ec_print.c, IgH fsm_change.c, SOES
 # and KickCAT name them: docs/protocol-notes.md §4).
 AL_STATUS_CODES: dict[int, str] = {

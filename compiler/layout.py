@@ -25,8 +25,8 @@ from dataclasses import dataclass, field
 from ecatcfg.eni.plan import BitRange, CyclicCmd, Frame, Variable
 from ecatcfg.compiler.resolve import ResolvedSlave
 from ecatcfg.errors import EcatcfgError
-from ecatcfg.esc import (DATAGRAM_OVERHEAD, FRAME_HEADER, FRAME_PAYLOAD, MAILBOX_STATE_ADDR,
-                         SM1_STATUS, Cmd, FmmuConfig, FmmuType, Reg)
+from ecatcfg.esc import (FRAME_PAYLOAD, MAILBOX_STATE_ADDR, SM1_STATUS, Cmd, FmmuConfig, FmmuType,
+                         Reg, frame_bytes)
 from ecatcfg.esi import datatypes
 
 LRW_BASE = 0x10000000
@@ -131,10 +131,6 @@ def _place(cursor: int, bits: int) -> int:
     return cursor if bits % 8 else (cursor + 7) // 8 * 8
 
 
-def _frame_bytes(lengths: list[int]) -> int:
-    return FRAME_HEADER + sum(DATAGRAM_OVERHEAD + n for n in lengths)
-
-
 def build(slaves: list[ResolvedSlave], layout: str, uses_dc: bool,
           mailbox_state: list[int]) -> Layout:
     """Lay out the process data of ``slaves`` (bus order).  ``mailbox_state`` lists the
@@ -156,7 +152,7 @@ def build(slaves: list[ResolvedSlave], layout: str, uses_dc: bool,
             lengths = [(s + w + 7) // 8 if w else d.length
                        for d, s, w in zip(dgs, starts, wants)]
             extra = misc if len(frames) == 1 else []
-            if _frame_bytes([x for x in lengths if x] + extra) <= FRAME_PAYLOAD:
+            if frame_bytes([x for x in lengths if x] + extra) <= FRAME_PAYLOAD:
                 for d, s, w in zip(dgs, starts, wants):
                     if w:
                         d.regions.append(_Region(i, s, w))

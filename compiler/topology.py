@@ -33,13 +33,13 @@ _LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
 MAX_NODES = 200_000
 # A topology nests about six levels deep; much deeper input only exhausts the stack.
 MAX_DEPTH = 64
-# Characters XML 1.0 cannot carry (names and comments end up in the ENI).
 _INT = "tag:yaml.org,2002:int"
 # What a YAML 1.1 int, float, bool, null or timestamp looks like: the patterns PyYAML's
 # resolver tells untagged scalars by, so a tagged one is held to the same form.
 _SCALAR_SYNTAX = {tag: regexp for resolvers in yaml.resolver.Resolver.yaml_implicit_resolvers
                   .values() for tag, regexp in resolvers
                   if tag.rpartition(":")[2] in ("int", "float", "bool", "null", "timestamp")}
+# Characters XML 1.0 cannot carry (names and comments end up in the ENI).
 _NOT_XML = re.compile("[^\t\n\r\x20-\ud7ff\ue000-\ufffd\U00010000-\U0010ffff]")
 
 
@@ -110,13 +110,14 @@ class _Model(BaseModel):
 class Master(_Model):
     """The master and its cycle."""
 
-    name: XmlText = Field(default="ecatcfg", min_length=1, description="Master name in the ENI")
+    name: XmlText = Field(default="ecatcfg", min_length=1,
+                          description="Master name in the ENI")
     cycle_time_us: CycleTime = Field(default=1000, description="Bus cycle in microseconds "
                                                        "(DC SYNC0 factor 1)")
     layout: Literal["lrw", "lrd_lwr"] = Field(
-        default="lrw", description="lrw: one LRW per frame, outputs and inputs of a slave overlap "
-                           "(EC-Engineer style); lrd_lwr: separate LWR and LRD windows "
-                           "(TwinCAT style)")
+        default="lrw", description="lrw: one LRW per frame, outputs and inputs of a slave "
+                                   "overlap (EC-Engineer style); lrd_lwr: separate LWR and "
+                                   "LRD windows (TwinCAT style)")
 
 
 class Sdo(_Model):

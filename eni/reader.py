@@ -39,8 +39,7 @@ from ecatcfg.eni.plan import (
     Variable,
 )
 from ecatcfg.errors import EcatcfgError
-from ecatcfg.esc import (DATAGRAM_OVERHEAD, FRAME_HEADER, FRAME_PAYLOAD, MAX_DATAGRAM_DATA,
-                         Transition)
+from ecatcfg.esc import FRAME_PAYLOAD, MAX_DATAGRAM_DATA, Transition, frame_bytes
 from ecatcfg.esi import xmlsafe
 from ecatcfg.esi.values import parse_bool, parse_hex_bytes, parse_int
 
@@ -177,10 +176,14 @@ class _Reader:
         value = _parse_int(text)
         if value is None:
             raise self.error(f"<{el.tag!s}> is not a number: {text.strip()!r}", el)
-        if bounds is not None and not bounds[0] <= value <= bounds[1]:
-            lo, hi, what = bounds
-            raise self.error(f"<{el.tag!s}> {value} is out of range: {what} ({lo}..{hi})", el)
+        self.check(value, bounds, f"<{el.tag!s}>", el)
         return value
+
+    def check(self, value: int, bounds: Bounds | None, what: str, el: _Node) -> None:
+        """``value`` of ``what`` (``<Cmd>``, ``attribute Sm of <Pdo>:``) within ``bounds``."""
+        if bounds is not None and not bounds[0] <= value <= bounds[1]:
+            lo, hi, range_text = bounds
+            raise self.error(f"{what} {value} is out of range: {range_text} ({lo}..{hi})", el)
 
     def req_int(self, parent: _Node, tag: str, bounds: Bounds | None = None) -> int:
         return self.number(self.child(parent, tag), bounds)
@@ -204,10 +207,7 @@ class _Reader:
         value = _parse_int(text)
         if value is None:
             raise self.error(f"attribute {name} of <{el.tag!s}> is not a number: {text!r}", el)
-        if bounds is not None and not bounds[0] <= value <= bounds[1]:
-            lo, hi, what = bounds
-            raise self.error(f"attribute {name} of <{el.tag!s}>: {value} is out of range: "
-                             f"{what} ({lo}..{hi})", el)
+        self.check(value, bounds, f"attribute {name} of <{el.tag!s}>:", el)
         return value
 
     def boolean(self, el: Element) -> bool:
@@ -494,13 +494,11 @@ class _Reader:
 
     def frame(self, el: Element) -> Frame:
         cmds = [self.cyclic_cmd(c) for c in el.iterchildren("Cmd")]
-        # A Frame is one Ethernet frame: its datagrams (header, data, WKC each) share the
-        # 1500-byte payload after the 2-byte EtherCAT header.
-        size = sum(DATAGRAM_OVERHEAD + c.length for c in cmds)
-        if size > FRAME_PAYLOAD - FRAME_HEADER:
-            raise self.error(f"<Frame> of {len(cmds)} commands needs {size} bytes of datagrams, "
-                             f"more than one Ethernet frame carries "
-                             f"({FRAME_PAYLOAD - FRAME_HEADER})", el)
+        # A Frame is one Ethernet frame: its datagrams must fit one frame's payload.
+        size = frame_bytes([c.length for c in cmds])
+        if size > FRAME_PAYLOAD:
+            raise self.error(f"<Frame> of {len(cmds)} commands needs {size} bytes, more than "
+                             f"one Ethernet frame carries ({FRAME_PAYLOAD})", el)
         return Frame(cmds=cmds, comment=self.opt_text(el, "Comment"))
 
     def cyclic_cmd(self, element: Element) -> CyclicCmd:
