@@ -115,9 +115,10 @@ def test_cyclic_frame_larger_than_an_ethernet_frame():
         reader.read_bytes(data, "x.eni.xml")
     assert err.value.line == data.count(b"\n", 0, data.index(b"<Frame>")) + 1
     # ARMW 494 (was 4), LRD 1486 (was 1), the LRW's 18 and the BRD's 2, with 12 bytes of
-    # header and WKC each: 494 + 1486 + 18 + 2 + 4 * 12 = 2048
-    assert err.value.message == ("<Frame> of 4 commands needs 2048 bytes of datagrams, more "
-                                 "than one Ethernet frame carries (1498)")
+    # header and WKC each, after the 2-byte EtherCAT header:
+    # 2 + 494 + 1486 + 18 + 2 + 4 * 12 = 2050, in a payload of 1500
+    assert err.value.message == ("<Frame> of 4 commands needs 2050 bytes, more than one "
+                                 "Ethernet frame carries (1500)")
 
 
 def test_eni_signed_spellings_still_read():
