@@ -22,6 +22,7 @@ from ecatcfg.eni.plan import (
     Cyclic,
     CyclicCmd,
     DcPlan,
+    EoeInitCmd,
     Frame,
     InitCmd,
     MailboxArea,
@@ -425,7 +426,7 @@ class _Reader:
     def mailbox(self, el: Element) -> MailboxPlan:
         recv = self.child(el, "Recv")
         boot = el.find("BootStrap")
-        coe = el.find("CoE")
+        coe, eoe, aoe = el.find("CoE"), el.find("EoE"), el.find("AoE")
         return MailboxPlan(
             send=self.mailbox_area(self.child(el, "Send")),
             recv=self.mailbox_area(recv),
@@ -437,6 +438,35 @@ class _Reader:
             coe_init_cmds=[] if coe is None else self.coe_init_cmds(coe),
             coe_profiles=[] if coe is None else self.coe_profiles(coe),
             data_link_layer=self.attr_bool(el, "DataLinkLayer"),
+            eoe_init_cmds=[] if eoe is None else self.eoe_init_cmds(eoe),
+            aoe_net_id=None if aoe is None else self.opt_text(aoe, "NetId"),
+        )
+
+    def eoe_init_cmds(self, eoe: Element) -> list[EoeInitCmd]:
+        cmds = eoe.find("InitCmds")
+        if cmds is None:
+            return []
+        return [self.eoe_init_cmd(c) for c in cmds.iterchildren("InitCmd")]
+
+    def eoe_init_cmd(self, element: Element) -> EoeInitCmd:
+        """ETG.2100 ``MailboxCmdType``; ``Data`` must be a set IP parameter request in one
+        of the encodings real files use (``ecatcfg.eoe.decode_init_data``)."""
+        from ecatcfg.eoe import decode_init_data
+
+        el = _Children(element)
+        data_el = self.child(el, "Data")
+        data = self.hex_bytes(data_el)
+        try:
+            decode_init_data(data)
+        except ValueError as exc:
+            raise self.error(f"EoE <Data>: {exc}", data_el) from None
+        return EoeInitCmd(
+            transitions=self.transitions(el),
+            comment=self.opt_text(el, "Comment") or "",
+            data=data,
+            timeout=self.int_or(el, "Timeout", 0, COUNT),
+            disabled=bool(self.opt_bool(el, "Disabled")),
+            fixed=bool(self.attr_bool(el, "Fixed")),
         )
 
     def coe_init_cmds(self, coe: Element) -> list[CoeInitCmd]:

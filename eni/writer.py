@@ -24,6 +24,7 @@ from ecatcfg.eni.plan import (
     Cyclic,
     CyclicCmd,
     DcPlan,
+    EoeInitCmd,
     InitCmd,
     MailboxArea,
     MailboxPlan,
@@ -312,6 +313,13 @@ def _mailbox(parent: Element, mb: MailboxPlan) -> None:
         _sub(el, "Protocol", protocol)
     if mb.coe_init_cmds or mb.coe_profiles:
         _coe(el, mb)
+    # ETG.2100 order: CoE, SoE, AoE, EoE, FoE, VoE.
+    if mb.aoe_net_id is not None:
+        _sub(_sub(el, "AoE"), "NetId", mb.aoe_net_id)
+    if mb.eoe_init_cmds:
+        cmds = _sub(_sub(el, "EoE"), "InitCmds")
+        for eoe_cmd in mb.eoe_init_cmds:
+            _eoe_init_cmd(cmds, eoe_cmd)
 
 
 def _coe(parent: Element, mb: MailboxPlan) -> None:
@@ -339,6 +347,19 @@ def _coe_init_cmd(parent: Element, cmd: CoeInitCmd) -> None:
     _int(el, "Ccs", cmd.ccs)
     _int(el, "Index", cmd.index)
     _int(el, "SubIndex", cmd.subindex)
+    _hex(el, "Data", cmd.data)
+    if cmd.disabled:
+        _sub(el, "Disabled", _bool(True))
+
+
+def _eoe_init_cmd(parent: Element, cmd: EoeInitCmd) -> None:
+    """ETG.2100 ``MailboxCmdType``: Transition+, Comment?, Timeout, Data, Disabled?."""
+    el = _sub(parent, "InitCmd")
+    _set_flag(el, "Fixed", cmd.fixed)
+    for transition in cmd.transitions:
+        _sub(el, "Transition", transition.value)
+    _text(el, "Comment", cmd.comment)
+    _int(el, "Timeout", cmd.timeout)
     _hex(el, "Data", cmd.data)
     if cmd.disabled:
         _sub(el, "Disabled", _bool(True))
