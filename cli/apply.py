@@ -31,6 +31,11 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                    help="accept a slave whose revision is newer than the ENI's")
     p.add_argument("--pcap", metavar="FILE", help="record every frame as pcapng")
     p.add_argument("--format", choices=["text", "json"], default="text")
+    p.add_argument("--skip-unsupported", action="store_true",
+                   help="apply an ENI that asks for what apply does not do (SoE, FoE, AoE or "
+                        "VoE InitCmds, hot-connect groups ...: see docs/runtime.md) without "
+                        "those parts, with one warning per slave; by default it is refused "
+                        "before anything is sent")
     p.add_argument("--no-cache", action="store_true",
                    help="parse the ENI (and with --virtual the ESI files) even if cached "
                         "in $XDG_CACHE_HOME/ecatcfg")
@@ -63,12 +68,18 @@ def run(args: argparse.Namespace) -> int:
     else:
         plan = eni_cache.read_file(args.eni)
     report = ApplyReport(plan, args.eni, json_output=args.format == "json")
+    if plan.unsupported and not args.skip_unsupported:
+        from ecatcfg.eni.contents import refuse
+        refuse(plan, args.eni)              # before a link is opened or a frame sent
+    report.skipped(plan.unsupported)
     if args.virtual:
         net = Network.virtual(plan, args.esi, pcap=args.pcap, on_event=report.event,
-                              esi_cache=not args.no_cache)
+                              esi_cache=not args.no_cache, skip_unsupported=True,
+                              eni_name=args.eni)
     else:
         from ecatcfg.runtime.link import RawLink
-        net = Network(plan, RawLink(args.iface), pcap=args.pcap, on_event=report.event)
+        net = Network(plan, RawLink(args.iface), pcap=args.pcap, on_event=report.event,
+                      skip_unsupported=True, eni_name=args.eni)
     target = AlState(STATES[args.state])
     failure: EcatcfgError | None = None
     try:

@@ -10,7 +10,7 @@ import sys
 from collections.abc import Callable
 from typing import IO, TYPE_CHECKING, Any
 
-from ecatcfg.eni.plan import NetworkPlan
+from ecatcfg.eni.plan import NetworkPlan, Unsupported
 from ecatcfg.esc import AlState, al_status_name
 
 if TYPE_CHECKING:                   # rich and the runtime are imported where they are used
@@ -50,8 +50,18 @@ class ApplyReport:
         self.events: list[str] = []
         self.rows: list[dict[str, Any]] = []
         self.summary: dict[str, Any] = {}
+        self.skipped_parts: list[dict[str, Any]] = []
+
+    def skipped(self, parts: list[Unsupported]) -> None:
+        """The parts of the ENI run without (``--skip-unsupported``), for the JSON."""
+        self.skipped_parts = [{"slave": p.slave, "element": p.element, "what": p.what,
+                               "line": p.line, "commands": p.commands} for p in parts]
 
     def event(self, event: Event) -> None:
+        if event.kind == "skipped":         # a warning: stderr, whatever the format
+            self.events.append(event.text)
+            print(event.text, file=sys.stderr, flush=True)
+            return
         text = event.text
         for code, words in _TRANSITION_TEXT.items():
             text = text.replace(f"{code}: {code} ...", f"{words} ...").replace(
@@ -94,6 +104,7 @@ class ApplyReport:
                        "wkc_error_commands": stats.wkc_error_cmds,
                        "jitter_us": {k: round(v, 1) for k, v in jitter.items()}},
             "frames": {"sent": counters.frames_sent, "lost": counters.frames_lost},
+            "skipped": self.skipped_parts,
         }
         if self.json_output:
             if failure:

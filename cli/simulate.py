@@ -70,7 +70,14 @@ def run(args: argparse.Namespace) -> int:
                  for d in plugged_devices(topology.load(args.topology), lib)]
     else:
         from ecatcfg.eni import reader as eni_reader
-        specs = emulate.specs_from_eni(eni_reader.read_file(args.eni), lib, args.eni)
+        from ecatcfg.eni.contents import line_of
+        plan = eni_reader.read_file(args.eni)
+        # Not the master: what apply would refuse asks nothing of the emulated slaves,
+        # but the user learns that it is there and not used.
+        for part in plan.unsupported:
+            print(f"note: ignored (apply would refuse it): {line_of(part, args.eni)}",
+                  file=sys.stderr)
+        specs = emulate.specs_from_eni(plan, lib, args.eni)
     if not specs:
         raise EcatcfgError(f"{source}: no slaves to emulate")
     seg = emulate.segment(specs, Faults(drop=args.drop, seed=args.seed))

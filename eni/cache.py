@@ -36,9 +36,11 @@ from ecatcfg.fileio import cache_dir, write_atomic
 
 FORMAT_VERSION = 1
 KEEP = 32                                   # entries; the oldest go when a new one is written
-# A change to any of these changes every key (esc.py: the Transition values; xmlsafe.py:
+# A change to any of these changes every key (contents.py: what is refused; eoe.py: which
+# EoE data decodes; esc.py: the Transition values; xmlsafe.py:
 # how the XML is parsed and its namespaces stripped; values.py: number and boolean syntax).
-_FINGERPRINTED = ("eni/reader.py", "eni/plan.py", "esc.py", "esi/xmlsafe.py", "esi/values.py")
+_FINGERPRINTED = ("eni/reader.py", "eni/contents.py", "eni/plan.py", "eoe.py", "esc.py",
+                  "esi/xmlsafe.py", "esi/values.py")
 
 
 def _fingerprint() -> int:

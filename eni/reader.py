@@ -2,10 +2,15 @@
 
 Tolerant of what real exporters write (``docs/eni-exports.md`` §1, §8): booleans ``1``/``0`` or
 ``true``/``false``, numbers decimal or ``#x``/``0x`` hex, ``InitCmd/Timeout`` (newer than the
-2011 schema), an ``EncryptedEtherCATConfig`` root with a clear-text body, and any element this
-reader does not know (Elmo Application Studio's ``ElmoSpecialResources``, ``HotConnect``,
-``EoE``, ``PotentialReferenceClock`` ...), which is skipped.  What the plan needs and the file
-lacks or misspells is an :class:`EniReadError` naming the file and the element's line.
+2011 schema), an ``EncryptedEtherCATConfig`` root with a clear-text body.  What the plan needs
+and the file lacks or misspells is an :class:`EniReadError` naming the file and the element's
+line.
+
+Nothing is dropped silently: which elements the reader takes, which it accepts without
+using them (and why), and which ask for what ``apply`` does not do is one explicit list,
+:mod:`ecatcfg.eni.contents`.  The refused and the unknown ones are recorded in
+``NetworkPlan.unsupported`` with their line, slave and command count; refusing or skipping
+them is the runtime's call (``apply --skip-unsupported``), not the reader's.
 """
 
 from __future__ import annotations
@@ -266,12 +271,14 @@ class _Reader:
                              "expected <EtherCATConfig>", root)
         config = self.child(root, "Config")
         image = config.find("ProcessImage")
+        from ecatcfg.eni.contents import audit
         return NetworkPlan(
             master=self.master(self.child(config, "Master")),
             slaves=[self.slave(el) for el in config.iterchildren("Slave")],
             cyclic=[self.cyclic(el) for el in config.iterchildren("Cyclic")],
             process_image=ProcessImage() if image is None else self.process_image(image),
             version=root.get("Version"),
+            unsupported=audit(config),
         )
 
     # --- commands -------------------------------------------------------------------------

@@ -61,10 +61,23 @@ class Network:
     def __init__(self, eni: NetworkPlan | str | Path, link: Link, *,
                  pcap: str | Path | None = None,
                  on_event: Callable[[Event], None] | None = None,
+                 skip_unsupported: bool = False, eni_name: str | None = None,
                  _closers: Iterable[Callable[[], None]] = ()) -> None:
-        if not isinstance(eni, NetworkPlan):
-            from ecatcfg.eni import reader as eni_reader
-            eni = eni_reader.read_file(eni)
+        """``skip_unsupported``: run an ENI that asks for what this master does not do
+        (``eni/contents.py``: SoE/FoE/AoE/VoE InitCmds, hot-connect groups ...) without
+        those parts, with one warning per slave (an ``Event("skipped", ...)`` to
+        ``on_event``, else a :class:`SkippedConfigWarning`); by default such an ENI raises
+        :class:`~ecatcfg.eni.contents.UnsupportedEniError` here, before any frame is sent.
+        ``eni_name`` names the file in those messages (default: the path given)."""
+        try:
+            if not isinstance(eni, NetworkPlan):
+                from ecatcfg.eni import reader as eni_reader
+                eni_name = eni_name or str(eni)
+                eni = eni_reader.read_file(eni)
+            _check_supported(eni, eni_name, skip_unsupported, on_event)
+        except BaseException:
+            link.close()                    # the Network owns the link from the start
+            raise
         self.plan = eni
         self.link = link                    # the Network's from here on: close() closes it
         self.recorder: PcapRecorder | None = None
@@ -84,16 +97,20 @@ class Network:
     def virtual(cls, eni: NetworkPlan | str | Path, esi: list[str | Path], *,
                 faults: Faults | None = None, esi_cache: bool = True,
                 pcap: str | Path | None = None,
-                on_event: Callable[[Event], None] | None = None) -> Network:
+                on_event: Callable[[Event], None] | None = None,
+                skip_unsupported: bool = False, eni_name: str | None = None) -> Network:
         """The ENI on a virtual segment that emulates its slaves from the ESI files
-        (``esi_cache``: through the ESI index cache)."""
+        (``esi_cache``: through the ESI index cache).  ``skip_unsupported`` and
+        ``eni_name`` as for the constructor."""
         from ecatcfg.eni import reader as eni_reader
         from ecatcfg.esi.library import Library
         from ecatcfg.runtime import emulate
         from ecatcfg.runtime.link import MemoryLink
 
-        shown = str(eni) if not isinstance(eni, NetworkPlan) else "the ENI"
+        shown = eni_name or (str(eni) if not isinstance(eni, NetworkPlan) else "the ENI")
         plan = eni if isinstance(eni, NetworkPlan) else eni_reader.read_file(eni)
+        if not skip_unsupported:            # refuse before building the segment
+            _check_supported(plan, eni_name or shown, False, None)
         library = Library([str(p) for p in esi], cache=esi_cache)
         segment = emulate.segment(emulate.specs_from_eni(plan, library, shown), faults)
         ours, theirs = MemoryLink.pair()
@@ -107,7 +124,8 @@ class Network:
             thread.join(2)
             theirs.close()
 
-        net = cls(plan, ours, pcap=pcap, on_event=on_event, _closers=[close_segment])
+        net = cls(plan, ours, pcap=pcap, on_event=on_event, skip_unsupported=skip_unsupported,
+                  eni_name=eni_name or shown, _closers=[close_segment])
         net.segment = segment
         return net
 
@@ -224,6 +242,26 @@ class Network:
                         raise
         finally:
             self.close()
+
+
+class SkippedConfigWarning(UserWarning):
+    """Parts of an ENI a Network runs without (``skip_unsupported=True``)."""
+
+
+def _check_supported(plan: NetworkPlan, name: str | None, skip: bool,
+                     on_event: Callable[[Event], None] | None) -> None:
+    """Refuse a plan with unsupported parts, or warn once per slave about skipping them."""
+    if not plan.unsupported:
+        return
+    from ecatcfg.eni import contents
+    if not skip:
+        contents.refuse(plan, name)
+    for text in contents.skip_warnings(plan, name):
+        if on_event is not None:
+            on_event(Event("skipped", f"warning: {text}"))
+        else:
+            import warnings
+            warnings.warn(text, SkippedConfigWarning, stacklevel=3)
 
 
 def _bits(var: _Var) -> tuple[int, int]:

@@ -1,0 +1,409 @@
+"""What an ENI may contain, and what ecatcfg does with each part: the ENI reader's explicit list.
+
+Every element below ``<Config>`` that can change what a master does is listed here, in
+one of three kinds:
+
+- **read**: the plan holds it and ``apply`` does what it says;
+- **accepted**: it asks nothing of the master at start-up (an address, a description, the
+  master's own host-side settings), or it holds the one value that asks nothing; the
+  reason is given;
+- **refused**: it configures the master's behaviour toward a slave and ``apply`` does not
+  implement it.  The reader records it as an :class:`~ecatcfg.eni.plan.Unsupported` in the
+  plan (with its line, slave and how many commands would be lost), and ``apply`` and the
+  ``Network`` refuse the plan before anything is written to the bus, unless told to skip
+  it (``--skip-unsupported``).
+
+The contexts named in :data:`CONTENTS` are *closed*: a child element not listed there is
+refused as unknown, since nothing tells whether it changes what the master must do.  The
+others are *open* (their reason in :data:`OPEN`): elements outside ``<Config>`` (vendor
+data such as Elmo Application Studio's ``ElmoSpecialResources``), and descriptions whose
+effect reaches the wire only through InitCmds (``ProcessData``, ``ProcessImage``, the
+master's ``Info``, ``PreviousPort``).  Attributes are not checked, except those named in a
+rule (``Slave/@HotPlug``, ``Frame/@CycleTimeFactor``).  ``docs/runtime.md`` shows this
+list as a table; a test keeps the two equal.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Literal
+
+from lxml import etree
+
+from ecatcfg.eni.plan import NetworkPlan, Unsupported
+from ecatcfg.errors import EcatcfgError, location
+from ecatcfg.esi.values import parse_bool, parse_int
+from ecatcfg.record import record
+
+Element = etree._Element
+Kind = Literal["read", "accepted", "refused"]
+# A check looks at the element and says what apply would not do ("" when all is well).
+Check = Callable[[Element], str]
+
+
+@record(frozen=True)
+class Part:
+    """One element of a context: its kind, what apply does with it (or why it is accepted,
+    or what it would ask of the master), and where the walk goes on from it."""
+
+    kind: Kind
+    text: str
+    within: str | None = None          # the context of its children, if it is checked
+    check: Check | None = None         # a condition on the element (kind "accepted"/"read")
+    counts: bool = False               # refused: count its InitCmds as commands lost
+
+
+def _read(text: str, within: str | None = None, check: Check | None = None) -> Part:
+    return Part("read", text, within, check)
+
+
+def _accepted(text: str, check: Check | None = None) -> Part:
+    return Part("accepted", text, None, check)
+
+
+def _refused(text: str, counts: bool = False) -> Part:
+    return Part("refused", text, counts=counts)
+
+
+# -- conditions ---------------------------------------------------------------------------
+
+def _text(el: Element) -> str:
+    return "".join(el.itertext()).strip()
+
+
+def _empty(el: Element) -> str:
+    return "" if len(el) == 0 and not _text(el) else f"<{el.tag!s}> is not empty"
+
+
+def _zero_or_absent(text: str | None) -> bool:
+    if text is None or not text.strip():
+        return True
+    try:
+        return parse_int(text) == 0
+    except ValueError:
+        try:
+            return not parse_bool(text)
+        except ValueError:
+            return False
+
+
+def _zero(el: Element) -> str:
+    return "" if _zero_or_absent(_text(el)) else f"<{el.tag!s}> {_text(el)!r}"
+
+
+def _all_zero_bytes(el: Element) -> str:
+    text = _text(el)
+    return "" if set(text) <= {"0"} else f"<{el.tag!s}> {text}"
+
+
+def _identification(el: Element) -> str:
+    enabled = el.get("EnableIdentification")
+    if enabled is None or _zero_or_absent(enabled):
+        return ""
+    ado = el.findtext("Ado")
+    return (f"explicit device identification (<Identification EnableIdentification="
+            f"{enabled!r}>, value {el.get('Value')!r} at {ado})")
+
+
+def _hot_plug(el: Element) -> str:
+    return "" if _zero_or_absent(el.get("HotPlug")) else \
+        f"hot plug (Slave HotPlug={el.get('HotPlug')!r})"
+
+
+def _frame_factors(el: Element) -> str:
+    for name in ("CycleTimeFactor", "CycleTimeShiftFactor"):
+        if not _zero_or_absent(el.get(name)):
+            return f"a frame sent on its own cycle (<Frame {name}={el.get(name)!r}>)"
+    return ""
+
+
+def _master_time_as_ref(el: Element) -> str:
+    text = el.findtext("MasterTimeAsRef")
+    return "" if _zero_or_absent(text) else \
+        "the master's clock as the DC reference (<DC><MasterTimeAsRef>)"
+
+
+def _frame_size(el: Element) -> str:
+    try:
+        size = parse_int(_text(el))
+    except ValueError:
+        return f"<MaxFrameSize> {_text(el)!r}"
+    return "" if size >= 1514 else f"frames of at most {size} bytes (<MaxFrameSize>)"
+
+
+# -- the list -----------------------------------------------------------------------------
+
+_INIT_CMD = "InitCmds/InitCmd"   # ECatCmdType: register commands of the master and slaves
+_COMMAND = "a field of the command, replayed as written"
+
+CONTENTS: dict[str, dict[str, Part]] = {
+    "Config": {
+        "Master": _read("the master's frame addresses and InitCmds", "Config/Master"),
+        "Slave": _read("one slave", "Config/Slave", _hot_plug),
+        "Cyclic": _read("cyclic frames, run from SAFEOP on", "Config/Cyclic"),
+        "ProcessImage": _read("the variables of the process image (Network API names)"),
+        "ExternalDrivers": _accepted("Elmo Application Studio: when empty, no driver to "
+                                     "load", _empty),
+    },
+    "Config/Master": {
+        "Info": _read("name, destination and source MAC, EtherType"),
+        "MailboxStates": _read("where the mailbox-state bits are; apply polls SM1 "
+                               "directly, which a slave answers the same way"),
+        "EoE": _accepted("the master's own EoE switch (ports, frames, MAC table): no "
+                         "command to a slave"),
+        "InitCmds": _read("replayed before (BeforeSlave) or after the slaves' commands",
+                          "InitCmds"),
+        # Elmo Application Studio's master settings (docs/eni-exports.md §8).
+        "NIC": _accepted("the interface name: apply's --iface chooses it"),
+        "RNIC": _accepted("when empty: no second interface (cable redundancy)", _empty),
+        "MaxFrameSize": _accepted("1514 or more: apply's frames are at most 1514 bytes",
+                                  _frame_size),
+        "SeparateIOUpdate": _accepted("when 0: inputs and outputs in the frames the ENI "
+                                      "lists", _zero),
+        "CycleTime": _accepted("the master's cycle; apply cycles at the Cyclic CycleTime, "
+                               "else the DC SYNC0 cycle (equal in the files seen)"),
+        "MBCycleTime": _accepted("how often the Elmo master polls mailboxes; apply polls "
+                                 "a mailbox while it waits for an answer"),
+        "InitialMasterState": _accepted("the state the Elmo master starts in; apply goes "
+                                        "to its --state"),
+        "AutoRecoveryTimeout": _accepted("when the Elmo master restarts a slave that "
+                                         "dropped out; nothing at start-up"),
+        "ProcessImageUpdatePeriod": _accepted("the Elmo master's host-side image copy"),
+        "StatisticsUpdatePeriod": _accepted("the Elmo master's host-side statistics"),
+        "DCUserShiftTime": _accepted("the Elmo master's send time within the cycle; the "
+                                     "slaves' SYNC shift is their DC ShiftTime"),
+        "DC": _accepted("the Elmo master's DC mode, unless the master's clock is the "
+                        "reference (MasterTimeAsRef): apply follows the reference slave",
+                        _master_time_as_ref),
+    },
+    "InitCmds": {
+        "InitCmd": _read("a register command", _INIT_CMD),
+    },
+    _INIT_CMD: {tag: _read(_COMMAND) for tag in (
+        "Transition", "BeforeSlave", "Comment", "Requires", "Cmd", "Adp", "Ado", "Addr",
+        "Data", "DataLength", "Cnt", "Retries", "Validate", "Timeout")},
+    "Config/Slave": {
+        "Info": _read("identity, station and auto-increment address", "Slave/Info"),
+        "ProcessData": _read("SyncManagers and PDOs, as a description: the SM and FMMU "
+                             "writes are InitCmds"),
+        "Mailbox": _read("SM0/SM1 and the mailbox protocols", "Slave/Mailbox"),
+        "InitCmds": _read("replayed transition by transition", "InitCmds"),
+        "PreviousPort": _read("where the slave is connected (the line is checked by "
+                              "position)"),
+        "DC": _read("SYNC cycle and shift; DC set-up before PREOP->SAFEOP", "Slave/DC"),
+        "HotConnect": _refused("HotConnect group (the master would identify the group "
+                               "and run the line without it when it is absent)", counts=True),
+    },
+    "Slave/Info": {
+        **{tag: _read("checked against the slave found at the position") for tag in (
+            "VendorId", "ProductCode", "RevisionNo", "SerialNo")},
+        **{tag: _read("the slave's name and addresses") for tag in (
+            "Name", "PhysAddr", "AutoIncAddr", "Physics")},
+        **{tag: _accepted("a description") for tag in (
+            "ProductRevision", "NameInResource", "ProductName", "RevisionReal")},
+        "Identification": _accepted("when EnableIdentification is false; otherwise the "
+                                    "master would check an ID register first",
+                                    _identification),
+    },
+    "Slave/Mailbox": {
+        "Send": _read("SM0: where requests are written"),
+        "Recv": _read("SM1: where answers are read"),
+        "BootStrap": _accepted("the mailbox for BOOT: apply does not go to BOOT"),
+        "Protocol": _accepted("the protocols the slave speaks: a description"),
+        "CoE": _read("SDO downloads (and uploads) per transition", "Mailbox/CoE"),
+        "EoE": _read("set IP parameter requests per transition", "Mailbox/EoE"),
+        "AoE": _read("the slave's AMS NetId", "Mailbox/AoE"),
+        "SoE": _refused("SoE InitCmds (servo drive parameters)", counts=True),
+        "FoE": _refused("FoE InitCmds (file transfers)", counts=True),
+        "VoE": _refused("VoE InitCmds (vendor-specific mailbox messages)", counts=True),
+    },
+    "Mailbox/CoE": {
+        "InitCmds": _read("SDO downloads (and uploads)", "CoE/InitCmds"),
+        "Profile": _accepted("the device profile (CiA 402 ...): a description"),
+    },
+    "CoE/InitCmds": {"InitCmd": _read("one SDO transfer", "CoE/InitCmds/InitCmd")},
+    "CoE/InitCmds/InitCmd": {
+        **{tag: _read(_COMMAND) for tag in (
+            "Transition", "Comment", "Timeout", "Ccs", "Index", "SubIndex", "Data",
+            "Disabled")},
+        "IndexType": _accepted("Elmo Application Studio: who made the command, like the "
+                               "Fixed attribute"),
+    },
+    "Mailbox/EoE": {"InitCmds": _read("set IP parameter requests", "EoE/InitCmds")},
+    "EoE/InitCmds": {"InitCmd": _read("one EoE request", "EoE/InitCmds/InitCmd")},
+    "EoE/InitCmds/InitCmd": {tag: _read(_COMMAND) for tag in (
+        "Transition", "Comment", "Timeout", "Data", "Disabled")},
+    "Mailbox/AoE": {
+        "NetId": _accepted("an address, no command"),
+        "InitCmds": _refused("AoE InitCmds (ADS requests)", counts=True),
+    },
+    "Slave/DC": {
+        **{tag: _read("SYNC0/1 set-up") for tag in (
+            "ReferenceClock", "CycleTime0", "CycleTime1", "ShiftTime")},
+        "PotentialReferenceClock": _accepted("could be the reference clock: a "
+                                             "description"),
+    },
+    "Config/Cyclic": {
+        "Comment": _accepted("a description"),
+        "CycleTime": _read("the cycle time (µs)"),
+        "Priority": _accepted("the task priority on the configurator's host"),
+        "TaskId": _accepted("the task on the configurator's host"),
+        "Frame": _read("one Ethernet frame per cycle", "Cyclic/Frame", _frame_factors),
+    },
+    "Cyclic/Frame": {
+        "Comment": _accepted("a description"),
+        "Cmd": _read("one datagram", "Frame/Cmd"),
+    },
+    "Frame/Cmd": {
+        **{tag: _read(_COMMAND) for tag in (
+            "State", "Comment", "Cmd", "Adp", "Ado", "Addr", "Data", "DataLength", "Cnt",
+            "InputOffs", "OutputOffs")},
+        "CopyInfos": _refused("slave-to-slave copies: the master would copy input bits "
+                              "to outputs every cycle"),
+        # Elmo Application Studio (docs/eni-exports.md §8).
+        "MaxErrors": _accepted("how many working-counter errors the Elmo master "
+                               "tolerates; apply counts them and goes on"),
+        "OwnerPhysAddr": _accepted("the slave the datagram is for: a description"),
+        **{tag: _accepted("when all zero: the image apply starts from", _all_zero_bytes)
+           for tag in ("InputDefaultData", "InputDefaultDataMask", "OutputDefaultData",
+                       "OutputDefaultDataMask")},
+    },
+}
+
+# Open contexts: what is inside is accepted whatever it is (with this reason).
+OPEN = {
+    "EtherCATConfig": "elements outside <Config> (ElmoSpecialResources, ResID, Manufacturer "
+                      "...): vendor data; ETG.2100 puts all the master does in <Config>",
+}
+
+# Where a child's context starts: root -> Config.
+ROOT_CONTEXT = "Config"
+
+
+def _commands(el: Element) -> int:
+    """Enabled InitCmds in ``el``'s ``InitCmds`` (or ``el`` itself being InitCmds); for a
+    ``HotConnect`` group, its ``IdentifyCmd`` commands."""
+    if el.tag == "HotConnect":
+        return len(el.findall("IdentifyCmd"))
+    cmds = el if el.tag == "InitCmds" else el.find("InitCmds")
+    if cmds is None:
+        return 0
+    return sum(1 for c in cmds.iterchildren("InitCmd")
+               if _zero_or_absent(c.findtext("Disabled")))
+
+
+def audit(config: Element) -> list[Unsupported]:
+    """Every refused or unknown part below ``config`` (the ``<Config>`` element)."""
+    found: list[Unsupported] = []
+    _walk(config, ROOT_CONTEXT, "", None, found)
+    cycle_times = {c.findtext("CycleTime", "").strip() for c in config.iterchildren("Cyclic")}
+    cycle_times.discard("")
+    if len(cycle_times) > 1:
+        first = next(config.iterchildren("Cyclic"))
+        found.append(Unsupported(
+            "Cyclic", f"cyclic tasks with different cycle times ({', '.join(sorted(cycle_times))} "
+            "µs): apply runs every frame in one cycle", first.sourceline))
+    return found
+
+
+def _walk(el: Element, context: str, path: str, slave: str | None,
+          found: list[Unsupported]) -> None:
+    parts = CONTENTS[context]
+    for child in el:
+        tag = child.tag
+        if not isinstance(tag, str):          # comments, processing instructions
+            continue
+        where = f"{path}/{tag}" if path else tag
+        part = parts.get(tag)
+        if part is None:
+            if context == "Slave/Mailbox" and _commands(child):
+                found.append(Unsupported(where, f"{tag} InitCmds (a mailbox protocol "
+                                         "ecatcfg does not know)", child.sourceline, slave,
+                                         _commands(child)))
+            else:
+                found.append(Unsupported(where, f"<{tag}>, an element ecatcfg does not know",
+                                         child.sourceline, slave))
+            continue
+        if part.kind == "refused":
+            count = _commands(child) if part.counts else 0
+            if part.counts and not count and tag != "HotConnect":
+                continue                      # <FoE/>, or only disabled commands: no loss
+            found.append(Unsupported(where, part.text, child.sourceline, slave, count))
+            continue
+        if part.check is not None:
+            problem = part.check(child)
+            if problem:
+                found.append(Unsupported(where, problem, child.sourceline, slave))
+                continue
+        if part.within is not None:
+            name = slave
+            if tag == "Slave":
+                name = child.findtext("Info/Name", "").strip() or f"line {child.sourceline}"
+            _walk(child, part.within, where, name, found)
+
+
+def table() -> list[tuple[str, str, str]]:
+    """``(elements, kind, text)`` for every listed element, in the order above, elements of
+    one context with the same kind and text on one row: the table ``docs/runtime.md``
+    shows."""
+    rows: dict[tuple[str, str, str], list[str]] = {}
+    for context, parts in CONTENTS.items():
+        for tag, part in parts.items():
+            rows.setdefault((context, part.kind, part.text), []).append(tag)
+    return [(f"{context}/{tags[0]}" if len(tags) == 1 else f"{context}/{{{', '.join(tags)}}}",
+             kind, text) for (context, kind, text), tags in rows.items()]
+
+
+# -- refusing, or skipping with a warning ---------------------------------------------------
+
+SKIP_HINT = "--skip-unsupported applies it without them"
+
+
+class UnsupportedEniError(EcatcfgError):
+    """An ENI that asks for what apply does not do; raised before anything is sent."""
+
+    def __init__(self, message: str, file: str | None, parts: list[Unsupported]) -> None:
+        super().__init__(message, file)
+        self.parts = parts
+
+
+def _owner(part: Unsupported) -> str:
+    return f"slave {part.slave!r}" if part.slave is not None else "the master"
+
+
+def line_of(part: Unsupported, file: str | None) -> str:
+    """``eni.xml:210: slave 'Drive': SoE InitCmds (servo drive parameters): 3 commands would
+    be lost``."""
+    where = location(file, part.line)
+    lost = (f": {part.commands} command{'s' if part.commands != 1 else ''} would be lost"
+            if part.commands else "")
+    return f"{where + ': ' if where else ''}{_owner(part)}: {part.what} [{part.element}]{lost}"
+
+
+def refuse(plan: NetworkPlan, file: str | None) -> None:
+    """Raise :class:`UnsupportedEniError` listing every unsupported part of ``plan``."""
+    if not plan.unsupported:
+        return
+    n = len(plan.unsupported)
+    lines = "\n".join("  " + line_of(p, file) for p in plan.unsupported)
+    raise UnsupportedEniError(
+        f"the ENI asks for {n} thing{'s' if n != 1 else ''} apply does not do; nothing was "
+        f"written to the bus:\n{lines}\n{SKIP_HINT}", file, plan.unsupported)
+
+
+def skip_warnings(plan: NetworkPlan, file: str | None) -> list[str]:
+    """One warning per slave (and one for the master) naming what is skipped:
+    ``eni.xml: slave 'Drive': skipped SoE InitCmds (servo drive parameters) [Slave/Mailbox/SoE]
+    at line 210, 3 commands not sent``."""
+    owners: dict[str, list[Unsupported]] = {}
+    for part in plan.unsupported:
+        owners.setdefault(_owner(part), []).append(part)
+
+    def one(p: Unsupported) -> str:
+        sent = f", {p.commands} command{'s' if p.commands != 1 else ''} not sent" \
+            if p.commands else ""
+        return f"{p.what} [{p.element}]" + (f" at line {p.line}" if p.line else "") + sent
+
+    prefix = f"{file}: " if file else ""
+    return [f"{prefix}{owner}: skipped " + "; ".join(one(p) for p in parts)
+            for owner, parts in owners.items()]

@@ -1,0 +1,306 @@
+"""Never lose configuration silently: ENI parts apply does not do are refused (file, line,
+slave, element, commands lost) before anything is sent, or skipped with one warning per
+slave when the user says so; everything real exporters write is accepted.
+
+The ENIs here are our example line compiled, then given the section under test with lxml,
+or corpus ENIs given it the same way; the expected lines come from lxml's ``sourceline`` of
+the element the test inserted, the expected counts from the test's own inserts.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import subprocess
+import sys
+import warnings
+from pathlib import Path
+
+import pytest
+from lxml import etree
+
+from conftest import EXAMPLES
+from ecatcfg.compiler import build, topology
+from ecatcfg.eni import contents
+from ecatcfg.eni import reader as eni_reader
+from ecatcfg.eni import writer as eni_writer
+from ecatcfg.eni.contents import UnsupportedEniError
+from ecatcfg.esc import AlState
+from ecatcfg.esi.library import Library
+from ecatcfg.runtime import Network
+from ecatcfg.runtime.link import MemoryLink
+from ecatcfg.runtime.network import SkippedConfigWarning
+
+ESI = EXAMPLES / "esi"
+DRIVE = "axis1"                     # the example's slave with a mailbox (CoE)
+
+
+@pytest.fixture(scope="module")
+def example_eni() -> bytes:
+    plan = build.compile_topology(topology.load(EXAMPLES / "topology.yaml"),
+                                  Library([ESI], cache=False)).plan
+    return eni_writer.to_bytes(plan)
+
+
+def _mailbox_cmds(tag: str, n: int, disabled: int = 0) -> str:
+    """``n`` InitCmds of a mailbox protocol (ETG.2100 MailboxCmdType), ``disabled`` of them
+    with Disabled=1; SoE gets its own fields (OpCode, DriveNo, IDN ...)."""
+    cmds = []
+    for i in range(n):
+        extra = ("<OpCode>3</OpCode><DriveNo>0</DriveNo><IDN>32</IDN><Elements>64</Elements>"
+                 "<Attribute>0</Attribute>" if tag == "SoE" else "")
+        off = "<Disabled>1</Disabled>" if i < disabled else ""
+        cmds.append(f"<InitCmd><Transition>PS</Transition><Comment>{tag} {i}</Comment>"
+                    f"<Timeout>1000</Timeout>{extra}<Data>0100</Data>{off}</InitCmd>")
+    return f"<{tag}><InitCmds>{''.join(cmds)}</InitCmds></{tag}>"
+
+
+HOT_CONNECT = ("<HotConnect><GroupMemberCnt>1</GroupMemberCnt><IdentifyCmd><Cmd>4</Cmd>"
+               "<Adp>1005</Adp><Ado>18</Ado><DataLength>2</DataLength></IdentifyCmd>"
+               "</HotConnect>")
+
+
+def _insert(eni: bytes, xpath: str, fragment: str, tmp_path: Path,
+            name: str = "line.xml") -> tuple[Path, int]:
+    """``eni`` with ``fragment`` appended to the element at ``xpath``; the file and the
+    inserted element's line in it."""
+    tree = etree.ElementTree(etree.fromstring(eni))
+    parent = tree.xpath(xpath)[0]
+    parent.append(etree.fromstring(fragment))
+    path = tmp_path / name
+    path.write_bytes(etree.tostring(tree, xml_declaration=True, encoding="UTF-8",
+                                    pretty_print=True))
+    tag = etree.fromstring(fragment).tag
+    line = etree.parse(str(path)).xpath(f"{xpath}/{tag}")[0].sourceline
+    return path, line
+
+
+def _apply(eni: Path, *args: str, esi: Path = ESI) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", "ecatcfg", "apply", str(eni), "--virtual",
+                           "--esi", str(esi), "--cycles", "3", *args],
+                          capture_output=True, text=True, timeout=120)
+
+
+SLAVE_MAILBOX = f"//Slave[Info/Name='{DRIVE}']/Mailbox"
+
+CASES = {   # name: (where, fragment, element path, what the message says, commands lost)
+    "SoE": (SLAVE_MAILBOX, _mailbox_cmds("SoE", 3), "Slave/Mailbox/SoE", "SoE InitCmds", 3),
+    "FoE": (SLAVE_MAILBOX, _mailbox_cmds("FoE", 2), "Slave/Mailbox/FoE", "FoE InitCmds", 2),
+    "AoE": (SLAVE_MAILBOX, _mailbox_cmds("AoE", 1), "Slave/Mailbox/AoE/InitCmds",
+            "AoE InitCmds", 1),
+    "VoE": (SLAVE_MAILBOX, _mailbox_cmds("VoE", 4), "Slave/Mailbox/VoE", "VoE InitCmds", 4),
+    "unknown protocol": (SLAVE_MAILBOX, _mailbox_cmds("XoE", 2), "Slave/Mailbox/XoE",
+                         "XoE InitCmds (a mailbox protocol ecatcfg does not know)", 2),
+    "HotConnect": (f"//Slave[Info/Name='{DRIVE}']", HOT_CONNECT, "Slave/HotConnect",
+                   "HotConnect group", 1),
+}
+
+
+@pytest.mark.parametrize("case", list(CASES))
+def test_refused_before_anything_is_sent_then_skipped_with_a_warning(case, example_eni,
+                                                                     tmp_path):
+    where, fragment, element, what, lost = CASES[case]
+    eni, line = _insert(example_eni, where, fragment, tmp_path)
+    pcap = tmp_path / "run.pcapng"
+    refused = _apply(eni, "--pcap", str(pcap))
+    assert refused.returncode == 1, refused.stdout + refused.stderr
+    err = refused.stderr
+    assert "Traceback" not in err
+    assert f"{eni}:{line}: slave '{DRIVE}': {what}" in err, err
+    assert f"[{element}]" in err
+    if lost:
+        assert f": {lost} command{'s' if lost > 1 else ''} would be lost" in err
+    else:
+        assert "would be lost" not in err
+    assert "nothing was written to the bus" in err and "--skip-unsupported" in err
+    assert not pcap.exists()                  # no link opened, not one frame
+
+    done = _apply(eni, "--skip-unsupported", "--format", "json")
+    assert done.returncode == 0, done.stderr
+    report = json.loads(done.stdout)
+    assert report["ok"] and all(s["state"] == "OP" for s in report["slaves"])
+    warnings_ = [w for w in done.stderr.splitlines() if w.startswith("warning:")]
+    assert len(warnings_) == 1, done.stderr               # one per slave: one slave here
+    assert f"slave '{DRIVE}': skipped {what}" in warnings_[0]
+    assert f"at line {line}" in warnings_[0]
+    assert report["skipped"] == [{"slave": DRIVE, "element": element,
+                                  "what": report["skipped"][0]["what"], "line": line,
+                                  "commands": lost}]
+
+
+def test_several_parts_are_all_named_and_warned_once_per_slave(example_eni, tmp_path):
+    first, _ = _insert(example_eni, SLAVE_MAILBOX, _mailbox_cmds("SoE", 2), tmp_path, "a.xml")
+    second, _ = _insert(first.read_bytes(), SLAVE_MAILBOX, _mailbox_cmds("FoE", 1), tmp_path,
+                        "b.xml")
+    eni, _ = _insert(second.read_bytes(), "//Slave[Info/Name='lamps']", HOT_CONNECT,
+                     tmp_path, "c.xml")
+    refused = _apply(eni)
+    assert refused.returncode == 1
+    assert "asks for 3 things" in refused.stderr
+    assert len(re.findall(r"^  .*c\.xml:\d+: slave ", refused.stderr, re.M)) == 3
+    done = _apply(eni, "--skip-unsupported")
+    assert done.returncode == 0, done.stderr
+    lines = [w for w in done.stderr.splitlines() if w.startswith("warning:")]
+    assert len(lines) == 2                                  # axis1 and lamps
+    drive = next(w for w in lines if f"'{DRIVE}'" in w)
+    assert "SoE InitCmds" in drive and "FoE InitCmds" in drive
+
+
+def test_network_api_refuses_and_skips(example_eni, tmp_path):
+    eni, line = _insert(example_eni, SLAVE_MAILBOX, _mailbox_cmds("SoE", 3), tmp_path)
+    with pytest.raises(UnsupportedEniError) as caught:
+        Network.virtual(eni, esi=[ESI])
+    [part] = caught.value.parts
+    assert (part.slave, part.element, part.line, part.commands) == (
+        DRIVE, "Slave/Mailbox/SoE", line, 3)
+    # The constructor refuses too, and closes the link it was given (it owns it).
+    ours, theirs = MemoryLink.pair()
+    with pytest.raises(UnsupportedEniError):
+        Network(eni, ours)
+    assert ours._closed                    # (private: MemoryLink has no public flag)
+    theirs.close()
+
+    with warnings.catch_warnings(record=True) as caught_warnings:
+        warnings.simplefilter("always")
+        with Network.virtual(eni, esi=[ESI], skip_unsupported=True) as net:
+            net.up()
+            assert net.state == AlState.OP
+    skipped = [w for w in caught_warnings if issubclass(w.category, SkippedConfigWarning)]
+    assert len(skipped) == 1 and f"slave '{DRIVE}'" in str(skipped[0].message)
+
+    events = []
+    with Network.virtual(eni, esi=[ESI], skip_unsupported=True,
+                         on_event=events.append) as net:
+        net.up(AlState.PREOP)
+    assert [e.kind for e in events].count("skipped") == 1
+
+
+ACCEPTED = {   # name: (where, fragment): nothing lost, so nothing to refuse
+    "empty FoE": (SLAVE_MAILBOX, "<FoE/>"),
+    "SoE with disabled commands only": (SLAVE_MAILBOX, _mailbox_cmds("SoE", 2, disabled=2)),
+    "AoE NetId": (SLAVE_MAILBOX, "<AoE><NetId>1.1.1.1.3.234</NetId></AoE>"),
+    "identification off": (f"//Slave[Info/Name='{DRIVE}']/Info",
+                           '<Identification Value="0" EnableIdentification="False">'
+                           "<Ado>#x0012</Ado></Identification>"),
+    "master EoE switch": ("//Config/Master",
+                          "<EoE><MaxPorts>2</MaxPorts><MaxFrames>120</MaxFrames>"
+                          "<MaxMACs>100</MaxMACs></EoE>"),
+    "vendor data outside Config": ("/EtherCATConfig",
+                                   "<ElmoSpecialResources><ElmoDC/></ElmoSpecialResources>"),
+}
+
+
+@pytest.mark.parametrize("case", list(ACCEPTED))
+def test_accepted_parts_are_not_refused(case, example_eni, tmp_path):
+    where, fragment = ACCEPTED[case]
+    eni, _ = _insert(example_eni, where, fragment, tmp_path)
+    assert eni_reader.read_file(eni).unsupported == []
+
+
+REFUSED_SETTINGS = {   # name: (where, fragment, element, words in the message)
+    "identification on": (f"//Slave[Info/Name='{DRIVE}']/Info",
+                          '<Identification Value="7" EnableIdentification="True">'
+                          "<Ado>#x0012</Ado></Identification>", "Slave/Info/Identification",
+                          "explicit device identification"),
+    "unknown slave element": (f"//Slave[Info/Name='{DRIVE}']", "<Redundancy>1</Redundancy>",
+                              "Slave/Redundancy", "<Redundancy>, an element ecatcfg does "
+                              "not know"),
+    "unknown InitCmd field": (f"//Slave[Info/Name='{DRIVE}']/InitCmds/InitCmd[1]",
+                              "<Repeat>5</Repeat>", "Slave/InitCmds/InitCmd/Repeat",
+                              "<Repeat>"),
+    "copy infos": ("//Cyclic/Frame/Cmd[1]",
+                   "<CopyInfos><CopyInfo><SrcBitOffs>0</SrcBitOffs><DstBitOffs>8</DstBitOffs>"
+                   "<BitSize>1</BitSize></CopyInfo></CopyInfos>", "Cyclic/Frame/Cmd/CopyInfos",
+                   "slave-to-slave copies"),
+    "master clock as DC reference": ("//Config/Master",
+                                     "<DC><ReferenceClock>0</ReferenceClock><Type>1</Type>"
+                                     "<MasterTimeAsRef>1</MasterTimeAsRef></DC>", "Master/DC",
+                                     "the master's clock as the DC reference"),
+    "redundancy NIC": ("//Config/Master", "<RNIC>eth2</RNIC>", "Master/RNIC",
+                       "<RNIC> is not empty"),
+}
+
+
+@pytest.mark.parametrize("case", list(REFUSED_SETTINGS))
+def test_settings_apply_does_not_do_are_recorded(case, example_eni, tmp_path):
+    where, fragment, element, words = REFUSED_SETTINGS[case]
+    eni, line = _insert(example_eni, where, fragment, tmp_path)
+    [part] = eni_reader.read_file(eni).unsupported
+    assert (part.element, part.line, part.commands) == (element, line, 0)
+    assert words in part.what
+    assert part.slave == (None if element.startswith(("Master", "Cyclic")) else DRIVE)
+
+
+def test_hot_plug_attribute_and_frame_factor(example_eni, tmp_path):
+    tree = etree.fromstring(example_eni)
+    tree.xpath(f"//Slave[Info/Name='{DRIVE}']")[0].set("HotPlug", "1")
+    tree.xpath("//Cyclic/Frame")[0].set("CycleTimeFactor", "4")
+    plan = eni_reader.read_bytes(etree.tostring(tree), "x.xml")
+    assert sorted(p.element for p in plan.unsupported) == ["Cyclic/Frame", "Slave"]
+    # The values Elmo Application Studio writes when the feature is off are accepted.
+    tree.xpath(f"//Slave[Info/Name='{DRIVE}']")[0].set("HotPlug", "0")
+    tree.xpath("//Cyclic/Frame")[0].set("CycleTimeFactor", "0")
+    assert eni_reader.read_bytes(etree.tostring(tree), "x.xml").unsupported == []
+
+
+def test_cyclic_tasks_with_different_cycle_times(example_eni, tmp_path):
+    tree = etree.fromstring(example_eni)
+    config = tree.find("Config")
+    cyclic = config.find("Cyclic")
+    for c in config.iterchildren("Cyclic"):
+        for old in c.iterchildren("CycleTime"):
+            c.remove(old)
+    etree.SubElement(cyclic, "CycleTime").text = "1000"
+    second = etree.fromstring("<Cyclic><CycleTime>4000</CycleTime></Cyclic>")
+    second.append(etree.fromstring(etree.tostring(cyclic.find("Frame"))))
+    cyclic.addnext(second)
+    [part] = eni_reader.read_bytes(etree.tostring(tree), "x.xml").unsupported
+    assert part.element == "Cyclic" and "1000, 4000" in part.what
+
+
+def test_refused_from_the_plan_cache_too(example_eni, tmp_path):
+    """A cached plan keeps its unsupported parts: the second run is refused as well."""
+    eni, line = _insert(example_eni, SLAVE_MAILBOX, _mailbox_cmds("VoE", 1), tmp_path)
+    for _ in range(2):
+        refused = _apply(eni)
+        assert refused.returncode == 1 and f"{eni}:{line}:" in refused.stderr
+
+
+def test_docs_table_is_the_readers_list():
+    """docs/runtime.md shows exactly the reader's list (eni/contents.py), row by row."""
+    doc = (Path(__file__).resolve().parent.parent / "docs" / "runtime.md").read_text()
+    rows = [f"| `{element}` | {kind} | {text} |" for element, kind, text in contents.table()]
+    section = doc.split("## What an ENI may contain", 1)[1].split("\n## ", 1)[0]
+    table = [line for line in section.splitlines() if line.startswith("| `")]
+    assert table == rows
+
+
+def test_every_context_the_list_descends_into_is_listed():
+    for context, parts in contents.CONTENTS.items():
+        for tag, part in parts.items():
+            assert part.within is None or part.within in contents.CONTENTS, (context, tag)
+            assert part.kind != "refused" or part.within is None
+
+
+# -- the corpus ------------------------------------------------------------------------------
+
+def test_every_corpus_eni_is_accepted_as_it_is(corpus):
+    enis = sorted((corpus / "eni").rglob("*.xml"))
+    assert len(enis) >= 10
+    for eni in enis:
+        plan = eni_reader.read_file(eni)
+        assert plan.unsupported == [], (eni.name, plan.unsupported)
+
+
+def test_corpus_eni_with_soe_added_is_refused(corpus, tmp_path):
+    """eni1.xml (Elmo Application Studio) with an SoE section added to its drive."""
+    source = (corpus / "eni" / "rocos-ethercat" / "eni1.xml").read_bytes()
+    eni, line = _insert(source, "//Slave[Info/Name='Elmo Drive']/Mailbox",
+                        _mailbox_cmds("SoE", 2), tmp_path)
+    refused = _apply(eni, esi=corpus / "esi")
+    assert refused.returncode == 1
+    assert f"{eni}:{line}: slave 'Elmo Drive': SoE InitCmds" in refused.stderr
+    assert ": 2 commands would be lost" in refused.stderr
+    done = _apply(eni, "--skip-unsupported", esi=corpus / "esi")
+    assert done.returncode == 0, done.stderr
+    assert "warning:" in done.stderr and "slave 'Elmo Drive': skipped SoE" in done.stderr
