@@ -304,3 +304,18 @@ def test_corpus_eni_with_soe_added_is_refused(corpus, tmp_path):
     done = _apply(eni, "--skip-unsupported", esi=corpus / "esi")
     assert done.returncode == 0, done.stderr
     assert "warning:" in done.stderr and "slave 'Elmo Drive': skipped SoE" in done.stderr
+
+
+def test_simulate_eni_names_what_it_ignores(veth_netns, example_eni, tmp_path):
+    """simulate is not the master: it emulates the slaves of an ENI apply would refuse,
+    and says which parts it ignores."""
+    eni, line = _insert(example_eni, SLAVE_MAILBOX, _mailbox_cmds("SoE", 3), tmp_path)
+    done = veth_netns.run_in(veth_netns.ns_b, [
+        sys.executable, "-m", "ecatcfg", "simulate", "--iface", veth_netns.if_b,
+        "--no-cache", "--esi", str(ESI), "--eni", str(eni), "--duration", "0.3"],
+        timeout=60)
+    assert done.returncode == 0, done.stderr
+    assert "ready: 5 slaves" in done.stdout
+    [note] = [n for n in done.stderr.splitlines() if n.startswith("note:")]
+    assert f"{eni}:{line}: slave '{DRIVE}': SoE InitCmds" in note
+    assert "3 commands would be lost" in note
