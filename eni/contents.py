@@ -50,7 +50,8 @@ class Part:
     text: str
     within: str | None = None          # the context of its children, if it is checked
     check: Check | None = None         # a condition on the element (kind "accepted"/"read")
-    counts: bool = False               # refused: count its InitCmds as commands lost
+    counts: bool = False               # refused: count its commands as commands lost ...
+    empty_ok: bool = False             # ... and accept it when it holds none (<FoE/>)
 
 
 def _read(text: str, within: str | None = None, check: Check | None = None) -> Part:
@@ -61,8 +62,8 @@ def _accepted(text: str, check: Check | None = None) -> Part:
     return Part("accepted", text, None, check)
 
 
-def _refused(text: str, counts: bool = False) -> Part:
-    return Part("refused", text, counts=counts)
+def _refused(text: str, counts: bool = False, empty_ok: bool = False) -> Part:
+    return Part("refused", text, counts=counts, empty_ok=empty_ok)
 
 
 # -- conditions ---------------------------------------------------------------------------
@@ -213,9 +214,10 @@ CONTENTS: dict[str, dict[str, Part]] = {
         "CoE": _read("SDO downloads (and uploads) per transition", "Mailbox/CoE"),
         "EoE": _read("set IP parameter requests per transition", "Mailbox/EoE"),
         "AoE": _read("the slave's AMS NetId", "Mailbox/AoE"),
-        "SoE": _refused("SoE InitCmds (servo drive parameters)", counts=True),
-        "FoE": _refused("FoE InitCmds (file transfers)", counts=True),
-        "VoE": _refused("VoE InitCmds (vendor-specific mailbox messages)", counts=True),
+        # Without (enabled) InitCmds these only say the protocol is there: nothing is lost.
+        "SoE": _refused("SoE InitCmds (servo drive parameters)", True, True),
+        "FoE": _refused("FoE InitCmds (file transfers)", True, True),
+        "VoE": _refused("VoE InitCmds (vendor-specific mailbox messages)", True, True),
     },
     "Mailbox/CoE": {
         "InitCmds": _read("SDO downloads (and uploads)", "CoE/InitCmds"),
@@ -235,7 +237,7 @@ CONTENTS: dict[str, dict[str, Part]] = {
         "Transition", "Comment", "Timeout", "Data", "Disabled")},
     "Mailbox/AoE": {
         "NetId": _accepted("an address, no command"),
-        "InitCmds": _refused("AoE InitCmds (ADS requests)", counts=True),
+        "InitCmds": _refused("AoE InitCmds (ADS requests)", True, True),
     },
     "Slave/DC": {
         **{tag: _read("SYNC0/1 set-up") for tag in (
@@ -280,6 +282,17 @@ OPEN = {
 ROOT_CONTEXT = "Config"
 
 
+def _number(text: str) -> int | str | None:
+    """A CycleTime as a number (its text if it is none: still compared), ``None`` if absent."""
+    text = text.strip()
+    if not text:
+        return None
+    try:
+        return parse_int(text)
+    except ValueError:
+        return text
+
+
 def _commands(el: Element) -> int:
     """Enabled InitCmds in ``el``'s ``InitCmds`` (or ``el`` itself being InitCmds); for a
     ``HotConnect`` group, its ``IdentifyCmd`` commands."""
@@ -296,13 +309,16 @@ def audit(config: Element) -> list[Unsupported]:
     """Every refused or unknown part below ``config`` (the ``<Config>`` element)."""
     found: list[Unsupported] = []
     _walk(config, ROOT_CONTEXT, "", None, found)
-    cycle_times = {c.findtext("CycleTime", "").strip() for c in config.iterchildren("Cyclic")}
-    cycle_times.discard("")
+    cycle_times = {_number(c.findtext("CycleTime", "")) for c in config.iterchildren("Cyclic")}
+    cycle_times.discard(None)
     if len(cycle_times) > 1:
         first = next(config.iterchildren("Cyclic"))
+        listed = ", ".join(str(t) for t in sorted(
+            cycle_times, key=lambda t: (isinstance(t, str), t if isinstance(t, int) else 0,
+                                        str(t))))
         found.append(Unsupported(
-            "Cyclic", f"cyclic tasks with different cycle times ({', '.join(sorted(cycle_times))} "
-            "µs): apply runs every frame in one cycle", first.sourceline))
+            "Cyclic", f"cyclic tasks with different cycle times ({listed} µs): apply runs "
+            "every frame in one cycle", first.sourceline))
     return found
 
 
@@ -326,7 +342,7 @@ def _walk(el: Element, context: str, path: str, slave: str | None,
             continue
         if part.kind == "refused":
             count = _commands(child) if part.counts else 0
-            if part.counts and not count and tag != "HotConnect":
+            if part.empty_ok and not count:
                 continue                      # <FoE/>, or only disabled commands: no loss
             found.append(Unsupported(where, part.text, child.sourceline, slave, count))
             continue
