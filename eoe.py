@@ -5,8 +5,9 @@ One codec for three users, the way ``esc.py`` serves compiler and runtime: the E
 checks an EoE InitCmd's ``Data`` with :func:`decode_init_data`, the master sends
 :func:`encode_set_ip_request` in a mailbox of type EoE, and the emulated slave decodes that
 request with :func:`decode_frame` and :func:`decode_ip_parameters` and answers with
-:func:`encode_set_ip_response`.  The layouts, with the projects where each can be checked,
-are in ``docs/protocol-notes.md`` §9.
+:func:`encode_set_ip_response` (or :func:`encode_get_ip_response`, :func:`encode_response`).
+The layouts, with the projects where each can be checked, are in
+``docs/protocol-notes.md`` §9.
 
 - **EoE header**, 4 bytes after the mailbox header: frame info 1 (type in bits 0-3, port
   4-7, last fragment 8, time appended 9, time requested 10) and frame info 2 (fragment,
@@ -15,9 +16,10 @@ are in ``docs/protocol-notes.md`` §9.
   3 default gateway, 4 DNS server, 5 DNS name) and the parameters.  IgH, TwinCAT and the
   ENI files write every field at a fixed place, 58 bytes in all (zeros where a flag is
   clear; Wireshark dissects it that way); SOEM 1.x writes only the fields whose flag is
-  set.  :func:`decode_ip_parameters` reads both, :func:`encode_ip_parameters` writes the
-  fixed layout.  An IPv4 address is a 32-bit little-endian number: 192.168.1.4 is
-  ``04 01 a8 c0`` (SOEM ``EOE_ip_uint32_to_byte``; the ENI files agree).
+  set, and SOES answers a get IP parameter request that way.
+  :func:`decode_ip_parameters` reads both, :func:`encode_ip_parameters` writes either (the
+  fixed one unless told otherwise).  An IPv4 address is a 32-bit little-endian number:
+  192.168.1.4 is ``04 01 a8 c0`` (SOEM ``EOE_ip_uint32_to_byte``; the ENI files agree).
 """
 
 from __future__ import annotations
@@ -25,8 +27,11 @@ from __future__ import annotations
 import ipaddress
 import struct
 from enum import IntEnum
+from typing import TypeVar
 
 from ecatcfg.record import record
+
+_T = TypeVar("_T")
 
 HEADER = struct.Struct("<HH")             # frame info 1, frame info 2 (or result code)
 HEADER_SIZE = HEADER.size                  # 4
@@ -108,6 +113,26 @@ class IpParameters:
                   self.dns_name)
         return sum(flag for (flag, _), value in zip(_FIELDS, values) if value is not None)
 
+    @property
+    def sets_ip(self) -> bool:
+        """Whether it sets anything of the IP stack (address, mask, gateway, DNS), not only
+        the MAC address: what a device without IP support must refuse."""
+        return any(value is not None for value in (self.ip, self.subnet_mask,
+                                                   self.default_gateway, self.dns_server,
+                                                   self.dns_name))
+
+    def updated(self, newer: IpParameters) -> IpParameters:
+        """These parameters after ``newer`` is set: its fields where given, ours elsewhere
+        (a request sets only the fields its flags name; SOES ``EOE_set_ip``)."""
+        def pick(new: _T | None, old: _T | None) -> _T | None:
+            return old if new is None else new
+
+        return IpParameters(mac=pick(newer.mac, self.mac), ip=pick(newer.ip, self.ip),
+                            subnet_mask=pick(newer.subnet_mask, self.subnet_mask),
+                            default_gateway=pick(newer.default_gateway, self.default_gateway),
+                            dns_server=pick(newer.dns_server, self.dns_server),
+                            dns_name=pick(newer.dns_name, self.dns_name))
+
     def describe(self) -> str:
         """``ip 192.168.1.4/255.255.255.0, gateway 192.168.1.10, mac 10:18:9e:ff:01:04``."""
         parts = []
@@ -131,17 +156,22 @@ def _ip_bytes(address: ipaddress.IPv4Address | None) -> bytes:
     return struct.pack("<I", int(address)) if address is not None else bytes(4)
 
 
-def encode_ip_parameters(params: IpParameters) -> bytes:
-    """The fixed 58-byte body (IgH ``ec_fsm_eoe_prepare_set``, TwinCAT)."""
+def encode_ip_parameters(params: IpParameters, compact: bool = False) -> bytes:
+    """A set (or get) IP parameter body: the fixed 58-byte layout (IgH
+    ``ec_fsm_eoe_prepare_set``, TwinCAT), or with ``compact`` only the fields whose flag is
+    set (SOEM ``ecx_EOEsetIp``, SOES ``EOE_get_ip``)."""
     name = b""
     if params.dns_name is not None:
         name = params.dns_name.encode("ascii")
         if len(name) > DNS_NAME_SIZE:
             raise ValueError(f"DNS name of {len(name)} characters; at most {DNS_NAME_SIZE}")
-    return b"".join((struct.pack("<I", params.flags), params.mac or bytes(MAC_SIZE),
-                     _ip_bytes(params.ip), _ip_bytes(params.subnet_mask),
-                     _ip_bytes(params.default_gateway), _ip_bytes(params.dns_server),
-                     name.ljust(DNS_NAME_SIZE, b"\x00")))
+    values = (params.mac, params.ip, params.subnet_mask, params.default_gateway,
+              params.dns_server, params.dns_name)
+    raw = (params.mac or bytes(MAC_SIZE), _ip_bytes(params.ip), _ip_bytes(params.subnet_mask),
+           _ip_bytes(params.default_gateway), _ip_bytes(params.dns_server),
+           name.ljust(DNS_NAME_SIZE, b"\x00"))
+    return struct.pack("<I", params.flags) + b"".join(
+        field for field, value in zip(raw, values) if not compact or value is not None)
 
 
 def _compact_size(flags: int) -> int:
@@ -224,10 +254,29 @@ def encode_set_ip_request(params: IpParameters, port: int = 0) -> bytes:
         encode_ip_parameters(params)
 
 
+def encode_response(frame_type: int, result: int, port: int = 0, body: bytes = b"") -> bytes:
+    """The EoE payload of a response: the last-fragment bit set and the result code in frame
+    info 2 (SOES ``EOE_no_data_response``; SOEM ``ecx_EOEsetIp`` and IgH ``fsm_eoe.c`` read
+    the result there), then ``body``."""
+    return HEADER.pack(frame_info(frame_type, port, last_fragment=True), result) + body
+
+
 def encode_set_ip_response(result: int, port: int = 0) -> bytes:
-    """A set IP parameter response: type 3 with the result code in frame info 2 (SOEM
-    ``ecx_EOEsetIp`` and IgH read it there)."""
-    return HEADER.pack(frame_info(FrameType.SET_IP_RESPONSE, port, last_fragment=True), result)
+    """A set IP parameter response: type 3 with the result code and no body."""
+    return encode_response(FrameType.SET_IP_RESPONSE, result, port)
+
+
+def encode_get_ip_request(port: int = 0) -> bytes:
+    """A get IP parameter request: type 6, the EoE header alone (SOEM ``ecx_EOEgetIp``)."""
+    return HEADER.pack(frame_info(FrameType.GET_IP_REQUEST, port), 0)
+
+
+def encode_get_ip_response(params: IpParameters, port: int = 0) -> bytes:
+    """A get IP parameter response: type 7, result success, the parameters that are set in
+    the compact layout, as SOES ``EOE_get_ip`` answers and SOEM ``ecx_EOEgetIp`` reads it
+    (SOEM reads no other layout; with every flag set the two layouts are the same)."""
+    return encode_response(FrameType.GET_IP_RESPONSE, Result.SUCCESS, port,
+                           encode_ip_parameters(params, compact=True))
 
 
 # -- what ENI files write ------------------------------------------------------------------
