@@ -356,13 +356,28 @@ class CoeSettings:
 
 
 @dataclass(slots=True)
+class EoeSettings:
+    """Mailbox/EoE's attributes (ETG.2000): what the device's EoE supports beyond Ethernet
+    frames: IP parameters, a MAC address, time stamps.  ``None`` where the file does not
+    say (the schema's default is false, but devices that leave them out, such as the Elmo
+    drives, take IP parameters: their own tool sets them)."""
+
+    source: Source
+    ip: bool | None = None
+    mac: bool | None = None
+    timestamp: bool | None = None
+
+
+@dataclass(slots=True)
 class Mailbox:
-    """Device/Mailbox: the protocols the slave speaks; CoE details in ``coe``."""
+    """Device/Mailbox: the protocols the slave speaks; CoE details in ``coe``, EoE's in
+    ``eoe``."""
 
     protocols: list[str]
     source: Source
     coe: CoeSettings | None = None
     data_link_layer: bool = False
+    eoe: EoeSettings | None = None
 
 
 @dataclass(slots=True)

@@ -19,9 +19,10 @@ from ecatcfg.errors import EcatcfgError
 from ecatcfg.esi import xmlsafe
 from ecatcfg.esi.model import (
     Access, ArrayInfo, CoeInitCmd, CoeSettings, DataType, DataTypeSubItem, Dc, DcOpMode,
-    Device, DeviceInfo, DictObject, Dictionary, Eeprom, EsiFile, Fmmu, Group, IgnoredElement,
-    Mailbox, MAILBOX_PROTOCOLS, Module, ObjectFlags, ObjectInfo, Pdo, PdoEntry, Profile,
-    ProblemKind, ReadProblem, Severity, Slot, Slots, Source, STATES, SyncManager, Vendor,
+    Device, DeviceInfo, DictObject, Dictionary, Eeprom, EoeSettings, EsiFile, Fmmu, Group,
+    IgnoredElement, Mailbox, MAILBOX_PROTOCOLS, Module, ObjectFlags, ObjectInfo, Pdo, PdoEntry,
+    Profile, ProblemKind, ReadProblem, Severity, Slot, Slots, Source, STATES, SyncManager,
+    Vendor,
 )
 from ecatcfg.esi.values import parse_bool, parse_hex_bytes, parse_int
 
@@ -401,9 +402,19 @@ class _Reader:
                 mbx.protocols.append(tag)
                 if tag == "CoE":
                     mbx.coe = self.coe(ch)
+                elif tag == "EoE":
+                    mbx.eoe = self.eoe(ch)
             else:
                 self.unknown(ch, "Mailbox", el)
         return mbx
+
+    def eoe(self, el: etree._Element) -> EoeSettings:
+        def flag(name: str) -> bool | None:
+            raw = el.get(name)
+            return None if raw is None else self.bool_(raw, el, f"EoE/@{name}")
+
+        return EoeSettings(self.src(el), ip=flag("IP"), mac=flag("MAC"),
+                           timestamp=flag("TimeStamp"))
 
     def coe(self, el: etree._Element) -> CoeSettings:
         g = el.get
