@@ -1,7 +1,10 @@
 """Emulated slaves from ESI devices: what ``ecatcfg simulate`` and the tests put on a line.
 
-Each device gets its SII image (``esi/sii.py``) and, when the ESI declares CoE, a runtime
-object dictionary with an SDO server (``runtime/objects.py``, ``runtime/sdo_server.py``).
+Each device gets its SII image (``esi/sii.py``) and, when it has a mailbox, a mailbox server
+(``runtime/mailbox_server.py``) with a server for each protocol the ESI declares that the
+emulation speaks: CoE, a runtime object dictionary with an SDO server
+(``runtime/objects.py``, ``runtime/sdo_server.py``); EoE, the IP parameter services
+(``runtime/eoe_server.py``).  Other protocols get the mailbox error "unsupported protocol".
 """
 
 from __future__ import annotations
@@ -38,25 +41,30 @@ class SlaveSpec:
 
 def emulated_slave(spec: SlaveSpec) -> EmulatedSlave:
     dev = spec.device
-    od = server = None
+    od = mailbox = None
+    out, inp = (next((s for s in dev.sms if s.type == t), None) for t in ("MBoxOut", "MBoxIn"))
+    # The slave's mailbox is the size its SMs get (the rule the ENI and the SII follow).
+    sizes = (out.mailbox_size if out else 0, inp.mailbox_size if inp else 0)
     if has_coe(dev):
         from ecatcfg.runtime.objects import ObjectDictionary
-        from ecatcfg.runtime.sdo_server import SdoServer
         od = ObjectDictionary.from_device(dev)
         esi_cmds = dev.mailbox.coe.init_cmds if dev.mailbox and dev.mailbox.coe else []
         _add_written_objects(od, [(c.index, c.subindex or 0, c.data) for c in esi_cmds
                                   if c.index is not None and c.data is not None
                                   and not c.complete_access] + list(spec.extra_writes))
-        out, inp = (next((s for s in dev.sms if s.type == t), None)
-                    for t in ("MBoxOut", "MBoxIn"))
-        sizes = (out.mailbox_size if out else 0, inp.mailbox_size if inp else 0)
-        # The slave's mailbox is the size its SMs get (the rule the ENI and the SII follow).
-        # One too small for an SDO (lint ESI204, ESI213): no SDO server, as such firmware
-        # could not answer one either.
-        if min(sizes) >= MIN_MAILBOX_SIZE:
-            server = SdoServer(od, *sizes)
+    # One too small for an SDO (lint ESI204, ESI213): no mailbox server, as such firmware
+    # could not answer one either.
+    if dev.mailbox is not None and min(sizes) >= MIN_MAILBOX_SIZE:
+        from ecatcfg.runtime.mailbox_server import MailboxServer
+        mailbox = MailboxServer(*sizes)
+        if od is not None:
+            from ecatcfg.runtime.sdo_server import SdoServer
+            mailbox.coe = SdoServer(od, *sizes)
+        if "EoE" in dev.mailbox.protocols:
+            from ecatcfg.runtime.eoe_server import EoeServer
+            mailbox.eoe = EoeServer(dev.mailbox.eoe, sizes[1])
     image = sii.build(dev, serial=spec.serial, alias=spec.alias)
-    return EmulatedSlave(dev, image, name=spec.name, od=od, sdo_server=server)
+    return EmulatedSlave(dev, image, name=spec.name, od=od, mailbox=mailbox)
 
 
 def _add_written_objects(od: ObjectDictionary, writes: list[tuple[int, int, bytes]]) -> None:

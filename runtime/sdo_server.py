@@ -1,9 +1,11 @@
-"""The CoE SDO server of an emulated slave: mailbox messages in (SM0), messages out (SM1).
+"""The CoE SDO server of an emulated slave: the CoE messages the mailbox hands it
+(``mailbox_server.py``, which checks the mailbox header first), the CoE messages to answer.
 
 Handles expedited, normal and segmented upload and download, complete access, toggle
 checks and aborts (ETG.1000.6 §5.6.2; ``docs/protocol-notes.md`` §5 mailbox, §6 CoE, cited
-below as "protocol-notes §N").  Mailbox-level problems get a mailbox error reply (type 0), as
-SOES ``MBX_error`` does.
+below as "protocol-notes §N").  A CoE message the mailbox must refuse raises
+:class:`MailboxProtocolError` with the detail of the mailbox error reply (type 0) that
+SOES ``MBX_error`` would send.
 
 Choices where those sources are silent:
 
@@ -12,9 +14,6 @@ Choices where those sources are silent:
   emulation has no OD list / object descriptions.
 - Other CoE services (emergency, PDO over mailbox, an SDO *response* sent to the slave) get a
   mailbox error reply with detail 4 (service not supported).
-- A channel other than 0 gets detail 3 (invalid channel).
-- Responses are padded to the SM1 length: the slave writes the whole SM1 area, because writing
-  its last byte is what marks the mailbox full (protocol-notes §3).
 """
 
 from __future__ import annotations
@@ -24,12 +23,11 @@ from dataclasses import dataclass, field
 from ecatcfg.esc import AlState
 from ecatcfg.runtime.mailbox import (
     ABORT_TOGGLE, ABORT_TYPE_MISMATCH, ABORT_UNKNOWN_COMMAND, ABORT_UNSUPPORTED_ACCESS,
-    COE_HEADER, MBX_HEADER_SIZE, NORMAL_OVERHEAD, SEGMENT_OVERHEAD, Abort, CoeMessage,
-    CoeService, DownloadSegment, InitiateDownload, InitiateUpload, MailboxCounter,
-    MailboxHeader, MailboxProtocolError, MbxErrorDetail, MbxType, SdoAbort, UnknownSdo,
-    UploadSegmentRequest, decode_coe, encode_abort, encode_download_response,
-    encode_download_segment_response, encode_mailbox_error, encode_sdo_info_error,
-    encode_upload_expedited, encode_upload_normal, encode_upload_segment, pad_to,
+    COE_HEADER, NORMAL_OVERHEAD, SEGMENT_OVERHEAD, Abort, CoeMessage, CoeService,
+    DownloadSegment, InitiateDownload, InitiateUpload, MailboxProtocolError, MbxErrorDetail,
+    SdoAbort, UnknownSdo, UploadSegmentRequest, decode_coe, encode_abort,
+    encode_download_response, encode_download_segment_response, encode_sdo_info_error,
+    encode_upload_expedited, encode_upload_normal, encode_upload_segment,
 )
 from ecatcfg.runtime.objects import ObjectDictionary
 
@@ -61,8 +59,8 @@ class SdoServer:
     """SDO server over one slave's mailbox.
 
     ``mbx_out_size`` / ``mbx_in_size`` are the SM0 (master -> slave) and SM1 (slave ->
-    master) lengths: they bound the messages accepted and the segment sizes sent
-    (SM1 size - 16 bytes of data in an initiate upload response, SM1 size - 9 per segment).
+    master) lengths: they bound the segment sizes sent (SM1 size - 16 bytes of data in an
+    initiate upload response, SM1 size - 9 per segment).
     """
 
     def __init__(self, od: ObjectDictionary, mbx_out_size: int, mbx_in_size: int) -> None:
@@ -72,45 +70,25 @@ class SdoServer:
         self.od = od
         self.mbx_out_size = mbx_out_size
         self.mbx_in_size = mbx_in_size
-        self._counter = MailboxCounter()
-        self._last_counter: int | None = None
         self._transfer: _Download | _Upload | None = None
 
     def reset(self) -> None:
-        """The mailbox starts afresh (INIT -> PREOP): forget the last counter and any
-        transfer in progress, as SOES does when it starts the mailbox."""
-        self._last_counter = None
+        """The mailbox starts afresh (INIT -> PREOP): forget any transfer in progress, as
+        SOES does when it starts the mailbox."""
         self._transfer = None
 
-    def handle(self, request: bytes, state: AlState) -> list[bytes]:
-        """The messages (headers included, padded to SM1) answering one mailbox message
-        as the master wrote it into SM0 (the whole SM area, padding included)."""
-        if len(request) < MBX_HEADER_SIZE:
-            return [self._error(MbxErrorDetail.SIZE_TOO_SHORT)]
-        header = MailboxHeader.unpack(request)
-        # A repeated message (non-zero counter equal to the last one) is dropped, as SOES
-        # does with mbxincnt (protocol-notes §5).
-        if header.counter and header.counter == self._last_counter:
-            return []
-        self._last_counter = header.counter
-        if header.length == 0 or header.length > min(len(request),
-                                                     self.mbx_out_size) - MBX_HEADER_SIZE:
-            return [self._error(MbxErrorDetail.INVALID_HEADER)]
-        if header.channel != 0:
-            return [self._error(MbxErrorDetail.INVALID_CHANNEL)]
-        if header.type != MbxType.COE:
-            return [self._error(MbxErrorDetail.UNSUPPORTED_PROTOCOL)]
-        data = request[MBX_HEADER_SIZE:MBX_HEADER_SIZE + header.length]
-        try:
-            msg = decode_coe(data)
-        except MailboxProtocolError as error:
-            return [self._error(error.detail or MbxErrorDetail.SYNTAX)]
+    def handle(self, data: bytes, state: AlState) -> list[bytes]:
+        """The messages answering one CoE message (``data``: what follows the mailbox
+        header), as whole mailbox messages with counter 0 and no padding: the mailbox
+        (``mailbox_server.py``) gives them the counter and pads them to SM1.  Raises
+        :class:`MailboxProtocolError` for a message the mailbox refuses."""
+        msg = decode_coe(data)
         service = COE_HEADER.unpack_from(data)[0] >> 12
         if service == CoeService.SDO_INFO:
-            return [self._out(encode_sdo_info_error(ABORT_UNSUPPORTED_ACCESS,
-                                                    self._counter()))]
+            return [encode_sdo_info_error(ABORT_UNSUPPORTED_ACCESS)]
         if service != CoeService.SDO_REQUEST:
-            return [self._error(MbxErrorDetail.SERVICE_NOT_SUPPORTED)]
+            raise MailboxProtocolError(f"CoE service {service} is not served",
+                                       detail=MbxErrorDetail.SERVICE_NOT_SUPPORTED)
         return self._sdo(msg, state)
 
     # -- SDO ---------------------------------------------------------------------------
@@ -155,8 +133,7 @@ class SdoServer:
                 self._transfer = _Download(index, sub, ca, msg.size, bytearray(msg.data))
         except SdoAbort as abort:
             return [self._abort(index, sub, abort.code)]
-        return [self._out(encode_download_response(index, sub, self._counter(),
-                                                   complete_access=ca))]
+        return [encode_download_response(index, sub, complete_access=ca)]
 
     def _download_segment(self, msg: DownloadSegment, state: AlState) -> list[bytes]:
         transfer = self._transfer
@@ -181,7 +158,7 @@ class SdoServer:
                 return [self._abort(transfer.index, transfer.subindex, abort.code)]
         else:
             transfer.toggle = not transfer.toggle
-        return [self._out(encode_download_segment_response(msg.toggle, self._counter()))]
+        return [encode_download_segment_response(msg.toggle)]
 
     def _initiate_upload(self, msg: InitiateUpload, state: AlState) -> list[bytes]:
         index, sub, ca = msg.index, msg.subindex, msg.complete_access
@@ -191,13 +168,12 @@ class SdoServer:
             return [self._abort(index, sub, abort.code)]
         if 1 <= len(data) <= 4:
             # Expedited, also with complete access, as SOES answers (protocol-notes §6).
-            return [self._out(encode_upload_expedited(index, sub, data, self._counter(),
-                                                      complete_access=ca))]
+            return [encode_upload_expedited(index, sub, data, complete_access=ca)]
         first = self.mbx_in_size - NORMAL_OVERHEAD
         if len(data) > first:
             self._transfer = _Upload(index, sub, data, first)
-        return [self._out(encode_upload_normal(index, sub, len(data), data[:first],
-                                               self._counter(), complete_access=ca))]
+        return [encode_upload_normal(index, sub, len(data), data[:first],
+                                     complete_access=ca)]
 
     def _upload_segment(self, msg: UploadSegmentRequest) -> list[bytes]:
         transfer = self._transfer
@@ -214,15 +190,7 @@ class SdoServer:
         transfer.toggle = not transfer.toggle
         if last:
             self._transfer = None
-        return [self._out(encode_upload_segment(part, msg.toggle, last, self._counter()))]
-
-    # -- replies -------------------------------------------------------------------------
-
-    def _out(self, msg: bytes) -> bytes:
-        return pad_to(msg, self.mbx_in_size)
+        return [encode_upload_segment(part, msg.toggle, last)]
 
     def _abort(self, index: int, subindex: int, code: int) -> bytes:
-        return self._out(encode_abort(index, subindex, code, self._counter()))
-
-    def _error(self, detail: int) -> bytes:
-        return self._out(encode_mailbox_error(detail, self._counter()))
+        return encode_abort(index, subindex, code)

@@ -3,7 +3,8 @@
 Built from the device's ESI: the SII EEPROM image (``esi/sii.py``) backs the SII interface
 (0x0500-0x050F) and loads the configured alias and PDI control at power-on; the object
 dictionary (``runtime/objects.py``) backs the CoE SDO server and decides which
-SyncManager lengths the slave accepts in SAFEOP.  Register addresses and the rules the
+SyncManager lengths the slave accepts in SAFEOP; the mailbox (``runtime/mailbox_server.py``)
+hands each message the master writes to the protocol's server (CoE, EoE).  Register addresses and the rules the
 firmware applies are those of ``docs/protocol-notes.md`` §2-§4 (ETG.1000.4/.6, SOES, KickCAT).
 
 The ESC's 64 KiB address space is one ``bytearray``: registers below 0x1000, process memory
@@ -30,9 +31,10 @@ from ecatcfg.esc import (AL_ERROR_ACK, AL_STATE_MASK, AL_STATUS_ERROR, EEPROM_CM
 from ecatcfg.esi.model import Device
 from ecatcfg.runtime.syncman import SmKind, SmState
 
-if TYPE_CHECKING:                   # only slaves with a CoE dictionary bring these
+if TYPE_CHECKING:                   # only slaves with a mailbox bring these
+    from ecatcfg.eoe import IpParameters
+    from ecatcfg.runtime.mailbox_server import MailboxServer
     from ecatcfg.runtime.objects import ObjectDictionary
-    from ecatcfg.runtime.sdo_server import SdoServer
 
 MEMORY_SIZE = 0x10000
 PROCESS_RAM = 0x1000
@@ -80,12 +82,12 @@ class EmulatedSlave:
 
     def __init__(self, device: Device, sii_image: bytes, *, name: str = "",
                  od: ObjectDictionary | None = None,
-                 sdo_server: SdoServer | None = None) -> None:
+                 mailbox: MailboxServer | None = None) -> None:
         self.device = device
         self.name = name or device.type_name
         self.eeprom = bytearray(sii_image)
         self.od = od
-        self.sdo_server = sdo_server
+        self.mailbox = mailbox
         self.mem = bytearray(MEMORY_SIZE)
         self.position = 0
         self.sms = [SmState(n) for n in range(N_SM)]
@@ -165,6 +167,13 @@ class EmulatedSlave:
         struct.pack_into("<H", self.mem, 0x0110, status)
 
     # -- state ------------------------------------------------------------------------------
+
+    @property
+    def eoe_ip(self) -> IpParameters | None:
+        """The IP parameters the master has set over EoE; ``None`` before any (or without
+        EoE)."""
+        eoe = self.mailbox.eoe if self.mailbox is not None else None
+        return eoe.params if eoe is not None else None
 
     @property
     def state(self) -> AlState:
@@ -356,9 +365,9 @@ class EmulatedSlave:
     def _mailbox_received(self, message: bytes) -> None:
         """The firmware takes the message out of SM0 at once (the buffer is empty again)
         and queues its answers for SM1."""
-        if self.state in (AlState.INIT, AlState.BOOT) or self.sdo_server is None:
+        if self.state in (AlState.INIT, AlState.BOOT) or self.mailbox is None:
             return
-        replies = self.sdo_server.handle(message, self.state)
+        replies = self.mailbox.handle(message, self.state)
         self.mailbox_queue.extend(replies)
         self._post_next()
 
@@ -562,8 +571,8 @@ class EmulatedSlave:
             self._stop_mailbox()
         if target == AlState.PREOP and self.state == AlState.INIT:
             self.last_mailbox = None
-            if self.sdo_server is not None:
-                self.sdo_server.reset()
+            if self.mailbox is not None:
+                self.mailbox.reset()
         self._set_state(target, 0)
 
     def _set_state(self, state: AlState, code: int) -> None:

@@ -21,6 +21,7 @@ from ecatcfg.runtime.mailbox import (
 )
 from ecatcfg.runtime.objects import ObjectDictionary, OdEntry, OdObject
 from ecatcfg.runtime.sdo_client import SdoDownload, SdoUpload
+from ecatcfg.runtime.mailbox_server import MailboxServer
 from ecatcfg.runtime.sdo_server import SdoServer
 from conftest import device_xml, esi_xml
 
@@ -112,11 +113,12 @@ def fixture_device():
 
 
 class Slave:
-    """An object dictionary, its SDO server and the master's side of the mailbox."""
+    """An object dictionary, its SDO server behind the slave's mailbox, and the master's side
+    of the mailbox."""
 
     def __init__(self, od: ObjectDictionary, sm0: int = 128, sm1: int = 128) -> None:
         self.od = od
-        self.server = SdoServer(od, sm0, sm1)
+        self.server = MailboxServer(sm0, sm1, coe=SdoServer(od, sm0, sm1))
         self.sm0 = sm0
         self.sm1 = sm1
         self.counter = MailboxCounter()      # the master's counter for this slave
