@@ -63,9 +63,10 @@ class ApplyReport:
             print(event.text, file=sys.stderr, flush=True)
             return
         text = event.text
-        for code, words in _TRANSITION_TEXT.items():
-            text = text.replace(f"{code}: {code} ...", f"{words} ...").replace(
-                f"{code}: ", f"{words}: ")
+        if event.kind == "transition":      # other events may name slaves like "SO"
+            for code, words in _TRANSITION_TEXT.items():
+                text = text.replace(f"{code}: {code} ...", f"{words} ...").replace(
+                    f"{code}: ", f"{words}: ")
         self.events.append(text)
         self.console.print(text)
 

@@ -26,7 +26,8 @@ from ecatcfg.record import record
 from ecatcfg.runtime.cyclic import CyclicFrames
 from ecatcfg.runtime.lockstep import Job, run_jobs, until_answered
 from ecatcfg.runtime.replay import (TIMEOUT_COMMAND, ApplyError, MailboxChannel,
-                                    SlaveProgress, master_job, slave_transition_job)
+                                    SlaveProgress, mailbox_init_cmds, master_job,
+                                    slave_transition_job)
 from ecatcfg.runtime.scan import FoundSlave, Mismatch, scan, verify
 from ecatcfg.runtime.transport import Transport
 from ecatcfg.runtime.wire import Datagram
@@ -71,7 +72,7 @@ class SlaveState:
 class Event:
     """Progress for the reporter: a step that starts or ends."""
 
-    kind: str                  # "scan", "transition", "dc", "done"
+    kind: str                  # "scan", "transition", "dc", "eoe", "done"
     text: str
 
 
@@ -161,6 +162,10 @@ class Master:
                                            self.mailboxes.get(s.name))
                       for s in self.slaves], tick)
             run_jobs(self.transport, [master_job(master, transition, False)], tick)
+            for s in self.slaves:
+                for cmd in mailbox_init_cmds(s, transition)[1]:
+                    self._event("eoe", f"EoE IP parameters of {s.name!r} set: "
+                                f"{cmd.request.params.describe()}")
         except ApplyError:
             # Some slaves may have changed state: going down must cover them too.
             if transition.target > self.state:

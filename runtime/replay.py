@@ -7,9 +7,11 @@ the file gives no timeout (ours carry them only in Validate), the defaults below
 A frame that is lost is sent again until the command's timeout; register writes are
 idempotent and mailbox messages carry a counter, so resending is safe.
 
-Within a transition each slave runs its register commands in file order; its CoE
+Within a transition each slave runs its register commands in file order; its mailbox
 InitCmds for that transition run after the SyncManager/FMMU writes and before the
-AL-control request (ETG.2100; PDO assignment needs the mailbox up and must precede SAFEOP).
+AL-control request (ETG.2100; PDO assignment needs the mailbox up and must precede SAFEOP),
+in INIT->PREOP once the slave is in PREOP: first the CoE ones, then the EoE ones, as IgH
+``fsm_slave_config.c`` sets the IP parameters after the SDO configuration.
 """
 
 from __future__ import annotations
@@ -18,7 +20,7 @@ import struct
 import time
 from typing import TYPE_CHECKING, TypeVar
 
-from ecatcfg.eni.plan import CoeInitCmd, DcPlan, InitCmd, MailboxPlan, SlavePlan
+from ecatcfg.eni.plan import CoeInitCmd, DcPlan, EoeInitCmd, InitCmd, MailboxPlan, SlavePlan
 from ecatcfg.errors import EcatcfgError
 from ecatcfg.esc import (AL_STATUS_ERROR, SM1_STATUS, SM_ACTIVATE_REPEAT, SM_PDI_REPEAT_ACK, Cmd,
                          Reg, Transition, al_state_name, al_status_name)
@@ -35,7 +37,7 @@ Transaction = TypeVar("Transaction", bound="SdoDownload | SdoUpload")
 TIMEOUT_COMMAND = 1.0          # a plain register command, lost frames included
 TIMEOUT_STATE = 5.0            # an AL state check (SOEM waits 2 s, IgH 5 s)
 TIMEOUT_VALIDATE = 0.5         # any other Validate without Timeout
-TIMEOUT_MAILBOX = 3.0          # one SDO transfer (SOEM: 700 ms per response)
+TIMEOUT_MAILBOX = 3.0          # one SDO transfer or EoE request (SOEM: 700 ms per response)
 RETRIES = 3                    # working-counter retries when Retries is not given
 ERROR_GRACE = 0.02             # s an AL error flag must persist before we give up early
 # Polling (Validate, SM1): the first polls go out at once (emulated and fast slaves answer
@@ -296,7 +298,73 @@ def coe_init_cmd_job(channel: MailboxChannel, cmd: CoeInitCmd, who: str | None,
     yield from sdo_job(channel, t, who, what, timeout)
 
 
+def eoe_init_cmd_job(channel: MailboxChannel, cmd: EoeInitCmd, who: str | None,
+                     progress: SlaveProgress | None = None) -> Job:
+    """One EoE set IP parameter request and its response (ETG.1000.6 §5.7; IgH
+    ``fsm_eoe.c``, SOEM ``ecx_EOEsetIp``; ``docs/protocol-notes.md`` §9).  The request goes
+    with the EoE header whichever encoding the ENI wrote (``ecatcfg.eoe.decode_init_data``).
+    CoE emergencies and EoE fragments (Ethernet frames the slave sends) that arrive before the
+    response are set aside, as IgH files them apart by type; anything else fails."""
+    from ecatcfg.eoe import FrameType, decode_frame, encode_set_ip_request, result_name
+    from ecatcfg.runtime.mailbox import (Emergency, MailboxError, MailboxProtocolError,
+                                         MbxType, decode, encode_mailbox)
+
+    if progress is not None:
+        progress.last_command = cmd.comment
+    what = cmd.comment or "EoE set IP parameter"
+    try:
+        request = cmd.request
+        payload = encode_set_ip_request(request.params, request.port)
+    except ValueError as exc:                     # a plan not read from a file
+        raise ApplyError(f"not an EoE set IP parameter request: {exc}", who, what) from None
+    message = encode_mailbox(MbxType.EOE, payload, channel.counter())
+    if len(message) > channel.plan.send.length:
+        raise ApplyError(f"the mailbox (SM0, {channel.plan.send.length} bytes) cannot carry "
+                         f"the EoE request ({len(message)} bytes)", who, what)
+    deadline = time.monotonic() + (cmd.timeout / 1000 if cmd.timeout else TIMEOUT_MAILBOX)
+    yield from channel.send(message, deadline, who, what)
+    while True:
+        response = yield from channel.receive(deadline, who, what)
+        try:
+            _header, content = decode(response)
+        except MailboxProtocolError as exc:
+            raise ApplyError(f"unreadable mailbox response to the EoE request: {exc}", who,
+                             what) from None
+        if isinstance(content, Emergency):
+            continue
+        if isinstance(content, MailboxError):
+            raise ApplyError(f"the slave answered the EoE request with mailbox error "
+                             f"{content.detail} ({content.name})", who, what)
+        if not isinstance(content, tuple) or content[0] != MbxType.EOE:
+            kind = content[0] if isinstance(content, tuple) else MbxType.COE
+            raise ApplyError(f"mailbox type {kind} where an EoE response was expected",
+                             who, what)
+        try:
+            frame = decode_frame(content[1])
+        except ValueError as exc:
+            raise ApplyError(f"unreadable EoE response: {exc}", who, what) from None
+        if frame.type == FrameType.FRAGMENT:
+            continue
+        if frame.type != FrameType.SET_IP_RESPONSE:
+            raise ApplyError(f"EoE frame type {frame.type} where a set IP parameter response "
+                             f"(type {FrameType.SET_IP_RESPONSE:d}) was expected", who, what)
+        if frame.info2:
+            raise ApplyError(f"EoE set IP parameter refused: result 0x{frame.info2:04X} "
+                             f"({result_name(frame.info2)})", who, what)
+        return
+
+
 # -- one slave, one transition ---------------------------------------------------------------
+
+def mailbox_init_cmds(slave: SlavePlan, transition: Transition
+                      ) -> tuple[list[CoeInitCmd], list[EoeInitCmd]]:
+    """The slave's enabled CoE and EoE InitCmds of ``transition``, in file order."""
+    mailbox = slave.mailbox
+    if mailbox is None:
+        return [], []
+    return ([c for c in mailbox.coe_init_cmds if transition in c.transitions and not c.disabled],
+            [c for c in mailbox.eoe_init_cmds if transition in c.transitions and not c.disabled])
+
 
 def _writes_al_control(cmd: InitCmd) -> bool:
     return cmd.cmd in (Cmd.APWR, Cmd.FPWR, Cmd.BWR) and cmd.ado == Reg.AL_CONTROL
@@ -310,17 +378,18 @@ def slave_transition_job(slave: SlavePlan, transition: Transition,
     who = slave.name
     cmds = [c for c in slave.init_cmds if transition in c.transitions]
     mailbox = slave.mailbox
-    coe = [] if mailbox is None else [c for c in mailbox.coe_init_cmds
-                                      if transition in c.transitions and not c.disabled]
+    coe, eoe = mailbox_init_cmds(slave, transition)
     split = len(cmds)
-    if coe and transition != Transition.IP:
+    if (coe or eoe) and transition != Transition.IP:
         split = next((i for i, c in enumerate(cmds) if _writes_al_control(c)), len(cmds))
     for cmd in cmds[:split]:
         yield from _register_cmd(slave, cmd, who, progress)
-    if mailbox is not None and coe:
+    if mailbox is not None and (coe or eoe):
         channel = channel or MailboxChannel(slave.phys_addr, mailbox)
         for c in coe:
             yield from coe_init_cmd_job(channel, c, who, progress)
+        for e in eoe:
+            yield from eoe_init_cmd_job(channel, e, who, progress)
     for cmd in cmds[split:]:
         yield from _register_cmd(slave, cmd, who, progress)
 
