@@ -13,10 +13,11 @@ The layouts, with the projects where each can be checked, are in
   4-7, last fragment 8, time appended 9, time requested 10) and frame info 2 (fragment,
   offset and frame numbers; in a response, the result code).
 - **Set IP parameter body**: a 32-bit flags word (bit 0 MAC, 1 IP address, 2 subnet mask,
-  3 default gateway, 4 DNS server, 5 DNS name) and the parameters.  IgH, TwinCAT and the
-  ENI files write every field at a fixed place, 58 bytes in all (zeros where a flag is
-  clear; Wireshark dissects it that way); SOEM 1.x writes only the fields whose flag is
-  set, and SOES answers a get IP parameter request that way.
+  3 default gateway, 4 DNS server, 5 DNS name) and the parameters.  IgH and the ENI files
+  write every field at a fixed place, 58 bytes in all (zeros where a flag is clear;
+  Wireshark dissects it that way, and IgH notes that TwinCAT 2.1 ignores the fields after
+  a missing one); SOEM 1.x writes only the fields whose flag is set, and SOES answers a get
+  IP parameter request that way.
   :func:`decode_ip_parameters` reads both, :func:`encode_ip_parameters` writes either (the
   fixed one unless told otherwise).  An IPv4 address is a 32-bit little-endian number:
   192.168.1.4 is ``04 01 a8 c0`` (SOEM ``EOE_ip_uint32_to_byte``; the ENI files agree).
@@ -158,7 +159,7 @@ def _ip_bytes(address: ipaddress.IPv4Address | None) -> bytes:
 
 def encode_ip_parameters(params: IpParameters, compact: bool = False) -> bytes:
     """A set (or get) IP parameter body: the fixed 58-byte layout (IgH
-    ``ec_fsm_eoe_prepare_set``, TwinCAT), or with ``compact`` only the fields whose flag is
+    ``ec_fsm_eoe_prepare_set``, the ENI files), or with ``compact`` only the fields whose flag is
     set (SOEM ``ecx_EOEsetIp``, SOES ``EOE_get_ip``)."""
     name = b""
     if params.dns_name is not None:
