@@ -110,7 +110,8 @@ class Network:
         shown = eni_name or (str(eni) if not isinstance(eni, NetworkPlan) else "the ENI")
         plan = eni if isinstance(eni, NetworkPlan) else eni_reader.read_file(eni)
         if not skip_unsupported:            # refuse before building the segment
-            _check_supported(plan, eni_name or shown, False, None)
+            _check_supported(plan, eni_name or (None if isinstance(eni, NetworkPlan)
+                                                else str(eni)), False, None)
         library = Library([str(p) for p in esi], cache=esi_cache)
         segment = emulate.segment(emulate.specs_from_eni(plan, library, shown), faults)
         ours, theirs = MemoryLink.pair()
@@ -125,7 +126,8 @@ class Network:
             theirs.close()
 
         net = cls(plan, ours, pcap=pcap, on_event=on_event, skip_unsupported=skip_unsupported,
-                  eni_name=eni_name or shown, _closers=[close_segment])
+                  eni_name=eni_name or (None if isinstance(eni, NetworkPlan) else str(eni)),
+                  _closers=[close_segment])
         net.segment = segment
         return net
 
