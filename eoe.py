@@ -70,10 +70,11 @@ class Result(IntEnum):
     NO_FILTER_SUPPORT = 0x0401
 
 
-RESULT_NAMES: dict[int, str] = {Result.SUCCESS: "success", Result.UNSPECIFIED_ERROR: "unspecified error",
-                Result.UNSUPPORTED_FRAME_TYPE: "unsupported frame type",
-                Result.NO_IP_SUPPORT: "no IP support", Result.NO_DHCP_SUPPORT: "no DHCP support",
-                Result.NO_FILTER_SUPPORT: "no address filter support"}
+RESULT_NAMES: dict[int, str] = {
+    Result.SUCCESS: "success", Result.UNSPECIFIED_ERROR: "unspecified error",
+    Result.UNSUPPORTED_FRAME_TYPE: "unsupported frame type",
+    Result.NO_IP_SUPPORT: "no IP support", Result.NO_DHCP_SUPPORT: "no DHCP support",
+    Result.NO_FILTER_SUPPORT: "no address filter support"}
 
 
 def result_name(code: int) -> str:
@@ -109,18 +110,20 @@ class IpParameters:
     dns_name: str | None = None
 
     @property
+    def values(self) -> tuple[object, ...]:
+        """The six parameters in body order (the order of ``_FIELDS``)."""
+        return (self.mac, self.ip, self.subnet_mask, self.default_gateway, self.dns_server,
+                self.dns_name)
+
+    @property
     def flags(self) -> int:
-        values = (self.mac, self.ip, self.subnet_mask, self.default_gateway, self.dns_server,
-                  self.dns_name)
-        return sum(flag for (flag, _), value in zip(_FIELDS, values) if value is not None)
+        return sum(flag for (flag, _), value in zip(_FIELDS, self.values) if value is not None)
 
     @property
     def sets_ip(self) -> bool:
         """Whether it sets anything of the IP stack (address, mask, gateway, DNS), not only
         the MAC address: what a device without IP support must refuse."""
-        return any(value is not None for value in (self.ip, self.subnet_mask,
-                                                   self.default_gateway, self.dns_server,
-                                                   self.dns_name))
+        return any(value is not None for value in self.values[1:])     # all but the MAC
 
     def updated(self, newer: IpParameters) -> IpParameters:
         """These parameters after ``newer`` is set: its fields where given, ours elsewhere
@@ -166,13 +169,11 @@ def encode_ip_parameters(params: IpParameters, compact: bool = False) -> bytes:
         name = params.dns_name.encode("ascii")
         if len(name) > DNS_NAME_SIZE:
             raise ValueError(f"DNS name of {len(name)} characters; at most {DNS_NAME_SIZE}")
-    values = (params.mac, params.ip, params.subnet_mask, params.default_gateway,
-              params.dns_server, params.dns_name)
     raw = (params.mac or bytes(MAC_SIZE), _ip_bytes(params.ip), _ip_bytes(params.subnet_mask),
            _ip_bytes(params.default_gateway), _ip_bytes(params.dns_server),
            name.ljust(DNS_NAME_SIZE, b"\x00"))
     return struct.pack("<I", params.flags) + b"".join(
-        field for field, value in zip(raw, values) if not compact or value is not None)
+        field for field, value in zip(raw, params.values) if not compact or value is not None)
 
 
 def _compact_size(flags: int) -> int:

@@ -332,10 +332,11 @@ def _walk(el: Element, context: str, path: str, slave: str | None,
         where = f"{path}/{tag}" if path else tag
         part = parts.get(tag)
         if part is None:
-            if context == "Slave/Mailbox" and _commands(child):
+            count = _commands(child) if context == "Slave/Mailbox" else 0
+            if count:
                 found.append(Unsupported(where, f"{tag} InitCmds (a mailbox protocol "
                                          "ecatcfg does not know)", child.sourceline, slave,
-                                         _commands(child)))
+                                         count))
             else:
                 found.append(Unsupported(where, f"<{tag}>, an element ecatcfg does not know",
                                          child.sourceline, slave))

@@ -3,9 +3,10 @@
 Built from the device's ESI: the SII EEPROM image (``esi/sii.py``) backs the SII interface
 (0x0500-0x050F) and loads the configured alias and PDI control at power-on; the object
 dictionary (``runtime/objects.py``) backs the CoE SDO server and decides which
-SyncManager lengths the slave accepts in SAFEOP; the mailbox (``runtime/mailbox_server.py``)
-hands each message the master writes to the protocol's server (CoE, EoE).  Register addresses and the rules the
-firmware applies are those of ``docs/protocol-notes.md`` §2-§4 (ETG.1000.4/.6, SOES, KickCAT).
+SyncManager lengths the slave accepts in SAFEOP; the mailbox
+(``runtime/mailbox_server.py``) hands each message the master writes to the protocol's
+server (CoE, EoE).  Register addresses and the rules the firmware applies are those of
+``docs/protocol-notes.md`` §2-§4 (ETG.1000.4/.6, SOES, KickCAT).
 
 The ESC's 64 KiB address space is one ``bytearray``: registers below 0x1000, process memory
 above.  Reads and writes from the wire go through :meth:`EmulatedSlave.read` and
