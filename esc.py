@@ -44,6 +44,7 @@ class Reg(IntEnum):
     DL_CONTROL_2 = 0x0103         # second station address enable (TwinCAT "en/disable")
     AL_CONTROL = 0x0120
     AL_STATUS = 0x0130            # + 0x0134 AL status code: 6 bytes with the padding
+    PDI_CONTROL = 0x0140          # + 0x0141 ESC configuration: both loaded from SII word 0
     ECAT_EVENT_MASK = 0x0200
     RX_ERROR_COUNTER = 0x0300
     WATCHDOG_DIVIDER = 0x0400

@@ -18,9 +18,11 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
     target = p.add_mutually_exclusive_group(required=True)
     target.add_argument("--iface", metavar="IF", help="network interface of the EtherCAT line")
     target.add_argument("--virtual", action="store_true",
-                        help="a virtual segment emulating the ENI's slaves (needs --esi)")
+                        help="a virtual segment emulating the ENI's slaves: from their ESI "
+                             "files (--esi), else from the ENI alone")
     p.add_argument("--esi", action="append", metavar="PATH",
-                   help="ESI file or folder for --virtual; repeatable")
+                   help="ESI file or folder for --virtual; repeatable.  A slave whose "
+                        "device is not there is emulated from the ENI alone")
     p.add_argument("--state", choices=list(STATES), default="op",
                    help="state to bring the slaves to (default: op)")
     p.add_argument("--cycles", type=int, metavar="N",
@@ -54,8 +56,8 @@ def run(args: argparse.Namespace) -> int:
 
     if not Path(args.eni).exists():
         raise UsageError(f"{args.eni}: no such file")
-    if args.virtual and not args.esi:
-        raise UsageError("--virtual needs --esi (the ESI files of the slaves to emulate)")
+    if args.esi and not args.virtual:
+        raise UsageError("--esi is for --virtual (the ESI files of the slaves to emulate)")
     if args.cycles is not None and args.cycles < 0:
         raise UsageError(f"--cycles {args.cycles}: must be 0 or more")
     if args.pcap and not Path(args.pcap).resolve().parent.is_dir():

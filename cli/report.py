@@ -107,6 +107,11 @@ class ApplyReport:
             "frames": {"sent": counters.frames_sent, "lost": counters.frames_lost},
             "skipped": self.skipped_parts,
         }
+        segment = getattr(net, "segment", None)         # set by Network.virtual only
+        if segment is not None:
+            # Which device each virtual slave behaves as: its ESI, or the ENI alone.
+            for row, slave in zip(self.rows, segment.slaves):
+                row["emulated_from"] = "eni" if slave.eni_only is not None else "esi"
         if self.json_output:
             if failure:
                 print(f"ecatcfg apply: {failure}", file=sys.stderr)

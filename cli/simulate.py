@@ -13,7 +13,8 @@ if TYPE_CHECKING:
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser(
         "simulate", help="run a virtual EtherCAT segment on a network interface",
-        description="Emulate a line of slaves from their ESI files and answer EtherCAT frames "
+        description="Emulate a line of slaves from their ESI files (or, with --eni, from "
+                    "the ENI alone where no ESI is given) and answer EtherCAT frames "
                     "on a network interface (raw Ethernet, EtherType 0x88A4), so a master "
                     "(ecatcfg apply, SOEM, TwinCAT) can configure and run them without "
                     "hardware.  Prints the slaves, then 'ready: N slaves on IF' once it "
@@ -21,8 +22,10 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                     "--duration.",
         epilog="Use an interface no other network uses: a veth end inside a network "
                "namespace is the usual choice.")
-    p.add_argument("--esi", action="append", required=True, metavar="PATH",
-                   help="ESI file or folder (searched recursively); repeatable")
+    p.add_argument("--esi", action="append", default=[], metavar="PATH",
+                   help="ESI file or folder (searched recursively); repeatable.  Needed for "
+                        "--topology; with --eni a slave whose device is not there is "
+                        "emulated from the ENI alone")
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--topology", metavar="T", help="the slaves of a topology file, in order")
     src.add_argument("--eni", metavar="ENI", help="the slaves an ENI describes, in order")
@@ -56,12 +59,15 @@ def run(args: argparse.Namespace) -> int:
     source = args.topology or args.eni
     if not Path(source).exists():
         raise UsageError(f"{source}: no such file")
-    lib = Library(args.esi, cache=not args.no_cache)
-    if lib.problems:
+    if args.topology and not args.esi:
+        raise UsageError("--topology needs --esi (the ESI files of the slaves to emulate)")
+    lib = Library(args.esi, cache=not args.no_cache) if args.esi else None
+    if lib is not None and lib.problems:
         for problem in lib.problems:
             print(f"error: {problem}", file=sys.stderr)
         raise EcatcfgError(f"{len(lib.problems)} ESI file problem(s)")
     if args.topology:
+        assert lib is not None
         # The compiler resolves the topology (its checks, the modules in the slots); the
         # segment emulates the devices it resolved.
         from ecatcfg.compiler import topology
@@ -83,13 +89,17 @@ def run(args: argparse.Namespace) -> int:
     seg = emulate.segment(specs, Faults(drop=args.drop, seed=args.seed))
 
     print(f"{'pos':>3}  {'name':16} {'device':14} {'vendor':>10} {'product':>10} "
-          f"{'revision':>10}  mailbox")
+          f"{'revision':>10}  {'from':4} mailbox")
     for s in seg.slaves:
         dev = s.device
         mbx = ",".join(dev.mailbox.protocols) if dev.mailbox else "-"
         print(f"{s.position:>3}  {s.name[:16]:16} {dev.type_name[:14]:14} "
               f"0x{dev.vendor.id or 0:08x} 0x{dev.product_code or 0:08x} "
-              f"0x{dev.revision or 0:08x}  {mbx}")
+              f"0x{dev.revision or 0:08x}  {'ENI' if s.eni_only else 'ESI':4} {mbx}")
+    for s in seg.slaves:
+        if s.eni_only is not None:
+            print(f"note: slave {s.position} ({s.name}) emulated from the ENI alone: "
+                  f"{s.eni_only}")
 
     def report(change: StateChange) -> None:
         flag = f" ERR 0x{change.code:04X}" if change.error else ""

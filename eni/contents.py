@@ -319,7 +319,64 @@ def audit(config: Element) -> list[Unsupported]:
         found.append(Unsupported(
             "Cyclic", f"cyclic tasks with different cycle times ({listed} µs): apply runs "
             "every frame in one cycle", first.sourceline))
+    found += [part for _, part in _unmapped_fmmus(config)]
     return found
+
+
+def dropped_init_cmds(config: Element) -> set[Element]:
+    """The refused parts that are InitCmds among commands the plan reads: the reader
+    leaves them out of the plan, so that a skipping apply does not write them."""
+    return {init for init, _ in _unmapped_fmmus(config)}
+
+
+# Logical commands (ETG.1000.4): the windows an FMMU's logical range must fall in.
+_LOGICAL_CMDS = {10, 11, 12}                  # LRD, LWR, LRW
+_FMMU_FIRST, _FMMU_END, _FMMU_SIZE = 0x0600, 0x0700, 16
+
+
+def _unmapped_fmmus(config: Element) -> list[tuple[Element, Unsupported]]:
+    """FMMU InitCmds whose logical range no cyclic command reads or writes: data that is
+    not a clear FMMU setting.  EC-Engineer's ``EncryptedEtherCATConfig`` encrypts the
+    process-data FMMU settings (the Murrelektronik VarioX export maps "logical
+    0xEB030B5F"); written as they are, the slave's process data would be mapped nowhere."""
+    windows: list[tuple[int, int]] = []
+    for cmd in config.iterfind("Cyclic/Frame/Cmd"):
+        kind, addr = _number(cmd.findtext("Cmd", "")), _number(cmd.findtext("Addr", ""))
+        size = _hex_length(cmd.findtext("Data")) or _number(cmd.findtext("DataLength", ""))
+        if kind in _LOGICAL_CMDS and isinstance(addr, int) and isinstance(size, int):
+            windows.append((addr, addr + size))
+    root = config.getparent()
+    encrypted = root is not None and root.tag == "EncryptedEtherCATConfig"
+    found: list[tuple[Element, Unsupported]] = []
+    for slave in config.iterchildren("Slave"):
+        name = slave.findtext("Info/Name", "").strip() or None
+        for init in slave.iterfind("InitCmds/InitCmd"):
+            ado = _number(init.findtext("Ado", ""))
+            if not isinstance(ado, int) or not _FMMU_FIRST <= ado < _FMMU_END:
+                continue
+            try:
+                data = bytes.fromhex((init.findtext("Data") or "").strip())
+            except ValueError:
+                continue                      # the reader reports bad hex with its line
+            for offset in range(0, len(data) - _FMMU_SIZE + 1, _FMMU_SIZE):
+                record = data[offset:offset + _FMMU_SIZE]
+                start, length = int.from_bytes(record[:4], "little"), record[4] | record[5] << 8
+                if not record[12] & 1 or not record[11] & 3 or not length:
+                    continue                  # inactive or unused: maps nothing
+                if any(lo <= start and start + length <= hi for lo, hi in windows):
+                    continue
+                what = (f"FMMU {(ado - _FMMU_FIRST + offset) // _FMMU_SIZE} setting that maps "
+                        f"logical 0x{start:08X}+{length}, which no cyclic command covers")
+                what += (" (encrypted: EncryptedEtherCATConfig, ecatcfg cannot decrypt it)"
+                         if encrypted else "")
+                found.append((init, Unsupported("Slave/InitCmds/InitCmd", what,
+                                                init.sourceline, name, 1)))
+    return found
+
+
+def _hex_length(text: str | None) -> int | None:
+    text = (text or "").strip()
+    return len(text) // 2 if text else None
 
 
 def _walk(el: Element, context: str, path: str, slave: str | None,

@@ -158,6 +158,8 @@ class _Reader:
 
     def __init__(self, file: str) -> None:
         self.file = file
+        # InitCmds the reader leaves out: refused parts (eni/contents.py dropped_init_cmds).
+        self._dropped: set[Element] = set()
 
     def error(self, message: str, el: _Node) -> EniReadError:
         return EniReadError(message, self.file, el.sourceline)
@@ -271,7 +273,8 @@ class _Reader:
                              "expected <EtherCATConfig>", root)
         config = self.child(root, "Config")
         image = config.find("ProcessImage")
-        from ecatcfg.eni.contents import audit
+        from ecatcfg.eni.contents import audit, dropped_init_cmds
+        self._dropped = dropped_init_cmds(config)
         return NetworkPlan(
             master=self.master(self.child(config, "Master")),
             slaves=[self.slave(el) for el in config.iterchildren("Slave")],
@@ -336,7 +339,8 @@ class _Reader:
 
     def init_cmds(self, parent: Element) -> list[InitCmd]:
         cmds = parent.find("InitCmds")
-        return [] if cmds is None else [self.init_cmd(c) for c in cmds.iterchildren("InitCmd")]
+        return [] if cmds is None else [self.init_cmd(c) for c in cmds.iterchildren("InitCmd")
+                                        if c not in self._dropped]
 
     # --- master ---------------------------------------------------------------------------
 

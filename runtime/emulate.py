@@ -34,9 +34,23 @@ class SlaveSpec:
     name: str = ""
     serial: int = 0
     alias: int = 0
-    # (index, subindex, data) the configuration writes that the dictionary may not have:
-    # a modular device from an ENI whose modules cannot be told (see specs_from_eni).
-    extra_writes: tuple[tuple[int, int, bytes], ...] = ()
+    # Downloads the configuration makes that the dictionary may not have: a modular device
+    # from an ENI whose modules cannot be told, a device from the ENI alone (specs_from_eni).
+    extra_writes: tuple[Write, ...] = ()
+    # Emulated from the ENI alone (no ESI device): why, e.g. "no device 0x2:0x... in the
+    # library"; None for a device from an ESI file.
+    eni_only: str | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class Write:
+    """A CoE download the configuration makes: the emulated dictionary must hold its
+    object."""
+
+    index: int
+    subindex: int
+    data: bytes
+    complete_access: bool = False
 
 
 def emulated_slave(spec: SlaveSpec) -> EmulatedSlave:
@@ -49,7 +63,7 @@ def emulated_slave(spec: SlaveSpec) -> EmulatedSlave:
         from ecatcfg.runtime.objects import ObjectDictionary
         od = ObjectDictionary.from_device(dev)
         esi_cmds = dev.mailbox.coe.init_cmds if dev.mailbox and dev.mailbox.coe else []
-        _add_written_objects(od, [(c.index, c.subindex or 0, c.data) for c in esi_cmds
+        _add_written_objects(od, [Write(c.index, c.subindex or 0, c.data) for c in esi_cmds
                                   if c.index is not None and c.data is not None
                                   and not c.complete_access] + list(spec.extra_writes))
     # One too small for an SDO (lint ESI204, ESI213): no mailbox server, as such firmware
@@ -64,28 +78,57 @@ def emulated_slave(spec: SlaveSpec) -> EmulatedSlave:
             from ecatcfg.runtime.eoe_server import EoeServer
             mailbox.eoe = EoeServer(dev.mailbox.eoe, sizes[1])
     image = sii.build(dev, serial=spec.serial, alias=spec.alias)
-    return EmulatedSlave(dev, image, name=spec.name, od=od, mailbox=mailbox)
+    slave = EmulatedSlave(dev, image, name=spec.name, od=od, mailbox=mailbox)
+    slave.eni_only = spec.eni_only
+    return slave
 
 
-def _add_written_objects(od: ObjectDictionary, writes: list[tuple[int, int, bytes]]) -> None:
+def _add_written_objects(od: ObjectDictionary, writes: list[Write]) -> None:
     """Objects that startup commands write but the dictionary does not describe: the ESI's
     own CoE InitCmds (Weidmueller UR20-FBC writes 0xF810:01, lint ESI301; the vendor's
     configurator writes it, so the real device has it) and ``SlaveSpec.extra_writes``.
-    They are created as writable octets of the written length."""
+
+    Each is created writable in every mailbox state, typed by the data written: 1, 2, 4 or
+    8 bytes as an unsigned number of that size, other lengths as an octet string of that
+    length, and an entry written with several lengths as a variable-length one.  A complete
+    access to an object not described splits its data into equal entries after subindex 0
+    (which travels in a 16-bit slot, ETG.1000.6 complete access)."""
     from ecatcfg.runtime.objects import OdEntry, OdObject
 
-    for index, sub, data in writes:
+    sizes: dict[tuple[int, int], set[int]] = {}
+    for w in writes:
+        if w.index in od and not w.complete_access and w.subindex in od[w.index].entries:
+            continue
+        if w.complete_access:
+            if w.index in od or w.subindex != 0 or len(w.data) < 2:
+                continue
+            count, body = w.data[0], w.data[2:]
+            if count and len(body) % count == 0:
+                for sub in range(1, count + 1):
+                    sizes.setdefault((w.index, sub), set()).add(len(body) // count)
+            sizes.setdefault((w.index, 0), set()).add(1)
+        else:
+            sizes.setdefault((w.index, w.subindex), set()).add(len(w.data))
+    for (index, sub), lengths in sorted(sizes.items()):
         obj = od[index] if index in od else None
         if obj is None:
-            obj = od.add(OdObject(index, f"0x{index:04X}", variable=sub == 0))
-            if sub:
-                obj.add(OdEntry(0, "Number of entries", "USINT", 8, bytes([sub]),
-                                access="ro"))
-        if sub not in obj.entries:
-            obj.add(OdEntry(sub, f"subindex {sub}", "OCTET_STRING", 8 * len(data),
-                            bytes(len(data))))
-            if sub and not obj.variable and 0 in obj.entries and obj[0].as_int() < sub:
-                obj[0].value = bytes([sub])
+            has_subs = any(i == index and s for i, s in sizes)
+            obj = od.add(OdObject(index, f"0x{index:04X}", variable=not has_subs))
+            if has_subs and (index, 0) not in sizes:
+                obj.add(OdEntry(0, "Number of entries", "USINT", 8, b"\0", access="ro"))
+        if sub in obj.entries:
+            continue
+        size = max(lengths)
+        kind = _NUMBER_TYPES.get(size, "OCTET_STRING") if len(lengths) == 1 \
+            else "OCTET_STRING"
+        bits = 8 * size if len(lengths) == 1 else 0
+        obj.add(OdEntry(sub, f"subindex {sub}", kind, bits, bytes(size if bits else 0)))
+        if sub and not obj.variable and 0 in obj.entries and obj[0].as_int() < sub:
+            obj[0].value = bytes([sub])
+
+
+# Unsigned CoE types by size: the type of an object known only by the data written to it.
+_NUMBER_TYPES = {1: "USINT", 2: "UINT", 4: "UDINT", 8: "ULINT"}
 
 
 def segment(specs: list[SlaveSpec], faults: Faults | None = None) -> VirtualSegment:
@@ -93,33 +136,42 @@ def segment(specs: list[SlaveSpec], faults: Faults | None = None) -> VirtualSegm
     return VirtualSegment([emulated_slave(s) for s in specs], faults)
 
 
-def specs_from_eni(plan: NetworkPlan, library: Library, shown: str) -> list[SlaveSpec]:
-    """The slaves an ENI describes (identity and order); their behaviour comes from the
-    ESI devices with exactly that vendor, product and revision.  A modular device gets the
+def specs_from_eni(plan: NetworkPlan, library: Library | None, shown: str) -> list[SlaveSpec]:
+    """The slaves an ENI describes (identity and order).  A slave whose vendor, product and
+    revision the ESI ``library`` holds behaves as that device: a modular device gets the
     modules of the ENI's module ident list (CoE 0xF030, written in PREOP->SAFEOP) and the
     PDOs the ENI lists for it; when the ENI names no modules (UR20 keeps its idents in
-    vendor objects), the objects its startup SDOs write are accepted as they are."""
-    from ecatcfg.errors import EcatcfgError
+    vendor objects), the objects its startup SDOs write are accepted as they are.  Any
+    other slave (and every slave without a library) is emulated from the ENI alone
+    (``runtime/eni_device.py``), with the objects its CoE InitCmds write; its spec says so
+    (``from_eni``).  ``shown`` names the ENI in the model's sources."""
+    from ecatcfg.esi.library import SelectorError
+    from ecatcfg.runtime.eni_device import device_from_eni
 
-    specs, missing = [], []
+    specs = []
     for s in sorted(plan.slaves, key=lambda s: s.position):
         selector = f"0x{s.vendor_id:x}:0x{s.product_code:x}:0x{s.revision:x}"
+        coe = s.mailbox.coe_init_cmds if s.mailbox else []
         try:
-            device = library.device(library.find(selector).entry)
-        except EcatcfgError as exc:
-            missing.append(f"slave {s.name!r} (position {s.position}): {exc.message}")
+            if library is None:
+                raise SelectorError("no ESI files given")
+            entry = library.find(selector).entry
+        except SelectorError as exc:
+            writes = tuple(Write(c.index, c.subindex, c.data, c.complete_access)
+                           for c in coe if not c.disabled and c.ccs == 1)
+            specs.append(SlaveSpec(device_from_eni(s, plan, shown), s.name,
+                                   serial=s.serial_no, extra_writes=writes,
+                                   eni_only=exc.message))
             continue
-        extra: tuple[tuple[int, int, bytes], ...] = ()
+        device = library.device(entry)     # a broken ESI file is an error, not a fallback
+        extra: tuple[Write, ...] = ()
         if device.slots is not None:
-            device, known = _eni_modules(device, device.slots, s, library.modules_for(
-                library.find(selector).entry))
-            if not known and s.mailbox is not None:
+            device, known = _eni_modules(device, device.slots, s, library.modules_for(entry))
+            if not known:
                 # Modules the ENI does not name: accept the objects its startup SDOs write.
-                extra = tuple((c.index, c.subindex, c.data) for c in s.mailbox.coe_init_cmds
+                extra = tuple(Write(c.index, c.subindex, c.data) for c in coe
                               if not c.complete_access and not is_pdo_object(c.index))
         specs.append(SlaveSpec(device, s.name, serial=s.serial_no, extra_writes=extra))
-    if missing:
-        raise EcatcfgError(f"{shown}: no ESI for " + "; ".join(missing))
     return specs
 
 

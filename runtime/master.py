@@ -72,7 +72,8 @@ class SlaveState:
 class Event:
     """Progress for the reporter: a step that starts or ends."""
 
-    kind: str                  # "scan", "transition", "dc", "eoe", "done"
+    kind: str                  # "scan", "transition", "dc", "eoe", "done"; from the
+                               # Network: "skipped", "emulated"
     text: str
 
 

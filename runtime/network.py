@@ -94,14 +94,17 @@ class Network:
         self._lock = threading.Lock()
 
     @classmethod
-    def virtual(cls, eni: NetworkPlan | str | Path, esi: list[str | Path], *,
+    def virtual(cls, eni: NetworkPlan | str | Path, esi: list[str | Path] | None = None, *,
                 faults: Faults | None = None, esi_cache: bool = True,
                 pcap: str | Path | None = None,
                 on_event: Callable[[Event], None] | None = None,
                 skip_unsupported: bool = False, eni_name: str | None = None) -> Network:
         """The ENI on a virtual segment that emulates its slaves from the ESI files
-        (``esi_cache``: through the ESI index cache).  ``skip_unsupported`` and
-        ``eni_name`` as for the constructor."""
+        (``esi_cache``: through the ESI index cache).  A slave whose device the files do not
+        hold, and every slave without ``esi``, is emulated from the ENI alone
+        (``runtime/eni_device.py``); each such slave is an ``Event("emulated", ...)`` to
+        ``on_event`` and has ``eni_only`` set in ``net.segment.slaves``.
+        ``skip_unsupported`` and ``eni_name`` as for the constructor."""
         from ecatcfg.eni import reader as eni_reader
         from ecatcfg.esi.library import Library
         from ecatcfg.runtime import emulate
@@ -112,8 +115,14 @@ class Network:
         if not skip_unsupported:            # refuse before building the segment
             _check_supported(plan, eni_name or (None if isinstance(eni, NetworkPlan)
                                                 else str(eni)), False, None)
-        library = Library([str(p) for p in esi], cache=esi_cache)
+        library = Library([str(p) for p in esi], cache=esi_cache) if esi else None
         segment = emulate.segment(emulate.specs_from_eni(plan, library, shown), faults)
+        if on_event is not None:
+            for slave in segment.slaves:
+                if slave.eni_only is not None:
+                    on_event(Event("emulated", f"slave {slave.name!r} (position "
+                                               f"{slave.position}): emulated from the ENI "
+                                               f"alone ({slave.eni_only})"))
         ours, theirs = MemoryLink.pair()
         stop = threading.Event()
         thread = threading.Thread(target=segment.serve, args=(theirs,),

@@ -86,6 +86,8 @@ class EmulatedSlave:
                  mailbox: MailboxServer | None = None) -> None:
         self.device = device
         self.name = name or device.type_name
+        # Why the device comes from the ENI alone (runtime/eni_device.py), else None.
+        self.eni_only: str | None = None
         self.eeprom = bytearray(sii_image)
         self.od = od
         self.mailbox = mailbox

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import re
+import struct
 import subprocess
 import sys
 import warnings
@@ -285,11 +286,42 @@ def test_every_context_the_list_descends_into_is_listed():
 # -- the corpus ------------------------------------------------------------------------------
 
 def test_every_corpus_eni_is_accepted_as_it_is(corpus):
+    """All but the Murrelektronik export: an EncryptedEtherCATConfig whose two process-data
+    FMMU InitCmds are not clear text (see the next test)."""
     enis = sorted((corpus / "eni").rglob("*.xml"))
     assert len(enis) >= 10
     for eni in enis:
         plan = eni_reader.read_file(eni)
-        assert plan.unsupported == [], (eni.name, plan.unsupported)
+        if eni.parent.name == "murrelektronik-variox":
+            assert [(p.slave, p.element, p.commands) for p in plan.unsupported] == [
+                ("Slave_1002 [54632]", "Slave/InitCmds/InitCmd", 1)] * 2
+            assert all("encrypted" in p.what for p in plan.unsupported)
+        else:
+            assert plan.unsupported == [], (eni.name, plan.unsupported)
+
+
+def test_encrypted_fmmu_settings_are_refused_and_never_written(corpus, tmp_path):
+    """The VarioX export's FMMU 0/1 data read as a mapping of logical 0xEB030B5F, while its
+    only process-data command is the LRW at 0x10000000 and its SM2 lies at 0x17D8.  The
+    clear FMMU 0 these settings stand for, from the file's own ProcessData (SM2 0x17D8,
+    164 bytes of outputs at logical 0x10000000), differs from the bytes in the file in
+    every 4-byte group: the data is encrypted, not a mapping."""
+    eni = corpus / "eni" / "murrelektronik-variox" / "eni.xml"
+    text = eni.read_text(encoding="iso-8859-1")
+    stored = bytes.fromhex(text.split("set fmmu 0 (outputs)]]></Comment>")[1]
+                           .split("<Data>")[1].split("</Data>")[0])
+    clear = struct.pack("<IHBBHBBB3x", 0x10000000, 164, 0, 7, 0x17D8, 0, 2, 1)
+    assert all(stored[i:i + 4] != clear[i:i + 4] for i in range(0, 16, 4))
+    plan = eni_reader.read_file(eni)
+    fmmu_writes = [c for s in plan.slaves for c in s.init_cmds
+                   if c.ado is not None and 0x0600 <= c.ado < 0x0700 and c.data and any(c.data)]
+    # Only the mailbox-state FMMU (clear text) stays in the plan: skipping never writes them.
+    assert [c.comment for c in fmmu_writes] == ["set fmmu 2 (mailbox state)"]
+    run = subprocess.run([sys.executable, "-m", "ecatcfg", "apply", str(eni), "--virtual",
+                          "--cycles", "1"], capture_output=True, text=True, timeout=60)
+    assert run.returncode == 1
+    assert "slave 'Slave_1002 [54632]': FMMU 0 setting that maps logical 0xEB030B5F" in \
+        run.stderr and "nothing was written to the bus" in run.stderr
 
 
 def test_corpus_eni_with_soe_added_is_refused(corpus, tmp_path):

@@ -1,0 +1,218 @@
+"""Any ENI on the virtual segment: slaves emulated from the ENI alone where no ESI is at hand.
+
+References independent of the code under test: the vendors' ESI files (an EL1809, an Elmo
+drive emulated from an ENI compared with the same device from its ESI), SOEM (pysoem), which
+scans the emulated line, reads its SII and PDO mapping and runs it, and the ENI files read
+with plain XPath for the identities and process-data sizes SOEM must find.  Which corpus
+slaves have an ESI in the corpus is taken from its MANIFEST.md.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from lxml import etree
+from conftest import CORPUS
+from test_soem import soem
+
+from ecatcfg.eni import reader as eni_reader
+from ecatcfg.eni.contents import UnsupportedEniError
+from ecatcfg.esc import AlState
+from ecatcfg.esi import sii
+from ecatcfg.esi.library import Library
+from ecatcfg.runtime import Network, emulate
+from ecatcfg.runtime.eni_device import device_from_eni, type_name
+
+ENCRYPTED = "murrelektronik-variox/eni.xml"      # refused: encrypted FMMU settings
+# Slaves whose device the corpus ESI files hold (MANIFEST.md); all others have none there.
+WITH_ESI = {"jn-ec-master/mega_master_eni.xml": {"Term 1 (EK1100)", "Term 2 (EL2008)",
+                                                  "Term 4 (EL1809)"},
+            "rocos-ethercat/eni.xml": {"Slave_1001 [Elmo Drive ]"},
+            "rocos-ethercat/eni1.xml": {"Elmo Drive"}}
+
+
+def corpus_enis() -> list[str]:
+    root = CORPUS / "eni"
+    found = sorted(p.relative_to(root).as_posix() for p in root.rglob("*.xml"))
+    return found or ["(corpus missing)"]
+
+
+def xml_slaves(path: Path) -> list[dict]:
+    """Identity and process-data bits of each slave, straight from the XML."""
+    config = etree.parse(str(path)).getroot().find("Config")
+    out = []
+    for s in config.iterfind("Slave"):
+        def bits(kind: str) -> int:
+            return sum(int(b.findtext("BitLength")) for b in s.iterfind(f"ProcessData/{kind}"))
+        out.append({"name": s.findtext("Info/Name").strip(),
+                    "identity": tuple(int(s.findtext(f"Info/{t}"), 0) for t in
+                                      ("VendorId", "ProductCode", "RevisionNo")),
+                    "bytes": ((bits("Send") + 7) // 8, (bits("Recv") + 7) // 8)})
+    return out
+
+
+# -- apply on the virtual segment, with and without ESI files -----------------------------
+
+@pytest.mark.parametrize("with_esi", [False, True], ids=["eni-only", "with-esi"])
+@pytest.mark.parametrize("eni", corpus_enis())
+def test_corpus_eni_reaches_op_and_cycles(corpus, eni, with_esi):
+    path = corpus / "eni" / eni
+    events = []
+    esi = [corpus / "esi"] if with_esi else None
+    if eni == ENCRYPTED:
+        with pytest.raises(UnsupportedEniError, match="encrypted"):
+            Network.virtual(path, esi, esi_cache=False)
+        return
+    net = Network.virtual(path, esi, esi_cache=False, on_event=events.append)
+    try:
+        net.up(AlState.OP)
+        net.run(100)
+        stats = net.run_stats
+        assert stats is not None and stats.cycles == 100
+        assert (stats.lost_frames, stats.wkc_errors) == (0, 0), stats.wkc_error_cmds
+        assert net.master.state == AlState.OP
+        net.down()
+    finally:
+        net.close()
+    from_eni = {s.name for s in net.segment.slaves if s.eni_only is not None}
+    names = {s["name"] for s in xml_slaves(path)}
+    assert from_eni == (names - WITH_ESI.get(eni, set()) if with_esi else names)
+    assert sorted(e.text for e in events if e.kind == "emulated") == sorted(
+        e.text for e in events if "emulated from the ENI alone" in e.text)
+    assert len([e for e in events if e.kind == "emulated"]) == len(from_eni)
+
+
+def test_apply_reports_which_slaves_come_from_the_eni(corpus):
+    eni = corpus / "eni" / "jn-ec-master" / "mega_master_eni.xml"
+    run = subprocess.run([sys.executable, "-m", "ecatcfg", "apply", str(eni), "--virtual",
+                          "--esi", str(corpus / "esi"), "--cycles", "3", "--format", "json",
+                          "--no-cache"], capture_output=True, text=True, timeout=120)
+    assert run.returncode == 0, run.stderr
+    report = json.loads(run.stdout)
+    assert [(r["name"], r["emulated_from"]) for r in report["slaves"]] == [
+        ("Term 1 (EK1100)", "esi"), ("Term 2 (EL2008)", "esi"), ("Term 3 (EL4002)", "eni"),
+        ("Term 4 (EL1809)", "esi")]
+    assert any(e.startswith("slave 'Term 3 (EL4002)' (position 2): emulated from the ENI "
+                            "alone (no device 0x2:0xfa23052:0x150000 in the library")
+               for e in report["events"])
+    text = subprocess.run([sys.executable, "-m", "ecatcfg", "apply", str(eni), "--virtual",
+                           "--cycles", "3"], capture_output=True, text=True, timeout=120)
+    assert text.returncode == 0, text.stderr
+    words = " ".join(text.stdout.split())          # rich wraps text at 80 columns in a pipe
+    assert words.count("emulated from the ENI alone (no ESI files given)") == 4
+
+
+def test_esi_without_virtual_is_a_usage_error(corpus, tmp_path):
+    eni = corpus / "eni" / "rocos-ethercat" / "eni.xml"
+    run = subprocess.run([sys.executable, "-m", "ecatcfg", "apply", str(eni), "--iface", "lo",
+                          "--esi", str(corpus / "esi")], capture_output=True, text=True,
+                         timeout=60)
+    assert run.returncode == 2 and "--esi is for --virtual" in run.stderr
+
+
+# -- the device an ENI describes, against the vendor's ESI ---------------------------------
+
+def test_el1809_from_the_eni_is_laid_out_like_its_esi(corpus):
+    """TwinCAT's ENI of an EL1809 (jn-ec-master) against Beckhoff's ESI of the same
+    terminal: SyncManager, default PDO assignment, FMMU kinds and device emulation."""
+    plan = eni_reader.read_file(corpus / "eni" / "jn-ec-master" / "mega_master_eni.xml")
+    slave = next(s for s in plan.slaves if s.name == "Term 4 (EL1809)")
+    ours = device_from_eni(slave, plan, "mega.xml")
+    lib = Library([corpus / "esi"], cache=False)
+    theirs = lib.device(lib.find("0x2:0x7113052:0x120000").entry)
+    pd = [(sm.number, sm.type, sm.start_address, sm.control_byte & 0x0F) for sm in theirs.sms
+          if sm.type in ("Outputs", "Inputs")]
+    assert [(sm.number, sm.type, sm.start_address, sm.control_byte & 0x0F)
+            for sm in ours.sms if sm.type] == pd
+    bits = {p.index: sum(e.bit_len or 0 for e in p.entries) for p in theirs.tx_pdos
+            if p.sm is not None}
+    assert {p.index: sum(e.bit_len or 0 for e in p.entries) for p in ours.tx_pdos
+            if p.sm is not None} == bits
+    assert [f.type for f in ours.fmmus if f.type] == ["Inputs"]
+    # Both images ask the ESC for device emulation (0x0141 bit 0): no firmware.
+    for device in (ours, theirs):
+        assert sii.decode(sii.build(device)).pdi_control & 0x0100
+
+
+def test_elmo_drive_from_the_eni_has_its_esi_mailbox_and_identity(corpus):
+    """The Elmo Gold drive of rocos-ethercat eni.xml: SII header words from the ENI alone
+    equal those of the image built from Elmo's ESI (identity, mailbox offsets and sizes,
+    mailbox protocols)."""
+    plan = eni_reader.read_file(corpus / "eni" / "rocos-ethercat" / "eni.xml")
+    ours = sii.decode(sii.build(device_from_eni(plan.slaves[0], plan, "eni.xml")))
+    lib = Library([corpus / "esi"], cache=False)
+    theirs = sii.decode(sii.build(lib.device(lib.find("0x9a:0x30924:0x10420").entry)))
+    for field in ("vendor_id", "product_code", "revision", "std_rx", "std_tx"):
+        assert getattr(ours, field) == getattr(theirs, field), field
+    assert set(ours.protocols) == set(theirs.protocols) == {"CoE", "EoE", "FoE"}
+    assert not ours.pdi_control & 0x0100           # firmware, not device emulation
+
+
+def test_written_objects_are_typed_by_their_data(corpus):
+    """eni1.xml (Elmo Application Studio) downloads 0x6060:00 = 08 and 0x60C2:01 = 02 and
+    describes neither: the emulated dictionary holds them as one-byte numbers; the PDOs it
+    assigns without describing them are mapped to the slave's process-image size."""
+    plan = eni_reader.read_file(corpus / "eni" / "rocos-ethercat" / "eni1.xml")
+    [spec] = emulate.specs_from_eni(plan, None, "eni1.xml")
+    slave = emulate.emulated_slave(spec)
+    assert slave.od is not None
+    assert (slave.od[0x6060][0].type, slave.od[0x6060][0].bit_size) == ("USINT", 8)
+    assert slave.od[0x60C2][0].as_int() >= 1
+    assert (slave.od[0x60C2][1].type, slave.od[0x60C2][1].bit_size) == ("USINT", 8)
+    # 0x1C12/0x1C13 defaults are the ENI's assignment; their PDOs fill the SMs it writes.
+    assert slave.od.sm_bits(2) == 8 * 16 and slave.od.sm_bits(3) == 8 * 14
+
+
+def test_type_name_from_configurator_names():
+    assert type_name("Term 2 (EL2008)") == "EL2008"
+    assert type_name("Slave_1002 [54632]") == "54632"
+    assert type_name("Elmo Drive") == "Elmo Drive"
+
+
+# -- SOEM on `simulate --eni` without ESI ------------------------------------------------
+
+def _simulate(rig, args: list[str]) -> tuple[subprocess.Popen, list[str]]:
+    sim = rig.popen_in(rig.ns_b, [sys.executable, "-m", "ecatcfg", "simulate", *args,
+                                  "--iface", rig.if_b, "--duration", "60", "--no-cache"],
+                       stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    lines: list[str] = []
+    assert sim.stdout is not None
+    for line in sim.stdout:
+        lines.append(line)
+        if line.startswith("ready:"):
+            break
+    assert lines and lines[-1].startswith("ready:"), "".join(lines) + sim.stderr.read()
+    return sim, lines
+
+
+@pytest.mark.parametrize("eni", corpus_enis())
+def test_soem_reaches_op_on_an_eni_without_esi(veth_netns, pysoem_module, corpus, eni):
+    path = corpus / "eni" / eni
+    sim, _ = _simulate(veth_netns, ["--eni", str(path)])
+    report = soem(veth_netns, {"outputs": "5a", "cycles": 20})
+    sim.terminate()
+    sim.communicate(timeout=10)
+    want = xml_slaves(path)
+    assert report["found"] == len(want)
+    assert [(s["vendor"], s["product"], s["revision"]) for s in report["slaves"]] == [
+        w["identity"] for w in want]
+    assert [tuple(x) for x in report["sizes"]] == [w["bytes"] for w in want]
+    assert report["safeop"] == 4 and report["op"] == 8, report
+    assert report["wkc"] == report["expected_wkc"]
+
+
+def test_simulate_says_which_slaves_come_from_the_eni(veth_netns, pysoem_module, corpus):
+    eni = corpus / "eni" / "jn-ec-master" / "mega_master_eni.xml"
+    sim, lines = _simulate(veth_netns, ["--eni", str(eni), "--esi", str(corpus / "esi")])
+    report = soem(veth_netns, {"cycles": 5})
+    sim.terminate()
+    sim.communicate(timeout=10)
+    rows = {line.split()[0]: line for line in lines if line[:3].strip().isdigit()}
+    assert [rows[p].split()[-2] for p in "0123"] == ["ESI", "ESI", "ENI", "ESI"]
+    assert any(line.startswith("note: slave 2 (Term 3 (EL4002)) emulated from the ENI "
+                               "alone: no device 0x2:0xfa23052:0x150000") for line in lines)
+    assert report["op"] == 8, report
