@@ -143,8 +143,8 @@ def specs_from_eni(plan: NetworkPlan, library: Library | None, shown: str) -> li
     PDOs the ENI lists for it; when the ENI names no modules (UR20 keeps its idents in
     vendor objects), the objects its startup SDOs write are accepted as they are.  Any
     other slave (and every slave without a library) is emulated from the ENI alone
-    (``runtime/eni_device.py``), with the objects its CoE InitCmds write; its spec says so
-    (``from_eni``).  ``shown`` names the ENI in the model's sources."""
+    (``runtime/eni_device.py``), with the objects its CoE InitCmds write; its spec says why
+    (``eni_only``).  ``shown`` names the ENI in the model's sources."""
     from ecatcfg.esi.library import SelectorError
     from ecatcfg.runtime.eni_device import device_from_eni
 

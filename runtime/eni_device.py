@@ -348,7 +348,7 @@ def _mailbox(slave: SlavePlan, coe: _Coe, source: Source) -> Mailbox | None:
     protocols = list(dict.fromkeys(mbx.protocols))
     settings = None
     if "CoE" in protocols:
-        settings = CoeSettings(source, sdo_info=True, pdo_assign=coe.assigns,
+        settings = CoeSettings(source, pdo_assign=coe.assigns,
                                pdo_config=coe.configures,
                                complete_access=coe.complete_access)
     eoe = EoeSettings(source, ip=True) if "EoE" in protocols else None
