@@ -44,12 +44,16 @@ class Reg(IntEnum):
     DL_CONTROL_2 = 0x0103         # second station address enable (TwinCAT "en/disable")
     AL_CONTROL = 0x0120
     AL_STATUS = 0x0130            # + 0x0134 AL status code: 6 bytes with the padding
+    AL_STATUS_CODE = 0x0134
     PDI_CONTROL = 0x0140          # + 0x0141 ESC configuration: both loaded from SII word 0
+    ESC_CONFIG = 0x0141
     ECAT_EVENT_MASK = 0x0200
     RX_ERROR_COUNTER = 0x0300
     WATCHDOG_DIVIDER = 0x0400
     WATCHDOG_PDI = 0x0410
     WATCHDOG_SM = 0x0420
+    WATCHDOG_STATUS = 0x0440      # bit 0: 0 = the process data (SM) watchdog expired
+    WATCHDOG_COUNTER_SM = 0x0442  # + 0x0443 the PDI watchdog's counter
     EEPROM_CONFIG = 0x0500        # 0 = EEPROM to ECAT, 1 = to PDI
     EEPROM_CONTROL = 0x0502
     EEPROM_ADDRESS = 0x0504
@@ -93,6 +97,7 @@ SM_WATCHDOG_ENABLE = 0x40         # control bit 6
 SM_CONTROL_MBOX_OUT = SM_MODE_MAILBOX | SM_DIR_ECAT_WRITES | SM_PDI_EVENT     # 0x26
 SM_CONTROL_MBOX_IN = SM_MODE_MAILBOX | SM_DIR_ECAT_READS | SM_PDI_EVENT       # 0x22
 SM_STATUS_WRITE_EVENT = 0x01      # status bit 0: a buffer was completely written
+SM_STATUS_READ_EVENT = 0x02       # status bit 1: a buffer was completely read
 SM_STATUS_MAILBOX_FULL = 0x08     # status bit 3 (1-buffer mode)
 SM_STATUS_BUFFER_NONE = 0x30      # status bits 5:4 = 3: no buffer written yet (3-buffer mode)
 SM_ACTIVATE_ENABLE = 0x01         # activate bit 0
@@ -124,6 +129,16 @@ class AlState(IntEnum):
 AL_ERROR_ACK = 0x10           # AL control bit 4: acknowledge an error indication
 AL_STATUS_ERROR = 0x10        # AL status bit 4: error indication (code in 0x0134)
 AL_STATE_MASK = 0x0F          # AL control / status bits 3:0: the state
+
+# ESC configuration 0x0141 bit 0, *device emulation*: an ESC without a microcontroller copies
+# every AL control write into AL status itself, with no checks (Beckhoff ESC Section II
+# register description, AL Control 0x0120 and AL Status 0x0130 notes; Section I "Device
+# Emulation").  Loaded from SII word 0 (ESI Eeprom/ConfigData byte 1).
+ESC_DEVICE_EMULATION = 0x01
+# PDI control 0x0140: the process data interface.  0x04 = digital I/O, the PDI of simple
+# terminals (EL1xxx, EL2xxx): the ESC drives the I/O pins from process memory itself
+# (ESC Section II, PDI Control 0x0140).
+PDI_DIGITAL_IO = 0x04
 
 
 class Transition(str, Enum):

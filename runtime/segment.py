@@ -25,8 +25,9 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-from ecatcfg.esc import AlState, Cmd, FmmuType, Reg
-from ecatcfg.runtime.slave import MEMORY_SIZE, PROCESS_RAM, EmulatedSlave, StateChange
+from ecatcfg.esc import Cmd, FmmuType, Reg
+from ecatcfg.runtime.slave import (MEMORY_SIZE, PROCESS_RAM, RUNNING_STATES, EmulatedSlave,
+                                   StateChange)
 from ecatcfg.runtime.syncman import SmKind, SmState
 from ecatcfg.runtime.wire import DG_HEADER_LEN, FrameError, datagram_offsets
 
@@ -53,7 +54,6 @@ _LOGICAL: dict[int, tuple[bool, bool]] = {Cmd.LRD: (True, False), Cmd.LWR: (Fals
                                           Cmd.LRW: (True, True)}        # (reads, writes)
 _ADDRESS_REGISTERS = (Reg.STATION_ADDRESS, Reg.DL_CONTROL_2 + 1)
 _AL_STATUS = int(Reg.AL_STATUS)
-_SAFEOP = int(AlState.SAFEOP)
 
 
 @dataclass(frozen=True, slots=True)
@@ -237,7 +237,9 @@ class VirtualSegment:
         added = 0
         # Plain tuples and locals: this loop runs for every slave of every cyclic frame.
         for slave, mem, writes, reads in plan:
-            running = mem[_AL_STATUS] & 0x0F >= _SAFEOP
+            # SAFEOP and OP exactly: a device-emulation ESC may show any value a master
+            # wrote, and process data moves in those two states only.
+            running = mem[_AL_STATUS] & 0x0F in RUNNING_STATES
             hit_write = hit_read = False
             for offset, phys, length, bits, sm, completes in writes:   # outputs first (LRW)
                 if sm is not None and not (running and sm.enabled and sm.length):

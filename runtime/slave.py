@@ -26,9 +26,10 @@ from typing import TYPE_CHECKING
 
 from ecatcfg.esc import (AL_ERROR_ACK, AL_STATE_MASK, AL_STATUS_ERROR, EEPROM_CMD_MASK,
                          EEPROM_CMD_READ, EEPROM_CMD_RELOAD, EEPROM_CMD_WRITE, EEPROM_R64,
-                         EEPROM_WRITE_ENABLE, FMMU_SIZE, SM_ACTIVATE_REPEAT, SM_DIR_MASK,
-                         SM_MODE_MASK, SM_WATCHDOG_ENABLE, AlState, AlStatusCode, FmmuConfig,
-                         FmmuType, Reg, fmmu_register, sm_register)
+                         EEPROM_WRITE_ENABLE, ESC_DEVICE_EMULATION, FMMU_SIZE, PDI_DIGITAL_IO,
+                         SM_ACTIVATE_REPEAT, SM_DIR_MASK, SM_MODE_MASK, SM_WATCHDOG_ENABLE,
+                         AlState, AlStatusCode, FmmuConfig, FmmuType, Reg, fmmu_register,
+                         sm_register)
 from ecatcfg.esi.model import Device
 from ecatcfg.runtime.syncman import SmKind, SmState
 
@@ -43,7 +44,10 @@ N_FMMU = 8
 N_SM = 8
 
 ESC_TYPE = 0x11                    # reported ESC type (an ET1100-class device)
-ESC_FEATURES = 0x01CC              # DC, 64-bit DC, EBUS/MII link detection, enhanced DC SYNC
+# 0x0008 features as a real ET1100 reports them (the EK1100 of ethercrab-rs/ethercrab
+# dumps/soem-sdinfo-ek1100-el1004.pcapng): DC, 64-bit DC, low-jitter EBUS, enhanced link
+# detection EBUS and MII, separate FCS error handling (ESC Section II, 0x0008).
+ESC_FEATURES = 0x00FC
 DEFAULT_WD_DIVIDER = 0x09C2        # (0x09C2 + 2) x 40 ns = 100 us watchdog time base
 DEFAULT_WD_TIME = 1000             # x 100 us = 100 ms
 # SM control bits a slave checks against its own SM configuration: mode and direction.
@@ -55,6 +59,9 @@ _ALLOWED = {(AlState.INIT, AlState.PREOP), (AlState.PREOP, AlState.SAFEOP),
             (AlState.OP, AlState.PREOP), (AlState.SAFEOP, AlState.PREOP)}
 _LETTER = {AlState.INIT: "I", AlState.PREOP: "P", AlState.BOOT: "B", AlState.SAFEOP: "S",
            AlState.OP: "O"}
+_STATES: dict[int, AlState] = {int(s): s for s in AlState}
+# The states in which process data moves (ETG.1000.6: inputs from SAFEOP, outputs in OP).
+RUNNING_STATES = (int(AlState.SAFEOP), int(AlState.OP))
 
 # Registers the master cannot write (device information, status, EEPROM-loaded values).
 _READ_ONLY = [(0x0000, 0x0010), (0x0110, 0x0112), (0x0130, 0x0136), (0x0140, 0x0142),
@@ -76,6 +83,17 @@ class StateChange:
 
 def _overlaps(a: int, n: int, start: int, end: int) -> bool:
     return a < end and a + n > start
+
+
+# Register blocks of FMMUs and SMs this ESC does not implement (the address map has room for
+# 16 of each): an access that lies wholly inside one gets no working counter, as a real
+# ET1100 (8 of each) answers a BWR to FMMU 8-15 or SM 8-15 (ethercrab-rs/ethercrab
+# tests/replay-ek1100-el2828-el2889.pcapng).
+_ABSENT = ((fmmu_register(N_FMMU), fmmu_register(16)), (sm_register(N_SM), sm_register(16)))
+
+
+def _absent(ado: int, n: int) -> bool:
+    return any(start <= ado and ado + n <= end for start, end in _ABSENT)
 
 
 class EmulatedSlave:
@@ -103,6 +121,7 @@ class EmulatedSlave:
         self.outputs_valid = False
         self._last_output_write = 0.0
         self._watchdog_limit: float | None = None
+        self._watchdog_expired = False
         self._clock_base = 0
         self._ro = bytearray(PROCESS_RAM)
         for start, end in _READ_ONLY:
@@ -127,7 +146,7 @@ class EmulatedSlave:
         struct.pack_into("<H", m, Reg.WATCHDOG_DIVIDER, DEFAULT_WD_DIVIDER)
         struct.pack_into("<H", m, Reg.WATCHDOG_PDI, DEFAULT_WD_TIME)
         struct.pack_into("<H", m, Reg.WATCHDOG_SM, DEFAULT_WD_TIME)
-        m[0x0440] = 1                               # SM watchdog status: OK
+        m[Reg.WATCHDOG_STATUS] = 1                  # SM watchdog status: OK
         struct.pack_into("<H", m, Reg.EEPROM_CONTROL, EEPROM_R64)
         struct.pack_into("<HH", m, 0x0934, 0x0C00, 0x1000)
         self._load_eeprom()
@@ -156,8 +175,10 @@ class EmulatedSlave:
     def set_links(self, upstream: bool, downstream: bool) -> None:
         """DL status 0x0110: port 0 towards the master, port 1 to the next slave; ports
         2 and 3 closed.  A port with communication has its loop open (SOEM: bits 9+2n, 8+2n
-        = 1, 0 means active)."""
-        status = 0x01 | 0x02
+        = 1, 0 means active).  Bit 1, the PDI watchdog, reads 1 (reloaded) only where a
+        PDI reloads it: an ESC whose PDI is off (0x0140 = 0, an EK1100) reads 0x5A31 where
+        an EL2828 reads 0x5A33 (ethercrab-rs/ethercrab tests/replay-dc.pcapng)."""
+        status = 0x01 | (0x02 if self.mem[Reg.PDI_CONTROL] else 0)
         if upstream:
             status |= 0x0010 | 0x0200
         else:
@@ -179,8 +200,22 @@ class EmulatedSlave:
         return eoe.params if eoe is not None else None
 
     @property
-    def state(self) -> AlState:
-        return AlState(self.mem[Reg.AL_STATUS] & AL_STATE_MASK)
+    def device_emulation(self) -> bool:
+        """0x0141 bit 0 (from SII word 0): no firmware, the ESC mirrors AL control into AL
+        status itself."""
+        return bool(self.mem[Reg.ESC_CONFIG] & ESC_DEVICE_EMULATION)
+
+    @property
+    def al_status(self) -> int:
+        """AL status 0x0130 as the master reads it."""
+        status: int = struct.unpack_from("<H", self.mem, Reg.AL_STATUS)[0]
+        return status
+
+    @property
+    def state(self) -> AlState | None:
+        """The state in AL status; ``None`` for a value that is no state, which only a
+        device-emulation ESC shows (it mirrors whatever the master wrote)."""
+        return _STATES.get(self.mem[Reg.AL_STATUS] & AL_STATE_MASK)
 
     @property
     def error(self) -> bool:
@@ -188,7 +223,7 @@ class EmulatedSlave:
 
     @property
     def status_code(self) -> int:
-        code: int = struct.unpack_from("<H", self.mem, 0x0134)[0]
+        code: int = struct.unpack_from("<H", self.mem, Reg.AL_STATUS_CODE)[0]
         return code
 
     @property
@@ -211,7 +246,7 @@ class EmulatedSlave:
         """``n`` bytes at ``ado`` as the ESC returns them, or ``None`` when it refuses
         (an empty mailbox, for example): the datagram then gets no working counter."""
         end = ado + n
-        if end > MEMORY_SIZE:
+        if end > MEMORY_SIZE or _absent(ado, n):
             return None
         if ado < PROCESS_RAM:
             if _overlaps(ado, n, Reg.DC_SYSTEM_TIME, Reg.DC_SYSTEM_TIME + 8):
@@ -226,7 +261,7 @@ class EmulatedSlave:
         """Write from the wire; ``False`` when the ESC refuses (a full mailbox)."""
         n = len(data)
         end = ado + n
-        if end > MEMORY_SIZE:
+        if end > MEMORY_SIZE or _absent(ado, n):
             return False
         if ado >= PROCESS_RAM:
             for sm in self.sms:
@@ -247,6 +282,9 @@ class EmulatedSlave:
     def _after_register_write(self, ado: int, n: int) -> None:
         if _overlaps(ado, n, 0x0502, 0x0504):
             self._eeprom_command()
+        if _overlaps(ado, n, Reg.WATCHDOG_COUNTER_SM, Reg.WATCHDOG_COUNTER_SM + 2):
+            # Writing either watchdog counter clears both (ESC Section II, 0x0442-0x0443).
+            self.mem[Reg.WATCHDOG_COUNTER_SM:Reg.WATCHDOG_COUNTER_SM + 2] = b"\x00\x00"
         if _overlaps(ado, n, Reg.FMMU0, Reg.FMMU0 + FMMU_SIZE * N_FMMU):
             self._load_fmmus()
         if _overlaps(ado, n, Reg.SM0, sm_register(N_SM)):
@@ -301,7 +339,7 @@ class EmulatedSlave:
         was_repeat = sm.repeat_request
         sm.load(self.mem)
         request = bool(self.mem[reg + 6] & SM_ACTIVATE_REPEAT)
-        if self._mailbox_running() and self._check_mailbox():
+        if not self.device_emulation and self._mailbox_running() and self._check_mailbox():
             # The mailbox SMs no longer as the firmware set them up: it stops the mailbox
             # and falls back to INIT with 0x0016 (SOES ESC_sm_act_event, ESC_checkmbx).
             # It never writes a reply into an area the master moved (over registers,
@@ -338,6 +376,8 @@ class EmulatedSlave:
                 return False
             self.mem[ado:ado + n] = data
             if ado + n == sm.end:
+                sm.read_event = True        # the firmware reads the buffer out at once
+                sm.store_status(self.mem)
                 self._mailbox_received(bytes(self.mem[sm.start:sm.end]))
             return True
         if not sm.master_writes:
@@ -353,6 +393,7 @@ class EmulatedSlave:
         data = bytes(self.mem[ado:ado + n])
         if ado + n == sm.end:
             sm.full = False
+            sm.read_event = True
             sm.store_status(self.mem)
             self._post_next()
         return data
@@ -368,9 +409,10 @@ class EmulatedSlave:
     def _mailbox_received(self, message: bytes) -> None:
         """The firmware takes the message out of SM0 at once (the buffer is empty again)
         and queues its answers for SM1."""
-        if self.state in (AlState.INIT, AlState.BOOT) or self.mailbox is None:
+        state = self.state
+        if state is None or state in (AlState.INIT, AlState.BOOT) or self.mailbox is None:
             return
-        replies = self.mailbox.handle(message, self.state)
+        replies = self.mailbox.handle(message, state)
         self.mailbox_queue.extend(replies)
         self._post_next()
 
@@ -385,6 +427,7 @@ class EmulatedSlave:
         self.mem[sm.start:sm.end] = body + bytes(sm.length - len(body))
         self.last_mailbox = message
         sm.full = True
+        sm.read_event = False
         sm.store_status(self.mem)
 
     # -- process data ------------------------------------------------------------------------
@@ -393,7 +436,8 @@ class EmulatedSlave:
         """A complete write of an output SM (feeds the SM watchdog)."""
         self._last_output_write = time.monotonic() if now is None else now
         self.outputs_valid = True
-        self.mem[0x0440] = 1
+        self._watchdog_expired = False
+        self.mem[Reg.WATCHDOG_STATUS] = 1
 
     def process_sms(self, kind: SmKind) -> list[SmState]:
         return [sm for sm in self.sms if sm.active and sm.kind is kind]
@@ -423,16 +467,28 @@ class EmulatedSlave:
 
     def check_watchdog(self, now: float) -> None:
         """SM watchdog: in OP, outputs that stop arriving for longer than the watchdog time
-        drop the slave to SAFEOP+ERR 0x001B and clear its outputs.  Runs every few
-        milliseconds for every slave: the limit is worked out when the slave enters OP."""
+        expire it once: the ESC clears the watchdog status (0x0440 bit 0) and counts the
+        expiry (0x0442, stops at 0xFF) (ESC Section II).  Firmware then takes the slave to
+        SAFEOP+ERR 0x001B and clears its outputs.  A device-emulation ESC cannot change
+        AL status: the state stays OP, and with the digital I/O PDI the ESC resets the
+        output pins (Beckhoff, "General notes for setting the watchdog": the SM watchdog
+        sets the outputs to FALSE, the state of the terminal remains unaffected).  Runs every
+        few milliseconds for every slave: the limit is worked out when the slave enters OP."""
         limit = self._watchdog_limit
-        if limit is None or self.mem[Reg.AL_STATUS] & AL_STATE_MASK != AlState.OP:
+        if (limit is None or self.mem[Reg.AL_STATUS] & AL_STATE_MASK != AlState.OP
+                or self._watchdog_expired):
             return
         if now - self._last_output_write > limit:
-            self.mem[0x0440] = 0
+            self._watchdog_expired = True
+            self.mem[Reg.WATCHDOG_STATUS] &= 0xFE
+            self.mem[Reg.WATCHDOG_COUNTER_SM] = min(self.mem[Reg.WATCHDOG_COUNTER_SM] + 1, 0xFF)
+            self.outputs_valid = False
+            if self.device_emulation and self.mem[Reg.PDI_CONTROL] != PDI_DIGITAL_IO:
+                return          # no firmware and no pins: nothing else reacts
             for sm in self.process_sms(SmKind.OUTPUTS):
                 self.mem[sm.start:sm.end] = bytes(sm.length)
-            self._set_state(AlState.SAFEOP, AlStatusCode.SM_WATCHDOG)
+            if not self.device_emulation:
+                self._set_state(AlState.SAFEOP, AlStatusCode.SM_WATCHDOG)
 
     def _arm_watchdog(self) -> None:
         """The SM watchdog time (0x0420 x (0x0400 + 2) x 40 ns), or None when no output SM
@@ -449,9 +505,13 @@ class EmulatedSlave:
 
     def _al_control(self) -> None:
         control = struct.unpack_from("<H", self.mem, Reg.AL_CONTROL)[0]
+        if self.device_emulation:
+            self._mirror_al_control(control)
+            return
         requested = control & AL_STATE_MASK
         ack = bool(control & AL_ERROR_ACK)
         current = self.state
+        assert current is not None          # firmware only ever sets states
         if self.error:
             if not ack and requested != AlState.INIT:
                 return              # an error must be acknowledged first (SOES, KickCAT)
@@ -564,24 +624,57 @@ class EmulatedSlave:
                 return AlStatusCode.DC_INVALID_SYNC_CYCLE
         return 0
 
-    def _enter(self, target: AlState) -> None:
-        if target < AlState.SAFEOP:
+    def _mirror_al_control(self, control: int) -> None:
+        """Device emulation: the ESC copies the AL control word into AL status, every bit
+        as written (state, the error-acknowledge bit as the error flag, device
+        identification, the reserved bits), whatever the state: no transition rules, no
+        SM, FMMU, mailbox or DC checks, no refusal codes, and 0x0134 untouched (Beckhoff
+        ESC Section II, AL Control 0x0120 note; Section I "Device Emulation").  A real
+        EK1100 and EL1004 read back 0x0011 after SOEM's 0x0011 (ethercrab-rs/ethercrab
+        dumps/soem-sdinfo-ek1100-el1004.pcapng).  A refusal injected with ``refuse`` is
+        still given: fault injection asks for a slave that refuses, whatever its ESC."""
+        old = self.mem[Reg.AL_STATUS] & AL_STATE_MASK
+        new = control & AL_STATE_MASK
+        if old in _STATES and new in _STATES and old != new:
+            code = self.refuse.get(_LETTER[_STATES[old]] + _LETTER[_STATES[new]])
+            if code:
+                target = _STATES[new]
+                self._set_state(_STATES[old] if target > old else target, code)
+                return
+        before = self.al_status
+        self._state_effects(old, new)
+        struct.pack_into("<H", self.mem, Reg.AL_STATUS, control)
+        state = _STATES.get(new)
+        if self.on_state_change and state is not None and control != before:
+            self.on_state_change(StateChange(self.position, self.name, state,
+                                             bool(control & AL_STATUS_ERROR),
+                                             self.status_code))
+
+    def _state_effects(self, old: int, new: int) -> None:
+        """What follows a state (``old`` -> ``new``, raw AL status state bits): outputs
+        are valid in SAFEOP and OP only, the SM watchdog runs from OP, the mailbox stops in
+        INIT and restarts empty in INIT->PREOP."""
+        if new not in RUNNING_STATES:
             self.outputs_valid = False
-        if target == AlState.OP:
+        if new == AlState.OP and old != AlState.OP:
             self._last_output_write = time.monotonic()
+            self._watchdog_expired = False
             self._arm_watchdog()
-        if target <= AlState.INIT:
+        if new == AlState.INIT:
             self._stop_mailbox()
-        if target == AlState.PREOP and self.state == AlState.INIT:
+        if new == AlState.PREOP and old == AlState.INIT:
             self.last_mailbox = None
             if self.mailbox is not None:
                 self.mailbox.reset()
+
+    def _enter(self, target: AlState) -> None:
+        self._state_effects(self.mem[Reg.AL_STATUS] & AL_STATE_MASK, target)
         self._set_state(target, 0)
 
     def _set_state(self, state: AlState, code: int) -> None:
         status = int(state) | (AL_STATUS_ERROR if code else 0)
         struct.pack_into("<H", self.mem, Reg.AL_STATUS, status)
-        struct.pack_into("<H", self.mem, 0x0134, code)
+        struct.pack_into("<H", self.mem, Reg.AL_STATUS_CODE, code)
         if self.on_state_change:
             self.on_state_change(StateChange(self.position, self.name, state, bool(code),
                                              code))

@@ -22,7 +22,7 @@ from enum import Enum
 
 from ecatcfg.esc import (SM_DIR_ECAT_WRITES, SM_DIR_MASK, SM_MODE_MAILBOX, SM_MODE_MASK,
                          SM_PDI_REPEAT_ACK, SM_SIZE, SM_STATUS_BUFFER_NONE, SM_STATUS_MAILBOX_FULL,
-                         SM_STATUS_WRITE_EVENT, SmConfig, sm_register)
+                         SM_STATUS_READ_EVENT, SM_STATUS_WRITE_EVENT, SmConfig, sm_register)
 
 
 class SmKind(Enum):
@@ -42,6 +42,7 @@ class SmState:
     control: int = 0
     enabled: bool = False
     full: bool = False
+    read_event: bool = False            # status bit 1: the buffer was completely read
     repeat_request: bool = False
 
     @property
@@ -77,6 +78,7 @@ class SmState:
                                                            self.control)
         if changed or not cfg.enable:
             self.full = False               # a disabled or moved mailbox starts empty
+            self.read_event = False
         self.start, self.length, self.control, self.enabled = (
             cfg.start, cfg.length, cfg.control, cfg.enable)
 
@@ -86,7 +88,12 @@ class SmState:
         if self.is_mailbox:
             # A full mailbox has its buffer written (bit 0) and full (bit 3); the ENIs'
             # mailbox-state FMMU maps bit 0 of SM1's status (docs/eni-exports.md §3).
-            mem[reg + 5] = SM_STATUS_MAILBOX_FULL | SM_STATUS_WRITE_EVENT if self.full else 0
+            # Once emptied by a complete read, a real ESC shows the read event (bit 1):
+            # LAN9252 slaves read 0x02 on SM0 after the firmware took a message and on
+            # SM1 after the master read a reply (ethercrab-rs/ethercrab
+            # dumps/soem-single-lan9252.pcapng).
+            mem[reg + 5] = (SM_STATUS_MAILBOX_FULL | SM_STATUS_WRITE_EVENT if self.full
+                            else SM_STATUS_READ_EVENT if self.read_event else 0)
         elif not mem[reg + 5]:
             mem[reg + 5] = SM_STATUS_BUFFER_NONE
         pdi = mem[reg + 7] & ~SM_PDI_REPEAT_ACK
