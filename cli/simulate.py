@@ -103,7 +103,8 @@ def run(args: argparse.Namespace) -> int:
 
     def report(change: StateChange) -> None:
         flag = f" ERR 0x{change.code:04X}" if change.error else ""
-        print(f"slave {change.position} ({change.name}): {change.state.name}{flag}",
+        note = f"; {change.note}" if change.note else ""
+        print(f"slave {change.position} ({change.name}): {change.state.name}{flag}{note}",
               flush=True)
 
     seg.on_state_change = report

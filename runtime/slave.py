@@ -79,6 +79,7 @@ class StateChange:
     state: AlState
     error: bool
     code: int
+    note: str = ""          # e.g. a device-emulation slave running with other SM lengths
 
 
 def _overlaps(a: int, n: int, start: int, end: int) -> bool:
@@ -646,9 +647,21 @@ class EmulatedSlave:
         struct.pack_into("<H", self.mem, Reg.AL_STATUS, control)
         state = _STATES.get(new)
         if self.on_state_change and state is not None and control != before:
+            note = self._sm_length_note() if new == AlState.SAFEOP and old != new else ""
             self.on_state_change(StateChange(self.position, self.name, state,
                                              bool(control & AL_STATUS_ERROR),
-                                             self.status_code))
+                                             self.status_code, note))
+
+    def _sm_length_note(self) -> str:
+        """The process-data SMs whose length differs from what the ESI's default PDOs
+        need (legal with device emulation: the slave then moves that many bytes)."""
+        diffs = []
+        for number, bits in self._expected_pd.items():
+            sm = self.sms[number]
+            got, want = (sm.length if sm.active else 0), (bits + 7) // 8
+            if got != want:
+                diffs.append(f"SM{number} {got} (ESI {want})")
+        return "SM lengths in bytes differ from the ESI: " + ", ".join(diffs) if diffs else ""
 
     def _state_effects(self, old: int, new: int) -> None:
         """What follows a state (``old`` -> ``new``, raw AL status state bits): outputs

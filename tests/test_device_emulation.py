@@ -25,6 +25,7 @@ from ecatcfg.esi.library import Library
 from ecatcfg.runtime import wire
 from ecatcfg.runtime.emulate import SlaveSpec, segment
 from ecatcfg.runtime.segment import VirtualSegment
+from ecatcfg.runtime.slave import StateChange
 from ecatcfg.runtime.wire import Datagram
 
 
@@ -55,6 +56,8 @@ def test_device_emulation_slaves_reach_op_with_sm_lengths_other_than_the_esis(be
     SM1) gets OP: no firmware checks them, the ESC copies AL control into AL status."""
     seg = line(beckhoff, "EK1100", "EL1809", "EL2809")
     assert [s.device_emulation for s in seg.slaves] == [True, True, True]
+    changes: list[StateChange] = []
+    seg.on_state_change = changes.append
     address_all(seg)
     configure(seg, 0x1002, 0, SmConfig(0x1000, 1, 0x00, True),
               FmmuConfig(0, 1, 0, 7, 0x1000, 0, FmmuType.READ))
@@ -69,6 +72,12 @@ def test_device_emulation_slaves_reach_op_with_sm_lengths_other_than_the_esis(be
     assert d.wkc == 1 + 2                             # inputs +1, outputs +2
     assert d.data[0] == 0x5A
     assert seg.slaves[2].outputs() == b"\x81\x42"
+    # simulate's log notes the lengths once, when each slave enters SAFEOP.
+    notes = {(c.name, c.state): c.note for c in changes if c.note}
+    assert notes == {
+        ("EL1809-1", AlState.SAFEOP): "SM lengths in bytes differ from the ESI: SM0 1 (ESI 2)",
+        ("EL2809-2", AlState.SAFEOP):
+            "SM lengths in bytes differ from the ESI: SM0 2 (ESI 1), SM1 0 (ESI 1)"}
 
 
 def test_a_firmware_refuses_the_same_sizing_with_its_code(beckhoff):
