@@ -21,9 +21,10 @@ emulated ESC are built exactly as for a device read from an ESI file:
 - mailbox: the protocols of ``Mailbox/Protocol``; CoE flags from what the InitCmds do
   (PDO assignment, PDO configuration, complete access); EoE with IP parameters;
 - DC: an op mode with the activation the ENI writes to 0x0980 and its SYNC0 cycle;
-- SII configuration area: a slave without a mailbox runs in ESC device emulation (0x0141
-  bit 0), as every such device in the vendors' files does; one with a mailbox has
-  firmware.
+- SII configuration area: the value an InitCmd checks at 0x0140, else a slave without a
+  mailbox runs in ESC device emulation (0x0141 bit 0), as every such device in the
+  vendors' files does (with a digital I/O PDI when it has process data); one with a
+  mailbox has firmware.
 
 What an ENI cannot say (object names and types beyond the written data, ESC type and build,
 vendor names) takes neutral values; ``runtime/emulate.py`` adds the objects the CoE InitCmds
@@ -42,10 +43,13 @@ from ecatcfg.eni.plan import CoeInitCmd, InitCmd, NetworkPlan, PdoDesc, SlavePla
 from ecatcfg.esi.model import (CoeSettings, Dc, DcOpMode, Device, Eeprom, EoeSettings, Fmmu,
                                Mailbox, Pdo, PdoEntry, Profile, Source, SyncManager, Vendor)
 
-# SII configuration area word 0 (PDI control 0x0140, ESC configuration 0x0141): a digital
-# I/O PDI in device emulation for slaves without a mailbox (the EL1004 of ethercrab's
-# soem-sdinfo capture reads 0x0104), a 16-bit asynchronous microcontroller PDI otherwise.
+# SII configuration area word 0 (PDI control 0x0140, ESC configuration 0x0141) of slaves
+# without a mailbox: device emulation, with a digital I/O PDI when they have process data
+# (the EL1004 of ethercrab-rs/ethercrab dumps/soem-sdinfo-ek1100-el1004.pcapng reads
+# 0x0104), without a PDI otherwise (its EK1100 reads 0x00 at 0x0140); a 16-bit asynchronous
+# microcontroller PDI for slaves with a mailbox (firmware).
 CONFIG_DEVICE_EMULATION = 0x0104
+CONFIG_NO_PDI = 0x0100
 CONFIG_FIRMWARE = 0x0008
 _WRITES = (Cmd.APWR, Cmd.FPWR, Cmd.BWR, Cmd.APRW, Cmd.FPRW, Cmd.BRW)
 _SM_ACTIVATE = 0x01
@@ -94,7 +98,10 @@ def device_from_eni(slave: SlavePlan, plan: NetworkPlan, file: str) -> Device:
         boot = struct.pack("<4H", b_out.start, b_out.length, b_in.start, b_in.length)
     config = _checked_config(slave)
     if config is None:
-        config = CONFIG_FIRMWARE if slave.mailbox is not None else CONFIG_DEVICE_EMULATION
+        config = (CONFIG_FIRMWARE if slave.mailbox is not None
+                  else CONFIG_DEVICE_EMULATION if any(sm.type in ("Outputs", "Inputs")
+                                                      for sm in sms)
+                  else CONFIG_NO_PDI)
     profiles = [Profile(source, profile_no=no) for no, _ in
                 (slave.mailbox.coe_profiles if slave.mailbox else [])[:1]]
     return Device(

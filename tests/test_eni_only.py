@@ -216,3 +216,16 @@ def test_simulate_says_which_slaves_come_from_the_eni(veth_netns, pysoem_module,
     assert any(line.startswith("note: slave 2 (Term 3 (EL4002)) emulated from the ENI "
                                "alone: no device 0x2:0xfa23052:0x150000") for line in lines)
     assert report["op"] == 8, report
+
+
+def test_couplers_and_terminals_from_the_eni_are_esc_only_like_the_hardware(corpus):
+    """Without a mailbox there is no firmware: the EK1100 and EL1004 of ethercrab-rs's
+    soem-sdinfo-ek1100-el1004 capture read 0x0140-0x0141 as 00 0D and 04 01 (device
+    emulation; no PDI on the coupler, digital I/O on the terminal).  The same kinds of
+    slave from TwinCAT's ENI alone: EK1100 and EL2008 of jn-ec-master."""
+    plan = eni_reader.read_file(corpus / "eni" / "jn-ec-master" / "mega_master_eni.xml")
+    words = {s.name: sii.decode(sii.build(device_from_eni(s, plan, "mega.xml"))).pdi_control
+             for s in plan.slaves}
+    assert words["Term 1 (EK1100)"] & 0x01FF == 0x0100          # capture: 0x0D00 & 0x01FF
+    assert words["Term 2 (EL2008)"] & 0x01FF == 0x0104          # capture: 0x0104
+    assert not words["Term 3 (EL4002)"] & 0x0100                # a mailbox: firmware
