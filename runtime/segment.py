@@ -72,8 +72,12 @@ class Faults:
 class VirtualSegment:
     """Emulated slaves in bus order (position 0 is the first after the master)."""
 
-    def __init__(self, slaves: list[EmulatedSlave], faults: Faults | None = None) -> None:
+    def __init__(self, slaves: list[EmulatedSlave], faults: Faults | None = None, *,
+                 clock_ns: Callable[[], int] | None = None) -> None:
+        """``clock_ns``: the time (ns, monotonic) the slaves live in; wall time by default,
+        a simulated clock for deterministic tests of time-dependent behaviour."""
         self.slaves = slaves
+        self.clock_ns: Callable[[], int] = clock_ns or time.monotonic_ns
         self.faults = faults or Faults()
         self._rng = random.Random(self.faults.seed)
         self._plans: dict[tuple[int, int, int], list[_Hit]] = {}
@@ -82,6 +86,7 @@ class VirtualSegment:
         self.on_state_change: Callable[[StateChange], None] | None = None
         for pos, slave in enumerate(slaves):
             slave.position = pos
+            slave.clock_ns = self.clock_ns
             slave.set_links(True, pos + 1 < len(slaves))
             slave.on_mapping_change = self._plans.clear
             slave.on_state_change = self._state_changed
@@ -233,7 +238,7 @@ class VirtualSegment:
         if plan is None:
             plan = self._plans[key] = self._plan(cmd, address, len(data))
         lrw = cmd == Cmd.LRW
-        now = time.monotonic()
+        now = self.clock_ns() / 1e9
         added = 0
         # Plain tuples and locals: this loop runs for every slave of every cyclic frame.
         for slave, mem, writes, reads in plan:
@@ -323,8 +328,9 @@ class VirtualSegment:
             while delayed and delayed[0][0] <= now:
                 link.send(heapq.heappop(delayed)[2])
             if now >= next_tick:
+                slave_now = self.clock_ns() / 1e9
                 for s in self.slaves:
-                    s.check_watchdog(now)
+                    s.check_watchdog(slave_now)
                 next_tick = now + 0.002
             wait = 0.002
             if delayed:

@@ -107,6 +107,9 @@ class EmulatedSlave:
         self.name = name or device.type_name
         # Why the device comes from the ENI alone (runtime/eni_device.py), else None.
         self.eni_only: str | None = None
+        # The time every behaviour of this slave reads (ns, monotonic): the segment's clock
+        # (VirtualSegment(clock_ns=...)), wall time unless a test simulates time.
+        self.clock_ns: Callable[[], int] = time.monotonic_ns
         self.eeprom = bytearray(sii_image)
         self.od = od
         self.mailbox = mailbox
@@ -435,7 +438,7 @@ class EmulatedSlave:
 
     def outputs_written(self, now: float | None = None) -> None:
         """A complete write of an output SM (feeds the SM watchdog)."""
-        self._last_output_write = time.monotonic() if now is None else now
+        self._last_output_write = self.clock_ns() / 1e9 if now is None else now
         self.outputs_valid = True
         self._watchdog_expired = False
         self.mem[Reg.WATCHDOG_STATUS] = 1
@@ -670,7 +673,7 @@ class EmulatedSlave:
         if new not in RUNNING_STATES:
             self.outputs_valid = False
         if new == AlState.OP and old != AlState.OP:
-            self._last_output_write = time.monotonic()
+            self._last_output_write = self.clock_ns() / 1e9
             self._watchdog_expired = False
             self._arm_watchdog()
         if new == AlState.INIT:
@@ -695,7 +698,7 @@ class EmulatedSlave:
     # -- distributed clocks ------------------------------------------------------------------
 
     def local_time(self) -> int:
-        return time.monotonic_ns() + self._clock_base
+        return self.clock_ns() + self._clock_base
 
     def system_time(self) -> int:
         offset: int = struct.unpack_from("<q", self.mem, 0x0920)[0]
