@@ -41,6 +41,7 @@ class Reg(IntEnum):
 
     STATION_ADDRESS = 0x0010
     STATION_ALIAS = 0x0012
+    DL_STATUS = 0x0110
     DL_CONTROL_2 = 0x0103         # second station address enable (TwinCAT "en/disable")
     AL_CONTROL = 0x0120
     AL_STATUS = 0x0130            # + 0x0134 AL status code: 6 bytes with the padding
@@ -48,6 +49,7 @@ class Reg(IntEnum):
     PDI_CONTROL = 0x0140          # + 0x0141 ESC configuration: both loaded from SII word 0
     ESC_CONFIG = 0x0141
     ECAT_EVENT_MASK = 0x0200
+    ECAT_EVENT_REQUEST = 0x0210   # bit 2: DL status changed (cleared by reading 0x0110)
     RX_ERROR_COUNTER = 0x0300
     WATCHDOG_DIVIDER = 0x0400
     WATCHDOG_PDI = 0x0410
@@ -62,6 +64,7 @@ class Reg(IntEnum):
     SM0 = 0x0800
     DC_RECEIVE_TIME_PORT0 = 0x0900
     DC_SYSTEM_TIME = 0x0910
+    DC_SYSTEM_TIME_DIFFERENCE = 0x092C
     DC_SPEED_COUNTER_START = 0x0930
     DC_TIME_FILTER = 0x0934
     DC_CYCLIC_UNIT_CONTROL = 0x0980   # + 0x0981 activation (AssignActivate, 2 bytes LE)

@@ -54,6 +54,7 @@ _LOGICAL: dict[int, tuple[bool, bool]] = {Cmd.LRD: (True, False), Cmd.LWR: (Fals
                                           Cmd.LRW: (True, True)}        # (reads, writes)
 _ADDRESS_REGISTERS = (Reg.STATION_ADDRESS, Reg.DL_CONTROL_2 + 1)
 _AL_STATUS = int(Reg.AL_STATUS)
+_ESC_CONFIG = int(Reg.ESC_CONFIG)
 
 
 @dataclass(frozen=True, slots=True)
@@ -77,6 +78,7 @@ class VirtualSegment:
         """``clock_ns``: the time (ns, monotonic) the slaves live in; wall time by default,
         a simulated clock for deterministic tests of time-dependent behaviour."""
         self.slaves = slaves
+        self._mems = [s.mem for s in slaves]
         self.clock_ns: Callable[[], int] = clock_ns or time.monotonic_ns
         self.faults = faults or Faults()
         self._rng = random.Random(self.faults.seed)
@@ -114,6 +116,15 @@ class VirtualSegment:
         return buf
 
     def _datagram(self, buf: bytearray, view: memoryview, pos: int, n: int) -> None:
+        # IRQ: every slave ORs its unmasked ECAT event requests (0x0210 & 0x0200) into the
+        # datagram as it passes, before processing it (ETG.1000.4 IRQ field; a real EL1004
+        # still shows its DL status event in the reply that reads 0x0110 and clears it).
+        irq = 0
+        for m in self._mems:
+            irq |= m[0x0210] & m[0x0200] | (m[0x0211] & m[0x0201]) << 8
+        if irq:
+            buf[pos + 8] |= irq & 0xFF
+            buf[pos + 9] |= irq >> 8
         cmd = buf[pos]
         data = view[pos + DG_HEADER_LEN:pos + DG_HEADER_LEN + n]
         wkc_at = pos + DG_HEADER_LEN + n
@@ -189,8 +200,10 @@ class VirtualSegment:
     def _broadcast(self, cmd: int, ado: int, data: memoryview) -> int:
         n = len(data)
         if cmd == Cmd.BRD and ado + n <= PROCESS_RAM and not (
-                ado < Reg.DC_SYSTEM_TIME + 8 and ado + n > Reg.DC_SYSTEM_TIME):
-            # Plain registers (a cyclic BRD of AL status): no side effects, just OR them.
+                ado < Reg.DC_SYSTEM_TIME + 8 and ado + n > Reg.DC_SYSTEM_TIME) and not (
+                ado < Reg.DL_STATUS + 2 and ado + n > Reg.DL_STATUS):
+            # Plain registers (a cyclic BRD of AL status): no side effects (reading system
+            # time and DL status has some), just OR them.
             end = ado + n
             merged = int.from_bytes(data, "little")
             for s in self.slaves:
@@ -242,9 +255,12 @@ class VirtualSegment:
         added = 0
         # Plain tuples and locals: this loop runs for every slave of every cyclic frame.
         for slave, mem, writes, reads in plan:
-            # SAFEOP and OP exactly: a device-emulation ESC may show any value a master
-            # wrote, and process data moves in those two states only.
-            running = mem[_AL_STATUS] & 0x0F in RUNNING_STATES
+            # Firmware moves process data in SAFEOP and OP exactly (it enables the SMs on its
+            # side then).  An ESC without firmware (device emulation, 0x0141 bit 0) serves
+            # its FMMUs and SMs whatever AL status says: a real EL2828 and EL2889 in PREOP
+            # count an LRW (ethercrab-rs/ethercrab tests/replay-dc.pcapng, working counter
+            # 4); their output pins are driven in OP only (EmulatedSlave.outputs).
+            running = mem[_ESC_CONFIG] & 0x01 or mem[_AL_STATUS] & 0x0F in RUNNING_STATES
             hit_write = hit_read = False
             for offset, phys, length, bits, sm, completes in writes:   # outputs first (LRW)
                 if sm is not None and not (running and sm.enabled and sm.length):

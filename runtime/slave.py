@@ -63,9 +63,12 @@ _STATES: dict[int, AlState] = {int(s): s for s in AlState}
 # The states in which process data moves (ETG.1000.6: inputs from SAFEOP, outputs in OP).
 RUNNING_STATES = (int(AlState.SAFEOP), int(AlState.OP))
 
+# ECAT event request 0x0210 bit 2: DL status changed, cleared when the master reads 0x0110
+# (ESC Section II, 0x0210).
+DL_STATUS_EVENT = 0x0004
 # Registers the master cannot write (device information, status, EEPROM-loaded values).
 _READ_ONLY = [(0x0000, 0x0010), (0x0110, 0x0112), (0x0130, 0x0136), (0x0140, 0x0142),
-              (0x0150, 0x0154), (0x0440, 0x0444), (0x0982, 0x0985)]
+              (0x0150, 0x0154), (0x0210, 0x0214), (0x0440, 0x0444), (0x0982, 0x0985)]
 _READ_ONLY += [(sm_register(n) + 5, sm_register(n) + 6) for n in range(N_SM)]
 _READ_ONLY += [(sm_register(n) + 7, sm_register(n) + 8) for n in range(N_SM)]
 
@@ -95,6 +98,16 @@ _ABSENT = ((fmmu_register(N_FMMU), fmmu_register(16)), (sm_register(N_SM), sm_re
 
 def _absent(ado: int, n: int) -> bool:
     return any(start <= ado and ado + n <= end for start, end in _ABSENT)
+
+
+# Read-only registers whose write gets no working counter: a BWR of 0x092C (system time
+# difference) comes back with 0 from an EK1100, EL2828 and EL2889 while their other DC
+# registers count (ethercrab-rs/ethercrab tests/replay-dc.pcapng).
+_UNWRITABLE = ((Reg.DC_SYSTEM_TIME_DIFFERENCE, Reg.DC_SYSTEM_TIME_DIFFERENCE + 4),)
+
+
+def _unwritable(ado: int, n: int) -> bool:
+    return any(start <= ado and ado + n <= end for start, end in _UNWRITABLE)
 
 
 class EmulatedSlave:
@@ -146,6 +159,10 @@ class EmulatedSlave:
         m[0x0006] = (MEMORY_SIZE - PROCESS_RAM) // 1024 - 1
         m[0x0007] = self._port_descriptor()
         struct.pack_into("<H", m, 0x0008, ESC_FEATURES)
+        # DL control byte 2 after reset: RX FIFO size 7 and bits 22-23 set, as an EK1100
+        # (ET1100) and an EL1004 (ET1200) read it (ethercrab-rs/ethercrab
+        # dumps/twincat-scan-boxes.pcapng).
+        m[Reg.DL_CONTROL_2 - 1] = 0xC7
         struct.pack_into("<H", m, Reg.AL_STATUS, AlState.INIT)
         struct.pack_into("<H", m, Reg.WATCHDOG_DIVIDER, DEFAULT_WD_DIVIDER)
         struct.pack_into("<H", m, Reg.WATCHDOG_PDI, DEFAULT_WD_TIME)
@@ -192,7 +209,13 @@ class EmulatedSlave:
         else:
             status |= 0x0400
         status |= 0x1000 | 0x4000
-        struct.pack_into("<H", self.mem, 0x0110, status)
+        if status != struct.unpack_from("<H", self.mem, Reg.DL_STATUS)[0]:
+            # A change of DL status (the links coming up at power-on) raises the ECAT
+            # event; real slaves show it in the IRQ field once the master unmasks it
+            # (SOEM and TwinCAT write 0x0200 = 0x0004; ethercrab-rs/ethercrab
+            # dumps/soem-sdinfo-ek1100-el1004.pcapng, dumps/twincat-scan-boxes.pcapng).
+            self.mem[Reg.ECAT_EVENT_REQUEST] |= DL_STATUS_EVENT
+        struct.pack_into("<H", self.mem, Reg.DL_STATUS, status)
 
     # -- state ------------------------------------------------------------------------------
 
@@ -253,6 +276,8 @@ class EmulatedSlave:
         if end > MEMORY_SIZE or _absent(ado, n):
             return None
         if ado < PROCESS_RAM:
+            if _overlaps(ado, n, Reg.DL_STATUS, Reg.DL_STATUS + 2):
+                self.mem[Reg.ECAT_EVENT_REQUEST] &= ~DL_STATUS_EVENT & 0xFF
             if _overlaps(ado, n, Reg.DC_SYSTEM_TIME, Reg.DC_SYSTEM_TIME + 8):
                 struct.pack_into("<Q", self.mem, Reg.DC_SYSTEM_TIME, self.system_time())
             return bytes(self.mem[ado:end])
@@ -265,7 +290,7 @@ class EmulatedSlave:
         """Write from the wire; ``False`` when the ESC refuses (a full mailbox)."""
         n = len(data)
         end = ado + n
-        if end > MEMORY_SIZE or _absent(ado, n):
+        if end > MEMORY_SIZE or _absent(ado, n) or _unwritable(ado, n):
             return False
         if ado >= PROCESS_RAM:
             for sm in self.sms:

@@ -134,7 +134,8 @@ def datagram_offsets(frame: bytes | bytearray | memoryview) -> list[tuple[int, i
     """Where each datagram's header and data start: ``[(header_offset, data_length), ...]``.
 
     Raises :class:`FrameError` for a frame that is not EtherCAT or whose lengths disagree
-    (the EtherCAT header's length must cover exactly the datagrams; padding may follow).
+    (the datagrams must lie within the EtherCAT header's length; padding may follow them,
+    inside that length as well as after it).
     """
     if len(frame) < FRAME_HEADER_END + DG_HEADER_LEN + WKC.size:
         raise FrameError(f"frame of {len(frame)} bytes is too short for one datagram")
@@ -163,8 +164,9 @@ def datagram_offsets(frame: bytes | bytearray | memoryview) -> list[tuple[int, i
         pos += DG_HEADER_LEN + n + WKC.size
         if not flags & MORE:
             break
-    if pos != end:
-        raise FrameError(f"datagrams end at byte {pos}, the EtherCAT header says {end}")
+    # Bytes after the last datagram but inside the header's length are padding: TwinCAT
+    # sends a 13-byte BWR with an EtherCAT length of 14 and real ESCs process it
+    # (ethercrab-rs/ethercrab dumps/twincat-scan-devices-2.pcapng: working counter 2).
     return out
 
 

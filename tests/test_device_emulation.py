@@ -104,7 +104,9 @@ def test_a_firmware_refuses_the_same_sizing_with_its_code(beckhoff):
 def test_al_control_is_copied_into_al_status(beckhoff):
     """Every value as written, whatever the state before (ESC Section II, 0x0120 note): the
     acknowledge bit becomes the error flag, BOOT and values that are no state are shown
-    too, the status code is left alone; no process data outside SAFEOP and OP."""
+    too, the status code is left alone.  With no firmware to switch SMs off, the ESC serves
+    its FMMUs in any state, as a real EL2828 and EL2889 count an LRW in PREOP
+    (ethercrab-rs/ethercrab tests/replay-dc.pcapng)."""
     seg = line(beckhoff, "EL1004")
     address_all(seg)
     assert request(seg, 0x1001, 0x0011) == (0x0011, 0)
@@ -116,7 +118,7 @@ def test_al_control_is_copied_into_al_status(beckhoff):
     assert request(seg, 0x1001, 0x0005) == (0x0005, 0)                 # no such state
     assert seg.slaves[0].state is None
     [d] = run(seg, Datagram.logical(Cmd.LRD, 0, 1))
-    assert d.wkc == 0
+    assert d.wkc == 1
     assert request(seg, 0x1001, AlState.SAFEOP) == (AlState.SAFEOP, 0)
     [d] = run(seg, Datagram.logical(Cmd.LRD, 0, 1))
     assert d.wkc == 1
