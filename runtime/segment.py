@@ -55,6 +55,9 @@ _LOGICAL: dict[int, tuple[bool, bool]] = {Cmd.LRD: (True, False), Cmd.LWR: (Fals
 _ADDRESS_REGISTERS = (Reg.STATION_ADDRESS, Reg.DL_CONTROL_2 + 1)
 _AL_STATUS = int(Reg.AL_STATUS)
 _ESC_CONFIG = int(Reg.ESC_CONFIG)
+# What changes the IRQ: reading DL status (0x0110), the ECAT event mask (0x0200) up to the
+# event request (0x0210-0x0211).
+_EVENTS_END = int(Reg.ECAT_EVENT_REQUEST) + 2
 
 
 @dataclass(frozen=True, slots=True)
@@ -79,6 +82,7 @@ class VirtualSegment:
         a simulated clock for deterministic tests of time-dependent behaviour."""
         self.slaves = slaves
         self._mems = [s.mem for s in slaves]
+        self._irq: int | None = None       # the IRQ all slaves OR in; None: work it out
         self.clock_ns: Callable[[], int] = clock_ns or time.monotonic_ns
         self.faults = faults or Faults()
         self._rng = random.Random(self.faults.seed)
@@ -119,13 +123,23 @@ class VirtualSegment:
         # IRQ: every slave ORs its unmasked ECAT event requests (0x0210 & 0x0200) into the
         # datagram as it passes, before processing it (ETG.1000.4 IRQ field; a real EL1004
         # still shows its DL status event in the reply that reads 0x0110 and clears it).
-        irq = 0
-        for m in self._mems:
-            irq |= m[0x0210] & m[0x0200] | (m[0x0211] & m[0x0201]) << 8
+        # Worked out again only after a datagram that may change it (one that touches the
+        # event mask or request, or reads DL status): cyclic frames pay nothing.
+        irq = self._irq
+        if irq is None:
+            irq = 0
+            for m in self._mems:
+                irq |= m[0x0210] & m[0x0200] | (m[0x0211] & m[0x0201]) << 8
+            self._irq = irq
         if irq:
             buf[pos + 8] |= irq & 0xFF
             buf[pos + 9] |= irq >> 8
         cmd = buf[pos]
+        if cmd not in _LOGICAL:
+            ado, = struct.unpack_from("<H", buf, pos + 4)
+            if (ado < Reg.DL_STATUS + 2 and ado + n > Reg.DL_STATUS
+                    or ado < _EVENTS_END and ado + n > Reg.ECAT_EVENT_MASK):
+                self._irq = None
         data = view[pos + DG_HEADER_LEN:pos + DG_HEADER_LEN + n]
         wkc_at = pos + DG_HEADER_LEN + n
         if cmd in _LOGICAL:
