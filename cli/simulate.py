@@ -36,6 +36,11 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                         "the slaves processed them")
     p.add_argument("--seed", type=int, default=0, metavar="N",
                    help="seed of the fault injection (same seed, same faults)")
+    p.add_argument("--realistic", action="store_true",
+                   help="slaves take the time real ones do: mailbox replies, state changes "
+                        "and EEPROM reads per device kind, from the table in docs/timing.md")
+    p.add_argument("--timing", metavar="FILE",
+                   help="JSON file overriding figures of that table (implies --realistic)")
     p.add_argument("--no-cache", action="store_true",
                    help="do not read or write the ESI index cache")
     p.set_defaults(run=run)
@@ -86,16 +91,26 @@ def run(args: argparse.Namespace) -> int:
         specs = emulate.specs_from_eni(plan, lib, args.eni)
     if not specs:
         raise EcatcfgError(f"{source}: no slaves to emulate")
-    seg = emulate.segment(specs, Faults(drop=args.drop, seed=args.seed))
+    timing = None
+    if args.timing:
+        if not Path(args.timing).exists():
+            raise UsageError(f"--timing {args.timing}: no such file")
+        from ecatcfg.runtime import timing as timing_model
+        timing = timing_model.load(args.timing)
+    elif args.realistic:
+        from ecatcfg.runtime.timing import Timing
+        timing = Timing()
+    seg = emulate.segment(specs, Faults(drop=args.drop, seed=args.seed), timing)
 
     print(f"{'pos':>3}  {'name':16} {'device':14} {'vendor':>10} {'product':>10} "
-          f"{'revision':>10}  {'from':4} mailbox")
+          f"{'revision':>10}  {'from':4} mailbox" + ("  timing" if timing else ""))
     for s in seg.slaves:
         dev = s.device
         mbx = ",".join(dev.mailbox.protocols) if dev.mailbox else "-"
         print(f"{s.position:>3}  {s.name[:16]:16} {dev.type_name[:14]:14} "
               f"0x{dev.vendor.id or 0:08x} 0x{dev.product_code or 0:08x} "
-              f"0x{dev.revision or 0:08x}  {'ENI' if s.eni_only else 'ESI':4} {mbx}")
+              f"0x{dev.revision or 0:08x}  {'ENI' if s.eni_only else 'ESI':4} {mbx}"
+              + (f"  {s.timing.kind}" if s.timing else ""))
     for s in seg.slaves:
         if s.eni_only is not None:
             print(f"note: slave {s.position} ({s.name}) emulated from the ENI alone: "

@@ -24,6 +24,7 @@ from ecatcfg.runtime.slave import EmulatedSlave
 if TYPE_CHECKING:
     from ecatcfg.esi.library import Library
     from ecatcfg.runtime.objects import ObjectDictionary
+    from ecatcfg.runtime.timing import Timing
 
 
 @dataclass(frozen=True, slots=True)
@@ -131,9 +132,11 @@ def _add_written_objects(od: ObjectDictionary, writes: list[Write]) -> None:
 _NUMBER_TYPES = {1: "USINT", 2: "UINT", 4: "UDINT", 8: "ULINT"}
 
 
-def segment(specs: list[SlaveSpec], faults: Faults | None = None) -> VirtualSegment:
-    """A line of emulated slaves in the order given."""
-    return VirtualSegment([emulated_slave(s) for s in specs], faults)
+def segment(specs: list[SlaveSpec], faults: Faults | None = None,
+            timing: Timing | None = None) -> VirtualSegment:
+    """A line of emulated slaves in the order given; ``timing``: how long they take
+    (``runtime/timing.py``, ``simulate --realistic``), none by default."""
+    return VirtualSegment([emulated_slave(s) for s in specs], faults, timing=timing)
 
 
 def specs_from_eni(plan: NetworkPlan, library: Library | None, shown: str) -> list[SlaveSpec]:

@@ -38,6 +38,7 @@ if TYPE_CHECKING:                   # imported where used: `import ecatcfg.runti
     from ecatcfg.runtime.link import Link
     from ecatcfg.runtime.pcap import PcapRecorder
     from ecatcfg.runtime.segment import Faults, VirtualSegment
+    from ecatcfg.runtime.timing import Timing
 
 _FLOATS = {"REAL": "<f", "LREAL": "<d"}
 _SIGNED = {"SINT", "INT", "DINT", "LINT", "INT24", "INT40", "INT48", "INT56"}
@@ -98,13 +99,16 @@ class Network:
                 faults: Faults | None = None, esi_cache: bool = True,
                 pcap: str | Path | None = None,
                 on_event: Callable[[Event], None] | None = None,
-                skip_unsupported: bool = False, eni_name: str | None = None) -> Network:
+                skip_unsupported: bool = False, eni_name: str | None = None,
+                timing: Timing | None = None) -> Network:
         """The ENI on a virtual segment that emulates its slaves from the ESI files
         (``esi_cache``: through the ESI index cache).  A slave whose device the files do not
         hold, and every slave without ``esi``, is emulated from the ENI alone
         (``runtime/eni_device.py``); each such slave is an ``Event("emulated", ...)`` to
         ``on_event`` and has ``eni_only`` set in ``net.segment.slaves``.
-        ``skip_unsupported`` and ``eni_name`` as for the constructor."""
+        ``skip_unsupported`` and ``eni_name`` as for the constructor.  ``timing``: slaves
+        that take the time real ones do (``runtime/timing.py``, e.g. ``Timing()`` for the
+        table); instantaneous slaves by default."""
         from ecatcfg.eni import reader as eni_reader
         from ecatcfg.esi.library import Library
         from ecatcfg.runtime import emulate
@@ -116,7 +120,8 @@ class Network:
             _check_supported(plan, eni_name or (None if isinstance(eni, NetworkPlan)
                                                 else str(eni)), False, None)
         library = Library([str(p) for p in esi], cache=esi_cache) if esi else None
-        segment = emulate.segment(emulate.specs_from_eni(plan, library, shown), faults)
+        segment = emulate.segment(emulate.specs_from_eni(plan, library, shown), faults,
+                                  timing)
         if on_event is not None:
             for slave in segment.slaves:
                 if slave.eni_only is not None:

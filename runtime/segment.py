@@ -33,6 +33,7 @@ from ecatcfg.runtime.wire import DG_HEADER_LEN, FrameError, datagram_offsets
 
 if TYPE_CHECKING:
     from ecatcfg.runtime.link import Link
+    from ecatcfg.runtime.timing import Timing
 
 # Propagation through one slave in the emulated line (ns): processing on the way out
 # (port 0 -> 3 -> 1) and forwarding on the way back (docs/protocol-notes.md §8).
@@ -77,9 +78,11 @@ class VirtualSegment:
     """Emulated slaves in bus order (position 0 is the first after the master)."""
 
     def __init__(self, slaves: list[EmulatedSlave], faults: Faults | None = None, *,
-                 clock_ns: Callable[[], int] | None = None) -> None:
+                 clock_ns: Callable[[], int] | None = None,
+                 timing: Timing | None = None) -> None:
         """``clock_ns``: the time (ns, monotonic) the slaves live in; wall time by default,
-        a simulated clock for deterministic tests of time-dependent behaviour."""
+        a simulated clock for deterministic tests of time-dependent behaviour.
+        ``timing``: how long the slaves take (``runtime/timing.py``); None: no time."""
         self.slaves = slaves
         self._mems = [s.mem for s in slaves]
         self._irq: int | None = None       # the IRQ all slaves OR in; None: work it out
@@ -96,6 +99,20 @@ class VirtualSegment:
             slave.set_links(True, pos + 1 < len(slaves))
             slave.on_mapping_change = self._plans.clear
             slave.on_state_change = self._state_changed
+        self._timed: list[EmulatedSlave] = []
+        self.set_timing(timing)
+
+    def set_timing(self, timing: Timing | None) -> None:
+        """Give every slave its kind's times (``runtime/timing.py``), or none."""
+        for slave in self.slaves:
+            slave.timing = timing.for_slave(slave) if timing is not None else None
+        self._timed = [s for s in self.slaves if s.timing is not None]
+
+    def settle(self) -> None:
+        """Make what the slaves finished by now visible (timing model)."""
+        for slave in self._timed:
+            if slave.busy:
+                slave.settle()
 
     def _state_changed(self, change: StateChange) -> None:
         if self.on_state_change:
@@ -107,6 +124,8 @@ class VirtualSegment:
         """The frame as it comes back to the master after passing every slave."""
         buf = bytearray(frame)
         self.frames += 1
+        if self._timed:
+            self.settle()
         try:
             offsets = datagram_offsets(buf)
         except FrameError:
@@ -359,6 +378,7 @@ class VirtualSegment:
                 link.send(heapq.heappop(delayed)[2])
             if now >= next_tick:
                 slave_now = self.clock_ns() / 1e9
+                self.settle()
                 for s in self.slaves:
                     s.check_watchdog(slave_now)
                 next_tick = now + 0.002

@@ -24,7 +24,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-from ecatcfg.esc import (AL_ERROR_ACK, AL_STATE_MASK, AL_STATUS_ERROR, EEPROM_CMD_MASK,
+from ecatcfg.esc import (AL_ERROR_ACK, AL_STATE_MASK, AL_STATUS_ERROR, EEPROM_BUSY,
+                         EEPROM_CMD_MASK,
                          EEPROM_CMD_READ, EEPROM_CMD_RELOAD, EEPROM_CMD_WRITE, EEPROM_R64,
                          EEPROM_WRITE_ENABLE, ESC_DEVICE_EMULATION, FMMU_SIZE, PDI_DIGITAL_IO,
                          SM_ACTIVATE_REPEAT, SM_DIR_MASK, SM_MODE_MASK, SM_WATCHDOG_ENABLE,
@@ -37,6 +38,7 @@ if TYPE_CHECKING:                   # only slaves with a mailbox bring these
     from ecatcfg.eoe import IpParameters
     from ecatcfg.runtime.mailbox_server import MailboxServer
     from ecatcfg.runtime.objects import ObjectDictionary
+    from ecatcfg.runtime.timing import SlaveTiming
 
 MEMORY_SIZE = 0x10000
 PROCESS_RAM = 0x1000
@@ -123,6 +125,14 @@ class EmulatedSlave:
         # The time every behaviour of this slave reads (ns, monotonic): the segment's clock
         # (VirtualSegment(clock_ns=...)), wall time unless a test simulates time.
         self.clock_ns: Callable[[], int] = time.monotonic_ns
+        # How long the firmware and the EEPROM take (runtime/timing.py); None: no time.
+        self.timing: SlaveTiming | None = None
+        # Work in progress under the timing model, each with the clock_ns it is done at:
+        # an EEPROM read, a state change, mailbox replies (settle() makes them visible).
+        self._eeprom_due: int | None = None
+        self._eeprom_regs = b""
+        self._transition: tuple[int, AlState] | None = None
+        self._replies: deque[tuple[int, list[bytes]]] = deque()
         self.eeprom = bytearray(sii_image)
         self.od = od
         self.mailbox = mailbox
@@ -309,7 +319,10 @@ class EmulatedSlave:
         return True
 
     def _after_register_write(self, ado: int, n: int) -> None:
-        if _overlaps(ado, n, 0x0502, 0x0504):
+        if self._eeprom_due is not None and _overlaps(ado, n, 0x0502, 0x0508):
+            # Busy: the ESC ignores writes to the EEPROM interface until the read is done.
+            self.mem[0x0502:0x0508] = self._eeprom_regs
+        elif _overlaps(ado, n, 0x0502, 0x0504):
             self._eeprom_command()
         if _overlaps(ado, n, Reg.WATCHDOG_COUNTER_SM, Reg.WATCHDOG_COUNTER_SM + 2):
             # Writing either watchdog counter clears both (ESC Section II, 0x0442-0x0443).
@@ -338,9 +351,17 @@ class EmulatedSlave:
         control = struct.unpack_from("<H", self.mem, Reg.EEPROM_CONTROL)[0]
         command = control & EEPROM_CMD_MASK
         address = struct.unpack_from("<I", self.mem, Reg.EEPROM_ADDRESS)[0]
+        if command == EEPROM_CMD_READ and self.timing and self.timing.eeprom_read_ns:
+            # Busy with the command bits set until the read is done: a real EK1100 reads
+            # 0x8140, then 0x0040 (ethercrab-rs/ethercrab tests/replay-ek1100-el2828-el2889
+            # .pcapng); the data registers fill at the end.
+            struct.pack_into("<H", self.mem, Reg.EEPROM_CONTROL,
+                             EEPROM_BUSY | EEPROM_CMD_READ | EEPROM_R64)
+            self._eeprom_regs = bytes(self.mem[0x0502:0x0508])
+            self._eeprom_due = self.clock_ns() + self.timing.eeprom_read_ns
+            return
         if command == EEPROM_CMD_READ:                        # read 4 words
-            data = bytes(self.eeprom[2 * address:2 * address + 8])
-            self.mem[Reg.EEPROM_DATA:Reg.EEPROM_DATA + 8] = data + b"\xff" * (8 - len(data))
+            self._eeprom_read(address)
         elif command == EEPROM_CMD_WRITE and control & EEPROM_WRITE_ENABLE:   # one word
             if 2 * address + 2 <= len(self.eeprom):
                 self.eeprom[2 * address:2 * address + 2] = self.mem[Reg.EEPROM_DATA:
@@ -349,6 +370,35 @@ class EmulatedSlave:
             self._load_eeprom()
         # Commands complete at once: busy, command and write-enable bits read back clear.
         struct.pack_into("<H", self.mem, Reg.EEPROM_CONTROL, EEPROM_R64)
+
+    def _eeprom_read(self, address: int) -> None:
+        data = bytes(self.eeprom[2 * address:2 * address + 8])
+        self.mem[Reg.EEPROM_DATA:Reg.EEPROM_DATA + 8] = data + b"\xff" * (8 - len(data))
+
+    # -- work that takes time (runtime/timing.py) --------------------------------------------
+
+    @property
+    def busy(self) -> bool:
+        """Work in progress that becomes visible later (timing model)."""
+        return self._eeprom_due is not None or self._transition is not None \
+            or bool(self._replies)
+
+    def settle(self) -> None:
+        """Make visible what is done by now (clock_ns): the segment calls this before
+        every frame and on its ticks, so a reader never sees work before its time."""
+        now = self.clock_ns()
+        if self._eeprom_due is not None and now >= self._eeprom_due:
+            self._eeprom_due = None
+            address, = struct.unpack_from("<I", self.mem, Reg.EEPROM_ADDRESS)
+            self._eeprom_read(address)
+            struct.pack_into("<H", self.mem, Reg.EEPROM_CONTROL, EEPROM_R64)
+        if self._transition is not None and now >= self._transition[0]:
+            target = self._transition[1]
+            self._transition = None
+            self._enter(target)
+        while self._replies and now >= self._replies[0][0]:
+            self.mailbox_queue.extend(self._replies.popleft()[1])
+            self._post_next()
 
     # -- FMMUs and SyncManagers --------------------------------------------------------------
 
@@ -394,6 +444,7 @@ class EmulatedSlave:
 
     def _stop_mailbox(self) -> None:
         self.mailbox_queue.clear()
+        self._replies.clear()
         self.last_mailbox = None
 
     def _write_sm_area(self, sm: SmState, ado: int, data: bytes | memoryview) -> bool:
@@ -442,6 +493,10 @@ class EmulatedSlave:
         if state is None or state in (AlState.INIT, AlState.BOOT) or self.mailbox is None:
             return
         replies = self.mailbox.handle(message, state)
+        if replies and self.timing and self.timing.mailbox_reply_ns:
+            # The firmware answers after its reply latency (runtime/timing.py).
+            self._replies.append((self.clock_ns() + self.timing.mailbox_reply_ns, replies))
+            return
         self.mailbox_queue.extend(replies)
         self._post_next()
 
@@ -538,6 +593,10 @@ class EmulatedSlave:
             self._mirror_al_control(control)
             return
         requested = control & AL_STATE_MASK
+        if self._transition is not None:
+            if requested == self._transition[1]:
+                return              # already on its way there
+            self._transition = None  # a new request replaces the one in progress
         ack = bool(control & AL_ERROR_ACK)
         current = self.state
         assert current is not None          # firmware only ever sets states
@@ -564,6 +623,11 @@ class EmulatedSlave:
         code = self.refuse.get(transition) or self._check(current, target)
         if code:
             self._set_state(current if target > current else target, code)
+            return
+        delay = self.timing.transition_ns(transition) if self.timing else 0
+        if delay:
+            # AL status keeps the old state until the firmware is done (runtime/timing.py).
+            self._transition = (self.clock_ns() + delay, target)
             return
         self._enter(target)
 
@@ -713,6 +777,7 @@ class EmulatedSlave:
         self._set_state(target, 0)
 
     def _set_state(self, state: AlState, code: int) -> None:
+        self._transition = None
         status = int(state) | (AL_STATUS_ERROR if code else 0)
         struct.pack_into("<H", self.mem, Reg.AL_STATUS, status)
         struct.pack_into("<H", self.mem, Reg.AL_STATUS_CODE, code)
