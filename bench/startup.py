@@ -4,6 +4,14 @@ apply`` against SOEM (pysoem) on the same virtual segment, in the same run.
 Run from the checkout, as root:
     python3 bench/startup.py [-n N] [--sizes 1,8,64] [--corpus] [--layouts free,same,split]
                              [--breakdown N] [--bytecode cache|env] [--profile SIZE] [--keep]
+                             [--realistic]
+
+``--realistic``: slaves that take time (``simulate --realistic``, runtime/timing.py: the
+drives' mailbox replies 28.5 ms, PS and SO 100 ms each ...) on lines of CiA 402 drives
+only, 8 and 64 (``402x8``, ``402x64``), each with its PDO assignment over CoE.  apply runs
+``--cycles 1``; the SOEM script writes the same PDO assignment SDOs as the ENI's PS
+InitCmds (pysoem ``sdo_write``, slave after slave, in PREOP before ``config_map``), so both
+masters do the same mailbox work.  Target: apply at most 0.2x SOEM's time at 64 drives.
 
 Method (targets: apply's whole process no slower than SOEM's, and apply's frames at most
 1.2x the minimum defined below):
@@ -102,6 +110,7 @@ ROOT = Path(__file__).resolve().parent.parent
 ESI_DIR = ROOT / "examples" / "esi"
 CORPUS = ROOT.parent / "shared" / "corpus" / "esi"
 TIME_TARGET = 1.0
+REALISTIC_TARGET = 0.2
 FRAME_TARGET = 1.2
 
 # SOEM up to OP and out (no INIT request at the end), timing itself.
@@ -117,6 +126,14 @@ try:
     t = time.monotonic()
     r["found"] = m.config_init()
     r["init_s"] = time.monotonic() - t
+    if r["found"] > 0 and len(sys.argv) > 2:
+        # The ENI's PDO assignment SDOs (PS), slave after slave, as a SOEM program writes
+        # them; config_map then reads the mapping back.
+        m.state_check(pysoem.PREOP_STATE, 5_000_000)
+        for i, cmds in enumerate(json.load(open(sys.argv[2]))):
+            for index, sub, data, ca in cmds:
+                m.slaves[i].sdo_write(index, sub, bytes.fromhex(data), ca)
+        r["assign_s"] = time.monotonic() - t
     if r["found"] > 0:
         r["iomap"] = m.config_map()
         r["map_s"] = time.monotonic() - t
@@ -190,6 +207,8 @@ def lines(corpus: bool) -> dict[str, tuple[list[str], list[tuple[str, str]]]]:
                                ("out1", "EX2008"), ("in3", "EX1008"), ("axis1", "EXD-402"),
                                ("out2", "EX2008"), ("axis2", "EXD-402")]),
         "64": ([str(ESI_DIR)], line(64, True)),
+        "402x8": ([str(ESI_DIR)], [(f"axis{i}", "EXD-402") for i in range(8)]),
+        "402x64": ([str(ESI_DIR)], [(f"axis{i}", "EXD-402") for i in range(64)]),
     }
     if corpus:
         files = [CORPUS / "beckhoff" / "Beckhoff EK11xx.xml",
@@ -290,6 +309,19 @@ def minimum_frames(plan) -> Minimum:
     return m
 
 
+def pdo_assignment(plan) -> list[list[tuple[int, int, str, bool]]]:
+    """Per slave in line order, the CoE downloads of its PS InitCmds (index, subindex,
+    data hex, complete access): what the SOEM script writes in --realistic runs."""
+    from ecatcfg.esc import Transition
+    out = []
+    for s in sorted(plan.slaves, key=lambda s: s.position):
+        cmds = s.mailbox.coe_init_cmds if s.mailbox else []
+        out.append([(c.index, c.subindex, c.data.hex(), bool(c.complete_access))
+                    for c in cmds if Transition.PS in c.transitions and not c.disabled
+                    and c.ccs == 1 and c.data is not None])
+    return out
+
+
 # ------------------------------------------------------------------ processes
 
 @dataclass
@@ -358,10 +390,15 @@ def pinned(cpu: int | None, argv: list[str]) -> list[str]:
     return argv if cpu is None else ["taskset", "-c", str(cpu), *argv]
 
 
+REALISTIC = False          # --realistic: the simulator's slaves take time
+
+
 def start_simulator(bench: StartupBench, esi: list[str], topo: Path,
                     cpu: int | None = None) -> subprocess.Popen:
     argv = [sys.executable, "-m", "ecatcfg", "simulate", "--topology", str(topo),
             "--iface", IF_B, "--no-cache", "--duration", "900"]
+    if REALISTIC:
+        argv.append("--realistic")
     for path in esi:
         argv += ["--esi", path]
     sim = bench.start(bench.ns_b, pinned(cpu, argv))
@@ -496,7 +533,16 @@ def main() -> None:
                          "(e.g. PYTHONDONTWRITEBYTECODE=1: every run compiles ecatcfg's "
                          "modules from source)")
     ap.add_argument("--keep", action="store_true", help="keep the temporary directory")
+    ap.add_argument("--realistic", action="store_true",
+                    help="slaves that take time (simulate --realistic) on lines of CiA 402 "
+                         "drives (default sizes 402x8,402x64); SOEM writes the same PDO "
+                         "assignment SDOs; target apply <= 0.2x SOEM at 64 drives")
     args = ap.parse_args()
+    if args.realistic:
+        global REALISTIC
+        REALISTIC = True
+        if args.sizes == ap.get_default("sizes"):
+            args.sizes = "402x8,402x64"
     run_as_root(ap, args, LAYOUTS, "startup", run)
 
 
@@ -544,7 +590,9 @@ def run(args: argparse.Namespace, tmp: Path) -> None:
         per_cycle = sum(1 for f in plan.cyclic[0].frames) if plan.cyclic else 0
         mix = {d: sum(1 for _, x in slaves if x == d)
                for d in dict.fromkeys(d for _, d in slaves)}
-        prepared[label] = (esi, topo, eni, plan, minimum_frames(plan), per_cycle)
+        assign = topo.with_suffix(".sdo.json")
+        assign.write_text(json.dumps(pdo_assignment(plan)))
+        prepared[label] = (esi, topo, eni, plan, minimum_frames(plan), per_cycle, assign)
         print(f"# line {label}: {len(slaves)} slaves "
               f"({', '.join(f'{k} x{v}' for k, v in mix.items())}); "
               f"cyclic frames per cycle {per_cycle}, cycle time "
@@ -556,10 +604,11 @@ def run(args: argparse.Namespace, tmp: Path) -> None:
     layouts = [x for x in args.layouts.split(",") if x]
     try:
         bench.up()
-        for label, (esi, topo, eni, plan, minimum, per_cycle) in prepared.items():
+        for label, (esi, topo, eni, plan, minimum, per_cycle, assign) in prepared.items():
             apply_argv = [py, "-m", "ecatcfg", "apply", str(eni), "--iface", IF_A,
-                          "--state", "op", "--cycles", "0", "--stay", "--format", "json"]
-            soem_argv = [py, "-c", SOEM, IF_A]
+                          "--state", "op", "--cycles", "1" if REALISTIC else "0", "--stay",
+                          "--format", "json"]
+            soem_argv = [py, "-c", SOEM, IF_A] + ([str(assign)] if REALISTIC else [])
             for n_layout, layout in enumerate(layouts):
                 cpus = LAYOUTS[layout]
                 runs: dict[str, list[Run]] = {"apply": [], "apply cold": [], "SOEM": []}
@@ -651,9 +700,13 @@ def report_line(label: str, runs: dict[str, list[Run]], warm: dict[str, Run],
           f"{statistics.median(total) / minimum.total:.2f}x (target <= {FRAME_TARGET}x: "
           f"configuration {_met(statistics.median(config) / minimum.total <= FRAME_TARGET)}"
           f", all {_met(statistics.median(total) / minimum.total <= FRAME_TARGET)}); "
-          f"time target apply <= SOEM (median): "
-          f"{_met(statistics.median(aw) <= TIME_TARGET * statistics.median(sw))}, with a "
-          f"cold plan cache {_met(statistics.median(cw) <= TIME_TARGET * statistics.median(sw))}")
+          f"time target apply <= {target()}x SOEM (median): "
+          f"{_met(statistics.median(aw) <= target() * statistics.median(sw))}, with a "
+          f"cold plan cache {_met(statistics.median(cw) <= target() * statistics.median(sw))}")
+
+
+def target() -> float:
+    return REALISTIC_TARGET if REALISTIC else TIME_TARGET
 
 
 def final_read_frames(n: int) -> int:
