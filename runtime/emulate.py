@@ -22,7 +22,10 @@ from ecatcfg.runtime.segment import Faults, VirtualSegment
 from ecatcfg.runtime.slave import EmulatedSlave
 
 if TYPE_CHECKING:
+    from collections.abc import Callable
+
     from ecatcfg.esi.library import Library
+    from ecatcfg.runtime.dc_clock import DcModel
     from ecatcfg.runtime.objects import ObjectDictionary
     from ecatcfg.runtime.timing import Timing
 
@@ -133,10 +136,13 @@ _NUMBER_TYPES = {1: "USINT", 2: "UINT", 4: "UDINT", 8: "ULINT"}
 
 
 def segment(specs: list[SlaveSpec], faults: Faults | None = None,
-            timing: Timing | None = None) -> VirtualSegment:
+            timing: Timing | None = None, *, clock_ns: Callable[[], int] | None = None,
+            dc: DcModel | None = None) -> VirtualSegment:
     """A line of emulated slaves in the order given; ``timing``: how long they take
-    (``runtime/timing.py``, ``simulate --realistic``), none by default."""
-    return VirtualSegment([emulated_slave(s) for s in specs], faults, timing=timing)
+    (``runtime/timing.py``, ``simulate --realistic``), none by default; ``clock_ns`` and
+    ``dc`` as for :class:`VirtualSegment`."""
+    return VirtualSegment([emulated_slave(s) for s in specs], faults, timing=timing,
+                          clock_ns=clock_ns, dc=dc)
 
 
 def specs_from_eni(plan: NetworkPlan, library: Library | None, shown: str) -> list[SlaveSpec]:

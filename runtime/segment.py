@@ -26,6 +26,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from ecatcfg.esc import Cmd, FmmuType, Reg
+from ecatcfg.runtime.dc_clock import DcModel
 from ecatcfg.runtime.slave import (MEMORY_SIZE, PROCESS_RAM, RUNNING_STATES, EmulatedSlave,
                                    StateChange)
 from ecatcfg.runtime.syncman import SmKind, SmState
@@ -34,11 +35,6 @@ from ecatcfg.runtime.wire import DG_HEADER_LEN, FrameError, datagram_offsets
 if TYPE_CHECKING:
     from ecatcfg.runtime.link import Link
     from ecatcfg.runtime.timing import Timing
-
-# Propagation through one slave in the emulated line (ns): processing on the way out
-# (port 0 -> 3 -> 1) and forwarding on the way back (docs/protocol-notes.md §8).
-FORWARD_DELAY_NS = 600
-RETURN_DELAY_NS = 200
 
 _READS = {Cmd.APRD, Cmd.FPRD, Cmd.BRD, Cmd.LRD}
 _WRITES = {Cmd.APWR, Cmd.FPWR, Cmd.BWR, Cmd.LWR}
@@ -79,23 +75,31 @@ class VirtualSegment:
 
     def __init__(self, slaves: list[EmulatedSlave], faults: Faults | None = None, *,
                  clock_ns: Callable[[], int] | None = None,
-                 timing: Timing | None = None) -> None:
+                 timing: Timing | None = None, dc: DcModel | None = None) -> None:
         """``clock_ns``: the time (ns, monotonic) the slaves live in; wall time by default,
         a simulated clock for deterministic tests of time-dependent behaviour.
-        ``timing``: how long the slaves take (``runtime/timing.py``); None: no time."""
+        ``timing``: how long the slaves take (``runtime/timing.py``); None: no time.
+        ``dc``: the slaves' clocks (drift, start) and the line's timing; ``DcModel()`` by
+        default (seeded drift within ±100 ppm)."""
         self.slaves = slaves
         self._mems = [s.mem for s in slaves]
         self._irq: int | None = None       # the IRQ all slaves OR in; None: work it out
         self.clock_ns: Callable[[], int] = clock_ns or time.monotonic_ns
+        self.dc_model = dc or DcModel()
+        # While a frame passes, the slaves see the time it was sent (plus their place on
+        # the line, runtime/dc_clock.py): one frame, one instant.
+        self._frame_ns: int | None = None
         self.faults = faults or Faults()
         self._rng = random.Random(self.faults.seed)
         self._plans: dict[tuple[int, int, int], list[_Hit]] = {}
         self._by_address: dict[int, list[EmulatedSlave]] | None = None
         self.frames = 0
         self.on_state_change: Callable[[StateChange], None] | None = None
+        clocks = self.dc_model.clocks(len(slaves), self.clock_ns())
         for pos, slave in enumerate(slaves):
             slave.position = pos
-            slave.clock_ns = self.clock_ns
+            slave.clock_ns = self._now
+            slave.dc = clocks[pos]
             slave.set_links(True, pos + 1 < len(slaves))
             slave.on_mapping_change = self._plans.clear
             slave.on_state_change = self._state_changed
@@ -114,6 +118,10 @@ class VirtualSegment:
             if slave.busy:
                 slave.settle()
 
+    def _now(self) -> int:
+        frame = self._frame_ns
+        return self.clock_ns() if frame is None else frame
+
     def _state_changed(self, change: StateChange) -> None:
         if self.on_state_change:
             self.on_state_change(change)
@@ -131,9 +139,13 @@ class VirtualSegment:
         except FrameError:
             return buf                  # an ESC forwards what it cannot process
         view = memoryview(buf)
-        for pos, n in offsets:
-            self._datagram(buf, view, pos, n)
-        view.release()
+        self._frame_ns = self.clock_ns()
+        try:
+            for pos, n in offsets:
+                self._datagram(buf, view, pos, n)
+        finally:
+            self._frame_ns = None
+            view.release()
         if self.slaves:
             buf[6] |= 0x02              # the first ESC sets the U/L bit of the source MAC
         return buf
@@ -267,14 +279,14 @@ class VirtualSegment:
         return ok
 
     def _latch(self, slave: EmulatedSlave) -> None:
-        """Receive times of a 0x0900 write: the frame reaches slave k's port 0 after the
-        slaves before it and comes back to its port 1 after the rest of the line."""
-        pos = slave.position
-        downstream = len(self.slaves) - pos - 1
-        port0 = slave.local_time() + pos * FORWARD_DELAY_NS
-        port1 = (port0 + downstream * (FORWARD_DELAY_NS + RETURN_DELAY_NS)
-                 if downstream else None)
-        slave.latch_receive_times(port0, port1)
+        """Receive times of a 0x0900 write, in the slave's local time: the frame reaches
+        slave k's port 0 after the slaves before it and comes back to its port 1 after
+        the rest of the line (``DcModel.clocks``)."""
+        sent = self._now()
+        clock = slave.dc
+        port1 = clock.port1_ns
+        slave.latch_receive_times(clock.local(sent + clock.port0_ns),
+                                  None if port1 is None else clock.local(sent + port1))
 
     # -- logical addressing ------------------------------------------------------------------
 

@@ -32,6 +32,8 @@ from ecatcfg.esc import (AL_ERROR_ACK, AL_STATE_MASK, AL_STATUS_ERROR, EEPROM_BU
                          AlState, AlStatusCode, FmmuConfig, FmmuType, Reg, fmmu_register,
                          sm_register)
 from ecatcfg.esi.model import Device
+from ecatcfg.runtime.dc_clock import (SPEED_COUNTER_START, SPEED_FILTER_DEPTH,
+                                      TIME_FILTER_DEPTH, DcClock)
 from ecatcfg.runtime.syncman import SmKind, SmState
 
 if TYPE_CHECKING:                   # only slaves with a mailbox bring these
@@ -71,6 +73,8 @@ DL_STATUS_EVENT = 0x0004
 # Registers the master cannot write (device information, status, EEPROM-loaded values).
 _READ_ONLY = [(0x0000, 0x0010), (0x0110, 0x0112), (0x0130, 0x0136), (0x0140, 0x0142),
               (0x0150, 0x0154), (0x0210, 0x0214), (0x0440, 0x0444), (0x0982, 0x0985)]
+# DC: system time difference and speed counter diff (ESC Section II 0x092C, 0x0932).
+_READ_ONLY += [(0x092C, 0x0930), (0x0932, 0x0934)]
 _READ_ONLY += [(sm_register(n) + 5, sm_register(n) + 6) for n in range(N_SM)]
 _READ_ONLY += [(sm_register(n) + 7, sm_register(n) + 8) for n in range(N_SM)]
 
@@ -85,6 +89,10 @@ class StateChange:
     error: bool
     code: int
     note: str = ""          # e.g. a device-emulation slave running with other SM lengths
+
+
+# DC registers whose writes the ESC acts on: system time (0x0910) to the SYNC0 start time.
+_DC_LOOP, _DC_LOOP_END = 0x0910, 0x0998
 
 
 def _overlaps(a: int, n: int, start: int, end: int) -> bool:
@@ -149,7 +157,11 @@ class EmulatedSlave:
         self._last_output_write = 0.0
         self._watchdog_limit: float | None = None
         self._watchdog_expired = False
-        self._clock_base = 0
+        # The ESC's local clock and time control loop; the segment gives each slave its
+        # drift and place on the line (runtime/dc_clock.py).
+        self.dc = DcClock()
+        # SYNC0 start time (0x0990) minus the system time when it was written (ns).
+        self.sync0_start_lead_ns: int | None = None
         self._ro = bytearray(PROCESS_RAM)
         for start, end in _READ_ONLY:
             self._ro[start:end] = b"\x01" * (end - start)
@@ -179,10 +191,10 @@ class EmulatedSlave:
         struct.pack_into("<H", m, Reg.WATCHDOG_SM, DEFAULT_WD_TIME)
         m[Reg.WATCHDOG_STATUS] = 1                  # SM watchdog status: OK
         struct.pack_into("<H", m, Reg.EEPROM_CONTROL, EEPROM_R64)
-        struct.pack_into("<HH", m, 0x0934, 0x0C00, 0x1000)
+        struct.pack_into("<H", m, Reg.DC_SPEED_COUNTER_START, SPEED_COUNTER_START)
+        m[Reg.DC_TIME_FILTER] = TIME_FILTER_DEPTH
+        m[Reg.DC_TIME_FILTER + 1] = SPEED_FILTER_DEPTH
         self._load_eeprom()
-        # Each slave's local clock starts somewhere else, as on a real line.
-        self._clock_base = (hash(self.name) & 0xFFFF_FFFF) * 1000
 
     def _port_descriptor(self) -> int:
         """0x0007: two bits per port from the ESI's Physics ("YY" = MII, "KK" = E-Bus)."""
@@ -289,7 +301,7 @@ class EmulatedSlave:
             if _overlaps(ado, n, Reg.DL_STATUS, Reg.DL_STATUS + 2):
                 self.mem[Reg.ECAT_EVENT_REQUEST] &= ~DL_STATUS_EVENT & 0xFF
             if _overlaps(ado, n, Reg.DC_SYSTEM_TIME, Reg.DC_SYSTEM_TIME + 8):
-                struct.pack_into("<Q", self.mem, Reg.DC_SYSTEM_TIME, self.system_time())
+                struct.pack_into("<Q", self.mem, Reg.DC_SYSTEM_TIME, self._ecat_system_time())
             return bytes(self.mem[ado:end])
         for sm in self.sms:
             if sm.covers(ado, n) and sm.is_mailbox:
@@ -336,8 +348,8 @@ class EmulatedSlave:
                     self._sm_registers_written(sm, ado, n)
         if _overlaps(ado, n, Reg.DC_RECEIVE_TIME_PORT0, Reg.DC_RECEIVE_TIME_PORT0 + 4):
             pass    # receive-time latch: done by the segment, which knows the line
-        if ado == Reg.DC_SYSTEM_TIME:
-            self._system_time_written(n)
+        if _overlaps(ado, n, _DC_LOOP, _DC_LOOP_END):
+            self._dc_registers_written(ado, n)
         if (self.mem[Reg.AL_STATUS] & AL_STATE_MASK == AlState.OP
                 and (_overlaps(ado, n, Reg.WATCHDOG_DIVIDER, Reg.WATCHDOG_SM + 2)
                      or _overlaps(ado, n, Reg.SM0, sm_register(N_SM)))):
@@ -787,12 +799,25 @@ class EmulatedSlave:
 
     # -- distributed clocks ------------------------------------------------------------------
 
+    def _dc_now(self) -> int:
+        """The segment time at which the current frame passes this slave's processing unit
+        (the segment holds its clock still while a frame passes)."""
+        return self.clock_ns() + self.dc.port0_ns
+
     def local_time(self) -> int:
-        return self.clock_ns() + self._clock_base
+        return self.dc.local(self._dc_now())
 
     def system_time(self) -> int:
+        """The local copy of system time: local time + offset (0x0920)."""
         offset: int = struct.unpack_from("<q", self.mem, 0x0920)[0]
         return (self.local_time() + offset) & 0xFFFF_FFFF_FFFF_FFFF
+
+    def _ecat_system_time(self) -> int:
+        """0x0910 as the wire reads it: the local copy of system time when the frame passed
+        the reference clock, local time + offset - delay (ESC Section I, Table 30), so a
+        synchronised line answers one value."""
+        delay: int = struct.unpack_from("<I", self.mem, 0x0928)[0]
+        return (self.system_time() - delay) & 0xFFFF_FFFF_FFFF_FFFF
 
     def latch_receive_times(self, port0: int, port1: int | None) -> None:
         """A write to 0x0900 passed: the ESC latches when the frame arrived at each port
@@ -801,21 +826,40 @@ class EmulatedSlave:
         struct.pack_into("<I", self.mem, 0x0904, (port1 or 0) & 0xFFFF_FFFF)
         struct.pack_into("<Q", self.mem, 0x0918, port0 & 0xFFFF_FFFF_FFFF_FFFF)
 
-    def _system_time_written(self, n: int) -> None:
-        """An ECAT write to 0x0910 (ARMW/FRMW from the reference clock) feeds the drift
-        loop: the difference to this slave's own system time (minus the delay 0x0928)
-        goes to 0x092C, and the loop pulls the clock onto the reference at once.  A 4-byte
-        write (the ENIs' cyclic ARMW) compares the low 32 bits only."""
+    def _dc_registers_written(self, ado: int, n: int) -> None:
+        if ado == Reg.DC_SYSTEM_TIME:
+            self._system_time_written()
+        if _overlaps(ado, n, Reg.DC_SPEED_COUNTER_START, Reg.DC_SPEED_COUNTER_START + 2):
+            # A write of Speed Counter Start resets 0x092C and 0x0932 and the filters.
+            self.dc.reset_loop(self._dc_now())
+            self.mem[0x092C:0x0930] = bytes(4)
+            self.mem[0x0932:0x0934] = bytes(2)
+        if _overlaps(ado, n, Reg.DC_START_TIME_CYCLIC, Reg.DC_START_TIME_CYCLIC + 8):
+            start, = struct.unpack_from("<Q", self.mem, Reg.DC_START_TIME_CYCLIC)
+            now = self.system_time()
+            if ado + n <= Reg.DC_START_TIME_CYCLIC + 4:         # 32-bit DC: low half
+                lead = (start - now + (1 << 31)) % (1 << 32) - (1 << 31)
+            else:
+                lead = (start - now + (1 << 63)) % (1 << 64) - (1 << 63)
+            self.sync0_start_lead_ns = lead
+
+    def _system_time_written(self) -> None:
+        """An ECAT write to 0x0910 (ARMW/FRMW from the reference clock) feeds the time
+        control loop with the lower 32 bits (ESC Section I 9.1.5):
+        dt = (local time + offset - delay) - received; 0x092C shows its mean, sign-magnitude
+        with bit 31 set when the local copy is smaller (Section II)."""
         delay, = struct.unpack_from("<I", self.mem, 0x0928)
-        own = self.system_time() - delay
-        if n >= 8:
-            received, = struct.unpack_from("<Q", self.mem, Reg.DC_SYSTEM_TIME)
-            diff = (own - received + (1 << 63)) % (1 << 64) - (1 << 63)
-        else:
-            received, = struct.unpack_from("<I", self.mem, Reg.DC_SYSTEM_TIME)
-            diff = (own - received + (1 << 31)) % (1 << 32) - (1 << 31)
+        received, = struct.unpack_from("<I", self.mem, Reg.DC_SYSTEM_TIME)
+        t = self._dc_now()
         offset, = struct.unpack_from("<q", self.mem, 0x0920)
-        corrected = (offset - diff + (1 << 63)) % (1 << 64) - (1 << 63)
-        struct.pack_into("<q", self.mem, 0x0920, corrected)
-        magnitude = min(abs(diff), 0x7FFF_FFFF)
-        struct.pack_into("<I", self.mem, 0x092C, magnitude | (0x8000_0000 if diff < 0 else 0))
+        own = self.dc.local(t) + offset - delay
+        dt = (own - received + (1 << 31)) % (1 << 32) - (1 << 31)
+        m = self.mem
+        speed_start = struct.unpack_from("<H", m, Reg.DC_SPEED_COUNTER_START)[0] & 0x7FFF
+        self.dc.sample(t, dt, speed_start, m[Reg.DC_TIME_FILTER] & 0x0F,
+                       m[Reg.DC_TIME_FILTER + 1] & 0x0F)
+        mean = int(round(self.dc.diff))
+        struct.pack_into("<I", m, 0x092C,
+                         min(abs(mean), 0x7FFF_FFFF) | (0x8000_0000 if mean < 0 else 0))
+        struct.pack_into("<h", m, 0x0932, max(-0x8000, min(0x7FFF, self.dc.speed_counter_diff(
+            speed_start))))

@@ -1,14 +1,19 @@
 """Distributed clocks on the virtual segment: the numbers the master writes, checked against
 what the line's model implies, not against the master's own arithmetic.
 
-The emulated line (``runtime/segment.py``) delays a frame by ``FORWARD_DELAY_NS`` in each
-slave on the way out and ``RETURN_DELAY_NS`` on the way back.  The propagation delay from
-the reference clock to a slave k further down the line is half the extra round trip
-through the slaves in between (ETG.1000.4 propagation delay measurement; SOEM
-``ethercatdc.c`` ``ecx_configdc``: "assumption: forward delay equals return delay",
-``pdelay = (dt3 - dt1) / 2 + ...``):
+The emulated line (``runtime/dc_clock.py``) delays a frame by P (``PROCESSING_DELAY_NS``,
+port 0 -> processing unit -> port 1) in each slave on the way out, F
+(``FORWARDING_DELAY_NS``, port 1 -> port 0) on the way back and C (``CABLE_DELAY_NS``) on
+every cable; the last slave turns the frame round in its processing unit (P).  The
+propagation delay from the reference clock to a slave k further down the line is half the
+difference of the loop times (port 1 - port 0 receive times) of the two (ETG.1000.4
+propagation delay measurement; SOEM ``ethercatdc.c`` ``ecx_configdc``: "assumption: forward
+delay equals return delay", ``pdelay = (dt3 - dt1) / 2 + ...``).  The loop time below a
+middle slave j is P + 2C + F more than below j + 1, and 0 at the last slave (port 1
+closed), whose own turn-round costs P:
 
-    delay(k) = (k - ref) * (FORWARD_DELAY_NS + RETURN_DELAY_NS) / 2
+    delay(k) = (k - ref) * ((P + F) / 2 + C)                  k in the middle
+    delay(n - 1) = ((n - 1 - ref) * (P + 2C + F) + P - F) / 2   the last slave
 
 The system time offset (0x0920) must make every slave's system time at the moment the
 latching frame passed equal to the master's time plus that delay:
@@ -36,7 +41,7 @@ from ecatcfg.eni import writer as eni_writer
 from ecatcfg.esc import AlState, Cmd
 from ecatcfg.esi.library import Library
 from ecatcfg.runtime import Network, wire
-from ecatcfg.runtime.segment import FORWARD_DELAY_NS, RETURN_DELAY_NS
+from ecatcfg.runtime.dc_clock import CABLE_DELAY_NS, FORWARDING_DELAY_NS, PROCESSING_DELAY_NS
 
 ESI = EXAMPLES / "esi"
 DRIVE = '"0xE0000ECA:0x7201"'
@@ -101,12 +106,14 @@ def dc_run(dc_plan) -> dict:
 
 
 REF = 1                                                   # d1: the first DC slave
-EXPECTED_DELAY = {name: (pos - REF) * (FORWARD_DELAY_NS + RETURN_DELAY_NS) // 2
-                  for name, pos in (("d1", 1), ("d2", 3), ("d3", 4))}
+P, F, C = PROCESSING_DELAY_NS, FORWARDING_DELAY_NS, CABLE_DELAY_NS
+EXPECTED_DELAY = {"d1": 0, "d2": (3 - REF) * ((P + F) // 2 + C),
+                  "d3": ((4 - REF) * (P + 2 * C + F) + P - F) // 2}
 
 
 def test_propagation_delays_are_half_the_extra_round_trip(dc_run):
-    assert EXPECTED_DELAY == {"d1": 0, "d2": 800, "d3": 1200}       # 600 + 200 ns per slave
+    assert (P, F, C) == (600, 200, 10)
+    assert EXPECTED_DELAY == {"d1": 0, "d2": 820, "d3": 1430}
     # The master writes offset (0x0920, 8 bytes) and delay (0x0928, 4 bytes) in one FPWR.
     written = {name: struct.unpack("<qI", d.data)[1] for name, d in dc_run["sent"]
                if d.cmd == Cmd.FPWR and d.ado == 0x0920 and len(d.data) == 12}
