@@ -64,7 +64,7 @@ class Reg(IntEnum):
     SM0 = 0x0800
     DC_RECEIVE_TIME_PORT0 = 0x0900
     DC_SYSTEM_TIME = 0x0910
-    DC_SYSTEM_TIME_DIFFERENCE = 0x092C
+    DC_SYSTEM_TIME_DIFFERENCE = 0x092C  # sign-magnitude, bit 31: local copy smaller
     DC_SPEED_COUNTER_START = 0x0930
     DC_TIME_FILTER = 0x0934
     DC_CYCLIC_UNIT_CONTROL = 0x0980   # + 0x0981 activation (AssignActivate, 2 bytes LE)

@@ -31,6 +31,13 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                    help="leave the slaves in the state reached instead of going to INIT")
     p.add_argument("--accept-newer-revision", action="store_true",
                    help="accept a slave whose revision is newer than the ENI's")
+    p.add_argument("--dc-threshold", type=int, default=None, metavar="NS",
+                   help="before SAFEOP->OP, drift compensation until every DC slave's system "
+                        "time difference (0x092C) is under NS nanoseconds (default 1000; "
+                        "0: no wait)")
+    p.add_argument("--dc-timeout", type=float, default=None, metavar="S",
+                   help="give up the DC wait after S seconds with an error naming the slave "
+                        "(default 5)")
     p.add_argument("--pcap", metavar="FILE", help="record every frame as pcapng")
     p.add_argument("--format", choices=["text", "json"], default="text")
     p.add_argument("--skip-unsupported", action="store_true",
@@ -60,6 +67,14 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError("--esi is for --virtual (the ESI files of the slaves to emulate)")
     if args.cycles is not None and args.cycles < 0:
         raise UsageError(f"--cycles {args.cycles}: must be 0 or more")
+    from ecatcfg.runtime.master import DC_THRESHOLD_NS, DC_TIMEOUT_S, check_dc_wait
+    dc_threshold: int = DC_THRESHOLD_NS if args.dc_threshold is None else args.dc_threshold
+    dc_timeout: float = DC_TIMEOUT_S if args.dc_timeout is None else args.dc_timeout
+    try:
+        check_dc_wait(dc_threshold, dc_timeout)
+    except ValueError as exc:
+        option = "--dc-threshold" if "threshold" in str(exc) else "--dc-timeout"
+        raise UsageError(f"{option}: {exc}") from None
     if args.pcap and not Path(args.pcap).resolve().parent.is_dir():
         raise UsageError(f"{args.pcap}: folder does not exist")
     if args.pcap and Path(args.pcap).is_dir():
@@ -77,11 +92,13 @@ def run(args: argparse.Namespace) -> int:
     if args.virtual:
         net = Network.virtual(plan, args.esi, pcap=args.pcap, on_event=report.event,
                               esi_cache=not args.no_cache, skip_unsupported=True,
-                              eni_name=args.eni)
+                              eni_name=args.eni,
+                              dc_threshold_ns=dc_threshold, dc_timeout_s=dc_timeout)
     else:
         from ecatcfg.runtime.link import RawLink
         net = Network(plan, RawLink(args.iface), pcap=args.pcap, on_event=report.event,
-                      skip_unsupported=True, eni_name=args.eni)
+                      skip_unsupported=True, eni_name=args.eni,
+                      dc_threshold_ns=dc_threshold, dc_timeout_s=dc_timeout)
     target = AlState(STATES[args.state])
     failure: EcatcfgError | None = None
     try:

@@ -7,7 +7,9 @@ The order follows what TwinCAT and EC-Engineer do (``docs/eni-exports.md`` §2-�
    way down): the master's ``BeforeSlave`` InitCmds, every slave's InitCmds (in lockstep,
    see ``lockstep.py``), then the master's other InitCmds;
 3. before PREOP->SAFEOP, for slaves with DC: propagation delays, system time offsets and
-   static drift compensation (not in the ENI; ``docs/protocol-notes.md`` §8);
+   static drift compensation (not in the ENI; ``docs/protocol-notes.md`` §8); before
+   SAFEOP->OP, drift compensation until every DC slave's system time difference (0x092C)
+   is under a threshold;
 4. from PREOP->SAFEOP on (the ENI's ``Requires=cycle``) the cyclic frames run between the
    rounds of InitCmds, so slaves see process data before OP and their SM watchdogs are fed.
 """
@@ -29,7 +31,7 @@ from ecatcfg.runtime.replay import (TIMEOUT_COMMAND, ApplyError, MailboxChannel,
                                     SlaveProgress, mailbox_init_cmds, master_job,
                                     slave_transition_job)
 from ecatcfg.runtime.scan import FoundSlave, Mismatch, scan, verify
-from ecatcfg.runtime.transport import Transport
+from ecatcfg.runtime.transport import Transport, pack
 from ecatcfg.runtime.wire import Datagram
 
 if TYPE_CHECKING:
@@ -41,8 +43,17 @@ DOWN = {AlState.OP: [Transition.OS, Transition.SP, Transition.PI],
         AlState.PREOP: [Transition.PI]}
 # EtherCAT system time counts nanoseconds from 2000-01-01 (ETG.1000.4; SOEM, KickCAT).
 EPOCH_2000_NS = 946_684_800 * 1_000_000_000
-DRIFT_FRAMES = 200             # static drift compensation (ESC datasheets: ~15 000 on
-                               # hardware; the emulated clocks need only a few)
+# Static drift compensation: ARMW frames of the reference clock's system time before the
+# cycle starts (EtherCrab and KickCAT send 15 000; the convergence wait below goes on
+# until the clocks agree, however many that takes).
+DRIFT_FRAMES = 2000
+# Before SAFEOP->OP: drift compensation until |0x092C| of every DC slave is under the
+# threshold, or an error after the timeout (IgH fsm_slave_config.c waits up to
+# EC_DC_SYNC_WAIT_MS = 5000 ms for EC_DC_MAX_SYNC_DIFF_NS = 10 us; a settled line is within
+# 100 ns, Beckhoff's DC figure, and 1 us leaves room for a loaded host).
+DC_THRESHOLD_NS = 1000
+DC_TIMEOUT_S = 5.0
+DC_CHECK_FRAMES = 100          # drift frames between two reads of 0x092C
 
 
 class VerifyError(ApplyError):
@@ -77,12 +88,29 @@ class Event:
     text: str
 
 
+class DcSyncError(ApplyError):
+    """The DC slaves' clocks did not converge onto the reference clock in time."""
+
+    def __init__(self, message: str, slave: str | None, differences: dict[str, int | None]
+                 ) -> None:
+        super().__init__(message, slave)
+        self.differences = differences
+
+
 class Master:
     """Runs one ENI on one link."""
 
     def __init__(self, plan: NetworkPlan, link: Link, *,
                  recorder: Callable[[bytes, bool], None] | None = None,
-                 on_event: Callable[[Event], None] | None = None) -> None:
+                 on_event: Callable[[Event], None] | None = None,
+                 dc_threshold_ns: int = DC_THRESHOLD_NS,
+                 dc_timeout_s: float = DC_TIMEOUT_S) -> None:
+        """``dc_threshold_ns``, ``dc_timeout_s``: before SAFEOP->OP, wait until every DC
+        slave's system time difference (0x092C) is under the threshold, for at most the
+        timeout (then :class:`DcSyncError`); a threshold of 0 skips the wait."""
+        check_dc_wait(dc_threshold_ns, dc_timeout_s)
+        self.dc_threshold_ns = dc_threshold_ns
+        self.dc_timeout_s = dc_timeout_s
         self.plan = plan
         self.slaves = sorted(plan.slaves, key=lambda s: s.position)
         self.transport = Transport(link, recorder=recorder)
@@ -118,6 +146,8 @@ class Master:
                 return
             if transition == Transition.PS:
                 self.setup_dc()
+            if transition == Transition.SO:
+                self.wait_dc()
             self.run_transition(transition)
 
     def bring_down(self, target: AlState = AlState.INIT) -> None:
@@ -198,12 +228,17 @@ class Master:
 
     # -- distributed clocks ------------------------------------------------------------------
 
-    def setup_dc(self) -> None:
+    def _dc_slaves(self) -> tuple[list[SlavePlan], SlavePlan | None]:
         dc = [s for s in self.slaves if s.dc is not None]
-        if not dc:
+        reference = next((s for s in dc if s.dc is not None and s.dc.reference_clock),
+                         dc[0] if dc else None)
+        return dc, reference
+
+    def setup_dc(self) -> None:
+        dc, reference = self._dc_slaves()
+        if reference is None:
             return
         self._event("dc", f"DC: {len(dc)} slaves")
-        reference = next((s for s in dc if s.dc is not None and s.dc.reference_clock), dc[0])
         self._broadcast_write(Reg.DC_RECEIVE_TIME_PORT0, bytes(4))
         times: dict[str, tuple[int, int, int]] = {}
         run_jobs(self.transport, [_read_receive_times(s, times) for s in dc])
@@ -225,16 +260,91 @@ class Master:
         run_jobs(self.transport, writes)
         run_jobs(self.transport, [_write_until_ok(s, Reg.DC_SPEED_COUNTER_START,
                                                   struct.pack("<H", 0x1000)) for s in dc])
-        armw = Datagram.physical(Cmd.ARMW, -reference.position & 0xFFFF,
-                                 Reg.DC_SYSTEM_TIME, 8)
+        armw = _drift_frame(reference)
         for _ in range(DRIFT_FRAMES):
             self.transport.exchange([armw])
+
+    def wait_dc(self) -> None:
+        """Drift compensation until every DC slave's system time difference (0x092C, read
+        every ``DC_CHECK_FRAMES`` frames) is under ``dc_threshold_ns``; the cyclic frames
+        go on meanwhile.  :class:`DcSyncError` after ``dc_timeout_s``, naming the slave
+        furthest off and its last difference."""
+        dc, reference = self._dc_slaves()
+        if reference is None or not self.dc_threshold_ns:
+            return
+        threshold = self.dc_threshold_ns
+        armw = _drift_frame(reference)
+        tick = self._tick if self._cycling else None
+        start = time.monotonic()
+        frames = 0
+        while True:
+            diffs = self.read_dc_differences(dc)
+            off = {n: d for n, d in diffs.items() if d is None or abs(d) >= threshold}
+            if not off:
+                self._event("dc", f"DC: every system time difference under {threshold} ns "
+                            f"after {frames} drift frames, "
+                            f"{(time.monotonic() - start) * 1000:.0f} ms (largest "
+                            f"{max(abs(d or 0) for d in diffs.values())} ns)")
+                return
+            if time.monotonic() - start > self.dc_timeout_s:
+                name = max(off, key=lambda n: float("inf") if off[n] is None
+                           else abs(off[n] or 0))
+                worst = off[name]
+                what = ("did not answer the read of its system time difference (0x092C)"
+                        if worst is None else f"system time difference (0x092C) is "
+                        f"{worst} ns")
+                others = len(off) - 1
+                raise DcSyncError(
+                    f"DC did not converge: {what}, threshold {threshold} ns, after "
+                    f"{self.dc_timeout_s:g} s and {frames} drift frames"
+                    + (f"; {others} more DC slaves over the threshold" if others else ""),
+                    name, diffs)
+            for _ in range(DC_CHECK_FRAMES):
+                self.transport.exchange([armw])
+                if tick is not None:
+                    tick()
+            frames += DC_CHECK_FRAMES
+
+    def read_dc_differences(self, slaves: list[SlavePlan] | None = None
+                            ) -> dict[str, int | None]:
+        """System time difference (0x092C, ns, signed: negative when the slave's copy is
+        behind the reference) of each DC slave; ``None`` for one that did not answer."""
+        if slaves is None:
+            slaves = self._dc_slaves()[0]
+        reads = [Datagram.physical(Cmd.FPRD, s.phys_addr, Reg.DC_SYSTEM_TIME_DIFFERENCE, 4)
+                 for s in slaves]
+        out: dict[str, int | None] = {s.name: None for s in slaves}
+        at = 0
+        for frame in pack(reads):
+            got = self.transport.exchange(frame)
+            back: list[Datagram | None] = list(got) if got else [None] * len(frame)
+            for answer, s in zip(back, slaves[at:at + len(frame)]):
+                if answer is not None and answer.wkc == 1:
+                    raw, = struct.unpack("<I", answer.data)
+                    out[s.name] = -(raw & 0x7FFF_FFFF) if raw & 0x8000_0000 else raw
+            at += len(frame)
+        return out
 
     def _broadcast_write(self, ado: int, data: bytes) -> None:
         deadline = time.monotonic() + TIMEOUT_COMMAND
         while self.transport.exchange([Datagram.physical(Cmd.BWR, 0, ado, data)]) is None:
             if time.monotonic() > deadline:
                 raise ApplyError("no frame came back for the DC receive-time latch")
+
+
+def check_dc_wait(threshold_ns: int, timeout_s: float) -> None:
+    """The convergence wait's settings as a user gives them (0 ns: no wait)."""
+    if not 0 <= threshold_ns <= 0x7FFF_FFFF:
+        raise ValueError(f"the DC threshold must be 0..{0x7FFF_FFFF} ns (0x092C holds 31 "
+                         f"bits), not {threshold_ns}")
+    if not timeout_s > 0:
+        raise ValueError(f"the DC timeout must be more than 0 s, not {timeout_s}")
+
+
+def _drift_frame(reference: SlavePlan) -> Datagram:
+    """ARMW of the system time: the reference clock reads it, every later slave's time
+    control loop compares it with its own (docs/protocol-notes.md §8)."""
+    return Datagram.physical(Cmd.ARMW, -reference.position & 0xFFFF, Reg.DC_SYSTEM_TIME, 8)
 
 
 def _read_receive_times(slave: SlavePlan, out: dict[str, tuple[int, int, int]]) -> Job:

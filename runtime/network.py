@@ -31,10 +31,11 @@ from ecatcfg.eni.plan import NetworkPlan, Variable
 from ecatcfg.errors import EcatcfgError
 from ecatcfg.esc import AlState
 from ecatcfg.record import record
-from ecatcfg.runtime.master import Event, Master
+from ecatcfg.runtime.master import DC_THRESHOLD_NS, DC_TIMEOUT_S, Event, Master
 
 if TYPE_CHECKING:                   # imported where used: `import ecatcfg.runtime` stays light
     from ecatcfg.runtime.cyclic import CycleStats
+    from ecatcfg.runtime.dc_clock import DcModel
     from ecatcfg.runtime.link import Link
     from ecatcfg.runtime.pcap import PcapRecorder
     from ecatcfg.runtime.segment import Faults, VirtualSegment
@@ -63,13 +64,18 @@ class Network:
                  pcap: str | Path | None = None,
                  on_event: Callable[[Event], None] | None = None,
                  skip_unsupported: bool = False, eni_name: str | None = None,
+                 dc_threshold_ns: int = DC_THRESHOLD_NS, dc_timeout_s: float = DC_TIMEOUT_S,
                  _closers: Iterable[Callable[[], None]] = ()) -> None:
         """``skip_unsupported``: run an ENI that asks for what this master does not do
         (``eni/contents.py``: SoE/FoE/AoE/VoE InitCmds, hot-connect groups ...) without
         those parts, with one warning per slave (an ``Event("skipped", ...)`` to
         ``on_event``, else a :class:`SkippedConfigWarning`); by default such an ENI raises
         :class:`~ecatcfg.eni.contents.UnsupportedEniError` here, before any frame is sent.
-        ``eni_name`` names the file in those messages (default: the path given)."""
+        ``eni_name`` names the file in those messages (default: the path given).
+        ``dc_threshold_ns``, ``dc_timeout_s``: before SAFEOP->OP, :meth:`up` sends drift
+        compensation until every DC slave's system time difference (0x092C) is under the
+        threshold (0: no wait), and raises :class:`~ecatcfg.runtime.master.DcSyncError`
+        naming the slave furthest off after the timeout."""
         try:
             if not isinstance(eni, NetworkPlan):
                 from ecatcfg.eni import reader as eni_reader
@@ -85,7 +91,8 @@ class Network:
         if pcap is not None:
             from ecatcfg.runtime.pcap import PcapRecorder
             self.recorder = PcapRecorder(pcap)
-        self.master = Master(eni, link, recorder=self.recorder, on_event=on_event)
+        self.master = Master(eni, link, recorder=self.recorder, on_event=on_event,
+                             dc_threshold_ns=dc_threshold_ns, dc_timeout_s=dc_timeout_s)
         self._vars = {v.name: _Var(v, False) for v in eni.process_image.inputs}
         self._vars.update({v.name: _Var(v, True) for v in eni.process_image.outputs})
         self._closers = list(_closers)
@@ -100,15 +107,19 @@ class Network:
                 pcap: str | Path | None = None,
                 on_event: Callable[[Event], None] | None = None,
                 skip_unsupported: bool = False, eni_name: str | None = None,
-                timing: Timing | None = None) -> Network:
+                timing: Timing | None = None, dc: DcModel | None = None,
+                dc_threshold_ns: int = DC_THRESHOLD_NS,
+                dc_timeout_s: float = DC_TIMEOUT_S) -> Network:
         """The ENI on a virtual segment that emulates its slaves from the ESI files
         (``esi_cache``: through the ESI index cache).  A slave whose device the files do not
         hold, and every slave without ``esi``, is emulated from the ENI alone
         (``runtime/eni_device.py``); each such slave is an ``Event("emulated", ...)`` to
         ``on_event`` and has ``eni_only`` set in ``net.segment.slaves``.
-        ``skip_unsupported`` and ``eni_name`` as for the constructor.  ``timing``: slaves
-        that take the time real ones do (``runtime/timing.py``, e.g. ``Timing()`` for the
-        table); instantaneous slaves by default."""
+        ``skip_unsupported``, ``eni_name`` and the DC wait as for the constructor.
+        ``timing``: slaves that take the time real ones do (``runtime/timing.py``, e.g.
+        ``Timing()`` for the table); instantaneous slaves by default.  ``dc``: the emulated
+        clocks and line timing (``runtime/dc_clock.py``; seeded ±100 ppm drift by
+        default)."""
         from ecatcfg.eni import reader as eni_reader
         from ecatcfg.esi.library import Library
         from ecatcfg.runtime import emulate
@@ -121,7 +132,7 @@ class Network:
                                                 else str(eni)), False, None)
         library = Library([str(p) for p in esi], cache=esi_cache) if esi else None
         segment = emulate.segment(emulate.specs_from_eni(plan, library, shown), faults,
-                                  timing)
+                                  timing, dc=dc)
         if on_event is not None:
             for slave in segment.slaves:
                 if slave.eni_only is not None:
@@ -141,6 +152,7 @@ class Network:
 
         net = cls(plan, ours, pcap=pcap, on_event=on_event, skip_unsupported=skip_unsupported,
                   eni_name=eni_name or (None if isinstance(eni, NetworkPlan) else str(eni)),
+                  dc_threshold_ns=dc_threshold_ns, dc_timeout_s=dc_timeout_s,
                   _closers=[close_segment])
         net.segment = segment
         return net

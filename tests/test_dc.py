@@ -29,7 +29,10 @@ from __future__ import annotations
 
 import datetime
 import struct
+import subprocess
+import sys
 import time
+from collections import deque
 
 import pytest
 from lxml import etree
@@ -40,8 +43,11 @@ from ecatcfg.eni import reader as eni_reader
 from ecatcfg.eni import writer as eni_writer
 from ecatcfg.esc import AlState, Cmd
 from ecatcfg.esi.library import Library
-from ecatcfg.runtime import Network, wire
-from ecatcfg.runtime.dc_clock import CABLE_DELAY_NS, FORWARDING_DELAY_NS, PROCESSING_DELAY_NS
+from ecatcfg.runtime import Network, emulate, wire
+from ecatcfg.runtime import master as master_module
+from ecatcfg.runtime.dc_clock import (CABLE_DELAY_NS, FORWARDING_DELAY_NS, PROCESSING_DELAY_NS,
+                                      DcModel)
+from ecatcfg.runtime.master import DC_THRESHOLD_NS, DcSyncError
 
 ESI = EXAMPLES / "esi"
 DRIVE = '"0xE0000ECA:0x7201"'
@@ -149,3 +155,237 @@ def test_sync0_start_time_is_a_cycle_boundary_plus_the_shift_time(dc_run):
 
 def _now_2000() -> int:
     return time.time_ns() - EPOCH_2000_NS
+
+
+# -- clocks that drift: the runtime's DC set-up checked in numbers, on simulated time -------
+
+class SimClock:
+    """The segment's time (ns), advanced by the test and by every frame."""
+
+    def __init__(self) -> None:
+        self.t = 1_000_000_000_000
+
+    def __call__(self) -> int:
+        return self.t
+
+
+class SimLink:
+    """The master's end of a virtual segment that answers at once: each frame takes
+    ``frame_ns`` of simulated time (a 64-slave line's round trip is ~53 us, plus the
+    master's own turnaround), so the result does not depend on the host's speed."""
+
+    def __init__(self, segment, clock: SimClock, frame_ns: int = 60_000) -> None:
+        self.segment, self.clock, self.frame_ns = segment, clock, frame_ns
+        self.replies: deque[bytes] = deque()
+
+    def send(self, frame: bytes) -> None:
+        self.clock.t += self.frame_ns
+        self.replies.append(bytes(self.segment.process(frame)))
+
+    def recv(self, timeout: float | None = None) -> bytes | None:
+        return self.replies.popleft() if self.replies else None
+
+    def fileno(self) -> int:
+        return -1
+
+    def close(self) -> None:
+        pass
+
+
+def drive_line(n: int):
+    topo = f"master: {{name: dc{n}, cycle_time_us: 1000}}\nslaves:\n" + "".join(
+        f"  - {{name: d{i}, device: {DRIVE}, dc: DC}}\n" for i in range(n))
+    library = Library([ESI], cache=False)
+    plan = build.compile_topology(topology.loads(topo, "line.yaml"), library).plan
+    return plan, library
+
+
+def simulated(n: int, dc: DcModel | None = None, **network):
+    plan, library = drive_line(n)
+    clock = SimClock()
+    segment = emulate.segment(emulate.specs_from_eni(plan, library, "line"), clock_ns=clock,
+                              dc=dc)
+    return Network(plan, SimLink(segment, clock), **network), segment, clock
+
+
+def system_times(segment, t: int) -> list[int]:
+    """Each slave's system time at one instant, as no master can read it."""
+    return [s.dc.local(t) + struct.unpack_from("<q", s.mem, 0x0920)[0] for s in segment.slaves]
+
+
+def registers_092c(segment) -> list[int]:
+    """0x092C of each emulated slave as signed ns (bit 31: the local copy is smaller)."""
+    raw = [struct.unpack_from("<I", s.mem, 0x092C)[0] for s in segment.slaves]
+    return [-(r & 0x7FFF_FFFF) if r & 0x8000_0000 else r for r in raw]
+
+
+N_LINE = 64
+
+
+@pytest.fixture(scope="module")
+def line64():
+    """64 DC drives with quartzes within ±100 ppm: set-up to SAFEOP (offsets, delays,
+    static drift frames), then 500 cycles of 1 ms with the ENI's cyclic ARMW."""
+    net, segment, clock = simulated(N_LINE, DcModel(drift_ppm=100.0, seed=7),
+                                    dc_threshold_ns=0)
+    net.up(AlState.SAFEOP)
+    after_setup = registers_092c(segment)
+    for _ in range(500):
+        clock.t += 1_000_000
+        assert net.cycle()
+    return {"net": net, "segment": segment, "clock": clock, "after_setup": after_setup}
+
+
+def test_64_drifting_clocks_converge_under_100_ns(line64):
+    segment = line64["segment"]
+    drifts = [s.dc.drift * 1e6 for s in segment.slaves]
+    assert min(drifts) < -80 and max(drifts) > 80          # the quartzes really differ
+    read = line64["net"].master.read_dc_differences()
+    assert len(read) == N_LINE and set(read.values()) != {None}
+    assert max(abs(d) for d in read.values() if d is not None) < 100, read
+    assert list(read.values()) == registers_092c(segment)
+    # The loops did the work: each learned its quartz's deviation from the reference's.
+    ref = segment.slaves[0].dc.drift
+    assert all(abs(s.dc.freq + (s.dc.drift - ref)) < 1e-6 for s in segment.slaves[1:])
+
+
+def test_64_clocks_agree_with_the_reference_up_to_the_lines_asymmetry(line64):
+    """The master's delays assume a frame needs as long out as back; on the emulated line
+    a middle slave forwards the way back faster (F < P), so slave k's system time is
+    (k - ref) * (F - P) / 2 off the reference's, the last slave's ((n - 2 - ref) * (F - P)
+    / 2 (the delays above).  Beyond that, every clock is within 100 ns."""
+    segment, clock = line64["segment"], line64["clock"]
+    times = system_times(segment, clock.t)
+    for k, t in enumerate(times):
+        bias = (k * (F - P) if k < N_LINE - 1 else (N_LINE - 2) * (F - P)) // 2
+        assert abs(t - times[0] - bias) < 100, (k, t - times[0], bias)
+
+
+def test_sync0_start_time_is_in_the_future_when_written(line64):
+    """Each slave saw a start time 100 ms (+ up to a cycle) after its own system time at
+    the moment the write passed it (not only after what the master read before)."""
+    leads = [s.sync0_start_lead_ns for s in line64["segment"].slaves]
+    assert None not in leads
+    assert all(START_MARGIN_NS - 5_000_000 < lead <= START_MARGIN_NS + CYCLE_NS
+               for lead in leads), leads
+
+
+def test_the_clocks_drift_apart_without_drift_compensation(monkeypatch):
+    """Control for the tests above: offsets and delays alone, no drift frame, leave each
+    clock at its quartz's speed, and a second later they are microseconds apart."""
+    monkeypatch.setattr(master_module, "DRIFT_FRAMES", 0)
+    net, segment, clock = simulated(8, DcModel(drift_ppm=100.0, seed=7), dc_threshold_ns=0)
+    net.up(AlState.PREOP)
+    net.master.setup_dc()
+    clock.t += 1_000_000_000
+    times = system_times(segment, clock.t)
+    assert max(abs(t - times[0] - k * (F - P) // 2) for k, t in enumerate(times[:-1])) > 10_000
+
+
+# -- the convergence wait before SAFEOP->OP ------------------------------------------------
+
+def test_apply_waits_for_the_clocks_before_op(monkeypatch):
+    """Without static drift frames the clocks are still off when SAFEOP is reached; up()
+    sends drift compensation until every |0x092C| is under the threshold, then OP."""
+    monkeypatch.setattr(master_module, "DRIFT_FRAMES", 0)
+    events = []
+    net, segment, clock = simulated(8, DcModel(drift_ppm=100.0, seed=3), dc_threshold_ns=50,
+                                    on_event=events.append)
+    # A larger start error than the set-up leaves: every slave but the reference 2 us off.
+    original = net.master.setup_dc
+
+    def setup_then_disturb() -> None:
+        original()
+        for s in segment.slaves[1:]:
+            offset, = struct.unpack_from("<q", s.mem, 0x0920)
+            struct.pack_into("<q", s.mem, 0x0920, offset + 2_000)
+
+    net.master.setup_dc = setup_then_disturb
+    net.up(AlState.OP)
+    assert net.state == AlState.OP
+    done = [e.text for e in events if e.kind == "dc" and "under 50 ns" in e.text]
+    assert len(done) == 1 and " 0 drift frames" not in done[0], done
+    assert max(abs(d) for d in registers_092c(segment)) < 50
+
+
+def test_apply_names_the_slave_whose_clock_does_not_converge():
+    """A quartz 3000 ppm off is beyond what the time control loop corrects (~781 ppm):
+    after the timeout, up() stops before OP naming that slave and its last difference."""
+    net, segment, clock = simulated(8, DcModel(drift_ppm=50.0, seed=1), dc_timeout_s=0.5)
+    segment.slaves[5].dc.drift = 3000e-6
+    with pytest.raises(DcSyncError) as err:
+        net.up(AlState.OP)
+    assert net.state == AlState.SAFEOP
+    assert err.value.slave == "d5"
+    last = err.value.differences["d5"]
+    assert last is not None and abs(last) > DC_THRESHOLD_NS
+    assert f"slave 'd5': DC did not converge: system time difference (0x092C) is {last} ns" \
+        in str(err.value)
+    assert "threshold 1000 ns, after 0.5 s" in str(err.value)
+    assert all(abs(d) < DC_THRESHOLD_NS for n, d in err.value.differences.items()
+               if n != "d5" and d is not None)
+
+
+def test_dc_wait_options_are_checked(tmp_path):
+    eni = tmp_path / "line.eni.xml"
+    eni.write_bytes(eni_writer.to_bytes(drive_line(2)[0]))
+    for option, value, says in (("--dc-threshold", "-1", "--dc-threshold: the DC threshold"),
+                                ("--dc-timeout", "0", "--dc-timeout: the DC timeout")):
+        proc = subprocess.run([sys.executable, "-m", "ecatcfg", "apply", str(eni), "--virtual",
+                               option, value], capture_output=True, text=True)
+        assert proc.returncode == 2, proc.stderr
+        assert says in proc.stderr and "Traceback" not in proc.stderr
+
+
+# -- the emulated ESC's registers --------------------------------------------------------
+
+def two_slaves(clock: SimClock):
+    plan, library = drive_line(2)
+    segment = emulate.segment(emulate.specs_from_eni(plan, library, "line"), clock_ns=clock,
+                              dc=DcModel(drift_ppm=0.0, start_spread_ns=0))
+    return segment
+
+
+def _armw(segment) -> None:
+    segment.process(wire.encode([wire.Datagram.physical(Cmd.ARMW, 0, 0x0910, 8)]))
+
+
+def test_system_time_difference_is_sign_and_magnitude_and_the_clock_slews():
+    """0x092C bit 31 is set when the local copy is smaller than the received time (ESC
+    Section II); with no averaging (0x0934 = 0) it shows the one difference.  The loop
+    corrects it by slewing the clock, not by a jump; a write of 0x0930 resets 0x092C."""
+    clock = SimClock()
+    segment = two_slaves(clock)
+    ref, slave = segment.slaves
+    # Same start, no drift: slave 1 sees the reference's time P + C later, so with a delay
+    # of P + C its copy matches; 500 ns less offset puts it 500 ns behind.
+    struct.pack_into("<qI", slave.mem, 0x0920, -500, P + C)
+    slave.mem[0x0934] = 0
+    before = slave.dc.local(clock.t + 1)
+    _armw(segment)
+    assert struct.unpack_from("<I", slave.mem, 0x092C)[0] == 0x8000_0000 | 500
+    assert slave.dc.local(clock.t + 1) == before                    # no jump
+    clock.t += 10_000
+    moved = slave.dc.local(clock.t) - before - 10_000
+    assert 0 < moved <= 8                                           # <= 781 ppm of 10 us
+    segment.process(wire.encode([wire.Datagram.physical(Cmd.FPWR, slave.station_address,
+                                                         0x0930, struct.pack("<H", 0x1000))]))
+    assert slave.mem[0x092C:0x0930] == bytes(4)
+    # 0x092C is read-only from the wire.
+    segment.process(wire.encode([wire.Datagram.physical(Cmd.BWR, 0, 0x092C, bytes([7] * 4))]))
+    assert slave.mem[0x092C:0x0930] == bytes(4)
+
+
+def test_receive_times_follow_the_line():
+    """A BWR of 0x0900 latches port 0 and port 1 receive times (local time) as the frame
+    passes: slave 1 (the last) sees it P + C after slave 0, and slave 0's port 1 sees it
+    come back after P + C out, the turn-round P in slave 1, and C back."""
+    clock = SimClock()
+    segment = two_slaves(clock)                      # both clocks start at 0 now, no drift
+    clock.t += 5_000
+    segment.process(wire.encode([wire.Datagram.physical(Cmd.BWR, 0, 0x0900, bytes(4))]))
+    (a0, a1), (b0, b1) = (struct.unpack_from("<II", s.mem, 0x0900) for s in segment.slaves)
+    assert (a0, a1) == (5_000, 5_000 + 2 * P + 2 * C)
+    assert b0 == 5_000 + P + C
+    assert b1 == 0                                   # port 1 of the last slave: closed
+    assert [struct.unpack_from("<Q", s.mem, 0x0918)[0] for s in segment.slaves] == [a0, b0]
