@@ -123,8 +123,11 @@ def test_propagation_delays_are_half_the_extra_round_trip(dc_run):
     # The master writes offset (0x0920, 8 bytes) and delay (0x0928, 4 bytes) in one FPWR.
     written = {name: struct.unpack("<qI", d.data)[1] for name, d in dc_run["sent"]
                if d.cmd == Cmd.FPWR and d.ado == 0x0920 and len(d.data) == 12}
-    assert written == EXPECTED_DELAY
-    assert {n: dc_run["reg"](n, 0x0928, "<I") for n in written} == EXPECTED_DELAY
+    # The receive times come from clocks that drift (up to 100 ppm of a ~3 us loop) and
+    # count whole ns: a delay may be 1 ns off the line's figure.
+    assert written.keys() == EXPECTED_DELAY.keys()
+    assert all(abs(written[n] - EXPECTED_DELAY[n]) <= 1 for n in written), written
+    assert {n: dc_run["reg"](n, 0x0928, "<I") for n in written} == written
 
 
 def test_system_time_offsets_give_every_slave_the_master_time_plus_its_delay(dc_run):
