@@ -258,6 +258,7 @@ EEPROM_CMD_WRITE = 0x0200
 EEPROM_CMD_RELOAD = 0x0400        # (SOEM's EC_ECMD_RELOAD is 0x0300; the emulated ESC
                                   # takes both as a reload)
 EEPROM_ERRORS = 0x7800            # bits 14:11: checksum, loading, acknowledge, write enable
+EEPROM_ERROR_ACKNOWLEDGE = 0x2000 # bit 13: missing EEPROM acknowledge or invalid command
 EEPROM_BUSY = 0x8000              # bit 15
 
 

@@ -123,6 +123,11 @@ class DcClock:
             value += self._slewed(elapsed)
         return int(round(value))
 
+    def shift(self, ns: int) -> None:
+        """Set the clock ``ns`` later, as if it had been started that much earlier (a
+        replay starts an emulated clock where the real one was)."""
+        self._local += ns
+
     def _slewed(self, elapsed: int) -> float:
         room = MAX_CORRECTION * max(elapsed, 0)
         p = self._pending

@@ -18,6 +18,7 @@ from ecatcfg.esi.coe import has_coe
 from ecatcfg.eni.plan import NetworkPlan, PdoDesc, SlavePlan
 from ecatcfg.esi.model import Device, Module, Pdo, PdoEntry, Slots
 from ecatcfg.esi.slots import plugged_module, with_modules
+from ecatcfg.runtime.esc_chips import chip_for
 from ecatcfg.runtime.segment import Faults, VirtualSegment
 from ecatcfg.runtime.slave import EmulatedSlave
 
@@ -82,7 +83,8 @@ def emulated_slave(spec: SlaveSpec) -> EmulatedSlave:
             from ecatcfg.runtime.eoe_server import EoeServer
             mailbox.eoe = EoeServer(dev.mailbox.eoe, sizes[1])
     image = sii.build(dev, serial=spec.serial, alias=spec.alias)
-    slave = EmulatedSlave(dev, image, name=spec.name, od=od, mailbox=mailbox)
+    slave = EmulatedSlave(dev, image, name=spec.name, od=od, mailbox=mailbox,
+                          chip=chip_for(dev.vendor.id, dev.product_code))
     slave.eni_only = spec.eni_only
     return slave
 

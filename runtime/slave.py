@@ -25,15 +25,15 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from ecatcfg.esc import (AL_ERROR_ACK, AL_STATE_MASK, AL_STATUS_ERROR, EEPROM_BUSY,
-                         EEPROM_CMD_MASK,
-                         EEPROM_CMD_READ, EEPROM_CMD_RELOAD, EEPROM_CMD_WRITE, EEPROM_R64,
-                         EEPROM_WRITE_ENABLE, ESC_DEVICE_EMULATION, FMMU_SIZE, PDI_DIGITAL_IO,
+                         EEPROM_CMD_MASK, EEPROM_CMD_READ, EEPROM_CMD_RELOAD, EEPROM_CMD_WRITE,
+                         EEPROM_ERROR_ACKNOWLEDGE, EEPROM_R64, EEPROM_WRITE_ENABLE, ESC_DEVICE_EMULATION, FMMU_SIZE, PDI_DIGITAL_IO,
                          SM_ACTIVATE_REPEAT, SM_DIR_MASK, SM_MODE_MASK, SM_WATCHDOG_ENABLE,
                          AlState, AlStatusCode, FmmuConfig, FmmuType, Reg, fmmu_register,
                          sm_register)
 from ecatcfg.esi.model import Device
 from ecatcfg.runtime.dc_clock import (SPEED_COUNTER_START, SPEED_FILTER_DEPTH,
                                       TIME_FILTER_DEPTH, DcClock)
+from ecatcfg.runtime.esc_chips import GENERIC, EscChip
 from ecatcfg.runtime.syncman import SmKind, SmState
 
 if TYPE_CHECKING:                   # only slaves with a mailbox bring these
@@ -47,11 +47,6 @@ PROCESS_RAM = 0x1000
 N_FMMU = 8
 N_SM = 8
 
-ESC_TYPE = 0x11                    # reported ESC type (an ET1100-class device)
-# 0x0008 features as a real ET1100 reports them (the EK1100 of ethercrab-rs/ethercrab
-# dumps/soem-sdinfo-ek1100-el1004.pcapng): DC, 64-bit DC, low-jitter EBUS, enhanced link
-# detection EBUS and MII, separate FCS error handling (ESC Section II, 0x0008).
-ESC_FEATURES = 0x00FC
 DEFAULT_WD_DIVIDER = 0x09C2        # (0x09C2 + 2) x 40 ns = 100 us watchdog time base
 DEFAULT_WD_TIME = 1000             # x 100 us = 100 ms
 # SM control bits a slave checks against its own SM configuration: mode and direction.
@@ -99,15 +94,20 @@ def _overlaps(a: int, n: int, start: int, end: int) -> bool:
     return a < end and a + n > start
 
 
-# Register blocks of FMMUs and SMs this ESC does not implement (the address map has room for
-# 16 of each): an access that lies wholly inside one gets no working counter, as a real
-# ET1100 (8 of each) answers a BWR to FMMU 8-15 or SM 8-15 (ethercrab-rs/ethercrab
-# tests/replay-ek1100-el2828-el2889.pcapng).
-_ABSENT = ((fmmu_register(N_FMMU), fmmu_register(16)), (sm_register(N_SM), sm_register(16)))
+# Register blocks an ESC without the resource does not implement: FMMUs and SMs past its
+# count (the address map has room for 16 of each), the DC system-time unit.  An access that
+# lies wholly inside one gets no working counter, as a real ET1100 (8 of each) answers a BWR
+# to FMMU 8-15 or SM 8-15 and an ET1200 (3 FMMUs, 4 SMs) one to FMMU 3-7 or SM 4-7
+# (ethercrab-rs/ethercrab tests/replay-ek1100-el2828-el2889.pcapng; runtime/esc_chips.py).
+_DC_UNIT = (Reg.DC_SYSTEM_TIME, 0x0A00)
 
 
-def _absent(ado: int, n: int) -> bool:
-    return any(start <= ado and ado + n <= end for start, end in _ABSENT)
+def _absent_blocks(chip: EscChip) -> tuple[tuple[int, int], ...]:
+    blocks = [(fmmu_register(chip.fmmus), fmmu_register(16)),
+              (sm_register(chip.sms), sm_register(16))]
+    if not chip.dc_unit:
+        blocks.append(_DC_UNIT)
+    return tuple(blocks)
 
 
 # Read-only registers whose write gets no working counter: a BWR of 0x092C (system time
@@ -125,8 +125,10 @@ class EmulatedSlave:
 
     def __init__(self, device: Device, sii_image: bytes, *, name: str = "",
                  od: ObjectDictionary | None = None,
-                 mailbox: MailboxServer | None = None) -> None:
+                 mailbox: MailboxServer | None = None, chip: EscChip = GENERIC) -> None:
         self.device = device
+        self.chip = chip
+        self._absent_blocks = _absent_blocks(chip)
         self.name = name or device.type_name
         # Why the device comes from the ENI alone (runtime/eni_device.py), else None.
         self.eni_only: str | None = None
@@ -138,6 +140,7 @@ class EmulatedSlave:
         # Work in progress under the timing model, each with the clock_ns it is done at:
         # an EEPROM read, a state change, mailbox replies (settle() makes them visible).
         self._eeprom_due: int | None = None
+        self._eeprom_writing_until = 0         # the EEPROM's write cycle ends (clock_ns)
         self._eeprom_regs = b""
         self._transition: tuple[int, AlState] | None = None
         self._replies: deque[tuple[int, list[bytes]]] = deque()
@@ -175,12 +178,15 @@ class EmulatedSlave:
 
     def _power_on(self) -> None:
         m = self.mem
-        m[0x0000] = ESC_TYPE
-        m[0x0004] = N_FMMU
-        m[0x0005] = N_SM
-        m[0x0006] = (MEMORY_SIZE - PROCESS_RAM) // 1024 - 1
+        chip = self.chip
+        m[0x0000] = chip.type
+        m[0x0001] = chip.revision
+        struct.pack_into("<H", m, 0x0002, chip.build)
+        m[0x0004] = chip.fmmus
+        m[0x0005] = chip.sms
+        m[0x0006] = chip.ram_kb
         m[0x0007] = self._port_descriptor()
-        struct.pack_into("<H", m, 0x0008, ESC_FEATURES)
+        struct.pack_into("<H", m, 0x0008, chip.features)
         # DL control byte 2 after reset: RX FIFO size 7 and bits 22-23 set, as an EK1100
         # (ET1100) and an EL1004 (ET1200) read it (ethercrab-rs/ethercrab
         # dumps/twincat-scan-boxes.pcapng).
@@ -291,11 +297,15 @@ class EmulatedSlave:
 
     # -- register access from the wire -------------------------------------------------------
 
+    def _absent(self, ado: int, n: int) -> bool:
+        """An access wholly inside a register block this ESC does not have."""
+        return any(start <= ado and ado + n <= end for start, end in self._absent_blocks)
+
     def read(self, ado: int, n: int) -> bytes | None:
         """``n`` bytes at ``ado`` as the ESC returns them, or ``None`` when it refuses
         (an empty mailbox, for example): the datagram then gets no working counter."""
         end = ado + n
-        if end > MEMORY_SIZE or _absent(ado, n):
+        if end > MEMORY_SIZE or self._absent(ado, n):
             return None
         if ado < PROCESS_RAM:
             if _overlaps(ado, n, Reg.DL_STATUS, Reg.DL_STATUS + 2):
@@ -312,7 +322,7 @@ class EmulatedSlave:
         """Write from the wire; ``False`` when the ESC refuses (a full mailbox)."""
         n = len(data)
         end = ado + n
-        if end > MEMORY_SIZE or _absent(ado, n) or _unwritable(ado, n):
+        if end > MEMORY_SIZE or self._absent(ado, n) or _unwritable(ado, n):
             return False
         if ado >= PROCESS_RAM:
             for sm in self.sms:
@@ -363,6 +373,12 @@ class EmulatedSlave:
         control = struct.unpack_from("<H", self.mem, Reg.EEPROM_CONTROL)[0]
         command = control & EEPROM_CMD_MASK
         address = struct.unpack_from("<I", self.mem, Reg.EEPROM_ADDRESS)[0]
+        if command and self.clock_ns() < self._eeprom_writing_until:
+            # The EEPROM is still writing the last word: it does not acknowledge, the ESC
+            # reports it and does nothing (ESC Section II 0x0502 bit 13; timing model).
+            struct.pack_into("<H", self.mem, Reg.EEPROM_CONTROL,
+                             EEPROM_ERROR_ACKNOWLEDGE | EEPROM_R64)
+            return
         if command == EEPROM_CMD_READ and self.timing and self.timing.eeprom_read_ns:
             # Busy with the command bits set until the read is done: a real EK1100 reads
             # 0x8140, then 0x0040 (ethercrab-rs/ethercrab tests/replay-ek1100-el2828-el2889
@@ -378,6 +394,8 @@ class EmulatedSlave:
             if 2 * address + 2 <= len(self.eeprom):
                 self.eeprom[2 * address:2 * address + 2] = self.mem[Reg.EEPROM_DATA:
                                                                    Reg.EEPROM_DATA + 2]
+            if self.timing and self.timing.eeprom_write_ns:
+                self._eeprom_writing_until = self.clock_ns() + self.timing.eeprom_write_ns
         elif command in (EEPROM_CMD_RELOAD, EEPROM_CMD_READ | EEPROM_CMD_WRITE):  # SOEM: 0x0300
             self._load_eeprom()
         # Commands complete at once: busy, command and write-enable bits read back clear.

@@ -280,3 +280,28 @@ def test_simulate_timing_file_errors(tmp_path):
     done = subprocess.run(argv + ["--timing", str(tmp_path / "none.json")],
                           capture_output=True, text=True, timeout=60)
     assert done.returncode == 2 and "none.json: no such file" in done.stderr
+
+
+def test_eeprom_write_cycle_refuses_commands_until_done(lib):
+    """After a word write the EEPROM writes internally for ~3.5 ms: a command in that time
+    reads back 0x2040 (bit 13, no acknowledge) and does nothing, as the EK1100 of
+    ethercrab-rs/ethercrab tests/replay-ek1100-alias-address.pcapng answers a write 1.2-3.2
+    ms after the previous one; from 3.7 ms on the write is taken."""
+    clock = Clock()
+    seg = line(lib, "EX1004", clock=clock)
+    slave = seg.slaves[0]
+    ms = 1_000_000
+
+    def command(data: bytes, word: int, cmd: int) -> int:
+        slave.write(0x0508, data)
+        slave.write(0x0502, struct.pack("<HI", cmd, word))
+        slave.settle()
+        return struct.unpack_from("<H", slave.mem, 0x0502)[0]
+
+    assert command(b"\xcd\xab", 4, 0x0201) & 0x2000 == 0
+    clock.advance(2 * ms)
+    assert command(b"\x52\x00", 7, 0x0201) == 0x2040          # refused: still writing
+    assert slave.eeprom[14:16] != b"\x52\x00"
+    clock.advance(2 * ms)
+    assert command(b"\x52\x00", 7, 0x0201) & 0x2000 == 0       # 4 ms after: taken
+    assert slave.eeprom[14:16] == b"\x52\x00" and slave.eeprom[8:10] == b"\xcd\xab"

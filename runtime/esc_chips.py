@@ -1,0 +1,75 @@
+"""The EtherCAT slave controller (ESC) inside an emulated slave: what no ESI says.
+
+An ESI describes a device's application (SyncManager use, PDOs, the SII), not the chip that
+carries it.  Yet a master sees the chip: the device information registers (0x0000-0x0009:
+type, revision, build, number of FMMUs and SyncManagers, RAM size, features), and the
+working counter of every access to an FMMU, SyncManager or DC register the chip does not
+have (an ESC does not answer for registers it lacks; a BWR to FMMU 3 counts only on the
+ESCs that have it).
+
+:data:`KNOWN` records the chip of the devices whose real replies we have, each with the
+public capture that shows it.  Every other device gets :data:`GENERIC`, the most capable
+ESC (the ET1100's 8 FMMUs and 8 SyncManagers, a DC unit), with RAM up to the end of the
+address space so any SyncManager address an ESI gives fits.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True, slots=True)
+class EscChip:
+    """The device information registers (ESC Section II, 0x0000-0x0009) and which
+    optional units the ESC has."""
+
+    name: str
+    type: int                       # 0x0000
+    revision: int                   # 0x0001
+    build: int                      # 0x0002-0x0003
+    fmmus: int                      # 0x0004
+    sms: int                        # 0x0005
+    ram_kb: int                     # 0x0006: process RAM in KiB
+    features: int                   # 0x0008-0x0009
+    # The DC system-time unit (0x0910-0x09FF: system time, offset, delay, the time control
+    # loop, SYNC and latch).  The receive-time latches (0x0900-0x090F) answer on every ESC.
+    dc_unit: bool = True
+    source: str = ""
+
+
+# Read from real devices with an FPRD of 0x0000-0x0009 (ethercrab-rs/ethercrab
+# dumps/twincat-scan-boxes.pcapng: an EK1100 answers 11 00 0300 08 08 08 3b fc00, an EL1004
+# 12 01 0100 03 04 01 4a fc01; the port descriptor 0x0007 follows the ESI's Physics).
+ET1100 = EscChip("ET1100", 0x11, 0x00, 0x0003, 8, 8, 8, 0x00FC,
+                 source="EK1100 in ethercrab-rs/ethercrab dumps/twincat-scan-boxes.pcapng")
+ET1200 = EscChip("ET1200", 0x12, 0x01, 0x0001, 3, 4, 1, 0x01FC,
+                 source="EL1004 in ethercrab-rs/ethercrab dumps/twincat-scan-boxes.pcapng")
+GENERIC = EscChip("ET1100-class", 0x11, 0x00, 0x0003, 8, 8, 60, 0x00FC,
+                  source="no capture of this device: the most capable ESC")
+
+# Devices by (vendor id, product code): the chip their real replies show.
+KNOWN: dict[tuple[int, int], EscChip] = {
+    # EK1100: device information read in twincat-scan-boxes; its DC registers answer in
+    # tests/replay-dc.pcapng.
+    (0x2, 0x044C2C52): ET1100,
+    # EL1004: an ET1200 (twincat-scan-boxes); no working counter for 0x0910-0x09A7 in
+    # dumps/soem-sdinfo-ek1100-el1004.pcapng (its DC unit is not in use).
+    (0x2, 0x03EC3052): EscChip("ET1200", 0x12, 0x01, 0x0001, 3, 4, 1, 0x01FC, dc_unit=False,
+                               source="EL1004 in dumps/twincat-scan-boxes.pcapng and "
+                                      "dumps/soem-sdinfo-ek1100-el1004.pcapng"),
+    # EL2828 and EL2889: a BWR to FMMU 3-7 or SM 4-7 counts only on the EK1100 in front of
+    # them (tests/replay-ek1100-el2828-el2889.pcapng): 3 FMMUs, 4 SyncManagers.  The
+    # EL2828 gives no working counter for any DC register from 0x0910 (FPRD 0x0918,
+    # 0x092C; FPWR 0x0920, 0x0928, 0x0981, 0x0990, 0x09A0; FRMW 0x0910), the EL2889 counts
+    # for each (tests/replay-dc.pcapng).  Their type register is not read alone in any
+    # capture; the BRD of 0x0000 gives 0x13 = ET1100 0x11 | ET1200 0x12.
+    (0x2, 0x0B0C3052): EscChip("ET1200", 0x12, 0x01, 0x0001, 3, 4, 1, 0x01FC, dc_unit=False,
+                               source="EL2828 in ethercrab-rs/ethercrab tests/replay-*.pcapng"),
+    (0x2, 0x0B493052): EscChip("ET1200", 0x12, 0x01, 0x0001, 3, 4, 1, 0x01FC,
+                               source="EL2889 in ethercrab-rs/ethercrab tests/replay-*.pcapng"),
+}
+
+
+def chip_for(vendor: int | None, product: int | None) -> EscChip:
+    """The ESC of a device: the one its real replies show, else :data:`GENERIC`."""
+    return KNOWN.get((vendor or 0, product or 0), GENERIC)
