@@ -136,9 +136,10 @@ def test_system_time_offsets_give_every_slave_the_master_time_plus_its_delay(dc_
     assert set(offsets) == {"d1", "d2", "d3"}
     # offset + receive time (0x0918, latched when the 0x0900 write passed) - delay is the
     # same master time for every slave, and that is the wall clock of the set-up.
+    # As for the delays: latches of drifting clocks in whole ns may be 1 ns off each.
     master_times = {n: offset + dc_run["reg"](n, 0x0918, "<Q") - EXPECTED_DELAY[n]
                     for n, offset in offsets.items()}
-    assert len(set(master_times.values())) == 1, master_times
+    assert max(master_times.values()) - min(master_times.values()) <= 2, master_times
     assert dc_run["before"] <= master_times["d1"] <= dc_run["after"]
 
 
