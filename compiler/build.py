@@ -104,8 +104,8 @@ def _notes(resolved: list[ResolvedSlave]) -> list[str]:
     """One line per distinct note (e.g. the revision taken), naming the slaves it concerns."""
     by_note: dict[str, list[str]] = {}
     for s in resolved:
-        if s.note:
-            by_note.setdefault(s.note, []).append(s.name)
+        for note in ([s.note] if s.note else []) + s.notes:
+            by_note.setdefault(note, []).append(s.name)
     out = []
     for note, names in by_note.items():
         who = ", ".join(repr(n) for n in names[:3]) + (
@@ -239,7 +239,9 @@ def _mailbox(s: ResolvedSlave, sl: layout_mod.SlaveLayout) -> MailboxPlan | None
         return None
     out, inp = mailboxes[0], mailboxes[1]
     boot = _bootstrap(s)
-    coe = pdocmds.pdo_cmds(s) + s.esi_cmds + s.module_cmds + s.user_cmds
+    # The module ident list first: the station builds its PDOs from it (TwinCAT writes it
+    # at the head of PREOP->SAFEOP).
+    coe = s.module_cmds + pdocmds.pdo_cmds(s) + s.esi_cmds + s.user_cmds
     return MailboxPlan(
         send=MailboxArea(out.start_address or 0, out.mailbox_size),
         recv=MailboxArea(inp.start_address or 0, inp.mailbox_size),

@@ -274,8 +274,7 @@ def _variables(result: SlaveLayout, slave: ResolvedSlave, sm: int, bit: int,
                label: str) -> None:
     target = result.outputs if label == "outputs" else result.inputs
     for pdo in slave.assigned(sm):
-        prefix = slave.pdo_prefix.get(pdo.index)
-        pdo_name = f"{prefix}.{pdo.name}" if prefix else pdo.name
+        pdo_name = pdo.name           # a module's carries its position: "Module 2 (X).In"
         for e in pdo.entries:
             if e.index:
                 entry = e.name or f"0x{e.index:04X}:{e.subindex:02X}"

@@ -9,18 +9,21 @@ value range).  Errors are collected, not raised one at a time: the user sees all
 
 from __future__ import annotations
 
+import difflib
 from dataclasses import dataclass, field
 
 from ecatcfg.eni.plan import CoeInitCmd, PdoDesc, PdoEntryDesc
 from ecatcfg.compiler.topology import LoadedTopology, Sdo, Slave, TopologyError
 from ecatcfg.errors import EcatcfgError
-from ecatcfg.esc import Transition
+from ecatcfg.esc import MODULE_IDENT_LIST, Transition
 from ecatcfg.esi import datatypes
 from ecatcfg.esi.coe import TRANSITION_STATE, DictEntry, device_dictionary, has_coe, lookup
+from ecatcfg.esi.index import DeviceEntry
 from ecatcfg.esi.library import Library, SelectorError
 from ecatcfg.esi.model import CoeInitCmd as EsiCoeInitCmd
 from ecatcfg.esi.model import DcOpMode, Device, Dictionary, Module, Pdo
-from ecatcfg.esi.slots import PluggedModule, module_dictionaries, plugged_module, with_modules
+from ecatcfg.esi.slots import (PluggedModule, fits, ident_list, ident_list_data,
+                               module_dictionaries, plug, with_modules)
 from ecatcfg.record import replace
 
 
@@ -42,6 +45,7 @@ class ResolvedSlave:
     module_dicts: list[tuple[int, Dictionary]] = field(default_factory=list)  # (offset, dic)
     modules: list[PluggedModule] = field(default_factory=list)     # plugged, in slot order
     note: str | None = None                  # e.g. which revision was taken
+    notes: list[str] = field(default_factory=list)   # e.g. a slot's default module plugged
 
     @property
     def name(self) -> str:
@@ -146,8 +150,9 @@ def _resolve(cfg: Slave, pos: int, phys: int, library: Library,
                if (x.vendor_id, x.product_code) == (e.vendor_id, e.product_code)}
     slave = ResolvedSlave(cfg, pos, device, phys, [],
                           note=selection.note if len(choices) > 1 else None)
-    modules = _plug_modules(slave, library.modules_for(selection.entry), errors)
+    modules = _plug_modules(slave, library, selection.entry, errors)
     slave.modules = modules
+    slave.module_cmds = _module_ident_list(slave, modules)
     slave.module_dicts = module_dictionaries(modules)
     _choose_pdos(slave, modules, errors)
     _apply_mappings(slave, errors)
@@ -159,7 +164,7 @@ def _resolve(cfg: Slave, pos: int, phys: int, library: Library,
 
 # -- modules ------------------------------------------------------------------------------
 
-def _plug_modules(slave: ResolvedSlave, library_modules: dict[int, Module],
+def _plug_modules(slave: ResolvedSlave, library: Library, entry: DeviceEntry,
                   errors: _Errors) -> list[PluggedModule]:
     dev, cfg = slave.device, slave.cfg
     where = ("slaves", slave.position, "modules")
@@ -169,32 +174,106 @@ def _plug_modules(slave: ResolvedSlave, library_modules: dict[int, Module],
                        "(its ESI has no Slots)", *where)
         return []
     slots = dev.slots.slots
-    plugged: list[PluggedModule] = []
     for number in cfg.modules:
         if not 1 <= number <= len(slots):
             errors.add(f"slave {cfg.name!r}: slot {number} does not exist; {dev.type_name} "
-                       f"has {len(slots)} slots (numbered from 1)", *where, number)
+                       f"has {len(slots)} slot{'s' if len(slots) != 1 else ''} (numbered "
+                       "from 1)", *where, number)
+    library_modules = library.modules_for(entry)
+    missing = library.missing_module_libraries(entry)
+    by_name: dict[str, Module] = {}
+    for m in library_modules.values():
+        by_name.setdefault(m.type_name.strip().casefold(), m)
+    by_slot: dict[int, list[tuple[Module, bool]]] = {}
     for number, slot in enumerate(slots, start=1):
-        ident = cfg.modules.get(number, slot.default_ident)
-        if ident is None:
+        here = (*where, number)
+        named = cfg.modules.get(number)
+        selectors: list[int | str] = list(named) if named else []
+        default = not named and slot.default_ident is not None
+        if default:
+            assert slot.default_ident is not None
+            selectors = [slot.default_ident]
+        low, high = slot.min_instances or 0, slot.max_instances or 1
+        label = f"slot {number} ({slot.name or 'unnamed'})"
+        if len(selectors) > high:
+            errors.add(f"slave {cfg.name!r}: {label} takes at most {high} module"
+                       f"{'s' if high != 1 else ''}; the topology plugs {len(selectors)}",
+                       *here)
             continue
-        module = library_modules.get(ident)
-        if module is None:
-            errors.add(f"slave {cfg.name!r}: no module with ident 0x{ident:08X} in the "
-                       "library (for the InfoReference module files, pass their folder "
-                       "with --esi)", *where, number)
+        if len(selectors) < low:
+            errors.add(f"slave {cfg.name!r}: {label} needs at least {low} module"
+                       f"{'s' if low != 1 else ''}; the topology plugs "
+                       f"{len(selectors) or 'none'}", *(here if named else where))
             continue
-        fits = ident in slot.module_idents or (
-            module.module_class is not None and module.module_class in slot.module_classes)
-        if not fits:
-            allowed = ", ".join(f"0x{i:08X}" for i in slot.module_idents[:12])
-            errors.add(f"slave {cfg.name!r}: module 0x{ident:08X} ({module.type_name}) does "
-                       f"not fit slot {number} ({slot.name or 'unnamed'}); it takes "
-                       f"{allowed or 'module classes ' + ', '.join(slot.module_classes)}",
-                       *where, number)
-            continue
-        plugged.append(plugged_module(dev, number, module))
+        for i, selector in enumerate(selectors):
+            at = (*here, i) if named and len(named) > 1 else here
+            module = _find_module(selector, library_modules, by_name)
+            if module is None:
+                what = (f"module 0x{selector:08X}" if isinstance(selector, int)
+                        else f"module {selector!r}")
+                if missing:
+                    hint = ("its module librar" + ("ies " if len(missing) > 1 else "y ")
+                            + ", ".join(missing) + f" (InfoReference in the ESI of "
+                            f"{dev.type_name}) {'are' if len(missing) > 1 else 'is'} not "
+                            "loaded; pass its folder with --esi")
+                else:
+                    close = difflib.get_close_matches(str(selector).casefold(), by_name, 3)
+                    hint = ("did you mean " + ", ".join(by_name[c].type_name for c in close)
+                            if close else "`ecatcfg devices` lists the modules of the files")
+                errors.add(f"slave {cfg.name!r}: no {what} in the library of "
+                           f"{dev.type_name}; {hint}", *at)
+                continue
+            if not fits(slot, module):
+                allowed = ", ".join(f"0x{i:08X}" for i in slot.module_idents[:12])
+                errors.add(f"slave {cfg.name!r}: module 0x{module.ident or 0:08X} "
+                           f"({module.type_name}) does not fit {label}; it takes "
+                           f"{allowed or 'module classes ' + ', '.join(slot.module_classes)}",
+                           *at)
+                continue
+            by_slot.setdefault(number, []).append((module, default))
+    plugged = plug(dev, by_slot)
+    for p in plugged:
+        if p.default:
+            slave.notes.append(f"slot {p.slot} ({slots[p.slot - 1].name or 'unnamed'}): "
+                               f"no module given, plugged its default {p.module.type_name} "
+                               f"(0x{p.module.ident or 0:08X})")
     return plugged
+
+
+def _module_ident_list(slave: ResolvedSlave, modules: list[PluggedModule]
+                       ) -> list[CoeInitCmd]:
+    """The configured module ident list (0xF030: one UDINT per module position, 0 for an
+    empty slot), written where the ESI asks for it (``Slots@DownloadModuleIdentList``) or
+    its dictionary has the object, in ``DownloadModuleListTransition`` (PS by default), as
+    TwinCAT and EC-Engineer do; a station compares it with what it detected (0xF050)."""
+    dev = slave.device
+    coe = dev.mailbox.coe if dev.mailbox else None
+    dic = slave.dictionary
+    if dev.slots is None or coe is None or not modules:
+        return []
+    if not (dev.slots.download_module_ident_list
+            or (dic is not None and MODULE_IDENT_LIST in dic.objects)):
+        return []
+    transition = Transition.__members__.get(dev.slots.download_transition, Transition.PS)
+    idents = ident_list(modules)
+    comment = "download module ident list (0xF030)"
+    if coe.complete_access:
+        return [CoeInitCmd([transition], comment, MODULE_IDENT_LIST, 0,
+                           ident_list_data(idents), complete_access=True, fixed=True)]
+    return ([CoeInitCmd([transition], f"{comment}: clear", MODULE_IDENT_LIST, 0, b"\x00",
+                        fixed=True)]
+            + [CoeInitCmd([transition], f"{comment}: position {n}", MODULE_IDENT_LIST, n,
+                          ident.to_bytes(4, "little"), fixed=True)
+               for n, ident in enumerate(idents, start=1)]
+            + [CoeInitCmd([transition], f"{comment}: count", MODULE_IDENT_LIST, 0,
+                          bytes([len(idents)]), fixed=True)])
+
+
+def _find_module(selector: int | str, by_ident: dict[int, Module],
+                 by_name: dict[str, Module]) -> Module | None:
+    if isinstance(selector, int):
+        return by_ident.get(selector)
+    return by_name.get(selector.strip().casefold())
 
 
 # -- PDO choice ---------------------------------------------------------------------------
@@ -216,12 +295,30 @@ def _desc(pdo: Pdo, pdo_offset: int = 0, index_offset: int = 0) -> PdoDesc:
 def _choose_pdos(slave: ResolvedSlave, modules: list[PluggedModule], errors: _Errors) -> None:
     dev, cfg = slave.device, slave.cfg
     # ESI document order (the ENI lists PDOs, and EC-Engineer clears them, in that order).
-    pdos = [_desc(p) for p in sorted(dev.rx_pdos + dev.tx_pdos, key=lambda p: p.source.line)]
+    # A device PDO marked OverwrittenByModule gives way to the plugged modules' PDOs (the
+    # same index when SlotPdoIncrement is 0: keeping both assigned it twice).
+    own = [p for p in dev.rx_pdos + dev.tx_pdos if not (modules and p.overwritten_by_module)]
+    grouped: list[tuple[int, PdoDesc]] = [(dev.module_pdo_group or 0, _desc(p))
+                                          for p in sorted(own, key=lambda p: p.source.line)]
     for plug in modules:
         for esi_pdo in plug.module.rx_pdos + plug.module.tx_pdos:
             d = _desc(esi_pdo, plug.pdo_offset, plug.index_offset)
-            slave.pdo_prefix[d.index] = f"Module {plug.slot} ({plug.module.name or plug.module.type_name})"
-            pdos.append(d)
+            # The module's position in the PDO's name, as EC-Engineer writes it:
+            # "Module 3 (UR20-4DI-P / 1315170000).Input"; the variables carry it on.
+            d.name = f"{plug.label}.{d.name}"
+            slave.pdo_prefix[d.index] = plug.label
+            grouped.append((plug.module.pdo_group or 0, d))
+    # ETG.2000 ModulePdoGroup: the PDOs of each group follow those of the groups before it
+    # (the UR20's own 0x16FF/0x1AFF, group 0, before its modules', group 1).
+    pdos = [d for _, d in sorted(grouped, key=lambda g: g[0])]
+    seen_index: dict[int, PdoDesc] = {}
+    module_pdos = set(slave.pdo_prefix)
+    for d in pdos:
+        if d.index in seen_index and d.index in module_pdos:
+            errors.add(f"slave {cfg.name!r}: PDO 0x{d.index:04X} ({d.name}) is defined twice "
+                       "(by the device and a module, or by two modules)",
+                       "slaves", slave.position, "modules")
+        seen_index.setdefault(d.index, d)
     slave.pdos = pdos
     coe = dev.mailbox.coe if dev.mailbox else None
     can_assign = bool(coe and coe.pdo_assign)

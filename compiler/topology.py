@@ -103,6 +103,42 @@ SlotNumber = Annotated[int, *_num(1)]
 ModuleIdent = Annotated[int, *_num(0, 0xFFFFFFFF)]
 
 
+def _module_selector(value: Any) -> int | str:
+    """A module ident (a number, "0x..", "#x..") or the module's Type name (other text)."""
+    if isinstance(value, bool) or not isinstance(value, (int, str)):
+        raise ValueError(f"a module is its ident or its Type name, not {value!r}")
+    number: int
+    if isinstance(value, str):
+        try:
+            number = parse_int(value)
+        except ValueError:
+            if not value.strip():
+                raise ValueError("a module name cannot be empty") from None
+            return _xml_text(value.strip())
+    else:
+        number = value
+    if not 0 <= number <= 0xFFFFFFFF:
+        raise ValueError(f"module ident {number} is not a 32-bit number")
+    return number
+
+
+def _slot_modules(value: Any) -> list[int | str]:
+    """One module, or the list of modules of a slot that takes several, as a list."""
+    if isinstance(value, list):
+        if not value:
+            raise ValueError("an empty list plugs nothing: leave the slot out")
+        return [_module_selector(v) for v in value]
+    return [_module_selector(value)]
+
+
+_SELECTOR_SCHEMA = {"anyOf": [{"type": "integer", "minimum": 0, "maximum": 0xFFFFFFFF},
+                              {"type": "string", "minLength": 1}]}
+# A slot's modules: one module (ident or Type name) or a list of them, in plug order.
+SlotModules = Annotated[list[int | str], BeforeValidator(_slot_modules), WithJsonSchema(
+    {"anyOf": [_SELECTOR_SCHEMA, {"type": "array", "items": _SELECTOR_SCHEMA, "minItems": 1}],
+     "description": "Module ident (number, 0x.., #x..) or Type name, or a list of them"})]
+
+
 class _Model(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
 
@@ -182,8 +218,10 @@ class Slave(_Model):
     # At least one entry: an empty PDO is left out of rx_pdos/tx_pdos, not assigned.
     pdo_mapping: dict[Index, Annotated[list[MappingEntry], Field(min_length=1)]] = Field(
         default_factory=dict, description="PDO index -> [[index, subindex, bit length], ...]")
-    modules: dict[SlotNumber, ModuleIdent] = Field(
-        default_factory=dict, description="Slot number (from 1) -> module ident")
+    modules: dict[SlotNumber, SlotModules] = Field(
+        default_factory=dict,
+        description="Slot number (from 1) -> its module, or the list of modules in a slot "
+                    "that takes several (a station's row of I/O modules, in order)")
     sdos: list[Sdo] = Field(default_factory=list)
     dc: str | None = Field(default=None, description="DC OpMode name from the ESI")
 

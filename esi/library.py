@@ -153,6 +153,11 @@ class Library:
         return [(lf, ref) for lf in self.files for ref in lf.summary.info_references
                 if self.resolve_reference(lf, ref) is None]
 
+    def missing_module_libraries(self, entry: DeviceEntry) -> list[str]:
+        """The ``InfoReference`` module libraries of a device's file that are not loaded."""
+        lf = self._file(entry.file)
+        return [r for r in lf.summary.info_references if self.resolve_reference(lf, r) is None]
+
     def modules_for(self, entry: DeviceEntry) -> dict[int, Module]:
         """Module ident -> Module for a device: its own file's modules, then referenced ones."""
         lf = self._file(entry.file)

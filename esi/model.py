@@ -254,6 +254,9 @@ class Pdo:
     os_index_inc: int | None = None
     pdo_order: int | None = None
     depend_on_slot: bool = False
+    # A device PDO that the module plugged in the slot replaces by its own (ETG.2000
+    # ``OverwrittenByModule``; Beckhoff TwinSAFE and EP/EJ terminals with a default module).
+    overwritten_by_module: bool = False
 
     @property
     def name(self) -> str:
@@ -457,10 +460,21 @@ class Slot:
     module_classes: list[str] = field(default_factory=list)
     slot_pdo_increment: int | None = None
     slot_index_increment: int | None = None
+    slot_group: int | None = None
 
     @property
     def name(self) -> str:
         return pick_name(self.names)
+
+
+@dataclass(slots=True)
+class ModulePdoGroup:
+    """Slots/ModulePdoGroup: where the PDOs of one group of modules start (their order in
+    the assignment follows the group's position in the list)."""
+
+    rx_pdo: int | None
+    tx_pdo: int | None
+    alignment: int | None = None
 
 
 @dataclass(slots=True)
@@ -469,6 +483,11 @@ class Slots:
     source: Source
     slot_pdo_increment: int | None = None
     slot_index_increment: int | None = None
+    # Write the configured module ident list (0xF030) in this transition (ETG.2000
+    # ``DownloadModuleIdentList``, ``DownloadModuleListTransition``, default PS).
+    download_module_ident_list: bool = False
+    download_transition: str = "PS"
+    pdo_groups: list[ModulePdoGroup] = field(default_factory=list)
 
 
 @dataclass(slots=True)
@@ -514,6 +533,10 @@ class Device:
     eeprom: Eeprom | None = None
     profiles: list[Profile] = field(default_factory=list)
     slots: Slots | None = None
+    module_pdo_group: int | None = None     # Type/@ModulePdoGroup: the group of its own PDOs
+    # Not from the ESI: the idents of the modules plugged, by position (0: an empty slot),
+    # for a device put together with its modules (esi/slots.py ``with_modules``).
+    plugged: tuple[int, ...] = ()
 
     @property
     def name(self) -> str:

@@ -20,9 +20,9 @@ from ecatcfg.esi import xmlsafe
 from ecatcfg.esi.model import (
     Access, ArrayInfo, CoeInitCmd, CoeSettings, DataType, DataTypeSubItem, Dc, DcOpMode,
     Device, DeviceInfo, DictObject, Dictionary, Eeprom, EoeSettings, EsiFile, Fmmu, Group,
-    IgnoredElement, Mailbox, MAILBOX_PROTOCOLS, Module, ObjectFlags, ObjectInfo, Pdo, PdoEntry,
-    Profile, ProblemKind, ReadProblem, Severity, Slot, Slots, Source, STATES, SyncManager,
-    Vendor,
+    IgnoredElement, Mailbox, MAILBOX_PROTOCOLS, Module, ModulePdoGroup, ObjectFlags,
+    ObjectInfo, Pdo, PdoEntry, Profile, ProblemKind, ReadProblem, Severity, Slot, Slots, Source,
+    STATES, SyncManager, Vendor,
 )
 from ecatcfg.esi.values import parse_bool, parse_hex_bytes, parse_int
 
@@ -61,7 +61,7 @@ _SKIPPED: dict[str, frozenset[str]] = {
     "Object": frozenset(("Comment", "Properties", "Xml")),
     "ObjectInfo": frozenset(("DisplayName", "Unit")),
     "Flags": frozenset(("SafetyMapping", "Attribute", "Transition")),
-    "Slots": frozenset(("SlotGroupData", "ModulePdoGroup", "SlotSelections")),
+    "Slots": frozenset(("SlotGroupData", "SlotSelections")),
     "Slot": frozenset(("Image16x14", "ImageFile16x14", "ImageData16x14")),
     "Module": frozenset(("SafetyParaMapping", "Image16x14", "ImageFile16x14",
                          "ImageData16x14", "VendorSpecific")),
@@ -262,6 +262,8 @@ class _Reader:
                 dev.product_code = self.int_(ch.get("ProductCode"), ch, "Type/@ProductCode",
                                              "error")
                 dev.revision = self.int_(ch.get("RevisionNo"), ch, "Type/@RevisionNo", "error")
+                dev.module_pdo_group = self.int_(ch.get("ModulePdoGroup"), ch,
+                                                 "Type/@ModulePdoGroup")
             elif tag == "Name":
                 self.add_name(dev.names, ch)
             elif tag == "GroupType":
@@ -353,7 +355,9 @@ class _Reader:
                   os_min=self.int_(g("OSMin"), el, f"{tag}/@OSMin"),
                   os_max=self.int_(g("OSMax"), el, f"{tag}/@OSMax"),
                   os_index_inc=self.int_(g("OSIndexInc"), el, f"{tag}/@OSIndexInc"),
-                  pdo_order=self.int_(g("PdoOrder"), el, f"{tag}/@PdoOrder"))
+                  pdo_order=self.int_(g("PdoOrder"), el, f"{tag}/@PdoOrder"),
+                  overwritten_by_module=self.bool_(g("OverwrittenByModule"), el,
+                                                   f"{tag}/@OverwrittenByModule"))
         for ch in el:
             ctag = ch.tag
             if ctag == "Entry":
@@ -701,10 +705,20 @@ class _Reader:
                       slot_pdo_increment=self.int_(el.get("SlotPdoIncrement"), el,
                                                    "Slots/@SlotPdoIncrement"),
                       slot_index_increment=self.int_(el.get("SlotIndexIncrement"), el,
-                                                     "Slots/@SlotIndexIncrement"))
+                                                     "Slots/@SlotIndexIncrement"),
+                      download_module_ident_list=self.bool_(
+                          el.get("DownloadModuleIdentList"), el,
+                          "Slots/@DownloadModuleIdentList"),
+                      download_transition=(el.get("DownloadModuleListTransition")
+                                           or "PS").strip())
         for ch in el:
             if ch.tag == "Slot":
                 slots.slots.append(self.slot(ch))
+            elif ch.tag == "ModulePdoGroup":
+                slots.pdo_groups.append(ModulePdoGroup(
+                    self.int_(ch.get("RxPdo"), ch, "ModulePdoGroup/@RxPdo"),
+                    self.int_(ch.get("TxPdo"), ch, "ModulePdoGroup/@TxPdo"),
+                    self.int_(ch.get("Alignment"), ch, "ModulePdoGroup/@Alignment")))
             else:
                 self.unknown(ch, "Slots", el)
         return slots
@@ -718,7 +732,8 @@ class _Reader:
                     slot_pdo_increment=self.int_(g("SlotPdoIncrement"), el,
                                                  "Slot/@SlotPdoIncrement"),
                     slot_index_increment=self.int_(g("SlotIndexIncrement"), el,
-                                                   "Slot/@SlotIndexIncrement"))
+                                                   "Slot/@SlotIndexIncrement"),
+                    slot_group=self.int_(g("SlotGroup"), el, "Slot/@SlotGroup"))
         for ch in el:
             tag = ch.tag
             if tag == "ModuleIdent":

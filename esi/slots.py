@@ -3,45 +3,129 @@
 Device-level rules that both the compiler (a topology's ``modules:``) and the virtual segment
 (a station emulated from its ESI or its ENI) follow, so they are written once here:
 
-- a module in slot N (from 1) has its PDO indices moved by (N - 1) x ``SlotPdoIncrement``
-  and its object indices by (N - 1) x ``SlotIndexIncrement``; a slot's own increment wins
-  over the one given for all slots (ETG.2000, ``Slots/Slot``);
+- modules take *positions* on the device, from 1, in slot order: a slot that takes one
+  module (``MaxInstances`` 1) is one position even when empty, a slot that takes several
+  (a remote I/O station's row of modules: UR20-FBC-EC, UTRIO UC20) one position per module
+  plugged.  The position is the module's subindex in the module ident lists 0xF030 and
+  0xF050 (ETG.5001 modular device profile);
+- the module at position P has its PDO indices moved by (P - 1) x ``SlotPdoIncrement`` and
+  its object indices by (P - 1) x ``SlotIndexIncrement`` (ETG.2000 ``Slots/Slot``; a slot's
+  own increment wins over the one given for all slots): the UR20's third module has TxPdo
+  0x1A02 and objects 0x6020, 0x8020; the Copley XE2's axis B 0x1740 and 0x6840;
 - only indices marked ``DependOnSlot`` move; a fixed index stays as written;
-- a module PDO without ``Sm`` goes to its direction's process-data SyncManager.
+- a module PDO without ``Sm`` goes to its direction's process-data SyncManager;
+- a device PDO marked ``OverwrittenByModule`` gives way to the PDOs of the plugged modules.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
 
-from ecatcfg.esi.model import Device, Dictionary, Module, Pdo, Profile
+from ecatcfg.esi.model import Device, Dictionary, Module, Pdo, Profile, Slot
 
 
 @dataclass(frozen=True, slots=True)
 class PluggedModule:
-    """``module`` in slot ``slot`` (from 1) with the offsets that slot gives it."""
+    """``module`` in slot ``slot`` (from 1) at ``position`` (from 1) with its offsets."""
 
     slot: int
     module: Module
     pdo_offset: int
     index_offset: int
+    position: int = 0
+    default: bool = False          # plugged because the slot's default, not named
 
     @property
     def dictionary(self) -> Dictionary | None:
         return self.module.profile.dictionary if self.module.profile else None
 
+    @property
+    def label(self) -> str:
+        """How the ENI's PDO and variable names show the module: ``Module 3 (UR20-4DI-P)``."""
+        return f"Module {self.position} ({self.module.name or self.module.type_name})"
 
-def plugged_module(device: Device, number: int, module: Module) -> PluggedModule:
-    """``module`` in slot ``number`` (from 1) of ``device``, which must have ``Slots``."""
+
+def increments(device: Device, slot: Slot) -> tuple[int, int]:
+    """(PDO, object index) increment of ``slot``: its own, else the one for all slots."""
+    assert device.slots is not None
+    pdo = slot.slot_pdo_increment if slot.slot_pdo_increment is not None \
+        else device.slots.slot_pdo_increment
+    idx = slot.slot_index_increment if slot.slot_index_increment is not None \
+        else device.slots.slot_index_increment
+    return pdo or 0, idx or 0
+
+
+def takes_several(slot: Slot) -> bool:
+    return (slot.max_instances or 1) > 1
+
+
+def plug(device: Device, by_slot: dict[int, list[tuple[Module, bool]]]) -> list[PluggedModule]:
+    """The modules of each slot (number from 1 -> [(module, plugged by default)], in plug
+    order) with their positions and offsets, in position order."""
     if device.slots is None:
         raise ValueError(f"{device.type_name} has no Slots")
-    slot = device.slots.slots[number - 1]
-    pdo_inc = slot.slot_pdo_increment if slot.slot_pdo_increment is not None \
-        else device.slots.slot_pdo_increment
-    idx_inc = slot.slot_index_increment if slot.slot_index_increment is not None \
-        else device.slots.slot_index_increment
-    return PluggedModule(number, module, (number - 1) * (pdo_inc or 0),
-                         (number - 1) * (idx_inc or 0))
+    plugged: list[PluggedModule] = []
+    position = 0
+    for number, slot in enumerate(device.slots.slots, start=1):
+        pdo_inc, idx_inc = increments(device, slot)
+        modules = by_slot.get(number, [])
+        if not takes_several(slot) and not modules:
+            position += 1                   # an empty single slot keeps its position
+        for module, default in modules:
+            position += 1
+            plugged.append(PluggedModule(number, module, (position - 1) * pdo_inc,
+                                         (position - 1) * idx_inc, position, default))
+    return plugged
+
+
+def plugged_module(device: Device, number: int, module: Module) -> PluggedModule:
+    """``module`` alone in slot ``number`` (from 1) of ``device``, which must have ``Slots``
+    (the other slots empty)."""
+    return plug(device, {number: [(module, False)]})[0]
+
+
+def plug_positions(device: Device, by_position: dict[int, Module]) -> list[PluggedModule]:
+    """The modules of a module ident list (position from 1 -> module; 0xF030 or 0xF050) in
+    their slots: a single slot takes the position after the previous one, a slot that
+    takes several the following positions while it has room and the module fits.  A
+    module that fits nowhere is left out."""
+    assert device.slots is not None
+    slots = device.slots.slots
+    by_slot: dict[int, list[tuple[Module, bool]]] = {}
+    index, used = 0, 0                     # the slot looked at, the positions before it
+    for pos in sorted(by_position):
+        module = by_position[pos]
+        while index < len(slots):
+            slot = slots[index]
+            if takes_several(slot):
+                inside = by_slot.setdefault(index + 1, [])
+                if pos == used + 1 and len(inside) < (slot.max_instances or 1) \
+                        and fits(slot, module):
+                    inside.append((module, False))
+                    used = pos
+                    break
+                index += 1
+                continue
+            used += 1                      # a single slot: one position, plugged or empty
+            index += 1
+            if pos == used and fits(slot, module):
+                by_slot[index] = [(module, False)]
+                break
+    return plug(device, by_slot)
+
+
+def fits(slot: Slot, module: Module) -> bool:
+    """Whether ``module`` may sit in ``slot``: its ident is listed, or its class."""
+    return (module.ident is not None and module.ident in slot.module_idents) or (
+        module.module_class is not None and module.module_class in slot.module_classes)
+
+
+def ident_list(plugged: list[PluggedModule]) -> list[int]:
+    """The module ident list of ``plugged``: one ident per position, 0 for an empty slot."""
+    idents = [0] * max((p.position for p in plugged), default=0)
+    for p in plugged:
+        idents[p.position - 1] = p.module.ident or 0
+    return idents
 
 
 def module_dictionaries(plugged: list[PluggedModule]) -> list[tuple[int, Dictionary]]:
@@ -51,18 +135,24 @@ def module_dictionaries(plugged: list[PluggedModule]) -> list[tuple[int, Diction
 
 def with_modules(device: Device, plugged: list[PluggedModule]) -> Device:
     """``device`` with the PDOs and dictionaries of its plugged modules, moved by their
-    slots' increments."""
+    positions' increments; device PDOs marked ``OverwrittenByModule`` give way."""
     if not plugged:
         return device
-    rx, tx = list(device.rx_pdos), list(device.tx_pdos)
+    own = device.module_pdo_group or 0
+    rx = [(own, p) for p in device.rx_pdos if not p.overwritten_by_module]
+    tx = [(own, p) for p in device.tx_pdos if not p.overwritten_by_module]
     for p in plugged:
         for pdo in p.module.rx_pdos + p.module.tx_pdos:
             moved = _moved_pdo(device, pdo, p.pdo_offset, p.index_offset)
-            (rx if pdo.direction == "rx" else tx).append(moved)
+            (rx if pdo.direction == "rx" else tx).append((p.module.pdo_group or 0, moved))
     profiles = list(device.profiles) + [
         Profile(dic.source, dictionary=_moved_dictionary(dic, offset))
         for offset, dic in module_dictionaries(plugged)]
-    return replace(device, rx_pdos=rx, tx_pdos=tx, profiles=profiles)
+    # ETG.2000 ModulePdoGroup: a group's PDOs after those of the groups before it (the
+    # compiler orders the assignment the same way).
+    return replace(device, rx_pdos=[p for _, p in sorted(rx, key=lambda g: g[0])],
+                   tx_pdos=[p for _, p in sorted(tx, key=lambda g: g[0])], profiles=profiles,
+                   plugged=tuple(ident_list(plugged)))
 
 
 def _moved_pdo(device: Device, pdo: Pdo, pdo_offset: int, index_offset: int) -> Pdo:
@@ -82,3 +172,34 @@ def _moved_dictionary(dic: Dictionary, offset: int) -> Dictionary:
         moved = index + offset if obj.depend_on_slot else index
         objects[moved] = replace(obj, index=moved)
     return Dictionary(dic.data_types, objects, dic.source)
+
+
+# -- module ident lists (0xF030 configured, 0xF050 detected; ETG.5001) ------------------------
+
+def ident_list_data(idents: list[int]) -> bytes:
+    """A module ident list for a CompleteAccess download from subindex 0: the count (its
+    USINT travels in 16 bits) and one UDINT per position."""
+    return bytes([len(idents), 0]) + b"".join(i.to_bytes(4, "little") for i in idents)
+
+
+def ident_list_from_writes(writes: list[tuple[int, bytes, bool]]) -> dict[int, int]:
+    """Position -> ident from the downloads of a module ident list: (subindex, data,
+    complete access) in order; a CompleteAccess from subindex 0 carries the count, a pad
+    byte, then one UDINT per position, from subindex 1 the UDINTs alone."""
+    idents: dict[int, int] = {}
+    count: int | None = None
+    for subindex, data, complete in writes:
+        if complete:
+            words = data[2:] if subindex == 0 else data
+            first = 1 if subindex == 0 else subindex
+            idents = {first + n: int.from_bytes(words[4 * n:4 * n + 4], "little")
+                      for n in range(len(words) // 4)}
+            if subindex == 0 and data:
+                count = data[0]
+        elif subindex == 0 and data:
+            count = data[0]
+        elif subindex and len(data) >= 4:
+            idents[subindex] = int.from_bytes(data[:4], "little")
+    if count is not None:
+        idents = {k: v for k, v in idents.items() if k <= count}
+    return idents

@@ -12,12 +12,13 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
-from ecatcfg.esc import MIN_MAILBOX_SIZE, MODULE_IDENT_LIST, is_pdo_object
+from ecatcfg.esc import (DETECTED_MODULE_IDENT_LIST, MIN_MAILBOX_SIZE, MODULE_IDENT_LIST,
+                         is_pdo_object)
 from ecatcfg.esi import sii
 from ecatcfg.esi.coe import has_coe
 from ecatcfg.eni.plan import NetworkPlan, PdoDesc, SlavePlan
 from ecatcfg.esi.model import Device, Module, Pdo, PdoEntry, Slots
-from ecatcfg.esi.slots import plugged_module, with_modules
+from ecatcfg.esi.slots import ident_list_from_writes, plug_positions, with_modules
 from ecatcfg.runtime.esc_chips import chip_for
 from ecatcfg.runtime.segment import Faults, VirtualSegment
 from ecatcfg.runtime.slave import EmulatedSlave
@@ -71,6 +72,8 @@ def emulated_slave(spec: SlaveSpec) -> EmulatedSlave:
         _add_written_objects(od, [Write(c.index, c.subindex or 0, c.data) for c in esi_cmds
                                   if c.index is not None and c.data is not None
                                   and not c.complete_access] + list(spec.extra_writes))
+        if dev.plugged:
+            _detected_modules(od, list(dev.plugged))
     # One too small for an SDO (lint ESI204, ESI213): no mailbox server, as such firmware
     # could not answer one either.
     if dev.mailbox is not None and min(sizes) >= MIN_MAILBOX_SIZE:
@@ -133,6 +136,28 @@ def _add_written_objects(od: ObjectDictionary, writes: list[Write]) -> None:
             obj[0].value = bytes([sub])
 
 
+def _detected_modules(od: ObjectDictionary, idents: list[int]) -> None:
+    """The station's detected module ident list (0xF050; ETG.5001): the idents of the
+    modules plugged, by position, read-only; and room in the configured list (0xF030) the
+    master downloads.  Objects the ESI dictionary declares keep their size."""
+    from ecatcfg.runtime.objects import OdEntry, OdObject
+
+    for index, name, access in ((MODULE_IDENT_LIST, "Configured module ident list", "rw"),
+                                (DETECTED_MODULE_IDENT_LIST, "Detected module ident list",
+                                 "ro")):
+        obj = od[index] if index in od else od.add(OdObject(index, name, variable=False))
+        if 0 not in obj.entries:
+            obj.add(OdEntry(0, "Number of entries", "USINT", 8, b"\0", access=access))
+        for sub in range(1, len(idents) + 1):
+            if sub not in obj.entries:
+                obj.add(OdEntry(sub, f"SubIndex {sub:03d}", "UDINT", 32, bytes(4),
+                                access=access))
+        if index == DETECTED_MODULE_IDENT_LIST:
+            obj[0].value = bytes([len(idents)])
+            for sub, ident in enumerate(idents, start=1):
+                obj[sub].value = ident.to_bytes(4, "little")
+
+
 # Unsigned CoE types by size: the type of an object known only by the data written to it.
 _NUMBER_TYPES = {1: "USINT", 2: "UINT", 4: "UDINT", 8: "ULINT"}
 
@@ -193,20 +218,12 @@ def _eni_modules(device: Device, slots: Slots, slave: SlavePlan,
     """A modular device as an ENI configures it: the modules named by its 0xF030 InitCmds
     (one subindex per slot, or the whole list with CompleteAccess) bring their dictionaries;
     the PDOs are the ENI's."""
-    idents: dict[int, int] = {}
     coe = slave.mailbox.coe_init_cmds if slave.mailbox else []
-    for cmd in coe:
-        if cmd.index != MODULE_IDENT_LIST or not cmd.data:
-            continue
-        if cmd.complete_access:              # count, pad byte, then one u32 per slot
-            words = cmd.data[2:] if cmd.subindex == 0 else cmd.data
-            for n in range(len(words) // 4):
-                idents[n + 1] = int.from_bytes(words[4 * n:4 * n + 4], "little")
-        elif cmd.subindex and len(cmd.data) >= 4:
-            idents[cmd.subindex] = int.from_bytes(cmd.data[:4], "little")
-    plugged = [plugged_module(device, n, library_modules[ident])
-               for n, ident in sorted(idents.items())
-               if 1 <= n <= len(slots.slots) and ident in library_modules]
+    idents = ident_list_from_writes([(c.subindex, c.data, c.complete_access) for c in coe
+                                     if c.index == MODULE_IDENT_LIST and c.data
+                                     and c.ccs == 1 and not c.disabled])
+    plugged = plug_positions(device, {n: library_modules[i] for n, i in idents.items()
+                                      if i in library_modules})
     device = with_modules(device, plugged)
     if slave.process_data is not None and slave.process_data.pdos:
         device = _with_eni_pdos(device, slave.process_data.pdos)

@@ -386,6 +386,9 @@ def slave_transition_job(slave: SlavePlan, transition: Transition,
         yield from _register_cmd(slave, cmd, who, progress)
     if mailbox is not None and (coe or eoe):
         channel = channel or MailboxChannel(slave.phys_addr, mailbox)
+        if coe:                     # a station's plugged modules, before they are configured
+            from ecatcfg.runtime.modules import check_modules
+            yield from check_modules(channel, slave, transition, who)
         for c in coe:
             yield from coe_init_cmd_job(channel, c, who, progress)
         for e in eoe:

@@ -5,7 +5,8 @@ Options: ``outputs`` (hex, written to every slave with outputs once in SAFEOP an
 ``assign`` ({"slave": N, "index": 0x1C13, "pdos": [...]}: after config_map, i.e. after
 SOEM sized the SyncManagers, the slave goes back to PREOP and gets this PDO assignment by
 SDO download), ``cycles`` (process
-data cycles in OP).
+data cycles in OP), ``read`` ([[slave, index, subindex], ...]: SDO uploads after config_map,
+as hex in ``read``).
 """
 
 from __future__ import annotations
@@ -36,6 +37,8 @@ def main() -> None:
             return
         result["iomap"] = master.config_map()
         result["sizes"] = [(len(s.output), len(s.input)) for s in master.slaves]
+        result["read"] = [master.slaves[n].sdo_read(index, sub).hex()
+                          for n, index, sub in options.get("read", [])]
         assign = options.get("assign")
         if assign:
             # config_map ends by requesting SAFEOP; PDO assignment is writable in PREOP.

@@ -112,12 +112,15 @@ def test_every_corpus_device_compiles_or_fails_with_a_line(tmp_path, corpus, eni
             plan = build.compile_topology(topology.loads(text, "t.yaml"), lib).plan
         except EcatcfgError as exc:
             assert str(exc).startswith("t.yaml:"), exc
-            failed.append(str(exc))
+            # A station whose slot needs modules and names no default (UR20-FBC-EC:
+            # MinInstances 1) cannot be configured empty.
+            if "needs at least 1 module; the topology plugs none" not in str(exc):
+                failed.append(str(exc))
             continue
         doc = etree.fromstring(eni_writer.to_bytes(plan))
         assert eni_schema.validate(etree.ElementTree(doc)), (e, eni_schema.error_log)
         ok += 1
-    assert ok >= 363 and not failed, failed
+    assert ok >= 361 and not failed, failed
 
 
 # -- topology files that used to crash --------------------------------------------------------
@@ -441,7 +444,11 @@ def test_schema_accepts_numbers_written_as_text_and_keeps_bounds(capsys):
     jsonschema.validate({"slaves": [{"name": "a", "device": "0x9a:0x30924:0x10420",
                                      "modules": {"1": "0x00001111"}, "tx_pdos": ["#x1A00"],
                                      "sdos": [{"index": 0x6060, "value": 8}]}]}, schema)
-    for bad in ({"rx_pdos": [0x10000]}, {"modules": {"1": "zz"}}, {"station_address": 0}):
+    # A module may also be named by its Type name ("UR20-4DI-P"), so text is a selector.
+    jsonschema.validate({"slaves": [{"name": "a", "device": "d",
+                                     "modules": {"1": ["UR20-4DI-P", 0x91F84]}}]}, schema)
+    for bad in ({"rx_pdos": [0x10000]}, {"modules": {"1": ""}}, {"modules": {"1": []}},
+                {"modules": {"1": 0x100000000}}, {"station_address": 0}):
         with pytest.raises(jsonschema.ValidationError):
             jsonschema.validate({"slaves": [{"name": "a", "device": "x", **bad}]}, schema)
     assert '"ge"' not in json.dumps(schema) and '"le"' not in json.dumps(schema)
