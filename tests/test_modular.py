@@ -354,3 +354,30 @@ def test_soem_reaches_op_on_simulate_of_the_ur20_station(veth_netns, pysoem_modu
     vendor = vendor_modules(corpus / "esi/modular/Weidmueller_UR20_IO.xml")
     assert got[2 + n2 + n3:] == [12] + [_hex(vendor[t].find("Type").get("ModuleIdent"))
                                         for t in UR20]
+
+
+# -- OverwrittenByModule and default modules ---------------------------------------------------
+
+FIXTURE = Path(__file__).with_name("fixtures") / "ecatcfg-EXS-overwritten-pdo.xml"
+
+
+@pytest.mark.parametrize("modules, bits, default", [("", 16, True), ("{1: EXS-APP-32}", 32, False)])
+def test_module_pdo_replaces_the_overwritten_device_pdo(modules, bits, default):
+    text = "slaves:\n  - name: s\n    device: EXS6900\n" + (
+        f"    modules: {modules}\n" if modules else "")
+    result = build.compile_topology(topology.loads(text, "t.yaml"), Library([FIXTURE],
+                                                                             cache=False))
+    plan = eni_reader.read_bytes(eni_writer.to_bytes(result.plan), "t.eni.xml")
+    rx = [p for p in plan.slaves[0].process_data.pdos if p.direction == "rx"]
+    # One 0x1600, the module's: the device's placeholder (8 bits) is gone.
+    assert [(p.index, [e.bit_len for e in p.entries]) for p in rx] == [(0x1600, [bits])]
+    assign = [c for c in plan.slaves[0].mailbox.coe_init_cmds if c.index == 0x1C12]
+    assert [c.data for c in assign if c.subindex == 1] == [b"\x00\x16"]
+    assert not any(c.subindex == 2 for c in assign)
+    noted = any("slot 1 (Application): no module given, plugged its default EXS-APP-16"
+                in n for n in result.notes)
+    assert noted == default, result.notes
+    with Network.virtual(plan, esi=[FIXTURE], esi_cache=False) as net:
+        net.up()
+        assert net.state == AlState.OP
+        check_process_data_moves(net, plan, "s")
