@@ -75,7 +75,7 @@ def check_modules(channel: MailboxChannel, slave: SlavePlan, transition: Transit
 def module_table(rows: list[tuple[int, int, int]], names: dict[int, str]) -> str:
     """Position, expected ident and name, found ident; differing rows marked ``<<``."""
     width = max([len(names.get(n, "")) for n, _, _ in rows] + [4])
-    lines = [f"  {'pos':>3}  {'expected':<10}  {'name':<{width}}  {'found':<10}"]
+    lines = [f"  {'pos':>3}  {'expected':<10}  {'name':<{width}}  found"]
     for n, want, got in rows:
         mark = "  <<" if want != got else ""
         lines.append(f"  {n:>3}  {_ident(want):<10}  {names.get(n, ''):<{width}}  "

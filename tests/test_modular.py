@@ -381,3 +381,23 @@ def test_module_pdo_replaces_the_overwritten_device_pdo(modules, bits, default):
         net.up()
         assert net.state == AlState.OP
         check_process_data_moves(net, plan, "s")
+
+
+def test_example_station_is_the_worked_example_of_the_docs():
+    """docs/compile.md's table for examples/station.yaml."""
+    from conftest import EXAMPLES
+    loaded = topology.load(EXAMPLES / "station.yaml")
+    plan = build.compile_topology(loaded, Library([EXAMPLES / "esi"], cache=False)).plan
+    pdos = [(p.index, p.name, p.entries[0].index) for p in plan.slaves[0].process_data.pdos]
+    assert pdos == [(0x1AFF, "Station status", 0xF100),
+                    (0x1A00, "Module 1 (4 digital inputs).Inputs", 0x6000),
+                    (0x1601, "Module 2 (4 digital outputs).Outputs", 0x7010),
+                    (0x1A02, "Module 3 (2 analog inputs).Inputs", 0x6020),
+                    (0x1A03, "Module 4 (4 digital inputs).Inputs", 0x6030)]
+    f030 = plan.slaves[0].mailbox.coe_init_cmds[0]
+    assert (f030.index, f030.complete_access) == (0xF030, True)
+    assert f030.data == bytes.fromhex("0400" "014de100" "024de100" "034de100" "014de100")
+    with Network.virtual(plan, esi=[EXAMPLES / "esi"], esi_cache=False) as net:
+        net.up()
+        assert net.state == AlState.OP
+        assert len(check_process_data_moves(net, plan, "station")) == 4
