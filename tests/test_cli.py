@@ -24,7 +24,7 @@ def test_devices_json_shape_on_examples():
     out = ecatcfg("devices", "--format", "json", "examples/")
     assert out.returncode == 0, out.stderr
     devices = json.loads(out.stdout)["devices"]
-    assert len(devices) == 5
+    assert len(devices) == 6            # the line of examples/esi and the station
     drive = next(d for d in devices if d["type"] == "EXD-402")
     assert CONTRACT_KEYS <= set(drive)
     assert drive == {**drive, "file": "examples/esi/ecatcfg-EXD402-drive.xml",
@@ -40,7 +40,7 @@ def test_devices_json_shape_on_examples():
 def test_devices_text_lists_selector_and_source():
     out = ecatcfg("devices", "examples")
     assert out.returncode == 0
-    assert "0xe0000eca:0x7201:0x20000" in out.stdout and "5 devices in 3 files" in out.stdout
+    assert "0xe0000eca:0x7201:0x20000" in out.stdout and "6 devices in 4 files" in out.stdout
 
 
 def test_missing_path_exits_2():

@@ -383,11 +383,15 @@ def test_module_pdo_replaces_the_overwritten_device_pdo(modules, bits, default):
         check_process_data_moves(net, plan, "s")
 
 
-def test_example_station_is_the_worked_example_of_the_docs():
-    """docs/compile.md's table for examples/station.yaml."""
+def test_example_station_is_the_worked_example_of_the_docs(esi_schema):
+    """docs/compile.md's table for examples/station/station.yaml; its ESI and the fixture's
+    are valid ETG.2000."""
     from conftest import EXAMPLES
-    loaded = topology.load(EXAMPLES / "station.yaml")
-    plan = build.compile_topology(loaded, Library([EXAMPLES / "esi"], cache=False)).plan
+    esi = EXAMPLES / "station" / "esi"
+    for f in (esi / "ecatcfg-EXM-station.xml", FIXTURE):
+        assert esi_schema.validate(etree.parse(str(f))), (f, esi_schema.error_log)
+    loaded = topology.load(EXAMPLES / "station" / "station.yaml")
+    plan = build.compile_topology(loaded, Library([esi], cache=False)).plan
     pdos = [(p.index, p.name, p.entries[0].index) for p in plan.slaves[0].process_data.pdos]
     assert pdos == [(0x1AFF, "Station status", 0xF100),
                     (0x1A00, "Module 1 (4 digital inputs).Inputs", 0x6000),
@@ -397,7 +401,7 @@ def test_example_station_is_the_worked_example_of_the_docs():
     f030 = plan.slaves[0].mailbox.coe_init_cmds[0]
     assert (f030.index, f030.complete_access) == (0xF030, True)
     assert f030.data == bytes.fromhex("0400" "014de100" "024de100" "034de100" "014de100")
-    with Network.virtual(plan, esi=[EXAMPLES / "esi"], esi_cache=False) as net:
+    with Network.virtual(plan, esi=[esi], esi_cache=False) as net:
         net.up()
         assert net.state == AlState.OP
         assert len(check_process_data_moves(net, plan, "station")) == 4
