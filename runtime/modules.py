@@ -3,7 +3,8 @@
 An ENI configures a station (Weidmueller UR20, UTRIO UC20, a drive with axis modules) with
 the configured module ident list, 0xF030, one UDINT per module position (ETG.5001 modular
 device profile; the compiler writes it where the ESI asks, ``Slots@DownloadModuleIdentList``).
-The station reports the modules it found in 0xF050, the detected module ident list.  Before
+The station reports the modules it found in 0xF050, the detected module ident list (a
+station without that object is not checked).  Before
 the mailbox InitCmds of the transition that downloads 0xF030 (PREOP->SAFEOP), the master
 uploads 0xF050 and stops with a table of the positions that differ: a station whose modules
 were swapped or removed would otherwise go on with a process image that no longer fits
@@ -46,6 +47,7 @@ def check_modules(channel: MailboxChannel, slave: SlavePlan, transition: Transit
                   who: str) -> Job:
     """Upload 0xF050 and compare it with the ENI's 0xF030 of ``transition``; nothing to do
     for a slave whose ENI downloads no module ident list then."""
+    from ecatcfg.runtime.mailbox import ABORT_NO_OBJECT
     from ecatcfg.runtime.sdo_client import SdoUpload
 
     expected = configured_modules(slave, transition)
@@ -60,7 +62,13 @@ def check_modules(channel: MailboxChannel, slave: SlavePlan, transition: Transit
         found[subindex] = int.from_bytes(t.result[:4], "little")
 
     found: dict[int, int] = {}
-    yield from upload(0)
+    try:
+        yield from upload(0)
+    except ApplyError as exc:
+        # 0xF050 is optional (ETG.5001): a station without it cannot be checked.
+        if exc.abort_code == ABORT_NO_OBJECT:
+            return
+        raise
     count = found.pop(0) & 0xFF
     for sub in range(1, count + 1):
         yield from upload(sub)

@@ -405,3 +405,11 @@ def test_example_station_is_the_worked_example_of_the_docs(esi_schema):
         net.up()
         assert net.state == AlState.OP
         assert len(check_process_data_moves(net, plan, "station")) == 4
+
+
+def test_station_without_a_detected_list_is_not_checked(corpus, modular_lib):
+    plan = compile_station(station("io", "UR20-FBC-EC", UR20[:3]), modular_lib)
+    with Network.virtual(plan, esi=[corpus / "esi/modular"], esi_cache=False) as net:
+        del net.segment.slaves[0].od.objects[0xF050]       # firmware without 0xF050
+        net.up()
+        assert net.state == AlState.OP
