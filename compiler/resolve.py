@@ -200,6 +200,14 @@ def _plug_modules(slave: ResolvedSlave, library: Library, entry: DeviceEntry,
                        f"{'s' if high != 1 else ''}; the topology plugs {len(selectors)}",
                        *here)
             continue
+        if selectors and slot.slot_group is not None:
+            # ETG.2000 SlotGroupData moves the indices of modules marked DependOnSlotGroup
+            # by the group's place; ecatcfg does not compute that, and a wrong index would
+            # configure another object (no corpus device uses slot groups).
+            errors.add(f"slave {cfg.name!r}: {label} belongs to slot group "
+                       f"{slot.slot_group}; module offsets by slot group (SlotGroupData, "
+                       "DependOnSlotGroup) are not implemented", *here)
+            continue
         if len(selectors) < low:
             errors.add(f"slave {cfg.name!r}: {label} needs at least {low} module"
                        f"{'s' if low != 1 else ''}; the topology plugs "
