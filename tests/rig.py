@@ -373,3 +373,22 @@ def tshark_malformed(pcap: str | os.PathLike) -> list[dict[str, Any]]:
             ["invalid EtherCAT mailbox"]
         out.append({"frame": int(layers["frame.number"][0]), "messages": messages})
     return out
+
+
+def serve_in_memory(segment) -> tuple[Any, Callable[[], None]]:
+    """``segment`` answering on a thread over an in-memory link: (the master's end of the
+    link, a function that stops the thread)."""
+    import threading
+
+    from ecatcfg.runtime.link import MemoryLink
+
+    a, b = MemoryLink.pair()
+    stop = threading.Event()
+    thread = threading.Thread(target=segment.serve, args=(b,), kwargs={"stop": stop},
+                              daemon=True)
+    thread.start()
+
+    def close() -> None:
+        stop.set()
+        thread.join(2)
+    return a, close

@@ -13,10 +13,10 @@ import json
 import random
 import subprocess
 import sys
-import threading
 from pathlib import Path
 
 import pytest
+from rig import serve_in_memory
 from lxml import etree
 
 from ecatcfg.compiler import build, topology
@@ -28,7 +28,6 @@ from ecatcfg.eni.plan import NetworkPlan
 from ecatcfg.esc import AlState
 from ecatcfg.esi.library import Library
 from ecatcfg.runtime import emulate
-from ecatcfg.runtime.link import MemoryLink
 from ecatcfg.runtime.network import Network
 from ecatcfg.runtime.replay import ApplyError
 
@@ -172,19 +171,6 @@ def test_missing_module_library_is_named(corpus, tmp_path):
 
 # -- apply on the virtual segment ---------------------------------------------------------------
 
-def _serve(seg):
-    a, b = MemoryLink.pair()
-    stop = threading.Event()
-    thread = threading.Thread(target=seg.serve, args=(b,), kwargs={"stop": stop},
-                              daemon=True)
-    thread.start()
-
-    def close() -> None:
-        stop.set()
-        thread.join(2)
-    return a, close
-
-
 def _entry_offsets(entries: list[tuple[int, int, int]]) -> dict[tuple[int, int], tuple[int, int]]:
     """(index, subindex) -> (bit offset, bits) in an SM, from the slave's own assignment."""
     out, bit = {}, 0
@@ -253,7 +239,7 @@ def test_swapped_module_fails_before_safeop_with_a_table(corpus, modular_lib):
     loaded = topology.loads(station("io", "UR20-FBC-EC", plugged), "real.yaml")
     seg = emulate.segment([emulate.SlaveSpec(d.device, d.name)
                            for d in plugged_devices(loaded, modular_lib)])
-    link, close = _serve(seg)
+    link, close = serve_in_memory(seg)
     with Network(plan, link, _closers=[close]) as net:
         with pytest.raises(ApplyError) as exc:
             net.up()
@@ -361,7 +347,8 @@ def test_soem_reaches_op_on_simulate_of_the_ur20_station(veth_netns, pysoem_modu
 FIXTURE = Path(__file__).with_name("fixtures") / "ecatcfg-EXS-overwritten-pdo.xml"
 
 
-@pytest.mark.parametrize("modules, bits, default", [("", 16, True), ("{1: EXS-APP-32}", 32, False)])
+@pytest.mark.parametrize("modules, bits, default",
+                         [("", 16, True), ("{1: EXS-APP-32}", 32, False)])
 def test_module_pdo_replaces_the_overwritten_device_pdo(modules, bits, default):
     text = "slaves:\n  - name: s\n    device: EXS6900\n" + (
         f"    modules: {modules}\n" if modules else "")

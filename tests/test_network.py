@@ -11,6 +11,7 @@ import threading
 import time
 
 import pytest
+from rig import serve_in_memory
 
 from conftest import EXAMPLES
 from ecatcfg.compiler import build, topology
@@ -247,23 +248,10 @@ def test_modular_devices_are_emulated_with_their_modules(corpus, slave, source):
     assigned = sorted(p.index for p in device.rx_pdos + device.tx_pdos if p.sm is not None)
     assert assigned == sorted(p.index for p in plan.slaves[0].process_data.pdos
                               if p.sm is not None)
-    link, close = _serve(emulate.segment(specs))
+    link, close = serve_in_memory(emulate.segment(specs))
     with Network(plan, link, _closers=[close]) as net:
         net.up()
         assert net.state == AlState.OP and net.cycle()
-
-
-def _serve(seg):
-    a, b = MemoryLink.pair()
-    stop = threading.Event()
-    thread = threading.Thread(target=seg.serve, args=(b,), kwargs={"stop": stop},
-                              daemon=True)
-    thread.start()
-
-    def close() -> None:
-        stop.set()
-        thread.join(2)
-    return a, close
 
 
 def test_mailbox_counters_go_on_across_transitions():
@@ -309,7 +297,7 @@ def test_close_closes_the_link_it_was_given(example_plan):
     from ecatcfg.runtime import emulate
     from ecatcfg.runtime.link import LinkError
     lib = Library([ESI], cache=False)
-    link, close = _serve(emulate.segment(emulate.specs_from_eni(example_plan, lib, "x")))
+    link, close = serve_in_memory(emulate.segment(emulate.specs_from_eni(example_plan, lib, "x")))
     with Network(example_plan, link, _closers=[close]) as net:
         net.up()
         assert net.state == AlState.OP
@@ -327,7 +315,7 @@ def test_two_slaves_answering_one_address_fail_the_command_at_once():
     change that; it is an error naming the slave and the command, never a success."""
     from ecatcfg.runtime import emulate
     plan = line_plan(["EX1100", "EX1004", "EX2008"])
-    link, close = _serve(emulate.segment(emulate.specs_from_eni(plan, Library([ESI],
+    link, close = serve_in_memory(emulate.segment(emulate.specs_from_eni(plan, Library([ESI],
                                                                               cache=False), "x")))
     transport = Transport(link)
     try:
@@ -379,7 +367,7 @@ def _verify_on(eni_plan, line, accept_newer_revision: bool = False
     from ecatcfg.runtime import emulate
     seg = emulate.segment(emulate.specs_from_eni(line, Library([ESI], cache=False), "x")
                           if line is not None else [])
-    link, close = _serve(seg)
+    link, close = serve_in_memory(seg)
     sent: list[bytes] = []
     master = Master(eni_plan, link, recorder=lambda f, out: sent.append(f) if out else None)
     try:
@@ -444,7 +432,7 @@ def test_another_revision_is_reported_and_a_newer_one_taken_only_on_request():
     assert [(m.position, m.problem) for m in err.mismatches] == [
         (1, "other revision (newer: --accept-newer-revision takes it)")]
     from ecatcfg.runtime import emulate
-    link, close = _serve(emulate.segment(emulate.specs_from_eni(
+    link, close = serve_in_memory(emulate.segment(emulate.specs_from_eni(
         line, Library([ESI], cache=False), "x")))
     try:
         found = Master(older, link).scan_and_verify(accept_newer_revision=True)
