@@ -121,6 +121,15 @@ def sm_register(n: int) -> int:
     return Reg.SM0 + SM_SIZE * n
 
 
+# ESC ports.  A frame enters port 0 (the one toward the master) and each ESC forwards it
+# through its open ports in the order 0 -> 3 -> 1 -> 2 (ET1100/ET1200 datasheets, "frame
+# processing order"; SOEM ethercatdc.c, IgH's next_table in slave.c), so auto-increment
+# positions number the slaves depth-first in that order.  ENI ``PreviousPort/Port`` and
+# Beckhoff's documentation call ports 0-3 A-D.
+PORT_PROCESSING_ORDER = (0, 3, 1, 2)
+PORT_LETTERS = "ABCD"
+
+
 class AlState(IntEnum):
     INIT = 1
     PREOP = 2

@@ -17,8 +17,9 @@ from ecatcfg.eni.plan import (Cyclic, DcPlan, MailboxArea, MailboxPlan, MasterPl
 from ecatcfg.compiler.resolve import ResolvedSlave, resolve_all
 from ecatcfg.compiler.topology import LoadedTopology, TopologyError
 from ecatcfg.errors import EcatcfgError
-from ecatcfg.esc import MAILBOX_STATE_ADDR, SmConfig
+from ecatcfg.esc import MAILBOX_STATE_ADDR, PORT_LETTERS, SmConfig
 from ecatcfg.esi.library import Library
+from ecatcfg.esi.physics import DEFAULT_PHYSICS, eni_physics
 
 # How often a master polls SM1 of a slave without a mailbox-state bit (ms; EC-Engineer
 # writes 10 for the Elmo Gold).
@@ -48,7 +49,7 @@ def compile_topology(loaded: LoadedTopology, library: Library) -> CompileResult:
     current budget) and notes (which revision a selector took) for the user.  The plan is
     written as an ENI by :mod:`ecatcfg.eni.writer`.
     """
-    resolved, errors = resolve_all(loaded, library)
+    resolved, errors, wiring_notes = resolve_all(loaded, library)
     errors += _esi_value_errors(loaded, resolved)
     errors += _fmmu_errors(loaded, resolved)
     if errors:
@@ -67,7 +68,7 @@ def compile_topology(loaded: LoadedTopology, library: Library) -> CompileResult:
     too_long = [loaded.error(f"slave {s.name!r}: DC op mode {s.dc_mode.name!r} gives a SYNC "
                              f"cycle of {max(dc.cycle_time0, dc.cycle_time1)} ns, more than "
                              f"the {U32_MAX} ns the ESC register holds; shorten "
-                             "master.cycle_time_us", "slaves", s.position, "dc")
+                             "master.cycle_time_us", "slaves", s.index, "dc")
                 for s, dc in zip(resolved, dcs)
                 if dc and s.dc_mode and not (0 <= dc.cycle_time0 <= U32_MAX
                                              and 0 <= dc.cycle_time1 <= U32_MAX)]
@@ -84,9 +85,10 @@ def compile_topology(loaded: LoadedTopology, library: Library) -> CompileResult:
         slaves.append(SlavePlan(
             name=s.name, phys_addr=s.phys_addr, auto_inc_addr=(-s.position) & 0xFFFF,
             vendor_id=s.device.vendor.id or 0, product_code=s.device.product_code or 0,
-            revision=s.device.revision or 0, physics=s.device.physics or "YY",
+            revision=s.device.revision or 0,
+            physics=eni_physics(s.device.physics or DEFAULT_PHYSICS),
             process_data=_process_data(s, sl), mailbox=_mailbox(s, sl), init_cmds=init, dc=dc,
-            previous_ports=[PreviousPort("B", slaves[-1].phys_addr)] if slaves else []))
+            previous_ports=_previous_port(s, resolved)))
 
     outputs = _unique([v for sl in lay.slaves for v in sl.outputs])
     inputs = _unique([v for sl in lay.slaves for v in sl.inputs])
@@ -96,8 +98,16 @@ def compile_topology(loaded: LoadedTopology, library: Library) -> CompileResult:
         slaves=slaves,
         cyclic=[Cyclic(lay.frames, cycle_time=topo.master.cycle_time_us)],
         process_image=ProcessImage(lay.image_size, lay.image_size, inputs, outputs))
-    notes = _notes(resolved)
+    notes = wiring_notes + _notes(resolved)
     return CompileResult(plan, ebus_warnings(loaded, resolved), notes)
+
+
+def _previous_port(s: ResolvedSlave, resolved: list[ResolvedSlave]) -> list[PreviousPort]:
+    """Where the slave is plugged, as TwinCAT and EC-Engineer write it: the parent's port
+    letter and station address, Selected (the first slave, on the master, has none)."""
+    if s.parent is None or s.parent_port is None:
+        return []
+    return [PreviousPort(PORT_LETTERS[s.parent_port], resolved[s.parent].phys_addr, True)]
 
 
 def _notes(resolved: list[ResolvedSlave]) -> list[str]:
@@ -161,7 +171,7 @@ def _esi_value_errors(loaded: LoadedTopology,
             if value is not None and not 0 <= value <= limit:
                 errors.append(loaded.error(
                     f"slave {s.name!r}: the ESI of {dev.type_name} ({dev.source}) has "
-                    f"{what} {value:#x}, outside 0..{limit:#x}", "slaves", s.position,
+                    f"{what} {value:#x}, outside 0..{limit:#x}", "slaves", s.index,
                     "device"))
     return errors
 
@@ -173,7 +183,7 @@ def _fmmu_errors(loaded: LoadedTopology, resolved: list[ResolvedSlave]) -> list[
         if have and need > have:
             errors.append(loaded.error(
                 f"slave {s.name!r}: its process data needs {need} FMMUs, the ESI of "
-                f"{s.device.type_name} declares {have}", "slaves", s.position))
+                f"{s.device.type_name} declares {have}", "slaves", s.index))
     return errors
 
 
@@ -290,5 +300,5 @@ def ebus_warnings(loaded: LoadedTopology, resolved: list[ResolvedSlave]) -> list
                 f"E-bus current: the terminals after {supplier.name!r} "
                 f"({supplier.device.type_name}) draw {drawn} mA up to slave {s.name!r}, more "
                 f"than the {budget} mA it supplies; add a power feed terminal",
-                "slaves", s.position))
+                "slaves", s.index))
     return warnings

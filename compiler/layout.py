@@ -37,7 +37,8 @@ STATE_PD = ["SAFEOP", "OP"]
 
 
 class LayoutError(EcatcfgError):
-    """A slave whose process data cannot be laid out; ``slave`` is its bus position."""
+    """A slave whose process data cannot be laid out; ``slave`` is its index in the
+    topology file (where the error points)."""
 
     def __init__(self, message: str, slave: int) -> None:
         super().__init__(message)
@@ -161,7 +162,7 @@ def build(slaves: list[ResolvedSlave], layout: str, uses_dc: bool,
             if attempt or not any(d.regions for d in dgs):
                 raise LayoutError(f"slave {slaves[i].name!r} has more process data "
                                   f"({(max(wants) + 7) // 8} bytes) than one frame can carry",
-                                  slaves[i].position)
+                                  slaves[i].index)
             frames.append([_Datagram(k) for k in kinds])
 
     # Logical addresses: consecutive windows; LRD windows after all LWR ones (TwinCAT).

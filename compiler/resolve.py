@@ -13,6 +13,7 @@ import difflib
 from dataclasses import dataclass, field
 
 from ecatcfg.eni.plan import CoeInitCmd, PdoDesc, PdoEntryDesc
+from ecatcfg.compiler import wiring
 from ecatcfg.compiler.topology import LoadedTopology, Sdo, Slave, TopologyError
 from ecatcfg.errors import EcatcfgError
 from ecatcfg.esc import MODULE_IDENT_LIST, Transition
@@ -22,6 +23,7 @@ from ecatcfg.esi.index import DeviceEntry
 from ecatcfg.esi.library import Library, SelectorError
 from ecatcfg.esi.model import CoeInitCmd as EsiCoeInitCmd
 from ecatcfg.esi.model import DcOpMode, Device, Dictionary, Module, Pdo
+from ecatcfg.esi.physics import DEFAULT_PHYSICS
 from ecatcfg.esi.slots import (PluggedModule, fits, ident_list, ident_list_data,
                                module_dictionaries, plug, with_modules)
 from ecatcfg.record import replace
@@ -32,7 +34,7 @@ class ResolvedSlave:
     """One slave with its device and the user's choices, checked."""
 
     cfg: Slave
-    position: int
+    position: int                            # bus position (auto-increment order)
     device: Device
     phys_addr: int
     pdos: list[PdoDesc]                      # every PDO, as configured (sm set = assigned)
@@ -46,6 +48,9 @@ class ResolvedSlave:
     modules: list[PluggedModule] = field(default_factory=list)     # plugged, in slot order
     note: str | None = None                  # e.g. which revision was taken
     notes: list[str] = field(default_factory=list)   # e.g. a slot's default module plugged
+    index: int = 0                           # place in the topology file (its errors' lines)
+    parent: int | None = None                # bus position of the parent (None: the first)
+    parent_port: int | None = None           # the parent's ESC port 0-3 it is plugged into
 
     @property
     def name(self) -> str:
@@ -86,54 +91,86 @@ class _Errors:
         self.items.append(self.loaded.error(message, *path))
 
 
-def resolve_all(loaded: LoadedTopology, library: Library) -> tuple[list[ResolvedSlave],
-                                                                   list[EcatcfgError]]:
+def resolve_all(loaded: LoadedTopology, library: Library
+                ) -> tuple[list[ResolvedSlave], list[EcatcfgError], list[str]]:
+    """Every slave resolved, in bus order (the wiring's: ``wiring.wire``), the errors, and
+    the wiring's notes.  Station addresses default to 1001, 1002, ... in bus order."""
     errors = _Errors(loaded)
+    slaves = loaded.topology.slaves
+    # The devices first: their ports (ESI Physics) decide the wiring, the wiring the bus
+    # positions, the positions the default station addresses.
+    found: list[tuple[Device, str | None] | None] = []
+    lookup_errors: list[list[EcatcfgError]] = []
+    for index, cfg in enumerate(slaves):
+        mine = _Errors(loaded)
+        found.append(_find_device(cfg, index, library, mine))
+        lookup_errors.append(mine.items)
+    tree, wiring_errors = wiring.wire(loaded, [f[0].physics or DEFAULT_PHYSICS if f else None
+                                               for f in found])
     resolved: list[ResolvedSlave] = []
     used: dict[int, int] = {}
     names: dict[str, int] = {}
-    for pos, cfg in enumerate(loaded.topology.slaves):
-        where = ("slaves", pos)
+    for index, cfg in enumerate(slaves):
+        where = ("slaves", index)
+        pos = tree.position(index)
         if cfg.name in names:
             errors.add(f"slave name {cfg.name!r} is already used by slave {names[cfg.name]}",
                        *where, "name")
-        names.setdefault(cfg.name, pos)
+        names.setdefault(cfg.name, index)
         phys = cfg.station_address if cfg.station_address is not None else 1001 + pos
         if phys in used:
             errors.add(f"station address {phys} is also the address of slave "
-                       f"{loaded.topology.slaves[used[phys]].name!r}", *where,
+                       f"{slaves[used[phys]].name!r}", *where,
                        "station_address" if cfg.station_address is not None else "name")
-        used.setdefault(phys, pos)
+        used.setdefault(phys, index)
+        errors.items += lookup_errors[index]
+        choice = found[index]
+        if choice is None:
+            continue
         before = len(errors.items)
-        slave = _resolve(cfg, pos, phys, library, errors)
-        if slave is not None and len(errors.items) == before:
+        parent, port = tree.parent[index], tree.port[index]
+        slave = ResolvedSlave(cfg, pos, choice[0], phys, [], note=choice[1], index=index,
+                              parent=None if parent is None else tree.position(parent),
+                              parent_port=port)
+        _resolve(slave, library, errors)
+        if len(errors.items) == before:
             resolved.append(slave)
-    return resolved, errors.items
+    errors.items += wiring_errors
+    resolved.sort(key=lambda r: r.position)
+    return resolved, errors.items, tree.notes
 
 
 @dataclass(frozen=True, slots=True)
 class PluggedDevice:
-    """A topology slave's device as it sits on the line: with the PDOs and dictionaries of
-    the modules the topology plugs into its slots (what a virtual segment emulates)."""
+    """A topology slave's device as it sits in the network: with the PDOs and dictionaries
+    of the modules the topology plugs into its slots (what a virtual segment emulates), and
+    where it is plugged: the bus position of its parent and the parent's ESC port (0-3;
+    ``None`` for the first slave, which the master is plugged into, through its port 0)."""
 
     name: str
     device: Device
     alias: int = 0
+    parent: int | None = None
+    parent_port: int | None = None
 
 
 def plugged_devices(loaded: LoadedTopology, library: Library) -> list[PluggedDevice]:
-    """The devices of a topology's slaves in bus order, after the same checks as a compile
-    (an unknown device or a module that does not fit its slot is an error at its line)."""
-    resolved, errors = resolve_all(loaded, library)
+    """The devices of a topology's slaves in bus order (auto-increment positions 0, 1, ...:
+    the frame's path through the tree), after the same checks as a compile (an unknown
+    device, a module that does not fit its slot, a port that cannot be plugged is an error at
+    its line).  A slave's ``parent`` is an index into this list, always a smaller one."""
+    resolved, errors, _ = resolve_all(loaded, library)
     if errors:
         raise TopologyError(errors)
-    return [PluggedDevice(r.name, with_modules(r.device, r.modules), r.cfg.alias or 0)
+    return [PluggedDevice(r.name, with_modules(r.device, r.modules), r.cfg.alias or 0,
+                          r.parent, r.parent_port)
             for r in resolved]
 
 
-def _resolve(cfg: Slave, pos: int, phys: int, library: Library,
-             errors: _Errors) -> ResolvedSlave | None:
-    where = ("slaves", pos)
+def _find_device(cfg: Slave, index: int, library: Library,
+                 errors: _Errors) -> tuple[Device, str | None] | None:
+    """The slave's device and, when its selector had a choice of revisions, which it took."""
+    where = ("slaves", index)
     try:
         selection = library.find(cfg.device)
         device = library.device(selection.entry)
@@ -148,8 +185,11 @@ def _resolve(cfg: Slave, pos: int, phys: int, library: Library,
     e = selection.entry
     choices = {x.revision for x in library.entries
                if (x.vendor_id, x.product_code) == (e.vendor_id, e.product_code)}
-    slave = ResolvedSlave(cfg, pos, device, phys, [],
-                          note=selection.note if len(choices) > 1 else None)
+    return device, selection.note if len(choices) > 1 else None
+
+
+def _resolve(slave: ResolvedSlave, library: Library, errors: _Errors) -> None:
+    selection = library.find(slave.cfg.device)      # found before: _find_device
     modules = _plug_modules(slave, library, selection.entry, errors)
     slave.modules = modules
     slave.module_cmds = _module_ident_list(slave, modules)
@@ -159,7 +199,6 @@ def _resolve(cfg: Slave, pos: int, phys: int, library: Library,
     _check_sm_sizes(slave, errors)          # after the mappings: they change the sizes
     slave.dc_mode = _dc_mode(slave, errors)
     _sdos(slave, modules, errors)
-    return slave
 
 
 # -- modules ------------------------------------------------------------------------------
@@ -167,7 +206,7 @@ def _resolve(cfg: Slave, pos: int, phys: int, library: Library,
 def _plug_modules(slave: ResolvedSlave, library: Library, entry: DeviceEntry,
                   errors: _Errors) -> list[PluggedModule]:
     dev, cfg = slave.device, slave.cfg
-    where = ("slaves", slave.position, "modules")
+    where = ("slaves", slave.index, "modules")
     if dev.slots is None:
         if cfg.modules:
             errors.add(f"slave {cfg.name!r}: {dev.type_name} is not a modular device "
@@ -325,7 +364,7 @@ def _choose_pdos(slave: ResolvedSlave, modules: list[PluggedModule], errors: _Er
         if d.index in seen_index and d.index in module_pdos:
             errors.add(f"slave {cfg.name!r}: PDO 0x{d.index:04X} ({d.name}) is defined twice "
                        "(by the device and a module, or by two modules)",
-                       "slaves", slave.position, "modules")
+                       "slaves", slave.index, "modules")
         seen_index.setdefault(d.index, d)
     slave.pdos = pdos
     coe = dev.mailbox.coe if dev.mailbox else None
@@ -344,7 +383,7 @@ def _choose_pdos(slave: ResolvedSlave, modules: list[PluggedModule], errors: _Er
                 p.sm = sm.number if sm else None
         if chosen is None:
             continue
-        where = ("slaves", slave.position, key)
+        where = ("slaves", slave.index, key)
         by_index = {p.index: p for p in mine}
         seen: set[int] = set()
         ok = True
@@ -405,7 +444,7 @@ def _check_sm_sizes(slave: ResolvedSlave, errors: _Errors) -> None:
         size = (sum(e.bit_len for p in slave.assigned(sm.number) for e in p.entries) + 7) // 8
         if size > sm.max_size:
             errors.add(f"slave {slave.name!r}: the PDOs assigned to SM{sm.number} need {size} "
-                       f"bytes, more than its MaxSize {sm.max_size}", "slaves", slave.position)
+                       f"bytes, more than its MaxSize {sm.max_size}", "slaves", slave.index)
 
 
 # -- PDO mapping --------------------------------------------------------------------------
@@ -418,7 +457,7 @@ def _apply_mappings(slave: ResolvedSlave, errors: _Errors) -> None:
     dic = slave.dictionary
     by_index = {p.index: p for p in slave.pdos}
     for index, entries in cfg.pdo_mapping.items():
-        where = ("slaves", slave.position, "pdo_mapping", index)
+        where = ("slaves", slave.index, "pdo_mapping", index)
         pdo = by_index.get(index)
         if pdo is None:
             errors.add(f"slave {cfg.name!r}: {dev.type_name} has no PDO 0x{index:04X} to map",
@@ -501,7 +540,7 @@ def _dc_mode(slave: ResolvedSlave, errors: _Errors) -> DcOpMode | None:
     name = slave.cfg.dc
     if name is None:
         return None
-    where = ("slaves", slave.position, "dc")
+    where = ("slaves", slave.index, "dc")
     dc = slave.device.dc
     modes = dc.opmodes if dc else []
     if not modes:
@@ -542,7 +581,7 @@ def _sdos(slave: ResolvedSlave, modules: list[PluggedModule], errors: _Errors) -
     if not cfg.sdos:
         return
     for i, user in enumerate(cfg.sdos):
-        where = ("slaves", slave.position, "sdos", i)
+        where = ("slaves", slave.index, "sdos", i)
         if not has_coe(dev):
             errors.add(f"slave {slave.name!r}: {dev.type_name} has no CoE mailbox, so SDOs "
                        "cannot be written", *where)

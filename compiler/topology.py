@@ -21,7 +21,7 @@ from pydantic import (AfterValidator, BaseModel, BeforeValidator, ConfigDict, Fi
                       ValidationError, WithJsonSchema, field_validator, model_validator)
 
 from ecatcfg.errors import EcatcfgError
-from ecatcfg.esc import Transition
+from ecatcfg.esc import PORT_LETTERS, Transition
 from ecatcfg.esi.values import parse_int
 
 Path_ = tuple[str | int, ...]
@@ -131,6 +131,22 @@ def _slot_modules(value: Any) -> list[int | str]:
     return [_module_selector(value)]
 
 
+def _port(value: Any) -> int:
+    """A port of the parent: its letter A-D (as ENI PreviousPort writes it) or ESC port 0-3."""
+    if isinstance(value, str) and value.strip().upper() in tuple(PORT_LETTERS):
+        return PORT_LETTERS.index(value.strip().upper())
+    if isinstance(value, int) and not isinstance(value, bool) and 0 <= value < len(PORT_LETTERS):
+        return value
+    raise ValueError(f"a port is A, B, C or D (ESC ports 0-3), not {value!r}")
+
+
+# ESC port 0-3 of the parent slave, written A-D (or 0-3).
+Port = Annotated[int, BeforeValidator(_port), WithJsonSchema(
+    {"anyOf": [{"type": "string", "enum": list(PORT_LETTERS)},
+               {"type": "integer", "minimum": 0, "maximum": len(PORT_LETTERS) - 1}],
+     "description": "The parent's port: A-D (ESC ports 0-3; A leads toward the master)"})]
+
+
 _SELECTOR_SCHEMA = {"anyOf": [{"type": "integer", "minimum": 0, "maximum": 0xFFFFFFFF},
                               {"type": "string", "minLength": 1}]}
 # A slot's modules: one module (ident or Type name) or a list of them, in plug order.
@@ -200,7 +216,7 @@ MappingEntry = tuple[Index, SubIndex, BitLen]
 
 
 class Slave(_Model):
-    """One slave, in bus order."""
+    """One slave; plugged into the slave before it unless it names its parent."""
 
     name: XmlText = Field(min_length=1, pattern=r"^[^\x00-\x1f\x7f]+$",
                           description="Unique name; prefixes its process variables")
@@ -224,10 +240,25 @@ class Slave(_Model):
                     "that takes several (a station's row of I/O modules, in order)")
     sdos: list[Sdo] = Field(default_factory=list)
     dc: str | None = Field(default=None, description="DC OpMode name from the ESI")
+    parent: XmlText | None = Field(
+        default=None, min_length=1,
+        description="Name of the slave this one is plugged into (default: the nearest slave "
+                    "before it with a free port of the kind of this slave's port A)")
+    port: Port | None = Field(
+        default=None, description="The parent's port it is plugged into, B-D (default: the "
+                                  "parent's first free port of the right kind in processing "
+                                  "order D, B, C); needs parent")
+
+    @model_validator(mode="after")
+    def _port_needs_parent(self) -> Slave:
+        if self.port is not None and self.parent is None:
+            raise ValueError("'port' needs 'parent' (the slave whose port it is)")
+        return self
 
 
 class Topology(_Model):
-    """An EtherCAT line: the master and its slaves in bus order."""
+    """An EtherCAT network: the master and its slaves, a line in bus order or a tree of
+    branches through junctions (``parent``/``port``)."""
 
     master: Master = Field(default_factory=Master)
     slaves: list[Slave] = Field(min_length=1)     # unique names: checked by the compiler

@@ -29,6 +29,7 @@ from ecatcfg.esc import (MAILBOX_PROTOCOL_BITS, SII_BOOTSTRAP_MAILBOX, SII_FIRST
                          SM_TYPE_CODES, mailbox_protocol_names)
 from ecatcfg.esi import datatypes
 from ecatcfg.esi.model import Device, DcOpMode, Pdo, SyncManager
+from ecatcfg.esi.physics import EBUS, ETHERNET, port_kinds
 
 # -- layouts (protocol-notes §7), declared once ----------------------------------------------
 
@@ -86,9 +87,9 @@ GENERAL_FLAG_NAMES = {FLAG_SAFEOP: "enable SafeOp", FLAG_NOT_LRW: "not LRW",
                       FLAG_IDENT_AL_STS: "ident AL status", FLAG_IDENT_PHY_M: "ident phys. memory"}
 # GENERAL bytes 16-17: 4 bits per port (port 0 = low nibble).
 PORT_TYPES = {0: "-", 1: "MII", 2: "reserved", 3: "EBUS"}
-# ESI Device/@Physics, one letter per port: Y = 100BASE-TX and F = 100BASE-FX behind an MII,
-# K (and E) = E-Bus (LVDS); a blank or anything else = port not used.
-PHYSICS_PORTS = {"Y": 1, "F": 1, "H": 1, "K": 3, "E": 3}
+# The nibble of each port kind (esi/physics.py reads the ESI Physics letters): Ethernet
+# ports sit behind an MII, E-bus ports are EBUS; a port that does not exist is 0.
+PORT_TYPE_CODES = {ETHERNET: 1, EBUS: 3}
 
 # SYNCM enable byte: b0 enable (protocol-notes §7), b2 virtual SM (IgH), b3 OpOnly (ETG.2010; the
 # Beckhoff dumps show 0x09 for the OpOnly output SMs of EL2004/EL2828/EL2889), b1 fixed
@@ -681,8 +682,8 @@ def _general(device: Device, group: int, order: int, name: int) -> bytes:
 def physical_ports(physics: str | None) -> int:
     """GENERAL bytes 16-17 from ESI ``Physics`` ("YKY" -> 0x0131): 4 bits per port."""
     value = 0
-    for port, letter in enumerate((physics or "")[:4]):
-        value |= PHYSICS_PORTS.get(letter.upper(), 0) << (4 * port)
+    for port, kind in enumerate(port_kinds(physics)):
+        value |= (PORT_TYPE_CODES[kind] if kind else 0) << (4 * port)
     return value
 
 
