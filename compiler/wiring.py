@@ -97,8 +97,8 @@ def wire(loaded: LoadedTopology, physics: list[str | None]) -> tuple[Wiring, lis
             _plug_default(st, i)
     cycles = _cycles(st)
     if st.errors or cycles or None in st.kinds:
-        st.errors += cycles
-        return Wiring(list(st.parent), list(st.port), list(range(n))), st.errors
+        errors = sorted(st.errors, key=lambda e: e.line or 0) + cycles    # in file order
+        return Wiring(list(st.parent), list(st.port), list(range(n))), errors
     order = _bus_order(st, n)
     wiring = Wiring(st.parent, st.port, order)
     if order != list(range(n)):
