@@ -133,8 +133,8 @@ def _slot_modules(value: Any) -> list[int | str]:
 
 def _port(value: Any) -> int:
     """A port of the parent: its letter A-D (as ENI PreviousPort writes it) or ESC port 0-3."""
-    if isinstance(value, str) and value.strip().upper() in tuple(PORT_LETTERS):
-        return PORT_LETTERS.index(value.strip().upper())
+    if isinstance(value, str) and value in tuple(PORT_LETTERS):
+        return PORT_LETTERS.index(value)
     if isinstance(value, int) and not isinstance(value, bool) and 0 <= value < len(PORT_LETTERS):
         return value
     raise ValueError(f"a port is A, B, C or D (ESC ports 0-3), not {value!r}")

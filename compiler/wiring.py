@@ -87,17 +87,19 @@ def wire(loaded: LoadedTopology, physics: list[str | None]) -> tuple[Wiring, lis
     names: dict[str, int] = {}
     for i, s in enumerate(slaves):
         names.setdefault(s.name, i)
-    # Named ports first, then named parents without a port, then the default plugging: a
-    # port the user names is never taken by a guess.
-    explicit = [i for i, s in enumerate(slaves) if s.parent is not None]
-    for i in sorted(explicit, key=lambda i: slaves[i].port is None):
-        _plug_named(st, i, names)
-    for i in range(1, n):
-        if slaves[i].parent is None:
+    # Named ports first, so that a port the user names is never taken by a guess; then in
+    # file order the slaves that name only their parent or nothing take the free ports.
+    for i, s in enumerate(slaves):
+        if s.parent is not None and s.port is not None:
+            _plug_named(st, i, names)
+    for i, s in enumerate(slaves):
+        if s.parent is not None and s.port is None:
+            _plug_named(st, i, names)
+        elif s.parent is None and i > 0:
             _plug_default(st, i)
     cycles = _cycles(st)
     if st.errors or cycles or None in st.kinds:
-        errors = sorted(st.errors, key=lambda e: e.line or 0) + cycles    # in file order
+        errors = sorted(st.errors + cycles, key=lambda e: e.line or 0)    # in file order
         return Wiring(list(st.parent), list(st.port), list(range(n))), errors
     order = _bus_order(st, n)
     wiring = Wiring(st.parent, st.port, order)

@@ -24,7 +24,7 @@ def test_devices_json_shape_on_examples():
     out = ecatcfg("devices", "--format", "json", "examples/")
     assert out.returncode == 0, out.stderr
     devices = json.loads(out.stdout)["devices"]
-    assert len(devices) == 6            # the line of examples/esi and the station
+    assert len(devices) == 10   # the line of examples/esi, the station, the tree (4)
     drive = next(d for d in devices if d["type"] == "EXD-402")
     assert CONTRACT_KEYS <= set(drive)
     assert drive == {**drive, "file": "examples/esi/ecatcfg-EXD402-drive.xml",

@@ -69,6 +69,7 @@ def test_wheel_installs_and_runs(tmp_path):
     assert top == {"ecatcfg"}, top
     assert "ecatcfg/examples/esi/ecatcfg-EXD402-drive.xml" in names
     assert "ecatcfg/examples/topology.yaml" in names
+    assert "ecatcfg/examples/tree/esi/ecatcfg-EXB-branching.xml" in names
     assert "ecatcfg/templates/process_image.h.j2" in names
     assert "ecatcfg/templates/__init__.py" in names
     assert not any(n.startswith("ecatcfg/tests/") or n.startswith("ecatcfg/bench/")
