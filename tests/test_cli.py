@@ -40,7 +40,7 @@ def test_devices_json_shape_on_examples():
 def test_devices_text_lists_selector_and_source():
     out = ecatcfg("devices", "examples")
     assert out.returncode == 0
-    assert "0xe0000eca:0x7201:0x20000" in out.stdout and "6 devices in 4 files" in out.stdout
+    assert "0xe0000eca:0x7201:0x20000" in out.stdout and "10 devices in 5 files" in out.stdout
 
 
 def test_missing_path_exits_2():

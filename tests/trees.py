@@ -1,5 +1,5 @@
-"""The branched network of the acceptance (issue 18) and the wiring rule, written here
-independently of ``ecatcfg.compiler.wiring``: a hand-written tree (parent and port letter per
+"""The branched network of the acceptance (a coupler, a junction, drives, terminals and a
+UR20 station) and the wiring rule, written here independently of ``ecatcfg.compiler.wiring``: a hand-written tree (parent and port letter per
 slave) and a depth-first walk that takes each ESC's ports in the order the ESC datasheets
 give for a frame (0, 3, 1, 2: A, D, B, C).
 
