@@ -1,7 +1,8 @@
 """The branched network of the acceptance (a coupler, a junction, drives, terminals and a
-UR20 station) and the wiring rule, written here independently of ``ecatcfg.compiler.wiring``: a hand-written tree (parent and port letter per
-slave) and a depth-first walk that takes each ESC's ports in the order the ESC datasheets
-give for a frame (0, 3, 1, 2: A, D, B, C).
+UR20 station) and the wiring rule, written here independently of
+``ecatcfg.compiler.wiring``: a hand-written tree (parent and port letter per slave) and a
+depth-first walk that takes each ESC's ports in the order the ESC datasheets give for a
+frame (0, 3, 1, 2: A, D, B, C).
 
 Devices are the corpus files the SOEM tests use (Beckhoff EK1100, EK1122, EL1809, EL2008,
 the Elmo drive) and a Weidmueller UR20 station (``test_modular``)."""
