@@ -116,7 +116,8 @@ def test_info_reference_resolved_beside_the_file_or_warned(tmp_path):
 def test_examples_are_a_valid_library():
     lib = Library([EXAMPLES], cache=False)
     assert {e.type for e in lib.entries} == {"EX1100", "EX1004", "EX1008", "EX2008", "EXD-402",
-                                              "EXM100"}
+                                              "EXM100", "EXB1100", "EXB1122", "EXB1018",
+                                              "EXB2018"}
     assert lib.problems == []
 
 
