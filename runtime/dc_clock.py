@@ -30,16 +30,29 @@ Per sample, not per second: as on hardware the number of drift frames decides co
 With ±100 ppm quartzes the loop settles to a few ns in about two thousand samples (EtherCrab
 and KickCAT send 15 000 static drift frames; IgH waits up to 5 s for |0x092C| to drop).
 
-The line's timing: a frame reaches slave k's port 0 after the processing delay of every
-slave before it (port 0 -> processing unit -> port 1) plus a cable each; it turns round in
-the last slave's processing unit and comes back through each slave's forwarding path
-(port 1 -> port 0) (Section I 9.1.2, "t_P" and "t_F" of Table 26).
+The segment's timing (Section I 9.1.2, "t_P" and "t_F" of Table 26): a frame that enters
+a slave's port 0 at ``a`` leaves its processing unit towards the first open downstream
+port (processing order 3, 1, 2; ``runtime/wiring.py``) at ``a + t_P``, crosses a cable,
+goes round the subtree behind that port and comes back across the cable to the same port,
+where the slave latches its receive time; the forwarding path takes it on to the next open
+port in ``t_F``, and after the last one out of port 0.  A slave with no open downstream
+port turns the frame round in its processing unit (``a + t_P`` back out of port 0).  On a
+line this is: slave k's port 0 after the processing delay of every slave before it plus
+a cable each, and its port 1 after the round trip through the rest of the line.
 """
 
 from __future__ import annotations
 
 import random
+from collections.abc import Iterable
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from ecatcfg.runtime.wiring import Wiring
+
+# Receive times of the four ports (ns after the frame was sent; None: no frame arrives).
+PortTimes = tuple["int | None", "int | None", "int | None", "int | None"]
 
 PROCESSING_DELAY_NS = 600      # port 0 -> processing unit -> port 1, on the way out
 FORWARDING_DELAY_NS = 200      # port 1 -> port 0 alongside the processing unit, way back
@@ -73,38 +86,65 @@ class DcModel:
             raise ValueError("DC model delays and start spread must not be negative")
 
     def clocks(self, n: int, now: int) -> list[DcClock]:
-        """The clocks of a line of ``n`` slaves at time ``now`` (ns), with the times a
-        frame sent at 0 reaches each slave's port 0 and comes back to its port 1."""
+        """The clocks of ``n`` slaves at time ``now`` (ns), drift and start seeded in that
+        order; their port times come from :meth:`port_times`."""
         rng = random.Random(self.seed)
-        hop = self.processing_ns + self.cable_ns
-        # Round trip below slave k, from its port 0 back to its port 0: the last slave
-        # turns the frame round in its processing unit.
-        below = [0] * n
-        for k in reversed(range(n)):
-            below[k] = self.processing_ns if k == n - 1 else (
-                hop + self.cable_ns + below[k + 1] + self.forwarding_ns)
         out = []
-        for k in range(n):
-            port0 = k * hop
-            port1 = port0 + hop + self.cable_ns + below[k + 1] if k + 1 < n else None
+        for _ in range(n):
             drift = rng.uniform(-self.drift_ppm, self.drift_ppm) * 1e-6
             start = rng.randrange(self.start_spread_ns) if self.start_spread_ns else 0
-            out.append(DcClock(drift, start, now, port0, port1))
+            out.append(DcClock(drift, start, now))
         return out
+
+    def port_times(self, wiring: Wiring, cut: Iterable[int] = ()) -> list[PortTimes]:
+        """Per slave of ``wiring`` (the cables into ``cut`` removed): when a frame sent at 0
+        reaches each of its ports (port 0 on the way out, the others on the way back from
+        the slaves behind them; see the module docstring).  All None for a slave the frame
+        does not reach."""
+        order = wiring.order(cut)
+        p, f, c = self.processing_ns, self.forwarding_ns, self.cable_ns
+        n = len(wiring.plugs)
+        below = [0] * n                     # port 0 in -> port 0 out, the subtree's loop
+        out_at: list[dict[int, int]] = [{} for _ in range(n)]   # child port -> leaves, from a
+        back_at: list[dict[int, int]] = [{} for _ in range(n)]  # ... and comes back
+        reached = set(order)
+        for k in reversed(order):           # children before their parent
+            t = p
+            ports = wiring.children[k]
+            for port in (3, 1, 2):
+                child = ports.get(port)
+                if child is None or child not in reached:
+                    continue
+                out_at[k][port] = t
+                back_at[k][port] = t + 2 * c + below[child]
+                t = back_at[k][port] + f
+            below[k] = t
+        arrive = [0] * n
+        times: list[PortTimes] = [(None, None, None, None)] * n
+        for k in order:                     # parents before their children
+            a = arrive[k]
+            for port, child in wiring.children[k].items():
+                if port in out_at[k]:
+                    arrive[child] = a + out_at[k][port] + c
+            rx = [a, None, None, None]
+            for port, back in back_at[k].items():
+                rx[port] = a + back
+            times[k] = (rx[0], rx[1], rx[2], rx[3])
+        return times
 
 
 class DcClock:
     """One ESC's local clock (ns) as a function of the segment's time ``t`` (ns), and its
     time control loop."""
 
-    __slots__ = ("drift", "port0_ns", "port1_ns", "diff", "freq", "samples",
+    __slots__ = ("drift", "port0_ns", "ports", "diff", "freq", "samples",
                  "_t", "_local", "_pending", "_applied", "_last_t", "_last_dt")
 
     def __init__(self, drift: float = 0.0, start_ns: int = 0, now: int = 0,
-                 port0_ns: int = 0, port1_ns: int | None = None) -> None:
+                 ports: PortTimes = (0, None, None, None)) -> None:
         self.drift = drift                 # quartz deviation (1e-6 = 1 ppm fast)
-        self.port0_ns = port0_ns           # a frame sent at t reaches port 0 at t + this
-        self.port1_ns = port1_ns           # ... and comes back to port 1 (None: closed)
+        self.ports = ports                 # a frame sent at t reaches port n at t + this
+        self.port0_ns = ports[0] or 0      # ... port 0 and the processing unit
         self.diff = 0.0                    # 0x092C: mean system time difference (ns)
         self.freq = 0.0                    # learned speed correction (0x0932)
         self.samples = 0                   # received system times since the last reset
@@ -114,6 +154,11 @@ class DcClock:
         self._applied = 0.0                # slewed since the last sample (ns)
         self._last_t: int | None = None
         self._last_dt = 0
+
+    def set_ports(self, ports: PortTimes) -> None:
+        """The slave's place in the segment changed (a cable removed or put back)."""
+        self.ports = ports
+        self.port0_ns = ports[0] or 0
 
     def local(self, t: int) -> int:
         """Local time at segment time ``t``."""

@@ -22,6 +22,7 @@ from ecatcfg.esi.slots import ident_list_from_writes, plug_positions, with_modul
 from ecatcfg.runtime.esc_chips import chip_for
 from ecatcfg.runtime.segment import Faults, VirtualSegment
 from ecatcfg.runtime.slave import EmulatedSlave
+from ecatcfg.runtime.wiring import PORT_LETTERS, Plug, Wiring
 
 if TYPE_CHECKING:
     from collections.abc import Callable
@@ -46,6 +47,9 @@ class SlaveSpec:
     # Emulated from the ENI alone (no ESI device): why, e.g. "no device 0x2:0x... in the
     # library"; None for a device from an ESI file.
     eni_only: str | None = None
+    # Where its port 0 is plugged: a port of an earlier slave (index into the list of
+    # specs).  None: port 1 of the slave before it (a line), the master for the first.
+    plug: Plug | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -165,11 +169,23 @@ _NUMBER_TYPES = {1: "USINT", 2: "UINT", 4: "UDINT", 8: "ULINT"}
 def segment(specs: list[SlaveSpec], faults: Faults | None = None,
             timing: Timing | None = None, *, clock_ns: Callable[[], int] | None = None,
             dc: DcModel | None = None) -> VirtualSegment:
-    """A line of emulated slaves in the order given; ``timing``: how long they take
-    (``runtime/timing.py``, ``simulate --realistic``), none by default; ``clock_ns`` and
-    ``dc`` as for :class:`VirtualSegment`."""
+    """The emulated slaves, plugged as their specs say (a line in the order given by
+    default); ``timing``: how long they take (``runtime/timing.py``, ``simulate
+    --realistic``), none by default; ``clock_ns`` and ``dc`` as for
+    :class:`VirtualSegment`."""
     return VirtualSegment([emulated_slave(s) for s in specs], faults, timing=timing,
-                          clock_ns=clock_ns, dc=dc)
+                          clock_ns=clock_ns, dc=dc, wiring=wiring(specs))
+
+
+def wiring(specs: list[SlaveSpec]) -> Wiring:
+    """The cables the specs describe; ValueError naming the slaves when they cannot be."""
+    plugs = [s.plug if s.plug is not None or k == 0 else Plug(k - 1, 1)
+             for k, s in enumerate(specs)]
+    try:
+        return Wiring(plugs)
+    except ValueError as exc:
+        names = ", ".join(f"{k} = {s.name!r}" for k, s in enumerate(specs))
+        raise ValueError(f"{exc} (slaves {names})") from None
 
 
 def specs_from_eni(plan: NetworkPlan, library: Library | None, shown: str) -> list[SlaveSpec]:
@@ -185,7 +201,9 @@ def specs_from_eni(plan: NetworkPlan, library: Library | None, shown: str) -> li
     from ecatcfg.runtime.eni_device import device_from_eni
 
     specs = []
-    for s in sorted(plan.slaves, key=lambda s: s.position):
+    ordered = sorted(plan.slaves, key=lambda s: s.position)
+    plugs = eni_plugs(ordered, shown)
+    for s in ordered:
         selector = f"0x{s.vendor_id:x}:0x{s.product_code:x}:0x{s.revision:x}"
         coe = s.mailbox.coe_init_cmds if s.mailbox else []
         try:
@@ -197,7 +215,7 @@ def specs_from_eni(plan: NetworkPlan, library: Library | None, shown: str) -> li
                            for c in coe if not c.disabled and c.ccs == 1)
             specs.append(SlaveSpec(device_from_eni(s, plan, shown), s.name,
                                    serial=s.serial_no, extra_writes=writes,
-                                   eni_only=exc.message))
+                                   eni_only=exc.message, plug=plugs[len(specs)]))
             continue
         device = library.device(entry)     # a broken ESI file is an error, not a fallback
         extra: tuple[Write, ...] = ()
@@ -207,8 +225,44 @@ def specs_from_eni(plan: NetworkPlan, library: Library | None, shown: str) -> li
                 # Modules the ENI does not name: accept the objects its startup SDOs write.
                 extra = tuple(Write(c.index, c.subindex, c.data) for c in coe
                               if not c.complete_access and not is_pdo_object(c.index))
-        specs.append(SlaveSpec(device, s.name, serial=s.serial_no, extra_writes=extra))
+        specs.append(SlaveSpec(device, s.name, serial=s.serial_no, extra_writes=extra,
+                               plug=plugs[len(specs)]))
+    try:
+        wiring(specs)
+    except ValueError as exc:
+        from ecatcfg.errors import EcatcfgError
+        raise EcatcfgError(f"{shown}: PreviousPort: {exc}") from None
     return specs
+
+
+def eni_plugs(slaves: list[SlavePlan], shown: str) -> list[Plug | None]:
+    """Where each slave (in position order) is plugged, from its ENI ``PreviousPort``:
+    the port letter (A-D = ESC port 0-3) of the slave with that ``PhysAddr``; the selected
+    entry when there are several (hot-connect alternatives), else the first.  A slave
+    without one (hand-written ENIs, the first slave) follows the slave before it on port
+    B (port 1), the first slave the master.  A PreviousPort that names no earlier slave
+    or no downstream port is an error naming the slave."""
+    from ecatcfg.errors import EcatcfgError
+
+    by_address = {s.phys_addr: k for k, s in enumerate(slaves)}
+    plugs: list[Plug | None] = []
+    for k, s in enumerate(slaves):
+        ports = s.previous_ports
+        chosen = next((p for p in ports if p.selected), ports[0] if ports else None)
+        if k == 0 or chosen is None:
+            plugs.append(None if k == 0 else Plug(k - 1, 1))
+            continue
+        letter = chosen.port.strip().upper()
+        port = PORT_LETTERS.find(letter) if len(letter) == 1 else -1
+        parent = k - 1 if chosen.phys_addr is None else by_address.get(chosen.phys_addr, -1)
+        where = f"{shown}: slave {s.name!r}: PreviousPort {chosen.port!r}" + (
+            f" of PhysAddr {chosen.phys_addr}" if chosen.phys_addr is not None else "")
+        if port < 1:
+            raise EcatcfgError(f"{where}: the port is not B, C or D (a downstream port)")
+        if not 0 <= parent < k:
+            raise EcatcfgError(f"{where}: no slave before it has that address")
+        plugs.append(Plug(parent, port))
+    return plugs
 
 
 # -- modular devices --------------------------------------------------------------------------

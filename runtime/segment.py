@@ -1,6 +1,12 @@
-"""A virtual EtherCAT segment: emulated slaves in a line, answering frames on a link.
+"""A virtual EtherCAT segment: emulated slaves in a line or a tree, answering frames on a link.
 
-A frame passes every slave in bus order and returns to the master.  Each datagram is
+A frame passes every slave in bus order and returns to the master.  In a tree
+(``runtime/wiring.py``) bus order is the order in which the frame, going through each
+ESC's open ports in the processing order 0 -> 3 -> 1 -> 2, reaches the slaves; each one
+processes it once, so the datagram rules below are the same as on a line.  The cabling
+shows in each slave's DL status (0x0110) and in the receive times its ports latch
+(``runtime/dc_clock.py``); a cable removed (:meth:`VirtualSegment.remove_cable`) takes
+the slaves behind it out of the frame and closes the port it was plugged into.  Each datagram is
 processed in place in the frame's buffer with the addressing and working-counter rules of
 ETG.1000.4 (``docs/protocol-notes.md`` §1): auto-increment (ADP counts up at each slave; the one
 that sees 0 acts), configured station address (or alias with 0x0103 bit 0), broadcast (every
@@ -30,6 +36,7 @@ from ecatcfg.runtime.dc_clock import DcModel
 from ecatcfg.runtime.slave import (MEMORY_SIZE, PROCESS_RAM, RUNNING_STATES, EmulatedSlave,
                                    StateChange)
 from ecatcfg.runtime.syncman import SmKind, SmState
+from ecatcfg.runtime.wiring import Wiring
 from ecatcfg.runtime.wire import DG_HEADER_LEN, FrameError, datagram_offsets
 
 if TYPE_CHECKING:
@@ -75,14 +82,23 @@ class VirtualSegment:
 
     def __init__(self, slaves: list[EmulatedSlave], faults: Faults | None = None, *,
                  clock_ns: Callable[[], int] | None = None,
-                 timing: Timing | None = None, dc: DcModel | None = None) -> None:
+                 timing: Timing | None = None, dc: DcModel | None = None,
+                 wiring: Wiring | None = None) -> None:
         """``clock_ns``: the time (ns, monotonic) the slaves live in; wall time by default,
         a simulated clock for deterministic tests of time-dependent behaviour.
         ``timing``: how long the slaves take (``runtime/timing.py``); None: no time.
-        ``dc``: the slaves' clocks (drift, start) and the line's timing; ``DcModel()`` by
-        default (seeded drift within ±100 ppm)."""
-        self.slaves = slaves
-        self._mems = [s.mem for s in slaves]
+        ``dc``: the slaves' clocks (drift, start) and the segment's timing; ``DcModel()``
+        by default (seeded drift within ±100 ppm).  ``wiring``: where each of ``slaves``
+        is plugged (indices into ``slaves``); a line in the order given by default.
+        ``self.slaves`` holds them in bus order, ``self.wired`` in the order given."""
+        self.wired = list(slaves)
+        self.wiring = wiring or Wiring.line(len(slaves))
+        if len(self.wiring.plugs) != len(slaves):
+            raise ValueError(f"the wiring has {len(self.wiring.plugs)} slaves, the segment "
+                             f"{len(slaves)}")
+        self.cut: set[int] = set()          # slaves (indices into wired) unplugged
+        self.slaves: list[EmulatedSlave] = []
+        self._mems: list[bytearray] = []
         self._irq: int | None = None       # the IRQ all slaves OR in; None: work it out
         self.clock_ns: Callable[[], int] = clock_ns or time.monotonic_ns
         self.dc_model = dc or DcModel()
@@ -96,15 +112,61 @@ class VirtualSegment:
         self.frames = 0
         self.on_state_change: Callable[[StateChange], None] | None = None
         clocks = self.dc_model.clocks(len(slaves), self.clock_ns())
-        for pos, slave in enumerate(slaves):
-            slave.position = pos
+        for k, slave in enumerate(slaves):
+            slave.dc = clocks[k]
             slave.clock_ns = self._now
-            slave.dc = clocks[pos]
-            slave.set_links(True, pos + 1 < len(slaves))
             slave.on_mapping_change = self._plans.clear
             slave.on_state_change = self._state_changed
+        self._rewire()
         self._timed: list[EmulatedSlave] = []
         self.set_timing(timing)
+
+    def _rewire(self) -> None:
+        """Bus order, positions, DL status and port times from the wiring and the cuts."""
+        order = self.wiring.order(self.cut)
+        times = self.dc_model.port_times(self.wiring, self.cut)
+        for k, slave in enumerate(self.wired):
+            slave.dc.set_ports(times[k])
+            slave.set_ports(self.wiring.links(k, self.cut))
+        for pos, k in enumerate(order):
+            self.wired[k].position = pos
+        self.slaves = [self.wired[k] for k in order]
+        self._mems = [s.mem for s in self.slaves]
+        self._irq = None
+        self._by_address = None
+        self._plans.clear()
+
+    def _wired_index(self, slave: EmulatedSlave | str | int) -> int:
+        if isinstance(slave, int):
+            if not 0 <= slave < len(self.slaves):
+                raise ValueError(f"no slave at position {slave} (the frame reaches "
+                                 f"{len(self.slaves)})")
+            slave = self.slaves[slave]
+        elif isinstance(slave, str):
+            named = [s for s in self.wired if s.name == slave]
+            if len(named) != 1:
+                raise ValueError(f"no slave named {slave!r}" if not named
+                                 else f"{len(named)} slaves are named {slave!r}")
+            slave = named[0]
+        return next(k for k, s in enumerate(self.wired) if s is slave)
+
+    def remove_cable(self, slave: EmulatedSlave | str | int) -> list[EmulatedSlave]:
+        """Unplug the cable into ``slave``'s port 0 (a slave, its name, or its position):
+        the port it was plugged into closes its loop and shows no link, and the frame no
+        longer reaches it and the slaves behind it.  Returns the slaves that are gone."""
+        k = self._wired_index(slave)
+        if self.wiring.plugs[k] is None:
+            raise ValueError(f"slave {self.wired[k].name!r} is plugged into the master")
+        before = set(map(id, self.slaves))
+        self.cut.add(k)
+        self._rewire()
+        after = set(map(id, self.slaves))
+        return [s for s in self.wired if id(s) in before and id(s) not in after]
+
+    def restore_cable(self, slave: EmulatedSlave | str) -> None:
+        """Plug back the cable :meth:`remove_cable` removed."""
+        self.cut.discard(self._wired_index(slave))
+        self._rewire()
 
     def set_timing(self, timing: Timing | None) -> None:
         """Give every slave its kind's times (``runtime/timing.py``), or none."""
@@ -280,13 +342,12 @@ class VirtualSegment:
 
     def _latch(self, slave: EmulatedSlave) -> None:
         """Receive times of a 0x0900 write, in the slave's local time: the frame reaches
-        slave k's port 0 after the slaves before it and comes back to its port 1 after
-        the rest of the line (``DcModel.clocks``)."""
+        each port after the slaves before it and the subtrees behind the ports taken
+        before (``DcModel.port_times``)."""
         sent = self._now()
         clock = slave.dc
-        port1 = clock.port1_ns
-        slave.latch_receive_times(clock.local(sent + clock.port0_ns),
-                                  None if port1 is None else clock.local(sent + port1))
+        slave.latch_receive_times(tuple(None if t is None else clock.local(sent + t)
+                                        for t in clock.ports))
 
     # -- logical addressing ------------------------------------------------------------------
 
@@ -391,7 +452,7 @@ class VirtualSegment:
             if now >= next_tick:
                 slave_now = self.clock_ns() / 1e9
                 self.settle()
-                for s in self.slaves:
+                for s in self.wired:            # unplugged slaves time out too
                     s.check_watchdog(slave_now)
                 next_tick = now + 0.002
             wait = 0.002

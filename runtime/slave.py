@@ -222,21 +222,19 @@ class EmulatedSlave:
         self.mem[0x0110] |= 0x01                    # DL status: EEPROM loaded
 
     def set_links(self, upstream: bool, downstream: bool) -> None:
-        """DL status 0x0110: port 0 towards the master, port 1 to the next slave; ports
-        2 and 3 closed.  A port with communication has its loop open (SOEM: bits 9+2n, 8+2n
-        = 1, 0 means active).  Bit 1, the PDI watchdog, reads 1 (reloaded) only where a
-        PDI reloads it: an ESC whose PDI is off (0x0140 = 0, an EK1100) reads 0x5A31 where
-        an EL2828 reads 0x5A33 (ethercrab-rs/ethercrab tests/replay-dc.pcapng)."""
+        """A slave of a line: port 0 towards the master, port 1 to the next slave."""
+        self.set_ports((upstream, downstream, False, False))
+
+    def set_ports(self, links: tuple[bool, bool, bool, bool]) -> None:
+        """DL status 0x0110 from which ports have a link partner: per port n, link (bit
+        4+n), and loop open with communication (bits 8+2n = 0, 9+2n = 1; SOEM reads a
+        port as active when (status >> 8+2n) & 3 == 2), or loop closed (bit 8+2n = 1)
+        without one.  Bit 1, the PDI watchdog, reads 1 (reloaded) only where a PDI
+        reloads it: an ESC whose PDI is off (0x0140 = 0, an EK1100) reads 0x5A31 where an
+        EL2828 reads 0x5A33 (ethercrab-rs/ethercrab tests/replay-dc.pcapng)."""
         status = 0x01 | (0x02 if self.mem[Reg.PDI_CONTROL] else 0)
-        if upstream:
-            status |= 0x0010 | 0x0200
-        else:
-            status |= 0x0100
-        if downstream:
-            status |= 0x0020 | 0x0800
-        else:
-            status |= 0x0400
-        status |= 0x1000 | 0x4000
+        for port, link in enumerate(links):
+            status |= (0x0010 << port | 0x0200 << 2 * port) if link else 0x0100 << 2 * port
         if status != struct.unpack_from("<H", self.mem, Reg.DL_STATUS)[0]:
             # A change of DL status (the links coming up at power-on) raises the ECAT
             # event; real slaves show it in the IRQ field once the master unmasks it
@@ -837,12 +835,14 @@ class EmulatedSlave:
         delay: int = struct.unpack_from("<I", self.mem, 0x0928)[0]
         return (self.system_time() - delay) & 0xFFFF_FFFF_FFFF_FFFF
 
-    def latch_receive_times(self, port0: int, port1: int | None) -> None:
+    def latch_receive_times(self, times: tuple[int | None, ...]) -> None:
         """A write to 0x0900 passed: the ESC latches when the frame arrived at each port
-        (local time) and at the processing unit (0x0918)."""
-        struct.pack_into("<I", self.mem, 0x0900, port0 & 0xFFFF_FFFF)
-        struct.pack_into("<I", self.mem, 0x0904, (port1 or 0) & 0xFFFF_FFFF)
-        struct.pack_into("<Q", self.mem, 0x0918, port0 & 0xFFFF_FFFF_FFFF_FFFF)
+        (local time; a port the frame did not reach keeps its last value, as IgH's
+        "bypassed" check expects) and at the processing unit (0x0918)."""
+        for port, t in enumerate(times[:4]):
+            if t is not None:
+                struct.pack_into("<I", self.mem, 0x0900 + 4 * port, t & 0xFFFF_FFFF)
+        struct.pack_into("<Q", self.mem, 0x0918, (times[0] or 0) & 0xFFFF_FFFF_FFFF_FFFF)
 
     def _dc_registers_written(self, ado: int, n: int) -> None:
         if ado == Reg.DC_SYSTEM_TIME:

@@ -1,0 +1,95 @@
+"""How the slaves of a virtual segment are cabled: a tree, with a line as the common case.
+
+Every slave is plugged with its port 0 into a port (1-3) of a parent slave, the first one
+into the master.  A frame enters the first slave's port 0 and each ESC passes it on
+through its open ports in the processing order 0 -> 3 -> 1 -> 2 (ETG.1000.4; SOEM
+``ethercatdc.c`` "order of ports is 0 - 3 - 1 - 2", IgH ``slave.c`` ``next_table``): the
+frame is processed once, where it enters on port 0, then goes down the subtree on port 3,
+comes back, goes down port 1, and so on.  A port with nothing plugged, or whose cable is
+removed, closes its loop, so the frame turns round there.  The order in which the frame
+meets the slaves, depth first, is their auto-increment order.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+
+from ecatcfg.record import record
+
+PROCESSING_ORDER = (0, 3, 1, 2)
+CHILD_PORTS = (3, 1, 2)        # the downstream ports, in the order the frame takes them
+PORT_LETTERS = "ABCD"          # ESC ports 0-3 as ENI PreviousPort and topologies name them
+
+
+@record(frozen=True)
+class Plug:
+    """Where a slave's port 0 is plugged: ``port`` (1-3) of slave ``parent`` (an index
+    into the segment's list of slaves)."""
+
+    parent: int
+    port: int
+
+
+class Wiring:
+    """The cables of ``n`` slaves: ``plugs[k]`` is where slave k is plugged, None for the
+    one slave plugged into the master."""
+
+    def __init__(self, plugs: Sequence[Plug | None]) -> None:
+        self.plugs = list(plugs)
+        n = len(self.plugs)
+        self.children: list[dict[int, int]] = [{} for _ in range(n)]
+        roots = [k for k, p in enumerate(self.plugs) if p is None]
+        if n and len(roots) != 1:
+            raise ValueError(f"exactly one slave is plugged into the master, not "
+                             f"{len(roots)} (slaves {roots})")
+        self.root = roots[0] if roots else -1
+        for k, p in enumerate(self.plugs):
+            if p is None:
+                continue
+            if not 0 <= p.parent < n or p.parent == k:
+                raise ValueError(f"slave {k}: parent {p.parent} is not another slave")
+            if p.port not in CHILD_PORTS:
+                raise ValueError(f"slave {k}: port {p.port} of slave {p.parent} is not a "
+                                 f"downstream port (1-3; port 0 faces the master)")
+            taken = self.children[p.parent].get(p.port)
+            if taken is not None:
+                raise ValueError(f"slaves {taken} and {k} are both plugged into port "
+                                 f"{p.port} of slave {p.parent}")
+            self.children[p.parent][p.port] = k
+        if n and len(self.order(())) != n:
+            raise ValueError("the plugging has a cycle: some slaves do not reach the master")
+
+    @classmethod
+    def line(cls, n: int) -> Wiring:
+        """Each slave in port 1 of the one before: a line."""
+        return cls([None] + [Plug(k - 1, 1) for k in range(1, n)])
+
+    @property
+    def is_line(self) -> bool:
+        return all(p is None or p == Plug(k - 1, 1) for k, p in enumerate(self.plugs))
+
+    def order(self, cut: Iterable[int]) -> list[int]:
+        """The slaves a frame reaches, in the order it reaches them, when the cables into
+        the slaves ``cut`` are removed (those slaves and everything behind them are gone)."""
+        if self.root < 0:
+            return []
+        gone = set(cut)
+        out: list[int] = []
+        stack = [self.root]
+        while stack:
+            k = stack.pop()
+            if k in gone:
+                continue
+            out.append(k)
+            ports = self.children[k]
+            # Pushed in reverse, so port 3's subtree is walked first, then 1, then 2.
+            stack.extend(ports[p] for p in reversed(CHILD_PORTS) if p in ports)
+        return out
+
+    def links(self, k: int, cut: Iterable[int]) -> tuple[bool, bool, bool, bool]:
+        """Which of slave k's ports have a link partner: port 0 unless its own cable is
+        removed, another port when a slave is plugged into it through a cable in place."""
+        gone = set(cut)
+        ports = self.children[k]
+        return (k not in gone, 1 in ports and ports[1] not in gone,
+                2 in ports and ports[2] not in gone, 3 in ports and ports[3] not in gone)
