@@ -48,6 +48,8 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
+from ecatcfg.runtime.wiring import CHILD_PORTS
+
 if TYPE_CHECKING:
     from ecatcfg.runtime.wiring import Wiring
 
@@ -111,7 +113,7 @@ class DcModel:
         for k in reversed(order):           # children before their parent
             t = p
             ports = wiring.children[k]
-            for port in (3, 1, 2):
+            for port in CHILD_PORTS:
                 child = ports.get(port)
                 if child is None or child not in reached:
                     continue

@@ -13,8 +13,12 @@ meets the slaves, depth first, is their auto-increment order.
 from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
+from typing import TYPE_CHECKING
 
 from ecatcfg.record import record
+
+if TYPE_CHECKING:
+    from ecatcfg.eni.plan import SlavePlan
 
 PROCESSING_ORDER = (0, 3, 1, 2)
 CHILD_PORTS = (3, 1, 2)        # the downstream ports, in the order the frame takes them
@@ -93,3 +97,33 @@ class Wiring:
         ports = self.children[k]
         return (k not in gone, 1 in ports and ports[1] not in gone,
                 2 in ports and ports[2] not in gone, 3 in ports and ports[3] not in gone)
+
+
+def eni_plugs(slaves: list[SlavePlan], shown: str) -> list[Plug | None]:
+    """Where each slave (in position order) is plugged, from its ENI ``PreviousPort``:
+    the port letter (A-D = ESC port 0-3) of the slave with that ``PhysAddr``; the selected
+    entry when there are several (hot-connect alternatives), else the first.  A slave
+    without one (hand-written ENIs, the first slave) follows the slave before it on port
+    B (port 1), the first slave the master.  A PreviousPort that names no earlier slave
+    or no downstream port is an error naming the slave."""
+    from ecatcfg.errors import EcatcfgError
+
+    by_address = {s.phys_addr: k for k, s in enumerate(slaves)}
+    plugs: list[Plug | None] = []
+    for k, s in enumerate(slaves):
+        ports = s.previous_ports
+        chosen = next((p for p in ports if p.selected), ports[0] if ports else None)
+        if k == 0 or chosen is None:
+            plugs.append(None if k == 0 else Plug(k - 1, 1))
+            continue
+        letter = chosen.port.strip().upper()
+        port = PORT_LETTERS.find(letter) if len(letter) == 1 else -1
+        parent = k - 1 if chosen.phys_addr is None else by_address.get(chosen.phys_addr, -1)
+        where = f"{shown}: slave {s.name!r}: PreviousPort {chosen.port!r}" + (
+            f" of PhysAddr {chosen.phys_addr}" if chosen.phys_addr is not None else "")
+        if port < 1:
+            raise EcatcfgError(f"{where}: the port is not B, C or D (a downstream port)")
+        if not 0 <= parent < k:
+            raise EcatcfgError(f"{where}: no slave before it has that address")
+        plugs.append(Plug(parent, port))
+    return plugs
