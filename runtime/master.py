@@ -33,6 +33,7 @@ from ecatcfg.runtime.replay import (TIMEOUT_COMMAND, ApplyError, MailboxChannel,
 from ecatcfg.runtime.scan import FoundSlave, Mismatch, scan, verify
 from ecatcfg.runtime.transport import Transport, pack
 from ecatcfg.runtime.wire import Datagram
+from ecatcfg.runtime.wiring import CHILD_PORTS, active_ports
 
 if TYPE_CHECKING:
     from ecatcfg.runtime.link import Link
@@ -122,6 +123,7 @@ class Master:
         self.on_event = on_event
         self._cycling = False
         self._next_cycle = 0.0
+        self.found: list[FoundSlave] | None = None     # the last scan: identity, plugs
 
     def _event(self, kind: str, text: str) -> None:
         if self.on_event:
@@ -135,6 +137,7 @@ class Master:
         problems = verify(self.plan, found, accept_newer_revision)
         if problems:
             raise VerifyError(problems)
+        self.found = found
         self._event("scan", f"{len(found)} slaves match the ENI")
         return found
 
@@ -240,20 +243,15 @@ class Master:
             return
         self._event("dc", f"DC: {len(dc)} slaves")
         self._broadcast_write(Reg.DC_RECEIVE_TIME_PORT0, bytes(4))
-        times: dict[str, tuple[int, int, int]] = {}
+        times: dict[str, tuple[tuple[int, int, int, int], int]] = {}
         run_jobs(self.transport, [_read_receive_times(s, times) for s in dc])
-        # Line topology: the loop time below slave k is port1 - port0 (0 at the line's end);
-        # the frame needs half the difference to get from the reference to k.
-        loop = {name: (p1 - p0) & 0xFFFF_FFFF if p1 else 0
-                for name, (p0, p1, _) in times.items()}
-        ref_rx = times[reference.name][2]
+        delays = propagation_delays(dc, reference, times, self.found)
+        ref_rx = times[reference.name][1]
         master_time = time.time_ns() - EPOCH_2000_NS
         writes = []
         for s in dc:
-            delay = 0
-            if s.position > reference.position:
-                delay = max(0, (loop[reference.name] - loop[s.name]) // 2)
-            offset = (master_time + delay - times[s.name][2]) if s is not reference else \
+            delay = delays[s.name]
+            offset = (master_time + delay - times[s.name][1]) if s is not reference else \
                 master_time - ref_rx
             writes.append(_write_until_ok(s, Reg.DC_SYSTEM_TIME + 0x10,
                                           struct.pack("<qI", offset, delay)))
@@ -347,14 +345,88 @@ def _drift_frame(reference: SlavePlan) -> Datagram:
     return Datagram.physical(Cmd.ARMW, -reference.position & 0xFFFF, Reg.DC_SYSTEM_TIME, 8)
 
 
-def _read_receive_times(slave: SlavePlan, out: dict[str, tuple[int, int, int]]) -> Job:
-    ports = Datagram.physical(Cmd.FPRD, slave.phys_addr, Reg.DC_RECEIVE_TIME_PORT0, 8)
+def _read_receive_times(slave: SlavePlan,
+                        out: dict[str, tuple[tuple[int, int, int, int], int]]) -> Job:
+    ports = Datagram.physical(Cmd.FPRD, slave.phys_addr, Reg.DC_RECEIVE_TIME_PORT0, 16)
     unit = Datagram.physical(Cmd.FPRD, slave.phys_addr, 0x0918, 8)
     got = yield from until_answered([ports, unit], time.monotonic() + TIMEOUT_COMMAND,
                                     ApplyError("cannot read the DC receive times", slave.name))
-    p0, p1 = struct.unpack("<II", got[0].data)
+    p0, p1, p2, p3 = struct.unpack("<IIII", got[0].data)
     rx, = struct.unpack("<Q", got[1].data)
-    out[slave.name] = (p0, p1, rx)
+    out[slave.name] = ((p0, p1, p2, p3), rx)
+
+
+def _between(later: int, earlier: int) -> int:
+    """Nanoseconds between two 32-bit receive times of one slave."""
+    return (later - earlier + (1 << 31)) % (1 << 32) - (1 << 31)
+
+
+def propagation_delays(dc: list[SlavePlan], reference: SlavePlan,
+                       times: dict[str, tuple[tuple[int, int, int, int], int]],
+                       found: list[FoundSlave] | None) -> dict[str, int]:
+    """Each DC slave's propagation delay from the reference clock (ns), from the receive
+    times its ports latched (``times``: per slave the four port times and the processing
+    unit's) and, over a tree, where each slave is plugged (``found``, the scan).
+
+    As SOEM does it (``ethercatdc.c`` ``ecx_configdc``; IgH does the same per link,
+    ``ec_slave_calc_transmission_delays_rec``), with the nearest DC slave ``a`` above
+    slave ``s`` and the port ``pa`` of ``a`` that leads to it, and ``prev`` the active
+    port of ``a`` before ``pa`` in the processing order 0 -> 3 -> 1 -> 2:
+
+        delay(s) = delay(a) + dt2 + (dt3 - dt1) / 2
+        dt2 = t_a(prev) - t_a(0)     the frame's time in a's earlier branches
+        dt3 = t_a(pa) - t_a(prev)    the round trip down pa and back
+        dt1 = t_s(last) - t_s(0)     s's own subtree, its last active port
+
+    assuming a frame takes as long out as back.  On a line (every slave on port 1 of the
+    one before) this is half the difference of the loop times port 1 - port 0 of the
+    reference and the slave.  A DC slave with no DC slave above it (a branch below a
+    junction without DC) gets that line value too: its branch cannot be measured."""
+    def port_times(name: str) -> tuple[int, int, int, int]:
+        return times[name][0]
+
+    def loop(name: str) -> int:                 # port 0 in -> last active port back
+        t = port_times(name)
+        return _between(t[1], t[0]) if t[1] else 0
+
+    by_position = {s.position: s for s in dc}
+    twice: dict[str, int] = {reference.name: 0}  # 2 x delay, so halves do not add up
+    for s in dc:
+        if s.position <= reference.position:
+            twice.setdefault(s.name, 0)
+            continue
+        above = _dc_above(s.position, by_position, found)
+        if above is None or above[0].name not in twice or found is None:
+            twice[s.name] = loop(reference.name) - loop(s.name)
+            continue
+        a, pa = above
+        active = active_ports(found[a.position].dl_status)
+        order = [p for p in CHILD_PORTS if p in active]
+        prev = order[order.index(pa) - 1] if pa in order and order.index(pa) else 0
+        ta = port_times(a.name)
+        dt2 = _between(ta[prev], ta[0])
+        dt3 = _between(ta[pa], ta[prev])
+        own = [p for p in CHILD_PORTS if p in active_ports(found[s.position].dl_status)]
+        ts = port_times(s.name)
+        dt1 = _between(ts[own[-1]], ts[0]) if own else 0
+        twice[s.name] = twice[a.name] + 2 * dt2 + dt3 - dt1
+    return {name: max(0, value // 2) for name, value in twice.items()}
+
+
+def _dc_above(position: int, dc: dict[int, SlavePlan], found: list[FoundSlave] | None
+              ) -> tuple[SlavePlan, int] | None:
+    """The nearest DC slave above ``position`` in the tree found, and its port that leads
+    down to ``position``; None without one (or without a tree)."""
+    if found is None or position >= len(found):
+        return None
+    child = position
+    plug = found[child].plug
+    while plug is not None:
+        if plug.parent in dc:
+            return dc[plug.parent], plug.port
+        child = plug.parent
+        plug = found[child].plug
+    return None
 
 
 def _read_state(position: int, out: dict[int, SlaveState]) -> Job:

@@ -1,4 +1,5 @@
-"""Who is on the wire: count the slaves and read each one's identity from its SII EEPROM.
+"""Who is on the wire: count the slaves, read each one's identity from its SII EEPROM and
+its DL status, and work out from the DL statuses where each one is plugged (a tree).
 
 Nothing but the SII interface registers (0x0500-0x050F) is written, and slaves are
 addressed by position (auto-increment), so a scan can run before any configuration and
@@ -11,7 +12,7 @@ from __future__ import annotations
 import struct
 import time
 
-from ecatcfg.eni.plan import NetworkPlan
+from ecatcfg.eni.plan import NetworkPlan, SlavePlan
 from ecatcfg.esc import (EEPROM_BUSY, EEPROM_ERRORS, EEPROM_R64, SII_REVISION, SII_VENDOR_ID, Cmd,
                          Reg, eeprom_read_request)
 from ecatcfg.record import record
@@ -19,6 +20,7 @@ from ecatcfg.runtime.lockstep import Job, Step, run_jobs, until_answered
 from ecatcfg.runtime.replay import ApplyError
 from ecatcfg.runtime.transport import Transport
 from ecatcfg.runtime.wire import Datagram
+from ecatcfg.runtime.wiring import PORT_LETTERS, Plug, eni_plugs, plugs_from_dl_status
 
 EEPROM_TIMEOUT = 0.5           # s per slave (IgH: 20 ms per access, 500 ms for loading)
 COUNT_ATTEMPTS = 5
@@ -31,6 +33,8 @@ class FoundSlave:
     product_code: int
     revision: int
     serial_no: int
+    dl_status: int = 0             # 0x0110: which ports have a link and communication
+    plug: Plug | None = None       # where it is plugged (positions); None: the master
 
     @property
     def identity(self) -> tuple[int, int, int]:
@@ -90,15 +94,23 @@ def _identity_job(position: int, out: dict[int, FoundSlave]) -> Job:
     second = yield from sii_words(position, SII_REVISION, deadline)
     vendor, product = struct.unpack("<II", first)
     revision, serial = struct.unpack("<II", second)
-    out[position] = FoundSlave(position, vendor, product, revision, serial)
+    dl = Datagram.physical(Cmd.APRD, adp, Reg.DL_STATUS, 2)
+    got = yield from until_answered([dl], deadline, ApplyError(f"position {position}: no "
+                                                                "answer to DL status"))
+    status, = struct.unpack("<H", got[0].data)
+    out[position] = FoundSlave(position, vendor, product, revision, serial, status)
 
 
 def scan(transport: Transport) -> list[FoundSlave]:
-    """The slaves on the line in bus order, with their SII identity."""
+    """The slaves on the line in bus order, with their SII identity, DL status and where
+    each is plugged."""
     n = count_slaves(transport)
     found: dict[int, FoundSlave] = {}
     run_jobs(transport, [_identity_job(p, found) for p in range(n)])
-    return [found[p] for p in range(n)]
+    slaves = [found[p] for p in range(n)]
+    plugs = plugs_from_dl_status([s.dl_status for s in slaves])
+    return [FoundSlave(s.position, s.vendor_id, s.product_code, s.revision, s.serial_no,
+                       s.dl_status, plug) for s, plug in zip(slaves, plugs)]
 
 
 @record(frozen=True)
@@ -111,9 +123,106 @@ class Mismatch:
 
 def verify(plan: NetworkPlan, found: list[FoundSlave],
            accept_newer_revision: bool = False) -> list[Mismatch]:
-    """Compare the line with the ENI in bus order: missing, extra, other device, other
-    revision (a newer one passes when ``accept_newer_revision``)."""
+    """Compare the slaves found with the ENI: missing, extra, other device, other revision
+    (a newer one passes when ``accept_newer_revision``), and, when the ENI says where its
+    slaves are plugged (``PreviousPort``), the tree: slaves are paired port by port from
+    the first one, so a slave in another port than the ENI's is reported with both places,
+    and the slaves behind a missing link are reported missing by name.  An ENI without
+    ``PreviousPort`` is compared in bus order."""
     expected = sorted(plan.slaves, key=lambda s: s.position)
+    if not any(s.previous_ports for s in expected[1:]) or any(
+            f.plug is None for f in found[1:]):
+        return _verify_line(expected, found, accept_newer_revision)
+    want = eni_plugs(expected, "the ENI")
+    line = all(p is None or p == Plug(k - 1, 1) for k, p in enumerate(want))
+    pairs = _pair(want, [f.plug for f in found])
+    paired = set(pairs.values())
+    by_found = {f: e for e, f in pairs.items()}
+
+    def ids(s: SlavePlan | FoundSlave) -> str:
+        return f"0x{s.vendor_id:x}:0x{s.product_code:x}:0x{s.revision:x}"
+
+    def where_expected(e: int) -> str:
+        plug = want[e]
+        return "" if line or plug is None else \
+            f" behind {expected[plug.parent].name} port {PORT_LETTERS[plug.port]}"
+
+    def where_found(f: int) -> str:
+        plug = found[f].plug
+        if line or plug is None:
+            return ""
+        parent = by_found.get(plug.parent)
+        shown = expected[parent].name if parent is not None else f"position {plug.parent}"
+        return f" behind {shown} port {PORT_LETTERS[plug.port]}"
+
+    problems: list[Mismatch] = []
+    extra = [f for f in range(len(found)) if f not in paired]
+    for e, want_slave in enumerate(expected):
+        w = f"{want_slave.name} ({ids(want_slave)}){where_expected(e)}"
+        f = pairs.get(e)
+        if f is None:
+            moved = next((x for x in extra if (found[x].vendor_id, found[x].product_code)
+                          == (want_slave.vendor_id, want_slave.product_code)), None)
+            if moved is not None:
+                extra.remove(moved)
+                problems.append(Mismatch(want_slave.position, w,
+                                         f"{ids(found[moved])}{where_found(moved)}",
+                                         f"plugged into another port (found at position "
+                                         f"{moved})"))
+            else:
+                plug = want[e]
+                behind = "" if plug is None or plug.parent not in pairs else (
+                    f" (no slave on port {PORT_LETTERS[plug.port]} of "
+                    f"{expected[plug.parent].name}: cable or slave missing)")
+                problems.append(Mismatch(want_slave.position, w, "-",
+                                         "missing slave" + ("" if line else behind)))
+            continue
+        problem = _compare(expected, want_slave, found[f], accept_newer_revision)
+        if problem:
+            problems.append(Mismatch(want_slave.position, w, ids(found[f]), problem))
+    for f in extra:
+        problems.append(Mismatch(f, "-", f"{ids(found[f])}{where_found(f)}", "extra slave"))
+    return problems
+
+
+def _pair(want: list[Plug | None], got: list[Plug | None]) -> dict[int, int]:
+    """Expected slave -> found slave, walking both trees from their first slaves and
+    pairing the slaves on the same port of paired parents."""
+    def children(plugs: list[Plug | None]) -> list[dict[int, int]]:
+        out: list[dict[int, int]] = [{} for _ in plugs]
+        for k, plug in enumerate(plugs):
+            if plug is not None:
+                out[plug.parent][plug.port] = k
+        return out
+
+    mine, theirs = children(want), children(got)
+    pairs: dict[int, int] = {}
+    todo = [(0, 0)] if want and got else []
+    while todo:
+        e, f = todo.pop()
+        pairs[e] = f
+        todo.extend((c, theirs[f][port]) for port, c in mine[e].items() if port in theirs[f])
+    return pairs
+
+
+def _compare(expected: list[SlavePlan], want: SlavePlan, got: FoundSlave,
+             accept_newer_revision: bool) -> str:
+    """What is wrong with ``got`` in the place of ``want`` ("" when nothing)."""
+    if (got.vendor_id, got.product_code) != (want.vendor_id, want.product_code):
+        others = [s.position for s in expected if (s.vendor_id, s.product_code) ==
+                  (got.vendor_id, got.product_code)]
+        return "other device" + (
+            f" (the ENI has it at position {others[0]}: swapped?)" if others else "")
+    if got.revision != want.revision and not (
+            accept_newer_revision and got.revision > want.revision):
+        return "other revision" + (" (newer: --accept-newer-revision takes it)"
+                                   if got.revision > want.revision else "")
+    return ""
+
+
+def _verify_line(expected: list[SlavePlan], found: list[FoundSlave],
+                 accept_newer_revision: bool) -> list[Mismatch]:
+    """Compare in bus order."""
     problems = []
     for pos in range(max(len(expected), len(found))):
         want = expected[pos] if pos < len(expected) else None
@@ -126,14 +235,8 @@ def verify(plan: NetworkPlan, found: list[FoundSlave],
             problems.append(Mismatch(pos, w, g, "extra slave"))
         elif got is None:
             problems.append(Mismatch(pos, w, g, "missing slave"))
-        elif (got.vendor_id, got.product_code) != (want.vendor_id, want.product_code):
-            others = [s.position for s in expected if (s.vendor_id, s.product_code) ==
-                      (got.vendor_id, got.product_code)]
-            problems.append(Mismatch(pos, w, g, "other device" + (
-                f" (the ENI has it at position {others[0]}: swapped?)" if others else "")))
-        elif got.revision != want.revision and not (
-                accept_newer_revision and got.revision > want.revision):
-            problems.append(Mismatch(pos, w, g, "other revision" + (
-                " (newer: --accept-newer-revision takes it)"
-                if got.revision > want.revision else "")))
+        else:
+            problem = _compare(expected, want, got, accept_newer_revision)
+            if problem:
+                problems.append(Mismatch(pos, w, g, problem))
     return problems

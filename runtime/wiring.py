@@ -127,3 +127,33 @@ def eni_plugs(slaves: list[SlavePlan], shown: str) -> list[Plug | None]:
             raise EcatcfgError(f"{where}: no slave before it has that address")
         plugs.append(Plug(parent, port))
     return plugs
+
+
+def active_ports(dl_status: int) -> list[int]:
+    """The ports DL status (0x0110) shows with the loop open and communication established
+    (bits 8+2n, 9+2n = 0, 1; SOEM ``ecx_config_init``)."""
+    return [port for port in range(4) if dl_status >> 8 + 2 * port & 3 == 2]
+
+
+def plugs_from_dl_status(statuses: Sequence[int]) -> list[Plug | None]:
+    """Where each slave found (in bus order) is plugged, from the DL status of every one:
+    the frame enters each slave on port 0 and takes its active ports in the processing
+    order, so the slave after a junction's port-3 subtree is on its port 1, and so on (the
+    facts IgH links its slaves with, ``ec_master_calc_topology_rec``).  A slave the active
+    ports leave no place for (DL status contradicts the count) gets None, like the first."""
+    plugs: list[Plug | None] = [None] * len(statuses)
+    if not statuses:
+        return plugs
+    following = 1
+    # Depth first, as the frame goes: per slave on the stack, its active ports still to walk.
+    stack = [(0, [p for p in CHILD_PORTS if p in active_ports(statuses[0])])]
+    while stack and following < len(statuses):
+        k, ports = stack[-1]
+        if not ports:
+            stack.pop()
+            continue
+        child = following
+        following += 1
+        plugs[child] = Plug(k, ports.pop(0))
+        stack.append((child, [p for p in CHILD_PORTS if p in active_ports(statuses[child])]))
+    return plugs
