@@ -163,3 +163,156 @@ def test_plugging_errors_name_the_slaves(drives):
         emulate.segment(two)
     with pytest.raises(ValueError, match="port 0 faces the master"):
         emulate.segment([specs[0], dataclasses.replace(specs[1], plug=Plug(0, 0))])
+
+
+# -- an ENI of a tree: apply, scan, verify, DC --------------------------------------------
+
+# The same shape with the names in bus order, as an ENI lists them (PreviousPort: the
+# port letter and PhysAddr of the parent).
+ENI_TREE = {"t1": ("t0", "D"), "t2": ("t1", "B"), "t3": ("t0", "B"), "t4": ("t3", "B"),
+            "t5": ("t0", "C")}
+ENI_ARRIVAL = {"t0": 0, "t1": P + C, "t2": 2 * P + 2 * C, "t3": 3 * P + 5 * C + 2 * F,
+               "t4": 4 * P + 6 * C + 2 * F, "t5": 5 * P + 9 * C + 4 * F}
+
+
+def tree_eni(drives, tree=ENI_TREE):
+    """The compiled line of six drives with its PreviousPort entries rewritten to ``tree``
+    (the XML, read back by the ENI reader)."""
+    from lxml import etree
+
+    from ecatcfg.eni import reader as eni_reader
+    from ecatcfg.eni import writer as eni_writer
+    plan, _ = drives
+    root = etree.fromstring(eni_writer.to_bytes(plan))
+    address = {s.findtext("Info/Name"): s.findtext("Info/PhysAddr")
+               for s in root.iter("Slave")}
+    for slave in root.iter("Slave"):
+        name = slave.findtext("Info/Name")
+        if name in tree:
+            parent, letter = tree[name]
+            slave.find("PreviousPort/Port").text = letter
+            slave.find("PreviousPort/PhysAddr").text = address[parent]
+    return eni_reader.read_bytes(etree.tostring(root), "tree.eni.xml")
+
+
+class SimLink:
+    """The master's end of a segment that answers at once, each frame 60 us of simulated
+    time (as in test_dc.py)."""
+
+    def __init__(self, segment, clock: SimClock) -> None:
+        self.segment, self.clock = segment, clock
+        self.replies: list[bytes] = []
+        self.sent: list[bytes] = []
+
+    def send(self, frame: bytes) -> None:
+        self.clock.t += 60_000
+        self.sent.append(bytes(frame))
+        self.replies.append(bytes(self.segment.process(frame)))
+
+    def recv(self, timeout: float | None = None) -> bytes | None:
+        return self.replies.pop(0) if self.replies else None
+
+    def fileno(self) -> int:
+        return -1
+
+    def close(self) -> None:
+        pass
+
+
+def on_segment(drives, plan, plugs=None, cut=(), dc=None):
+    """A Master for ``plan`` on a segment of its slaves plugged as the ENI says, or as
+    ``plugs`` (name -> (parent name, letter)) says, with the cables into ``cut`` removed."""
+    from ecatcfg.runtime.master import Master
+    _, library = drives
+    specs = emulate.specs_from_eni(plan, library, "tree")
+    if plugs is not None:
+        index = {s.name: k for k, s in enumerate(specs)}
+        specs = [dataclasses.replace(s, plug=None if s.name not in plugs else Plug(
+            index[plugs[s.name][0]], "ABCD".index(plugs[s.name][1]))) for s in specs]
+    clock = SimClock()
+    segment = emulate.segment(specs, clock_ns=clock,
+                              dc=dc or DcModel(drift_ppm=0.0, start_spread_ns=0))
+    for name in cut:
+        segment.remove_cable(name)
+    link = SimLink(segment, clock)
+    return Master(plan, link, dc_threshold_ns=0), segment, link
+
+
+def test_the_eni_tree_is_emulated_and_scanned_back(drives):
+    plan = tree_eni(drives)
+    from ecatcfg.runtime.wiring import eni_plugs
+    names = [s.name for s in sorted(plan.slaves, key=lambda s: s.position)]
+    assert [(names[p.parent], "ABCD"[p.port]) if p else None
+            for p in eni_plugs(sorted(plan.slaves, key=lambda s: s.position), "x")] == \
+        [None] + [ENI_TREE[n] for n in names[1:]]
+    master, segment, _ = on_segment(drives, plan)
+    assert [s.name for s in segment.slaves] == names              # the ENI's bus order
+    found = master.scan_and_verify()
+    assert [(names[f.plug.parent], "ABCD"[f.plug.port]) if f.plug else None
+            for f in found] == [None] + [ENI_TREE[n] for n in names[1:]]
+
+
+def test_a_tree_eni_reaches_op_on_the_virtual_segment(drives):
+    from ecatcfg.esc import AlState
+    from ecatcfg.runtime import Network
+    with Network.virtual(tree_eni(drives), esi=[ESI]) as net:
+        assert not net.segment.wiring.is_line
+        net.up()
+        assert net.state == AlState.OP
+        assert all(net.cycle() for _ in range(5))
+        assert [s.state for s in net.segment.slaves] == [AlState.OP] * 6
+
+
+def _verify_error(master, link):
+    from ecatcfg.runtime.master import VerifyError
+    with pytest.raises(VerifyError) as err:
+        master.scan_and_verify()
+    written = {d.ado for f in link.sent for d in wire.decode(f).datagrams
+               if d.cmd in (Cmd.APWR, Cmd.FPWR, Cmd.BWR)}
+    assert all(0x0500 <= ado < 0x0510 for ado in written), written     # nothing configured
+    return err.value
+
+
+def test_a_slave_in_another_junction_port_is_a_mismatch_with_both_places(drives):
+    plan = tree_eni(drives)
+    moved = dict(ENI_TREE, t5=("t1", "C"))              # t0's port C -> t1's port C
+    master, segment, link = on_segment(drives, plan, moved)
+    assert [s.name for s in segment.slaves] == ["t0", "t1", "t2", "t5", "t3", "t4"]
+    err = _verify_error(master, link)
+    assert [(m.position, m.problem) for m in err.mismatches] == [
+        (5, "plugged into another port (found at position 3)")]
+    m = err.mismatches[0]
+    assert m.expected.startswith("t5 (") and m.expected.endswith(" behind t0 port C")
+    assert m.found.endswith(" behind t1 port C")
+    assert "t5" in str(err) and "behind t1 port C" in str(err)
+
+
+def test_a_cable_removed_in_a_branch_names_the_slaves_behind_it(drives):
+    plan = tree_eni(drives)
+    master, segment, link = on_segment(drives, plan, cut=["t3"])
+    err = _verify_error(master, link)
+    assert [(m.position, m.expected.split()[0], m.found) for m in err.mismatches] == [
+        (3, "t3", "-"), (4, "t4", "-")]
+    assert err.mismatches[0].problem == ("missing slave (no slave on port B of t0: cable "
+                                         "or slave missing)")
+    assert err.mismatches[1].problem == "missing slave"
+
+
+def test_dc_delays_on_the_tree_equal_the_model(drives):
+    """The delays the master writes (0x0928) against the model's: slave s's port 0 sees
+    the frame ENI_ARRIVAL[s] after the reference t0 does (by hand, module docstring).  The
+    master assumes a frame takes as long out as back, which the model does not (P out, F
+    back), so a delay may be off by (P - F) / 2 where half a hop is guessed: the tolerance."""
+    from ecatcfg.esc import AlState
+    plan = tree_eni(drives)
+    master, segment, _ = on_segment(drives, plan, dc=DcModel(drift_ppm=50.0, seed=3))
+    master.scan_and_verify()
+    master.bring_up(AlState.SAFEOP)
+    written = {s.name: struct.unpack_from("<I", s.mem, 0x0928)[0] for s in segment.slaves}
+    tolerance = (P - F) // 2
+    off = {n: written[n] - ENI_ARRIVAL[n] for n in written}
+    assert all(abs(d) <= tolerance for d in off.values()), off
+    assert written["t0"] == 0
+    # Branches the frame takes later are further away than a line's position suggests:
+    # t5 (position 5, third branch) is more than 5 hops of P + C away.
+    assert written["t5"] > 5 * (P + C) + tolerance
