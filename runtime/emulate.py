@@ -200,7 +200,7 @@ def specs_from_eni(plan: NetworkPlan, library: Library | None, shown: str) -> li
     from ecatcfg.esi.library import SelectorError
     from ecatcfg.runtime.eni_device import device_from_eni
 
-    specs = []
+    specs: list[SlaveSpec] = []
     ordered = sorted(plan.slaves, key=lambda s: s.position)
     plugs = eni_plugs(ordered, shown)
     for s in ordered:
