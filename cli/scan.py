@@ -4,7 +4,10 @@ from __future__ import annotations
 
 import argparse
 import re
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from ecatcfg.runtime.wiring import Plug
 
 
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -40,16 +43,30 @@ def slave_name(type_name: str | None, used: dict[str, int]) -> str:
 
 
 def topology_yaml(rows: list[dict[str, Any]], iface: str) -> str:
-    """The topology text for the slaves found (names and exact device selectors)."""
+    """The topology text for the slaves found (names and exact device selectors), with
+    ``parent`` and ``port`` for each slave the DL statuses show plugged elsewhere than
+    simply behind the slave before it (see :func:`simply_behind`)."""
     lines = [f"# Written by 'ecatcfg scan --iface {iface}': the slaves found, in bus order.",
-             "# Devices are VENDOR:PRODUCT:REVISION from each slave's SII EEPROM.",
+             "# Devices are VENDOR:PRODUCT:REVISION from each slave's SII EEPROM; parent and",
+             "# port (A-D = ESC ports 0-3) where the DL statuses show a branch.",
              "slaves:"]
     for row in rows:
         shown = " ".join((row["type"] or "").split())
         note = f"  # {shown}" if shown else "  # not in the ESI files given"
-        lines.append(f"  - {{name: {row['topology_name']}, device: \"{row['selector']}\"}}"
-                     f"{note}")
+        plug = "" if row["simply_behind"] or row["parent"] is None else \
+            f", parent: {row['parent']}, port: {row['port']}"
+        lines.append(f"  - {{name: {row['topology_name']}, device: \"{row['selector']}\""
+                     f"{plug}}}{note}")
     return "\n".join(lines) + "\n"
+
+
+def simply_behind(plug: Plug | None, position: int, physics: str | None) -> bool:
+    """Whether a topology may leave out where a slave is plugged: on port B of the slave
+    before it, when that slave (its ESI ``Physics``, ``physics``) has no port D, which
+    the default plugging would take first (processing order D, B, C).  A slave of an
+    unknown device before it: no (the topology names the port)."""
+    return (plug is not None and plug.parent == position - 1 and plug.port == 1
+            and physics is not None and len(physics.strip()) <= 3)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -71,12 +88,14 @@ def run(args: argparse.Namespace) -> int:
     from ecatcfg.runtime.link import RawLink
     from ecatcfg.runtime.scan import scan
     from ecatcfg.runtime.transport import Transport
+    from ecatcfg.runtime.wiring import PORT_LETTERS
 
     with RawLink(args.iface) as link:
         found = scan(Transport(link))
 
     used: dict[str, int] = {}
     rows: list[dict[str, Any]] = []          # the JSON output's slaves
+    physics: list[str | None] = []
     for s in found:
         exact = other = None
         if lib is not None:
@@ -93,6 +112,8 @@ def run(args: argparse.Namespace) -> int:
                                         if (e.vendor_id, e.product_code) ==
                                         (s.vendor_id, s.product_code)
                                         and e.revision is not None})))
+        physics.append(lib.device(entry).physics if lib is not None and entry else None)
+        parent = rows[s.plug.parent] if s.plug is not None else None
         rows.append({
             "position": s.position, "vendor_id": s.vendor_id,
             "product_code": s.product_code, "revision": s.revision, "serial_no": s.serial_no,
@@ -102,6 +123,12 @@ def run(args: argparse.Namespace) -> int:
             "exact": exact is not None, "note": note,
             "selector": f"0x{s.vendor_id:x}:0x{s.product_code:x}:0x{s.revision:x}",
             "topology_name": slave_name(entry.type if entry else None, used),
+            "dl_status": s.dl_status,
+            "parent": parent["topology_name"] if parent is not None else None,
+            "parent_position": parent["position"] if parent is not None else None,
+            "port": PORT_LETTERS[s.plug.port] if s.plug is not None else None,
+            "simply_behind": s.plug is None or simply_behind(
+                s.plug, s.position, physics[s.plug.parent]),
         })
 
     if args.topology_out:
@@ -119,10 +146,11 @@ def run(args: argparse.Namespace) -> int:
     print(f"{len(rows)} slave{'s' if len(rows) != 1 else ''} on {args.iface}")
     if rows:
         print(f"{'pos':>3}  {'vendor':10} {'product':10} {'revision':10} {'serial':10}  "
-              f"{'type':14} name")
+              f"{'behind':8} {'type':14} name")
         for r in rows:
+            behind = f"{r['parent_position']}:{r['port']}" if r["parent"] else "master"
             print(f"{r['position']:>3}  0x{r['vendor_id']:08x} 0x{r['product_code']:08x} "
-                  f"0x{r['revision']:08x} 0x{r['serial_no']:08x}  "
+                  f"0x{r['revision']:08x} 0x{r['serial_no']:08x}  {behind:8} "
                   f"{(r['type'] or '-')[:14]:14} {r['name'] or '-'}"
                   + (f"  ({r['note']})" if r["note"] else ""))
     if args.topology_out:

@@ -41,6 +41,11 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                         "and EEPROM reads per device kind, from the table in docs/timing.md")
     p.add_argument("--timing", metavar="FILE",
                    help="JSON file overriding figures of that table (implies --realistic)")
+    p.add_argument("--cut", action="append", default=[], metavar="SLAVE",
+                   help="remove the cable into this slave's port 0 (its name, or its bus "
+                        "position with every cable in place): it and the slaves behind it "
+                        "are not on the frame, the port it was plugged into has no link; "
+                        "repeatable")
     p.add_argument("--no-cache", action="store_true",
                    help="do not read or write the ESI index cache")
     p.set_defaults(run=run)
@@ -100,7 +105,27 @@ def run(args: argparse.Namespace) -> int:
     elif args.realistic:
         from ecatcfg.runtime.timing import Timing
         timing = Timing()
-    seg = emulate.segment(specs, Faults(drop=args.drop, seed=args.seed), timing)
+    try:
+        seg = emulate.segment(specs, Faults(drop=args.drop, seed=args.seed), timing)
+    except ValueError as exc:
+        raise EcatcfgError(f"{source}: {exc}") from None
+    cut = []
+    for which in args.cut:
+        by_position = which.isdigit() and int(which) < len(seg.wired)
+        named = [s for s in seg.wired if s.name == which]
+        if not named and not by_position:
+            raise UsageError(f"--cut {which}: no slave of that name or position (the "
+                             f"slaves are {', '.join(s.name for s in seg.wired)})")
+        target = named[0] if named else next(s for s in seg.wired
+                                             if s.position == int(which))
+        cut.append(target)
+    for target in cut:
+        try:
+            gone = seg.remove_cable(target)
+        except ValueError as exc:
+            raise UsageError(f"--cut {target.name}: {exc}") from None
+        print(f"cable into {target.name} removed: "
+              + ", ".join(s.name for s in gone) + " not on the frame", flush=True)
 
     print(f"{'pos':>3}  {'name':16} {'device':14} {'vendor':>10} {'product':>10} "
           f"{'revision':>10}  {'from':4} mailbox" + ("  timing" if timing else ""))

@@ -6,7 +6,9 @@ Options: ``outputs`` (hex, written to every slave with outputs once in SAFEOP an
 SOEM sized the SyncManagers, the slave goes back to PREOP and gets this PDO assignment by
 SDO download), ``cycles`` (process
 data cycles in OP), ``read`` ([[slave, index, subindex], ...]: SDO uploads after config_map,
-as hex in ``read``).
+as hex in ``read``), ``dc`` (true: SOEM's ``config_dc`` after config_map, which works out
+the tree from the DL statuses and writes each slave's propagation delay; read back from
+0x0928 into ``delays``).
 """
 
 from __future__ import annotations
@@ -39,6 +41,10 @@ def main() -> None:
         result["sizes"] = [(len(s.output), len(s.input)) for s in master.slaves]
         result["read"] = [master.slaves[n].sdo_read(index, sub).hex()
                           for n, index, sub in options.get("read", [])]
+        if options.get("dc"):
+            result["dc"] = bool(master.config_dc())
+            result["delays"] = [struct.unpack("<I", s._fprd(0x0928, 4))[0]
+                                for s in master.slaves]
         assign = options.get("assign")
         if assign:
             # config_map ends by requesting SAFEOP; PDO assignment is writable in PREOP.

@@ -36,6 +36,10 @@ from ecatcfg.runtime.wiring import Plug
 ESI = EXAMPLES / "esi"
 DRIVE = '"0xE0000ECA:0x7201"'
 P, F, C = PROCESSING_DELAY_NS, FORWARDING_DELAY_NS, CABLE_DELAY_NS
+# A master assumes a frame takes as long out as back; the model does not (P out, F back),
+# so a delay may be off by (P - F) / 2 where half a hop is guessed; plus 2 ns: the ports
+# latch in their own clock (quartz within ±100 ppm over a few us, rounded to the ns).
+TOLERANCE = (P - F) // 2 + 2
 A, B_, C_, D = 0, 1, 2, 3                     # ESC ports by ENI letter
 TREE = [None, Plug(0, D), Plug(1, B_), Plug(0, B_), Plug(0, C_), Plug(3, B_)]
 BUS_ORDER = ["t0", "t1", "t2", "t3", "t5", "t4"]
@@ -301,18 +305,88 @@ def test_a_cable_removed_in_a_branch_names_the_slaves_behind_it(drives):
 def test_dc_delays_on_the_tree_equal_the_model(drives):
     """The delays the master writes (0x0928) against the model's: slave s's port 0 sees
     the frame ENI_ARRIVAL[s] after the reference t0 does (by hand, module docstring).  The
-    master assumes a frame takes as long out as back, which the model does not (P out, F
-    back), so a delay may be off by (P - F) / 2 where half a hop is guessed: the tolerance."""
+    master assumes a frame takes as long out as back, which the model does not: TOLERANCE."""
     from ecatcfg.esc import AlState
     plan = tree_eni(drives)
     master, segment, _ = on_segment(drives, plan, dc=DcModel(drift_ppm=50.0, seed=3))
     master.scan_and_verify()
     master.bring_up(AlState.SAFEOP)
     written = {s.name: struct.unpack_from("<I", s.mem, 0x0928)[0] for s in segment.slaves}
-    tolerance = (P - F) // 2
     off = {n: written[n] - ENI_ARRIVAL[n] for n in written}
-    assert all(abs(d) <= tolerance for d in off.values()), off
+    assert all(abs(d) <= TOLERANCE for d in off.values()), off
     assert written["t0"] == 0
     # Branches the frame takes later are further away than a line's position suggests:
     # t5 (position 5, third branch) is more than 5 hops of P + C away.
-    assert written["t5"] > 5 * (P + C) + tolerance
+    assert written["t5"] > 5 * (P + C) + TOLERANCE
+
+
+# -- SOEM, a master nobody here wrote, on `ecatcfg simulate` of the tree ------------------
+
+def _simulate(rig, eni, *extra):
+    import subprocess
+    import sys
+    sim = rig.popen_in(rig.ns_b, [
+        sys.executable, "-m", "ecatcfg", "simulate", "--esi", str(ESI), "--eni", str(eni),
+        "--iface", rig.if_b, "--duration", "60", "--no-cache", *extra],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    lines = []
+    for line in sim.stdout:
+        lines.append(line)
+        if line.startswith("ready:"):
+            break
+    return sim, lines
+
+
+def _soem(rig, options):
+    import json
+    import sys
+    from pathlib import Path
+    probe = Path(__file__).with_name("soem_probe.py")
+    done = rig.run_in(rig.ns_a, [sys.executable, str(probe), rig.if_a, json.dumps(options)],
+                      timeout=120)
+    assert done.returncode == 0, done.stderr
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def test_soem_reads_the_tree_from_simulate(veth_netns, pysoem_module, drives, tmp_path):
+    """pysoem does not expose SOEM's parent and port of a slave, but its config_dc works
+    them out from the DL statuses (ethercatconfig.c, ethercatdc.c) and writes a delay
+    computed along them: delays that agree with the model's arrival times (within the
+    tolerance of the symmetric-link assumption, test_dc_delays_on_the_tree_equal_the_model)
+    show SOEM found each slave on the parent and port the ENI names."""
+    from ecatcfg.eni import writer as eni_writer
+    eni = tmp_path / "tree.eni.xml"
+    eni.write_bytes(eni_writer.to_bytes(tree_eni(drives)))
+    sim, lines = _simulate(veth_netns, eni)
+    try:
+        assert lines and lines[-1].strip() == f"ready: 6 slaves on {veth_netns.if_b}", \
+            "".join(lines)
+        report = _soem(veth_netns, {"dc": True, "outputs": "5a"})
+    finally:
+        sim.terminate()
+        out, err = sim.communicate(timeout=10)
+    assert report["found"] == 6, report
+    assert report["dc"] is True
+    names = ["t0", "t1", "t2", "t3", "t4", "t5"]
+    off = {n: d - ENI_ARRIVAL[n] for n, d in zip(names, report["delays"])}
+    assert all(abs(d) <= TOLERANCE for d in off.values()), (off, report["delays"])
+    assert report["op"] == 8 and report["wkc"] == report["expected_wkc"], report
+    assert "slave 5 (t5): OP" in out, out + err
+
+
+def test_soem_sees_a_removed_cable(veth_netns, pysoem_module, drives, tmp_path):
+    from ecatcfg.eni import writer as eni_writer
+    eni = tmp_path / "tree.eni.xml"
+    eni.write_bytes(eni_writer.to_bytes(tree_eni(drives)))
+    sim, lines = _simulate(veth_netns, eni, "--cut", "t3")
+    try:
+        assert lines and lines[-1].strip() == f"ready: 4 slaves on {veth_netns.if_b}", \
+            "".join(lines)
+        assert any("cable into t3 removed: t3, t4 not on the frame" in line
+                   for line in lines), "".join(lines)
+        report = _soem(veth_netns, {})
+    finally:
+        sim.terminate()
+        sim.communicate(timeout=10)
+    assert report["found"] == 4, report
+    assert report["op"] == 8, report
