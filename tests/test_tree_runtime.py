@@ -390,3 +390,62 @@ def test_soem_sees_a_removed_cable(veth_netns, pysoem_module, drives, tmp_path):
         sim.communicate(timeout=10)
     assert report["found"] == 4, report
     assert report["op"] == 8, report
+
+
+# -- ecatcfg scan and apply on a tree -----------------------------------------------------
+
+def _ecatcfg_in(rig, *argv):
+    import sys
+    from pathlib import Path
+    done = rig.run_in(rig.ns_a, [sys.executable, "-m", "ecatcfg", *argv, "--iface", rig.if_a],
+                      timeout=60, cwd=Path(__file__).resolve().parent.parent)
+    assert "Traceback" not in done.stderr, done.stderr
+    return done
+
+
+def test_scan_writes_parent_and_port_where_the_tree_branches(veth_netns, drives, tmp_path):
+    """By hand from ENI_TREE: t2 and t4 sit on port B of the slave before them (a drive,
+    Physics YY: no port D the default plugging would take first), so only t1, t3 and t5
+    name their parent and port."""
+    import json
+
+    from rig import serving
+    _, library = drives
+    segment = emulate.segment(emulate.specs_from_eni(tree_eni(drives), library, "tree"))
+    out = tmp_path / "found.yaml"
+    with serving(veth_netns, segment):
+        done = _ecatcfg_in(veth_netns, "scan", "--esi", str(ESI), "--topology-out", str(out),
+                           "--format", "json", "--no-cache")
+    assert done.returncode == 0, done.stderr
+    rows = json.loads(done.stdout)["slaves"]
+    assert [(r["parent_position"], r["port"]) for r in rows] == [
+        (None, None), (0, "D"), (1, "B"), (0, "B"), (3, "B"), (0, "C")]
+    plugs = [line.split("device:")[1].split("}")[0] for line in out.read_text().splitlines()
+             if line.startswith("  - ")]
+    assert [p.split(",", 1)[1].strip() if "," in p else "" for p in plugs] == [
+        "", "parent: exd_402_1, port: D", "", "parent: exd_402_1, port: B", "",
+        "parent: exd_402_1, port: C"], out.read_text()
+
+
+def test_apply_names_the_slaves_behind_a_removed_cable(veth_netns, drives, tmp_path):
+    """apply against simulate --cut: exit 1 before any configuration, naming the missing
+    slaves with where the ENI has them."""
+    import json
+
+    from ecatcfg.eni import writer as eni_writer
+    eni = tmp_path / "tree.eni.xml"
+    eni.write_bytes(eni_writer.to_bytes(tree_eni(drives)))
+    sim, lines = _simulate(veth_netns, eni, "--cut", "t3")
+    try:
+        assert lines and lines[-1].startswith("ready: 4 slaves"), "".join(lines)
+        done = _ecatcfg_in(veth_netns, "apply", str(eni), "--format", "json")
+    finally:
+        sim.terminate()
+        sim.communicate(timeout=10)
+    assert done.returncode == 1, done.stdout + done.stderr
+    table = json.loads(done.stdout)["error"]
+    assert "nothing was configured" in table
+    row3 = next(line for line in table.splitlines() if line.strip().startswith("3  t3 ("))
+    assert "behind t0 port B" in row3 and "missing slave (no slave on port B of t0" in row3
+    row4 = next(line for line in table.splitlines() if line.strip().startswith("4  t4 ("))
+    assert "behind t3 port B" in row4 and "missing slave" in row4
