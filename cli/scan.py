@@ -14,10 +14,12 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
     p = sub.add_parser(
         "scan", help="list the slaves on a line (SII identity, ESI names)",
         description="Count the slaves on the line and read each one's identity (vendor, "
-                    "product, revision, serial) from its SII EEPROM, addressed by position: "
-                    "nothing but the SII interface registers is written.  With --esi the "
-                    "devices are named from the ESI files; --topology-out writes a topology "
-                    "file for the line found.",
+                    "product, revision, serial) from its SII EEPROM and its DL status, "
+                    "addressed by position: nothing but the SII interface registers is "
+                    "written.  The DL statuses show where each slave is plugged (column "
+                    "'behind': parent position and port A-D).  With --esi the devices are "
+                    "named from the ESI files; --topology-out writes a topology file for "
+                    "the slaves found, with parent and port where the network branches.",
         epilog="Exit 1 when no frame comes back (nothing on the interface, or not an "
                "EtherCAT line).")
     p.add_argument("--iface", required=True, metavar="IF",

@@ -189,8 +189,8 @@ CONTENTS: dict[str, dict[str, Part]] = {
                              "writes are InitCmds"),
         "Mailbox": _read("SM0/SM1 and the mailbox protocols", "Slave/Mailbox"),
         "InitCmds": _read("replayed transition by transition", "InitCmds"),
-        "PreviousPort": _read("where the slave is connected (the line is checked by "
-                              "position)"),
+        "PreviousPort": _read("where the slave is connected (the tree is checked port by "
+                              "port)"),
         "DC": _read("SYNC cycle and shift; DC set-up before PREOP->SAFEOP", "Slave/DC"),
         "HotConnect": _refused("HotConnect group (the master would identify the group "
                                "and run the line without it when it is absent)", counts=True),
