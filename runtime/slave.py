@@ -221,10 +221,6 @@ class EmulatedSlave:
         struct.pack_into("<H", self.mem, Reg.STATION_ALIAS, words[4])
         self.mem[0x0110] |= 0x01                    # DL status: EEPROM loaded
 
-    def set_links(self, upstream: bool, downstream: bool) -> None:
-        """A slave of a line: port 0 towards the master, port 1 to the next slave."""
-        self.set_ports((upstream, downstream, False, False))
-
     def set_ports(self, links: tuple[bool, bool, bool, bool]) -> None:
         """DL status 0x0110 from which ports have a link partner: per port n, link (bit
         4+n), and loop open with communication (bits 8+2n = 0, 9+2n = 1; SOEM reads a

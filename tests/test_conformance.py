@@ -79,13 +79,13 @@ def test_a_broken_register_shows_as_a_difference(corpus, library, monkeypatch):
     show): the harness reports the reads of 0x0110 as different."""
     name = "ethercrab/soem-sdinfo-ek1100-only.pcapng"
     assert _report(corpus, library, name).counts[DIFFERENT] == 0
-    original = EmulatedSlave.set_links
+    original = EmulatedSlave.set_ports
 
-    def broken(self: EmulatedSlave, upstream: bool, downstream: bool) -> None:
-        original(self, upstream, downstream)
+    def broken(self: EmulatedSlave, links: tuple[bool, bool, bool, bool]) -> None:
+        original(self, links)
         self.mem[0x0110] |= 0x08
 
-    monkeypatch.setattr(EmulatedSlave, "set_links", broken)
+    monkeypatch.setattr(EmulatedSlave, "set_ports", broken)
     r = _report(corpus, library, name)
     assert r.counts[DIFFERENT] > 0
     assert any(d.field == "0x0110" for d in r.differences), r.differences
