@@ -64,11 +64,11 @@ def topology_yaml(rows: list[dict[str, Any]], iface: str) -> str:
 
 def simply_behind(plug: Plug | None, position: int, physics: str | None) -> bool:
     """Whether a topology may leave out where a slave is plugged: on port B of the slave
-    before it, when that slave (its ESI ``Physics``, ``physics``) has no port D, which
-    the default plugging would take first (processing order D, B, C).  A slave of an
-    unknown device before it: no (the topology names the port)."""
+    before it, unless that slave's ESI ``Physics`` (``physics``) has a port D, which the
+    default plugging would take first (processing order D, B, C).  An unknown device
+    before it is taken for one with two ports, as on a line."""
     return (plug is not None and plug.parent == position - 1 and plug.port == 1
-            and physics is not None and len(physics.strip()) <= 3)
+            and (physics is None or len(physics.strip()) <= 3))
 
 
 def run(args: argparse.Namespace) -> int:

@@ -100,7 +100,7 @@ def test_scan_lists_the_line_and_writes_a_topology_that_compiles(veth_netns, lib
     assert text.returncode == 0, text.stderr
     assert f"{len(LINE)} slaves on {veth_netns.if_a}" in text.stdout
     assert "EX1004 4-channel digital input" in text.stdout
-    assert "0xe0000eca 0x00007201 0x00020000 0x00000104  EXD-402" in text.stdout
+    assert "0xe0000eca 0x00007201 0x00020000 0x00000104  3:B      EXD-402" in text.stdout
 
     loaded = topology.load(topo)
     assert [s.name for s in loaded.topology.slaves] == names
