@@ -449,3 +449,16 @@ def test_apply_names_the_slaves_behind_a_removed_cable(veth_netns, drives, tmp_p
     assert "behind t0 port B" in row3 and "missing slave (no slave on port B of t0" in row3
     row4 = next(line for line in table.splitlines() if line.strip().startswith("4  t4 ("))
     assert "behind t3 port B" in row4 and "missing slave" in row4
+
+
+def test_a_previous_port_that_cannot_be_wired_is_an_error_naming_the_slave(drives):
+    from ecatcfg.errors import EcatcfgError
+    _, library = drives
+    for tree, says in (
+            (dict(ENI_TREE, t4=("t3", "A")), "slave 't4': PreviousPort 'A' of PhysAddr "
+                                             "1004: the port is not B, C or D"),
+            (dict(ENI_TREE, t5=("t1", "B")), "slaves 2 and 5 are both plugged into port 1 "
+                                             "of slave 1")):
+        with pytest.raises(EcatcfgError) as err:
+            emulate.specs_from_eni(tree_eni(drives, tree), library, "tree.eni.xml")
+        assert says in str(err.value) and str(err.value).startswith("tree.eni.xml: ")
