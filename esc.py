@@ -36,9 +36,13 @@ class Cmd(IntEnum):
     FRMW = 14
 
 
+ESC_FEATURE_DC = 0x0004           # 0x0008 bit 2: the ESC has a DC unit (SOEM hasdc, IgH)
+
+
 class Reg(IntEnum):
     """ESC registers the configuration touches."""
 
+    ESC_FEATURES = 0x0008         # bit 2: DC available (ESC Section II 0x0008)
     STATION_ADDRESS = 0x0010
     STATION_ALIAS = 0x0012
     DL_STATUS = 0x0110

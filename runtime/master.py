@@ -22,8 +22,8 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 from ecatcfg.eni.plan import NetworkPlan, SlavePlan
-from ecatcfg.esc import (AL_ERROR_ACK, AL_STATE_MASK, AL_STATUS_ERROR, AlState, Cmd, Reg,
-                         Transition, al_state_name)
+from ecatcfg.esc import (AL_ERROR_ACK, AL_STATE_MASK, AL_STATUS_ERROR, ESC_FEATURE_DC,
+                         AlState, Cmd, Reg, Transition, al_state_name)
 from ecatcfg.record import record
 from ecatcfg.runtime.cyclic import CyclicFrames
 from ecatcfg.runtime.lockstep import Job, run_jobs, until_answered
@@ -245,7 +245,13 @@ class Master:
         self._broadcast_write(Reg.DC_RECEIVE_TIME_PORT0, bytes(4))
         times: dict[str, tuple[tuple[int, int, int, int], int]] = {}
         run_jobs(self.transport, [_read_receive_times(s, times) for s in dc])
-        delays = propagation_delays(dc, reference, times, self.found)
+        # Every ESC with a DC unit latches its port times, also one the ENI sets no DC for
+        # (a coupler, a junction): its times measure the branches between the DC slaves.
+        ports = {name: t[0] for name, t in times.items()}
+        run_jobs(self.transport, [_read_port_times(s, ports) for s in self.slaves
+                                  if s.dc is None])
+        measured = [s for s in self.slaves if s.name in ports]
+        delays = propagation_delays(measured, reference, ports, self.found)
         ref_rx = times[reference.name][1]
         master_time = time.time_ns() - EPOCH_2000_NS
         writes = []
@@ -361,56 +367,70 @@ def _between(later: int, earlier: int) -> int:
     return (later - earlier + (1 << 31)) % (1 << 32) - (1 << 31)
 
 
-def propagation_delays(dc: list[SlavePlan], reference: SlavePlan,
-                       times: dict[str, tuple[tuple[int, int, int, int], int]],
+def _read_port_times(slave: SlavePlan, out: dict[str, tuple[int, int, int, int]]) -> Job:
+    """The port receive times of a slave the ENI sets no DC for, when its ESC has a DC
+    unit (0x0008 bit 2, as SOEM and IgH tell); nothing when not, or without an answer."""
+    features = Datagram.physical(Cmd.FPRD, slave.phys_addr, Reg.ESC_FEATURES, 2)
+    ports = Datagram.physical(Cmd.FPRD, slave.phys_addr, Reg.DC_RECEIVE_TIME_PORT0, 16)
+    for _ in range(3):
+        got = yield [features, ports]
+        if got is not None and got[0].wkc == 1 and got[1].wkc == 1:
+            if struct.unpack("<H", got[0].data)[0] & ESC_FEATURE_DC:
+                out[slave.name] = struct.unpack("<IIII", got[1].data)
+            return
+
+
+def propagation_delays(measured: list[SlavePlan], reference: SlavePlan,
+                       ports: dict[str, tuple[int, int, int, int]],
                        found: list[FoundSlave] | None) -> dict[str, int]:
-    """Each DC slave's propagation delay from the reference clock (ns), from the receive
-    times its ports latched (``times``: per slave the four port times and the processing
-    unit's) and, over a tree, where each slave is plugged (``found``, the scan).
+    """Each measured slave's propagation delay from the reference clock (ns), from the
+    receive times its ports latched (``ports``; ``measured``: the slaves with them, in
+    bus order) and, over a tree, where each slave is plugged (``found``, the scan).
 
     As SOEM does it (``ethercatdc.c`` ``ecx_configdc``; IgH does the same per link,
-    ``ec_slave_calc_transmission_delays_rec``), with the nearest DC slave ``a`` above
-    slave ``s`` and the port ``pa`` of ``a`` that leads to it, and ``prev`` the active
-    port of ``a`` before ``pa`` in the processing order 0 -> 3 -> 1 -> 2:
+    ``ec_slave_calc_transmission_delays_rec``): with the nearest measured slave ``a``
+    above slave ``s``, the port ``pa`` of ``a`` that leads to it, and ``prev`` the active
+    port of ``a`` before ``pa`` in the processing order 0 -> 3 -> 1 -> 2, the frame
+    reaches ``s`` after it reaches ``a`` by
 
-        delay(s) = delay(a) + dt2 + (dt3 - dt1) / 2
+        D(s) - D(a) = dt2 + (dt3 - dt1) / 2
         dt2 = t_a(prev) - t_a(0)     the frame's time in a's earlier branches
         dt3 = t_a(pa) - t_a(prev)    the round trip down pa and back
         dt1 = t_s(last) - t_s(0)     s's own subtree, its last active port
 
-    assuming a frame takes as long out as back.  On a line (every slave on port 1 of the
-    one before) this is half the difference of the loop times port 1 - port 0 of the
-    reference and the slave.  A DC slave with no DC slave above it (a branch below a
-    junction without DC) gets that line value too: its branch cannot be measured."""
-    def port_times(name: str) -> tuple[int, int, int, int]:
-        return times[name][0]
-
-    def loop(name: str) -> int:                 # port 0 in -> last active port back
-        t = port_times(name)
+    assuming a frame takes as long out as back; the delay is D(s) - D(reference), 0 for
+    the slaves before the reference.  On a line (every slave on port 1 of the one
+    before) this is half the difference of the loop times port 1 - port 0 of the
+    reference and the slave.  A slave with no measured slave above it (a branch below a
+    junction without a DC unit) gets that line value too: its branch cannot be measured."""
+    def loop(name: str) -> int:                 # port 0 in -> port 1 back
+        t = ports[name]
         return _between(t[1], t[0]) if t[1] else 0
 
-    by_position = {s.position: s for s in dc}
-    twice: dict[str, int] = {reference.name: 0}  # 2 x delay, so halves do not add up
-    for s in dc:
-        if s.position <= reference.position:
-            twice.setdefault(s.name, 0)
-            continue
+    if not measured:
+        return {}
+    first = measured[0]
+    by_position = {s.position: s for s in measured}
+    twice: dict[str, int] = {first.name: 0}     # 2 x D, so halves do not add up
+    for s in measured[1:]:
         above = _dc_above(s.position, by_position, found)
-        if above is None or above[0].name not in twice or found is None:
-            twice[s.name] = loop(reference.name) - loop(s.name)
+        if above is None or found is None:
+            twice[s.name] = loop(first.name) - loop(s.name)
             continue
         a, pa = above
         active = active_ports(found[a.position].dl_status)
         order = [p for p in CHILD_PORTS if p in active]
         prev = order[order.index(pa) - 1] if pa in order and order.index(pa) else 0
-        ta = port_times(a.name)
+        ta = ports[a.name]
         dt2 = _between(ta[prev], ta[0])
         dt3 = _between(ta[pa], ta[prev])
         own = [p for p in CHILD_PORTS if p in active_ports(found[s.position].dl_status)]
-        ts = port_times(s.name)
+        ts = ports[s.name]
         dt1 = _between(ts[own[-1]], ts[0]) if own else 0
         twice[s.name] = twice[a.name] + 2 * dt2 + dt3 - dt1
-    return {name: max(0, value // 2) for name, value in twice.items()}
+    ref = twice.get(reference.name, 0)
+    return {s.name: max(0, (twice[s.name] - ref) // 2)
+            if s.position > reference.position else 0 for s in measured}
 
 
 def _dc_above(position: int, dc: dict[int, SlavePlan], found: list[FoundSlave] | None
