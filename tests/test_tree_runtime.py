@@ -179,9 +179,9 @@ ENI_ARRIVAL = {"t0": 0, "t1": P + C, "t2": 2 * P + 2 * C, "t3": 3 * P + 5 * C + 
                "t4": 4 * P + 6 * C + 2 * F, "t5": 5 * P + 9 * C + 4 * F}
 
 
-def tree_eni(drives, tree=ENI_TREE):
+def tree_eni(drives, tree=ENI_TREE, no_dc=()):
     """The compiled line of six drives with its PreviousPort entries rewritten to ``tree``
-    (the XML, read back by the ENI reader)."""
+    and no DC settings for the slaves ``no_dc`` (the XML, read back by the ENI reader)."""
     from lxml import etree
 
     from ecatcfg.eni import reader as eni_reader
@@ -192,6 +192,8 @@ def tree_eni(drives, tree=ENI_TREE):
                for s in root.iter("Slave")}
     for slave in root.iter("Slave"):
         name = slave.findtext("Info/Name")
+        if name in no_dc:
+            slave.remove(slave.find("DC"))
         if name in tree:
             parent, letter = tree[name]
             slave.find("PreviousPort/Port").text = letter
@@ -346,6 +348,25 @@ def _soem(rig, options):
                       timeout=120)
     assert done.returncode == 0, done.stderr
     return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def test_dc_delays_through_a_junction_the_eni_sets_no_dc_for(drives):
+    """t0 without DC in the ENI (a junction as TwinCAT writes it): t1 is the reference,
+    and the branches on t0's ports B and C are measured with t0's receive times (its ESC
+    has a DC unit, 0x0008 bit 2).  Without them t3, t4 and t5 would have no measured slave
+    above them.  The reference's estimate and the slave's are each off by up to
+    (P - F) / 2 (one guessed half-hop on each path): the tolerance is twice TOLERANCE."""
+    from ecatcfg.esc import AlState
+    plan = tree_eni(drives, no_dc=["t0"])
+    master, segment, _ = on_segment(drives, plan, dc=DcModel(drift_ppm=50.0, seed=5))
+    master.scan_and_verify()
+    master.bring_up(AlState.SAFEOP)
+    written = {s.name: struct.unpack_from("<I", s.mem, 0x0928)[0] for s in segment.slaves
+               if s.name != "t0"}
+    want = {n: ENI_ARRIVAL[n] - ENI_ARRIVAL["t1"] for n in written}
+    off = {n: written[n] - want[n] for n in written}
+    assert all(abs(d) <= 2 * TOLERANCE for d in off.values()), (off, written)
+    assert written["t1"] == 0
 
 
 def test_soem_reads_the_tree_from_simulate(veth_netns, pysoem_module, drives, tmp_path):
