@@ -483,3 +483,22 @@ def test_a_previous_port_that_cannot_be_wired_is_an_error_naming_the_slave(drive
         with pytest.raises(EcatcfgError) as err:
             emulate.specs_from_eni(tree_eni(drives, tree), library, "tree.eni.xml")
         assert says in str(err.value) and str(err.value).startswith("tree.eni.xml: ")
+
+
+def test_the_tree_from_dl_statuses_by_hand():
+    """DL statuses written by hand (ESC Section II 0x0110; SOEM counts a port active when
+    bits 9+2n, 8+2n read 1, 0): a junction with all four ports, a slave with ports A and
+    B on its port D, an end on that one's B, an end on the junction's B, an end on its C.
+    The frame takes D before B before C."""
+    from ecatcfg.runtime.wiring import active_ports, plugs_from_dl_status
+    statuses = [dl_status(A, B_, C_, D) | 0x1, dl_status(A, B_) | 0x3, dl_status(A),
+                dl_status(A), dl_status(A)]
+    assert active_ports(statuses[0]) == [0, 1, 2, 3]
+    assert active_ports(0x5A31) == [0, 1]                 # a real EK1100 between two slaves
+    assert plugs_from_dl_status(statuses) == [None, Plug(0, D), Plug(1, B_), Plug(0, B_),
+                                              Plug(0, C_)]
+    # A line: two slaves with ports A and B open (an EK1100 reads 0x5A31, an EL2828 0x5A33
+    # in ethercrab-rs/ethercrab tests/replay-dc.pcapng), then an end with port A only.
+    assert plugs_from_dl_status([0x5A31, 0x5A33, 0x5633]) == [None, Plug(0, 1), Plug(1, 1)]
+    # More slaves than the open ports leave room for: the rest get no place.
+    assert plugs_from_dl_status([0x5633, 0x5633]) == [None, None]
