@@ -6,8 +6,9 @@ ESC's open ports in the processing order 0 -> 3 -> 1 -> 2, reaches the slaves; e
 processes it once, so the datagram rules below are the same as on a line.  The cabling
 shows in each slave's DL status (0x0110) and in the receive times its ports latch
 (``runtime/dc_clock.py``); a cable removed (:meth:`VirtualSegment.remove_cable`) takes
-the slaves behind it out of the frame and closes the port it was plugged into.  Each datagram is
-processed in place in the frame's buffer with the addressing and working-counter rules of
+the slaves behind it out of the frame and closes the port it was plugged into.
+
+Each datagram is processed in place in the frame's buffer with the addressing and working-counter rules of
 ETG.1000.4 (``docs/protocol-notes.md`` §1): auto-increment (ADP counts up at each slave; the one
 that sees 0 acts), configured station address (or alias with 0x0103 bit 0), broadcast (every
 slave; reads OR into the data), logical (every slave whose FMMUs overlap, down to single
