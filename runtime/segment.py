@@ -8,10 +8,10 @@ shows in each slave's DL status (0x0110) and in the receive times its ports latc
 (``runtime/dc_clock.py``); a cable removed (:meth:`VirtualSegment.remove_cable`) takes
 the slaves behind it out of the frame and closes the port it was plugged into.
 
-Each datagram is processed in place in the frame's buffer with the addressing and working-counter rules of
-ETG.1000.4 (``docs/protocol-notes.md`` §1): auto-increment (ADP counts up at each slave; the one
-that sees 0 acts), configured station address (or alias with 0x0103 bit 0), broadcast (every
-slave; reads OR into the data), logical (every slave whose FMMUs overlap, down to single
+Each datagram is processed in place in the frame's buffer with the addressing and
+working-counter rules of ETG.1000.4 (``docs/protocol-notes.md`` §1): auto-increment (ADP
+counts up at each slave; the one that sees 0 acts), configured station address (or alias
+with 0x0103 bit 0), broadcast (every slave; reads OR into the data), logical (every slave whose FMMUs overlap, down to single
 bits), and ARMW/FRMW (one slave reads, all others write).  Processing datagram by datagram
 over all slaves gives the same result as slave by slave over all datagrams: slaves only
 meet through the frame's bytes, and each slave still sees the datagrams in order.
