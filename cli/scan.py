@@ -90,7 +90,7 @@ def run(args: argparse.Namespace) -> int:
     from ecatcfg.runtime.link import RawLink
     from ecatcfg.runtime.scan import scan
     from ecatcfg.runtime.transport import Transport
-    from ecatcfg.runtime.wiring import PORT_LETTERS
+    from ecatcfg.esc import PORT_LETTERS
 
     with RawLink(args.iface) as link:
         found = scan(Transport(link))

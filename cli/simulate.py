@@ -13,8 +13,8 @@ if TYPE_CHECKING:
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser(
         "simulate", help="run a virtual EtherCAT segment on a network interface",
-        description="Emulate a line of slaves from their ESI files (or, with --eni, from "
-                    "the ENI alone where no ESI is given) and answer EtherCAT frames "
+        description="Emulate a line or tree of slaves from their ESI files (or, with "
+                    "--eni, from the ENI alone where no ESI is given) and answer EtherCAT frames "
                     "on a network interface (raw Ethernet, EtherType 0x88A4), so a master "
                     "(ecatcfg apply, SOEM, TwinCAT) can configure and run them without "
                     "hardware.  Prints the slaves, then 'ready: N slaves on IF' once it "
@@ -27,8 +27,10 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                         "--topology; with --eni a slave whose device is not there is "
                         "emulated from the ENI alone")
     src = p.add_mutually_exclusive_group(required=True)
-    src.add_argument("--topology", metavar="T", help="the slaves of a topology file, in order")
-    src.add_argument("--eni", metavar="ENI", help="the slaves an ENI describes, in order")
+    src.add_argument("--topology", metavar="T",
+                     help="the slaves of a topology file, plugged as it says")
+    src.add_argument("--eni", metavar="ENI",
+                     help="the slaves an ENI describes, plugged as its PreviousPort says")
     p.add_argument("--iface", required=True, metavar="IF", help="network interface to serve")
     p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds")
     p.add_argument("--drop", type=float, default=0.0, metavar="P",
@@ -82,7 +84,10 @@ def run(args: argparse.Namespace) -> int:
         # segment emulates the devices it resolved.
         from ecatcfg.compiler import topology
         from ecatcfg.compiler.resolve import plugged_devices
-        specs = [emulate.SlaveSpec(d.device, d.name, alias=d.alias)
+        from ecatcfg.runtime.wiring import Plug
+        specs = [emulate.SlaveSpec(d.device, d.name, alias=d.alias, plug=None
+                                   if d.parent is None or d.parent_port is None
+                                   else Plug(d.parent, d.parent_port))
                  for d in plugged_devices(topology.load(args.topology), lib)]
     else:
         from ecatcfg.eni import reader as eni_reader

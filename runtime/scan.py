@@ -13,14 +13,14 @@ import struct
 import time
 
 from ecatcfg.eni.plan import NetworkPlan, SlavePlan
-from ecatcfg.esc import (EEPROM_BUSY, EEPROM_ERRORS, EEPROM_R64, SII_REVISION, SII_VENDOR_ID, Cmd,
-                         Reg, eeprom_read_request)
+from ecatcfg.esc import (EEPROM_BUSY, EEPROM_ERRORS, EEPROM_R64, PORT_LETTERS, SII_REVISION,
+                         SII_VENDOR_ID, Cmd, Reg, eeprom_read_request)
 from ecatcfg.record import record
 from ecatcfg.runtime.lockstep import Job, Step, run_jobs, until_answered
 from ecatcfg.runtime.replay import ApplyError
 from ecatcfg.runtime.transport import Transport
 from ecatcfg.runtime.wire import Datagram
-from ecatcfg.runtime.wiring import PORT_LETTERS, Plug, eni_plugs, plugs_from_dl_status
+from ecatcfg.runtime.wiring import Plug, eni_plugs, plugs_from_dl_status
 
 EEPROM_TIMEOUT = 0.5           # s per slave (IgH: 20 ms per access, 500 ms for loading)
 COUNT_ATTEMPTS = 5

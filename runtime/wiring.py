@@ -15,14 +15,15 @@ from __future__ import annotations
 from collections.abc import Iterable, Sequence
 from typing import TYPE_CHECKING
 
+from ecatcfg.esc import PORT_LETTERS, PORT_PROCESSING_ORDER
 from ecatcfg.record import record
 
 if TYPE_CHECKING:
     from ecatcfg.eni.plan import SlavePlan
 
-PROCESSING_ORDER = (0, 3, 1, 2)
-CHILD_PORTS = (3, 1, 2)        # the downstream ports, in the order the frame takes them
-PORT_LETTERS = "ABCD"          # ESC ports 0-3 as ENI PreviousPort and topologies name them
+# The downstream ports (not port 0, which faces the master), in the order the frame takes
+# them; ``PORT_LETTERS`` names ESC ports 0-3 as ENI PreviousPort and topologies do.
+CHILD_PORTS = tuple(p for p in PORT_PROCESSING_ORDER if p != 0)
 
 
 @record(frozen=True)
