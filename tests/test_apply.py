@@ -106,9 +106,20 @@ def write_line(tmp_path: Path, lib: Library, kinds: list[str],
     return topo, eni, plan
 
 
-def specs_for(lib: Library, kinds: list[str], names: list[str] | None = None):
+def specs_for(lib: Library, kinds: list[str], names: list[str] | None = None,
+              plan: NetworkPlan | None = None):
+    """The emulated slaves of ``kinds``; plugged as ``plan``'s PreviousPort entries say
+    (the compiler puts a drive after a row of terminals on the coupler's Ethernet port)
+    when given, else in a line."""
+    from dataclasses import replace
+
+    from ecatcfg.runtime.wiring import eni_plugs
     names = names or [f"s{i}" for i in range(len(kinds))]
-    return [emulate.SlaveSpec(lib.device(lib.find(k).entry), n) for k, n in zip(kinds, names)]
+    specs = [emulate.SlaveSpec(lib.device(lib.find(k).entry), n) for k, n in zip(kinds, names)]
+    if plan is None:
+        return specs
+    plugs = eni_plugs(sorted(plan.slaves, key=lambda s: s.position), "the ENI")
+    return [replace(spec, plug=plug) for spec, plug in zip(specs, plugs)]
 
 
 class Simulator:
@@ -364,7 +375,7 @@ def test_process_data_over_veth(veth_netns, corpus_lib):
     kinds = [EK1100, EL2008, EL1809, ELMO]
     names = ["coupler", "out", "in", "drive"]
     plan, _ = compile_line(corpus_lib, kinds, names)
-    seg = emulate.segment(specs_for(corpus_lib, kinds, names))
+    seg = emulate.segment(specs_for(corpus_lib, kinds, names, plan))
     with serving(veth_netns, seg):
         with Network(plan, veth_netns.socket_in(veth_netns.ns_a)) as net:
             net.up()
@@ -463,7 +474,7 @@ def _within(seconds: float, fn: Callable[[], object]) -> tuple[str, object, floa
 
 def test_lost_frames_100_runs_in_process(corpus_lib):
     plan, _ = compile_line(corpus_lib, FAULT_LINE)
-    specs = specs_for(corpus_lib, FAULT_LINE)
+    specs = specs_for(corpus_lib, FAULT_LINE, plan=plan)
     limit = _longest_timeout(plan) + 2.0
 
     def one(seed: int) -> list[AlState]:
