@@ -511,3 +511,65 @@ def test_the_tree_from_dl_statuses_by_hand():
     assert plugs_from_dl_status([0x5A31, 0x5A33, 0x5633]) == [None, Plug(0, 1), Plug(1, 1)]
     # More slaves than the open ports leave room for: the rest get no place.
     assert plugs_from_dl_status([0x5633, 0x5633]) == [None, None]
+
+
+# -- the compiler's worked example on `simulate --topology` --------------------------------
+
+TREE_TOPOLOGY = ESI.parent / "tree" / "tree.yaml"
+TREE_ESI = [ESI.parent / "tree" / "esi", ESI]
+
+
+def _slaves_of(eni: bytes) -> list[tuple]:
+    """What an ENI says of each slave that a scan can know: identity, addresses, Physics,
+    PreviousPort (read with lxml)."""
+    from lxml import etree
+    out = []
+    for el in etree.fromstring(eni).iter("Slave"):
+        info = el.find("Info")
+        out.append(tuple(info.findtext(k) for k in ("VendorId", "ProductCode", "RevisionNo",
+                                                     "PhysAddr", "AutoIncAddr", "Physics"))
+                   + tuple((p.findtext("Port"), p.findtext("PhysAddr"))
+                           for p in el.findall("PreviousPort")))
+    return out
+
+
+def test_the_example_tree_on_simulate_apply_soem_and_scan(veth_netns, pysoem_module, tmp_path):
+    """examples/tree/tree.yaml served by `simulate --topology`: apply reaches OP, SOEM
+    finds the 7 slaves and reaches OP, and the topology the scan writes compiles to an ENI
+    whose slaves (identity, addresses, Physics, PreviousPort) are the example's: what the
+    scan cannot know are the names, DC settings and the master's name and cycle time."""
+    import subprocess
+    import sys
+
+    from ecatcfg.eni import writer as eni_writer
+    lib = Library(TREE_ESI, cache=False)
+    eni = tmp_path / "tree.eni.xml"
+    original = eni_writer.to_bytes(build.compile_topology(topology.load(TREE_TOPOLOGY),
+                                                          lib).plan)
+    eni.write_bytes(original)
+    esi = [a for p in TREE_ESI for a in ("--esi", str(p))]
+    sim = veth_netns.popen_in(veth_netns.ns_b, [
+        sys.executable, "-m", "ecatcfg", "simulate", *esi, "--topology", str(TREE_TOPOLOGY),
+        "--iface", veth_netns.if_b, "--duration", "60", "--no-cache"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        lines = []
+        for line in sim.stdout:
+            lines.append(line)
+            if line.startswith("ready:"):
+                break
+        assert lines and lines[-1].startswith("ready: 7 slaves"), "".join(lines)
+        applied = _ecatcfg_in(veth_netns, "apply", str(eni), "--cycles", "20")
+        found = tmp_path / "found.yaml"
+        scanned = _ecatcfg_in(veth_netns, "scan", *esi, "--topology-out", str(found),
+                              "--no-cache")
+        report = _soem(veth_netns, {"outputs": "5a"})
+    finally:
+        sim.terminate()
+        sim.communicate(timeout=10)
+    assert applied.returncode == 0, applied.stdout + applied.stderr
+    assert scanned.returncode == 0, scanned.stderr
+    assert report["found"] == 7 and report["op"] == 8, report
+    again = eni_writer.to_bytes(build.compile_topology(topology.load(found), lib).plan)
+    assert _slaves_of(again) == _slaves_of(original)
+    assert [len(s) for s in _slaves_of(original)] == [6] + [7] * 6     # PreviousPort each
