@@ -272,6 +272,7 @@ EEPROM_CMD_RELOAD = 0x0400        # (SOEM's EC_ECMD_RELOAD is 0x0300; the emulat
                                   # takes both as a reload)
 EEPROM_ERRORS = 0x7800            # bits 14:11: checksum, loading, acknowledge, write enable
 EEPROM_ERROR_ACKNOWLEDGE = 0x2000 # bit 13: missing EEPROM acknowledge or invalid command
+EEPROM_ERROR_WRITE_ENABLE = 0x4000  # bit 14: a write command without write enable
 EEPROM_BUSY = 0x8000              # bit 15
 
 
@@ -280,12 +281,21 @@ def eeprom_read_request(word_address: int) -> bytes:
     return struct.pack("<HI", EEPROM_CMD_READ, word_address)
 
 
+def eeprom_write_request(word_address: int, word: int) -> bytes:
+    """EEPROM control/status + address + data (0x0502, 8 bytes): 'write' one word with
+    write enable, in one datagram as IgH's fsm_sii.c sends it; the ESC starts the command
+    once the whole datagram is in."""
+    return struct.pack("<HIH", EEPROM_CMD_WRITE | EEPROM_WRITE_ENABLE, word_address, word)
+
+
 # SII word addresses (ETG.2010 header; esi/sii.py builds and decodes the whole image and
 # checks its layout against these).
 SII_VENDOR_ID = 0x0008
 SII_PRODUCT_CODE = 0x000A
 SII_REVISION = 0x000C
 SII_SERIAL = 0x000E
+SII_ALIAS = 0x0004                # configured station alias, loaded into 0x0012 at power-on
+SII_CHECKSUM = 0x0007             # low byte: CRC-8 of words 0-6 (esi/sii.py crc8)
 SII_BOOTSTRAP_MAILBOX = 0x0014    # receive offset, size, send offset, size (4 words)
 SII_STD_MAILBOX = 0x0018          # receive (SM0) offset, size, send (SM1) offset, size
 SII_MAILBOX_PROTOCOLS = 0x001C

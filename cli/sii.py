@@ -1,7 +1,10 @@
-"""``ecatcfg sii build|show``: write the SII (EEPROM) image of an ESI device; decode an image.
+"""``ecatcfg sii build|show|read|write``: write the SII (EEPROM) image of an ESI device;
+decode an image; read or program a slave's EEPROM on a line.
 
     ecatcfg sii build ESI --device SELECTOR -o FILE.bin [--serial N] [--alias N]
     ecatcfg sii show FILE.bin [--format text|json]
+    ecatcfg sii read --iface IF --slave POS -o FILE.bin
+    ecatcfg sii write --iface IF --slave POS FILE.bin [--force] [--backup FILE.bin]
 """
 
 from __future__ import annotations
@@ -52,6 +55,45 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
     s.add_argument("--format", choices=("text", "json"), default="text")
     s.set_defaults(run=run)
 
+    r = actions.add_parser("read", help="read a slave's EEPROM into a file",
+                           description="Read the whole SII EEPROM of the slave at a position "
+                                       "(its size from SII word 0x3E) through the ESC's "
+                                       "EEPROM interface; nothing else is written.")
+    add_target(r)
+    r.add_argument("-o", "--output", required=True, metavar="FILE.bin",
+                   help="image file to write")
+    r.set_defaults(run=run)
+
+    w = actions.add_parser(
+        "write", help="program a slave's EEPROM from an image file",
+        description="Program the SII EEPROM of the slave at a position: the current image "
+                    "is read and saved first (the backup file is named in the output), an "
+                    "image of another device (vendor, product, revision) is refused unless "
+                    "--force, a wrong configuration-area checksum is fixed, the words that "
+                    "differ are written one by one and everything is read back and "
+                    "compared.  A write that stops part-way names the words written and "
+                    "the backup to restore.",
+        epilog="Exit 1 when the image is refused, the write stops or the read-back differs.")
+    add_target(w)
+    w.add_argument("image", metavar="FILE.bin", help="SII image (raw binary)")
+    w.add_argument("--force", action="store_true",
+                   help="write an image whose identity differs from the slave's")
+    add_backup(w)
+    w.set_defaults(run=run)
+
+
+def add_target(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--iface", required=True, metavar="IF",
+                   help="network interface of the EtherCAT line")
+    p.add_argument("--slave", required=True, type=_number(0xFFFF), metavar="POS",
+                   help="the slave's position on the line (0 = first)")
+
+
+def add_backup(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--backup", metavar="FILE.bin",
+                   help="where to save the current image before writing (default "
+                        "sii-backup-posPOS-DATE-TIME.bin in the current folder)")
+
 
 def _number(maximum: int) -> Callable[[str], int]:
     def parse(text: str) -> int:
@@ -69,7 +111,55 @@ def _number(maximum: int) -> Callable[[str], int]:
 def run(args: argparse.Namespace) -> int:
     if args.sii_action == "build":
         return _build(args)
+    if args.sii_action == "read":
+        return _read(args)
+    if args.sii_action == "write":
+        return _write(args)
     return _show(args)
+
+
+def _read(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from ecatcfg.errors import UsageError
+    from ecatcfg.fileio import write_atomic
+
+    out = Path(args.output)
+    if not out.resolve().parent.is_dir():
+        raise UsageError(f"{args.output}: folder does not exist")
+    from ecatcfg.cli.sii_program import open_eeprom
+    with open_eeprom(args.iface, args.slave) as eeprom:
+        data = eeprom.read()
+    try:
+        write_atomic(out, data)
+    except OSError as exc:
+        raise UsageError(f"cannot write {args.output}: {exc.strerror}") from None
+    from ecatcfg.cli.sii_program import describe
+    print(f"position {args.slave}: {describe(data)}; {len(data)} bytes written to {out} "
+          f"({eeprom.reads} EEPROM reads)")
+    return 0
+
+
+def _write(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from ecatcfg.cli.sii_program import program
+    from ecatcfg.errors import EcatcfgError, UsageError
+    from ecatcfg.esi.sii import decode
+
+    path = Path(args.image)
+    if not path.is_file():
+        raise UsageError(f"{args.image}: no such file")
+    try:
+        image = path.read_bytes()
+    except OSError as exc:
+        raise EcatcfgError(f"cannot read: {exc.strerror}", args.image) from None
+    if len(image) % 2:
+        raise EcatcfgError(f"{len(image)} bytes: an EEPROM image is whole 16-bit words",
+                           args.image)
+    decode(image, source=args.image)        # an SII image at all? (names file and offset)
+    return program(args.iface, args.slave, image, backup=args.backup, force=args.force,
+                   source=args.image)
 
 
 def _build(args: argparse.Namespace) -> int:

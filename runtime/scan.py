@@ -13,7 +13,7 @@ import struct
 import time
 
 from ecatcfg.eni.plan import NetworkPlan, SlavePlan
-from ecatcfg.esc import (EEPROM_BUSY, EEPROM_ERRORS, EEPROM_R64, PORT_LETTERS, SII_REVISION,
+from ecatcfg.esc import (EEPROM_BUSY, EEPROM_ERROR_ACKNOWLEDGE, EEPROM_ERRORS, EEPROM_R64, PORT_LETTERS, SII_REVISION,
                          SII_VENDOR_ID, Cmd, Reg, eeprom_read_request)
 from ecatcfg.record import record
 from ecatcfg.runtime.lockstep import Job, Step, run_jobs, until_answered
@@ -72,6 +72,13 @@ def sii_words(position: int, word: int, deadline: float) -> Step[bytes]:
             elif phase == "poll":
                 control, = struct.unpack("<H", reply[0].data)
                 if control & EEPROM_BUSY:
+                    continue
+                if control & EEPROM_ERROR_ACKNOWLEDGE and not control & EEPROM_ERRORS \
+                        & ~EEPROM_ERROR_ACKNOWLEDGE:
+                    # The EEPROM did not acknowledge: it is still busy with its own write
+                    # cycle after a word was written (ESC Section II 0x0502 bit 13). Ask
+                    # again until the deadline.
+                    phase = "request"
                     continue
                 if control & EEPROM_ERRORS:
                     raise ApplyError(f"position {position}: SII EEPROM error "

@@ -169,6 +169,13 @@ class VirtualSegment:
         self.cut.discard(self._wired_index(slave))
         self._rewire()
 
+    def power_cycle(self, slave: EmulatedSlave | str | int) -> None:
+        """Switch ``slave`` (a slave, its name, or its position) off and on: its registers
+        reset, its EEPROM keeps what was written (``EmulatedSlave.power_cycle``); its links
+        come back as they were."""
+        self.wired[self._wired_index(slave)].power_cycle()
+        self._rewire()
+
     def set_timing(self, timing: Timing | None) -> None:
         """Give every slave its kind's times (``runtime/timing.py``), or none."""
         for slave in self.slaves:

@@ -26,7 +26,7 @@ from typing import TYPE_CHECKING
 
 from ecatcfg.esc import (AL_ERROR_ACK, AL_STATE_MASK, AL_STATUS_ERROR, EEPROM_BUSY,
                          EEPROM_CMD_MASK, EEPROM_CMD_READ, EEPROM_CMD_RELOAD, EEPROM_CMD_WRITE,
-                         EEPROM_ERROR_ACKNOWLEDGE, EEPROM_R64, EEPROM_WRITE_ENABLE, ESC_DEVICE_EMULATION, FMMU_SIZE, PDI_DIGITAL_IO,
+                         EEPROM_ERROR_ACKNOWLEDGE, EEPROM_ERROR_WRITE_ENABLE, EEPROM_R64, EEPROM_WRITE_ENABLE, ESC_DEVICE_EMULATION, FMMU_SIZE, PDI_DIGITAL_IO,
                          SM_ACTIVATE_REPEAT, SM_DIR_MASK, SM_MODE_MASK, SM_WATCHDOG_ENABLE,
                          AlState, AlStatusCode, FmmuConfig, FmmuType, Reg, fmmu_register,
                          sm_register)
@@ -175,6 +175,18 @@ class EmulatedSlave:
         self._power_on()
 
     # -- power-on ---------------------------------------------------------------------------
+
+    def power_cycle(self) -> None:
+        """Switch the slave off and on: every register and the firmware start afresh (INIT,
+        no SyncManagers, FMMUs or addresses), the EEPROM keeps what was written, and what
+        an ESC loads from it at power-on (PDI control, the station alias 0x0012) is loaded
+        again.  The segment's clock, timing, callbacks and DC clock stay."""
+        keep = (self.clock_ns, self.timing, self.on_state_change, self.on_mapping_change,
+                self.dc, self.position, self.eni_only, self.refuse)
+        self.__init__(self.device, bytes(self.eeprom),   # type: ignore[misc]
+                      name=self.name, od=self.od, mailbox=self.mailbox, chip=self.chip)
+        (self.clock_ns, self.timing, self.on_state_change, self.on_mapping_change,
+         self.dc, self.position, self.eni_only, self.refuse) = keep
 
     def _power_on(self) -> None:
         m = self.mem
@@ -384,7 +396,13 @@ class EmulatedSlave:
             return
         if command == EEPROM_CMD_READ:                        # read 4 words
             self._eeprom_read(address)
-        elif command == EEPROM_CMD_WRITE and control & EEPROM_WRITE_ENABLE:   # one word
+        elif command == EEPROM_CMD_WRITE and not control & EEPROM_WRITE_ENABLE:
+            # Write enable must come in the same access as the command (ESC Section II
+            # 0x0502 bits 0 and 14): the word is not written and the error bit says why.
+            struct.pack_into("<H", self.mem, Reg.EEPROM_CONTROL,
+                             EEPROM_ERROR_WRITE_ENABLE | EEPROM_R64)
+            return
+        elif command == EEPROM_CMD_WRITE:                     # one word
             if 2 * address + 2 <= len(self.eeprom):
                 self.eeprom[2 * address:2 * address + 2] = self.mem[Reg.EEPROM_DATA:
                                                                    Reg.EEPROM_DATA + 2]
