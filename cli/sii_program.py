@@ -115,6 +115,7 @@ def program(iface: str, position: int, image: bytes, *, backup: str | None, forc
         except InterruptedWrite as exc:
             done = f"{len(exc.written)} word(s) written ({_words(exc.written)})" \
                 if exc.written else "no word written"
+            done += f", word 0x{exc.word:04X} may or may not be written"
             print(f"ecatcfg: the write stopped: {exc}; {done}. The EEPROM now holds a mix "
                   f"of both images: restore the backup with 'ecatcfg sii write --iface "
                   f"{iface} --slave {position} --force {saved}'", file=sys.stderr)

@@ -52,11 +52,13 @@ def fix_checksum(image: bytes) -> tuple[bytes, int | None]:
 
 
 class InterruptedWrite(ApplyError):
-    """A write that stopped part-way: which words were written before it stopped."""
+    """A write that stopped part-way: which words were written (their write command
+    completed without error) before it stopped, and the word it stopped at."""
 
-    def __init__(self, message: str, written: list[int]) -> None:
+    def __init__(self, message: str, written: list[int], word: int) -> None:
         super().__init__(message)
-        self.written = written
+        self.written = written     # words written and confirmed, in order
+        self.word = word           # the word being written: its command may have gone in
 
 
 class Eeprom:
@@ -125,7 +127,7 @@ class Eeprom:
                 try:
                     yield from self._write_word(word, value)
                 except ApplyError as exc:
-                    raise InterruptedWrite(f"word 0x{word:04X}: {exc}", written) from exc
+                    raise InterruptedWrite(f"word 0x{word:04X}: {exc}", written, word) from exc
                 written.append(word)
                 if progress is not None:
                     progress(len(written))

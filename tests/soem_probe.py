@@ -8,7 +8,8 @@ SDO download), ``cycles`` (process
 data cycles in OP), ``read`` ([[slave, index, subindex], ...]: SDO uploads after config_map,
 as hex in ``read``), ``dc`` (true: SOEM's ``config_dc`` after config_map, which works out
 the tree from the DL statuses and writes each slave's propagation delay; read back from
-0x0928 into ``delays``).
+0x0928 into ``delays``), ``sii_words`` (N: read the first N SII words of every slave with
+SOEM's EEPROM reader into ``sii`` (hex) and register 0x0012 into ``alias``, then stop).
 """
 
 from __future__ import annotations
@@ -36,6 +37,16 @@ def main() -> None:
         result["slaves"] = [{"name": s.name, "vendor": s.man, "product": s.id,
                              "revision": s.rev} for s in master.slaves]
         if found <= 0:
+            return
+        if "sii_words" in options:
+            # SOEM's own EEPROM reader (ecx_readeeprom, 4 bytes per read) over the first
+            # ``sii_words`` words of every slave, and the alias register 0x0012 as
+            # config_init leaves it; nothing else.
+            n = options["sii_words"]
+            result["sii"] = [b"".join(s.eeprom_read(w) for w in range(0, n, 2))[:2 * n].hex()
+                             for s in master.slaves]
+            result["alias"] = [struct.unpack("<H", s._fprd(0x0012, 2))[0]
+                               for s in master.slaves]
             return
         result["iomap"] = master.config_map()
         result["sizes"] = [(len(s.output), len(s.input)) for s in master.slaves]
