@@ -13,8 +13,9 @@ import struct
 import time
 
 from ecatcfg.eni.plan import NetworkPlan, SlavePlan
-from ecatcfg.esc import (EEPROM_BUSY, EEPROM_ERROR_ACKNOWLEDGE, EEPROM_ERRORS, EEPROM_R64, PORT_LETTERS, SII_REVISION,
-                         SII_VENDOR_ID, Cmd, Reg, eeprom_read_request)
+from ecatcfg.esc import (EEPROM_BUSY, EEPROM_ERROR_ACKNOWLEDGE, EEPROM_ERRORS, EEPROM_R64,
+                         PORT_LETTERS, SII_REVISION, SII_VENDOR_ID, Cmd, Reg,
+                         eeprom_read_request)
 from ecatcfg.record import record
 from ecatcfg.runtime.lockstep import Job, Step, run_jobs, until_answered
 from ecatcfg.runtime.replay import ApplyError

@@ -26,7 +26,8 @@ from typing import TYPE_CHECKING
 
 from ecatcfg.esc import (AL_ERROR_ACK, AL_STATE_MASK, AL_STATUS_ERROR, EEPROM_BUSY,
                          EEPROM_CMD_MASK, EEPROM_CMD_READ, EEPROM_CMD_RELOAD, EEPROM_CMD_WRITE,
-                         EEPROM_ERROR_ACKNOWLEDGE, EEPROM_ERROR_WRITE_ENABLE, EEPROM_R64, EEPROM_WRITE_ENABLE, ESC_DEVICE_EMULATION, FMMU_SIZE, PDI_DIGITAL_IO,
+                         EEPROM_ERROR_ACKNOWLEDGE, EEPROM_ERROR_WRITE_ENABLE, EEPROM_R64,
+                         EEPROM_WRITE_ENABLE, ESC_DEVICE_EMULATION, FMMU_SIZE, PDI_DIGITAL_IO,
                          SM_ACTIVATE_REPEAT, SM_DIR_MASK, SM_MODE_MASK, SM_WATCHDOG_ENABLE,
                          AlState, AlStatusCode, FmmuConfig, FmmuType, Reg, fmmu_register,
                          sm_register)

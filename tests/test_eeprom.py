@@ -11,7 +11,6 @@ as real I2C EEPROMs do during their write cycle.
 from __future__ import annotations
 
 import json
-import os
 import re
 import struct
 import sys
@@ -47,9 +46,7 @@ def line(lib: Library, timing: Timing | None = None) -> VirtualSegment:
 
 def ecatcfg(rig, *args: str, cwd: Path) -> tuple[int, str, str]:
     """The command line in the master's namespace, from this checkout."""
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join(
-        [os.environ.get("PYTHONPATH", "")] if os.environ.get("PYTHONPATH") else []))
-    done = rig.run_in(rig.ns_a, [sys.executable, "-m", "ecatcfg", *args], cwd=cwd, env=env,
+    done = rig.run_in(rig.ns_a, [sys.executable, "-m", "ecatcfg", *args], cwd=cwd,
                       timeout=120)
     return done.returncode, done.stdout, done.stderr
 
@@ -160,7 +157,8 @@ def test_an_interrupted_write_names_the_words_written_and_the_backup(veth_netns,
     at = image.index(name.encode())
     image[at:at + len(name)] = ("Q" * len(name)).encode()
     (tmp_path / "new.bin").write_bytes(image)
-    differ = [w for w in range(len(image) // 2) if image[2 * w:2 * w + 2] != before[2 * w:2 * w + 2]]
+    differ = [w for w in range(len(image) // 2)
+              if image[2 * w:2 * w + 2] != before[2 * w:2 * w + 2]]
     assert len(differ) > 3 and differ[:2] == [0x0E, 0x0F]
     words: list[int] = []
     original = drive._eeprom_command
