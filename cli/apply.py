@@ -3,6 +3,13 @@
 from __future__ import annotations
 
 import argparse
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from ecatcfg.cli.report import ApplyReport
+    from ecatcfg.runtime.master import Event
+    from ecatcfg.runtime.network import Network
+    from ecatcfg.runtime.service import Notifier
 
 STATES = {"init": 1, "preop": 2, "safeop": 4, "op": 8}
 
@@ -59,7 +66,9 @@ def run(args: argparse.Namespace) -> int:
     from ecatcfg.eni import cache as eni_cache
     from ecatcfg.errors import EcatcfgError, UsageError
     from ecatcfg.esc import AlState
+    from ecatcfg.runtime.master import Event
     from ecatcfg.runtime.network import Network
+    from ecatcfg.runtime.service import Notifier
 
     if not Path(args.eni).exists():
         raise UsageError(f"{args.eni}: no such file")
@@ -89,37 +98,112 @@ def run(args: argparse.Namespace) -> int:
         from ecatcfg.eni.contents import refuse
         refuse(plan, args.eni)              # before a link is opened or a frame sent
     report.skipped(plan.unsupported)
+    notify = Notifier.from_env()
+
+    def on_event(event: Event) -> None:
+        notify.watchdog()               # a step that reports progress is alive
+        report.event(event)
     if args.virtual:
-        net = Network.virtual(plan, args.esi, pcap=args.pcap, on_event=report.event,
+        net = Network.virtual(plan, args.esi, pcap=args.pcap, on_event=on_event,
                               esi_cache=not args.no_cache, skip_unsupported=True,
                               eni_name=args.eni,
                               dc_threshold_ns=dc_threshold, dc_timeout_s=dc_timeout)
     else:
         from ecatcfg.runtime.link import RawLink
-        net = Network(plan, RawLink(args.iface), pcap=args.pcap, on_event=report.event,
+        net = Network(plan, RawLink(args.iface), pcap=args.pcap, on_event=on_event,
                       skip_unsupported=True, eni_name=args.eni,
                       dc_threshold_ns=dc_threshold, dc_timeout_s=dc_timeout)
     target = AlState(STATES[args.state])
+    guard = _SignalGuard(net, report, notify)
     failure: EcatcfgError | None = None
-    try:
+    with guard:                         # also while the summary is printed
         try:
-            net.up(target, accept_newer_revision=args.accept_newer_revision)
-            if target >= AlState.SAFEOP and args.cycles != 0:
-                report.cycling(args.cycles)
-                net.run(args.cycles, report.cycle_callback(net))
-        except EcatcfgError as exc:
-            failure = exc
-        except KeyboardInterrupt:
-            report.note("interrupted")
-        report.final_states(net.master.read_states(), net.master.progress)
-        if not args.stay and net.state > AlState.INIT:
             try:
-                net.down()
+                try:
+                    net.up(target, accept_newer_revision=args.accept_newer_revision)
+                    status = f"{len(plan.slaves)} slaves in {target.name}"
+                    if target >= AlState.SAFEOP and args.cycles != 0:
+                        report.cycling(args.cycles)
+                        notify.ready(status + ", cycling")
+                        net.run(args.cycles, report.cycle_callback(net, notify.watchdog))
+                    else:
+                        notify.ready(status)
+                finally:
+                    # No bytecode here checks for signals: from this store on, a signal
+                    # can no longer interrupt, whatever ends the run.
+                    guard.down = True
             except EcatcfgError as exc:
-                failure = failure or exc
-    finally:
-        net.close()
-    report.finish(net, failure, target)
-    if args.format == "json":
-        print(json.dumps(report.as_json(), indent=2))
+                failure = exc
+            except KeyboardInterrupt as exc:   # Ctrl-C, or SIGTERM/SIGHUP (_SignalGuard)
+                report.note(f"stopped by {exc.args[0]}" if exc.args else "interrupted")
+            highest = net.master.read_states()
+            if not args.stay and net.state > AlState.INIT:
+                notify.stopping(f"bringing {len(plan.slaves)} slaves down to INIT")
+                try:
+                    net.down()
+                except EcatcfgError as exc:
+                    failure = failure or exc
+                report.final_states(net.master.read_states(), net.master.progress,
+                                    highest=highest, scanned=net.master.scanned)
+            else:
+                notify.stopping("leaving the slaves as they are")
+                report.final_states(highest, net.master.progress, highest=highest,
+                                    scanned=net.master.scanned)
+        finally:
+            net.close()
+            notify.close()
+        report.finish(net, failure, target)
+        if args.format == "json":
+            print(json.dumps(report.as_json(), indent=2), flush=True)
     return 1 if failure else 0
+
+
+class _SignalGuard:
+    """SIGINT, SIGTERM and SIGHUP during ``apply``: the first one stops the run like Ctrl-C
+    (a KeyboardInterrupt naming the signal), so the slaves are brought down and the summary
+    printed.  Once the way down has begun, a further signal does not abandon the slaves: it
+    says how long the way down can still take (Master.down_bound); a third signal in all
+    exits at once (exit 1), naming the state each slave was last brought to."""
+
+    SIGNALS = ("SIGINT", "SIGTERM", "SIGHUP")
+
+    def __init__(self, net: Network, report: ApplyReport, notify: Notifier) -> None:
+        self.net = net
+        self.report = report
+        self.notify = notify
+        self.count = 0
+        self.down = False               # True once the way down has begun: no interrupt
+        self.saved: dict[int, Any] = {}
+
+    def __enter__(self) -> _SignalGuard:
+        import signal
+        for name in self.SIGNALS:
+            number = getattr(signal, name)
+            self.saved[number] = signal.signal(number, self._handle)
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        import signal
+        for number, handler in self.saved.items():
+            signal.signal(number, handler)
+
+    def _handle(self, number: int, _frame: object) -> None:
+        import os
+        import signal
+        import sys
+        name = signal.Signals(number).name
+        self.count += 1
+        if not self.down:
+            self.down = True
+            raise KeyboardInterrupt(name)
+        master = self.net.master
+        if self.count >= 3:
+            where = ", ".join(s.name for s in master.slaves)
+            print(f"ecatcfg apply: {name} (third signal): exiting at once; the slaves were "
+                  f"left on the way down, last brought to {master.state.name}: {where}",
+                  file=sys.stderr, flush=True)
+            self.notify.send(STATUS=f"abandoned with the slaves in {master.state.name}")
+            os._exit(1)
+        print(f"ecatcfg apply: {name}: finishing the way down (at most "
+              f"{master.down_bound():.0f} s from {master.state.name}); a third signal exits "
+              f"at once and leaves the slaves as they are", file=sys.stderr, flush=True)

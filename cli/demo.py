@@ -95,8 +95,7 @@ def _apply(eni: Path, esi: Path, cycles: int) -> int:
     print(f"Applying {eni} to a virtual segment of the example devices:")
     with Network.virtual(plan, [esi], on_event=report.event) as net:
         net.up(AlState.OP)
-        report.final_states(net.master.read_states(), net.master.progress)
-        report.finish(net, None, AlState.OP)
+        net.reset_stats()               # the statistics count the cycles shown below
         inputs = {s.name: s for s in net.segment.slaves if s.device.type_name == "EX1004"}
         lamps = [v for v in net.variables if v.startswith("lamps.")]
         shown = [v for v in net.variables if v.startswith(("buttons.", "sensors."))]
@@ -105,7 +104,9 @@ def _apply(eni: Path, esi: Path, cycles: int) -> int:
                        and v.lower().replace(" ", "").endswith("statusword")), None)
         position = next((v for v in net.variables if v.startswith("axis1.")
                          and v.lower().endswith("position actual value")), None)
-        print(f"\n{'cycle':>5}  {'lamps (out)':12} {'buttons+sensors (in)':20} "
+        print(f"\nTwo bus cycles a row (the inputs of a cycle come back with the next "
+              f"frame):")
+        print(f"{'row':>5}  {'lamps (out)':12} {'buttons+sensors (in)':20} "
               f"{'axis1 status word, position (in)' if status else ''}")
         for n in range(cycles):
             # The emulated terminals "see" inputs and the emulated drive reports a status
@@ -124,6 +125,8 @@ def _apply(eni: Path, esi: Path, cycles: int) -> int:
             word = f"0x{net[status]:04X} {net[position]:>7}" if status and position else ""
             print(f"{n + 1:>5}  {out:12} {got:20} {word}")
         print()
+        report.final_states(net.master.read_states(), net.master.progress)
+        report.finish(net, None, AlState.OP)
     return 0
 
 

@@ -11,7 +11,7 @@ from collections.abc import Callable
 from typing import IO, TYPE_CHECKING, Any
 
 from ecatcfg.eni.plan import NetworkPlan, Unsupported
-from ecatcfg.esc import AlState, al_status_name
+from ecatcfg.esc import AlState, al_state_name, al_status_name
 
 if TYPE_CHECKING:                   # rich and the runtime are imported where they are used
     from rich.console import Console
@@ -20,7 +20,9 @@ if TYPE_CHECKING:                   # rich and the runtime are imported where th
     from ecatcfg.runtime.master import Event, SlaveState
     from ecatcfg.runtime.network import Network
     from ecatcfg.runtime.replay import SlaveProgress
+    from ecatcfg.runtime.scan import FoundSlave
 
+_LOG_WIDTH = 1000          # columns for a pipe or a file: wide enough that nothing wraps
 _TRANSITION_TEXT = {"IP": "INIT -> PREOP", "PS": "PREOP -> SAFEOP", "SO": "SAFEOP -> OP",
                     "OS": "OP -> SAFEOP", "SP": "SAFEOP -> PREOP", "PI": "PREOP -> INIT"}
 
@@ -47,6 +49,10 @@ class ApplyReport:
         else:
             from rich.console import Console
             self.console = Console(highlight=False)
+            if not self.console.is_terminal:
+                # A pipe or a file (a service's journal): rich would wrap at 80 columns and
+                # split table rows and the statistics line; a log keeps each line whole.
+                self.console = Console(highlight=False, width=_LOG_WIDTH, soft_wrap=True)
         self.events: list[str] = []
         self.rows: list[dict[str, Any]] = []
         self.summary: dict[str, Any] = {}
@@ -77,23 +83,50 @@ class ApplyReport:
     def cycling(self, cycles: int | None) -> None:
         self.note(f"cycling ({cycles} cycles)" if cycles else "cycling until Ctrl-C")
 
-    def cycle_callback(self, net: Network) -> Callable[[Network], None]:
-        return lambda _net: None
+    def cycle_callback(self, net: Network,
+                       each: Callable[[], None] | None = None) -> Callable[[Network], None]:
+        """Called after every bus cycle: ``each`` (the service watchdog's ping)."""
+        if each is None:
+            return lambda _net: None
+        ping = each
+        return lambda _net: ping()
 
     def final_states(self, states: list[SlaveState | None],
-                     progress: dict[str, SlaveProgress]) -> None:
+                     progress: dict[str, SlaveProgress], *,
+                     highest: list[SlaveState | None] | None = None,
+                     scanned: list[FoundSlave] | None = None) -> None:
+        """``states``: each slave's state now (after the way down), read by auto-increment
+        position; ``highest``: read before the way down.  ``scanned``: what the scan found.
+        When it does not match the ENI (a moved slave, a pulled cable), position N is not
+        the ENI's slave N: a state is shown only for a slave found where the ENI has it
+        with its identity, "not found" for a slave the line does not hold."""
         self.rows = []
-        for slave, st in zip(sorted(self.plan.slaves, key=lambda s: s.position), states):
+        slaves = sorted(self.plan.slaves, key=lambda s: s.position)
+        highest = states if highest is None else highest
+        for k, (slave, st, top) in enumerate(zip(slaves, states, highest)):
+            found = scanned[k] if scanned is not None and k < len(scanned) else None
+            where: str | None = None
+            if scanned is not None and (found is None or (found.vendor_id, found.product_code)
+                                        != (slave.vendor_id, slave.product_code)):
+                present = any((f.vendor_id, f.product_code)
+                              == (slave.vendor_id, slave.product_code) for f in scanned)
+                where = "elsewhere" if present else "not found"
+                st = top = None
             row = {"position": slave.position, "name": slave.name,
                    "address": slave.phys_addr,
-                   "state": st.name if st else "no answer",
+                   "state": where or (st.name if st else "no answer"),
+                   "highest_state": where or (al_state_name(top.state) if top
+                                              else "no answer"),
                    "al_status_code": st.code if st else None,
                    "al_status": al_status_name(st.code) if st and st.code else None,
                    "last_command": progress[slave.name].last_command}
             self.rows.append(row)
 
     def finish(self, net: Network, failure: EcatcfgError | None, target: AlState) -> None:
-        stats = net.run_stats or net.master.cyclic.stats
+        # The cycles that ran (net.run, or net.cycle() after reset_stats()), not the ones
+        # run while the slaves changed state.
+        from ecatcfg.runtime.cyclic import CycleStats
+        stats = net.run_stats or CycleStats()
         counters = net.master.transport.counters
         jitter = stats.jitter()
         self.summary = {
@@ -121,11 +154,12 @@ class ApplyReport:
         console = self.console
         assert not isinstance(console, _PlainConsole)      # the JSON mode returned above
         table = Table(title=f"{self.eni}: slaves")
-        for col in ("pos", "name", "addr", "state", "AL status", "last InitCmd"):
+        for col in ("pos", "name", "addr", "state", "highest", "AL status", "last InitCmd"):
             table.add_column(col)
         for r in self.rows:
             code = r["al_status_code"]
             table.add_row(str(r["position"]), r["name"], str(r["address"]), r["state"],
+                          r["highest_state"],
                           f"0x{code:04X} {r['al_status']}" if code else "-",
                           r["last_command"] or "-")
         console.print(table)

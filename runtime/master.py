@@ -124,6 +124,7 @@ class Master:
         self._cycling = False
         self._next_cycle = 0.0
         self.found: list[FoundSlave] | None = None     # the last scan: identity, plugs
+        self.scanned: list[FoundSlave] | None = None   # the last scan, also when it failed
 
     def _event(self, kind: str, text: str) -> None:
         if self.on_event:
@@ -135,6 +136,7 @@ class Master:
         self._event("scan", "scanning the line")
         found = scan(self.transport)
         problems = verify(self.plan, found, accept_newer_revision)
+        self.scanned = found                # what is on the line, verified or not
         if problems:
             raise VerifyError(problems)
         self.found = found
@@ -172,6 +174,29 @@ class Master:
         if first is not None:
             raise first
 
+    def down_bound(self, target: AlState = AlState.INIT) -> float:
+        """Seconds :meth:`bring_down` can take at most from the current state: per
+        transition, the master's InitCmds and the slowest slave's (their timeouts, lost
+        frames included: the slaves run in parallel), its mailbox InitCmds, and the AL error
+        acknowledgements (a state read and a write) before and after each step.  A service
+        manager's stop timeout must be above this (docs/runtime.md)."""
+        from ecatcfg.runtime.replay import TIMEOUT_MAILBOX, command_timeout
+        ack = 2 * TIMEOUT_COMMAND
+        total = ack
+        for transition in DOWN.get(self.state, []):
+            if transition.target < target:
+                break
+            master = sum(command_timeout(c) for c in self.plan.master.init_cmds
+                         if transition in c.transitions)
+            slowest = 0.0
+            for s in self.slaves:
+                coe, eoe = mailbox_init_cmds(s, transition)
+                t = sum(command_timeout(c) for c in s.init_cmds if transition in c.transitions)
+                t += sum(c.timeout / 1000 if c.timeout else TIMEOUT_MAILBOX for c in coe + eoe)
+                slowest = max(slowest, t)
+            total += master + slowest + ack
+        return total
+
     def _acknowledge_errors(self) -> None:
         states = self.read_states()
         jobs = [_write_by_position(s.position, Reg.AL_CONTROL,
@@ -200,8 +225,9 @@ class Master:
                 for cmd in mailbox_init_cmds(s, transition)[1]:
                     self._event("eoe", f"EoE IP parameters of {s.name!r} set: "
                                 f"{cmd.request.params.describe()}")
-        except ApplyError:
-            # Some slaves may have changed state: going down must cover them too.
+        except BaseException:
+            # Some slaves may have changed state (also when a signal or Ctrl-C interrupts
+            # the step): going down must cover them too.
             if transition.target > self.state:
                 self.state = transition.target
             raise

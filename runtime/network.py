@@ -217,10 +217,16 @@ class Network:
             self._stop.clear()
             self._loop(cycles, callback)
 
+    def reset_stats(self) -> CycleStats:
+        """Count cycles from here on in :attr:`run_stats` (apart from the cycles run while
+        the slaves change state); :meth:`run` does this itself."""
+        from ecatcfg.runtime.cyclic import CycleStats
+        self.run_stats = self.master.cyclic.stats = CycleStats()
+        return self.run_stats
+
     def _loop(self, cycles: int | None, callback: Callable[[Network], None] | None) -> None:
         from ecatcfg.runtime.cyclic import CycleStats
-        # The statistics of this run: kept apart from the cycles of state changes.
-        self.run_stats = self.master.cyclic.stats = CycleStats()
+        self.reset_stats()          # the statistics of this run
         period = self.master.cyclic.cycle_time_us / 1e6
         next_at = time.perf_counter()
         done = 0
