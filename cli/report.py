@@ -95,23 +95,32 @@ class ApplyReport:
                      progress: dict[str, SlaveProgress], *,
                      highest: list[SlaveState | None] | None = None,
                      scanned: list[FoundSlave] | None = None) -> None:
-        """``states``: each slave's state now (after the way down), read by auto-increment
+        """``states``: the state now (after the way down) of the slave at each auto-increment
         position; ``highest``: read before the way down.  ``scanned``: what the scan found.
-        When it does not match the ENI (a moved slave, a pulled cable), position N is not
-        the ENI's slave N: a state is shown only for a slave found where the ENI has it
-        with its identity, "not found" for a slave the line does not hold."""
+        When the line does not match the ENI (a moved slave, a pulled cable), position N is
+        not the ENI's slave N: a slave gets the state of the slave found where the ENI has
+        it (paired as verify pairs them) only if it passed verification; "not found" for a
+        missing slave, "not verified" for one that differs from the ENI."""
+        from ecatcfg.runtime.scan import paired, verify
         self.rows = []
         slaves = sorted(self.plan.slaves, key=lambda s: s.position)
         highest = states if highest is None else highest
-        for k, (slave, st, top) in enumerate(zip(slaves, states, highest)):
-            found = scanned[k] if scanned is not None and k < len(scanned) else None
-            where: str | None = None
-            if scanned is not None and (found is None or (found.vendor_id, found.product_code)
-                                        != (slave.vendor_id, slave.product_code)):
-                present = any((f.vendor_id, f.product_code)
-                              == (slave.vendor_id, slave.product_code) for f in scanned)
-                where = "elsewhere" if present else "not found"
-                st = top = None
+        at: dict[int, int] = {s.position: k for k, s in enumerate(slaves)}
+        problems: dict[int, str] = {}
+        if scanned is not None:
+            mismatches = verify(self.plan, scanned, accept_newer_revision=True)
+            if mismatches:
+                problems = {m.position: ("not found" if m.problem.startswith("missing")
+                                         else "not verified")
+                            for m in mismatches if m.expected != "-"}
+                at = paired(self.plan, scanned)
+        for slave in slaves:
+            where = problems.get(slave.position)
+            k = at.get(slave.position)
+            if k is None and where is None:
+                where = "not found"
+            st = states[k] if where is None and k is not None and k < len(states) else None
+            top = highest[k] if where is None and k is not None and k < len(highest) else None
             row = {"position": slave.position, "name": slave.name,
                    "address": slave.phys_addr,
                    "state": where or (st.name if st else "no answer"),

@@ -193,6 +193,17 @@ def verify(plan: NetworkPlan, found: list[FoundSlave],
     return problems
 
 
+def paired(plan: NetworkPlan, found: list[FoundSlave]) -> dict[int, int]:
+    """Which slave found (its auto-increment position) is the ENI's slave at each position,
+    as :func:`verify` pairs them: in bus order, or port by port through the tree."""
+    expected = sorted(plan.slaves, key=lambda s: s.position)
+    if not any(s.previous_ports for s in expected[1:]) or any(
+            f.plug is None for f in found[1:]):
+        return {expected[k].position: k for k in range(min(len(expected), len(found)))}
+    pairs = _pair(eni_plugs(expected, "the ENI"), [f.plug for f in found])
+    return {expected[e].position: f for e, f in pairs.items()}
+
+
 def _pair(want: list[Plug | None], got: list[Plug | None]) -> dict[int, int]:
     """Expected slave -> found slave, walking both trees from their first slaves and
     pairing the slaves on the same port of paired parents."""
