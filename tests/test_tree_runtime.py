@@ -479,6 +479,12 @@ def test_apply_names_the_slaves_behind_a_removed_cable(veth_netns, drives, tmp_p
     assert "behind t0 port B" in row3 and "missing slave (no slave on port B of t0" in row3
     row4 = next(line for line in table.splitlines() if line.strip().startswith("4  t4 ("))
     assert "behind t3 port B" in row4 and "missing slave" in row4
+    # The final table names the ENI's slaves, not auto-increment positions: t5 is found at
+    # position 3 (t3 and t4 are gone), so its state is the one read there.
+    slaves = {r["name"]: r for r in json.loads(done.stdout)["slaves"]}
+    assert slaves["t3"]["state"] == slaves["t4"]["state"] == "not found", slaves
+    assert all(slaves[n]["state"] == slaves[n]["highest_state"] == "INIT"
+               for n in ("t0", "t1", "t2", "t5")), slaves
 
 
 def test_a_previous_port_that_cannot_be_wired_is_an_error_naming_the_slave(drives):
