@@ -121,10 +121,12 @@ def run(args: argparse.Namespace) -> int:
             try:
                 try:
                     net.up(target, accept_newer_revision=args.accept_newer_revision)
-                    status = f"{len(plan.slaves)} slaves in {target.name}"
+                    # The stop timeout a service manager needs (docs/runtime.md).
+                    status = (f"{len(plan.slaves)} slaves in {target.name}; way down at "
+                              f"most {net.master.down_bound():.0f} s")
                     if target >= AlState.SAFEOP and args.cycles != 0:
                         report.cycling(args.cycles)
-                        notify.ready(status + ", cycling")
+                        notify.ready(status.replace(";", ", cycling;", 1))
                         net.run(args.cycles, report.cycle_callback(net, notify.watchdog))
                     else:
                         notify.ready(status)

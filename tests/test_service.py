@@ -185,7 +185,7 @@ def test_notify_ready_watchdog_stopping(example_eni, tmp_path, abstract):
     ready = [k for k, (_, m) in enumerate(cycling) if m.get("READY") == "1"]
     assert len(ready) == 1, cycling
     first = cycling[ready[0]][1]
-    assert first["STATUS"] == "5 slaves in OP, cycling"
+    assert re.fullmatch(r"5 slaves in OP, cycling; way down at most \d+ s", first["STATUS"])
     pings = [t for t, m in cycling[ready[0] + 1:] if m == {"WATCHDOG": "1"}]
     # Half the period between pings: about 4 in the 2 s read, never a full period apart.
     assert len(pings) >= 3, cycling
@@ -206,7 +206,8 @@ def test_no_watchdog_when_it_is_another_process(example_eni, tmp_path):
         assert run.finish() == 0, run.stderr()
         got = _messages(sock, time.monotonic() + 0.5)
     kinds = [m for _, m in got]
-    assert kinds[0] == {"READY": "1", "STATUS": "5 slaves in OP, cycling"}, kinds
+    assert kinds[0]["READY"] == "1" and kinds[0]["STATUS"].startswith("5 slaves in OP, "
+                                                                   "cycling; "), kinds
     assert not any("WATCHDOG" in m for m in kinds), kinds
     assert kinds[-1]["STOPPING"] == "1"
 
@@ -378,3 +379,47 @@ def test_a_signal_on_the_way_up_is_a_requested_stop(veth_netns, example_eni, tmp
         report["events"]
     assert report["cycles"]["count"] == 0           # no cycling: none ran
     assert last_states(sim_out) == {n: "INIT" for n in NAMES}, sim_out
+
+
+# -- the unit file ---------------------------------------------------------------------------
+
+UNIT = EXAMPLES / "ecatcfg-apply.service"
+
+
+def _unit() -> dict[str, str]:
+    keys = {}
+    for line in UNIT.read_text().splitlines():
+        if line and not line.startswith(("#", "[")):
+            key, value = line.split("=", 1)
+            keys[key] = value
+    return keys
+
+
+def test_the_unit_file_is_a_notify_service_whose_stop_timeout_covers_the_way_down(
+        example_eni):
+    from ecatcfg.esc import AlState
+    from ecatcfg.runtime.network import Network
+    unit = _unit()
+    assert unit["Type"] == "notify" and unit["KillSignal"] == "SIGTERM"
+    assert unit["ExecStart"].split()[1:3] == ["apply", "/etc/ecatcfg/line.eni.xml"]
+    assert int(unit["WatchdogSec"]) > 0
+    # The example line in OP: its way down is bounded well below TimeoutStopSec.
+    with Network.virtual(example_eni, [EXAMPLES / "esi"]) as net:
+        net.up(AlState.OP)
+        bound = net.master.down_bound()
+    assert 0 < bound < int(unit["TimeoutStopSec"]), bound
+
+
+def test_systemd_accepts_the_unit_file(tmp_path):
+    import shutil
+    analyze = shutil.which("systemd-analyze")
+    if analyze is None:
+        pytest.skip("systemd-analyze is not installed")
+    # The unit as installed, with ExecStart pointing at this Python's ecatcfg.
+    text = UNIT.read_text().replace("/usr/local/bin/ecatcfg",
+                                    f"{sys.executable} -m ecatcfg")
+    unit = tmp_path / "ecatcfg-apply.service"
+    unit.write_text(text)
+    done = subprocess.run([analyze, "verify", str(unit)], capture_output=True, text=True,
+                          timeout=60)
+    assert done.returncode == 0 and not done.stderr.strip(), done.stderr
