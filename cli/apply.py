@@ -179,6 +179,9 @@ class _SignalGuard:
 
     def __enter__(self) -> _SignalGuard:
         import signal
+        import threading
+        if threading.current_thread() is not threading.main_thread():
+            return self                 # only the main thread may set handlers (main() in a thread)
         for name in self.SIGNALS:
             number = getattr(signal, name)
             self.saved[number] = signal.signal(number, self._handle)

@@ -11,7 +11,7 @@ from collections.abc import Callable
 from typing import IO, TYPE_CHECKING, Any
 
 from ecatcfg.eni.plan import NetworkPlan, Unsupported
-from ecatcfg.esc import AlState, al_state_name, al_status_name
+from ecatcfg.esc import AlState, al_status_name
 
 if TYPE_CHECKING:                   # rich and the runtime are imported where they are used
     from rich.console import Console
@@ -121,13 +121,15 @@ class ApplyReport:
                 where = "not found"
             st = states[k] if where is None and k is not None and k < len(states) else None
             top = highest[k] if where is None and k is not None and k < len(highest) else None
+            # The AL status code read before the way down: why a slave refused a state
+            # (the way down acknowledges the error).
+            code = top.code if top and top.code else st.code if st else None
             row = {"position": slave.position, "name": slave.name,
                    "address": slave.phys_addr,
                    "state": where or (st.name if st else "no answer"),
-                   "highest_state": where or (al_state_name(top.state) if top
-                                              else "no answer"),
-                   "al_status_code": st.code if st else None,
-                   "al_status": al_status_name(st.code) if st and st.code else None,
+                   "highest_state": where or (top.name if top else "no answer"),
+                   "al_status_code": code,
+                   "al_status": al_status_name(code) if code else None,
                    "last_command": progress[slave.name].last_command}
             self.rows.append(row)
 

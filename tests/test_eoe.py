@@ -511,7 +511,8 @@ def test_eni1_sets_the_ip_parameters_on_the_wire(corpus, tshark_path, tmp_path):
                            "--format", "json"], capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr
     report = json.loads(done.stdout)
-    assert report["ok"] and [s["state"] for s in report["slaves"]] == ["OP"]
+    assert report["ok"] and [(s["highest_state"], s["state"]) for s in report["slaves"]] \
+        == [("OP", "INIT")]
     assert "EoE IP parameters of 'Elmo Drive' set: ip 192.168.1.4/255.255.255.0, gateway " \
            "192.168.1.10, dns 0.0.0.0, name '', mac 10:18:9e:ff:01:04" in report["events"]
     fields = ["ecat_mailbox.eoe.type", "ecat_mailbox.eoe.init.ipaddr",
