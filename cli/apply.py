@@ -181,7 +181,7 @@ class _SignalGuard:
         import signal
         import threading
         if threading.current_thread() is not threading.main_thread():
-            return self                 # only the main thread may set handlers (main() in a thread)
+            return self                 # only the main thread may set signal handlers
         for name in self.SIGNALS:
             number = getattr(signal, name)
             self.saved[number] = signal.signal(number, self._handle)
