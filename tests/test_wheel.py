@@ -7,6 +7,7 @@ wheel) and generic top-level modules leaking into site-packages.
 from __future__ import annotations
 
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -69,6 +70,7 @@ def test_wheel_installs_and_runs(tmp_path):
     assert top == {"ecatcfg"}, top
     assert "ecatcfg/examples/esi/ecatcfg-EXD402-drive.xml" in names
     assert "ecatcfg/examples/topology.yaml" in names
+    assert "ecatcfg/examples/ecatcfg-apply.service" in names     # the systemd unit
     assert "ecatcfg/examples/tree/esi/ecatcfg-EXB-branching.xml" in names
     assert "ecatcfg/templates/process_image.h.j2" in names
     assert "ecatcfg/templates/__init__.py" in names
@@ -92,7 +94,9 @@ def test_wheel_installs_and_runs(tmp_path):
     out = run("demo", cwd=tmp_path)        # the embedded default: package data only
     assert out.returncode == 0 and "LRW (WKC 7)" in out.stdout, out.stderr
     # ... and applied on the virtual segment: every slave in OP, process data both ways.
-    assert "SAFEOP -> OP: OP" in out.stdout and out.stdout.count("│ OP ") == 5, out.stdout
+    # (state and highest state: the demo's table is printed while the slaves are in OP)
+    assert "SAFEOP -> OP: OP" in out.stdout and len(re.findall(
+        r"│ OP\s+│ OP\s+│", out.stdout)) == 5, out.stdout
     assert "0x0237    7000" in out.stdout and "00000001     11101100" in out.stdout
     assert "PREOP -> INIT: INIT" in out.stdout
     assert (tmp_path / "ecatcfg-demo" / "demo.h").is_file()     # template from the wheel
