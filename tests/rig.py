@@ -392,3 +392,24 @@ def serve_in_memory(segment) -> tuple[Any, Callable[[], None]]:
         stop.set()
         thread.join(2)
     return a, close
+
+
+def start_simulate(rig: VethRig, *args: str, duration: float = 60) -> tuple[
+        subprocess.Popen, list[str]]:
+    """``ecatcfg simulate ARGS --iface`` on the rig's B end (its namespace), read until it
+    prints ``ready:``: (the process, the lines it printed up to that one).  The last line
+    is not ``ready:`` when simulate ended first; callers assert on it (and may read
+    ``stderr``).  The rig stops the process when it goes away."""
+    import sys
+
+    sim = rig.popen_in(rig.ns_b, [sys.executable, "-m", "ecatcfg", "simulate", *args,
+                                  "--iface", rig.if_b, "--duration", str(duration),
+                                  "--no-cache"],
+                       stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    lines: list[str] = []
+    assert sim.stdout is not None
+    for line in sim.stdout:
+        lines.append(line)
+        if line.startswith("ready:"):
+            break
+    return sim, lines

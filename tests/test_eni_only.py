@@ -15,6 +15,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from rig import start_simulate
 from lxml import etree
 from conftest import CORPUS
 from test_soem import soem
@@ -176,15 +177,7 @@ def test_type_name_from_configurator_names():
 # -- SOEM on `simulate --eni` without ESI ------------------------------------------------
 
 def _simulate(rig, args: list[str]) -> tuple[subprocess.Popen, list[str]]:
-    sim = rig.popen_in(rig.ns_b, [sys.executable, "-m", "ecatcfg", "simulate", *args,
-                                  "--iface", rig.if_b, "--duration", "60", "--no-cache"],
-                       stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    lines: list[str] = []
-    assert sim.stdout is not None
-    for line in sim.stdout:
-        lines.append(line)
-        if line.startswith("ready:"):
-            break
+    sim, lines = start_simulate(rig, *args)
     assert lines and lines[-1].startswith("ready:"), "".join(lines) + sim.stderr.read()
     return sim, lines
 

@@ -16,7 +16,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from rig import serve_in_memory
+from rig import serve_in_memory, start_simulate
 from lxml import etree
 
 from ecatcfg.compiler import build, topology
@@ -308,15 +308,8 @@ def test_soem_reaches_op_on_simulate_of_the_ur20_station(veth_netns, pysoem_modu
     pdos = plan.slaves[0].process_data.pdos
     sizes = [(sum(e.bit_len for p in pdos if p.sm == sm for e in p.entries) + 7) // 8
              for sm in (2, 3)]
-    sim = veth_netns.popen_in(veth_netns.ns_b, [
-        sys.executable, "-m", "ecatcfg", "simulate", "--esi", str(corpus / "esi/modular"),
-        "--topology", str(topo), "--iface", veth_netns.if_b, "--duration", "60",
-        "--no-cache"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    lines = []
-    for line in sim.stdout:
-        lines.append(line)
-        if line.startswith("ready:"):
-            break
+    sim, lines = start_simulate(veth_netns, "--esi", str(corpus / "esi/modular"),
+                                "--topology", str(topo))
     assert lines and lines[-1].startswith("ready: 1 slaves"), "".join(lines) + sim.stderr.read()
     reads = [[0, 0x1C12, 0], [0, 0x1C13, 0]]
     reads += [[0, 0x1C12, n] for n in range(1, len(sm_pdos[2]) + 1)]

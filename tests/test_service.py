@@ -32,6 +32,7 @@ import time
 from pathlib import Path
 
 import pytest
+from rig import start_simulate
 
 from conftest import EXAMPLES
 
@@ -261,13 +262,10 @@ def _simulate(rig, eni: Path, tmp_path: Path, slow: bool, slow_up: bool = False)
         timing.write_text(json.dumps({k: {"state_change_ms": down}
                                       for k in ("esc", "firmware", "drive")}))
         extra = ["--timing", str(timing)]
-    sim = rig.popen_in(rig.ns_b, [
-        sys.executable, "-m", "ecatcfg", "simulate", "--esi", str(EXAMPLES / "esi"), "--eni",
-        str(eni), "--iface", rig.if_b, "--duration", "120", "--no-cache", *extra],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    for line in sim.stdout:
-        if line.startswith("ready:"):
-            return sim
+    sim, lines = start_simulate(rig, "--esi", str(EXAMPLES / "esi"), "--eni", str(eni),
+                                *extra, duration=120)
+    if lines and lines[-1].startswith("ready:"):
+        return sim
     raise AssertionError(sim.stderr.read())
 
 

@@ -9,12 +9,11 @@ default PDO assignment, states, and process data in both directions.
 from __future__ import annotations
 
 import json
-import subprocess
 import sys
 from pathlib import Path
 
 import pytest
-from rig import serving
+from rig import serving, start_simulate
 
 from ecatcfg.esi.library import Library
 from ecatcfg.runtime.emulate import SlaveSpec, segment
@@ -160,15 +159,8 @@ def test_simulate_command_serves_soem(veth_netns, pysoem_module, corpus, tmp_pat
                     f"  - {{name: out, device: '{EL2008}'}}\n"
                     f"  - {{name: in, device: '{EL1809}'}}\n"
                     f"  - {{name: drive, device: '{ELMO}'}}\n")
-    sim = veth_netns.popen_in(veth_netns.ns_b, [
-        sys.executable, "-m", "ecatcfg", "simulate", "--esi", str(corpus / "esi"),
-        "--topology", str(topo), "--iface", veth_netns.if_b, "--duration", "60",
-        "--no-cache"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    lines = []
-    for line in sim.stdout:
-        lines.append(line)
-        if line.startswith("ready:"):
-            break
+    sim, lines = start_simulate(veth_netns, "--esi", str(corpus / "esi"), "--topology",
+                                str(topo))
     assert lines and lines[-1].strip() == f"ready: 4 slaves on {veth_netns.if_b}", \
         "".join(lines) + sim.stderr.read()
     report = soem(veth_netns, {"outputs": "5a"})

@@ -15,11 +15,11 @@ compiled from the corpus ESI files.
 
 from __future__ import annotations
 
-import subprocess
 import sys
 from pathlib import Path
 
 import pytest
+from rig import start_simulate
 import trees
 import yaml
 
@@ -104,17 +104,9 @@ def test_soem_and_scan_on_simulate_of_the_tree(veth_netns, pysoem_module, corpus
     topo = tmp_path / "tree.yaml"
     topo.write_text(trees.ACCEPTANCE)
     original = compiled(trees.ACCEPTANCE, tree_lib)
-    sim = veth_netns.popen_in(veth_netns.ns_b, [
-        sys.executable, "-m", "ecatcfg", "simulate", "--esi", str(corpus / "esi"),
-        "--topology", str(topo), "--iface", veth_netns.if_b, "--duration", "90",
-        "--no-cache"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    sim, lines = start_simulate(veth_netns, "--esi", str(corpus / "esi"), "--topology",
+                                str(topo), duration=90)
     try:
-        lines = []
-        assert sim.stdout is not None
-        for line in sim.stdout:
-            lines.append(line)
-            if line.startswith("ready:"):
-                break
         assert lines and lines[-1].startswith("ready: 7 slaves"), "".join(lines)
         found = tmp_path / "found.yaml"
         scan = veth_netns.run_in(veth_netns.ns_a, [
@@ -154,17 +146,9 @@ def test_a_moved_slave_or_a_pulled_cable_stops_apply(veth_netns, corpus, tree_li
         extra = ["--cut", slave]
     topo = tmp_path / "wired.yaml"
     topo.write_text(text)
-    sim = veth_netns.popen_in(veth_netns.ns_b, [
-        sys.executable, "-m", "ecatcfg", "simulate", "--esi", str(corpus / "esi"),
-        "--topology", str(topo), "--iface", veth_netns.if_b, "--duration", "60",
-        "--no-cache", *extra], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    sim, lines = start_simulate(veth_netns, "--esi", str(corpus / "esi"), "--topology",
+                                str(topo), *extra)
     try:
-        lines = []
-        assert sim.stdout is not None
-        for line in sim.stdout:
-            lines.append(line)
-            if line.startswith("ready:"):
-                break
         assert lines and lines[-1].startswith("ready:"), "".join(lines)
         done = veth_netns.run_in(veth_netns.ns_a, [
             sys.executable, "-m", "ecatcfg", "apply", str(eni), "--iface", veth_netns.if_a],

@@ -23,6 +23,7 @@ import dataclasses
 import struct
 
 import pytest
+from rig import start_simulate
 
 from conftest import EXAMPLES
 from ecatcfg.compiler import build, topology
@@ -325,29 +326,12 @@ def test_dc_delays_on_the_tree_equal_the_model(drives):
 # -- SOEM, a master nobody here wrote, on `ecatcfg simulate` of the tree ------------------
 
 def _simulate(rig, eni, *extra):
-    import subprocess
-    import sys
-    sim = rig.popen_in(rig.ns_b, [
-        sys.executable, "-m", "ecatcfg", "simulate", "--esi", str(ESI), "--eni", str(eni),
-        "--iface", rig.if_b, "--duration", "60", "--no-cache", *extra],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    lines = []
-    for line in sim.stdout:
-        lines.append(line)
-        if line.startswith("ready:"):
-            break
-    return sim, lines
+    return start_simulate(rig, "--esi", str(ESI), "--eni", str(eni), *extra)
 
 
 def _soem(rig, options):
-    import json
-    import sys
-    from pathlib import Path
-    probe = Path(__file__).with_name("soem_probe.py")
-    done = rig.run_in(rig.ns_a, [sys.executable, str(probe), rig.if_a, json.dumps(options)],
-                      timeout=120)
-    assert done.returncode == 0, done.stderr
-    return json.loads(done.stdout.strip().splitlines()[-1])
+    from test_soem import soem
+    return soem(rig, options)
 
 
 def test_dc_delays_through_a_junction_the_eni_sets_no_dc_for(drives):
@@ -544,9 +528,6 @@ def test_the_example_tree_on_simulate_apply_soem_and_scan(veth_netns, pysoem_mod
     finds the 7 slaves and reaches OP, and the topology the scan writes compiles to an ENI
     whose slaves (identity, addresses, Physics, PreviousPort) are the example's: what the
     scan cannot know are the names, DC settings and the master's name and cycle time."""
-    import subprocess
-    import sys
-
     from ecatcfg.eni import writer as eni_writer
     lib = Library(TREE_ESI, cache=False)
     eni = tmp_path / "tree.eni.xml"
@@ -554,16 +535,8 @@ def test_the_example_tree_on_simulate_apply_soem_and_scan(veth_netns, pysoem_mod
                                                           lib).plan)
     eni.write_bytes(original)
     esi = [a for p in TREE_ESI for a in ("--esi", str(p))]
-    sim = veth_netns.popen_in(veth_netns.ns_b, [
-        sys.executable, "-m", "ecatcfg", "simulate", *esi, "--topology", str(TREE_TOPOLOGY),
-        "--iface", veth_netns.if_b, "--duration", "60", "--no-cache"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    sim, lines = start_simulate(veth_netns, *esi, "--topology", str(TREE_TOPOLOGY))
     try:
-        lines = []
-        for line in sim.stdout:
-            lines.append(line)
-            if line.startswith("ready:"):
-                break
         assert lines and lines[-1].startswith("ready: 7 slaves"), "".join(lines)
         applied = _ecatcfg_in(veth_netns, "apply", str(eni), "--cycles", "20")
         found = tmp_path / "found.yaml"
