@@ -62,6 +62,7 @@ def run(args: argparse.Namespace) -> int:
     import json
     from pathlib import Path
 
+    from ecatcfg.cli.paths import output_file
     from ecatcfg.cli.report import ApplyReport
     from ecatcfg.eni import cache as eni_cache
     from ecatcfg.errors import EcatcfgError, UsageError
@@ -84,10 +85,8 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as exc:
         option = "--dc-threshold" if "threshold" in str(exc) else "--dc-timeout"
         raise UsageError(f"{option}: {exc}") from None
-    if args.pcap and not Path(args.pcap).resolve().parent.is_dir():
-        raise UsageError(f"{args.pcap}: folder does not exist")
-    if args.pcap and Path(args.pcap).is_dir():
-        raise UsageError(f"{args.pcap}: is a folder, not a file to write")
+    if args.pcap:
+        output_file(args.pcap)
     if args.no_cache:
         from ecatcfg.eni import reader as eni_reader
         plan = eni_reader.read_file(args.eni)

@@ -28,6 +28,7 @@ def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from ecatcfg import __version__
+    from ecatcfg.cli.paths import output_file
     from ecatcfg.compiler import build, header, topology
     from ecatcfg.eni import writer as eni_writer
     from ecatcfg.errors import EcatcfgError, UsageError
@@ -38,12 +39,8 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"{args.topology}: no such file")
     outputs = [args.output] + ([args.header] if args.header else [])
     for out in outputs:
-        parent = Path(out).parent
-        if not parent.is_dir():
-            raise UsageError(f"{out}: folder {str(parent)!r} does not exist")
         # Checked before anything is written: a failure after the ENI would leave it behind.
-        if Path(out).is_dir():
-            raise UsageError(f"{out}: is a folder, not a file to write")
+        output_file(out)
     # One output must not replace the other, nor the topology it is compiled from.
     targets = [Path(p).resolve() for p in [args.topology] + outputs]
     if len(set(targets)) < len(targets):

@@ -104,8 +104,8 @@ def _apply(eni: Path, esi: Path, cycles: int) -> int:
                        and v.lower().replace(" ", "").endswith("statusword")), None)
         position = next((v for v in net.variables if v.startswith("axis1.")
                          and v.lower().endswith("position actual value")), None)
-        print(f"\nTwo bus cycles a row (the inputs of a cycle come back with the next "
-              f"frame):")
+        print("\nTwo bus cycles a row (the inputs of a cycle come back with the next "
+              "frame):")
         print(f"{'row':>5}  {'lamps (out)':12} {'buttons+sensors (in)':20} "
               f"{'axis1 status word, position (in)' if status else ''}")
         for n in range(cycles):

@@ -74,12 +74,11 @@ def simply_behind(plug: Plug | None, position: int, physics: str | None) -> bool
 def run(args: argparse.Namespace) -> int:
     import json
     import sys
-    from pathlib import Path
 
-    from ecatcfg.errors import UsageError
+    from ecatcfg.cli.paths import output_file
 
-    if args.topology_out and not Path(args.topology_out).resolve().parent.is_dir():
-        raise UsageError(f"{args.topology_out}: folder does not exist")
+    if args.topology_out:
+        output_file(args.topology_out)
     lib = None
     if args.esi:
         from ecatcfg.esi.library import Library

@@ -119,14 +119,11 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _read(args: argparse.Namespace) -> int:
-    from pathlib import Path
-
+    from ecatcfg.cli.paths import output_file
     from ecatcfg.errors import UsageError
     from ecatcfg.fileio import write_atomic
 
-    out = Path(args.output)
-    if not out.resolve().parent.is_dir():
-        raise UsageError(f"{args.output}: folder does not exist")
+    out = output_file(args.output)
     from ecatcfg.cli.sii_program import open_eeprom
     with open_eeprom(args.iface, args.slave) as eeprom:
         data = eeprom.read()
@@ -163,18 +160,13 @@ def _write(args: argparse.Namespace) -> int:
 
 
 def _build(args: argparse.Namespace) -> int:
-    from pathlib import Path
-
+    from ecatcfg.cli.paths import output_file
     from ecatcfg.errors import EcatcfgError, UsageError
     from ecatcfg.esi import sii
     from ecatcfg.esi.library import Library
     from ecatcfg.fileio import write_atomic
 
-    out = Path(args.output)
-    if not out.parent.is_dir():
-        raise UsageError(f"{args.output}: folder {str(out.parent)!r} does not exist")
-    if out.is_dir():
-        raise UsageError(f"{args.output}: is a folder, not a file to write")
+    out = output_file(args.output)
     lib = Library(args.esi, cache=not args.no_cache)
     if lib.problems:
         for problem in lib.problems:

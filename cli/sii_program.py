@@ -11,9 +11,10 @@ import contextlib
 import sys
 import time
 from collections.abc import Iterator
-from typing import TYPE_CHECKING
 from pathlib import Path
+from typing import TYPE_CHECKING
 
+from ecatcfg.cli.paths import output_file
 from ecatcfg.errors import EcatcfgError, UsageError
 
 if TYPE_CHECKING:   # the runtime is imported when a command runs
@@ -59,11 +60,7 @@ def backup_path(given: str | None, position: int) -> Path:
         while path.exists():
             n += 1
             path = Path(f"sii-backup-pos{position}-{stamp}-{n}.bin")
-    if not path.resolve().parent.is_dir():
-        raise UsageError(f"{path}: folder does not exist")
-    if path.is_dir():
-        raise UsageError(f"{path}: is a folder, not a file to write")
-    return path
+    return output_file(path)
 
 
 def _words(words: list[int]) -> str:
