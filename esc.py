@@ -11,6 +11,7 @@ project (SOEM, IgH, SOES, KickCAT, Wireshark) where a layout can be checked.
 from __future__ import annotations
 
 import struct
+from collections.abc import Iterable
 from enum import Enum, IntEnum
 
 from ecatcfg.record import record
@@ -341,6 +342,31 @@ def pdo_mapping_range(direction: str) -> range:
 def is_pdo_object(index: int) -> bool:
     """A PDO mapping or assignment object: the ones a PDO configuration writes."""
     return index in RX_PDO_MAPPING or index in TX_PDO_MAPPING or index in SM_PDO_ASSIGN_RANGE
+
+
+def array_downloads(writes: Iterable[tuple[int, bytes, bool]],
+                    entry_size: int) -> tuple[int | None, dict[int, int]]:
+    """What an array object (subindex 0 = number of entries, then unsigned entries of
+    ``entry_size`` bytes: PDO assignment 2, mapping and module ident list 4) holds after
+    downloads (subindex, data, complete access) in order: (subindex 0, or None if never
+    written; {subindex: value} of the entries written).  A complete access from subindex 0
+    carries subindex 0 in a 16-bit slot, then the entries (ETG.1000.6 SDO complete
+    access); from subindex k it carries entries k, k + 1, ..."""
+    count: int | None = None
+    entries: dict[int, int] = {}
+    for subindex, data, complete in writes:
+        if not complete:
+            if subindex == 0:
+                count = data[0] if data else 0
+            else:
+                entries[subindex] = int.from_bytes(data[:entry_size], "little")
+            continue
+        if subindex == 0 and data:
+            count, data, subindex = data[0], data[2:], 1
+        for offset in range(0, len(data) - entry_size + 1, entry_size):
+            entries[subindex] = int.from_bytes(data[offset:offset + entry_size], "little")
+            subindex += 1
+    return count, entries
 
 # Ethernet: EtherType, and how much datagram data one frame can carry (1500 payload − 2
 # EtherCAT header; every datagram costs a 10-byte header and a 2-byte WKC: IgH

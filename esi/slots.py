@@ -21,6 +21,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 
+from ecatcfg.esc import array_downloads
 from ecatcfg.esi.model import Device, Dictionary, Module, Pdo, Profile, Slot
 
 
@@ -186,20 +187,5 @@ def ident_list_from_writes(writes: list[tuple[int, bytes, bool]]) -> dict[int, i
     """Position -> ident from the downloads of a module ident list: (subindex, data,
     complete access) in order; a CompleteAccess from subindex 0 carries the count, a pad
     byte, then one UDINT per position, from subindex 1 the UDINTs alone."""
-    idents: dict[int, int] = {}
-    count: int | None = None
-    for subindex, data, complete in writes:
-        if complete:
-            words = data[2:] if subindex == 0 else data
-            first = 1 if subindex == 0 else subindex
-            idents = {first + n: int.from_bytes(words[4 * n:4 * n + 4], "little")
-                      for n in range(len(words) // 4)}
-            if subindex == 0 and data:
-                count = data[0]
-        elif subindex == 0 and data:
-            count = data[0]
-        elif subindex and len(data) >= 4:
-            idents[subindex] = int.from_bytes(data[:4], "little")
-    if count is not None:
-        idents = {k: v for k, v in idents.items() if k <= count}
-    return idents
+    count, idents = array_downloads(writes, 4)
+    return {k: v for k, v in idents.items() if count is None or k <= count}

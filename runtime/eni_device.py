@@ -37,8 +37,9 @@ import re
 import struct
 from dataclasses import dataclass, field
 
-from ecatcfg.esc import (FMMU_SIZE, RX_PDO_MAPPING, SM_PDO_ASSIGN, SM_PDO_ASSIGN_RANGE, SM_SIZE,
-                         TX_PDO_MAPPING, Cmd, FmmuConfig, FmmuType, Reg, SmConfig, Transition)
+from ecatcfg.esc import (FMMU_SIZE, RX_PDO_MAPPING, SM1_STATUS, SM_DIR_ECAT_WRITES, SM_DIR_MASK,
+                         SM_PDO_ASSIGN, SM_PDO_ASSIGN_RANGE, SM_SIZE, TX_PDO_MAPPING, Cmd,
+                         FmmuConfig, FmmuType, Reg, SmConfig, Transition, array_downloads)
 from ecatcfg.eni.plan import CoeInitCmd, InitCmd, NetworkPlan, PdoDesc, SlavePlan
 from ecatcfg.esi.model import (CoeSettings, Dc, DcOpMode, Device, Eeprom, EoeSettings, Fmmu,
                                Mailbox, Pdo, PdoEntry, Profile, Source, SyncManager, Vendor)
@@ -52,8 +53,6 @@ CONFIG_DEVICE_EMULATION = 0x0104
 CONFIG_NO_PDI = 0x0100
 CONFIG_FIRMWARE = 0x0008
 _WRITES = (Cmd.APWR, Cmd.FPWR, Cmd.BWR, Cmd.APRW, Cmd.FPRW, Cmd.BRW)
-_SM_ACTIVATE = 0x01
-_SM_WRITE_DIRECTION = 0x04          # control bits 3:2 = 01: the master writes (ETG.1000.4)
 _MAX_ENTRY_BITS = 0xFF              # a mapping entry's length field (one byte)
 _LANGUAGE = 1033
 
@@ -66,20 +65,19 @@ class _SmWrite:
 
 @dataclass(slots=True)
 class _Coe:
-    """The final values the ENI's CoE downloads leave in the PDO objects."""
+    """The ENI's CoE downloads to the PDO objects, and what they tell of the device."""
 
-    values: dict[int, dict[int, bytes]] = field(default_factory=dict)
+    writes: dict[int, list[tuple[int, bytes, bool]]] = field(default_factory=dict)
     assigns: bool = False
     configures: bool = False
     complete_access: bool = False
 
     def entries(self, index: int) -> list[int] | None:
-        """Subindex 1..n of ``index`` as integers (n = subindex 0), or None if not written."""
-        obj = self.values.get(index)
-        if obj is None or 0 not in obj:
-            return None
-        count = obj[0][0] if obj[0] else 0
-        return [int.from_bytes(obj.get(sub, b""), "little") for sub in range(1, count + 1)]
+        """Subindex 1..n of ``index`` after the downloads (n = subindex 0), or None if
+        subindex 0 was never written."""
+        size = 2 if index in SM_PDO_ASSIGN_RANGE else 4
+        count, values = array_downloads(self.writes.get(index, []), size)
+        return None if count is None else [values.get(s, 0) for s in range(1, count + 1)]
 
 
 def device_from_eni(slave: SlavePlan, plan: NetworkPlan, file: str) -> Device:
@@ -199,7 +197,7 @@ def _sync_managers(slave: SlavePlan, source: Source) -> list[SyncManager]:
             continue                        # only ever cleared: not in use
         control = w.config.control if w else (setting.control_byte if setting else 0)
         kind = setting.type if setting and setting.type in ("Outputs", "Inputs") else (
-            "Outputs" if control & _SM_WRITE_DIRECTION else "Inputs")
+            "Outputs" if control & SM_DIR_MASK == SM_DIR_ECAT_WRITES else "Inputs")
         op_only = w is not None and Transition.SO in w.transitions \
             and Transition.PS not in w.transitions
         sms[number] = SyncManager(
@@ -219,14 +217,13 @@ def _fmmus(slave: SlavePlan, sms: list[SyncManager], source: Source) -> list[Fmm
     status byte (the mailbox state), else its direction.  A direction the SMs carry but no
     FMMU write shows (an ENI whose FMMU settings the reader refused) takes the first free
     FMMU."""
-    status_bit_addr = Reg.SM0 + SM_SIZE + 5
     fmmus: dict[int, str] = {}
     for n, records in _register_writes(slave, Reg.FMMU0, FMMU_SIZE, 8).items():
         for data, _ in records:
             cfg = FmmuConfig.from_bytes(data)
             if not cfg.active or cfg.type == FmmuType.UNUSED:
                 continue
-            fmmus[n] = ("MBoxState" if cfg.physical_start == status_bit_addr
+            fmmus[n] = ("MBoxState" if cfg.physical_start == SM1_STATUS
                         else "Outputs" if cfg.type & FmmuType.WRITE else "Inputs")
             break
     for kind in ("Outputs", "Inputs"):
@@ -239,9 +236,8 @@ def _fmmus(slave: SlavePlan, sms: list[SyncManager], source: Source) -> list[Fmm
 # -- PDOs -------------------------------------------------------------------------------------
 
 def _coe_downloads(cmds: list[CoeInitCmd]) -> _Coe:
-    """Replays the ENI's downloads to the PDO assignment and mapping objects (entries of 2
-    and 4 bytes; a complete access starting at subindex 0 carries subindex 0 in a 16-bit
-    slot, ETG.1000.6 5.6.2)."""
+    """The ENI's downloads to the PDO assignment and mapping objects, in order (their
+    values: :meth:`_Coe.entries`)."""
     coe = _Coe()
     for cmd in cmds:
         if cmd.disabled or cmd.ccs != 1:
@@ -249,21 +245,12 @@ def _coe_downloads(cmds: list[CoeInitCmd]) -> _Coe:
         coe.complete_access |= cmd.complete_access
         index = cmd.index
         if index in SM_PDO_ASSIGN_RANGE:
-            coe.assigns, size = True, 2
+            coe.assigns = True
         elif index in RX_PDO_MAPPING or index in TX_PDO_MAPPING:
-            coe.configures, size = True, 4
+            coe.configures = True
         else:
             continue
-        obj = coe.values.setdefault(index, {})
-        if not cmd.complete_access:
-            obj[cmd.subindex] = cmd.data
-            continue
-        data, sub = cmd.data, cmd.subindex
-        if sub == 0 and data:
-            obj[0], data, sub = data[:1], data[2:], 1
-        for offset in range(0, len(data) - size + 1, size):
-            obj[sub] = data[offset:offset + size]
-            sub += 1
+        coe.writes.setdefault(index, []).append((cmd.subindex, cmd.data, cmd.complete_access))
     return coe
 
 
