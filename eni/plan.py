@@ -191,6 +191,20 @@ class PreviousPort:
 
 
 @record
+class HotConnectPlan:
+    """An ENI hot-connect group (``Config/Slave/HotConnect``, ETG.2100), on its head slave.
+
+    The group is the head and the slaves after it in the ENI's order, ``member_count`` in
+    all (``GroupMemberCnt``).  The slaves of a group may be absent at start-up and may come
+    and go while the rest runs; the head is recognised by ``identify_cmds`` (typically a
+    read of the station alias 0x0012 or of the ID register 0x0134 with a ``Validate``),
+    sent to the position where the head is expected."""
+
+    member_count: int
+    identify_cmds: list[InitCmd] = field(default_factory=list)
+
+
+@record
 class SlavePlan:
     name: str
     phys_addr: int
@@ -205,6 +219,7 @@ class SlavePlan:
     init_cmds: list[InitCmd] = field(default_factory=list)
     dc: DcPlan | None = None
     previous_ports: list[PreviousPort] = field(default_factory=list)
+    hot_connect: HotConnectPlan | None = None   # this slave heads a hot-connect group
 
     @property
     def position(self) -> int:

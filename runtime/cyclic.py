@@ -28,6 +28,10 @@ class _Slot:
     cmd: CyclicCmd
     in_at: int                  # data offset in the input image
     out_at: int                 # ... and in the output image
+    # The working counter this cycle must bring back: the ENI's Cnt, lowered by what the
+    # slaves that are offline would add (runtime/recovery.py); None: not checked.
+    expected: int | None = None
+    wkc: int = -1               # what the last cycle brought back; -1: its frame was lost
 
 
 @record
@@ -81,7 +85,8 @@ class CyclicFrames:
             # "Bus shift" (APWR/FPWR of 0x0910) writes the master's own clock into the
             # reference clock; this master follows the reference instead (ARMW), and sending
             # the file's zeros would feed the reference's drift loop a huge error.
-            slots = [_Slot(c, c.input_offs + shift, c.output_offs + shift) for c in f.cmds
+            slots = [_Slot(c, c.input_offs + shift, c.output_offs + shift, c.cnt)
+                     for c in f.cmds
                      if not (c.cmd in (Cmd.APWR, Cmd.FPWR) and c.ado == Reg.DC_SYSTEM_TIME)]
             for s in slots:
                 in_size = max(in_size, s.in_at + s.cmd.length)
@@ -112,12 +117,15 @@ class CyclicFrames:
             back = transport.exchange(dgs, timeout)
             if back is None:
                 self.stats.lost_frames += 1
+                for s in active:
+                    s.wkc = -1
                 ok = False
                 continue
             for s, dg in zip(active, back):
                 if s.cmd.cmd in _READS:
                     self.inputs[s.in_at:s.in_at + s.cmd.length] = dg.data
-                if s.cmd.cnt is not None and dg.wkc != s.cmd.cnt:
+                s.wkc = dg.wkc
+                if s.expected is not None and dg.wkc != s.expected:
                     self.stats.wkc_errors += 1
                     key = s.cmd.comment or f"cmd {s.cmd.cmd}"
                     self.stats.wkc_error_cmds[key] = self.stats.wkc_error_cmds.get(key, 0) + 1
