@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Literal
 
-from ecatcfg.esc import Transition
+from ecatcfg.esc import Cmd, Transition
 from ecatcfg.record import field, record
 
 if TYPE_CHECKING:         # imported where used: only ENIs with EoE InitCmds need the codec
@@ -312,3 +312,24 @@ class NetworkPlan:
 
     def slave(self, name: str) -> SlavePlan:
         return next(s for s in self.slaves if s.name == name)
+
+
+# Register writes (physical and broadcast commands that carry data into the ESC).
+_REGISTER_WRITES = (Cmd.APWR, Cmd.FPWR, Cmd.BWR, Cmd.APRW, Cmd.FPRW, Cmd.BRW)
+
+
+def register_writes(slave: SlavePlan, first: int, size: int,
+                    count: int) -> dict[int, list[tuple[bytes, frozenset[Transition]]]]:
+    """Each register record ``n`` (``first + size * n``, n < count: the SyncManagers, the
+    FMMUs) the slave's InitCmds write, in ENI order, with the transitions of the write:
+    one write of several records (SM0 and SM1 in 16 bytes) counts for each."""
+    out: dict[int, list[tuple[bytes, frozenset[Transition]]]] = {}
+    for cmd in slave.init_cmds:
+        if cmd.cmd not in _REGISTER_WRITES or cmd.ado is None or not cmd.data:
+            continue
+        for n in range(count):
+            start = first + size * n
+            if cmd.ado <= start and start + size <= cmd.ado + len(cmd.data):
+                record = cmd.data[start - cmd.ado:start - cmd.ado + size]
+                out.setdefault(n, []).append((record, frozenset(cmd.transitions)))
+    return out

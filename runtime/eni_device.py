@@ -40,7 +40,8 @@ from dataclasses import dataclass, field
 from ecatcfg.esc import (FMMU_SIZE, RX_PDO_MAPPING, SM1_STATUS, SM_DIR_ECAT_WRITES, SM_DIR_MASK,
                          SM_PDO_ASSIGN, SM_PDO_ASSIGN_RANGE, SM_SIZE, TX_PDO_MAPPING, Cmd,
                          FmmuConfig, FmmuType, Reg, SmConfig, Transition, array_downloads)
-from ecatcfg.eni.plan import CoeInitCmd, InitCmd, NetworkPlan, PdoDesc, SlavePlan
+from ecatcfg.eni.plan import (CoeInitCmd, InitCmd, NetworkPlan, PdoDesc, SlavePlan,
+                              register_writes)
 from ecatcfg.esi.model import (CoeSettings, Dc, DcOpMode, Device, Eeprom, EoeSettings, Fmmu,
                                Mailbox, Pdo, PdoEntry, Profile, Source, SyncManager, Vendor)
 
@@ -52,7 +53,6 @@ from ecatcfg.esi.model import (CoeSettings, Dc, DcOpMode, Device, Eeprom, EoeSet
 CONFIG_DEVICE_EMULATION = 0x0104
 CONFIG_NO_PDI = 0x0100
 CONFIG_FIRMWARE = 0x0008
-_WRITES = (Cmd.APWR, Cmd.FPWR, Cmd.BWR, Cmd.APRW, Cmd.FPRW, Cmd.BRW)
 _MAX_ENTRY_BITS = 0xFF              # a mapping entry's length field (one byte)
 _LANGUAGE = 1033
 
@@ -123,30 +123,9 @@ def type_name(name: str) -> str:
 
 # -- what the InitCmds write ------------------------------------------------------------------
 
-def _register_writes(slave: SlavePlan, first: int, size: int,
-                     count: int) -> dict[int, list[tuple[bytes, frozenset[Transition]]]]:
-    """Each record ``n`` (``first + size * n``, n < count) the InitCmds write, in ENI order:
-    one write of several records (SM0 and SM1 in 16 bytes) counts for each."""
-    out: dict[int, list[tuple[bytes, frozenset[Transition]]]] = {}
-    for cmd in slave.init_cmds:
-        if not _writes_data(cmd):
-            continue
-        assert cmd.ado is not None and cmd.data is not None
-        for n in range(count):
-            start = first + size * n
-            if cmd.ado <= start and start + size <= cmd.ado + len(cmd.data):
-                record = cmd.data[start - cmd.ado:start - cmd.ado + size]
-                out.setdefault(n, []).append((record, frozenset(cmd.transitions)))
-    return out
-
-
-def _writes_data(cmd: InitCmd) -> bool:
-    return cmd.cmd in _WRITES and cmd.ado is not None and bool(cmd.data)
-
-
 def _sm_writes(slave: SlavePlan) -> dict[int, list[_SmWrite]]:
     return {n: [_SmWrite(SmConfig.from_bytes(data), t) for data, t in records]
-            for n, records in _register_writes(slave, Reg.SM0, SM_SIZE, 8).items()}
+            for n, records in register_writes(slave, Reg.SM0, SM_SIZE, 8).items()}
 
 
 def _enabling(writes: list[_SmWrite]) -> _SmWrite | None:
@@ -218,7 +197,7 @@ def _fmmus(slave: SlavePlan, sms: list[SyncManager], source: Source) -> list[Fmm
     FMMU write shows (an ENI whose FMMU settings the reader refused) takes the first free
     FMMU."""
     fmmus: dict[int, str] = {}
-    for n, records in _register_writes(slave, Reg.FMMU0, FMMU_SIZE, 8).items():
+    for n, records in register_writes(slave, Reg.FMMU0, FMMU_SIZE, 8).items():
         for data, _ in records:
             cfg = FmmuConfig.from_bytes(data)
             if not cfg.active or cfg.type == FmmuType.UNUSED:
@@ -354,7 +333,7 @@ def _dc(slave: SlavePlan, source: Source) -> Dc | None:
     """The DC mode the ENI runs the slave in: the activation it writes to 0x0980-0x0981
     (cyclic unit and SYNC outputs) and its cycle times."""
     activation = None
-    for data, _ in _register_writes(slave, Reg.DC_CYCLIC_UNIT_CONTROL, 2, 1).get(0, []):
+    for data, _ in register_writes(slave, Reg.DC_CYCLIC_UNIT_CONTROL, 2, 1).get(0, []):
         value = int.from_bytes(data, "little")
         if value:
             activation = value

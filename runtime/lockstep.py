@@ -32,36 +32,58 @@ IDLE_S = 0.0005     # when every job only waits, do not spin the wire
 def run_jobs(transport: Transport, jobs: list[Job],
              on_round: Callable[[], None] | None = None) -> None:
     """Run ``jobs`` to completion; an exception from any job ends the step and propagates."""
-    active: list[tuple[Job, list[Datagram]]] = []
+    active = start(jobs)
+    while active:
+        if on_round is not None:
+            on_round()
+        if not any(request for _, request in active):
+            time.sleep(IDLE_S)
+        active = one_round(transport, active)
+
+
+Pending = list[tuple[Job, list[Datagram]]]     # running jobs and the datagrams each wants
+
+
+def start(jobs: list[Job]) -> Pending:
+    """The jobs that have something to do, each with its first datagrams."""
+    active: Pending = []
     for job in jobs:
         try:
             active.append((job, next(job)))
         except StopIteration:
             pass
-    while active:
-        if on_round is not None:
-            on_round()
-        owned = [(i, dg) for i, (_, request) in enumerate(active) for dg in request]
-        replies: dict[int, list[Datagram] | None] = {i: [] for i in range(len(active))}
-        if not owned:
-            time.sleep(IDLE_S)
-        for frame in pack([dg for _, dg in owned]):
-            owners = [owner for owner, dg in owned[:len(frame)]]
-            owned = owned[len(frame):]
-            back = transport.exchange(frame)
-            for k, owner in enumerate(owners):
-                got = replies[owner]
-                if back is None or got is None:
-                    replies[owner] = None
-                else:
-                    got.append(back[k])
-        still = []
-        for i, (job, _) in enumerate(active):
-            try:
-                still.append((job, job.send(replies[i])))
-            except StopIteration:
-                pass
-        active = still
+    return active
+
+
+def one_round(transport: Transport, active: Pending, timeout: float | None = None,
+              on_error: Callable[[Job, Exception], None] | None = None) -> Pending:
+    """One round: the pending datagrams of every job in as few frames as fit, each job
+    sent its replies (``None`` when a frame was lost); returns the jobs still running.
+    An exception from a job propagates, or goes to ``on_error(job, exception)`` (the job
+    then ends) when that is given."""
+    owned = [(i, dg) for i, (_, request) in enumerate(active) for dg in request]
+    replies: dict[int, list[Datagram] | None] = {i: [] for i in range(len(active))}
+    for frame in pack([dg for _, dg in owned]):
+        owners = [owner for owner, dg in owned[:len(frame)]]
+        owned = owned[len(frame):]
+        back = transport.exchange(frame, timeout)
+        for k, owner in enumerate(owners):
+            got = replies[owner]
+            if back is None or got is None:
+                replies[owner] = None
+            else:
+                got.append(back[k])
+    still: Pending = []
+    for i, (job, _) in enumerate(active):
+        try:
+            still.append((job, job.send(replies[i])))
+        except StopIteration:
+            pass
+        except Exception as exc:
+            if on_error is None:
+                raise
+            on_error(job, exc)
+    return still
 
 
 def until_answered(datagrams: list[Datagram], deadline: float,

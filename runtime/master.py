@@ -26,7 +26,7 @@ from ecatcfg.esc import (AL_ERROR_ACK, AL_STATE_MASK, AL_STATUS_ERROR, ESC_FEATU
                          AlState, Cmd, Reg, Transition, al_state_name)
 from ecatcfg.record import record
 from ecatcfg.runtime.cyclic import CyclicFrames
-from ecatcfg.runtime.lockstep import Job, run_jobs, until_answered
+from ecatcfg.runtime.lockstep import Job, Step, run_jobs, until_answered
 from ecatcfg.runtime.replay import (TIMEOUT_COMMAND, ApplyError, MailboxChannel,
                                     SlaveProgress, mailbox_init_cmds, master_job,
                                     slave_transition_job)
@@ -37,6 +37,7 @@ from ecatcfg.runtime.wiring import CHILD_PORTS, active_ports
 
 if TYPE_CHECKING:
     from ecatcfg.runtime.link import Link
+    from ecatcfg.runtime.recovery import Supervisor
 
 UP = [Transition.IP, Transition.PS, Transition.SO]
 DOWN = {AlState.OP: [Transition.OS, Transition.SP, Transition.PI],
@@ -85,8 +86,11 @@ class Event:
     """Progress for the reporter: a step that starts or ends."""
 
     kind: str                  # "scan", "transition", "dc", "eoe", "done"; from the
-                               # Network: "skipped", "emulated"
+                               # Network: "skipped", "emulated"; while cycling
+                               # (runtime/recovery.py): "offline", "online", "retry",
+                               # "refused"
     text: str
+    slave: str | None = None   # the slave it is about, when it is about one
 
 
 class DcSyncError(ApplyError):
@@ -105,11 +109,13 @@ class Master:
                  recorder: Callable[[bytes, bool], None] | None = None,
                  on_event: Callable[[Event], None] | None = None,
                  dc_threshold_ns: int = DC_THRESHOLD_NS,
-                 dc_timeout_s: float = DC_TIMEOUT_S) -> None:
+                 dc_timeout_s: float = DC_TIMEOUT_S, recovery: bool = True) -> None:
         """``dc_threshold_ns``, ``dc_timeout_s``: before SAFEOP->OP, wait until every DC
         slave's system time difference (0x092C) is under the threshold, for at most the
-        timeout (then :class:`DcSyncError`); a threshold of 0 skips the wait."""
+        timeout (then :class:`DcSyncError`); a threshold of 0 skips the wait.
+        ``recovery``: bring back slaves that drop out while the network cycles."""
         check_dc_wait(dc_threshold_ns, dc_timeout_s)
+        self.recovery = recovery
         self.dc_threshold_ns = dc_threshold_ns
         self.dc_timeout_s = dc_timeout_s
         self.plan = plan
@@ -125,15 +131,20 @@ class Master:
         self._next_cycle = 0.0
         self.found: list[FoundSlave] | None = None     # the last scan: identity, plugs
         self.scanned: list[FoundSlave] | None = None   # the last scan, also when it failed
+        self.accept_newer_revision = False
+        self.dc_delays: dict[str, int] = {}            # propagation delays set (ns)
+        # Watches the slaves once the network cycles in SAFEOP or OP (runtime/recovery.py).
+        self.supervisor: Supervisor | None = None
 
-    def _event(self, kind: str, text: str) -> None:
+    def _event(self, kind: str, text: str, slave: str | None = None) -> None:
         if self.on_event:
-            self.on_event(Event(kind, text))
+            self.on_event(Event(kind, text, slave))
 
     # -- scan -------------------------------------------------------------------------------
 
     def scan_and_verify(self, accept_newer_revision: bool = False) -> list[FoundSlave]:
         self._event("scan", "scanning the line")
+        self.accept_newer_revision = accept_newer_revision
         found = scan(self.transport)
         problems = verify(self.plan, found, accept_newer_revision)
         self.scanned = found                # what is on the line, verified or not
@@ -160,17 +171,26 @@ class Master:
         are acknowledged first (a slave ignores requests while its error is not
         acknowledged); a failed step does not stop the way down: the first failure is
         raised at the end."""
+        # Slaves that dropped out while cycling are not taken down step by step (they are
+        # not in the network's state); they are only asked for INIT at the end.
+        offline = {n for n, h in self.supervisor.health.items() if not h.online} \
+            if self.supervisor is not None else set()
         self._acknowledge_errors()
         first: ApplyError | None = None
         for transition in DOWN.get(self.state, []):
             if self.state <= target:
                 break
             try:
-                self.run_transition(transition)
+                self.run_transition(transition, offline)
             except ApplyError as exc:
                 first = first or exc
                 self.state = transition.target
                 self._acknowledge_errors()
+        if offline and target == AlState.INIT:
+            run_jobs(self.transport, [
+                _write_by_position(s.position, Reg.AL_CONTROL,
+                                   struct.pack("<H", AlState.INIT | AL_ERROR_ACK))
+                for s in self.slaves if s.name in offline])
         if first is not None:
             raise first
 
@@ -205,7 +225,9 @@ class Master:
         if jobs:
             run_jobs(self.transport, jobs)
 
-    def run_transition(self, transition: Transition) -> None:
+    def run_transition(self, transition: Transition,
+                       skip: frozenset[str] | set[str] = frozenset()) -> None:
+        """Every slave's InitCmds of ``transition`` (but the slaves named in ``skip``)."""
         start = time.monotonic()
         frames = self.transport.counters.frames_sent
         self._event("transition", f"{transition.value}: {transition.name} ...")
@@ -219,7 +241,7 @@ class Master:
             run_jobs(self.transport,
                      [slave_transition_job(s, transition, self.progress[s.name],
                                            self.mailboxes.get(s.name))
-                      for s in self.slaves], tick)
+                      for s in self.slaves if s.name not in skip], tick)
             run_jobs(self.transport, [master_job(master, transition, False)], tick)
             for s in self.slaves:
                 for cmd in mailbox_init_cmds(s, transition)[1]:
@@ -232,6 +254,7 @@ class Master:
                 self.state = transition.target
             raise
         self.state = transition.target
+        self.supervisor = None          # a new state: every slave is in it (or raised)
         self._event("transition", f"{transition.value}: {self.state.name} in "
                     f"{(time.monotonic() - start) * 1000:.0f} ms, "
                     f"{self.transport.counters.frames_sent - frames} frames")
@@ -252,8 +275,17 @@ class Master:
     # -- cyclic -----------------------------------------------------------------------------
 
     def cycle(self) -> bool:
-        """One cycle of the ENI's cyclic frames in the current state."""
-        return self.cyclic.exchange(self.transport, self.state)
+        """One cycle of the ENI's cyclic frames in the current state; in SAFEOP and OP the
+        supervisor then looks after slaves that drop out (``runtime/recovery.py``), and the
+        result says whether every online slave's data came back as expected."""
+        ok = self.cyclic.exchange(self.transport, self.state)
+        supervisor = self.supervisor
+        if supervisor is None:
+            if self.state < AlState.SAFEOP or not self.recovery:
+                return ok
+            from ecatcfg.runtime.recovery import Supervisor
+            supervisor = self.supervisor = Supervisor(self)
+        return supervisor.after_cycle(ok)
 
     # -- distributed clocks ------------------------------------------------------------------
 
@@ -278,6 +310,7 @@ class Master:
                                   if s.dc is None])
         measured = [s for s in self.slaves if s.name in ports]
         delays = propagation_delays(measured, reference, ports, self.found)
+        self.dc_delays = {s.name: delays[s.name] for s in dc}
         ref_rx = times[reference.name][1]
         master_time = time.time_ns() - EPOCH_2000_NS
         writes = []
@@ -354,6 +387,54 @@ class Master:
                     out[s.name] = -(raw & 0x7FFF_FFFF) if raw & 0x8000_0000 else raw
             at += len(frame)
         return out
+
+    def dc_rejoin_job(self, slave: SlavePlan) -> Step[None]:
+        """A DC slave that was powered off and on lost its system time offset and delay:
+        set them again from another DC slave's system time (the reference clock, or any
+        other DC slave when the reference itself came back), read in the same frame as the
+        slave's local time, with the delays :meth:`setup_dc` measured; the cyclic drift
+        compensation then keeps it on time."""
+        dc, reference = self._dc_slaves()
+        online = self.supervisor.health if self.supervisor is not None else {}
+        sources = [s for s in ([reference] if reference is not None else []) + dc
+                   if s.name != slave.name and (s.name not in online or online[s.name].online)]
+        if not sources:
+            return
+        source = sources[0]
+        delay = self.dc_delays.get(slave.name, 0)
+        failed = ApplyError("cannot read the DC system times", slave.name)
+        got = yield from until_answered(
+            [Datagram.physical(Cmd.FPRD, source.phys_addr, Reg.DC_SYSTEM_TIME, 8),
+             Datagram.physical(Cmd.FPRD, slave.phys_addr, Reg.DC_SYSTEM_TIME, 8)],
+            time.monotonic() + TIMEOUT_COMMAND, failed)
+        (theirs,), (local,) = (struct.unpack("<Q", dg.data) for dg in got)
+        # The frame reads the source, then the slave: their delays from the reference
+        # say how far apart the two reads were (negative: the slave came first).
+        offset = theirs + delay - self.dc_delays.get(source.name, 0) - local
+        yield from _write_until_ok(slave, Reg.DC_SYSTEM_TIME + 0x10,
+                                   struct.pack("<qI", offset, delay))
+        yield from _write_until_ok(slave, Reg.DC_SPEED_COUNTER_START, struct.pack("<H", 0x1000))
+
+    def dc_wait_job(self, slave: SlavePlan) -> Step[None]:
+        """Until the slave's system time difference (0x092C) is under the threshold (the
+        cyclic frames' drift compensation runs meanwhile), at most the DC timeout."""
+        if not self.dc_threshold_ns:
+            return
+        deadline = time.monotonic() + self.dc_timeout_s
+        read = Datagram.physical(Cmd.FPRD, slave.phys_addr, Reg.DC_SYSTEM_TIME_DIFFERENCE, 4)
+        last: int | None = None
+        while True:
+            back = yield [read]
+            if back is not None and back[0].wkc == 1:
+                raw, = struct.unpack("<I", back[0].data)
+                last = raw & 0x7FFF_FFFF
+                if last < self.dc_threshold_ns:
+                    return
+            if time.monotonic() > deadline:
+                raise DcSyncError(f"DC did not converge: system time difference (0x092C) "
+                                  f"{last} ns, threshold {self.dc_threshold_ns} ns, after "
+                                  f"{self.dc_timeout_s:g} s", slave.name, {slave.name: last})
+            yield []
 
     def _broadcast_write(self, ado: int, data: bytes) -> None:
         deadline = time.monotonic() + TIMEOUT_COMMAND

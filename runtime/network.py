@@ -35,6 +35,7 @@ from ecatcfg.runtime.master import DC_THRESHOLD_NS, DC_TIMEOUT_S, Event, Master
 
 if TYPE_CHECKING:                   # imported where used: `import ecatcfg.runtime` stays light
     from ecatcfg.runtime.cyclic import CycleStats
+    from ecatcfg.runtime.recovery import SlaveHealth
     from ecatcfg.runtime.dc_clock import DcModel
     from ecatcfg.runtime.link import Link
     from ecatcfg.runtime.pcap import PcapRecorder
@@ -65,6 +66,7 @@ class Network:
                  on_event: Callable[[Event], None] | None = None,
                  skip_unsupported: bool = False, eni_name: str | None = None,
                  dc_threshold_ns: int = DC_THRESHOLD_NS, dc_timeout_s: float = DC_TIMEOUT_S,
+                 recovery: bool = True,
                  _closers: Iterable[Callable[[], None]] = ()) -> None:
         """``skip_unsupported``: run an ENI that asks for what this master does not do
         (``eni/contents.py``: SoE/FoE/AoE/VoE InitCmds, hot-connect groups ...) without
@@ -75,7 +77,9 @@ class Network:
         ``dc_threshold_ns``, ``dc_timeout_s``: before SAFEOP->OP, :meth:`up` sends drift
         compensation until every DC slave's system time difference (0x092C) is under the
         threshold (0: no wait), and raises :class:`~ecatcfg.runtime.master.DcSyncError`
-        naming the slave furthest off after the timeout."""
+        naming the slave furthest off after the timeout.  ``recovery``: while cycling,
+        bring back slaves that drop out (``runtime/recovery.py``, :attr:`health`); when
+        false, a slave that drops out only makes :meth:`cycle` return ``False``."""
         try:
             if not isinstance(eni, NetworkPlan):
                 from ecatcfg.eni import reader as eni_reader
@@ -92,9 +96,15 @@ class Network:
             from ecatcfg.runtime.pcap import PcapRecorder
             self.recorder = PcapRecorder(pcap)
         self.master = Master(eni, link, recorder=self.recorder, on_event=on_event,
-                             dc_threshold_ns=dc_threshold_ns, dc_timeout_s=dc_timeout_s)
+                             dc_threshold_ns=dc_threshold_ns, dc_timeout_s=dc_timeout_s,
+                             recovery=recovery)
         self._vars = {v.name: _Var(v, False) for v in eni.process_image.inputs}
         self._vars.update({v.name: _Var(v, True) for v in eni.process_image.outputs})
+        # Which slave each variable belongs to: its name starts with the slave's name and a
+        # dot (the longest such name, as slave names may contain dots).
+        names = sorted((s.name for s in eni.slaves), key=len, reverse=True)
+        self._owner = {v: next((n for n in names if v.startswith(n + ".")), None)
+                       for v in self._vars}
         self._closers = list(_closers)
         self.run_stats: CycleStats | None = None
         self._thread: threading.Thread | None = None
@@ -109,13 +119,14 @@ class Network:
                 skip_unsupported: bool = False, eni_name: str | None = None,
                 timing: Timing | None = None, dc: DcModel | None = None,
                 dc_threshold_ns: int = DC_THRESHOLD_NS,
-                dc_timeout_s: float = DC_TIMEOUT_S) -> Network:
+                dc_timeout_s: float = DC_TIMEOUT_S, recovery: bool = True) -> Network:
         """The ENI on a virtual segment that emulates its slaves from the ESI files
         (``esi_cache``: through the ESI index cache).  A slave whose device the files do not
         hold, and every slave without ``esi``, is emulated from the ENI alone
         (``runtime/eni_device.py``); each such slave is an ``Event("emulated", ...)`` to
         ``on_event`` and has ``eni_only`` set in ``net.segment.slaves``.
-        ``skip_unsupported``, ``eni_name`` and the DC wait as for the constructor.
+        ``skip_unsupported``, ``eni_name``, the DC wait and ``recovery`` as for the
+        constructor.
         ``timing``: slaves that take the time real ones do (``runtime/timing.py``, e.g.
         ``Timing()`` for the table); instantaneous slaves by default.  ``dc``: the emulated
         clocks and line timing (``runtime/dc_clock.py``; seeded ±100 ppm drift by
@@ -153,7 +164,7 @@ class Network:
         net = cls(plan, ours, pcap=pcap, on_event=on_event, skip_unsupported=skip_unsupported,
                   eni_name=eni_name or (None if isinstance(eni, NetworkPlan) else str(eni)),
                   dc_threshold_ns=dc_threshold_ns, dc_timeout_s=dc_timeout_s,
-                  _closers=[close_segment])
+                  recovery=recovery, _closers=[close_segment])
         net.segment = segment
         return net
 
@@ -182,6 +193,41 @@ class Network:
         """One bus cycle; ``True`` if every working counter was as the ENI expects."""
         with self._lock:
             return self.master.cycle()
+
+    # -- slaves that drop out ----------------------------------------------------------------
+
+    @property
+    def health(self) -> dict[str, SlaveHealth]:
+        """Each slave's health while the network cycles in SAFEOP or OP (``online``, why
+        not, attempts to bring it back: ``runtime/recovery.py``); every slave online
+        before that.  Changes are also events (``offline``, ``online``, ``retry``,
+        ``refused``) to ``on_event``."""
+        supervisor = self.master.supervisor
+        if supervisor is not None:
+            return dict(supervisor.health)
+        from ecatcfg.runtime.recovery import SlaveHealth
+        return {s.name: SlaveHealth(s.name, s.position) for s in self.master.slaves}
+
+    def online(self, slave: str) -> bool:
+        """Whether ``slave`` (its ENI name) is in the network's state and exchanging data."""
+        try:
+            return self.health[slave].online
+        except KeyError:
+            raise EcatcfgError(f"no slave {slave!r} in the ENI") from None
+
+    def valid(self, name: str) -> bool:
+        """Whether the process variable ``name`` holds what its slave sent this cycle: an
+        input of a slave that is offline is cleared to 0 and not valid."""
+        var = self._var(name)
+        slave = self._owner.get(name)
+        return var.output or slave is None or self.online(slave)
+
+    def recover(self, slave: str) -> None:
+        """Try again to bring back a slave the network gave up on (after
+        ``recovery.MAX_ATTEMPTS`` failed attempts)."""
+        self.online(slave)                      # names the slave if it does not exist
+        if self.master.supervisor is not None:
+            self.master.supervisor.recover(slave)
 
     def __getitem__(self, name: str) -> bool | int | float:
         var = self._var(name)

@@ -92,7 +92,7 @@ def sii_words(position: int, word: int, deadline: float) -> Step[bytes]:
     return data[:8]
 
 
-def _identity_job(position: int, out: dict[int, FoundSlave]) -> Job:
+def identity_job(position: int, out: dict[int, FoundSlave]) -> Job:
     deadline = time.monotonic() + EEPROM_TIMEOUT
     adp = -position & 0xFFFF
     # The EEPROM belongs to the EtherCAT side for the reading (0x0500 = 0).
@@ -114,7 +114,7 @@ def scan(transport: Transport) -> list[FoundSlave]:
     each is plugged."""
     n = count_slaves(transport)
     found: dict[int, FoundSlave] = {}
-    run_jobs(transport, [_identity_job(p, found) for p in range(n)])
+    run_jobs(transport, [identity_job(p, found) for p in range(n)])
     slaves = [found[p] for p in range(n)]
     plugs = plugs_from_dl_status([s.dl_status for s in slaves])
     return [FoundSlave(s.position, s.vendor_id, s.product_code, s.revision, s.serial_no,

@@ -1,0 +1,456 @@
+"""Keeping a running network whole: slaves that drop out and come back.
+
+While the network cycles, the :class:`Supervisor` watches every cycle's working counters
+and the AL status the cyclic frames carry (the ENI's ``BRD`` of 0x0130, whose working
+counter counts the slaves that answered and whose data ORs their states).  When either is
+off it reads each slave's AL status: a slave that does not answer (a cable pulled, power
+lost) or that left the network's state (SAFEOP+ERR after its SM watchdog expired) goes
+*offline*: it is reported once, the working counters the cycle expects are lowered by what
+it adds (:func:`wkc_shares`), and its input bits in the process image are cleared every
+cycle and marked invalid, so the other slaves' data stays valid and checked.
+
+While a slave is offline, every :data:`PROBE_INTERVAL` one frame reads the station address
+and AL status at every position.  A slave that still has its station address kept its
+configuration (a cable pulled and plugged back): its errors are acknowledged and it is
+brought from its state back up to the network's.  A position that answers with station
+address 0 holds a slave that was powered off and on (or replaced): its identity is read
+from its SII and compared with the ENI (another device is refused and reported, and is not
+configured), then its InitCmds are replayed from INIT up to the network's state, with its
+DC system time offset and delay set again first.  Failed attempts are retried with a
+back-off (:data:`BACKOFF_FIRST` doubling up to :data:`BACKOFF_MAX`), at most
+:data:`MAX_ATTEMPTS` times; a later attempt starts from INIT.
+
+All of this runs between the cycles, one round of frames per cycle (``lockstep.one_round``),
+so the cyclic frames of the other slaves never stop: the recovery's frames are sent after
+the cycle's, with the cycle time as their timeout.
+"""
+
+from __future__ import annotations
+
+import struct
+import time
+from collections.abc import Callable
+from typing import TYPE_CHECKING
+
+from ecatcfg.eni.plan import InitCmd, SlavePlan, register_writes
+from ecatcfg.esc import (AL_ERROR_ACK, AL_STATE_MASK, AL_STATUS_ERROR, FMMU_SIZE, AlState, Cmd,
+                         FmmuConfig, FmmuType, Reg, Transition, al_state_name, al_status_name)
+from ecatcfg.record import field, record
+from ecatcfg.runtime.lockstep import Job, Pending, Step, one_round, start, until_answered
+from ecatcfg.runtime.replay import (TIMEOUT_COMMAND, ApplyError, MailboxChannel,
+                                    slave_transition_job)
+from ecatcfg.runtime.wire import Datagram
+
+if TYPE_CHECKING:
+    from ecatcfg.runtime.cyclic import CyclicFrames, _Slot
+    from ecatcfg.runtime.master import Master
+
+PROBE_INTERVAL = 0.1           # s between looks for the slaves that are offline
+DIAGNOSE_INTERVAL = 0.02       # s at least between two AL status reads of every slave
+BACKOFF_FIRST = 0.1            # s after the first failed attempt, doubling ...
+BACKOFF_MAX = 5.0              # ... up to this
+MAX_ATTEMPTS = 5               # attempts to bring a slave back before giving up
+STATE_TIMEOUT = 5.0            # s for a state change of one slave (as replay.TIMEOUT_STATE)
+
+_UP = {AlState.INIT: Transition.IP, AlState.PREOP: Transition.PS,
+       AlState.SAFEOP: Transition.SO}
+# Working counter increments (ETG.1000.4 §5.4.1.2): a read-only or write-only command adds
+# 1 in each slave that carries it out; a read-write command 1 for the read and 2 for the
+# write (3 for both); ARMW/FRMW add 1 in every slave (the one that reads and the ones that
+# write).
+_INCREMENT: dict[int, int] = {Cmd.APRD: 1, Cmd.FPRD: 1, Cmd.BRD: 1, Cmd.APWR: 1,
+                              Cmd.FPWR: 1, Cmd.BWR: 1, Cmd.APRW: 3, Cmd.FPRW: 3, Cmd.BRW: 3}
+_READS_FROM = (FmmuType.READ, FmmuType.READ_WRITE)
+_WRITES_TO = (FmmuType.WRITE, FmmuType.READ_WRITE)
+
+
+@record
+class SlaveHealth:
+    """One slave as the supervisor sees it (``Network.health``)."""
+
+    name: str
+    position: int               # where it is on the line (auto-increment position)
+    online: bool = True         # in the network's state, its data exchanged and valid
+    reason: str = ""            # why it is offline
+    since: float = 0.0          # time.monotonic() it went offline
+    attempts: int = 0           # failed attempts to bring it back
+    joining: bool = False       # being brought back now
+    gave_up: bool = False       # MAX_ATTEMPTS failed: Network.recover() tries again
+    next_try: float = 0.0
+    refused: set[tuple[int, int, int]] = field(default_factory=set)   # reported identities
+
+
+# -- what each slave adds to the cyclic frames --------------------------------------------------
+
+def fmmus(slave: SlavePlan) -> list[FmmuConfig]:
+    """The FMMUs the slave's InitCmds configure (their last setting that activates them)."""
+    out = []
+    for records in register_writes(slave, Reg.FMMU0, FMMU_SIZE, 16).values():
+        active = [FmmuConfig.from_bytes(data) for data, _ in records]
+        last = [f for f in active if f.active]
+        if last:
+            out.append(last[-1])
+    return out
+
+
+def _overlaps(f: FmmuConfig, addr: int, length: int) -> bool:
+    return f.length > 0 and f.logical_start < addr + length and addr < f.logical_start + f.length
+
+
+def wkc_share(slave: SlavePlan, cmd_slot: _Slot) -> int:
+    """What ``slave`` adds to the working counter of one cyclic command (ETG.1000.4): a
+    logical read adds 1 where a read FMMU of the slave overlaps the command's window, a
+    logical write 2 where a write FMMU does; broadcasts count every slave; physical
+    commands only the slave addressed."""
+    c = cmd_slot.cmd
+    if c.cmd in (Cmd.ARMW, Cmd.FRMW):
+        return 1 if slave.dc is not None else 0
+    if c.cmd in (Cmd.LRD, Cmd.LWR, Cmd.LRW):
+        mapped = [f for f in fmmus(slave) if _overlaps(f, c.addr or 0, c.length)]
+        reads = any(f.type in _READS_FROM for f in mapped)
+        writes = any(f.type in _WRITES_TO for f in mapped)
+        if c.cmd == Cmd.LRD:
+            return int(reads)
+        if c.cmd == Cmd.LWR:
+            return int(writes)
+        return int(reads) + 2 * int(writes)
+    kind = _INCREMENT.get(c.cmd, 0)
+    if c.cmd in (Cmd.BRD, Cmd.BWR, Cmd.BRW):
+        return kind
+    if c.cmd in (Cmd.APRD, Cmd.APWR, Cmd.APRW):
+        return kind if c.adp == slave.auto_inc_addr else 0
+    return kind if c.adp == slave.phys_addr else 0
+
+
+def input_bits(slave: SlavePlan, cyclic: CyclicFrames) -> list[tuple[int, int]]:
+    """The input image bytes (offset, bit mask) the slave's read FMMUs fill: what is
+    cleared while it is offline."""
+    masks: dict[int, int] = {}
+    for frame in cyclic.frames:
+        for s in frame:
+            c = s.cmd
+            if c.cmd not in (Cmd.LRD, Cmd.LRW):
+                continue
+            addr = c.addr or 0
+            for f in fmmus(slave):
+                if f.type not in (FmmuType.READ, FmmuType.READ_WRITE) or \
+                        not _overlaps(f, addr, c.length):
+                    continue
+                first = f.logical_start * 8 + f.logical_start_bit
+                last = (f.logical_start + f.length - 1) * 8 + f.logical_stop_bit
+                for bit in range(max(first, addr * 8), min(last, (addr + c.length) * 8 - 1) + 1):
+                    at = s.in_at + bit // 8 - addr
+                    masks[at] = masks.get(at, 0) | 1 << bit % 8
+    return sorted(masks.items())
+
+
+# -- the supervisor ------------------------------------------------------------------------------
+
+class Supervisor:
+    """Watches a cycling network and brings back its slaves (see the module docstring)."""
+
+    def __init__(self, master: Master, on_change: Callable[[SlaveHealth], None] | None = None
+                 ) -> None:
+        self.master = master
+        self.on_change = on_change
+        self.health = {s.name: SlaveHealth(s.name, s.position) for s in master.slaves}
+        self._by_name = {s.name: s for s in master.slaves}
+        cyclic = master.cyclic
+        self._slots = [s for frame in cyclic.frames for s in frame]
+        self._shares = {s.name: [(slot, share) for slot in self._slots
+                                 if (share := wkc_share(s, slot))] for s in master.slaves}
+        self._inputs = {s.name: input_bits(s, cyclic) for s in master.slaves}
+        self._al_slots = [slot for slot in self._slots if slot.cmd.cmd == Cmd.BRD
+                          and slot.cmd.ado == Reg.AL_STATUS and slot.cmd.length >= 1]
+        self._clear: list[tuple[int, int]] = []       # (offset, bits kept) every cycle
+        self._pending: Pending = []
+        self._incoming: list[Job] = []                # started, first round next cycle
+        self._busy: set[str] = set()                  # slaves with a job running
+        self._diagnosing = False
+        self._probing = False
+        self._next_diagnosis = 0.0
+        self._next_probe = 0.0
+        self.timeout = max(cyclic.cycle_time_us / 1e6, 0.001)
+
+    # -- every cycle --------------------------------------------------------------------------
+
+    def after_cycle(self, ok: bool) -> bool:
+        """Run after each cycle's frames: clear the offline slaves' inputs, look for
+        slaves that dropped out, go one round on with the recovery's frames.  Returns
+        whether every *online* slave's data came back as expected."""
+        inputs = self.master.cyclic.inputs
+        for at, keep in self._clear:
+            inputs[at] &= keep
+        now = time.monotonic()
+        if not ok:
+            ok = self._tolerated()
+        if not ok or self._al_wrong(inputs):
+            # With slaves offline or joining, the ORed AL status cannot tell who is out
+            # of state: look at every slave, but not more often than the probes.
+            unsure = ok and any(not h.online for h in self.health.values())
+            ok = ok and unsure
+            if not self._diagnosing and now >= self._next_diagnosis:
+                self._diagnosing = True
+                self._next_diagnosis = now + (PROBE_INTERVAL if unsure else DIAGNOSE_INTERVAL)
+                self._incoming.append(self._diagnose())
+        if not self._probing and now >= self._next_probe and any(
+                not h.online and not h.joining and not h.gave_up and now >= h.next_try
+                for h in self.health.values()):
+            self._probing = True
+            self._next_probe = now + PROBE_INTERVAL
+            self._incoming.append(self._probe())
+        if self._incoming:
+            self._pending += start(self._incoming)
+            self._incoming = []
+        if self._pending:
+            self._pending = one_round(self.master.transport, self._pending, self.timeout,
+                                      self._job_failed)
+        return ok
+
+    def _al_wrong(self, inputs: bytearray) -> bool:
+        """The cyclic BRD of the AL status: any slave out of the network's state (the
+        data ORs every answering slave's state and error bits)."""
+        want = int(self.master.state)
+        for slot in self._al_slots:
+            if slot.wkc >= 0 and inputs[slot.in_at] & (AL_STATE_MASK | AL_STATUS_ERROR) != want:
+                return True
+        return False
+
+    def _tolerated(self) -> bool:
+        """A working counter that is off only by what slaves that are offline or being
+        brought back add (back on the wire but not configured yet, or passing through
+        INIT..SAFEOP with part of their share) is no error of the others; it means one
+        may be back, so the next probe goes at once."""
+        back = [n for n, h in self.health.items() if not h.online]
+        for slot in self._slots:
+            if slot.expected is None or slot.wkc == slot.expected:
+                continue
+            if slot.wkc < slot.expected:
+                return False
+            extra = sum(share for n in back for s, share in self._shares[n] if s is slot)
+            if slot.wkc > slot.expected + extra:
+                return False
+            self._next_probe = min(self._next_probe, time.monotonic())
+        return True
+
+    def _job_failed(self, job: Job, exc: Exception) -> None:
+        if not isinstance(exc, ApplyError):
+            raise exc
+
+    # -- going offline and coming back ---------------------------------------------------------
+
+    def _event(self, kind: str, text: str, slave: str) -> None:
+        self.master._event(kind, text, slave)
+
+    def _where(self, h: SlaveHealth) -> str:
+        return f"slave {h.name!r} (position {h.position})"
+
+    def _offline(self, name: str, reason: str) -> None:
+        h = self.health[name]
+        if not h.online:
+            return
+        h.online, h.reason, h.since = False, reason, time.monotonic()
+        h.attempts, h.gave_up, h.next_try = 0, False, 0.0
+        for slot, share in self._shares[name]:
+            if slot.expected is not None:
+                slot.expected -= share
+        self._update_clear()
+        self._event("offline", f"{self._where(h)} {reason}; the others go on", name)
+        if self.on_change:
+            self.on_change(h)
+
+    def _online(self, name: str) -> None:
+        h = self.health[name]
+        for slot, share in self._shares[name]:
+            if slot.expected is not None:
+                slot.expected += share
+        h.online, h.joining, h.reason, h.attempts = True, False, "", 0
+        h.refused.clear()
+        self._update_clear()
+        self._event("online", f"{self._where(h)} is back in {self.master.state.name} after "
+                              f"{time.monotonic() - h.since:.2f} s", name)
+        if self.on_change:
+            self.on_change(h)
+
+    def _update_clear(self) -> None:
+        bits: dict[int, int] = {}
+        for name, h in self.health.items():
+            if not h.online:
+                for at, mask in self._inputs[name]:
+                    bits[at] = bits.get(at, 0) | mask
+        self._clear = [(at, ~mask & 0xFF) for at, mask in sorted(bits.items())]
+
+    def recover(self, name: str) -> None:
+        """Try again to bring back a slave the supervisor gave up on."""
+        h = self.health[name]
+        h.gave_up, h.attempts, h.next_try = False, 0, 0.0
+
+    def _failed(self, h: SlaveHealth, error: str) -> None:
+        h.joining = False
+        h.attempts += 1
+        if h.attempts >= MAX_ATTEMPTS:
+            h.gave_up = True
+            self._event("offline", f"{self._where(h)}: gave up after {h.attempts} attempts "
+                                   f"({error})", h.name)
+            return
+        wait = min(BACKOFF_FIRST * 2 ** (h.attempts - 1), BACKOFF_MAX)
+        h.next_try = time.monotonic() + wait
+        self._event("retry", f"{self._where(h)}: attempt {h.attempts} of {MAX_ATTEMPTS} "
+                             f"failed ({error}); again in {wait:g} s", h.name)
+
+    # -- jobs ------------------------------------------------------------------------------
+
+    def _diagnose(self) -> Job:
+        """Every online slave's AL status by its station address."""
+        try:
+            online = [self._by_name[n] for n, h in self.health.items()
+                      if h.online and not h.joining]
+            reads = [Datagram.physical(Cmd.FPRD, s.phys_addr, Reg.AL_STATUS, 6)
+                     for s in online]
+            for _ in range(3):
+                back = yield reads
+                if back is not None:
+                    break
+            else:
+                return
+            want = self.master.state
+            for s, dg in zip(online, back):
+                if dg.wkc == 0:
+                    self._offline(s.name, "stopped answering")
+                    continue
+                status, _, code = struct.unpack("<HHH", dg.data)
+                if status & AL_STATE_MASK != want or status & AL_STATUS_ERROR:
+                    text = f"fell to {al_state_name(status)}"
+                    if status & AL_STATUS_ERROR or code:
+                        text += f", AL status code 0x{code:04X} ({al_status_name(code)})"
+                    self._offline(s.name, text)
+        finally:
+            self._diagnosing = False
+
+    def _probe(self) -> Job:
+        """Look at every position for the offline slaves: station address and AL status."""
+        try:
+            count = yield [Datagram.physical(Cmd.BRD, 0, Reg.AL_STATUS, 2)]
+            if count is None:
+                return
+            n = count[0].wkc
+            reads = [dg for pos in range(n) for dg in (
+                Datagram.physical(Cmd.APRD, -pos & 0xFFFF, Reg.STATION_ADDRESS, 2),
+                Datagram.physical(Cmd.APRD, -pos & 0xFFFF, Reg.AL_STATUS, 6))]
+            back = yield reads
+            if back is None:
+                return
+            by_address = {s.phys_addr: s for s in self.master.slaves}
+            now = time.monotonic()
+            for pos in range(n):
+                addr_dg, state_dg = back[2 * pos], back[2 * pos + 1]
+                if addr_dg.wkc != 1 or state_dg.wkc != 1:
+                    continue
+                address, = struct.unpack("<H", addr_dg.data)
+                status, _, code = struct.unpack("<HHH", state_dg.data)
+                slave = by_address.get(address)
+                if slave is None:
+                    # A slave without its station address (powered off and on, or
+                    # another device): the offline slave expected at this position.
+                    slave = next((self._by_name[n] for n, h in self.health.items()
+                                  if not h.online and h.position == pos), None)
+                    configured = False
+                else:
+                    configured = True
+                if slave is None:
+                    continue
+                h = self.health[slave.name]
+                if h.online or h.joining or h.gave_up or now < h.next_try:
+                    continue
+                h.position = pos
+                h.joining = True
+                self._incoming.append(self._rejoin(slave, pos, configured, status))
+        finally:
+            self._probing = False
+
+    def _rejoin(self, plan: SlavePlan, position: int, configured: bool, status: int) -> Job:
+        """Verify the slave at ``position`` is the ENI's ``plan`` and bring it up to the
+        network's state."""
+        h = self.health[plan.name]
+        slave = at_position(plan, position)
+        master = self.master
+        try:
+            from ecatcfg.runtime.scan import FoundSlave, identity_job
+            found: dict[int, FoundSlave] = {}
+            yield from identity_job(position, found)
+            got = found[position]
+            want = (plan.vendor_id, plan.product_code, plan.revision)
+            if got.identity[:2] != want[:2] or not (
+                    got.revision == plan.revision
+                    or master.accept_newer_revision and got.revision > plan.revision):
+                h.joining = False
+                h.next_try = time.monotonic() + PROBE_INTERVAL
+                if got.identity not in h.refused:
+                    h.refused.add(got.identity)
+                    self._event("refused", f"{self._where(h)}: another device is in its "
+                                f"place (0x{got.vendor_id:x}:0x{got.product_code:x}:"
+                                f"0x{got.revision:x}, the ENI has 0x{plan.vendor_id:x}:"
+                                f"0x{plan.product_code:x}:0x{plan.revision:x}); it is not "
+                                "configured", plan.name)
+                return
+            state = AlState(status & AL_STATE_MASK) if status & AL_STATE_MASK in (
+                1, 2, 4, 8) else AlState.INIT
+            if status & AL_STATUS_ERROR:
+                yield from _request(slave, AlState(state) | AL_ERROR_ACK, None)
+            if not configured or h.attempts > 0 or state == AlState.INIT:
+                if state != AlState.INIT:
+                    yield from _request(slave, AlState.INIT, AlState.INIT)
+                state = AlState.INIT
+                channel = MailboxChannel(slave.phys_addr, slave.mailbox) \
+                    if slave.mailbox is not None else None
+            else:
+                channel = master.mailboxes.get(plan.name)
+            if channel is not None:
+                master.mailboxes[plan.name] = channel
+            while state < master.state:
+                transition = _UP[state]
+                if transition == Transition.PS and slave.dc is not None:
+                    yield from master.dc_rejoin_job(slave)
+                if transition == Transition.SO and slave.dc is not None:
+                    yield from master.dc_wait_job(slave)
+                yield from slave_transition_job(slave, transition, master.progress[plan.name],
+                                                channel)
+                state = transition.target
+            self._online(plan.name)
+        except ApplyError as exc:
+            self._failed(h, str(exc))
+
+
+def at_position(slave: SlavePlan, position: int) -> SlavePlan:
+    """The slave's plan for when it sits at ``position``: its auto-increment address and
+    the auto-increment commands among its InitCmds moved there (a hot-connect group
+    absent before it shifts it)."""
+    adp = -position & 0xFFFF
+    if adp == slave.auto_inc_addr:
+        return slave
+    from dataclasses import replace
+
+    def moved(cmd: InitCmd) -> InitCmd:
+        if cmd.cmd in (Cmd.APRD, Cmd.APWR, Cmd.APRW) and cmd.adp == slave.auto_inc_addr:
+            return replace(cmd, adp=adp)
+        return cmd
+
+    return replace(slave, auto_inc_addr=adp, init_cmds=[moved(c) for c in slave.init_cmds])
+
+
+def _request(slave: SlavePlan, control: int, wait: AlState | None) -> Step[None]:
+    """Write AL control by position; with ``wait``, until the slave shows that state."""
+    adp = slave.auto_inc_addr
+    write = Datagram.physical(Cmd.APWR, adp, Reg.AL_CONTROL, struct.pack("<H", control))
+    yield from until_answered([write], time.monotonic() + TIMEOUT_COMMAND,
+                              ApplyError("no answer to the AL control write", slave.name))
+    if wait is None:
+        return
+    read = Datagram.physical(Cmd.APRD, adp, Reg.AL_STATUS, 2)
+    deadline = time.monotonic() + STATE_TIMEOUT
+    while True:
+        back = yield [read]
+        if back is not None and back[0].wkc == 1 and back[0].data[0] & AL_STATE_MASK == wait:
+            return
+        if time.monotonic() > deadline:
+            raise ApplyError(f"did not go to {wait.name}", slave.name)
