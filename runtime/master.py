@@ -25,6 +25,7 @@ from ecatcfg.eni.plan import NetworkPlan, SlavePlan
 from ecatcfg.esc import (AL_ERROR_ACK, AL_STATE_MASK, AL_STATUS_ERROR, ESC_FEATURE_DC,
                          AlState, Cmd, Reg, Transition, al_state_name)
 from ecatcfg.record import record
+from ecatcfg.runtime import hotconnect
 from ecatcfg.runtime.cyclic import CyclicFrames
 from ecatcfg.runtime.lockstep import Job, Step, run_jobs, until_answered
 from ecatcfg.runtime.replay import (TIMEOUT_COMMAND, ApplyError, MailboxChannel,
@@ -122,6 +123,8 @@ class Master:
         self.slaves = sorted(plan.slaves, key=lambda s: s.position)
         self.transport = Transport(link, recorder=recorder)
         self.cyclic = CyclicFrames(plan)
+        self._cyclic_plan = plan.cyclic
+        self.line = plan                # the plan as the line is (hot-connect groups absent)
         self.state = AlState.INIT
         self.progress = {s.name: SlaveProgress(s.name) for s in self.slaves}
         self.mailboxes = {s.name: MailboxChannel(s.phys_addr, s.mailbox)
@@ -146,13 +149,50 @@ class Master:
         self._event("scan", "scanning the line")
         self.accept_newer_revision = accept_newer_revision
         found = scan(self.transport)
-        problems = verify(self.plan, found, accept_newer_revision)
+        present = {s.name for s in self.plan.slaves}
+        absent_heads: set[str] = set()
+        if any(s.hot_connect is not None for s in self.plan.slaves):
+            # Which hot-connect groups are there (runtime/hotconnect.py); the line is
+            # verified without the others.
+            identified: dict[tuple[str, int], bool] = {}
+            run_jobs(self.transport, [hotconnect.identify_job(head, position, identified)
+                                      for head, position in hotconnect.candidates(
+                                          self.plan, found)])
+            heads = hotconnect.present_groups(self.plan, found, identified)
+            absent_heads = {h for h in hotconnect.groups(self.plan.slaves) if h not in heads}
+            present -= set(hotconnect.absent_slaves(self.plan, heads))
+        self.layout(present)
+        problems = verify(self.line, found, accept_newer_revision)
         self.scanned = found                # what is on the line, verified or not
         if problems:
             raise VerifyError(problems)
         self.found = found
         self._event("scan", f"{len(found)} slaves match the ENI")
+        self.supervisor = None
+        if absent_heads:
+            for head, members in hotconnect.groups(self.plan.slaves).items():
+                if head in absent_heads:
+                    self._event("hot-connect", f"hot-connect group {head!r} ({len(members)} "
+                                f"slaves) is not on the line; the others go on", head)
+            if self.recovery:
+                from ecatcfg.runtime.recovery import Supervisor
+                self.supervisor = Supervisor(self, absent_heads)
         return found
+
+    def layout(self, present: set[str]) -> None:
+        """Run the line as it is with the slaves named in ``present`` (the others belong
+        to hot-connect groups that are not there): their plans moved to where they are
+        (``hotconnect.as_found``), the cyclic frames' position-addressed commands too (the
+        process image and the statistics carry over)."""
+        line = hotconnect.as_found(self.plan, present)
+        self.line = line
+        self.slaves = sorted(line.slaves, key=lambda s: s.position)
+        if line.cyclic != self._cyclic_plan:
+            outputs, stats = self.cyclic.outputs, self.cyclic.stats
+            self.cyclic = CyclicFrames(line)
+            self.cyclic.outputs[:] = outputs
+            self.cyclic.stats = stats
+            self._cyclic_plan = line.cyclic
 
     # -- state changes ----------------------------------------------------------------------
 
@@ -254,7 +294,6 @@ class Master:
                 self.state = transition.target
             raise
         self.state = transition.target
-        self.supervisor = None          # a new state: every slave is in it (or raised)
         self._event("transition", f"{transition.value}: {self.state.name} in "
                     f"{(time.monotonic() - start) * 1000:.0f} ms, "
                     f"{self.transport.counters.frames_sent - frames} frames")

@@ -32,10 +32,12 @@ import time
 from collections.abc import Callable
 from typing import TYPE_CHECKING
 
-from ecatcfg.eni.plan import InitCmd, SlavePlan, register_writes
+from ecatcfg.eni.plan import SlavePlan, register_writes
 from ecatcfg.esc import (AL_ERROR_ACK, AL_STATE_MASK, AL_STATUS_ERROR, FMMU_SIZE, AlState, Cmd,
                          FmmuConfig, FmmuType, Reg, Transition, al_state_name, al_status_name)
 from ecatcfg.record import field, record
+from ecatcfg.runtime import hotconnect
+from ecatcfg.runtime.hotconnect import at_position
 from ecatcfg.runtime.lockstep import Job, Pending, Step, one_round, start, until_answered
 from ecatcfg.runtime.replay import (TIMEOUT_COMMAND, ApplyError, MailboxChannel,
                                     slave_transition_job)
@@ -77,7 +79,7 @@ class SlaveHealth:
     joining: bool = False       # being brought back now
     gave_up: bool = False       # MAX_ATTEMPTS failed: Network.recover() tries again
     next_try: float = 0.0
-    refused: set[tuple[int, int, int]] = field(default_factory=set)   # reported identities
+    refused: set[tuple[object, ...]] = field(default_factory=set)   # reported, once each
 
 
 # -- what each slave adds to the cyclic frames --------------------------------------------------
@@ -149,27 +151,60 @@ def input_bits(slave: SlavePlan, cyclic: CyclicFrames) -> list[tuple[int, int]]:
 class Supervisor:
     """Watches a cycling network and brings back its slaves (see the module docstring)."""
 
-    def __init__(self, master: Master, on_change: Callable[[SlaveHealth], None] | None = None
-                 ) -> None:
+    def __init__(self, master: Master, absent_groups: set[str] | None = None) -> None:
+        """``absent_groups``: the heads of the hot-connect groups that were not on the line
+        at start-up (``runtime/hotconnect.py``); their slaves start offline."""
         self.master = master
-        self.on_change = on_change
-        self.health = {s.name: SlaveHealth(s.name, s.position) for s in master.slaves}
-        self._by_name = {s.name: s for s in master.slaves}
-        cyclic = master.cyclic
-        self._slots = [s for frame in cyclic.frames for s in frame]
-        self._shares = {s.name: [(slot, share) for slot in self._slots
-                                 if (share := wkc_share(s, slot))] for s in master.slaves}
-        self._inputs = {s.name: input_bits(s, cyclic) for s in master.slaves}
-        self._al_slots = [slot for slot in self._slots if slot.cmd.cmd == Cmd.BRD
-                          and slot.cmd.ado == Reg.AL_STATUS and slot.cmd.length >= 1]
-        self._clear: list[tuple[int, int]] = []       # (offset, bits kept) every cycle
+        self.groups = hotconnect.groups(master.plan.slaves)
+        self.absent_groups = set(absent_groups or ())
+        # The innermost group of each slave (groups may nest: a later head is inner).
+        self._group_of = {m.name: head for head, members in self.groups.items()
+                          for m in members}
+        self.health = {s.name: SlaveHealth(s.name, s.position) for s in master.plan.slaves}
+        for name in self._absent_members():
+            h = self.health[name]
+            h.online, h.since = False, time.monotonic()
+            h.reason = f"its hot-connect group ({self._group_of[name]!r}) is not on the line"
         self._pending: Pending = []
         self._incoming: list[Job] = []                # started, first round next cycle
-        self._busy: set[str] = set()                  # slaves with a job running
         self._diagnosing = False
         self._probing = False
         self._next_diagnosis = 0.0
         self._next_probe = 0.0
+        self._bind()
+
+    def _absent_members(self) -> set[str]:
+        return {m.name for head in self.absent_groups for m in self.groups[head]}
+
+    def _bind(self) -> None:
+        """Where every slave is and what it adds to the master's cyclic frames (again after
+        a hot-connect group came or went): plans at their positions, working counter
+        shares, input bits; the expected working counters lowered for the slaves that
+        are not online."""
+        master = self.master
+        present = {s.name for s in master.plan.slaves} - self._absent_members()
+        if {s.name for s in master.slaves} != present:
+            master.layout(present)
+        where = hotconnect.positions(master.plan.slaves, present)
+        self._by_name = {s.name: at_position(s, where[s.name]) for s in master.plan.slaves}
+        for name, h in self.health.items():
+            h.position = where[name]
+        cyclic = master.cyclic
+        self._slots = [s for frame in cyclic.frames for s in frame]
+        for slot in self._slots:
+            slot.expected = slot.cmd.cnt
+        self._shares = {name: [(slot, share) for slot in self._slots
+                               if (share := wkc_share(s, slot))]
+                        for name, s in self._by_name.items()}
+        self._inputs = {name: input_bits(s, cyclic) for name, s in self._by_name.items()}
+        self._al_slots = [slot for slot in self._slots if slot.cmd.cmd == Cmd.BRD
+                          and slot.cmd.ado == Reg.AL_STATUS and slot.cmd.length >= 1]
+        for name, h in self.health.items():
+            if not h.online:
+                for slot, share in self._shares[name]:
+                    if slot.expected is not None:
+                        slot.expected -= share
+        self._update_clear()
         self.timeout = max(cyclic.cycle_time_us / 1e6, 0.001)
 
     # -- every cycle --------------------------------------------------------------------------
@@ -256,8 +291,7 @@ class Supervisor:
                 slot.expected -= share
         self._update_clear()
         self._event("offline", f"{self._where(h)} {reason}; the others go on", name)
-        if self.on_change:
-            self.on_change(h)
+        self._group_left(name)
 
     def _online(self, name: str) -> None:
         h = self.health[name]
@@ -269,8 +303,27 @@ class Supervisor:
         self._update_clear()
         self._event("online", f"{self._where(h)} is back in {self.master.state.name} after "
                               f"{time.monotonic() - h.since:.2f} s", name)
-        if self.on_change:
-            self.on_change(h)
+
+    def _group_left(self, name: str) -> None:
+        """A hot-connect group whose every slave stopped answering has left the line:
+        the slaves behind it move up."""
+        for head, members in self.groups.items():
+            if head in self.absent_groups or name not in {m.name for m in members}:
+                continue
+            if all(not self.health[m.name].online and not self.health[m.name].joining
+                   and self.health[m.name].reason == "stopped answering" for m in members):
+                self.absent_groups.add(head)
+                self._event("hot-connect", f"hot-connect group {head!r} ({len(members)} "
+                                           f"slaves) left the line; the others go on", head)
+                self._bind()
+
+    def _group_back(self, head: str) -> None:
+        """The head of an absent group was found and identified: the group is on the line
+        again, the slaves behind it move down."""
+        self.absent_groups.discard(head)
+        self._event("hot-connect", f"hot-connect group {head!r} is on the line; bringing it "
+                                   f"up", head)
+        self._bind()
 
     def _update_clear(self) -> None:
         bits: dict[int, int] = {}
@@ -340,7 +393,8 @@ class Supervisor:
             back = yield reads
             if back is None:
                 return
-            by_address = {s.phys_addr: s for s in self.master.slaves}
+            by_address = {s.phys_addr: s for s in self._by_name.values()}
+            absent = self._absent_members()
             now = time.monotonic()
             for pos in range(n):
                 addr_dg, state_dg = back[2 * pos], back[2 * pos + 1]
@@ -349,24 +403,48 @@ class Supervisor:
                 address, = struct.unpack("<H", addr_dg.data)
                 status, _, code = struct.unpack("<HHH", state_dg.data)
                 slave = by_address.get(address)
+                configured = slave is not None
                 if slave is None:
-                    # A slave without its station address (powered off and on, or
-                    # another device): the offline slave expected at this position.
+                    # A slave without its station address (powered off and on, another
+                    # device, or a hot-connect group plugged in): the offline slave
+                    # expected at this position.
                     slave = next((self._by_name[n] for n, h in self.health.items()
-                                  if not h.online and h.position == pos), None)
-                    configured = False
-                else:
-                    configured = True
+                                  if not h.online and h.position == pos
+                                  and (n not in absent or n in self.absent_groups)), None)
                 if slave is None:
                     continue
                 h = self.health[slave.name]
                 if h.online or h.joining or h.gave_up or now < h.next_try:
                     continue
-                h.position = pos
+                if slave.name in absent and slave.name not in self.absent_groups:
+                    continue            # a group's slaves join after its head
                 h.joining = True
-                self._incoming.append(self._rejoin(slave, pos, configured, status))
+                if slave.name in self.absent_groups:
+                    self._incoming.append(self._identify(slave, pos, configured, status))
+                else:
+                    self._incoming.append(self._rejoin(slave, pos, configured, status))
         finally:
             self._probing = False
+
+    def _identify(self, head: SlavePlan, position: int, configured: bool, status: int
+                  ) -> Job:
+        """The head of an absent hot-connect group at ``position``: its IdentifyCmds, then
+        the group is back on the line and the head is brought up (its members follow
+        with the next probes)."""
+        h = self.health[head.name]
+        found: dict[tuple[str, int], bool] = {}
+        yield from hotconnect.identify_job(head, position, found)
+        if not found[(head.name, position)]:
+            h.joining = False
+            h.next_try = time.monotonic() + PROBE_INTERVAL
+            if ("identify", position) not in h.refused:
+                h.refused.add(("identify", position))
+                self._event("refused", f"hot-connect group {head.name!r}: the slave at "
+                            f"position {position} is not its head (its IdentifyCmds "
+                            f"failed); it is not configured", head.name)
+            return
+        self._group_back(head.name)
+        yield from self._rejoin(self._by_name[head.name], position, configured, status)
 
     def _rejoin(self, plan: SlavePlan, position: int, configured: bool, status: int) -> Job:
         """Verify the slave at ``position`` is the ENI's ``plan`` and bring it up to the
@@ -419,23 +497,6 @@ class Supervisor:
             self._online(plan.name)
         except ApplyError as exc:
             self._failed(h, str(exc))
-
-
-def at_position(slave: SlavePlan, position: int) -> SlavePlan:
-    """The slave's plan for when it sits at ``position``: its auto-increment address and
-    the auto-increment commands among its InitCmds moved there (a hot-connect group
-    absent before it shifts it)."""
-    adp = -position & 0xFFFF
-    if adp == slave.auto_inc_addr:
-        return slave
-    from dataclasses import replace
-
-    def moved(cmd: InitCmd) -> InitCmd:
-        if cmd.cmd in (Cmd.APRD, Cmd.APWR, Cmd.APRW) and cmd.adp == slave.auto_inc_addr:
-            return replace(cmd, adp=adp)
-        return cmd
-
-    return replace(slave, auto_inc_addr=adp, init_cmds=[moved(c) for c in slave.init_cmds])
 
 
 def _request(slave: SlavePlan, control: int, wait: AlState | None) -> Step[None]:
