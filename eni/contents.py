@@ -192,8 +192,15 @@ CONTENTS: dict[str, dict[str, Part]] = {
         "PreviousPort": _read("where the slave is connected (the tree is checked port by "
                               "port)"),
         "DC": _read("SYNC cycle and shift; DC set-up before PREOP->SAFEOP", "Slave/DC"),
-        "HotConnect": _refused("HotConnect group (the master would identify the group "
-                               "and run the line without it when it is absent)", counts=True),
+        "HotConnect": _read("a hot-connect group: the head and the slaves after it may be "
+                            "absent, the rest runs; the group joins when its head answers "
+                            "its IdentifyCmds", "Slave/HotConnect"),
+    },
+    "Slave/HotConnect": {
+        "GroupMemberCnt": _read("the head and the slaves after it in the file, this many "
+                                "in all"),
+        "IdentifyCmd": _read("a command that recognises the head (its station alias or "
+                             "ID register), sent where the head is expected", _INIT_CMD),
     },
     "Slave/Info": {
         **{tag: _read("checked against the slave found at the position") for tag in (
@@ -294,10 +301,7 @@ def _number(text: str) -> int | str | None:
 
 
 def _commands(el: Element) -> int:
-    """Enabled InitCmds in ``el``'s ``InitCmds`` (or ``el`` itself being InitCmds); for a
-    ``HotConnect`` group, its ``IdentifyCmd`` commands."""
-    if el.tag == "HotConnect":
-        return len(el.findall("IdentifyCmd"))
+    """Enabled InitCmds in ``el``'s ``InitCmds`` (or ``el`` itself being InitCmds)."""
     cmds = el if el.tag == "InitCmds" else el.find("InitCmds")
     if cmds is None:
         return 0

@@ -29,6 +29,7 @@ from ecatcfg.eni.plan import (
     DcPlan,
     EoeInitCmd,
     Frame,
+    HotConnectPlan,
     InitCmd,
     MailboxArea,
     MailboxPlan,
@@ -275,9 +276,12 @@ class _Reader:
         image = config.find("ProcessImage")
         from ecatcfg.eni.contents import audit, dropped_init_cmds
         self._dropped = dropped_init_cmds(config)
+        slave_els = list(config.iterchildren("Slave"))
+        slaves = [self.slave(el) for el in slave_els]
+        self.hot_connect_groups(slave_els, slaves)
         return NetworkPlan(
             master=self.master(self.child(config, "Master")),
-            slaves=[self.slave(el) for el in config.iterchildren("Slave")],
+            slaves=slaves,
             cyclic=[self.cyclic(el) for el in config.iterchildren("Cyclic")],
             process_image=ProcessImage() if image is None else self.process_image(image),
             version=root.get("Version"),
@@ -365,6 +369,7 @@ class _Reader:
         pd = el.find("ProcessData")
         mailbox = el.find("Mailbox")
         dc = el.find("DC")
+        hot = el.find("HotConnect")
         return SlavePlan(
             name=self.opt_text(info, "Name") or "",
             phys_addr=self.req_int(info, "PhysAddr", U16),
@@ -380,7 +385,47 @@ class _Reader:
             init_cmds=self.init_cmds(el),
             dc=None if dc is None else self.dc(dc),
             previous_ports=[self.previous_port(p) for p in el.iterchildren("PreviousPort")],
+            hot_connect=None if hot is None else self.hot_connect(hot),
         )
+
+    def hot_connect(self, element: Element) -> HotConnectPlan:
+        """``HotConnect``: ``GroupMemberCnt`` and the ``IdentifyCmd`` commands (ETG.2100
+        ``ECatCmdType``, read like an InitCmd); the count is checked against the slaves
+        that follow by :meth:`hot_connect_groups`."""
+        el = _Children(element)
+        count = self.req_int(el, "GroupMemberCnt", I32)
+        cmds = [self.init_cmd(c) for c in el.iterchildren("IdentifyCmd")]
+        if not cmds:
+            raise self.error("<HotConnect> has no <IdentifyCmd>: nothing tells the master "
+                             "that the device at the group's place is its head", el)
+        return HotConnectPlan(member_count=count, identify_cmds=cmds)
+
+    def hot_connect_groups(self, elements: list[Element], slaves: list[SlavePlan]) -> None:
+        """A group is its head and the slaves after it in the file, ``GroupMemberCnt`` in
+        all: at least the head, no more slaves than the file has from the head on, and no
+        slave in two groups (the master takes a group as absent or present as a whole)."""
+        owner: dict[int, int] = {}            # slave index -> index of its group's head
+        for i, (el, slave) in enumerate(zip(elements, slaves)):
+            if slave.hot_connect is None:
+                continue
+            count_el = self.child(self.child(el, "HotConnect"), "GroupMemberCnt")
+            count, left = slave.hot_connect.member_count, len(slaves) - i
+            if count < 1:
+                raise self.error(f"<GroupMemberCnt> {count}: a hot-connect group has at "
+                                 "least its head", count_el)
+            if count > left:
+                raise self.error(f"<GroupMemberCnt> {count}: only {left} slave"
+                                 f"{'s' if left != 1 else ''} from the group's head "
+                                 f"{slave.name!r} to the end of the file", count_el)
+            for member in range(i, i + count):
+                if member in owner:
+                    head = owner[member]
+                    raise self.error(
+                        f"the hot-connect group of {slave.name!r} takes slave "
+                        f"{slaves[member].name!r}, which is already in the group of "
+                        f"{slaves[head].name!r} (line {elements[head].sourceline}); a slave "
+                        "belongs to one group", count_el)
+                owner[member] = i
 
     def bit_range(self, el: Element) -> BitRange:
         return BitRange(self.req_int(el, "BitStart", IMAGE_BITS),

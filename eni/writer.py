@@ -25,6 +25,7 @@ from ecatcfg.eni.plan import (
     CyclicCmd,
     DcPlan,
     EoeInitCmd,
+    HotConnectPlan,
     InitCmd,
     MailboxArea,
     MailboxPlan,
@@ -157,8 +158,9 @@ def _payload(el: Element, data: bytes | None, length: int) -> None:
     _hex(el, "Data", data)
 
 
-def _init_cmd(parent: Element, cmd: InitCmd) -> None:
-    el = _sub(parent, "InitCmd")
+def _init_cmd(parent: Element, cmd: InitCmd, tag: str = "InitCmd") -> None:
+    """An ``ECatCmdType`` command: an ``InitCmd``, or a hot-connect ``IdentifyCmd``."""
+    el = _sub(parent, tag)
     for transition in cmd.transitions:
         _sub(el, "Transition", transition.value)
     if cmd.before_slave is not None:
@@ -221,6 +223,8 @@ def _slave(config: Element, slave: SlavePlan) -> None:
     _init_cmds(el, slave.init_cmds)
     for port in slave.previous_ports:
         _previous_port(el, port)
+    if slave.hot_connect is not None:
+        _hot_connect(el, slave.hot_connect)
     if slave.dc is not None:
         _dc(el, slave.dc)
 
@@ -371,6 +375,16 @@ def _previous_port(parent: Element, port: PreviousPort) -> None:
         el.set("Selected", _bool(port.selected))     # xs:int in the 2011 schema
     _sub(el, "Port", port.port)
     _opt_int(el, "PhysAddr", port.phys_addr)
+
+
+def _hot_connect(parent: Element, group: HotConnectPlan) -> None:
+    """ETG.2100 ``HotConnect``: GroupMemberCnt, then one or more IdentifyCmd."""
+    if not group.identify_cmds:
+        raise ValueError("a HotConnect group needs at least one IdentifyCmd (ETG.2100)")
+    el = _sub(parent, "HotConnect")
+    _int(el, "GroupMemberCnt", group.member_count)
+    for cmd in group.identify_cmds:
+        _init_cmd(el, cmd, "IdentifyCmd")
 
 
 def _dc(parent: Element, dc: DcPlan) -> None:

@@ -19,6 +19,7 @@ from ecatcfg.eni.plan import (
     CyclicCmd,
     DcPlan,
     Frame,
+    HotConnectPlan,
     InitCmd,
     MailboxArea,
     MailboxPlan,
@@ -111,7 +112,11 @@ def _drive() -> SlavePlan:
         ],
         dc=DcPlan(reference_clock=True, cycle_time0=1_000_000, cycle_time1=0, shift_time=0),
         previous_ports=[PreviousPort("B", 1001, True), PreviousPort("C", None, False),
-                        PreviousPort("D")])
+                        PreviousPort("D")],
+        # A group of one, recognised by its station alias 0x0012 = 7 at position 1.
+        hot_connect=HotConnectPlan(1, [
+            InitCmd([], "check station alias", cmd=1, length=2, adp=0xFFFF, ado=0x0012,
+                    cnt=1, validate=Validate(b"\x07\x00", b"\xff\xff", 100))]))
 
 
 def _cyclic() -> list[Cyclic]:
@@ -371,7 +376,8 @@ _SMALL = """<?xml version="1.0"?>
         <InitCmd><Transition>{transition}</Transition><Cmd>{cmd}</Cmd><Adp>0</Adp>
           <Ado>16</Ado><Data>E903</Data><Timeout>100</Timeout><Unknown/></InitCmd>
       </InitCmds>
-      <HotConnect><GroupMemberCnt>1</GroupMemberCnt></HotConnect>
+      <HotConnect><GroupMemberCnt>1</GroupMemberCnt><IdentifyCmd><Cmd>1</Cmd><Adp>-1</Adp>
+        <Ado>#x12</Ado><DataLength>2</DataLength></IdentifyCmd></HotConnect>
     </Slave>
   </Config>
 </EtherCATConfig>
@@ -388,6 +394,10 @@ def test_tolerant_reading_of_numbers_and_unknown_elements():
     assert (slave.auto_inc_addr, slave.vendor_id, slave.product_code) == (0xFFFF, 0x9A, 0x10)
     assert slave.init_cmds[0].data == b"\xe9\x03" and slave.init_cmds[0].timeout == 100
     assert plan.master.ether_type == b"\xa4\x88" and plan.process_image == ProcessImage()
+    group = slave.hot_connect
+    assert group is not None and group.member_count == 1
+    assert [(c.cmd, c.adp, c.ado, c.length) for c in group.identify_cmds] == [
+        (1, 0xFFFF, 0x12, 2)]
 
 
 @pytest.mark.parametrize("data, line, words", [
@@ -418,6 +428,77 @@ def test_bad_input_is_a_located_error(data: bytes, line: int | None, words: str)
     else:
         assert error.line
     assert str(error).startswith("bad.xml:")
+
+
+def _group_eni(counts: dict[int, str], identify: str = "<IdentifyCmd><Cmd>1</Cmd>"
+               "<Ado>18</Ado><DataLength>2</DataLength></IdentifyCmd>") -> bytes:
+    """Three slaves; slave ``i`` in ``counts`` heads a group with that GroupMemberCnt."""
+    slaves = []
+    for i in range(3):
+        group = (f"<HotConnect><GroupMemberCnt>{counts[i]}</GroupMemberCnt>{identify}"
+                 "</HotConnect>" if i in counts else "")
+        slaves.append(
+            f"<Slave><Info><Name>s{i}</Name><PhysAddr>{1001 + i}</PhysAddr>"
+            f"<AutoIncAddr>{-i}</AutoIncAddr><VendorId>2</VendorId><ProductCode>3"
+            f"</ProductCode><RevisionNo>0</RevisionNo></Info>\n{group}</Slave>\n")
+    return ("<EtherCATConfig><Config><Master><Info><Name>m</Name></Info></Master>\n"
+            + "".join(slaves) + "</Config></EtherCATConfig>\n").encode()
+
+
+def _line_of(data: bytes, xpath: str) -> int:
+    return etree.fromstring(data).xpath(xpath)[0].sourceline
+
+
+@pytest.mark.parametrize("counts, identify, at, words", [
+    ({1: "0"}, None, "//Slave[2]/HotConnect/GroupMemberCnt", "at least its head"),
+    ({1: "-3"}, None, "//Slave[2]/HotConnect/GroupMemberCnt", "at least its head"),
+    ({1: "3"}, None, "//Slave[2]/HotConnect/GroupMemberCnt",
+     "only 2 slaves from the group's head 's1'"),
+    ({2: "2"}, None, "//Slave[3]/HotConnect/GroupMemberCnt", "only 1 slave from"),
+    ({1: "two"}, None, "//Slave[2]/HotConnect/GroupMemberCnt", "not a number"),
+    ({0: "2", 1: "1"}, None, "//Slave[2]/HotConnect/GroupMemberCnt",
+     "already in the group of 's0'"),
+    ({1: "1"}, "", "//Slave[2]/HotConnect", "no <IdentifyCmd>"),
+    ({1: "1"}, "<IdentifyCmd><Cmd>1</Cmd><DataLength>2</DataLength></IdentifyCmd>",
+     "//Slave[2]/HotConnect/IdentifyCmd", "neither <Ado> nor <Addr>"),
+    ({1: "1"}, "<IdentifyCmd><Cmd>1</Cmd><Ado>18</Ado><Data>0g</Data></IdentifyCmd>",
+     "//Slave[2]/HotConnect/IdentifyCmd/Data", "hex"),
+])
+def test_bad_hot_connect_group_is_a_located_error(counts, identify, at, words):
+    data = _group_eni(counts) if identify is None else _group_eni(counts, identify)
+    with pytest.raises(EniReadError) as info:
+        read_bytes(data, "groups.xml")
+    assert words in info.value.message, info.value.message
+    assert (info.value.file, info.value.line) == ("groups.xml", _line_of(data, at))
+
+
+def test_hot_connect_groups_that_fit_are_read():
+    """Two groups side by side, the second up to the last slave."""
+    plan = read_bytes(_group_eni({0: "1", 1: "2"}), "groups.xml")
+    assert [s.hot_connect.member_count if s.hot_connect else None for s in plan.slaves] == [
+        1, 2, None]
+
+
+def test_a_group_without_identify_cmds_is_not_written():
+    plan = rich_plan()
+    plan.slaves[1].hot_connect.identify_cmds.clear()
+    with pytest.raises(ValueError, match="IdentifyCmd"):
+        to_bytes(plan)
+
+
+def test_hot_connect_is_written_where_the_schema_puts_it():
+    """After PreviousPort, before DC (ETG.2100 ``Config/Slave``); the values as written."""
+    drive = etree.fromstring(to_bytes(rich_plan())).xpath("//Slave[2]")[0]
+    tags = [child.tag for child in drive]
+    assert tags.index("HotConnect") == tags.index("DC") - 1
+    assert tags[tags.index("HotConnect") - 1] == "PreviousPort"
+    cmd = drive.find("HotConnect/IdentifyCmd")
+    assert drive.findtext("HotConnect/GroupMemberCnt") == "1"
+    assert [(c.tag, c.text) for c in cmd if len(c) == 0] == [
+        ("Comment", "check station alias"), ("Cmd", "1"), ("Adp", "65535"), ("Ado", "18"),
+        ("DataLength", "2"), ("Cnt", "1")]
+    assert [(c.tag, c.text) for c in cmd.find("Validate")] == [
+        ("Data", "0700"), ("DataMask", "ffff"), ("Timeout", "100")]
 
 
 def test_reader_errors_are_eni_read_errors():

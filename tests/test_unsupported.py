@@ -92,8 +92,6 @@ CASES = {   # name: (where, fragment, element path, what the message says, comma
     "VoE": (SLAVE_MAILBOX, _mailbox_cmds("VoE", 4), "Slave/Mailbox/VoE", "VoE InitCmds", 4),
     "unknown protocol": (SLAVE_MAILBOX, _mailbox_cmds("XoE", 2), "Slave/Mailbox/XoE",
                          "XoE InitCmds (a mailbox protocol ecatcfg does not know)", 2),
-    "HotConnect": (f"//Slave[Info/Name='{DRIVE}']", HOT_CONNECT, "Slave/HotConnect",
-                   "HotConnect group", 1),
 }
 
 
@@ -134,8 +132,8 @@ def test_several_parts_are_all_named_and_warned_once_per_slave(example_eni, tmp_
     first, _ = _insert(example_eni, SLAVE_MAILBOX, _mailbox_cmds("SoE", 2), tmp_path, "a.xml")
     second, _ = _insert(first.read_bytes(), SLAVE_MAILBOX, _mailbox_cmds("FoE", 1), tmp_path,
                         "b.xml")
-    eni, _ = _insert(second.read_bytes(), "//Slave[Info/Name='lamps']", HOT_CONNECT,
-                     tmp_path, "c.xml")
+    eni, _ = _insert(second.read_bytes(), "//Slave[Info/Name='lamps']",
+                     "<Redundancy>1</Redundancy>", tmp_path, "c.xml")
     refused = _apply(eni)
     assert refused.returncode == 1
     assert "asks for 3 things" in refused.stderr
@@ -187,6 +185,8 @@ ACCEPTED = {   # name: (where, fragment): nothing lost, so nothing to refuse
     "master EoE switch": ("//Config/Master",
                           "<EoE><MaxPorts>2</MaxPorts><MaxFrames>120</MaxFrames>"
                           "<MaxMACs>100</MaxMACs></EoE>"),
+    # Read since issue 20 (the plan's SlavePlan.hot_connect), no longer refused.
+    "hot-connect group": (f"//Slave[Info/Name='{DRIVE}']", HOT_CONNECT),
     "vendor data outside Config": ("/EtherCATConfig",
                                    "<ElmoSpecialResources><ElmoDC/></ElmoSpecialResources>"),
 }
@@ -231,6 +231,24 @@ def test_settings_apply_does_not_do_are_recorded(case, example_eni, tmp_path):
     assert (part.element, part.line, part.commands) == (element, line, 0)
     assert words in part.what
     assert part.slave == (None if element.startswith(("Master", "Cyclic")) else DRIVE)
+
+
+def test_hot_connect_group_is_read_and_its_commands_checked_field_by_field(example_eni,
+                                                                          tmp_path):
+    """A HotConnect group is read into the plan; an IdentifyCmd field the reader does not
+    know is refused like one in an InitCmd."""
+    first, _ = _insert(example_eni, f"//Slave[Info/Name='{DRIVE}']", HOT_CONNECT, tmp_path,
+                       "a.xml")
+    plan = eni_reader.read_file(first)
+    group = plan.slave(DRIVE).hot_connect
+    assert plan.unsupported == [] and group is not None
+    [cmd] = group.identify_cmds
+    assert (group.member_count, cmd.cmd, cmd.adp, cmd.ado, cmd.length) == (1, 4, 1005, 18, 2)
+    eni, line = _insert(first.read_bytes(), f"//Slave[Info/Name='{DRIVE}']/HotConnect/"
+                        "IdentifyCmd", "<Repeat>5</Repeat>", tmp_path, "b.xml")
+    [part] = eni_reader.read_file(eni).unsupported
+    assert (part.element, part.line, part.slave) == (
+        "Slave/HotConnect/IdentifyCmd/Repeat", line, DRIVE)
 
 
 def test_hot_plug_attribute_and_frame_factor(example_eni, tmp_path):
