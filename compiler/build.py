@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from ecatcfg.compiler import initcmds, layout as layout_mod, pdocmds
+from ecatcfg.compiler import hotconnect, initcmds, layout as layout_mod, pdocmds
 from ecatcfg.eni.plan import (Cyclic, DcPlan, MailboxArea, MailboxPlan, MasterPlan,
                                    NetworkPlan, PreviousPort, ProcessData, ProcessImage,
                                    SlavePlan, SmSettings, Variable)
@@ -54,6 +54,9 @@ def compile_topology(loaded: LoadedTopology, library: Library) -> CompileResult:
     errors += _fmmu_errors(loaded, resolved)
     if errors:
         raise TopologyError(errors)
+    groups, group_errors = hotconnect.groups(loaded, resolved)
+    if group_errors:
+        raise TopologyError(group_errors)
     topo = loaded.topology
     cycle_ns = topo.master.cycle_time_us * 1000
     ref = next((s for s in resolved if s.dc_mode and s.dc_mode.assign_activate), None)
@@ -88,7 +91,7 @@ def compile_topology(loaded: LoadedTopology, library: Library) -> CompileResult:
             revision=s.device.revision or 0,
             physics=eni_physics(s.device.physics or DEFAULT_PHYSICS),
             process_data=_process_data(s, sl), mailbox=_mailbox(s, sl), init_cmds=init, dc=dc,
-            previous_ports=_previous_port(s, resolved)))
+            previous_ports=_previous_port(s, resolved), hot_connect=groups.get(s.position)))
 
     outputs = _unique([v for sl in lay.slaves for v in sl.outputs])
     inputs = _unique([v for sl in lay.slaves for v in sl.inputs])

@@ -226,7 +226,13 @@ class Slave(_Model):
                                             description="Default 1001, 1002, ...")
     alias: Address | None = Field(
         default=None,
-        description="Expected station alias (register 0x0012), checked in INIT->PREOP")
+        description="Expected station alias (register 0x0012), checked in INIT->PREOP; "
+                    "identifies the head of a hot-connect group")
+    hot_connect: bool = Field(
+        default=False,
+        description="Head of a hot-connect group: this slave and every slave behind it (its "
+                    "branch; slaves behind another head form that head's group) may be "
+                    "absent at start-up and join later. Needs 'alias'")
     rx_pdos: list[Index] | None = Field(default=None,
                                         description="RxPDOs to assign (default: ESI)")
     tx_pdos: list[Index] | None = Field(default=None,

@@ -185,7 +185,7 @@ ACCEPTED = {   # name: (where, fragment): nothing lost, so nothing to refuse
     "master EoE switch": ("//Config/Master",
                           "<EoE><MaxPorts>2</MaxPorts><MaxFrames>120</MaxFrames>"
                           "<MaxMACs>100</MaxMACs></EoE>"),
-    # Read since issue 20 (the plan's SlavePlan.hot_connect), no longer refused.
+    # A hot-connect group is read (the plan's SlavePlan.hot_connect), no longer refused.
     "hot-connect group": (f"//Slave[Info/Name='{DRIVE}']", HOT_CONNECT),
     "vendor data outside Config": ("/EtherCATConfig",
                                    "<ElmoSpecialResources><ElmoDC/></ElmoSpecialResources>"),
