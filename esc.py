@@ -43,6 +43,7 @@ ESC_FEATURE_DC = 0x0004           # 0x0008 bit 2: the ESC has a DC unit (SOEM ha
 class Reg(IntEnum):
     """ESC registers the configuration touches."""
 
+    PORT_DESCRIPTOR = 0x0007      # 2 bits per port: 0 none, 2 E-bus, 3 MII (Section II)
     ESC_FEATURES = 0x0008         # bit 2: DC available (ESC Section II 0x0008)
     STATION_ADDRESS = 0x0010
     STATION_ALIAS = 0x0012

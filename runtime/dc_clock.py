@@ -98,6 +98,12 @@ class DcModel:
             out.append(DcClock(drift, start, now))
         return out
 
+    def powered_on(self, key: int, now: int) -> DcClock:
+        """The clock of a device switched on at ``now`` (a device swapped into the segment):
+        local time 0 then, its drift seeded from ``key`` (each new device its own)."""
+        rng = random.Random(f"{self.seed}:{key}")
+        return DcClock(rng.uniform(-self.drift_ppm, self.drift_ppm) * 1e-6, 0, now)
+
     def port_times(self, wiring: Wiring, cut: Iterable[int] = ()) -> list[PortTimes]:
         """Per slave of ``wiring`` (the cables into ``cut`` removed): when a frame sent at 0
         reaches each of its ports (port 0 on the way out, the others on the way back from

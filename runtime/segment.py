@@ -112,15 +112,21 @@ class VirtualSegment:
         self._by_address: dict[int, list[EmulatedSlave]] | None = None
         self.frames = 0
         self.on_state_change: Callable[[StateChange], None] | None = None
+        self.swaps = 0                      # devices swapped in (seeds their clocks)
         clocks = self.dc_model.clocks(len(slaves), self.clock_ns())
         for k, slave in enumerate(slaves):
             slave.dc = clocks[k]
-            slave.clock_ns = self._now
-            slave.on_mapping_change = self._plans.clear
-            slave.on_state_change = self._state_changed
+            self._attach(slave)
         self._rewire()
         self._timed: list[EmulatedSlave] = []
+        self.timing: Timing | None = None
         self.set_timing(timing)
+
+    def _attach(self, slave: EmulatedSlave) -> None:
+        """The segment's time and callbacks for ``slave``."""
+        slave.clock_ns = self._now
+        slave.on_mapping_change = self._plans.clear
+        slave.on_state_change = self._state_changed
 
     def _rewire(self) -> None:
         """Bus order, positions, DL status and port times from the wiring and the cuts."""
@@ -176,11 +182,50 @@ class VirtualSegment:
         self.wired[self._wired_index(slave)].power_cycle()
         self._rewire()
 
+    def swap(self, slave: EmulatedSlave | str | int,
+             replacement: EmulatedSlave) -> EmulatedSlave:
+        """Unplug the device at ``slave``'s place (a slave, its name, or its position) and
+        plug ``replacement`` in with the same cables: another device, or one of the same
+        type with another alias or serial number.  The replacement has just been switched
+        on: INIT, registers reset, what its own EEPROM holds loaded (``power_cycle``), its
+        local clock from 0; it gets the segment's clock, timing model and callbacks and the
+        old device's place (ports, links, position).  The old device is gone from the
+        segment, detached from it, and returned."""
+        k = self._wired_index(slave)
+        old = self.wired[k]
+        if any(replacement is s for s in self.wired):
+            raise ValueError(f"slave {replacement.name!r} is already in the segment")
+        # The cables must fit: every port the place uses (0 toward the master, and those
+        # with a slave behind) exists on the replacement and is of the same kind (port
+        # descriptor 0x0007, two bits per port: 2 E-bus, 3 MII; ESC Section II).
+        for port in (0, *self.wiring.children[k]):
+            had, has = (s.mem[Reg.PORT_DESCRIPTOR] >> 2 * port & 3 for s in (old, replacement))
+            if has != had:
+                kinds = {0: "no port", 1: "an unconfigured port", 2: "E-bus", 3: "Ethernet"}
+                raise ValueError(f"{replacement.name!r} does not fit in the place of "
+                                 f"{old.name!r}: its port {port} is {kinds[has]}, the cable "
+                                 f"there needs {kinds[had]}")
+        old.on_state_change = old.on_mapping_change = None
+        old.clock_ns = time.monotonic_ns
+        replacement.power_cycle()
+        self.swaps += 1
+        replacement.dc = self.dc_model.powered_on(self.swaps, self.clock_ns())
+        self._attach(replacement)
+        self.wired[k] = replacement
+        self._rewire()
+        self._set_slave_timing(replacement)
+        self._timed = [s for s in self.wired if s.timing is not None]
+        return old
+
     def set_timing(self, timing: Timing | None) -> None:
         """Give every slave its kind's times (``runtime/timing.py``), or none."""
-        for slave in self.slaves:
-            slave.timing = timing.for_slave(slave) if timing is not None else None
-        self._timed = [s for s in self.slaves if s.timing is not None]
+        self.timing = timing
+        for slave in self.wired:
+            self._set_slave_timing(slave)
+        self._timed = [s for s in self.wired if s.timing is not None]
+
+    def _set_slave_timing(self, slave: EmulatedSlave) -> None:
+        slave.timing = self.timing.for_slave(slave) if self.timing is not None else None
 
     def settle(self) -> None:
         """Make what the slaves finished by now visible (timing model)."""

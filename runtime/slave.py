@@ -126,8 +126,12 @@ class EmulatedSlave:
 
     def __init__(self, device: Device, sii_image: bytes, *, name: str = "",
                  od: ObjectDictionary | None = None,
-                 mailbox: MailboxServer | None = None, chip: EscChip = GENERIC) -> None:
+                 mailbox: MailboxServer | None = None, chip: EscChip = GENERIC,
+                 device_id: int | None = None) -> None:
         self.device = device
+        # The explicit device ID (an ID switch, ETG.1020 "Requesting ID"): what the slave
+        # shows in 0x0134 when the master asks for it; None: the device has none.
+        self.device_id = device_id
         self.chip = chip
         self._absent_blocks = _absent_blocks(chip)
         self.name = name or device.type_name
@@ -179,15 +183,21 @@ class EmulatedSlave:
 
     def power_cycle(self) -> None:
         """Switch the slave off and on: every register and the firmware start afresh (INIT,
-        no SyncManagers, FMMUs or addresses), the EEPROM keeps what was written, and what
-        an ESC loads from it at power-on (PDI control, the station alias 0x0012) is loaded
-        again.  The segment's clock, timing, callbacks and DC clock stay."""
+        no SyncManagers, FMMUs or addresses: station address 0x0010 reads 0), the EEPROM
+        keeps what was written, and what an ESC loads from it at power-on (PDI control,
+        the station alias 0x0012) is loaded again.  The local clock restarts from 0 with
+        its time control loop reset (0x0910-0x0935 are registers: ESC Section I 9.1, the
+        local time counts from power-on); its quartz keeps its drift.  The segment's clock,
+        timing, callbacks and the slave's place (position, port times) stay."""
         keep = (self.clock_ns, self.timing, self.on_state_change, self.on_mapping_change,
-                self.dc, self.position, self.eni_only, self.refuse)
+                self.position, self.eni_only, self.refuse)
+        drift, ports = self.dc.drift, self.dc.ports
         self.__init__(self.device, bytes(self.eeprom),   # type: ignore[misc]
-                      name=self.name, od=self.od, mailbox=self.mailbox, chip=self.chip)
+                      name=self.name, od=self.od, mailbox=self.mailbox, chip=self.chip,
+                      device_id=self.device_id)
         (self.clock_ns, self.timing, self.on_state_change, self.on_mapping_change,
-         self.dc, self.position, self.eni_only, self.refuse) = keep
+         self.position, self.eni_only, self.refuse) = keep
+        self.dc = DcClock(drift, 0, self.clock_ns(), ports)
 
     def _power_on(self) -> None:
         m = self.mem
@@ -198,7 +208,7 @@ class EmulatedSlave:
         m[0x0004] = chip.fmmus
         m[0x0005] = chip.sms
         m[0x0006] = chip.ram_kb
-        m[0x0007] = self._port_descriptor()
+        m[Reg.PORT_DESCRIPTOR] = self._port_descriptor()
         struct.pack_into("<H", m, 0x0008, chip.features)
         # DL control byte 2 after reset: RX FIFO size 7 and bits 22-23 set, as an EK1100
         # (ET1100) and an EL1004 (ET1200) read it (ethercrab-rs/ethercrab
