@@ -147,6 +147,11 @@ class AlState(IntEnum):
 AL_ERROR_ACK = 0x10           # AL control bit 4: acknowledge an error indication
 AL_STATUS_ERROR = 0x10        # AL status bit 4: error indication (code in 0x0134)
 AL_STATE_MASK = 0x0F          # AL control / status bits 3:0: the state
+# Explicit device identification (ETG.1020 "Requesting ID"; ESC Section II 0x0120/0x0130
+# bit 5): the master sets AL control bit 5, the slave loads its ID into AL status code
+# 0x0134 and sets AL status bit 5 while the request stands.
+AL_ID_REQUEST = 0x20          # AL control bit 5: device identification request
+AL_STATUS_ID = 0x20           # AL status bit 5: device identification loaded (in 0x0134)
 
 # ESC configuration 0x0141 bit 0, *device emulation*: an ESC without a microcontroller copies
 # every AL control write into AL status itself, with no checks (Beckhoff ESC Section II

@@ -24,7 +24,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-from ecatcfg.esc import (AL_ERROR_ACK, AL_STATE_MASK, AL_STATUS_ERROR, EEPROM_BUSY,
+from ecatcfg.esc import (AL_ERROR_ACK, AL_ID_REQUEST, AL_STATE_MASK, AL_STATUS_ERROR,
+                         AL_STATUS_ID, EEPROM_BUSY,
                          EEPROM_CMD_MASK, EEPROM_CMD_READ, EEPROM_CMD_RELOAD, EEPROM_CMD_WRITE,
                          EEPROM_ERROR_ACKNOWLEDGE, EEPROM_ERROR_WRITE_ENABLE, EEPROM_R64,
                          EEPROM_WRITE_ENABLE, ESC_DEVICE_EMULATION, FMMU_SIZE, PDI_DIGITAL_IO,
@@ -129,9 +130,9 @@ class EmulatedSlave:
                  mailbox: MailboxServer | None = None, chip: EscChip = GENERIC,
                  device_id: int | None = None) -> None:
         self.device = device
-        # The explicit device ID (an ID switch, ETG.1020 "Requesting ID"): what the slave
-        # shows in 0x0134 when the master asks for it; None: the device has none.
         self.device_id = device_id
+        self._id_shown = False              # AL status bit 5: 0x0134 holds the ID
+        self._al_code = 0                   # the AL status code while the ID is shown
         self.chip = chip
         self._absent_blocks = _absent_blocks(chip)
         self.name = name or device.type_name
@@ -178,6 +179,21 @@ class EmulatedSlave:
         # them in its configuration, ESCvar.mb[0..1], and writes replies to its own SM1).
         self._mbx_in = next((sm.number for sm in device.sms if sm.type == "MBoxIn"), None)
         self._power_on()
+
+    @property
+    def device_id(self) -> int | None:
+        """The explicit device ID (ETG.1020 "Requesting ID"): the value of an ID switch,
+        which the firmware shows in AL status code 0x0134 when the master asks (AL control
+        bit 5); ``None``: the device has none and ignores the request.  Set it like
+        turning the switch: the next request shows the new value.  A device-emulation ESC
+        (no firmware) only mirrors bit 5 and leaves 0x0134 alone (``_mirror_al_control``)."""
+        return self._device_id
+
+    @device_id.setter
+    def device_id(self, value: int | None) -> None:
+        if value is not None and not 0 <= value <= 0xFFFF:
+            raise ValueError(f"a device ID is 16 bits (AL status code 0x0134), not {value}")
+        self._device_id = value
 
     # -- power-on ---------------------------------------------------------------------------
 
@@ -645,6 +661,28 @@ class EmulatedSlave:
         if self.device_emulation:
             self._mirror_al_control(control)
             return
+        self._state_request(control)
+        self._id_request(control)
+
+    def _id_request(self, control: int) -> None:
+        """Explicit device identification (ETG.1020 "Requesting ID"; ESC Section II AL
+        control/status bit 5, AL status code 0x0134): while the master's AL control has
+        bit 5 set, the firmware shows its ID (``device_id``, an ID switch) in 0x0134 and
+        sets AL status bit 5; when the master clears the bit, AL status bit 5 clears and
+        0x0134 holds the AL status code again.  A device without an ID ignores the
+        request (bit 5 stays 0, the code stays), and an error indication keeps its code:
+        the master acknowledges the error first."""
+        want = bool(control & AL_ID_REQUEST) and self.device_id is not None
+        if want == self._id_shown or (want and self.error):
+            return
+        self._id_shown = want
+        status = self.al_status & ~AL_STATUS_ID | (AL_STATUS_ID if want else 0)
+        struct.pack_into("<H", self.mem, Reg.AL_STATUS, status)
+        shown = self.device_id if want and self.device_id is not None else self._al_code
+        struct.pack_into("<H", self.mem, Reg.AL_STATUS_CODE, shown & 0xFFFF)
+
+    def _state_request(self, control: int) -> None:
+        """The state bits of an AL control write: the firmware's state machine."""
         requested = control & AL_STATE_MASK
         if self._transition is not None:
             if requested == self._transition[1]:
@@ -831,9 +869,15 @@ class EmulatedSlave:
 
     def _set_state(self, state: AlState, code: int) -> None:
         self._transition = None
-        status = int(state) | (AL_STATUS_ERROR if code else 0)
+        self._al_code = code
+        if code:
+            self._id_shown = False          # an error shows its code, not the ID
+        status = int(state) | (AL_STATUS_ERROR if code else 0) | (
+            AL_STATUS_ID if self._id_shown else 0)
         struct.pack_into("<H", self.mem, Reg.AL_STATUS, status)
-        struct.pack_into("<H", self.mem, Reg.AL_STATUS_CODE, code)
+        struct.pack_into("<H", self.mem, Reg.AL_STATUS_CODE,
+                         self.device_id if self._id_shown and self.device_id is not None
+                         else code)
         if self.on_state_change:
             self.on_state_change(StateChange(self.position, self.name, state, bool(code),
                                              code))
