@@ -12,8 +12,12 @@ middle (a junction's port processed before a port the group goes on through) tha
 error: the group could not be written as a count.
 
 The master recognises the head by its station alias (ESC register 0x0012, loaded from SII
-word 4 at power-on): one auto-increment read where the head is when every slave is present,
-validated against the alias the topology gives.
+word 4 at power-on) and/or its explicit device ID (an ID switch): auto-increment commands
+where the head is when every slave is present, validated against the values the topology
+gives.  Where the ID is, the ESI says: ``Info/IdentificationAdo`` (a register or memory
+address that shows it; the EK1101's switch at 0x1000) or ``Info/IdentificationReg134``
+(ETG.1020 "Requesting ID": AL control bit 5 makes the slave show it in AL status code
+0x0134, with AL status bit 5).
 """
 
 from __future__ import annotations
@@ -24,7 +28,7 @@ from ecatcfg.compiler.resolve import ResolvedSlave
 from ecatcfg.compiler.topology import LoadedTopology
 from ecatcfg.eni.plan import HotConnectPlan, InitCmd, Validate
 from ecatcfg.errors import EcatcfgError
-from ecatcfg.esc import Cmd, Reg
+from ecatcfg.esc import AL_ID_REQUEST, AL_STATUS_ID, AlState, Cmd, Reg
 
 # How long the master re-reads the alias when it does not match yet (ms): the ESC loads it
 # from the EEPROM just after power-on, so a head that has just appeared may still show 0.
@@ -38,12 +42,17 @@ def groups(loaded: LoadedTopology, resolved: list[ResolvedSlave]
     ``resolved`` is the whole network in bus order (``resolved[n].position == n``)."""
     heads = {s.position for s in resolved if s.cfg.hot_connect}
     errors: list[EcatcfgError] = []
+    identify: dict[int, list[InitCmd]] = {}
     for s in resolved:
-        if s.cfg.hot_connect and s.cfg.alias is None:
+        if s.cfg.hot_connect:
+            cmds = _identify_cmds(loaded, s, errors)
+            if cmds:
+                identify[s.position] = cmds
+        elif s.cfg.device_id is not None:
             errors.append(loaded.error(
-                f"slave {s.name!r}: a hot-connect group's head needs 'alias', the station "
-                "alias (register 0x0012) the master recognises it by", "slaves", s.index,
-                "hot_connect"))
+                f"slave {s.name!r}: 'device_id' identifies the head of a hot-connect group, "
+                "and this slave is none (add hot_connect: true)", "slaves", s.index,
+                "device_id"))
     if not heads:
         return {}, errors
     owner: list[int | None] = []             # by bus position: the head of its group
@@ -59,10 +68,38 @@ def groups(loaded: LoadedTopology, resolved: list[ResolvedSlave]
         if members != list(range(head, head + count)):
             errors.append(_gap_error(loaded, resolved, owner, head, members))
             continue
-        s = resolved[head]
-        if s.cfg.alias is not None:
-            result[head] = HotConnectPlan(count, [identify_by_alias(s.position, s.cfg.alias)])
+        if head in identify:
+            result[head] = HotConnectPlan(count, identify[head])
     return result, sorted(errors, key=lambda e: e.line or 0)     # in file order
+
+
+def _identify_cmds(loaded: LoadedTopology, s: ResolvedSlave,
+                   errors: list[EcatcfgError]) -> list[InitCmd]:
+    """The head's IdentifyCmds: its alias, then its device ID; errors when it has neither
+    or the ESI does not say where the ID is."""
+    cfg, info = s.cfg, s.device.info
+    if cfg.alias is None and cfg.device_id is None:
+        errors.append(loaded.error(
+            f"slave {s.name!r}: a hot-connect group's head needs 'alias' (the station alias, "
+            "register 0x0012) or 'device_id' (its ID switch) for the master to recognise it "
+            "by", "slaves", s.index, "hot_connect"))
+        return []
+    cmds = [] if cfg.alias is None else [identify_by_alias(s.position, cfg.alias)]
+    if cfg.device_id is None:
+        return cmds
+    if info is not None and info.identification_ado is not None:
+        return cmds + [identify_at(s.position, info.identification_ado, cfg.device_id)]
+    if info is not None and info.identification_reg134:
+        return cmds + identify_by_request(s.position, cfg.device_id)
+    errors.append(loaded.error(
+        f"slave {s.name!r}: the ESI of {s.device.type_name} does not say the device has an "
+        "ID (Info/IdentificationAdo or IdentificationReg134); identify it by 'alias'",
+        "slaves", s.index, "device_id"))
+    return []
+
+
+def _validate16(value: int) -> Validate:
+    return Validate(struct.pack("<H", value), b"\xff\xff", IDENTIFY_TIMEOUT)
 
 
 def identify_by_alias(position: int, alias: int) -> InitCmd:
@@ -70,7 +107,30 @@ def identify_by_alias(position: int, alias: int) -> InitCmd:
     one slave answering (working counter 1), validated against ``alias``."""
     return InitCmd([], "identify hot-connect group head: station alias", Cmd.APRD, 2,
                    adp=(-position) & 0xFFFF, ado=Reg.STATION_ALIAS, cnt=1,
-                   validate=Validate(struct.pack("<H", alias), b"\xff\xff", IDENTIFY_TIMEOUT))
+                   validate=_validate16(alias))
+
+
+def identify_at(position: int, ado: int, device_id: int) -> InitCmd:
+    """APRD of the 16 bits at the ESI's ``IdentificationAdo``, validated against the ID."""
+    return InitCmd([], "identify hot-connect group head: device ID", Cmd.APRD, 2,
+                   adp=(-position) & 0xFFFF, ado=ado, cnt=1, validate=_validate16(device_id))
+
+
+def identify_by_request(position: int, device_id: int) -> list[InitCmd]:
+    """ETG.1020 "Requesting ID": APWR of AL control = INIT with the ID request bit (a head
+    that has just appeared is in INIT), then APRD of AL status to AL status code (0x0130,
+    6 bytes) until AL status bit 5 shows the ID is loaded and 0x0134 holds it."""
+    adp = (-position) & 0xFFFF
+    expected = bytes([AL_STATUS_ID, 0, 0, 0]) + struct.pack("<H", device_id)
+    return [
+        InitCmd([], "identify hot-connect group head: request device ID", Cmd.APWR, 2,
+                adp=adp, ado=Reg.AL_CONTROL, data=struct.pack("<H", AlState.INIT | AL_ID_REQUEST),
+                cnt=1),
+        InitCmd([], "identify hot-connect group head: device ID", Cmd.APRD, 6, adp=adp,
+                ado=Reg.AL_STATUS, cnt=1,
+                validate=Validate(expected, bytes([AL_STATUS_ID, 0, 0, 0, 0xFF, 0xFF]),
+                                  IDENTIFY_TIMEOUT)),
+    ]
 
 
 def _gap_error(loaded: LoadedTopology, resolved: list[ResolvedSlave], owner: list[int | None],

@@ -232,7 +232,12 @@ class Slave(_Model):
         default=False,
         description="Head of a hot-connect group: this slave and every slave behind it (its "
                     "branch; slaves behind another head form that head's group) may be "
-                    "absent at start-up and join later. Needs 'alias'")
+                    "absent at start-up and join later. Needs 'alias' or 'device_id'")
+    device_id: Annotated[int, *_num(0, 0xFFFF)] | None = Field(
+        default=None,
+        description="Explicit device ID (ID switch) of a hot-connect group's head, where "
+                    "the ESI says the device has one (Info/IdentificationAdo or "
+                    "IdentificationReg134)")
     rx_pdos: list[Index] | None = Field(default=None,
                                         description="RxPDOs to assign (default: ESI)")
     tx_pdos: list[Index] | None = Field(default=None,

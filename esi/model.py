@@ -444,7 +444,8 @@ class DeviceInfo:
     mailbox_request_timeout: int | None = None
     mailbox_response_timeout: int | None = None
     ebus_current: int | None = None
-    identification_ado: int | None = None
+    identification_ado: int | None = None      # where the device shows its ID (EK1101: 0x1000)
+    identification_reg134: bool = False        # explicit device ID in AL status code 0x0134
 
 
 @dataclass(slots=True)

@@ -42,8 +42,7 @@ _SKIPPED: dict[str, frozenset[str]] = {
                          "Su", "ESC", "Image16x14", "ImageFile16x14", "ImageData16x14",
                          "VendorSpecific")),
     "Info": frozenset(("Electrical", "EtherCATController", "Port", "ExecutionUnit",
-                       "VendorSpecific", "StationAliasSupported", "IdentificationReg134",
-                       "DeviceFeature")),
+                       "VendorSpecific", "StationAliasSupported", "DeviceFeature")),
     "Pdo": frozenset(("ExcludedSm",)),
     "Entry": frozenset(("Comment",)),
     "Mailbox": frozenset(("VendorSpecific",)),
@@ -302,6 +301,9 @@ class _Reader:
                         setattr(info, attr, self.int_(t.text, t, f"Mailbox/Timeout/{name}"))
             elif tag == "IdentificationAdo":
                 info.identification_ado = self.int_(ch.text, ch, "Info/IdentificationAdo")
+            elif tag == "IdentificationReg134":
+                info.identification_reg134 = self.bool_(ch.text, ch,
+                                                        "Info/IdentificationReg134")
             else:
                 if tag == "Electrical":
                     cur = ch.find("EBusCurrent")

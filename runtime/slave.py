@@ -130,7 +130,8 @@ class EmulatedSlave:
                  mailbox: MailboxServer | None = None, chip: EscChip = GENERIC,
                  device_id: int | None = None) -> None:
         self.device = device
-        self.device_id = device_id
+        self._device_id: int | None = None
+        self._id_ado = device.info.identification_ado if device.info else None
         self._id_shown = False              # AL status bit 5: 0x0134 holds the ID
         self._al_code = 0                   # the AL status code while the ID is shown
         self.chip = chip
@@ -179,6 +180,7 @@ class EmulatedSlave:
         # them in its configuration, ESCvar.mb[0..1], and writes replies to its own SM1).
         self._mbx_in = next((sm.number for sm in device.sms if sm.type == "MBoxIn"), None)
         self._power_on()
+        self.device_id = device_id
 
     @property
     def device_id(self) -> int | None:
@@ -186,7 +188,10 @@ class EmulatedSlave:
         which the firmware shows in AL status code 0x0134 when the master asks (AL control
         bit 5); ``None``: the device has none and ignores the request.  Set it like
         turning the switch: the next request shows the new value.  A device-emulation ESC
-        (no firmware) only mirrors bit 5 and leaves 0x0134 alone (``_mirror_al_control``)."""
+        (no firmware) only mirrors bit 5 and leaves 0x0134 alone (``_mirror_al_control``).
+        A device whose ESI names an ``Info/IdentificationAdo`` (the EK1101's ID switch at
+        0x1000, read through its digital-input PDI) shows the value there, 16 bits, all the
+        time."""
         return self._device_id
 
     @device_id.setter
@@ -194,6 +199,9 @@ class EmulatedSlave:
         if value is not None and not 0 <= value <= 0xFFFF:
             raise ValueError(f"a device ID is 16 bits (AL status code 0x0134), not {value}")
         self._device_id = value
+        ado = self._id_ado
+        if ado is not None and 0 <= ado <= MEMORY_SIZE - 2:
+            struct.pack_into("<H", self.mem, ado, value or 0)
 
     # -- power-on ---------------------------------------------------------------------------
 

@@ -104,3 +104,22 @@ def test_device_emulation_mirrors_the_bit_and_loads_no_id(corpus: Path):
     seg.slaves[1].device_id = 9
     al_control(seg, 1, 0x0021)
     assert al_status(seg, 1) == (0x0021, 0)
+
+
+def test_an_id_switch_the_esi_places_in_memory_reads_there(corpus: Path):
+    """The EK1101's ESI says ``<IdentificationAdo>#x1000</IdentificationAdo>``: its ID
+    switch is read at 0x1000 (16 bits), in every state, kept over a power cycle."""
+    beckhoff = Library([corpus / "esi" / "beckhoff"], cache=False)
+    seg = line(beckhoff, "EK1101")
+    seg.slaves[0].device_id = 0x0042
+
+    def at_0x1000() -> int:
+        [d] = wire.decode(seg.process(wire.encode([wire.Datagram.physical(
+            Cmd.APRD, 0, 0x1000, 2)]))).datagrams
+        assert d.wkc == 1
+        value: int = struct.unpack("<H", d.data)[0]
+        return value
+
+    assert at_0x1000() == 0x0042
+    seg.power_cycle(0)
+    assert at_0x1000() == 0x0042

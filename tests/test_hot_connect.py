@@ -15,14 +15,17 @@ import sys
 
 import jsonschema
 import pytest
-from conftest import EXAMPLES
+from conftest import EXAMPLES, device_xml, esi_xml
 from lxml import etree
 
 from ecatcfg.compiler import build, topology
 from ecatcfg.compiler.topology import TopologyError
 from ecatcfg.eni import reader as eni_reader
 from ecatcfg.eni import writer as eni_writer
+from ecatcfg.esc import Cmd
 from ecatcfg.esi.library import Library
+from ecatcfg.runtime import wire
+from ecatcfg.runtime.emulate import SlaveSpec, segment
 
 TREE_ESI = [EXAMPLES / "tree" / "esi", EXAMPLES / "esi"]
 HOT_TREE = EXAMPLES / "tree" / "hotconnect.yaml"
@@ -114,8 +117,9 @@ def test_a_head_without_alias_is_an_error_at_its_line():
     text = HOT_TREE.read_text().replace("    alias: 12\n", "")
     line = _line_of(text, "hot_connect: true", "name: outputs")
     assert _errors(text) == [
-        f"t.yaml:{line}: slave 'outputs': a hot-connect group's head needs 'alias', the "
-        "station alias (register 0x0012) the master recognises it by"]
+        f"t.yaml:{line}: slave 'outputs': a hot-connect group's head needs 'alias' (the "
+        "station alias, register 0x0012) or 'device_id' (its ID switch) for the master to "
+        "recognise it by"]
 
 
 def test_a_nested_group_inside_a_group_is_refused():
@@ -140,3 +144,101 @@ def test_topology_schema_has_hot_connect(tmp_path):
     with pytest.raises(jsonschema.ValidationError):
         jsonschema.validate({"slaves": [{"name": "a", "device": "X", "hot_connect": "yes"}]},
                             schema)
+
+
+# -- identification by device ID ----------------------------------------------------------
+
+def _cmds(data: bytes, name: str) -> list[dict]:
+    """Every IdentifyCmd of slave ``name``, its fields as written."""
+    [slave] = etree.fromstring(data).xpath(f"//Slave[Info/Name='{name}']")
+    return [{c.tag: c.text for c in cmd.iter() if len(c) == 0 and c.tag != "Comment"}
+            for cmd in slave.xpath("HotConnect/IdentifyCmd")]
+
+
+def test_an_ek1101_is_identified_by_its_id_switch_at_the_esis_address(corpus, eni_schema):
+    """Beckhoff EK11xx.xml gives the EK1101 ``<IdentificationAdo>#x1000</IdentificationAdo>``:
+    the ID switch is read there; alias and ID both given: both are checked."""
+    text = ("slaves:\n  - {name: c, device: EK1100}\n"
+            "  - {name: head, device: EK1101, parent: c, port: C, hot_connect: true,\n"
+            "     device_id: 0x42, alias: 7}\n")
+    data = _compile(text, _lib(corpus / "esi" / "beckhoff"))
+    assert eni_schema.validate(etree.fromstring(data)), eni_schema.error_log
+    assert _cmds(data, "head") == [
+        {"Cmd": "1", "Adp": "65535", "Ado": "18", "DataLength": "2", "Cnt": "1",
+         "Data": "0700", "DataMask": "ffff", "Timeout": "100"},
+        {"Cmd": "1", "Adp": "65535", "Ado": "4096", "DataLength": "2", "Cnt": "1",
+         "Data": "4200", "DataMask": "ffff", "Timeout": "100"}]
+
+
+def _reg134_lib(tmp_path) -> Library:
+    head = device_xml("FXH", "#x21").replace(
+        "<GroupType>", "<Info><IdentificationReg134>1</IdentificationReg134></Info><GroupType>")
+    (tmp_path / "fx.xml").write_text(esi_xml(device_xml("FXC", "#x20"), head,
+                                             device_xml("FXP", "#x22")))
+    return _lib(tmp_path)
+
+
+def test_a_head_with_the_id_in_0x0134_is_asked_for_it(tmp_path, eni_schema):
+    """IdentificationReg134: write AL control 0x0021 (INIT + request, ETG.1020), then read
+    AL status .. AL status code (6 bytes) for bit 5 and the ID."""
+    text = ("slaves:\n  - {name: c, device: FXC}\n"
+            "  - {name: head, device: FXH, hot_connect: true, device_id: 513}\n"
+            "  - {name: tail, device: FXP}\n")
+    data = _compile(text, _reg134_lib(tmp_path))
+    assert eni_schema.validate(etree.fromstring(data)), eni_schema.error_log
+    assert _cmds(data, "head") == [
+        {"Cmd": "2", "Adp": "65535", "Ado": "288", "Data": "2100", "Cnt": "1"},
+        {"Cmd": "1", "Adp": "65535", "Ado": "304", "DataLength": "6", "Cnt": "1",
+         "Data": "200000000102", "DataMask": "20000000ffff", "Timeout": "100"}]
+    assert int(etree.fromstring(data).xpath(
+        "string(//Slave[Info/Name='head']/HotConnect/GroupMemberCnt)")) == 2
+
+
+def test_the_identify_cmds_pass_on_the_emulated_devices_and_fail_on_others(tmp_path):
+    """The commands as compiled, sent to emulated slaves with the alias and ID the topology
+    names: they validate; a device with another ID or alias fails them."""
+    lib = _reg134_lib(tmp_path)
+    text = ("slaves:\n  - {name: c, device: FXC}\n"
+            "  - {name: head, device: FXH, hot_connect: true, device_id: 513, alias: 9}\n")
+    plan = build.compile_topology(topology.loads(text, "t.yaml"), lib).plan
+    cmds = plan.slave("head").hot_connect.identify_cmds
+    assert len(cmds) == 3
+
+    def passes(alias: int, device_id: int) -> bool:
+        seg = segment([SlaveSpec(lib.device(lib.find(t).entry), n, alias=a)
+                       for t, n, a in (("FXC", "c", 0), ("FXH", "head", alias))])
+        seg.slaves[1].device_id = device_id
+        ok = True
+        for cmd in cmds:
+            [got] = wire.decode(seg.process(wire.encode([wire.Datagram.physical(
+                cmd.cmd, cmd.adp, cmd.ado, cmd.payload)]))).datagrams
+            ok &= got.wkc == cmd.cnt
+            if cmd.validate is not None:
+                mask = cmd.validate.mask or bytes([0xFF] * len(got.data))
+                ok &= bytes(a & m for a, m in zip(got.data, mask)) == bytes(
+                    a & m for a, m in zip(cmd.validate.data, mask))
+        return ok
+
+    assert passes(9, 513)
+    assert not passes(9, 514) and not passes(8, 513)
+    assert cmds[0].cmd == Cmd.APRD
+
+
+@pytest.mark.parametrize("extra, key, words", [
+    ("device_id: 5", "device_id", "does not say the device has an ID"),
+])
+def test_device_id_where_the_esi_has_none_is_an_error(extra, key, words):
+    text = HOT_TREE.read_text().replace("    alias: 12\n", f"    {extra}\n")
+    line = _line_of(text, extra)
+    [error] = _errors(text)
+    assert error.startswith(f"t.yaml:{line}: slave 'outputs': the ESI of EXB2018 ") and \
+        words in error
+
+
+def test_device_id_without_a_group_is_an_error():
+    text = HOT_TREE.read_text().replace(
+        "  - name: inputs\n", "  - name: inputs\n    device_id: 3\n")
+    line = _line_of(text, "device_id: 3")
+    assert _errors(text) == [
+        f"t.yaml:{line}: slave 'inputs': 'device_id' identifies the head of a hot-connect "
+        "group, and this slave is none (add hot_connect: true)"]
