@@ -153,6 +153,10 @@ class EmulatedSlave:
         self._replies: deque[tuple[int, list[bytes]]] = deque()
         self.eeprom = bytearray(sii_image)
         self.od = od
+        # What the dictionary holds at power-on (power_cycle restores it).
+        self._od_power_on = {} if od is None else {
+            (obj.index, entry.subindex): entry.value for obj in od for entry in
+            obj.entries.values()}
         self.mailbox = mailbox
         self.mem = bytearray(MEMORY_SIZE)
         self.position = 0
@@ -216,6 +220,17 @@ class EmulatedSlave:
         keep = (self.clock_ns, self.timing, self.on_state_change, self.on_mapping_change,
                 self.position, self.eni_only, self.refuse)
         drift, ports = self.dc.drift, self.dc.ports
+        # The firmware starts afresh too: the object dictionary holds its power-on values
+        # again (what the master downloaded, a PDO assignment or mapping, is gone until it
+        # downloads it again), the mailbox forgets what was in progress and EoE its IP
+        # parameters.
+        if self.od is not None:
+            for (index, sub), value in self._od_power_on.items():
+                self.od[index][sub].value = value
+        if self.mailbox is not None:
+            self.mailbox.reset()
+            if self.mailbox.eoe is not None:
+                self.mailbox.eoe.params = None
         self.__init__(self.device, bytes(self.eeprom),   # type: ignore[misc]
                       name=self.name, od=self.od, mailbox=self.mailbox, chip=self.chip,
                       device_id=self.device_id)

@@ -1,5 +1,6 @@
 """Faults of the virtual segment a running network must survive: a device swapped for
-another in its place, and a power cycle.
+another in its place, and a power cycle (registers, firmware and object dictionary afresh,
+EEPROM kept).
 
 What a real slave does is taken from the ESC datasheet (Section II: registers after reset,
 the station address 0x0010 is 0 until the master writes it, the alias 0x0012 and PDI
@@ -182,6 +183,8 @@ def test_a_power_cycle_in_op_leaves_the_slave_in_init_with_its_registers_reset(e
     assert drive.state in (AlState.OP, AlState.SAFEOP)
     assert drive.fmmus and drive.station_address == 1005
     eeprom = bytes(drive.eeprom)
+    # topology.yaml assigns RxPDO 0x1601 where the ESI's default (0x1C12:01) is 0x1600.
+    assert drive.od.value(0x1C12, 1) == b"\x01\x16"
     logical = [wire.Datagram.logical(c.cmd, c.addr, bytes(c.length))
                for f in net.plan.cyclic[0].frames for c in f.cmds if c.addr is not None]
     assert [d.cmd for d in logical] == [Cmd.LRD, Cmd.LRW]
@@ -192,6 +195,9 @@ def test_a_power_cycle_in_op_leaves_the_slave_in_init_with_its_registers_reset(e
     assert not drive.fmmus and not any(sm.active for sm in drive.sms)
     assert aprd(seg, pos, 0x0800, 16).data == bytes(16)      # SM0, SM1 cleared
     assert bytes(drive.eeprom) == eeprom
+    # The firmware restarted: the dictionary is back at power-on, as the ESI says
+    # (DefaultData 0016), until the master downloads the assignment again.
+    assert drive.od.value(0x1C12, 1) == b"\x00\x16" and drive.od.value(0x1C12, 0) == b"\x01"
     got, = send(seg, wire.Datagram.physical(Cmd.FPRD, 1005, 0x0130, 2))
     assert got.wkc == 0
     after = sum(d.wkc for d in send(seg, *logical))
