@@ -121,8 +121,11 @@ def run(args: argparse.Namespace) -> int:
                 try:
                     net.up(target, accept_newer_revision=args.accept_newer_revision)
                     # The stop timeout a service manager needs (docs/runtime.md).
-                    status = (f"{len(plan.slaves)} slaves in {target.name}; way down at "
-                              f"most {net.master.down_bound():.0f} s")
+                    up = len(net.master.slaves)
+                    status = (f"{up} slaves in {target.name}" + (
+                        f" ({len(plan.slaves) - up} in hot-connect groups not on the line)"
+                        if up < len(plan.slaves) else "")
+                        + f"; way down at most {net.master.down_bound():.0f} s")
                     if target >= AlState.SAFEOP and args.cycles != 0:
                         report.cycling(args.cycles)
                         notify.ready(status.replace(";", ", cycling;", 1))
@@ -145,11 +148,12 @@ def run(args: argparse.Namespace) -> int:
                 except EcatcfgError as exc:
                     failure = failure or exc
                 report.final_states(net.master.read_states(), net.master.progress,
-                                    highest=highest, scanned=net.master.scanned)
+                                    highest=highest, scanned=net.master.scanned,
+                                    line=net.master.line)
             else:
                 notify.stopping("leaving the slaves as they are")
                 report.final_states(highest, net.master.progress, highest=highest,
-                                    scanned=net.master.scanned)
+                                    scanned=net.master.scanned, line=net.master.line)
         finally:
             net.close()
             notify.close()

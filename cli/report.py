@@ -94,29 +94,36 @@ class ApplyReport:
     def final_states(self, states: list[SlaveState | None],
                      progress: dict[str, SlaveProgress], *,
                      highest: list[SlaveState | None] | None = None,
-                     scanned: list[FoundSlave] | None = None) -> None:
+                     scanned: list[FoundSlave] | None = None,
+                     line: NetworkPlan | None = None) -> None:
         """``states``: the state now (after the way down) of the slave at each auto-increment
         position; ``highest``: read before the way down.  ``scanned``: what the scan found.
-        When the line does not match the ENI (a moved slave, a pulled cable), position N is
+        ``line``: the ENI as the line was run (``Master.line``: without the hot-connect
+        groups that were not there, the slaves behind them moved up); the ENI by default.
+        When the line does not match it (a moved slave, a pulled cable), position N is
         not the ENI's slave N: a slave gets the state of the slave found where the ENI has
         it (paired as verify pairs them) only if it passed verification; "not found" for a
-        missing slave, "not verified" for one that differs from the ENI."""
+        missing slave, "not verified" for one that differs from the ENI, "absent
+        (hot-connect group)" for a slave of a group that was not there."""
         from ecatcfg.runtime.scan import paired, verify
         self.rows = []
+        line = line or self.plan
         slaves = sorted(self.plan.slaves, key=lambda s: s.position)
+        where_on_line = {s.name: s.position for s in line.slaves}
         highest = states if highest is None else highest
-        at: dict[int, int] = {s.position: k for k, s in enumerate(slaves)}
+        at: dict[int, int] = {p: p for p in where_on_line.values()}
         problems: dict[int, str] = {}
         if scanned is not None:
-            mismatches = verify(self.plan, scanned, accept_newer_revision=True)
+            mismatches = verify(line, scanned, accept_newer_revision=True)
             if mismatches:
                 problems = {m.position: ("not found" if m.problem.startswith("missing")
                                          else "not verified")
                             for m in mismatches if m.expected != "-"}
-                at = paired(self.plan, scanned)
+                at = paired(line, scanned)
         for slave in slaves:
-            where = problems.get(slave.position)
-            k = at.get(slave.position)
+            pos = where_on_line.get(slave.name)
+            where = "absent (hot-connect group)" if pos is None else problems.get(pos)
+            k = at.get(pos) if pos is not None else None
             if k is None and where is None:
                 where = "not found"
             st = states[k] if where is None and k is not None and k < len(states) else None

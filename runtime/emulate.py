@@ -13,7 +13,7 @@ from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
 from ecatcfg.esc import (DETECTED_MODULE_IDENT_LIST, MIN_MAILBOX_SIZE, MODULE_IDENT_LIST,
-                         is_pdo_object)
+                         Reg, is_pdo_object)
 from ecatcfg.esi import sii
 from ecatcfg.esi.coe import has_coe
 from ecatcfg.eni.plan import NetworkPlan, PdoDesc, SlavePlan
@@ -214,7 +214,7 @@ def specs_from_eni(plan: NetworkPlan, library: Library | None, shown: str) -> li
             writes = tuple(Write(c.index, c.subindex, c.data, c.complete_access)
                            for c in coe if not c.disabled and c.ccs == 1)
             specs.append(SlaveSpec(device_from_eni(s, plan, shown), s.name,
-                                   serial=s.serial_no, extra_writes=writes,
+                                   serial=s.serial_no, alias=_head_alias(s), extra_writes=writes,
                                    eni_only=exc.message, plug=plugs[len(specs)]))
             continue
         device = library.device(entry)     # a broken ESI file is an error, not a fallback
@@ -225,8 +225,8 @@ def specs_from_eni(plan: NetworkPlan, library: Library | None, shown: str) -> li
                 # Modules the ENI does not name: accept the objects its startup SDOs write.
                 extra = tuple(Write(c.index, c.subindex, c.data) for c in coe
                               if not c.complete_access and not is_pdo_object(c.index))
-        specs.append(SlaveSpec(device, s.name, serial=s.serial_no, extra_writes=extra,
-                               plug=plugs[len(specs)]))
+        specs.append(SlaveSpec(device, s.name, serial=s.serial_no, alias=_head_alias(s),
+                               extra_writes=extra, plug=plugs[len(specs)]))
     try:
         wiring(specs)
     except ValueError as exc:
@@ -234,6 +234,17 @@ def specs_from_eni(plan: NetworkPlan, library: Library | None, shown: str) -> li
         raise EcatcfgError(f"{shown}: PreviousPort: {exc}") from None
     return specs
 
+
+def _head_alias(slave: SlavePlan) -> int:
+    """The station alias a hot-connect group's head is identified by (its IdentifyCmd
+    reading 0x0012 expects it): the emulated head has it in its EEPROM, as the real one
+    was given it; 0 for any other slave."""
+    group = slave.hot_connect
+    for cmd in group.identify_cmds if group is not None else []:
+        if cmd.ado == Reg.STATION_ALIAS and cmd.validate is not None \
+                and len(cmd.validate.data) >= 2:
+            return int.from_bytes(cmd.validate.data[:2], "little")
+    return 0
 
 
 # -- modular devices --------------------------------------------------------------------------

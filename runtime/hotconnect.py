@@ -33,6 +33,11 @@ from ecatcfg.runtime.scan import FoundSlave, paired
 _AUTO_INCREMENT = (Cmd.APRD, Cmd.APWR, Cmd.APRW, Cmd.ARMW)
 
 
+def slaves(n: int) -> str:
+    """"1 slave", "3 slaves": a group's size in a message."""
+    return f"{n} slave" + ("" if n == 1 else "s")
+
+
 def groups(slaves: Iterable[SlavePlan]) -> dict[str, list[SlavePlan]]:
     """Each group's head name and its members (the head first), in bus order."""
     ordered = sorted(slaves, key=lambda s: s.position)

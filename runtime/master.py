@@ -172,8 +172,9 @@ class Master:
         if absent_heads:
             for head, members in hotconnect.groups(self.plan.slaves).items():
                 if head in absent_heads:
-                    self._event("hot-connect", f"hot-connect group {head!r} ({len(members)} "
-                                f"slaves) is not on the line; the others go on", head)
+                    self._event("hot-connect", f"hot-connect group {head!r} "
+                                f"({hotconnect.slaves(len(members))}) is not on the line; "
+                                f"the others go on", head)
             if self.recovery:
                 from ecatcfg.runtime.recovery import Supervisor
                 self.supervisor = Supervisor(self, absent_heads)

@@ -313,8 +313,9 @@ class Supervisor:
             if all(not self.health[m.name].online and not self.health[m.name].joining
                    and self.health[m.name].reason == "stopped answering" for m in members):
                 self.absent_groups.add(head)
-                self._event("hot-connect", f"hot-connect group {head!r} ({len(members)} "
-                                           f"slaves) left the line; the others go on", head)
+                self._event("hot-connect", f"hot-connect group {head!r} "
+                                           f"({hotconnect.slaves(len(members))}) left the "
+                                           f"line; the others go on", head)
                 self._bind()
 
     def _group_back(self, head: str) -> None:

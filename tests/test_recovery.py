@@ -255,9 +255,12 @@ def with_group(plan: NetworkPlan, head: str, members: int) -> NetworkPlan:
     return replace(plan, slaves=[grouped(s) for s in plan.slaves])
 
 
-def grouped_segment(plan: NetworkPlan, head: str, leave_out: set[str] = frozenset()):
+def grouped_segment(plan: NetworkPlan, head: str, leave_out: set[str] = frozenset(),
+                    alias: int = ALIAS):
+    """The line of ``plan`` (a virtual segment from the ENI gives a group's head the alias
+    its IdentifyCmd expects; here the head is given ``alias``)."""
     import dataclasses
-    specs = [dataclasses.replace(s, alias=ALIAS if s.name == head else s.alias, plug=None)
+    specs = [dataclasses.replace(s, alias=alias if s.name == head else s.alias, plug=None)
              for s in emulate.specs_from_eni(plan, Library([ESI], cache=False), "x")
              if s.name not in leave_out]                      # a line
     return emulate.segment(specs)
@@ -329,8 +332,73 @@ def test_a_head_that_is_not_identified_leaves_its_group_out_and_fails_the_line(p
     absent, so that slave is one the ENI does not expect and nothing is configured."""
     from ecatcfg.runtime.master import VerifyError
     grouped = with_group(plan, "lamps", 2)
-    seg = grouped_segment(grouped, "nobody")           # the alias is not set
+    seg = grouped_segment(grouped, "lamps", alias=ALIAS + 1)
     with grouped_network(grouped, seg, "memory") as (net, events):
         with pytest.raises(VerifyError, match="extra slave"):
             net.up()
         assert [s.state for s in seg.slaves] == [AlState.INIT] * 5
+
+
+def test_another_device_in_its_place_is_refused_once_and_the_right_one_rejoins(plan):
+    """The drive is swapped for a digital input terminal: its SII identity is not the
+    ENI's, so it is reported (once) and never configured; the drive put back is."""
+    with network(plan, "memory") as (net, events):
+        io = IoCheck(net)
+        seg = net.segment
+        spec = next(s for s in emulate.specs_from_eni(plan, Library([ESI], cache=False), "x")
+                    if s.name == "buttons")
+        import dataclasses
+        intruder = emulate.emulated_slave(dataclasses.replace(spec, name="intruder"))
+        drive = seg.swap("axis1", intruder)
+        io.until(lambda: not net.online("axis1"), 1.0)
+        assert io.run(0.5) == 0
+        refused = [e.text for e in events if e.kind == "refused"]
+        assert len(refused) == 1 and "another device is in its place" in refused[0]
+        assert f":0x{spec.device.product_code:x}:" in refused[0]     # EX1004 (its ESI)
+        assert intruder.state == AlState.INIT and intruder.station_address == 0
+        assert not net.online("axis1")
+        seg.swap("intruder", drive)
+        io.until(lambda: net.online("axis1"), BOUND_S)
+        assert drive.state == AlState.OP and io.failures == []
+
+
+def test_the_compiled_tree_example_runs_without_its_groups_and_takes_them_in(tmp_path):
+    """examples/tree/hotconnect.yaml compiled: with the junction's cable out, both groups
+    behind it (the junction with its drives, and the outputs on its port C) are absent,
+    the rest reaches OP; plugged in, both groups join; unplugged again, they leave and
+    the rest goes on; plugged in again, they rejoin."""
+    esi = [EXAMPLES / "tree" / "esi", ESI]
+    built = build.compile_topology(topology.load(EXAMPLES / "tree" / "hotconnect.yaml"),
+                                   Library(esi, cache=False)).plan
+    tree = eni_reader.read_bytes(eni_writer.to_bytes(built), "hotconnect.eni.xml")
+    events: list[Event] = []
+    with Network.virtual(tree, esi=esi, on_event=events.append) as net:
+        seg = net.segment
+        assert {s.name for s in seg.remove_cable("junction")} == {
+            "junction", "axis1", "axis2", "outputs"}
+        net.up()
+        assert sorted(e.text for e in events if e.kind == "hot-connect") == [
+            "hot-connect group 'junction' (3 slaves) is not on the line; the others go on",
+            "hot-connect group 'outputs' (1 slave) is not on the line; the others go on"]
+        assert [(s.name, s.state) for s in seg.slaves] == [
+            ("coupler", AlState.OP), ("inputs", AlState.OP), ("axis3", AlState.OP)]
+        for _ in range(2):
+            assert all(net.cycle() for _ in range(30))
+            seg.restore_cable("junction")
+            start = time.monotonic()
+            while not all(h.online for h in net.health.values()):
+                assert time.monotonic() - start < BOUND_S, net.health
+                net.cycle()
+                time.sleep(0.0005)
+            assert all(s.state == AlState.OP for s in seg.slaves)
+            assert [s.station_address for s in seg.slaves] == list(range(1001, 1008))
+            assert all(net.cycle() for _ in range(30))
+            seg.remove_cable("junction")
+            start = time.monotonic()
+            while net.online("outputs"):
+                assert time.monotonic() - start < 1
+                net.cycle()
+        assert [e.text for e in events if e.kind == "hot-connect"][-2:] == [
+            "hot-connect group 'junction' (3 slaves) left the line; the others go on",
+            "hot-connect group 'outputs' (1 slave) left the line; the others go on"]
+        seg.restore_cable("junction")
