@@ -214,8 +214,6 @@ class Supervisor:
         slaves that dropped out, go one round on with the recovery's frames.  Returns
         whether every *online* slave's data came back as expected."""
         inputs = self.master.cyclic.inputs
-        for at, keep in self._clear:
-            inputs[at] &= keep
         now = time.monotonic()
         if not ok:
             ok = self._tolerated()
@@ -240,6 +238,10 @@ class Supervisor:
         if self._pending:
             self._pending = one_round(self.master.transport, self._pending, self.timeout,
                                       self._job_failed)
+        # Last: the slaves found offline in this cycle's round are cleared at once.
+        inputs = self.master.cyclic.inputs
+        for at, keep in self._clear:
+            inputs[at] &= keep
         return ok
 
     def _al_wrong(self, inputs: bytearray) -> bool:

@@ -117,6 +117,9 @@ def test_a_drive_power_cycled_in_op_is_back_within_the_bound_while_the_io_goes_o
         io = IoCheck(net)
         assert io.run(0.2) == 0
         drive = next(s for s in net.segment.slaves if s.name == "axis1")
+        drive.set_inputs(bytes(range(1, 32)))
+        io.run(0.05)
+        assert net["axis1.TxPDO 1 (CSP).Position actual value"] != 0
         net.segment.remove_cable("axis1")             # power lost: off the wire ...
         drive.power_cycle()                           # ... registers gone, EEPROM kept
         bad = io.run(0.3)
@@ -402,3 +405,27 @@ def test_the_compiled_tree_example_runs_without_its_groups_and_takes_them_in(tmp
             "hot-connect group 'junction' (3 slaves) left the line; the others go on",
             "hot-connect group 'outputs' (1 slave) left the line; the others go on"]
         seg.restore_cable("junction")
+
+
+def test_the_inputs_of_a_slave_out_of_op_are_cleared_and_invalid(plan):
+    """The drive's firmware finds a local error and falls to SAFEOP+ERR (0x001A,
+    synchronisation error, as a drive whose SYNC0 stopped reports it); it still answers and
+    sends inputs: the network marks them invalid and clears them, while the other slaves'
+    inputs stay valid; once acknowledged it is back in OP with valid inputs."""
+    from ecatcfg.esc import AlState as State
+    with network(plan, "memory") as (net, events):
+        io = IoCheck(net)
+        drive = next(s for s in net.segment.slaves if s.name == "axis1")
+        drive.set_inputs(bytes(range(1, 32)))
+        io.run(0.05)
+        position = "axis1.TxPDO 1 (CSP).Position actual value"
+        assert net[position] != 0 and net.valid(position)
+        drive._set_state(State.SAFEOP, 0x001A)          # the firmware's own decision
+        io.until(lambda: not net.online("axis1"), 1.0)
+        assert "SAFEOP+ERR, AL status code 0x001A" in net.health["axis1"].reason
+        assert drive.read(drive.input_areas()[0][0], 1) != b"\0"
+        assert net[position] == 0 and not net.valid(position) and net.valid(BUTTONS[0])
+        io.until(lambda: net.online("axis1"), BOUND_S)
+        io.run(0.05)
+        assert net[position] != 0 and net.valid(position) and io.failures == []
+        assert kinds(events, "axis1") == ["offline", "online"]
