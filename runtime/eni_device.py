@@ -40,7 +40,7 @@ from dataclasses import dataclass, field
 from ecatcfg.esc import (FMMU_SIZE, RX_PDO_MAPPING, SM1_STATUS, SM_DIR_ECAT_WRITES, SM_DIR_MASK,
                          SM_PDO_ASSIGN, SM_PDO_ASSIGN_RANGE, SM_SIZE, TX_PDO_MAPPING, Cmd,
                          FmmuConfig, FmmuType, Reg, SmConfig, Transition, array_downloads)
-from ecatcfg.eni.plan import (CoeInitCmd, InitCmd, NetworkPlan, PdoDesc, SlavePlan,
+from ecatcfg.eni.plan import (CoeInitCmd, NetworkPlan, PdoDesc, SlavePlan,
                               register_writes)
 from ecatcfg.esi.model import (CoeSettings, Dc, DcOpMode, Device, Eeprom, EoeSettings, Fmmu,
                                Mailbox, Pdo, PdoEntry, Profile, Source, SyncManager, Vendor)

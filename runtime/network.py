@@ -206,7 +206,11 @@ class Network:
         if supervisor is not None:
             return dict(supervisor.health)
         from ecatcfg.runtime.recovery import SlaveHealth
-        return {s.name: SlaveHealth(s.name, s.position) for s in self.master.slaves}
+        present = {s.name: s.position for s in self.master.slaves}
+        return {s.name: SlaveHealth(s.name, present.get(s.name, s.position),
+                                    online=s.name in present,
+                                    reason="" if s.name in present else "not on the line")
+                for s in self.plan.slaves}
 
     def online(self, slave: str) -> bool:
         """Whether ``slave`` (its ENI name) is in the network's state and exchanging data."""

@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import struct
 import time
-from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 from ecatcfg.eni.plan import SlavePlan, register_writes
