@@ -37,6 +37,21 @@ class Cmd(IntEnum):
     FRMW = 14
 
 
+_READ_WRITE_CMDS = (Cmd.APRW, Cmd.FPRW, Cmd.BRW, Cmd.LRW)
+
+
+def wkc_increment(cmd: int, read: bool, written: bool) -> int:
+    """What one slave adds to a datagram's working counter (ETG.1000.4 §5.4.1.2, "working
+    counter"): a read or a write adds 1; a read-write command (APRW, FPRW, BRW, LRW) adds 1
+    for the read and 2 for the write; ARMW/FRMW add 1 in every slave (the reader and
+    the writers alike, so pass ``read``).  The master's expectations (compiler/layout.py,
+    runtime/recovery.py) follow this; the emulated ESCs (runtime/segment.py) count the
+    same inline, in their per-frame loop."""
+    if cmd in _READ_WRITE_CMDS:
+        return int(read) + 2 * int(written)
+    return int(read or written)
+
+
 ESC_FEATURE_DC = 0x0004           # 0x0008 bit 2: the ESC has a DC unit (SOEM hasdc, IgH)
 
 

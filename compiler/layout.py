@@ -26,7 +26,7 @@ from ecatcfg.eni.plan import BitRange, CyclicCmd, Frame, Variable
 from ecatcfg.compiler.resolve import ResolvedSlave
 from ecatcfg.errors import EcatcfgError
 from ecatcfg.esc import (FRAME_PAYLOAD, MAILBOX_STATE_ADDR, SM1_STATUS, Cmd, FmmuConfig, FmmuType,
-                         Reg, frame_bytes)
+                         Reg, frame_bytes, wkc_increment)
 from ecatcfg.esi import datatypes
 
 LRW_BASE = 0x10000000
@@ -228,12 +228,8 @@ def _wkc(d: _Datagram, sizes: list[SlaveBits]) -> int:
     for r in d.regions:
         out, inp = sizes[r.slave]
         has_out, has_in = any(b for _, b in out), any(b for _, b in inp)
-        if d.cmd == Cmd.LRW:
-            total += 2 * has_out + has_in
-        elif d.cmd == Cmd.LWR:
-            total += has_out
-        else:
-            total += has_in
+        total += wkc_increment(d.cmd, has_in and d.cmd != Cmd.LWR,
+                               has_out and d.cmd != Cmd.LRD)
     return total
 
 

@@ -33,7 +33,8 @@ from typing import TYPE_CHECKING
 
 from ecatcfg.eni.plan import SlavePlan, register_writes
 from ecatcfg.esc import (AL_ERROR_ACK, AL_STATE_MASK, AL_STATUS_ERROR, FMMU_SIZE, AlState, Cmd,
-                         FmmuConfig, FmmuType, Reg, Transition, al_state_name, al_status_name)
+                         FmmuConfig, FmmuType, Reg, Transition, al_state_name, al_status_name,
+                         wkc_increment)
 from ecatcfg.record import field, record
 from ecatcfg.runtime import hotconnect
 from ecatcfg.runtime.hotconnect import at_position
@@ -55,14 +56,10 @@ STATE_TIMEOUT = 5.0            # s for a state change of one slave (as replay.TI
 
 _UP = {AlState.INIT: Transition.IP, AlState.PREOP: Transition.PS,
        AlState.SAFEOP: Transition.SO}
-# Working counter increments (ETG.1000.4 §5.4.1.2): a read-only or write-only command adds
-# 1 in each slave that carries it out; a read-write command 1 for the read and 2 for the
-# write (3 for both); ARMW/FRMW add 1 in every slave (the one that reads and the ones that
-# write).
-_INCREMENT: dict[int, int] = {Cmd.APRD: 1, Cmd.FPRD: 1, Cmd.BRD: 1, Cmd.APWR: 1,
-                              Cmd.FPWR: 1, Cmd.BWR: 1, Cmd.APRW: 3, Cmd.FPRW: 3, Cmd.BRW: 3}
 _READS_FROM = (FmmuType.READ, FmmuType.READ_WRITE)
 _WRITES_TO = (FmmuType.WRITE, FmmuType.READ_WRITE)
+_READ_CMDS = (Cmd.APRD, Cmd.FPRD, Cmd.BRD, Cmd.APRW, Cmd.FPRW, Cmd.BRW)
+_WRITE_CMDS = (Cmd.APWR, Cmd.FPWR, Cmd.BWR, Cmd.APRW, Cmd.FPRW, Cmd.BRW)
 
 
 @record
@@ -105,22 +102,20 @@ def wkc_share(slave: SlavePlan, cmd_slot: _Slot) -> int:
     commands only the slave addressed."""
     c = cmd_slot.cmd
     if c.cmd in (Cmd.ARMW, Cmd.FRMW):
-        return 1 if slave.dc is not None else 0
+        return wkc_increment(c.cmd, slave.dc is not None, False)
     if c.cmd in (Cmd.LRD, Cmd.LWR, Cmd.LRW):
         mapped = [f for f in fmmus(slave) if _overlaps(f, c.addr or 0, c.length)]
-        reads = any(f.type in _READS_FROM for f in mapped)
-        writes = any(f.type in _WRITES_TO for f in mapped)
-        if c.cmd == Cmd.LRD:
-            return int(reads)
-        if c.cmd == Cmd.LWR:
-            return int(writes)
-        return int(reads) + 2 * int(writes)
-    kind = _INCREMENT.get(c.cmd, 0)
-    if c.cmd in (Cmd.BRD, Cmd.BWR, Cmd.BRW):
-        return kind
+        reads = c.cmd != Cmd.LWR and any(f.type in _READS_FROM for f in mapped)
+        writes = c.cmd != Cmd.LRD and any(f.type in _WRITES_TO for f in mapped)
+        return wkc_increment(c.cmd, reads, writes)
     if c.cmd in (Cmd.APRD, Cmd.APWR, Cmd.APRW):
-        return kind if c.adp == slave.auto_inc_addr else 0
-    return kind if c.adp == slave.phys_addr else 0
+        addressed = c.adp == slave.auto_inc_addr
+    elif c.cmd in (Cmd.FPRD, Cmd.FPWR, Cmd.FPRW):
+        addressed = c.adp == slave.phys_addr
+    else:
+        addressed = c.cmd in (Cmd.BRD, Cmd.BWR, Cmd.BRW)
+    return wkc_increment(c.cmd, addressed and c.cmd in _READ_CMDS,
+                         addressed and c.cmd in _WRITE_CMDS)
 
 
 def input_bits(slave: SlavePlan, cyclic: CyclicFrames) -> list[tuple[int, int]]:
@@ -156,7 +151,7 @@ class Supervisor:
         self.master = master
         self.groups = hotconnect.groups(master.plan.slaves)
         self.absent_groups = set(absent_groups or ())
-        # The innermost group of each slave (groups may nest: a later head is inner).
+        # The group of each slave in one (groups never overlap: eni/reader.py).
         self._group_of = {m.name: head for head, members in self.groups.items()
                           for m in members}
         self.health = {s.name: SlaveHealth(s.name, s.position) for s in master.plan.slaves}
@@ -217,10 +212,12 @@ class Supervisor:
         if not ok:
             ok = self._tolerated()
         if not ok or self._al_wrong(inputs):
-            # With slaves offline or joining, the ORed AL status cannot tell who is out
-            # of state: look at every slave, but not more often than the probes.
+            # The ORed AL status also shows the slaves already offline or joining: then
+            # it cannot tell whether another one left the state.  Look at every slave,
+            # but only as often as the probes, and count the cycle as good.
             unsure = ok and any(not h.online for h in self.health.values())
-            ok = ok and unsure
+            if not unsure:
+                ok = False
             if not self._diagnosing and now >= self._next_diagnosis:
                 self._diagnosing = True
                 self._next_diagnosis = now + (PROBE_INTERVAL if unsure else DIAGNOSE_INTERVAL)

@@ -342,10 +342,13 @@ def test_a_head_that_is_not_identified_leaves_its_group_out_and_fails_the_line(p
         assert [s.state for s in seg.slaves] == [AlState.INIT] * 5
 
 
-def test_another_device_in_its_place_is_refused_once_and_the_right_one_rejoins(plan):
+@pytest.mark.parametrize("where", ["memory", "veth"])
+def test_another_device_in_its_place_is_refused_once_and_the_right_one_rejoins(
+        plan, where, request):
     """The drive is swapped for a digital input terminal: its SII identity is not the
     ENI's, so it is reported (once) and never configured; the drive put back is."""
-    with network(plan, "memory") as (net, events):
+    rig = request.getfixturevalue("veth_netns") if where == "veth" else None
+    with network(plan, where, rig) as (net, events):
         io = IoCheck(net)
         seg = net.segment
         spec = next(s for s in emulate.specs_from_eni(plan, Library([ESI], cache=False), "x")
