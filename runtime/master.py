@@ -443,14 +443,17 @@ class Master:
         source = sources[0]
         delay = self.dc_delays.get(slave.name, 0)
         failed = ApplyError("cannot read the DC system times", slave.name)
+        # The slave's system time 0x0910 and its offset 0x0920 (0 after a power cycle; a
+        # slave that kept power keeps its old one) in one read of 24 bytes.
         got = yield from until_answered(
             [Datagram.physical(Cmd.FPRD, source.phys_addr, Reg.DC_SYSTEM_TIME, 8),
-             Datagram.physical(Cmd.FPRD, slave.phys_addr, Reg.DC_SYSTEM_TIME, 8)],
+             Datagram.physical(Cmd.FPRD, slave.phys_addr, Reg.DC_SYSTEM_TIME, 24)],
             time.monotonic() + TIMEOUT_COMMAND, failed)
-        (theirs,), (local,) = (struct.unpack("<Q", dg.data) for dg in got)
-        # The frame reads the source, then the slave: their delays from the reference
+        theirs, = struct.unpack("<Q", got[0].data)
+        own, old_offset = struct.unpack_from("<Q8xq", got[1].data)
+        # One frame passes the source and the slave: their delays from the reference
         # say how far apart the two reads were (negative: the slave came first).
-        offset = theirs + delay - self.dc_delays.get(source.name, 0) - local
+        offset = old_offset + theirs + delay - self.dc_delays.get(source.name, 0) - own
         yield from _write_until_ok(slave, Reg.DC_SYSTEM_TIME + 0x10,
                                    struct.pack("<qI", offset, delay))
         yield from _write_until_ok(slave, Reg.DC_SPEED_COUNTER_START, struct.pack("<H", 0x1000))

@@ -432,3 +432,79 @@ def test_the_inputs_of_a_slave_out_of_op_are_cleared_and_invalid(plan):
         io.run(0.05)
         assert net[position] != 0 and net.valid(position) and io.failures == []
         assert kinds(events, "axis1") == ["offline", "online"]
+
+
+def tree_network(events: list[Event]) -> Network:
+    esi = [EXAMPLES / "tree" / "esi", ESI]
+    built = build.compile_topology(topology.load(EXAMPLES / "tree" / "tree.yaml"),
+                                   Library(esi, cache=False)).plan
+    tree = eni_reader.read_bytes(eni_writer.to_bytes(built), "tree.eni.xml")
+    return Network.virtual(tree, esi=esi, on_event=events.append)
+
+
+def test_a_dc_slave_configured_again_from_init_keeps_its_system_time():
+    """axis3 (DC, powered all along) falls to SAFEOP+ERR and refuses OP once: the second
+    attempt starts from INIT and sets its system time offset again, from the offset it
+    still has; it must come back on the reference's time."""
+    from ecatcfg.esc import AlState as State
+    events: list[Event] = []
+    with tree_network(events) as net:
+        net.up()
+        drive = next(s for s in net.segment.slaves if s.name == "axis3")
+        drive.refuse["SO"] = 0x001A
+
+        def first_retry(event: Event) -> None:
+            events.append(event)
+            if event.kind == "retry":
+                drive.refuse.clear()
+        net.master.on_event = first_retry
+        drive._set_state(State.SAFEOP, 0x001A)
+        start = time.monotonic()
+        while net.online("axis3"):
+            assert time.monotonic() - start < 1
+            net.cycle()
+        while not net.online("axis3"):
+            assert time.monotonic() - start < BOUND_S + 2, [e.text for e in events[-5:]]
+            net.cycle()
+            time.sleep(0.0005)
+        assert [e.kind for e in events if e.slave == "axis3"] == ["offline", "retry", "online"]
+        diffs = net.master.read_dc_differences()
+        assert all(d is not None and abs(d) < 1000 for d in diffs.values()), diffs
+
+
+def test_a_dc_slave_powered_off_and_on_gets_its_system_time_back():
+    """examples/tree/tree.yaml has three DC drives; axis1 is the reference clock.  axis3
+    (at the end of the coupler's Ethernet out) loses power: it comes back with its local
+    clock from 0 and no offset; before OP its system time must again follow the
+    reference's (0x092C under the threshold), and it does."""
+    import struct
+
+    from ecatcfg.esc import Cmd, Reg
+    from ecatcfg.runtime.wire import Datagram
+    events: list[Event] = []
+    with tree_network(events) as net:
+        tree = net.plan
+        net.up()
+        seg = net.segment
+        drive = next(s for s in seg.slaves if s.name == "axis3")
+        seg.remove_cable("axis3")
+        drive.power_cycle()
+        start = time.monotonic()
+        while net.online("axis3"):
+            assert time.monotonic() - start < 1
+            net.cycle()
+        seg.restore_cable("axis3")
+        while not net.online("axis3"):
+            assert time.monotonic() - start < BOUND_S, [e.text for e in events[-5:]]
+            net.cycle()
+            time.sleep(0.0005)
+        assert drive.state == AlState.OP
+        diffs = net.master.read_dc_differences()
+        assert all(d is not None and abs(d) < 1000 for d in diffs.values()), diffs
+        reference = next(s for s in tree.slaves if s.name == "axis1")
+        mine = next(s for s in tree.slaves if s.name == "axis3")
+        back = net.master.transport.exchange([
+            Datagram.physical(Cmd.FPRD, reference.phys_addr, Reg.DC_SYSTEM_TIME, 8),
+            Datagram.physical(Cmd.FPRD, mine.phys_addr, Reg.DC_SYSTEM_TIME, 8)])
+        ref_time, own_time = (struct.unpack("<Q", dg.data)[0] for dg in back)
+        assert abs(own_time - ref_time) < 10_000      # the same time, within the line delay
