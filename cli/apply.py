@@ -49,7 +49,7 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
     p.add_argument("--format", choices=["text", "json"], default="text")
     p.add_argument("--skip-unsupported", action="store_true",
                    help="apply an ENI that asks for what apply does not do (SoE, FoE, AoE or "
-                        "VoE InitCmds, hot-connect groups ...: see docs/runtime.md) without "
+                        "VoE InitCmds, slave-to-slave copies ...: see docs/runtime.md) without "
                         "those parts, with one warning per slave; by default it is refused "
                         "before anything is sent")
     p.add_argument("--no-cache", action="store_true",

@@ -69,7 +69,7 @@ class Network:
                  recovery: bool = True,
                  _closers: Iterable[Callable[[], None]] = ()) -> None:
         """``skip_unsupported``: run an ENI that asks for what this master does not do
-        (``eni/contents.py``: SoE/FoE/AoE/VoE InitCmds, hot-connect groups ...) without
+        (``eni/contents.py``: SoE/FoE/AoE/VoE InitCmds, slave-to-slave copies ...) without
         those parts, with one warning per slave (an ``Event("skipped", ...)`` to
         ``on_event``, else a :class:`SkippedConfigWarning`); by default such an ENI raises
         :class:`~ecatcfg.eni.contents.UnsupportedEniError` here, before any frame is sent.
