@@ -9,6 +9,7 @@ if TYPE_CHECKING:
     from ecatcfg.cli.report import ApplyReport
     from ecatcfg.runtime.master import Event
     from ecatcfg.runtime.network import Network
+    from ecatcfg.runtime.realtime import RealtimeOptions
     from ecatcfg.runtime.service import Notifier
 
 STATES = {"init": 1, "preop": 2, "safeop": 4, "op": 8}
@@ -46,6 +47,22 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                    help="give up the DC wait after S seconds with an error naming the slave "
                         "(default 5)")
     p.add_argument("--pcap", metavar="FILE", help="record every frame as pcapng")
+    rt = p.add_argument_group(
+        "real-time options for the cycling thread (docs/runtime.md, \"Real-time options\"); "
+        "a refused one is an error (exit 1) saying how to grant it")
+    rt.add_argument("--rt-priority", type=int, metavar="N",
+                    help="cycle under SCHED_FIFO at priority N (1-99); needs root, "
+                         "CAP_SYS_NICE or an RLIMIT_RTPRIO of N (ulimit -r, LimitRTPRIO=)")
+    rt.add_argument("--lock-memory", action="store_true",
+                    help="lock the process's memory (mlockall) so no cycle waits for a page "
+                         "fault; needs root, CAP_IPC_LOCK or RLIMIT_MEMLOCK (ulimit -l, "
+                         "LimitMEMLOCK=)")
+    rt.add_argument("--cpu", metavar="LIST",
+                    help="run the cycling thread only on these CPUs, e.g. 1 or 2-3 (best an "
+                         "isolated one: isolcpus=)")
+    rt.add_argument("--busy-wait", type=int, metavar="US", default=0,
+                    help="wake US microseconds before each period boundary and spin to it "
+                         "(less wake-up jitter for that much CPU time per cycle; default 0)")
     p.add_argument("--format", choices=["text", "json"], default="text")
     p.add_argument("--skip-unsupported", action="store_true",
                    help="apply an ENI that asks for what apply does not do (SoE, FoE, AoE or "
@@ -85,6 +102,12 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as exc:
         option = "--dc-threshold" if "threshold" in str(exc) else "--dc-timeout"
         raise UsageError(f"{option}: {exc}") from None
+    realtime = _realtime_options(args)
+    if realtime is not None:
+        # Try them once here, undone at once: a refusal is reported before a frame is sent
+        # (the cycling thread applies them again for the run).
+        from ecatcfg.runtime.realtime import apply as apply_realtime
+        apply_realtime(realtime)()
     if args.pcap:
         output_file(args.pcap)
     if args.no_cache:
@@ -129,7 +152,8 @@ def run(args: argparse.Namespace) -> int:
                     if target >= AlState.SAFEOP and args.cycles != 0:
                         report.cycling(args.cycles)
                         notify.ready(status.replace(";", ", cycling;", 1))
-                        net.run(args.cycles, report.cycle_callback(net, notify.watchdog))
+                        net.run(args.cycles, report.cycle_callback(net, notify.watchdog),
+                                realtime=realtime)
                     else:
                         notify.ready(status)
                 finally:
@@ -161,6 +185,23 @@ def run(args: argparse.Namespace) -> int:
         if args.format == "json":
             print(json.dumps(report.as_json(), indent=2), flush=True)
     return 1 if failure else 0
+
+
+def _realtime_options(args: argparse.Namespace) -> RealtimeOptions | None:
+    """The --rt-priority/--lock-memory/--cpu/--busy-wait options, checked (exit 2 for a
+    value out of range); None without any."""
+    if args.rt_priority is None and not args.lock_memory and args.cpu is None \
+            and not args.busy_wait:
+        return None
+    from ecatcfg.errors import UsageError
+    from ecatcfg.runtime import realtime
+    try:
+        cpus = realtime.parse_cpus(args.cpu) if args.cpu is not None else None
+        return realtime.options(args.rt_priority, args.lock_memory, cpus, args.busy_wait)
+    except UsageError as exc:
+        flag = ("--cpu" if "CPU" in exc.message else "--busy-wait" if "busy" in exc.message
+                else "--rt-priority")
+        raise UsageError(f"{flag}: {exc.message}") from None
 
 
 class _SignalGuard:

@@ -7,20 +7,32 @@ ecatcfg write offsets into a compact image (the data starts at the offset); Twin
 is shaped like the frame, and its offsets are those of the datagram *header* in the
 Ethernet frame (16 for the first), so the data starts 10 bytes later.  A frame whose
 offsets are exactly its datagrams' header positions is read the TwinCAT way.
+
+The hot path (docs/BENCHMARKS.md, "Cyclic"): each frame is encoded once per AL state
+(:class:`_Prepared`, by ``wire.encode``, the one home of the layout); a cycle copies the
+output image into it through memoryviews, sets the datagram index, receives the reply
+into a buffer of its own, checks its shape and reads the working counters with one
+``struct`` call at fixed offsets, and copies the read data into the input image.  No
+``Datagram``, list or frame is built per cycle.
 """
 
 from __future__ import annotations
 
+import struct
 import time
+from array import array
 
 from ecatcfg.eni.plan import CyclicCmd, NetworkPlan
-from ecatcfg.esc import AlState, Cmd, Reg
+from ecatcfg.esc import ETHERTYPE, AlState, Cmd, Reg
 from ecatcfg.record import field, record
 from ecatcfg.runtime import wire
 from ecatcfg.runtime.transport import Transport
-from ecatcfg.runtime.wire import Datagram
 
 _READS = {Cmd.LRD, Cmd.LRW, Cmd.APRD, Cmd.FPRD, Cmd.BRD, Cmd.ARMW, Cmd.FRMW}
+_FLAG_SHAPE = wire.LEN_MASK | wire.MORE          # what a slave never changes in len|flags
+_ETHERTYPE_LE = struct.unpack("<H", struct.pack("!H", ETHERTYPE))[0]
+PERIODS_KEPT = 65_536       # the last periods CycleStats keeps (jitter), in a ring
+REPLY_BUFFER = 2048         # > 1514, the largest Ethernet frame without FCS
 
 
 @record
@@ -40,7 +52,28 @@ class CycleStats:
     lost_frames: int = 0
     wkc_errors: int = 0
     wkc_error_cmds: dict[str, int] = field(default_factory=dict)
-    periods_us: list[float] = field(default_factory=list)
+    # The periods in a ring of doubles, made at the first period: appending to a list
+    # would allocate a float per cycle.
+    _ring: array[float] | None = None
+    _count: int = 0
+
+    def add_period(self, us: float) -> None:
+        ring = self._ring
+        if ring is None:
+            ring = self._ring = array("d", bytes(8 * PERIODS_KEPT))
+        ring[self._count % PERIODS_KEPT] = us
+        self._count += 1
+
+    @property
+    def periods_us(self) -> list[float]:
+        """The last (at most ``PERIODS_KEPT``) cycle periods, oldest first, in us."""
+        ring, n = self._ring, self._count
+        if ring is None:
+            return []
+        if n <= PERIODS_KEPT:
+            return ring[:n].tolist()
+        at = n % PERIODS_KEPT
+        return (ring[at:] + ring[:at]).tolist()
 
     def jitter(self) -> dict[str, float]:
         """p50/p99/max of the cycle period's deviation from the nominal, in us."""
@@ -64,6 +97,75 @@ def _frame_shaped(cmds: list[CyclicCmd]) -> bool:
             return False
         pos += wire.DG_HEADER_LEN + c.length + wire.WKC.size
     return True
+
+
+class _Prepared:
+    """One cyclic frame of one AL state, encoded once, with the places a cycle touches."""
+
+    __slots__ = ("slots", "frame", "index_at", "length", "_layout", "_shape", "_word",
+                 "_outputs", "_out_copies", "_in_copies", "_image_ids", "values")
+
+    def __init__(self, slots: list[_Slot], constant: list[bytes]) -> None:
+        self.slots = slots
+        frame = bytearray(wire.encode([wire.datagram_for(s.cmd, data)
+                                       for s, data in zip(slots, constant)]))
+        self.frame = frame
+        places = wire.datagram_offsets(frame)
+        self.index_at = tuple(pos + 1 for pos, _ in places)
+        last, n = places[-1]
+        self.length = last + wire.DG_HEADER_LEN + n + wire.WKC.size
+        # EtherType, EtherCAT header, then per datagram cmd, index, len|flags, WKC.
+        self._layout = struct.Struct("<12xHH" + "".join(
+            f"BB4xH2x{n}xH" for _, n in places))
+        # What the reply must show: the header words and commands sent, index aside.
+        sent = self._layout.unpack_from(frame)
+        self._word = sent[1]
+        self._shape = tuple((sent[at], sent[at + 2] & _FLAG_SHAPE)
+                            for at in range(2, len(sent), 4))
+        self._image_ids: tuple[int, int] = (0, 0)
+        self._out_copies: tuple[tuple[memoryview, memoryview], ...] = ()
+        self._in_copies: tuple[tuple[memoryview, memoryview], ...] = ()
+        self.values: tuple[int, ...] = ()
+
+    def bind(self, inputs: bytearray, outputs: bytearray, reply: bytearray) -> None:
+        """Views from the frame to the images (again if the images were replaced)."""
+        ids = (id(inputs), id(outputs))
+        if ids == self._image_ids:
+            return
+        frame, places = memoryview(self.frame), wire.datagram_offsets(self.frame)
+        back, ins, outs = memoryview(reply), memoryview(inputs), memoryview(outputs)
+        out_copies, in_copies = [], []
+        for s, (pos, n) in zip(self.slots, places):
+            data = pos + wire.DG_HEADER_LEN
+            if s.cmd.cmd in (Cmd.LWR, Cmd.LRW):      # process data from the output image
+                out_copies.append((frame[data:data + n], outs[s.out_at:s.out_at + n]))
+            if s.cmd.cmd in _READS:
+                in_copies.append((ins[s.in_at:s.in_at + n], back[data:data + n]))
+        self._out_copies, self._in_copies = tuple(out_copies), tuple(in_copies)
+        self._image_ids = ids
+
+    def fill(self) -> None:
+        for to, source in self._out_copies:
+            to[:] = source
+
+    def matches(self, reply: bytearray, size: int, idx: int) -> bool:
+        if size < self.length:
+            return False
+        values = self._layout.unpack_from(reply)
+        if values[0] != _ETHERTYPE_LE or values[1] != self._word:
+            return False
+        at = 2
+        for cmd, flags in self._shape:
+            if values[at] != cmd or values[at + 1] != idx \
+                    or values[at + 2] & _FLAG_SHAPE != flags:
+                return False
+            at += 4
+        self.values = values
+        return True
+
+    def take(self) -> None:
+        for to, source in self._in_copies:
+            to[:] = source
 
 
 class CyclicFrames:
@@ -96,46 +198,55 @@ class CyclicFrames:
         self.outputs = bytearray(out_size)
         self.stats = CycleStats()
         self._last_start: float | None = None
+        self._prepared: dict[AlState, tuple[_Prepared, ...]] = {}
+        self._reply = bytearray(REPLY_BUFFER)
+
+    def prepared(self, state: AlState) -> tuple[_Prepared, ...]:
+        """The frames of ``state``, encoded (once per state)."""
+        found = self._prepared.get(state)
+        if found is None:
+            found = self._prepared[state] = tuple(
+                _Prepared(active, [_constant(s) for s in active])
+                for active in ([s for s in slots if state.name in s.cmd.states]
+                               for slots in self.frames) if active)
+        return found
 
     def exchange(self, transport: Transport, state: AlState, timeout: float = 0.01) -> bool:
         """One cycle: every frame with the commands of ``state``; ``True`` if all came back
-        with the working counters the ENI expects."""
+        with the working counters expected (each slot's ``expected``)."""
         now = time.perf_counter()
+        stats = self.stats
         if self._last_start is not None:
-            self.stats.periods_us.append((now - self._last_start) * 1e6)
-            if len(self.stats.periods_us) > 100_000:
-                del self.stats.periods_us[:50_000]
+            stats.add_period((now - self._last_start) * 1e6)
         self._last_start = now
-        self.stats.cycles += 1
-        name = state.name
+        stats.cycles += 1
         ok = True
-        for slots in self.frames:
-            active = [s for s in slots if name in s.cmd.states]
-            if not active:
-                continue
-            dgs = [self._datagram(s) for s in active]
-            back = transport.exchange(dgs, timeout)
-            if back is None:
-                self.stats.lost_frames += 1
-                for s in active:
+        inputs, outputs, reply = self.inputs, self.outputs, self._reply
+        for p in self.prepared(state):
+            p.bind(inputs, outputs, reply)
+            p.fill()
+            if not transport.exchange_prepared(p, reply, timeout):
+                stats.lost_frames += 1
+                for s in p.slots:
                     s.wkc = -1
                 ok = False
                 continue
-            for s, dg in zip(active, back):
-                if s.cmd.cmd in _READS:
-                    self.inputs[s.in_at:s.in_at + s.cmd.length] = dg.data
-                s.wkc = dg.wkc
-                if s.expected is not None and dg.wkc != s.expected:
-                    self.stats.wkc_errors += 1
+            p.take()
+            at = 5                              # the first WKC in p.values
+            for s in p.slots:
+                wkc = s.wkc = p.values[at]
+                at += 4
+                if s.expected is not None and wkc != s.expected:
+                    stats.wkc_errors += 1
                     key = s.cmd.comment or f"cmd {s.cmd.cmd}"
-                    self.stats.wkc_error_cmds[key] = self.stats.wkc_error_cmds.get(key, 0) + 1
+                    stats.wkc_error_cmds[key] = stats.wkc_error_cmds.get(key, 0) + 1
                     ok = False
         return ok
 
-    def _datagram(self, s: _Slot) -> Datagram:
-        c = s.cmd
-        if c.cmd in (Cmd.LWR, Cmd.LRW):           # process data from the output image
-            data = bytes(self.outputs[s.out_at:s.out_at + c.length])
-        else:
-            data = c.data if c.data is not None else bytes(c.length)
-        return wire.datagram_for(c, data)
+
+def _constant(s: _Slot) -> bytes:
+    """What a datagram carries apart from the output image: the ENI's data, else zeros."""
+    c = s.cmd
+    if c.cmd in (Cmd.LWR, Cmd.LRW) or c.data is None:
+        return bytes(c.length)
+    return c.data

@@ -52,7 +52,8 @@ class LinkError(EcatcfgError):
 class Link(Protocol):
     """What the master and the virtual segment need from a wire."""
 
-    def send(self, frame: bytes) -> None: ...
+    # The frame is on its way when send returns: the caller may reuse the buffer.
+    def send(self, frame: bytes | bytearray) -> None: ...
 
     def recv(self, timeout: float | None) -> bytes | None: ...
 
@@ -155,7 +156,7 @@ class RawLink(_Base):
     def fileno(self) -> int:
         return self._fd
 
-    def send(self, frame: bytes) -> None:
+    def send(self, frame: bytes | bytearray) -> None:
         """Send ``frame`` (bytes-like) exactly as given; blocks only while the send buffer is
         full."""
         try:
@@ -212,6 +213,39 @@ class RawLink(_Base):
             if not poller.poll(wait):
                 if deadline is not None and time.monotonic() >= deadline:
                     return None
+            elif self._closed:
+                raise LinkError(f"{self.iface}: link is closed")
+
+    def recv_into(self, buffer: bytearray, timeout: float | None = None) -> int:
+        """The next received frame copied into ``buffer`` (at least MTU + 18 bytes long):
+        its length, or 0 after ``timeout`` seconds.  Allocates no frame (the cyclic path)."""
+        sock = self._sock
+        deadline: float | None = None
+        while True:
+            try:
+                n, addr = sock.recvfrom_into(buffer, 0, socket.MSG_DONTWAIT)
+            except BlockingIOError:
+                pass
+            except OSError as exc:
+                raise self._recv_error(exc) from None
+            else:
+                if addr[2] != socket.PACKET_OUTGOING:
+                    return n
+                continue
+            if timeout is None:
+                wait = None
+            else:
+                now = time.monotonic()
+                if deadline is None:
+                    deadline = now + timeout
+                if deadline - now <= 0:
+                    return 0
+                wait = (deadline - now) * 1000.0
+            poller = select.poll()
+            poller.register(self._fd, select.POLLIN)
+            if not poller.poll(wait):
+                if deadline is not None and time.monotonic() >= deadline:
+                    return 0
             elif self._closed:
                 raise LinkError(f"{self.iface}: link is closed")
 
@@ -309,7 +343,7 @@ class MemoryLink(_Base):
         """Frames waiting to be received."""
         return len(self._queue)
 
-    def send(self, frame: bytes) -> None:
+    def send(self, frame: bytes | bytearray) -> None:
         if self._closed:
             raise LinkError(f"{self.iface}: link is closed")
         size = len(frame)
@@ -360,6 +394,15 @@ class MemoryLink(_Base):
             if queue:
                 self._cv.notify()       # another receiving thread may take the next one
             return frame
+
+    def recv_into(self, buffer: bytearray, timeout: float | None = None) -> int:
+        """The next frame copied into ``buffer``: its length, or 0 after ``timeout``."""
+        frame = self.recv(timeout)
+        if frame is None:
+            return 0
+        n = len(frame)
+        buffer[:n] = frame
+        return n
 
     def recv_many(self, max_frames: int, timeout: float | None = None) -> list[bytes]:
         """Up to ``max_frames`` frames: waits up to ``timeout`` for the first one, then takes

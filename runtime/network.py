@@ -20,6 +20,7 @@ callback between the frames.
 
 from __future__ import annotations
 
+import gc
 import struct
 import threading
 import time
@@ -39,6 +40,7 @@ if TYPE_CHECKING:                   # imported where used: `import ecatcfg.runti
     from ecatcfg.runtime.dc_clock import DcModel
     from ecatcfg.runtime.link import Link
     from ecatcfg.runtime.pcap import PcapRecorder
+    from ecatcfg.runtime.realtime import RealtimeOptions
     from ecatcfg.runtime.segment import Faults, VirtualSegment
     from ecatcfg.runtime.timing import Timing
 
@@ -255,17 +257,27 @@ class Network:
                 f"; did you mean {', '.join(map(repr, close))}?" if close else "")) from None
 
     def run(self, cycles: int | None = None, callback: Callable[[Network], None] | None = None,
-            *, background: bool = False) -> None:
+            *, background: bool = False, realtime: RealtimeOptions | None = None) -> None:
         """Cycle at the ENI's cycle time (``cycles`` times, or until :meth:`stop`), calling
-        ``callback(network)`` after every cycle."""
-        if background:
-            self._stop.clear()
-            self._thread = threading.Thread(target=self._loop, args=(cycles, callback),
-                                            daemon=True, name="ecat-cycle")
-            self._thread.start()
-        else:
-            self._stop.clear()
-            self._loop(cycles, callback)
+        ``callback(network)`` after every cycle.  ``realtime``: the options of
+        ``runtime/realtime.py`` (SCHED_FIFO, mlockall, CPU affinity, busy-wait), applied to
+        the cycling thread for the run and undone after it; a refusal raises
+        :class:`~ecatcfg.runtime.realtime.RealtimeError` here, before the first cycle."""
+        self._stop.clear()
+        if not background:
+            self._loop(cycles, callback, realtime)
+            return
+        started = threading.Event()
+        refused: list[BaseException] = []
+        self._thread = threading.Thread(target=self._loop,
+                                        args=(cycles, callback, realtime, started, refused),
+                                        daemon=True, name="ecat-cycle")
+        self._thread.start()
+        started.wait()
+        if refused:
+            self._thread.join()
+            self._thread = None
+            raise refused[0]
 
     def reset_stats(self) -> CycleStats:
         """Count cycles from here on in :attr:`run_stats` (apart from the cycles run while
@@ -274,24 +286,59 @@ class Network:
         self.run_stats = self.master.cyclic.stats = CycleStats()
         return self.run_stats
 
-    def _loop(self, cycles: int | None, callback: Callable[[Network], None] | None) -> None:
+    def _loop(self, cycles: int | None, callback: Callable[[Network], None] | None,
+              realtime: RealtimeOptions | None = None, started: threading.Event | None = None,
+              refused: list[BaseException] | None = None) -> None:
         from ecatcfg.runtime.cyclic import CycleStats
-        self.reset_stats()          # the statistics of this run
-        period = self.master.cyclic.cycle_time_us / 1e6
-        next_at = time.perf_counter()
-        done = 0
-        while not self._stop.is_set() and (cycles is None or done < cycles):
-            self.cycle()
-            done += 1
-            if callback is not None:
-                callback(self)
-            next_at += period
-            delay = next_at - time.perf_counter()
-            if delay > 0:
-                time.sleep(delay)
-            else:
-                next_at = time.perf_counter()       # late: do not try to catch up
-        self.master.cyclic.stats = CycleStats()
+        restore: Callable[[], None] | None = None
+        try:
+            if realtime is not None:
+                from ecatcfg.runtime import realtime as rt
+                restore = rt.apply(realtime)
+        except BaseException as exc:
+            if refused is None:
+                raise
+            refused.append(exc)
+            return
+        finally:
+            if started is not None:
+                started.set()
+        frozen = realtime is not None
+        if frozen:
+            # Everything allocated so far goes to the permanent generation: a collection
+            # the callback's garbage triggers then scans only what is new (docs/runtime.md).
+            gc.collect()
+            gc.freeze()
+        try:
+            self.reset_stats()          # the statistics of this run
+            period = self.master.cyclic.cycle_time_us / 1e6
+            margin = realtime.busy_wait_us / 1e6 if realtime is not None else 0.0
+            clock, sleep = time.perf_counter, time.sleep
+            next_at = clock()
+            done = 0
+            while not self._stop.is_set() and (cycles is None or done < cycles):
+                self.cycle()
+                done += 1
+                if callback is not None:
+                    callback(self)
+                next_at += period
+                now = clock()
+                if now >= next_at:
+                    next_at = now               # late: do not try to catch up
+                    continue
+                # An absolute deadline: sleep to it, or to ``margin`` before it and spin on
+                # the clock to it, so neither the cycle's time nor a late wake-up adds up.
+                if next_at - now > margin:
+                    sleep(next_at - now - margin)
+                if margin:
+                    while clock() < next_at:
+                        pass
+        finally:
+            if frozen:
+                gc.unfreeze()
+            if restore is not None:
+                restore()
+            self.master.cyclic.stats = CycleStats()
 
     def stop(self) -> None:
         self._stop.set()

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 from ecatcfg.esc import MAX_DATAGRAM_DATA
 from ecatcfg.record import record
@@ -76,6 +76,57 @@ class Transport:
             if back and back[0].idx == idx and [(d.cmd, len(d.data)) for d in back] == shape:
                 return back
             self.counters.stray_replies += 1
+
+    def exchange_prepared(self, prepared: Prepared, reply: bytearray,
+                          timeout: float | None = None) -> int:
+        """Send a prepared frame under the next index and wait for it in ``reply``: the
+        reply's length, or 0 if the frame was lost.  The same matching as :meth:`exchange`
+        (index and shape; anything else is a stray reply), without building objects: the
+        cyclic frames' path."""
+        self._idx = idx = (self._idx + 1) & 0xFF
+        frame = prepared.frame
+        for at in prepared.index_at:
+            frame[at] = idx
+        link = self.link
+        link.send(frame)
+        self.counters.frames_sent += 1
+        recorder = self.recorder
+        if recorder:
+            recorder(bytes(frame), True)
+        receive = getattr(link, "recv_into", None)
+        deadline = time.monotonic() + (self.timeout if timeout is None else timeout)
+        while True:
+            left = deadline - time.monotonic()
+            if left <= 0:
+                self.counters.frames_lost += 1
+                return 0
+            if receive is not None:
+                size = int(receive(reply, left))
+            else:
+                got = link.recv(left)
+                size = 0 if got is None else len(got)
+                if got is not None:
+                    reply[:size] = got
+            if not size:
+                continue
+            if recorder:
+                recorder(bytes(reply[:size]), False)
+            if prepared.matches(reply, size, idx):
+                return size
+            self.counters.stray_replies += 1
+
+
+class Prepared(Protocol):
+    """A frame built once whose replies :meth:`Transport.exchange_prepared` matches without
+    decoding it (``runtime/cyclic.py``)."""
+
+    frame: bytearray            # the Ethernet frame as sent, datagram indices aside
+    index_at: tuple[int, ...]   # offset of each datagram's index byte
+
+    def matches(self, reply: bytearray, size: int, idx: int) -> bool:
+        """``reply[:size]`` is this frame come back with index ``idx`` on every datagram:
+        same EtherCAT header, same command and length on each datagram."""
+        ...
 
 
 def pack(datagrams: list[Datagram]) -> list[list[Datagram]]:
