@@ -331,8 +331,11 @@ class Network:
                 if next_at - now > margin:
                     sleep(next_at - now - margin)
                 if margin:
+                    # sleep(0) lets go of the GIL on every turn: another thread of the
+                    # process (a virtual segment, the application's) wanting it would
+                    # otherwise wait out the 5 ms switch interval, and the cycle after it.
                     while clock() < next_at:
-                        pass
+                        sleep(0)
         finally:
             if frozen:
                 gc.unfreeze()
