@@ -23,14 +23,13 @@ import time
 from array import array
 
 from ecatcfg.eni.plan import CyclicCmd, NetworkPlan
-from ecatcfg.esc import ETHERTYPE, AlState, Cmd, Reg
+from ecatcfg.esc import AlState, Cmd, Reg
 from ecatcfg.record import field, record
 from ecatcfg.runtime import wire
 from ecatcfg.runtime.transport import Transport
 
 _READS = {Cmd.LRD, Cmd.LRW, Cmd.APRD, Cmd.FPRD, Cmd.BRD, Cmd.ARMW, Cmd.FRMW}
 _FLAG_SHAPE = wire.LEN_MASK | wire.MORE          # what a slave never changes in len|flags
-_ETHERTYPE_LE = struct.unpack("<H", struct.pack("!H", ETHERTYPE))[0]
 PERIODS_KEPT = 65_536       # the last periods CycleStats keeps (jitter), in a ring
 REPLY_BUFFER = 2048         # > 1514, the largest Ethernet frame without FCS
 
@@ -102,8 +101,8 @@ def _frame_shaped(cmds: list[CyclicCmd]) -> bool:
 class _Prepared:
     """One cyclic frame of one AL state, encoded once, with the places a cycle touches."""
 
-    __slots__ = ("slots", "frame", "index_at", "length", "_layout", "_shape", "_word",
-                 "_outputs", "_out_copies", "_in_copies", "_image_ids", "values")
+    __slots__ = ("slots", "frame", "index_at", "length", "_header", "_wkcs", "_expect",
+                 "_shape", "_out_copies", "_in_copies", "_inputs", "_outputs", "wkcs")
 
     def __init__(self, slots: list[_Slot], constant: list[bytes]) -> None:
         self.slots = slots
@@ -114,23 +113,24 @@ class _Prepared:
         self.index_at = tuple(pos + 1 for pos, _ in places)
         last, n = places[-1]
         self.length = last + wire.DG_HEADER_LEN + n + wire.WKC.size
-        # EtherType, EtherCAT header, then per datagram cmd, index, len|flags, WKC.
-        self._layout = struct.Struct("<12xHH" + "".join(
-            f"BB4xH2x{n}xH" for _, n in places))
-        # What the reply must show: the header words and commands sent, index aside.
-        sent = self._layout.unpack_from(frame)
-        self._word = sent[1]
-        self._shape = tuple((sent[at], sent[at + 2] & _FLAG_SHAPE)
-                            for at in range(2, len(sent), 4))
-        self._image_ids: tuple[int, int] = (0, 0)
+        # The fixed offsets, read with one struct call each: EtherType, EtherCAT header
+        # and each datagram's cmd, index and len|flags; and each datagram's WKC.
+        self._header = struct.Struct("<12xHH" + "".join(f"BB4xH2x{n}x2x" for _, n in places))
+        self._wkcs = struct.Struct(f"<{wire.FRAME_HEADER_END}x" + "".join(
+            f"{wire.DG_HEADER_LEN}x{n}xH" for _, n in places))
+        sent = self._header.unpack_from(frame)
+        # What a reply under index i reads as, made at the index's first use.
+        self._expect: list[tuple[int, ...] | None] = [None] * 256
+        self._shape = sent
         self._out_copies: tuple[tuple[memoryview, memoryview], ...] = ()
         self._in_copies: tuple[tuple[memoryview, memoryview], ...] = ()
-        self.values: tuple[int, ...] = ()
+        self._inputs: bytearray | None = None
+        self._outputs: bytearray | None = None
+        self.wkcs: tuple[int, ...] = ()        # the working counters of the last reply
 
     def bind(self, inputs: bytearray, outputs: bytearray, reply: bytearray) -> None:
         """Views from the frame to the images (again if the images were replaced)."""
-        ids = (id(inputs), id(outputs))
-        if ids == self._image_ids:
+        if inputs is self._inputs and outputs is self._outputs:
             return
         frame, places = memoryview(self.frame), wire.datagram_offsets(self.frame)
         back, ins, outs = memoryview(reply), memoryview(inputs), memoryview(outputs)
@@ -142,25 +142,31 @@ class _Prepared:
             if s.cmd.cmd in _READS:
                 in_copies.append((ins[s.in_at:s.in_at + n], back[data:data + n]))
         self._out_copies, self._in_copies = tuple(out_copies), tuple(in_copies)
-        self._image_ids = ids
+        self._inputs, self._outputs = inputs, outputs
 
     def fill(self) -> None:
         for to, source in self._out_copies:
             to[:] = source
 
     def matches(self, reply: bytearray, size: int, idx: int) -> bool:
+        """The reply is this frame come back under ``idx``: EtherType and EtherCAT header
+        as sent, and every datagram's command, index and length (ignoring the circulating
+        bit a slave may set); then its working counters are in :attr:`wkcs`."""
         if size < self.length:
             return False
-        values = self._layout.unpack_from(reply)
-        if values[0] != _ETHERTYPE_LE or values[1] != self._word:
-            return False
-        at = 2
-        for cmd, flags in self._shape:
-            if values[at] != cmd or values[at + 1] != idx \
-                    or values[at + 2] & _FLAG_SHAPE != flags:
+        got = self._header.unpack_from(reply)
+        expect = self._expect[idx]
+        if expect is None:
+            expect = self._expect[idx] = tuple(
+                idx if k > 1 and k % 3 == 0 else v for k, v in enumerate(self._shape))
+        if got != expect:
+            if got[0] != expect[0] or got[1] != expect[1]:
                 return False
-            at += 4
-        self.values = values
+            for k in range(2, len(got), 3):   # the slow way: masked len|flags
+                if got[k] != expect[k] or got[k + 1] != idx \
+                        or got[k + 2] & _FLAG_SHAPE != expect[k + 2] & _FLAG_SHAPE:
+                    return False
+        self.wkcs = self._wkcs.unpack_from(reply)
         return True
 
     def take(self) -> None:
@@ -222,7 +228,7 @@ class CyclicFrames:
         stats.cycles += 1
         ok = True
         inputs, outputs, reply = self.inputs, self.outputs, self._reply
-        for p in self.prepared(state):
+        for p in self._prepared.get(state) or self.prepared(state):
             p.bind(inputs, outputs, reply)
             p.fill()
             if not transport.exchange_prepared(p, reply, timeout):
@@ -232,10 +238,8 @@ class CyclicFrames:
                 ok = False
                 continue
             p.take()
-            at = 5                              # the first WKC in p.values
-            for s in p.slots:
-                wkc = s.wkc = p.values[at]
-                at += 4
+            for s, wkc in zip(p.slots, p.wkcs):
+                s.wkc = wkc
                 if s.expected is not None and wkc != s.expected:
                     stats.wkc_errors += 1
                     key = s.cmd.comment or f"cmd {s.cmd.cmd}"

@@ -103,12 +103,13 @@ class RawLink(_Base):
     ``tests/rig.py`` for opening one inside another namespace).
     """
 
-    __slots__ = ("iface", "ethertype", "mtu", "_sock", "_fd", "_bufsize", "_closed")
+    __slots__ = ("iface", "ethertype", "mtu", "_sock", "_fd", "_bufsize", "_closed", "_rcvtimeo")
 
     def __init__(self, iface: str, *, ethertype: int = ETHERTYPE, rcvbuf: int = _RCVBUF) -> None:
         self.iface = iface
         self.ethertype = ethertype
         self._closed = True
+        self._rcvtimeo = 0.0        # s, the SO_RCVTIMEO recv_into set (0: none)
         try:
             # Protocol 0 receives nothing until bind() names the EtherType; a socket created
             # with the protocol costs the kernel an RCU grace period (6-16 ms) at creation
@@ -218,36 +219,36 @@ class RawLink(_Base):
 
     def recv_into(self, buffer: bytearray, timeout: float | None = None) -> int:
         """The next received frame copied into ``buffer`` (at least MTU + 18 bytes long):
-        its length, or 0 after ``timeout`` seconds.  Allocates no frame (the cyclic path)."""
-        sock = self._sock
-        deadline: float | None = None
+        its length, or 0 after ``timeout`` seconds.  Allocates no frame (the cyclic path).
+
+        One blocking ``recvfrom_into`` bounded by ``SO_RCVTIMEO`` (set when the timeout
+        changes by more than 0.5 ms), as SOEM waits: no poll() before it and no exception
+        while a reply is on its way.  May wait up to 0.5 ms past ``timeout``."""
+        sock, outgoing = self._sock, socket.PACKET_OUTGOING
+        deadline = None if timeout is None else time.monotonic() + timeout
+        wait = timeout
         while True:
+            if wait is None:
+                wait = 0.0                  # SO_RCVTIMEO 0: block until a frame comes
+            elif wait <= 0:
+                return 0
+            if abs(wait - self._rcvtimeo) > 0.0005:
+                sec = int(wait)
+                sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVTIMEO,
+                                struct.pack("ll", sec, max(1, int((wait - sec) * 1e6))
+                                            if wait else 0))
+                self._rcvtimeo = wait
             try:
-                n, addr = sock.recvfrom_into(buffer, 0, socket.MSG_DONTWAIT)
-            except BlockingIOError:
-                pass
+                n, addr = sock.recvfrom_into(buffer)
+            except (BlockingIOError, InterruptedError):
+                n, addr = 0, None
             except OSError as exc:
                 raise self._recv_error(exc) from None
-            else:
-                if addr[2] != socket.PACKET_OUTGOING:
-                    return n
-                continue
-            if timeout is None:
-                wait = None
-            else:
-                now = time.monotonic()
-                if deadline is None:
-                    deadline = now + timeout
-                if deadline - now <= 0:
-                    return 0
-                wait = (deadline - now) * 1000.0
-            poller = select.poll()
-            poller.register(self._fd, select.POLLIN)
-            if not poller.poll(wait):
-                if deadline is not None and time.monotonic() >= deadline:
-                    return 0
-            elif self._closed:
+            if self._closed:
                 raise LinkError(f"{self.iface}: link is closed")
+            if addr is not None and addr[2] != outgoing:
+                return n
+            wait = None if deadline is None else deadline - time.monotonic()
 
     def recv_many(self, max_frames: int, timeout: float | None = None) -> list[bytes]:
         """Up to ``max_frames`` frames: waits up to ``timeout`` for the first one, then takes

@@ -43,6 +43,7 @@ class Transport:
         self.timeout = timeout
         self.counters = Counters()
         self._idx = 0
+        self._recv_into = getattr(link, "recv_into", None)   # links that have it
 
     def exchange(self, datagrams: list[Datagram],
                  timeout: float | None = None) -> list[Datagram] | None:
@@ -93,7 +94,7 @@ class Transport:
         recorder = self.recorder
         if recorder:
             recorder(bytes(frame), True)
-        receive = getattr(link, "recv_into", None)
+        receive = self._recv_into
         deadline = time.monotonic() + (self.timeout if timeout is None else timeout)
         while True:
             left = deadline - time.monotonic()

@@ -307,13 +307,19 @@ class _TamperingLink:
     previous frame's reply (late), then a copy of this one with a datagram's length
     changed (another shape)."""
 
-    def __init__(self, segment) -> None:
+    def __init__(self, segment, circulate: bool = False) -> None:
         self.segment = segment
         self.queue: list[bytes] = []
         self.last: bytes | None = None
+        self.circulate = circulate          # set the circulating bit in every reply
 
     def send(self, frame) -> None:
         reply = bytes(self.segment.process(bytes(frame)))
+        if self.circulate:
+            marked = bytearray(reply)
+            for pos, _n in wire.datagram_offsets(marked):
+                marked[pos + 7] |= wire.CIRCULATING >> 8
+            reply = bytes(marked)
         if self.last is not None:
             self.queue.append(self.last)
         reshaped = bytearray(reply)
@@ -332,11 +338,14 @@ class _TamperingLink:
         pass
 
 
-def test_late_and_reshaped_replies_are_never_taken(example_plan):
+@pytest.mark.parametrize("circulate", [False, True])
+def test_late_and_reshaped_replies_are_never_taken(example_plan, circulate):
+    """... and a reply whose datagrams carry the circulating bit (ETG.1000.4: set by a
+    slave, not a change of shape) is taken, as Transport.exchange takes it."""
     from ecatcfg.runtime import emulate
     seg = emulate.segment(emulate.specs_from_eni(example_plan, Library([ESI], cache=False),
                                                  "x"))
-    link = _TamperingLink(seg)
+    link = _TamperingLink(seg, circulate)
     with Network(example_plan, link) as net:           # type: ignore[arg-type]
         net.up()                    # the way up meets the same extra replies, and copes
         counters, cyclic = net.master.transport.counters, net.master.cyclic
