@@ -87,7 +87,8 @@ def worker_ecatcfg(args: argparse.Namespace) -> dict:
                 assert st is not None
                 out["rates"].append({"period_us": period, "cycles": n,
                                      "achieved_hz": n / took,
-                                     "lost": st.lost_frames + st.wkc_errors})
+                                     "lost": st.lost_frames + st.wkc_errors,
+                                     "long": sorted(st.periods_us)[-3:]})
         elif args.mode == "profile":
             import cProfile
             import io
@@ -115,7 +116,10 @@ def worker_ecatcfg(args: argparse.Namespace) -> dict:
             out["cpu_us"] = (time.process_time() - cpu) / n * 1e6
             out["cycles"], out["lost"] = st.cycles, st.lost_frames + st.wkc_errors
             out["jitter"] = st.jitter()
-            out["periods"] = len(st.periods_us)
+            periods = st.periods_us
+            out["periods"] = len(periods)
+            # The long ones, where they fell: a pattern (every N s) points at a cause.
+            out["long"] = [(k, round(p)) for k, p in enumerate(periods) if p > 2000][:40]
     return out
 
 

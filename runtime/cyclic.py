@@ -217,6 +217,10 @@ class CyclicFrames:
                                for slots in self.frames) if active)
         return found
 
+    def restart_periods(self) -> None:
+        """The next cycle starts the periods afresh (not measured from a cycle before)."""
+        self._last_start = None
+
     def exchange(self, transport: Transport, state: AlState, timeout: float = 0.01) -> bool:
         """One cycle: every frame with the commands of ``state``; ``True`` if all came back
         with the working counters expected (each slot's ``expected``)."""

@@ -284,6 +284,7 @@ class Network:
         the slaves change state); :meth:`run` does this itself."""
         from ecatcfg.runtime.cyclic import CycleStats
         self.run_stats = self.master.cyclic.stats = CycleStats()
+        self.master.cyclic.restart_periods()
         return self.run_stats
 
     def _loop(self, cycles: int | None, callback: Callable[[Network], None] | None,

@@ -395,3 +395,15 @@ def test_no_allocation_grows_per_cycle(example_plan):
     top = snap1.compare_to(snap0, "lineno")[:5]
     # 4000 cycles: a byte per cycle would be 4000; allow the allocator's noise.
     assert grown - base < 2000, "\n".join(map(str, top))
+
+
+def test_the_periods_of_a_run_start_with_the_run(example_plan):
+    """The first period of a run is measured from its first cycle, not from a cycle run
+    before it (a pause before run() is not a period of the run)."""
+    with Network.virtual(example_plan, esi=[ESI]) as net:
+        net.up()
+        net.cycle()
+        time.sleep(0.2)
+        net.run(5)
+        periods = net.run_stats.periods_us
+    assert len(periods) == 4 and max(periods) < 100_000, periods
