@@ -63,7 +63,7 @@ def worker_ecatcfg(args: argparse.Namespace) -> dict:
     from ecatcfg.runtime.network import Network
 
     out: dict = {}
-    with Network(args.eni, RawLink(IF_A)) as net:
+    with Network(args.eni, RawLink(IF_A), recovery=not args.no_recovery) as net:
         net.up()
         for _ in range(WARMUP):
             net.cycle()
@@ -254,6 +254,7 @@ def main() -> None:
     ap.add_argument("--mode", choices=["cpu", "rate", "jitter", "profile"],
                     help=argparse.SUPPRESS)
     ap.add_argument("--eni", help=argparse.SUPPRESS)
+    ap.add_argument("--no-recovery", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--seconds", type=float, default=2.0, help=argparse.SUPPRESS)
     ap.add_argument("--periods", type=lambda s: [int(x) for x in s.split(",")],
                     default=PERIODS_US, help=argparse.SUPPRESS)
@@ -303,15 +304,19 @@ def run(args: argparse.Namespace, tmp: Path) -> None:
                                          "--cycles", str(args.cycles), *extra], 900)
             return json.loads(out.strip().splitlines()[-1])
 
+        if "floor" not in skip:
+            results["floor"] = python_floor(eni, esi)
+            print("floor", json.dumps(results["floor"]), flush=True)
         if args.profile:
             print(worker("ecatcfg", "profile")["profile"], flush=True)
         if "cpu" not in skip:
             results["cpu"] = {}
             for layout in args.layouts.split(","):
                 cpu = LAYOUTS[layout]
-                ours, soem, base = [], [], []
+                ours, soem, base, bare = [], [], [], []
                 for k in range(args.rounds + 1):        # round 0: warm-up, not counted
                     a = worker("ecatcfg", "cpu", cpu=cpu)
+                    d = worker("ecatcfg", "cpu", "--no-recovery", cpu=cpu)
                     b = worker("soem", "cpu", cpu=cpu)
                     c = worker("ecatcfg", "cpu", path=args.baseline, cpu=cpu) \
                         if args.baseline else None
@@ -320,6 +325,7 @@ def run(args: argparse.Namespace, tmp: Path) -> None:
                     if k:
                         ours.append(a)
                         soem.append(b)
+                        bare.append(d)
                         if c is not None:
                             base.append(c)
                 oc = [r["cpu_us"] for r in ours]
@@ -327,6 +333,8 @@ def run(args: argparse.Namespace, tmp: Path) -> None:
                 res = {
                     "ecatcfg_cpu_us": mm(oc), "soem_cpu_us": mm(sc),
                     "ratio_min_median": ratio(sc, oc),
+                    "ecatcfg_no_recovery_cpu_us": mm([r["cpu_us"] for r in bare]),
+                    "no_recovery_over_soem": ratio(sc, [r["cpu_us"] for r in bare]),
                     "ecatcfg_wall_us": mm([r["wall_us"] for r in ours]),
                     "soem_wall_us": mm([r["wall_us"] for r in soem]),
                     "lost": [r["lost"] for r in ours] + [r["lost"] for r in soem]}
@@ -361,6 +369,67 @@ def run(args: argparse.Namespace, tmp: Path) -> None:
     finally:
         bench.close()
     print(json.dumps(results, indent=1))
+
+
+def python_floor(eni: Path, esi: str, cycles: int = 100_000) -> dict:
+    """ecatcfg's own CPU per cycle without a wire: in this process, a link that answers
+    at once with the reply the emulated line gave to the first cycle (the index copied
+    in), so only the master's Python runs; with and without the recovery supervisor."""
+    from ecatcfg.eni import reader
+    from ecatcfg.esi.library import Library
+    from ecatcfg.runtime import emulate, wire
+    from ecatcfg.runtime.network import Network
+
+    plan = reader.read_file(eni)
+
+    class Echo:
+        def __init__(self) -> None:
+            self.segment = emulate.segment(emulate.specs_from_eni(
+                plan, Library([esi], cache=False), "line"))
+            self.reply = bytearray()
+            self.canned: tuple[bytearray, list[int]] | None = None
+
+        def send(self, frame: bytes | bytearray) -> None:
+            if self.canned is None:
+                self.reply = self.segment.process(frame)
+                return
+            reply, at = self.canned
+            for k in at:
+                reply[k] = frame[k]
+            self.reply = reply
+
+        def recv_into(self, buffer: bytearray, timeout: float | None) -> int:
+            n = len(self.reply)
+            buffer[:n] = self.reply
+            return n
+
+        def recv(self, timeout: float | None) -> bytes:
+            return bytes(self.reply)
+
+        def fileno(self) -> int:
+            return -1
+
+        def close(self) -> None:
+            pass
+
+    out = {}
+    for recovery in (True, False):
+        link = Echo()
+        net = Network(plan, link, recovery=recovery)   # type: ignore[arg-type]
+        net.up()
+        net.cycle()
+        if len(net.master.cyclic.prepared(net.state)) != 1:
+            return {"skipped": "more than one cyclic frame"}
+        link.canned = (bytearray(link.reply),
+                       [pos + 1 for pos, _ in wire.datagram_offsets(link.reply)])
+        best = []
+        for _ in range(3):
+            start = time.thread_time()
+            for _ in range(cycles):
+                net.cycle()
+            best.append((time.thread_time() - start) / cycles * 1e6)
+        out["with_recovery" if recovery else "without_recovery"] = round(min(best), 2)
+    return out
 
 
 def worker_jitter(worker, args: argparse.Namespace, margin: int) -> dict:
