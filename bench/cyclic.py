@@ -10,14 +10,17 @@ Method:
   1. Two fresh network namespaces with a veth pair (``virtual_segment.Bench``); ``ecatcfg
      simulate`` in B serves a 3-slave line of the example devices (EX1100 coupler, EX1004
      inputs, EX2008 outputs: one LRW of process data, plus the ENI's state check), pinned
-     to CPU 0.  The line is compiled once to an ENI (``ecatcfg compile``, not timed).
+     to CPU 0 under SCHED_FIFO 70 (the slaves must not be what is measured).  The line is
+     compiled once to an ENI (``ecatcfg compile``, not timed).
   2. CPU time per cycle: a master process in A brings the line to OP, runs 500 cycles of
      warm-up, then ``--cycles`` cycles back to back, timed with ``time.thread_time()``
      (CPU time of the cycling thread: user + system, waiting excluded) and wall time.
      ecatcfg: ``Network.cycle()``; SOEM: ``send_processdata(); receive_processdata(2000)``
-     (SOEM polls the socket while it waits: its wait is CPU time, ours is not).  The two
-     alternate, ``--rounds`` processes each (a new process each time: both pay the same
-     interpreter, and machine noise hits both alike); min and median over rounds.
+     (both sleep in the kernel while the reply travels: not CPU time).  They alternate
+     (ecatcfg, ecatcfg with ``recovery=False``, SOEM, ``--baseline``'s ecatcfg),
+     ``--rounds`` processes each, the master on CPU 0 with the simulator (``same``) or on
+     CPU 1 (``split``, ``--layouts``); min and median over rounds.  ``floor``: ecatcfg's
+     own Python per cycle, in this process, on a link that answers at once.
   3. Highest cycle rate without lost frames: each master paces itself to an absolute
      deadline (``Network.run`` with the cycle time set; for SOEM the same loop in Python)
      at periods from 1000 us down, ``--rate-seconds`` each; a period is sustained when no

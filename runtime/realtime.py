@@ -36,7 +36,7 @@ from ecatcfg.errors import EcatcfgError, UsageError
 from ecatcfg.record import record
 
 MCL_CURRENT, MCL_FUTURE = 1, 2                  # <sys/mman.h>
-PR_SET_TIMERSLACK = 29                          # <linux/prctl.h>
+PR_SET_TIMERSLACK, PR_GET_TIMERSLACK = 29, 30  # <linux/prctl.h>
 MAX_BUSY_WAIT_US = 10_000
 
 
@@ -116,7 +116,7 @@ def _limit(which: int) -> str:
 def apply(opts: RealtimeOptions | None) -> Callable[[], None]:
     """Apply ``opts`` to the calling thread; returns the function that restores what it
     changed.  ``None`` or empty options change nothing."""
-    undo: list[Callable[[], None]] = []
+    undo: list[Callable[[], object]] = []
 
     def restore() -> None:
         for step in reversed(undo):
@@ -142,7 +142,7 @@ def apply(opts: RealtimeOptions | None) -> Callable[[], None]:
     return restore
 
 
-def _lock_memory(undo: list[Callable[[], None]]) -> None:
+def _lock_memory(undo: list[Callable[[], object]]) -> None:
     libc = _libc()
     if libc.mlockall(MCL_CURRENT | MCL_FUTURE) != 0:
         err = ctypes.get_errno()
@@ -152,10 +152,10 @@ def _lock_memory(undo: list[Callable[[], None]]) -> None:
             f"CAP_IPC_LOCK), or raise the locked-memory limit (RLIMIT_MEMLOCK, now "
             f"{_limit(resource.RLIMIT_MEMLOCK)} bytes) with `ulimit -l unlimited` or "
             f"LimitMEMLOCK=infinity in the systemd unit")
-    undo.append(lambda: None if libc.munlockall() == 0 else None)
+    undo.append(libc.munlockall)
 
 
-def _set_affinity(cpus: frozenset[int], undo: list[Callable[[], None]]) -> None:
+def _set_affinity(cpus: frozenset[int], undo: list[Callable[[], object]]) -> None:
     before = os.sched_getaffinity(0)
     count = os.cpu_count() or 1
     missing = sorted(c for c in cpus if c >= count)
@@ -176,7 +176,7 @@ def _set_affinity(cpus: frozenset[int], undo: list[Callable[[], None]]) -> None:
     undo.append(lambda: os.sched_setaffinity(0, before))
 
 
-def _set_fifo(priority: int, undo: list[Callable[[], None]]) -> None:
+def _set_fifo(priority: int, undo: list[Callable[[], object]]) -> None:
     policy = os.sched_getscheduler(0)
     param = os.sched_getparam(0)
     try:
@@ -195,11 +195,11 @@ def _set_fifo(priority: int, undo: list[Callable[[], None]]) -> None:
     undo.append(lambda: os.sched_setscheduler(0, policy, param))
 
 
-def _timer_slack(undo: list[Callable[[], None]]) -> None:
+def _timer_slack(undo: list[Callable[[], object]]) -> None:
     """1 ns timer slack: a normal thread's sleeps may end up to 50 us late by design
     (``man 2 prctl``, PR_SET_TIMERSLACK); real-time threads have none, a busy-waiting
     normal one wants none either."""
     libc = _libc()
-    before = libc.prctl(30, 0, 0, 0, 0)             # PR_GET_TIMERSLACK
+    before = libc.prctl(PR_GET_TIMERSLACK, 0, 0, 0, 0)
     if libc.prctl(PR_SET_TIMERSLACK, 1, 0, 0, 0) == 0 and before > 0:
-        undo.append(lambda: None if libc.prctl(PR_SET_TIMERSLACK, before, 0, 0, 0) else None)
+        undo.append(lambda: libc.prctl(PR_SET_TIMERSLACK, before, 0, 0, 0))

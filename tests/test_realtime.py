@@ -26,7 +26,6 @@ from pathlib import Path
 
 import pytest
 import rig
-
 from conftest import EXAMPLES
 from ecatcfg.compiler import build, topology
 from ecatcfg.eni import reader as eni_reader
@@ -35,7 +34,6 @@ from ecatcfg.errors import UsageError
 from ecatcfg.esc import AlState, Cmd
 from ecatcfg.esi.library import Library
 from ecatcfg.runtime import Network, realtime, wire
-from ecatcfg.runtime.link import MemoryLink
 
 ESI = EXAMPLES / "esi"
 CYCLE_US = 1000
@@ -323,7 +321,7 @@ class _TamperingLink:
         if self.last is not None:
             self.queue.append(self.last)
         reshaped = bytearray(reply)
-        pos, n = wire.datagram_offsets(reshaped)[0]
+        pos, _n = wire.datagram_offsets(reshaped)[0]
         reshaped[pos + 6] ^= 0x01                     # length one off
         self.queue += [bytes(reshaped), reply]
         self.last = reply
