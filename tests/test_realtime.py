@@ -405,3 +405,12 @@ def test_the_periods_of_a_run_start_with_the_run(example_plan):
         net.run(5)
         periods = net.run_stats.periods_us
     assert len(periods) == 4 and max(periods) < 100_000, periods
+
+
+def test_a_refusal_on_the_background_thread_is_raised_in_the_caller(example_plan):
+    with Network.virtual(example_plan, esi=[ESI]) as net:
+        net.up()
+        with pytest.raises(realtime.RealtimeError, match="CPU 4096 does not exist"):
+            net.run(10, background=True, realtime=realtime.options(cpus=[4096]))
+        assert net._thread is None
+        assert net.cycle()                       # nothing ran, the network is as it was
