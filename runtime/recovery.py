@@ -200,6 +200,7 @@ class Supervisor:
                         slot.expected -= share
         self._update_clear()
         self.timeout = max(cyclic.cycle_time_us / 1e6, 0.001)
+        self._all_online = all(h.online for h in self.health.values())
 
     # -- every cycle --------------------------------------------------------------------------
 
@@ -208,6 +209,8 @@ class Supervisor:
         slaves that dropped out, go one round on with the recovery's frames.  Returns
         whether every *online* slave's data came back as expected."""
         inputs = self.master.cyclic.inputs
+        if ok and self._all_online and not self._pending and not self._al_wrong(inputs):
+            return True                         # the usual cycle: nothing to look after
         now = time.monotonic()
         if not ok:
             ok = self._tolerated()
@@ -215,7 +218,7 @@ class Supervisor:
             # The ORed AL status also shows the slaves already offline or joining: then
             # it cannot tell whether another one left the state.  Look at every slave,
             # but only as often as the probes, and count the cycle as good.
-            unsure = ok and any(not h.online for h in self.health.values())
+            unsure = ok and not self._all_online
             if not unsure:
                 ok = False
             if not self._diagnosing and now >= self._next_diagnosis:
@@ -283,6 +286,7 @@ class Supervisor:
         if not h.online:
             return
         h.online, h.reason, h.since = False, reason, time.monotonic()
+        self._all_online = False
         h.attempts, h.gave_up, h.next_try = 0, False, 0.0
         for slot, share in self._shares[name]:
             if slot.expected is not None:
@@ -297,6 +301,7 @@ class Supervisor:
             if slot.expected is not None:
                 slot.expected += share
         h.online, h.joining, h.reason, h.attempts = True, False, "", 0
+        self._all_online = all(h.online for h in self.health.values())
         h.refused.clear()
         self._update_clear()
         self._event("online", f"{self._where(h)} is back in {self.master.state.name} after "
