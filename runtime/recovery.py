@@ -6,7 +6,7 @@ counter counts the slaves that answered and whose data ORs their states).  When 
 off it reads each slave's AL status: a slave that does not answer (a cable pulled, power
 lost) or that left the network's state (SAFEOP+ERR after its SM watchdog expired) goes
 *offline*: it is reported once, the working counters the cycle expects are lowered by what
-it adds (:func:`wkc_shares`), and its input bits in the process image are cleared every
+it adds (:func:`wkc_share`), and its input bits in the process image are cleared every
 cycle and marked invalid, so the other slaves' data stays valid and checked.
 
 While a slave is offline, every :data:`PROBE_INTERVAL` one frame reads the station address
@@ -257,13 +257,13 @@ class Supervisor:
         brought back add (back on the wire but not configured yet, or passing through
         INIT..SAFEOP with part of their share) is no error of the others; it means one
         may be back, so the next probe goes at once."""
-        back = [n for n, h in self.health.items() if not h.online]
+        down = [name for name, h in self.health.items() if not h.online]
         for slot in self._slots:
             if slot.expected is None or slot.wkc == slot.expected:
                 continue
             if slot.wkc < slot.expected:
                 return False
-            extra = sum(share for n in back for s, share in self._shares[n] if s is slot)
+            extra = sum(share for name in down for s, share in self._shares[name] if s is slot)
             if slot.wkc > slot.expected + extra:
                 return False
             self._next_probe = min(self._next_probe, time.monotonic())
@@ -405,16 +405,17 @@ class Supervisor:
                 if addr_dg.wkc != 1 or state_dg.wkc != 1:
                     continue
                 address, = struct.unpack("<H", addr_dg.data)
-                status, _, code = struct.unpack("<HHH", state_dg.data)
+                status, = struct.unpack_from("<H", state_dg.data)
                 slave = by_address.get(address)
                 configured = slave is not None
                 if slave is None:
                     # A slave without its station address (powered off and on, another
                     # device, or a hot-connect group plugged in): the offline slave
                     # expected at this position.
-                    slave = next((self._by_name[n] for n, h in self.health.items()
+                    slave = next((self._by_name[name] for name, h in self.health.items()
                                   if not h.online and h.position == pos
-                                  and (n not in absent or n in self.absent_groups)), None)
+                                  and (name not in absent or name in self.absent_groups)),
+                                 None)
                 if slave is None:
                     continue
                 h = self.health[slave.name]
