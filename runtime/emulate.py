@@ -41,6 +41,7 @@ class SlaveSpec:
     name: str = ""
     serial: int = 0
     alias: int = 0
+    device_id: int | None = None    # an ID switch (ETG.1020 explicit device identification)
     # Downloads the configuration makes that the dictionary may not have: a modular device
     # from an ENI whose modules cannot be told, a device from the ENI alone (specs_from_eni).
     extra_writes: tuple[Write, ...] = ()
@@ -91,7 +92,8 @@ def emulated_slave(spec: SlaveSpec) -> EmulatedSlave:
             mailbox.eoe = EoeServer(dev.mailbox.eoe, sizes[1])
     image = sii.build(dev, serial=spec.serial, alias=spec.alias)
     slave = EmulatedSlave(dev, image, name=spec.name, od=od, mailbox=mailbox,
-                          chip=chip_for(dev.vendor.id, dev.product_code))
+                          chip=chip_for(dev.vendor.id, dev.product_code),
+                          device_id=spec.device_id)
     slave.eni_only = spec.eni_only
     return slave
 
@@ -206,6 +208,7 @@ def specs_from_eni(plan: NetworkPlan, library: Library | None, shown: str) -> li
     for s in ordered:
         selector = f"0x{s.vendor_id:x}:0x{s.product_code:x}:0x{s.revision:x}"
         coe = s.mailbox.coe_init_cmds if s.mailbox else []
+        alias, device_id = _head_identification(s)
         try:
             if library is None:
                 raise SelectorError("no ESI files given")
@@ -214,7 +217,8 @@ def specs_from_eni(plan: NetworkPlan, library: Library | None, shown: str) -> li
             writes = tuple(Write(c.index, c.subindex, c.data, c.complete_access)
                            for c in coe if not c.disabled and c.ccs == 1)
             specs.append(SlaveSpec(device_from_eni(s, plan, shown), s.name,
-                                   serial=s.serial_no, alias=_head_alias(s), extra_writes=writes,
+                                   serial=s.serial_no, alias=alias, device_id=device_id,
+                                   extra_writes=writes,
                                    eni_only=exc.message, plug=plugs[len(specs)]))
             continue
         device = library.device(entry)     # a broken ESI file is an error, not a fallback
@@ -225,8 +229,9 @@ def specs_from_eni(plan: NetworkPlan, library: Library | None, shown: str) -> li
                 # Modules the ENI does not name: accept the objects its startup SDOs write.
                 extra = tuple(Write(c.index, c.subindex, c.data) for c in coe
                               if not c.complete_access and not is_pdo_object(c.index))
-        specs.append(SlaveSpec(device, s.name, serial=s.serial_no, alias=_head_alias(s),
-                               extra_writes=extra, plug=plugs[len(specs)]))
+        specs.append(SlaveSpec(device, s.name, serial=s.serial_no, alias=alias,
+                               device_id=device_id, extra_writes=extra,
+                               plug=plugs[len(specs)]))
     try:
         wiring(specs)
     except ValueError as exc:
@@ -235,16 +240,22 @@ def specs_from_eni(plan: NetworkPlan, library: Library | None, shown: str) -> li
     return specs
 
 
-def _head_alias(slave: SlavePlan) -> int:
-    """The station alias a hot-connect group's head is identified by (its IdentifyCmd
-    reading 0x0012 expects it): the emulated head has it in its EEPROM, as the real one
-    was given it; 0 for any other slave."""
+def _head_identification(slave: SlavePlan) -> tuple[int, int | None]:
+    """The station alias and the device ID a hot-connect group's head is identified by
+    (what its IdentifyCmds expect to read: 0x0012; the ID in AL status code 0x0134 after
+    the ETG.1020 request, or at the ID address the device's ESI names): the emulated head
+    has them, as the real one was given them; (0, None) for any other slave."""
+    alias, device_id = 0, None
     group = slave.hot_connect
     for cmd in group.identify_cmds if group is not None else []:
-        if cmd.ado == Reg.STATION_ALIAS and cmd.validate is not None \
-                and len(cmd.validate.data) >= 2:
-            return int.from_bytes(cmd.validate.data[:2], "little")
-    return 0
+        want = cmd.validate.data if cmd.validate is not None else b""
+        if cmd.ado == Reg.STATION_ALIAS and len(want) >= 2:
+            alias = int.from_bytes(want[:2], "little")
+        elif cmd.ado == Reg.AL_STATUS and len(want) >= 6:
+            device_id = int.from_bytes(want[4:6], "little")
+        elif cmd.ado is not None and cmd.ado != Reg.AL_STATUS and len(want) >= 2:
+            device_id = int.from_bytes(want[:2], "little")
+    return alias, device_id
 
 
 # -- modular devices --------------------------------------------------------------------------

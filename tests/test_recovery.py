@@ -508,3 +508,35 @@ def test_a_dc_slave_powered_off_and_on_gets_its_system_time_back():
             Datagram.physical(Cmd.FPRD, mine.phys_addr, Reg.DC_SYSTEM_TIME, 8)])
         ref_time, own_time = (struct.unpack("<Q", dg.data)[0] for dg in back)
         assert abs(own_time - ref_time) < 10_000      # the same time, within the line delay
+
+
+def test_a_group_head_identified_by_its_device_id_on_a_segment_from_the_eni(plan):
+    """The ETG.1020 request as the compiler writes it for an ESI with IdentificationReg134
+    (APWR 0x0120 = 0x0021, then APRD 0x0130, 6 bytes, under a mask: the ID bit and the ID
+    in 0x0134): the virtual segment built from such an ENI gives the head that ID switch,
+    so the group is found; the same head with another ID switch is not its head."""
+    from ecatcfg.eni.plan import HotConnectPlan, InitCmd, Validate
+    from ecatcfg.esc import Cmd
+    from ecatcfg.record import replace
+
+    def grouped(s):
+        if s.name != "lamps":
+            return s
+        request = InitCmd([], "request ID", Cmd.APWR, 2, adp=s.auto_inc_addr, ado=0x0120,
+                          data=b"\x21\x00", cnt=1)
+        check = InitCmd([], "check ID", Cmd.APRD, 6, adp=s.auto_inc_addr, ado=0x0130, cnt=1,
+                        validate=Validate(b"\x20\x00\x00\x00\x2a\x00",
+                                          b"\x20\x00\x00\x00\xff\xff", 100))
+        return replace(s, hot_connect=HotConnectPlan(2, [request, check]))
+
+    by_id = replace(plan, slaves=[grouped(s) for s in plan.slaves])
+    with Network.virtual(by_id, esi=[ESI]) as net:
+        lamps = next(s for s in net.segment.slaves if s.name == "lamps")
+        assert lamps.device_id == 42
+        net.up()
+        assert net.online("lamps") and all(s.state == AlState.OP for s in net.segment.slaves)
+    with Network.virtual(by_id, esi=[ESI]) as net:
+        next(s for s in net.segment.slaves if s.name == "lamps").device_id = 43
+        from ecatcfg.runtime.master import VerifyError
+        with pytest.raises(VerifyError, match="extra slave"):
+            net.up()
