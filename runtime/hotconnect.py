@@ -8,7 +8,7 @@ next slave found; in a tree: on the ENI's port of its parent) with the head's id
 the group's ``IdentifyCmd`` commands (a read of the station alias 0x0012 or of the ID
 register 0x0134 with a ``Validate``) must succeed at that position.  A group that is not
 there is left out: the other slaves move up in the auto-increment order, so their plans are
-moved with them (:func:`~ecatcfg.runtime.recovery.at_position`), and the rest is verified
+moved with them (:func:`at_position`, :func:`as_found`), and the rest is verified
 and brought up as usual.  While the network cycles, the supervisor
 (``runtime/recovery.py``) looks for the absent groups where they would be, identifies the
 head and brings the group up.
@@ -21,15 +21,15 @@ order (:func:`positions`).
 from __future__ import annotations
 
 from collections.abc import Iterable
-from ecatcfg.record import replace
 
 from ecatcfg.eni.plan import CyclicCmd, InitCmd, NetworkPlan, SlavePlan
 from ecatcfg.esc import Cmd
+from ecatcfg.record import replace
 from ecatcfg.runtime.lockstep import Job
 from ecatcfg.runtime.replay import ApplyError, init_cmd_job
 from ecatcfg.runtime.scan import FoundSlave, paired
 
-
+# Commands addressed by auto-increment position (ARMW: the drift compensation's).
 _AUTO_INCREMENT = (Cmd.APRD, Cmd.APWR, Cmd.APRW, Cmd.ARMW)
 
 
