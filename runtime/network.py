@@ -36,11 +36,11 @@ from ecatcfg.runtime.master import DC_THRESHOLD_NS, DC_TIMEOUT_S, Event, Master
 
 if TYPE_CHECKING:                   # imported where used: `import ecatcfg.runtime` stays light
     from ecatcfg.runtime.cyclic import CycleStats
-    from ecatcfg.runtime.recovery import SlaveHealth
     from ecatcfg.runtime.dc_clock import DcModel
     from ecatcfg.runtime.link import Link
     from ecatcfg.runtime.pcap import PcapRecorder
     from ecatcfg.runtime.realtime import RealtimeOptions
+    from ecatcfg.runtime.recovery import SlaveHealth
     from ecatcfg.runtime.segment import Faults, VirtualSegment
     from ecatcfg.runtime.timing import Timing
 
