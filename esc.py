@@ -37,7 +37,15 @@ class Cmd(IntEnum):
     FRMW = 14
 
 
-_READ_WRITE_CMDS = (Cmd.APRW, Cmd.FPRW, Cmd.BRW, Cmd.LRW)
+# The command classes (ETG.1000.4 "EtherCAT command types"): how a datagram is addressed,
+# and whether it reads or writes the slave's memory.
+AUTO_INCREMENT_CMDS = frozenset({Cmd.APRD, Cmd.APWR, Cmd.APRW, Cmd.ARMW})
+CONFIGURED_ADDRESS_CMDS = frozenset({Cmd.FPRD, Cmd.FPWR, Cmd.FPRW, Cmd.FRMW})
+BROADCAST_CMDS = frozenset({Cmd.BRD, Cmd.BWR, Cmd.BRW})
+LOGICAL_CMDS = frozenset({Cmd.LRD, Cmd.LWR, Cmd.LRW})
+REGISTER_READS = frozenset({Cmd.APRD, Cmd.FPRD, Cmd.BRD, Cmd.APRW, Cmd.FPRW, Cmd.BRW})
+REGISTER_WRITES = frozenset({Cmd.APWR, Cmd.FPWR, Cmd.BWR, Cmd.APRW, Cmd.FPRW, Cmd.BRW})
+READ_WRITE_CMDS = frozenset({Cmd.APRW, Cmd.FPRW, Cmd.BRW, Cmd.LRW})
 
 
 def wkc_increment(cmd: int, read: bool, written: bool) -> int:
@@ -47,7 +55,7 @@ def wkc_increment(cmd: int, read: bool, written: bool) -> int:
     the writers alike, so pass ``read``).  The master's expectations (compiler/layout.py,
     runtime/recovery.py) follow this; the emulated ESCs (runtime/segment.py) count the
     same inline, in their per-frame loop."""
-    if cmd in _READ_WRITE_CMDS:
+    if cmd in READ_WRITE_CMDS:
         return int(read) + 2 * int(written)
     return int(read or written)
 

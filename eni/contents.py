@@ -32,6 +32,7 @@ from lxml import etree
 
 from ecatcfg.eni.plan import NetworkPlan, Unsupported
 from ecatcfg.errors import EcatcfgError, location
+from ecatcfg.esc import LOGICAL_CMDS
 from ecatcfg.esi.values import parse_bool, parse_int
 from ecatcfg.record import record
 
@@ -334,7 +335,6 @@ def dropped_init_cmds(config: Element) -> set[Element]:
 
 
 # Logical commands (ETG.1000.4): the windows an FMMU's logical range must fall in.
-_LOGICAL_CMDS = {10, 11, 12}                  # LRD, LWR, LRW
 _FMMU_FIRST, _FMMU_END, _FMMU_SIZE = 0x0600, 0x0700, 16
 
 
@@ -347,7 +347,7 @@ def _unmapped_fmmus(config: Element) -> list[tuple[Element, Unsupported]]:
     for cmd in config.iterfind("Cyclic/Frame/Cmd"):
         kind, addr = _number(cmd.findtext("Cmd", "")), _number(cmd.findtext("Addr", ""))
         size = _hex_length(cmd.findtext("Data")) or _number(cmd.findtext("DataLength", ""))
-        if kind in _LOGICAL_CMDS and isinstance(addr, int) and isinstance(size, int):
+        if kind in LOGICAL_CMDS and isinstance(addr, int) and isinstance(size, int):
             windows.append((addr, addr + size))
     root = config.getparent()
     encrypted = root is not None and root.tag == "EncryptedEtherCATConfig"

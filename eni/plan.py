@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Literal
 
-from ecatcfg.esc import Cmd, Transition
+from ecatcfg.esc import REGISTER_WRITES, Transition
 from ecatcfg.record import field, record
 
 if TYPE_CHECKING:         # imported where used: only ENIs with EoE InitCmds need the codec
@@ -314,10 +314,6 @@ class NetworkPlan:
         return next(s for s in self.slaves if s.name == name)
 
 
-# Register writes (physical and broadcast commands that carry data into the ESC).
-_REGISTER_WRITES = (Cmd.APWR, Cmd.FPWR, Cmd.BWR, Cmd.APRW, Cmd.FPRW, Cmd.BRW)
-
-
 def register_writes(slave: SlavePlan, first: int, size: int,
                     count: int) -> dict[int, list[tuple[bytes, frozenset[Transition]]]]:
     """Each register record ``n`` (``first + size * n``, n < count: the SyncManagers, the
@@ -325,7 +321,7 @@ def register_writes(slave: SlavePlan, first: int, size: int,
     one write of several records (SM0 and SM1 in 16 bytes) counts for each."""
     out: dict[int, list[tuple[bytes, frozenset[Transition]]]] = {}
     for cmd in slave.init_cmds:
-        if cmd.cmd not in _REGISTER_WRITES or cmd.ado is None or not cmd.data:
+        if cmd.cmd not in REGISTER_WRITES or cmd.ado is None or not cmd.data:
             continue
         for n in range(count):
             start = first + size * n

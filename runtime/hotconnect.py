@@ -23,14 +23,12 @@ from __future__ import annotations
 from collections.abc import Iterable
 
 from ecatcfg.eni.plan import CyclicCmd, InitCmd, NetworkPlan, SlavePlan
-from ecatcfg.esc import Cmd
+from ecatcfg.esc import AUTO_INCREMENT_CMDS
 from ecatcfg.record import replace
 from ecatcfg.runtime.lockstep import Job
 from ecatcfg.runtime.replay import ApplyError, init_cmd_job
 from ecatcfg.runtime.scan import FoundSlave, paired
 
-# Commands addressed by auto-increment position (ARMW: the drift compensation's).
-_AUTO_INCREMENT = (Cmd.APRD, Cmd.APWR, Cmd.APRW, Cmd.ARMW)
 
 
 def slaves(n: int) -> str:
@@ -63,7 +61,7 @@ def moved(cmds: list[InitCmd], old: int, new: int) -> list[InitCmd]:
     """``cmds`` with the auto-increment commands addressed to ``old`` sent to ``new``."""
     if old == new:
         return cmds
-    return [replace(c, adp=new) if c.cmd in _AUTO_INCREMENT and c.adp == old else c
+    return [replace(c, adp=new) if c.cmd in AUTO_INCREMENT_CMDS and c.adp == old else c
             for c in cmds]
 
 
@@ -153,7 +151,7 @@ def as_found(plan: NetworkPlan, present: set[str]) -> NetworkPlan:
             if s.name in present}
 
     def move(c: CyclicCmd) -> CyclicCmd:
-        if c.cmd in _AUTO_INCREMENT and c.adp in adps:
+        if c.cmd in AUTO_INCREMENT_CMDS and c.adp in adps:
             return replace(c, adp=adps[c.adp])
         return c
 

@@ -32,15 +32,16 @@ import time
 from typing import TYPE_CHECKING
 
 from ecatcfg.eni.plan import SlavePlan, register_writes
-from ecatcfg.esc import (AL_ERROR_ACK, AL_STATE_MASK, AL_STATUS_ERROR, FMMU_SIZE, AlState, Cmd,
-                         FmmuConfig, FmmuType, Reg, Transition, al_state_name, al_status_name,
-                         wkc_increment)
+from ecatcfg.esc import (AL_ERROR_ACK, AL_STATE_MASK, AL_STATUS_ERROR, AUTO_INCREMENT_CMDS,
+                         BROADCAST_CMDS, CONFIGURED_ADDRESS_CMDS, FMMU_SIZE, LOGICAL_CMDS,
+                         REGISTER_READS, REGISTER_WRITES, AlState, Cmd, FmmuConfig, FmmuType,
+                         Reg, Transition, al_state_name, al_status_name, wkc_increment)
 from ecatcfg.record import field, record
 from ecatcfg.runtime import hotconnect
 from ecatcfg.runtime.hotconnect import at_position
 from ecatcfg.runtime.lockstep import Job, Pending, Step, one_round, start, until_answered
-from ecatcfg.runtime.replay import (TIMEOUT_COMMAND, ApplyError, MailboxChannel,
-                                    slave_transition_job)
+from ecatcfg.runtime.replay import (TIMEOUT_COMMAND, TIMEOUT_STATE, ApplyError,
+                                    MailboxChannel, slave_transition_job)
 from ecatcfg.runtime.wire import Datagram
 
 if TYPE_CHECKING:
@@ -52,14 +53,11 @@ DIAGNOSE_INTERVAL = 0.02       # s at least between two AL status reads of every
 BACKOFF_FIRST = 0.1            # s after the first failed attempt, doubling ...
 BACKOFF_MAX = 5.0              # ... up to this
 MAX_ATTEMPTS = 5               # attempts to bring a slave back before giving up
-STATE_TIMEOUT = 5.0            # s for a state change of one slave (as replay.TIMEOUT_STATE)
 
 _UP = {AlState.INIT: Transition.IP, AlState.PREOP: Transition.PS,
        AlState.SAFEOP: Transition.SO}
 _READS_FROM = (FmmuType.READ, FmmuType.READ_WRITE)
 _WRITES_TO = (FmmuType.WRITE, FmmuType.READ_WRITE)
-_READ_CMDS = (Cmd.APRD, Cmd.FPRD, Cmd.BRD, Cmd.APRW, Cmd.FPRW, Cmd.BRW)
-_WRITE_CMDS = (Cmd.APWR, Cmd.FPWR, Cmd.BWR, Cmd.APRW, Cmd.FPRW, Cmd.BRW)
 
 
 @record
@@ -103,19 +101,19 @@ def wkc_share(slave: SlavePlan, cmd_slot: _Slot) -> int:
     c = cmd_slot.cmd
     if c.cmd in (Cmd.ARMW, Cmd.FRMW):
         return wkc_increment(c.cmd, slave.dc is not None, False)
-    if c.cmd in (Cmd.LRD, Cmd.LWR, Cmd.LRW):
+    if c.cmd in LOGICAL_CMDS:
         mapped = [f for f in fmmus(slave) if _overlaps(f, c.addr or 0, c.length)]
         reads = c.cmd != Cmd.LWR and any(f.type in _READS_FROM for f in mapped)
         writes = c.cmd != Cmd.LRD and any(f.type in _WRITES_TO for f in mapped)
         return wkc_increment(c.cmd, reads, writes)
-    if c.cmd in (Cmd.APRD, Cmd.APWR, Cmd.APRW):
+    if c.cmd in AUTO_INCREMENT_CMDS:
         addressed = c.adp == slave.auto_inc_addr
-    elif c.cmd in (Cmd.FPRD, Cmd.FPWR, Cmd.FPRW):
+    elif c.cmd in CONFIGURED_ADDRESS_CMDS:
         addressed = c.adp == slave.phys_addr
     else:
-        addressed = c.cmd in (Cmd.BRD, Cmd.BWR, Cmd.BRW)
-    return wkc_increment(c.cmd, addressed and c.cmd in _READ_CMDS,
-                         addressed and c.cmd in _WRITE_CMDS)
+        addressed = c.cmd in BROADCAST_CMDS
+    return wkc_increment(c.cmd, addressed and c.cmd in REGISTER_READS,
+                         addressed and c.cmd in REGISTER_WRITES)
 
 
 def input_bits(slave: SlavePlan, cyclic: CyclicFrames) -> list[tuple[int, int]]:
@@ -458,21 +456,21 @@ class Supervisor:
         slave = at_position(plan, position)
         master = self.master
         try:
-            from ecatcfg.runtime.scan import FoundSlave, identity_job
+            from ecatcfg.runtime.scan import FoundSlave, compare, identity_job
             found: dict[int, FoundSlave] = {}
             yield from identity_job(position, found)
             got = found[position]
-            want = (plan.vendor_id, plan.product_code, plan.revision)
-            if got.identity[:2] != want[:2] or not (
-                    got.revision == plan.revision
-                    or master.accept_newer_revision and got.revision > plan.revision):
+            # The start-up check's rule (other device; other revision, a newer one only
+            # when the start-up took newer ones).
+            problem = compare(master.plan.slaves, plan, got, master.accept_newer_revision)
+            if problem:
                 h.joining = False
                 h.next_try = time.monotonic() + PROBE_INTERVAL
                 if got.identity not in h.refused:
                     h.refused.add(got.identity)
                     self._event("refused", f"{self._where(h)}: another device is in its "
-                                f"place (0x{got.vendor_id:x}:0x{got.product_code:x}:"
-                                f"0x{got.revision:x}, the ENI has 0x{plan.vendor_id:x}:"
+                                f"place ({problem}: 0x{got.vendor_id:x}:0x{got.product_code:x}"
+                                f":0x{got.revision:x}, the ENI has 0x{plan.vendor_id:x}:"
                                 f"0x{plan.product_code:x}:0x{plan.revision:x}); it is not "
                                 "configured", plan.name)
                 return
@@ -513,7 +511,7 @@ def _request(slave: SlavePlan, control: int, wait: AlState | None) -> Step[None]
     if wait is None:
         return
     read = Datagram.physical(Cmd.APRD, adp, Reg.AL_STATUS, 2)
-    deadline = time.monotonic() + STATE_TIMEOUT
+    deadline = time.monotonic() + TIMEOUT_STATE
     while True:
         back = yield [read]
         if back is not None and back[0].wkc == 1 and back[0].data[0] & AL_STATE_MASK == wait:

@@ -185,7 +185,7 @@ def verify(plan: NetworkPlan, found: list[FoundSlave],
                 problems.append(Mismatch(want_slave.position, w, "-",
                                          "missing slave" + ("" if line else behind)))
             continue
-        problem = _compare(expected, want_slave, found[f], accept_newer_revision)
+        problem = compare(expected, want_slave, found[f], accept_newer_revision)
         if problem:
             problems.append(Mismatch(want_slave.position, w, ids(found[f]), problem))
     for f in extra:
@@ -224,8 +224,8 @@ def _pair(want: list[Plug | None], got: list[Plug | None]) -> dict[int, int]:
     return pairs
 
 
-def _compare(expected: list[SlavePlan], want: SlavePlan, got: FoundSlave,
-             accept_newer_revision: bool) -> str:
+def compare(expected: list[SlavePlan], want: SlavePlan, got: FoundSlave,
+            accept_newer_revision: bool) -> str:
     """What is wrong with ``got`` in the place of ``want`` ("" when nothing)."""
     if (got.vendor_id, got.product_code) != (want.vendor_id, want.product_code):
         others = [s.position for s in expected if (s.vendor_id, s.product_code) ==
@@ -255,7 +255,7 @@ def _verify_line(expected: list[SlavePlan], found: list[FoundSlave],
         elif got is None:
             problems.append(Mismatch(pos, w, g, "missing slave"))
         else:
-            problem = _compare(expected, want, got, accept_newer_revision)
+            problem = compare(expected, want, got, accept_newer_revision)
             if problem:
                 problems.append(Mismatch(pos, w, g, problem))
     return problems

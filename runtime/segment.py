@@ -32,7 +32,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-from ecatcfg.esc import Cmd, FmmuType, Reg
+from ecatcfg.esc import (AUTO_INCREMENT_CMDS, BROADCAST_CMDS, CONFIGURED_ADDRESS_CMDS, Cmd,
+                         FmmuType, Reg)
 from ecatcfg.runtime.dc_clock import DcModel
 from ecatcfg.runtime.slave import (MEMORY_SIZE, PROCESS_RAM, RUNNING_STATES, EmulatedSlave,
                                    StateChange)
@@ -46,9 +47,9 @@ if TYPE_CHECKING:
 
 _READS = {Cmd.APRD, Cmd.FPRD, Cmd.BRD, Cmd.LRD}
 _WRITES = {Cmd.APWR, Cmd.FPWR, Cmd.BWR, Cmd.LWR}
-_AUTO_INC = {Cmd.APRD, Cmd.APWR, Cmd.APRW, Cmd.ARMW}
-_CONFIGURED = {Cmd.FPRD, Cmd.FPWR, Cmd.FPRW, Cmd.FRMW}
-_BROADCAST = {Cmd.BRD, Cmd.BWR, Cmd.BRW}
+_AUTO_INC = AUTO_INCREMENT_CMDS
+_CONFIGURED = CONFIGURED_ADDRESS_CMDS
+_BROADCAST = BROADCAST_CMDS
 # An FMMU access of a logical datagram (see _op): frame offset, physical address, byte length
 # or 0, masked bit groups (frame byte, memory byte, shift, mask), SM gate, completes the SM.
 _Op = tuple[int, int, int, tuple[tuple[int, int, int, int], ...], "SmState | None", bool]

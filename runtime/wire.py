@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING
 
 from ecatcfg.errors import EcatcfgError
 from ecatcfg.esc import (DATAGRAM_OVERHEAD, ETH_HEADER_SIZE, ETHERTYPE, FRAME_HEADER, MIN_FRAME,
-                         Cmd)
+                         LOGICAL_CMDS)
 from ecatcfg.record import field, record
 
 if TYPE_CHECKING:
@@ -47,7 +47,6 @@ MORE = 0x8000                # bit 15: another datagram follows
 MASTER_MAC = bytes.fromhex("010101010101")     # SOEM's source address (priMAC, nicdrv.c)
 BROADCAST_MAC = b"\xff" * 6
 
-LOGICAL_CMDS = frozenset({Cmd.LRD, Cmd.LWR, Cmd.LRW})
 
 
 class FrameError(EcatcfgError):

@@ -152,12 +152,19 @@ def test_a_slave_in_safeop_err_after_its_watchdog_is_brought_back_to_op(plan):
         assert kinds(events, "lamps") == ["offline", "online"]
 
 
+def refusing_safeop(net: Network):
+    """The lamps terminal powered off and on, refusing SAFEOP (0x001E) from now on: every
+    attempt to bring it back fails."""
+    lamps = next(s for s in net.segment.slaves if s.name == "lamps")
+    lamps.refuse["PS"] = 0x001E
+    lamps.power_cycle()
+    return lamps
+
+
 def test_attempts_are_bounded_and_backed_off_and_recover_tries_again(plan):
     with network(plan, "memory") as (net, events):
         io = IoCheck(net)
-        lamps = next(s for s in net.segment.slaves if s.name == "lamps")
-        lamps.refuse["PS"] = 0x001E           # refuses SAFEOP from now on
-        lamps.power_cycle()
+        lamps = refusing_safeop(net)
         io.until(lambda: net.health["lamps"].gave_up, 10)
         retries = [e for e in events if e.slave == "lamps" and e.kind == "retry"]
         assert len(retries) == recovery.MAX_ATTEMPTS - 1
@@ -174,9 +181,7 @@ def test_attempts_are_bounded_and_backed_off_and_recover_tries_again(plan):
 def test_the_back_off_doubles(plan):
     with network(plan, "memory") as (net, events):
         io = IoCheck(net)
-        lamps = next(s for s in net.segment.slaves if s.name == "lamps")
-        lamps.refuse["PS"] = 0x001E
-        lamps.power_cycle()
+        refusing_safeop(net)
         stamps: list[float] = []
         net.master.on_event = lambda e: (events.append(e), e.kind == "retry"
                                          and stamps.append(time.monotonic()))
@@ -189,9 +194,7 @@ def test_the_back_off_doubles(plan):
 def test_going_down_passes_over_a_slave_that_is_offline(plan):
     with network(plan, "memory") as (net, events):
         io = IoCheck(net)
-        lamps = next(s for s in net.segment.slaves if s.name == "lamps")
-        lamps.refuse["PS"] = 0x001E
-        lamps.power_cycle()
+        refusing_safeop(net)
         io.until(lambda: net.health["lamps"].attempts >= 1, 5)
         net.down()
         assert [s.state for s in net.segment.slaves] == [AlState.INIT] * 5
