@@ -7,6 +7,7 @@ from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from ecatcfg.cli.report import ApplyReport
+    from ecatcfg.eni.plan import NetworkPlan
     from ecatcfg.runtime.master import Event
     from ecatcfg.runtime.network import Network
     from ecatcfg.runtime.realtime import RealtimeOptions
@@ -76,6 +77,33 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
 
 
 def run(args: argparse.Namespace) -> int:
+    """The run, and with ``--format json`` always one JSON document on stdout: also when
+    the ENI is refused or cannot be read, or the command line is wrong (the error then
+    goes to stderr as well, with the usual exit code)."""
+    from ecatcfg.errors import EcatcfgError
+    ctx = _Run()
+    try:
+        return _run(args, ctx)
+    except EcatcfgError as exc:
+        if args.format == "json" and not ctx.printed:
+            import json
+
+            from ecatcfg.cli.report import refusal_json
+            print(json.dumps(refusal_json(args.eni, STATES[args.state], exc, ctx.plan),
+                             indent=2), flush=True)
+        raise
+
+
+class _Run:
+    """What the JSON of a refused run can say: the plan, once read; whether the run's own
+    document was printed."""
+
+    def __init__(self) -> None:
+        self.plan: NetworkPlan | None = None
+        self.printed = False
+
+
+def _run(args: argparse.Namespace, ctx: _Run) -> int:
     import json
     from pathlib import Path
 
@@ -84,7 +112,7 @@ def run(args: argparse.Namespace) -> int:
     from ecatcfg.eni import cache as eni_cache
     from ecatcfg.errors import EcatcfgError, UsageError
     from ecatcfg.esc import AlState
-    from ecatcfg.runtime.master import Event
+    from ecatcfg.runtime.master import Event, check_requests
     from ecatcfg.runtime.network import Network
     from ecatcfg.runtime.service import Notifier
 
@@ -116,9 +144,12 @@ def run(args: argparse.Namespace) -> int:
     else:
         plan = eni_cache.read_file(args.eni)
     report = ApplyReport(plan, args.eni, json_output=args.format == "json")
+    target = AlState(STATES[args.state])
+    ctx.plan = plan
     if plan.unsupported and not args.skip_unsupported:
         from ecatcfg.eni.contents import refuse
         refuse(plan, args.eni)              # before a link is opened or a frame sent
+    check_requests(plan, target, args.eni)
     report.skipped(plan.unsupported)
     notify = Notifier.from_env()
 
@@ -135,7 +166,6 @@ def run(args: argparse.Namespace) -> int:
         net = Network(plan, RawLink(args.iface), pcap=args.pcap, on_event=on_event,
                       skip_unsupported=True, eni_name=args.eni,
                       dc_threshold_ns=dc_threshold, dc_timeout_s=dc_timeout)
-    target = AlState(STATES[args.state])
     guard = _SignalGuard(net, report, notify)
     failure: EcatcfgError | None = None
     with guard:                         # also while the summary is printed
@@ -184,6 +214,7 @@ def run(args: argparse.Namespace) -> int:
         report.finish(net, failure, target)
         if args.format == "json":
             print(json.dumps(report.as_json(), indent=2), flush=True)
+            ctx.printed = True
     return 1 if failure else 0
 
 

@@ -13,10 +13,11 @@ from typing import IO, TYPE_CHECKING, Any
 from ecatcfg.eni.plan import NetworkPlan, Unsupported
 from ecatcfg.esc import AlState, al_status_name
 
+from ecatcfg.errors import EcatcfgError
+
 if TYPE_CHECKING:                   # rich and the runtime are imported where they are used
     from rich.console import Console
 
-    from ecatcfg.errors import EcatcfgError
     from ecatcfg.runtime.master import Event, SlaveState
     from ecatcfg.runtime.network import Network
     from ecatcfg.runtime.replay import SlaveProgress
@@ -156,6 +157,7 @@ class ApplyReport:
                        "wkc_error_commands": stats.wkc_error_cmds,
                        "jitter_us": {k: round(v, 1) for k, v in jitter.items()}},
             "frames": {"sent": counters.frames_sent, "lost": counters.frames_lost},
+            "refused": [],
             "skipped": self.skipped_parts,
         }
         segment = getattr(net, "segment", None)         # set by Network.virtual only
@@ -192,3 +194,29 @@ class ApplyReport:
 
     def as_json(self) -> dict[str, Any]:
         return dict(self.summary, events=self.events)
+
+
+def refusal_json(eni: str, target: int, error: EcatcfgError,
+                 plan: NetworkPlan | None) -> dict[str, Any]:
+    """The JSON document of a run that did not start (an ENI refused or unreadable, a wrong
+    option): the keys of a run's document, nothing run, the error, and ``refused``: the
+    parts that made apply refuse the ENI, each with its slave, element, line and what
+    (``[]`` when the error is not about parts of the ENI)."""
+    from ecatcfg.eni.contents import UnsupportedEniError
+    from ecatcfg.runtime.master import IncompleteEniError
+    refused: list[dict[str, Any]] = []
+    if isinstance(error, UnsupportedEniError):
+        refused = [{"slave": p.slave, "element": p.element, "what": p.what, "line": p.line,
+                    "commands": p.commands} for p in error.parts]
+    elif isinstance(error, IncompleteEniError):
+        refused = [{"slave": name, "element": "Slave/InitCmds", "what": text, "line": None,
+                    "commands": 0} for name, text in error.missing.items()]
+    slaves = [{"position": s.position, "name": s.name, "address": s.phys_addr,
+               "state": "not started", "highest_state": "not started", "al_status_code": None,
+               "al_status": None, "last_command": ""}
+              for s in sorted(plan.slaves, key=lambda s: s.position)] if plan else []
+    return {"eni": eni, "target": AlState(target).name, "ok": False, "error": str(error),
+            "refused": refused, "slaves": slaves,
+            "cycles": {"count": 0, "lost_frames": 0, "wkc_errors": 0,
+                       "wkc_error_commands": {}, "jitter_us": {}},
+            "frames": {"sent": 0, "lost": 0}, "skipped": [], "events": []}

@@ -28,6 +28,8 @@ from ecatcfg.record import record
 from ecatcfg.runtime import hotconnect
 from ecatcfg.runtime.cyclic import CyclicFrames
 from ecatcfg.runtime.lockstep import Job, Step, run_jobs, until_answered
+from ecatcfg.runtime.reached import (EXPLAIN, describe_missing, missing_requests,
+                                     not_reached)
 from ecatcfg.runtime.replay import (TIMEOUT_COMMAND, ApplyError, MailboxChannel,
                                     SlaveProgress, mailbox_init_cmds, master_job,
                                     slave_transition_job)
@@ -41,6 +43,19 @@ if TYPE_CHECKING:
     from ecatcfg.runtime.recovery import Supervisor
 
 UP = [Transition.IP, Transition.PS, Transition.SO]
+
+
+def up_to(target: AlState) -> list[Transition]:
+    """The transitions from INIT to ``target`` (none for INIT)."""
+    return [t for t in UP if t.target <= target]
+
+
+def check_requests(plan: NetworkPlan, target: AlState, eni: str | None = None) -> None:
+    """Raise :class:`IncompleteEniError` when some slave's way to ``target`` has a state
+    that no InitCmd requests (a partial ENI), before anything is sent."""
+    missing = missing_requests(plan, plan.slaves, up_to(target))
+    if missing:
+        raise IncompleteEniError(plan, target, missing, eni)
 DOWN = {AlState.OP: [Transition.OS, Transition.SP, Transition.PI],
         AlState.SAFEOP: [Transition.SP, Transition.PI],
         AlState.PREOP: [Transition.PI]}
@@ -92,6 +107,33 @@ class Event:
                                # "refused"
     text: str
     slave: str | None = None   # the slave it is about, when it is about one
+
+
+class NotReachedError(ApplyError):
+    """Slaves whose AL status, read back after a transition, is not its target state."""
+
+    def __init__(self, transition: Transition, lines: list[str]) -> None:
+        super().__init__(f"after {transition.value} ({transition.target.name} requested), "
+                         f"{len(lines)} slave{'s' if len(lines) != 1 else ''} not in "
+                         f"{transition.target.name}:\n" + "\n".join(f"  {x}" for x in lines))
+        self.transition = transition
+        self.lines = lines
+
+
+class IncompleteEniError(ApplyError):
+    """An ENI whose InitCmds do not request every state on the way to the target
+    (``runtime/reached.py``); raised before any frame is sent.  ``missing``: per slave,
+    the transitions whose state nothing requests."""
+
+    def __init__(self, plan: NetworkPlan, target: AlState,
+                 missing: dict[str, list[Transition]], eni: str | None) -> None:
+        self.missing = {name: describe_missing(plan, name, steps)
+                        for name, steps in missing.items()}
+        super().__init__(
+            f"{eni + ': ' if eni else ''}the ENI cannot take its slaves to {target.name}; "
+            f"nothing was sent:\n" + "\n".join(f"  slave {name!r}: {text}"
+                                                for name, text in self.missing.items())
+            + "\n" + EXPLAIN)
 
 
 class DcSyncError(ApplyError):
@@ -198,6 +240,10 @@ class Master:
     # -- state changes ----------------------------------------------------------------------
 
     def bring_up(self, target: AlState = AlState.OP) -> None:
+        """Up to ``target`` transition by transition; after each one every slave's AL
+        status is read back, and a slave that is not in the transition's target state is
+        an :class:`ApplyError` (``runtime/reached.py``): the state is reached when the
+        slaves say so, not when the ENI's commands have been sent."""
         for transition in UP:
             if self.state >= target:
                 return
@@ -206,6 +252,14 @@ class Master:
             if transition == Transition.SO:
                 self.wait_dc()
             self.run_transition(transition)
+            self.check_reached(transition)
+
+    def check_reached(self, transition: Transition) -> None:
+        """Raise :class:`NotReachedError` unless every slave on the line reads back in
+        ``transition``'s target state without the error flag."""
+        lines = not_reached(self.slaves, self.read_states(), transition.target)
+        if lines:
+            raise NotReachedError(transition, lines)
 
     def bring_down(self, target: AlState = AlState.INIT) -> None:
         """Down to ``target`` in order (OP->SAFEOP->PREOP->INIT).  Slaves with an AL error

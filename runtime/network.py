@@ -32,7 +32,8 @@ from ecatcfg.eni.plan import NetworkPlan, Variable
 from ecatcfg.errors import EcatcfgError
 from ecatcfg.esc import AlState
 from ecatcfg.record import record
-from ecatcfg.runtime.master import DC_THRESHOLD_NS, DC_TIMEOUT_S, Event, Master
+from ecatcfg.runtime.master import (DC_THRESHOLD_NS, DC_TIMEOUT_S, Event, Master,
+                                    check_requests)
 
 if TYPE_CHECKING:                   # imported where used: `import ecatcfg.runtime` stays light
     from ecatcfg.runtime.cyclic import CycleStats
@@ -92,6 +93,7 @@ class Network:
             link.close()                    # the Network owns the link from the start
             raise
         self.plan = eni
+        self.eni_name = eni_name
         self.link = link                    # the Network's from here on: close() closes it
         self.recorder: PcapRecorder | None = None
         if pcap is not None:
@@ -177,7 +179,11 @@ class Network:
         return self.master.state
 
     def up(self, state: AlState = AlState.OP, *, accept_newer_revision: bool = False) -> None:
-        """Scan and verify the line, then bring it to ``state`` (default OP)."""
+        """Scan and verify the line, then bring it to ``state`` (default OP).  An ENI that
+        has no command requesting a state on the way (a partial ENI) is refused before
+        anything is sent; a slave not read back in a transition's target state is an
+        :class:`~ecatcfg.runtime.master.NotReachedError` (``runtime/reached.py``)."""
+        check_requests(self.plan, state, self.eni_name)
         self.master.scan_and_verify(accept_newer_revision)
         self.master.bring_up(state)
 
