@@ -405,7 +405,8 @@ ETH_HEADER_SIZE = 14          # destination MAC, source MAC, EtherType
 MIN_FRAME = 60                # Ethernet minimum without FCS: shorter frames are padded
 FRAME_PAYLOAD = 1500
 FRAME_HEADER = 2
-DATAGRAM_OVERHEAD = 12
+DATAGRAM_HEADER = 10          # command, index, address, length, IRQ
+DATAGRAM_OVERHEAD = DATAGRAM_HEADER + 2     # ... and the working counter after the data
 MAX_DATAGRAM_DATA = FRAME_PAYLOAD - FRAME_HEADER - DATAGRAM_OVERHEAD     # 1486
 
 

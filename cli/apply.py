@@ -143,13 +143,17 @@ def _run(args: argparse.Namespace, ctx: _Run) -> int:
         plan = eni_reader.read_file(args.eni)
     else:
         plan = eni_cache.read_file(args.eni)
-    report = ApplyReport(plan, args.eni, json_output=args.format == "json")
     target = AlState(STATES[args.state])
     ctx.plan = plan
     if plan.unsupported and not args.skip_unsupported:
         from ecatcfg.eni.contents import refuse
         refuse(plan, args.eni)              # before a link is opened or a frame sent
+    # A partial ENI: the standard set-up of slaves without register InitCmds.
+    from ecatcfg.eni.derive import complete
+    plan, derived = complete(plan, args.eni)
     check_requests(plan, target, args.eni)
+    report = ApplyReport(plan, args.eni, json_output=args.format == "json")
+    report.derived(derived)
     report.skipped(plan.unsupported)
     notify = Notifier.from_env()
 

@@ -18,6 +18,8 @@ from ecatcfg.errors import EcatcfgError
 if TYPE_CHECKING:                   # rich and the runtime are imported where they are used
     from rich.console import Console
 
+    from ecatcfg.eni.derive import Derived
+
     from ecatcfg.runtime.master import Event, SlaveState
     from ecatcfg.runtime.network import Network
     from ecatcfg.runtime.replay import SlaveProgress
@@ -58,6 +60,15 @@ class ApplyReport:
         self.rows: list[dict[str, Any]] = []
         self.summary: dict[str, Any] = {}
         self.skipped_parts: list[dict[str, Any]] = []
+        self.derived_parts: list[dict[str, Any]] = []
+
+    def derived(self, derived: list[Derived]) -> None:
+        """The set-up derived for a partial ENI (``eni/derive.py``): a line each, and the
+        JSON's ``derived``."""
+        self.derived_parts = [{"slave": d.slave or None, "what": d.text} for d in derived]
+        for d in derived:
+            self.note(f"slave {d.slave!r}: {d.text}" if d.slave else
+                      f"master: no InitCmds in the ENI: {d.text}")
 
     def skipped(self, parts: list[Unsupported]) -> None:
         """The parts of the ENI run without (``--skip-unsupported``), for the JSON."""
@@ -158,6 +169,7 @@ class ApplyReport:
                        "jitter_us": {k: round(v, 1) for k, v in jitter.items()}},
             "frames": {"sent": counters.frames_sent, "lost": counters.frames_lost},
             "refused": [],
+            "derived": self.derived_parts,
             "skipped": self.skipped_parts,
         }
         segment = getattr(net, "segment", None)         # set by Network.virtual only
@@ -203,6 +215,7 @@ def refusal_json(eni: str, target: int, error: EcatcfgError,
     parts that made apply refuse the ENI, each with its slave, element, line and what
     (``[]`` when the error is not about parts of the ENI)."""
     from ecatcfg.eni.contents import UnsupportedEniError
+    from ecatcfg.eni.derive import DeriveError
     from ecatcfg.runtime.master import IncompleteEniError
     refused: list[dict[str, Any]] = []
     if isinstance(error, UnsupportedEniError):
@@ -211,6 +224,9 @@ def refusal_json(eni: str, target: int, error: EcatcfgError,
     elif isinstance(error, IncompleteEniError):
         refused = [{"slave": name, "element": "Slave/InitCmds", "what": text, "line": None,
                     "commands": 0} for name, text in error.missing.items()]
+    elif isinstance(error, DeriveError):
+        refused = [{"slave": name, "element": "Slave/InitCmds", "what": text, "line": None,
+                    "commands": 0} for name, text in error.problems.items()]
     slaves = [{"position": s.position, "name": s.name, "address": s.phys_addr,
                "state": "not started", "highest_state": "not started", "al_status_code": None,
                "al_status": None, "last_command": ""}
@@ -219,4 +235,4 @@ def refusal_json(eni: str, target: int, error: EcatcfgError,
             "refused": refused, "slaves": slaves,
             "cycles": {"count": 0, "lost_frames": 0, "wkc_errors": 0,
                        "wkc_error_commands": {}, "jitter_us": {}},
-            "frames": {"sent": 0, "lost": 0}, "skipped": [], "events": []}
+            "frames": {"sent": 0, "lost": 0}, "derived": [], "skipped": [], "events": []}

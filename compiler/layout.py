@@ -25,8 +25,9 @@ from dataclasses import dataclass, field
 from ecatcfg.eni.plan import BitRange, CyclicCmd, Frame, Variable
 from ecatcfg.compiler.resolve import ResolvedSlave
 from ecatcfg.errors import EcatcfgError
-from ecatcfg.esc import (FRAME_PAYLOAD, MAILBOX_STATE_ADDR, SM1_STATUS, Cmd, FmmuConfig, FmmuType,
-                         Reg, frame_bytes, wkc_increment)
+from ecatcfg.eni.standard import mailbox_state_fmmu, pd_fmmu
+from ecatcfg.esc import (FRAME_PAYLOAD, MAILBOX_STATE_ADDR, Cmd, FmmuConfig, FmmuType, Reg,
+                         frame_bytes, wkc_increment)
 from ecatcfg.esi import datatypes
 
 LRW_BASE = 0x10000000
@@ -215,8 +216,7 @@ def build(slaves: list[ResolvedSlave], layout: str, uses_dc: bool,
 
     for bit, i in enumerate(mailbox_state):
         results[i].status_bit = bit
-        results[i].fmmus.append((FmmuConfig(MAILBOX_STATE_ADDR + bit // 8, 1, bit % 8, bit % 8,
-                                            SM1_STATUS, 0, FmmuType.READ), "mailbox state"))
+        results[i].fmmus.append((mailbox_state_fmmu(MAILBOX_STATE_ADDR, bit), "mailbox state"))
     return Layout(results, out_frames, offs, len(mailbox_state))
 
 
@@ -250,11 +250,8 @@ def _map_region(result: SlaveLayout, slave: ResolvedSlave, size: SlaveBits, d: _
         for group in fmmu_groups(slave, sms, label.capitalize()):
             sm = next(s for s in slave.device.sms if s.number == group[0][0])
             bits = sum(b for _, b in group)
-            logical = d.addr * 8 + bit
-            first = logical % 8
-            result.fmmus.append((FmmuConfig(logical // 8, (first + bits + 7) // 8, first,
-                                            (first + bits - 1) % 8, sm.start_address or 0, 0,
-                                            kind), label))
+            result.fmmus.append((pd_fmmu(d.addr * 8 + bit, bits, sm.start_address or 0,
+                                         kind), label))
             for sm_number, sm_bits in group:
                 _variables(result, slave, sm_number, d.image_offs * 8 + bit, label)
                 bit += sm_bits

@@ -14,7 +14,8 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Literal
 
-from ecatcfg.esc import REGISTER_WRITES, Transition
+from ecatcfg.esc import (DATAGRAM_HEADER, DATAGRAM_OVERHEAD, ETH_HEADER_SIZE, FRAME_HEADER,
+                         REGISTER_WRITES, Transition)
 from ecatcfg.record import field, record
 
 if TYPE_CHECKING:         # imported where used: only ENIs with EoE InitCmds need the codec
@@ -246,6 +247,22 @@ class CyclicCmd:
 class Frame:
     cmds: list[CyclicCmd] = field(default_factory=list)
     comment: str | None = None
+
+    @property
+    def data_shift(self) -> int:
+        """Bytes from a command's ``InputOffs``/``OutputOffs`` to its data in the process
+        image.  Two conventions exist (``docs/eni-exports.md`` §4): EC-Engineer and ecatcfg
+        write offsets into a compact image (the data starts at the offset, shift 0);
+        TwinCAT's image is shaped like the frame and its offsets are those of the datagram
+        *header* in the Ethernet frame (16 for the first), so the data starts 10 bytes
+        later.  A frame whose offsets are exactly its datagrams' header positions is read
+        the TwinCAT way."""
+        pos = ETH_HEADER_SIZE + FRAME_HEADER
+        for c in self.cmds:
+            if c.input_offs != pos or c.output_offs != pos:
+                return 0
+            pos += DATAGRAM_OVERHEAD + c.length
+        return DATAGRAM_HEADER
 
 
 @record

@@ -2,11 +2,8 @@
 
 ``Cyclic/Frame/Cmd`` gives each cyclic datagram, the states it runs in, its expected
 working counter (``Cnt``) and where its data sits in the process image (``InputOffs`` /
-``OutputOffs``).  Two conventions exist (``docs/eni-exports.md`` §4): EC-Engineer and
-ecatcfg write offsets into a compact image (the data starts at the offset); TwinCAT's image
-is shaped like the frame, and its offsets are those of the datagram *header* in the
-Ethernet frame (16 for the first), so the data starts 10 bytes later.  A frame whose
-offsets are exactly its datagrams' header positions is read the TwinCAT way.
+``OutputOffs``), in either of the two conventions ``Frame.data_shift`` tells apart
+(``eni/plan.py``: a compact image, or TwinCAT's frame-shaped one).
 
 The hot path (docs/BENCHMARKS.md, "Cyclic"): each frame is encoded once per AL state
 (:class:`_Prepared`, by ``wire.encode``, the one home of the layout); a cycle copies the
@@ -87,15 +84,6 @@ class CycleStats:
         return {"p50": devs[len(devs) // 2], "p99": devs[min(len(devs) - 1,
                                                              int(len(devs) * 0.99))],
                 "max": devs[-1]}
-
-
-def _frame_shaped(cmds: list[CyclicCmd]) -> bool:
-    pos = wire.FRAME_HEADER_END
-    for c in cmds:
-        if c.input_offs != pos or c.output_offs != pos:
-            return False
-        pos += wire.DG_HEADER_LEN + c.length + wire.WKC.size
-    return True
 
 
 class _Prepared:
@@ -189,7 +177,7 @@ class CyclicFrames:
         self.frames: list[list[_Slot]] = []
         in_size, out_size = image.inputs_size, image.outputs_size
         for f in frames:
-            shift = wire.DG_HEADER_LEN if _frame_shaped(f.cmds) else 0
+            shift = f.data_shift
             # "Bus shift" (APWR/FPWR of 0x0910) writes the master's own clock into the
             # reference clock; this master follows the reference instead (ARMW), and sending
             # the file's zeros would feed the reference's drift loop a huge error.

@@ -89,6 +89,7 @@ class Network:
                 eni_name = eni_name or str(eni)
                 eni = eni_reader.read_file(eni)
             _check_supported(eni, eni_name, skip_unsupported, on_event)
+            eni = _completed(eni, eni_name, on_event)
         except BaseException:
             link.close()                    # the Network owns the link from the start
             raise
@@ -145,6 +146,9 @@ class Network:
         if not skip_unsupported:            # refuse before building the segment
             _check_supported(plan, eni_name or (None if isinstance(eni, NetworkPlan)
                                                 else str(eni)), False, None)
+        # The slaves of a partial ENI are emulated as configured by its derived set-up.
+        plan = _completed(plan, eni_name or (None if isinstance(eni, NetworkPlan)
+                                             else str(eni)), on_event)
         library = Library([str(p) for p in esi], cache=esi_cache) if esi else None
         segment = emulate.segment(emulate.specs_from_eni(plan, library, shown), faults,
                                   timing, dc=dc)
@@ -387,6 +391,20 @@ class Network:
 
 class SkippedConfigWarning(UserWarning):
     """Parts of an ENI a Network runs without (``skip_unsupported=True``)."""
+
+
+def _completed(plan: NetworkPlan, name: str | None,
+               on_event: Callable[[Event], None] | None) -> NetworkPlan:
+    """``plan`` with the standard set-up of the slaves a partial ENI gives no register
+    InitCmds (``eni/derive.py``), each one said as an ``Event("derived", ...)``; raises
+    :class:`~ecatcfg.eni.derive.DeriveError` when it cannot be derived."""
+    from ecatcfg.eni.derive import complete
+    done, derived = complete(plan, name)
+    if on_event is not None:
+        for d in derived:
+            on_event(Event("derived", f"slave {d.slave!r}: {d.text}" if d.slave else
+                           f"master: no InitCmds in the ENI: {d.text}", d.slave or None))
+    return done
 
 
 def _check_supported(plan: NetworkPlan, name: str | None, skip: bool,

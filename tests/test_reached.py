@@ -1,7 +1,8 @@
-"""Results that are true (``runtime/reached.py``): apply and the Network report a state only
-when every slave reads back in it, refuse an ENI that cannot take its slaves there (a partial
-ENI) before anything is sent, and ``apply --format json`` prints one JSON document whatever
-happens.
+"""Results that are true (``runtime/reached.py``, ``eni/derive.py``): apply and the Network
+report a state only when every slave reads back in it; a partial ENI (no register InitCmds)
+is completed with the standard set-up, or refused before anything is sent when that cannot
+be derived, as is an ENI that requests no state on the way; ``apply --format json`` prints
+one JSON document whatever happens.
 
 The ENIs are the example topology compiled by ecatcfg, then cut the way the files seen in
 the field are: no register InitCmds for the slaves (a partial export), no "check device
@@ -22,8 +23,10 @@ from lxml import etree
 
 from conftest import EXAMPLES
 from ecatcfg.eni import reader as eni_reader
-from ecatcfg.esc import AlState, Transition
-from ecatcfg.runtime.master import IncompleteEniError, NotReachedError
+from ecatcfg.eni.derive import complete
+from ecatcfg.eni.plan import SlavePlan
+from ecatcfg.esc import AlState, Cmd, Reg, Transition
+from ecatcfg.runtime.master import Event, NotReachedError
 from ecatcfg.runtime.network import Network
 
 TIMEOUT = 90
@@ -60,37 +63,119 @@ def apply_json(eni: Path, *args: str) -> tuple[int, dict, str]:
     return done.returncode, json.loads(done.stdout), done.stderr
 
 
-def partial(compiled: Path, tmp_path: Path) -> Path:
-    """Mailbox, process data and CoE InitCmds only, as some IDEs export."""
-    return cut(compiled, tmp_path / "partial.xml", lambda name, comment: True)
+def partial(src: Path, dst: Path, keep_master: bool = False) -> Path:
+    """Mailbox, process data and CoE InitCmds only, as some IDEs export: no register
+    InitCmds of the slaves (nor of the master, unless ``keep_master``)."""
+    cut(src, dst, lambda name, comment: True)
+    if not keep_master:
+        tree = etree.parse(str(dst))
+        cmds = tree.find("Config/Master/InitCmds")
+        cmds.getparent().remove(cmds)
+        tree.write(str(dst))
+    return dst
 
 
-# -- a partial ENI is refused before anything is sent ------------------------------------------
+# Register writes that make the set-up: station address, AL control, SyncManagers, FMMUs.
+_SETUP = (Reg.STATION_ADDRESS, Reg.AL_CONTROL)
 
-def test_partial_eni_is_refused_naming_every_slave(compiled, tmp_path):
-    eni = partial(compiled, tmp_path)
+
+def setup_writes(slave: SlavePlan) -> set[tuple]:
+    """The slave's register writes of the set-up, in the transitions apply runs, as
+    (transitions, register, data): what must be equal whoever wrote the ENI."""
+    out = set()
+    for c in slave.init_cmds:
+        runs = tuple(t for t in c.transitions if t in (Transition.IP, Transition.PS,
+                                                        Transition.SO))
+        if c.cmd in (Cmd.APWR, Cmd.FPWR) and runs and c.ado is not None and (
+                c.ado in _SETUP or 0x0600 <= c.ado < 0x0A00):
+            out.add((runs, c.ado, c.payload))
+    return out
+
+
+# -- a partial ENI: the standard set-up derived, equal to a full export's -----------------
+
+def test_partial_eni_reaches_op_with_the_derived_setup(compiled, tmp_path):
+    eni = partial(compiled, tmp_path / "partial.xml")
     rc, report, err = apply_json(eni)
-    assert rc == 1
-    assert report["ok"] is False
+    assert rc == 0, err
     names = [s.name for s in eni_reader.read_file(eni).slaves]
-    assert [r["slave"] for r in report["refused"]] == names
-    for part in report["refused"]:
-        assert part["what"] == ("no InitCmd requests PREOP (INIT -> PREOP), SAFEOP (PREOP -> "
-                                "SAFEOP), OP (SAFEOP -> OP); no register InitCmds at all")
-    assert report["frames"]["sent"] == 0 and report["cycles"]["count"] == 0
-    assert [r["state"] for r in report["slaves"]] == ["not started"] * len(names)
-    assert "partial export" in report["error"] and "nothing was sent" in report["error"]
-    assert f"{eni}: the ENI cannot take its slaves to OP" in err      # and on stderr
+    assert [d["slave"] for d in report["derived"]] == [*names, None]     # None: the master
+    assert all(d["what"].startswith("no register InitCmds in the ENI: derived the standard "
+                                    "set-up") for d in report["derived"][:-1])
+    assert {r["highest_state"] for r in report["slaves"]} == {"OP"}
+    assert report["cycles"]["count"] == 5
 
 
-def test_partial_eni_through_the_network_api_sends_nothing(compiled, tmp_path):
-    plan = eni_reader.read_file(partial(compiled, tmp_path))
-    with Network.virtual(plan, [EXAMPLES / "esi"]) as net:
-        with pytest.raises(IncompleteEniError) as caught:
-            net.up()
-        assert net.master.transport.counters.frames_sent == 0
-        assert all(s.al_status & 0x0F == AlState.INIT for s in net.segment.slaves)
-    assert set(caught.value.missing) == {s.name for s in plan.slaves}
+def test_derived_setup_equals_the_compiled_export(compiled, tmp_path):
+    """The same devices compiled from their ESI files (a full export) and derived from the
+    partial ENI write the same SyncManagers, FMMUs, station addresses and state requests,
+    but for what only an ESI says: the lamps' EX2008 enables its outputs SM only in OP
+    (ESI OpOnly), the derived set-up from PREOP->SAFEOP on."""
+    full = eni_reader.read_file(compiled)
+    done, _ = complete(eni_reader.read_file(partial(compiled, tmp_path / "p.xml")))
+    assert [c.comment for c in done.master.init_cmds] == \
+        [c.comment for c in full.master.init_cmds]
+    for ours, theirs in zip(done.slaves, full.slaves):
+        if ours.name == "lamps":
+            sm0 = (Reg.SM0, bytes.fromhex("000f010044000100"))
+            assert ((Transition.SO,), *sm0) in setup_writes(theirs)
+            assert ((Transition.PS,), *sm0) in setup_writes(ours)
+            assert setup_writes(ours) - {((Transition.PS,), *sm0)} == \
+                setup_writes(theirs) - {((Transition.SO,), *sm0)}
+        else:
+            assert setup_writes(ours) == setup_writes(theirs), ours.name
+            assert ours.init_cmds == theirs.init_cmds, ours.name
+
+
+def test_derived_setup_equals_twincats(corpus, tmp_path):
+    """An independent reference: TwinCAT's export of EK1100, EL2008, EL4002 (mailbox,
+    bootstrap, mailbox-state FMMU) and EL1809, cut to a partial ENI, derived again: every
+    SyncManager, FMMU, station address and state request is TwinCAT's, but the EL2008's
+    OpOnly outputs SM (TwinCAT: set in SAFEOP->OP)."""
+    src = corpus / "eni" / "jn-ec-master" / "mega_master_eni.xml"
+    full = eni_reader.read_file(src)
+    done, derived = complete(eni_reader.read_file(partial(src, tmp_path / "p.xml",
+                                                          keep_master=True)))
+    assert [d.slave for d in derived] == [s.name for s in full.slaves]
+    for ours, theirs in zip(done.slaves, full.slaves):
+        mine, twincat = setup_writes(ours), setup_writes(theirs)
+        if ours.name == "Term 2 (EL2008)":
+            sm0 = (Reg.SM0, bytes.fromhex("000f010044000100"))
+            assert mine - twincat == {((Transition.PS,), *sm0)}
+            assert twincat - mine == {((Transition.SO,), *sm0)}
+        else:
+            assert mine == twincat, ours.name
+    fmmus = [c for c in done.slave("Term 3 (EL4002)").init_cmds if c.ado == Reg.FMMU0 + 16]
+    assert fmmus[0].payload.hex() == "00000009010000000d08000101000000"    # mailbox state
+
+
+def test_partial_eni_through_the_network_api(compiled, tmp_path):
+    plan = eni_reader.read_file(partial(compiled, tmp_path / "partial.xml"))
+    events: list[Event] = []
+    with Network.virtual(plan, [EXAMPLES / "esi"], on_event=events.append) as net:
+        net.up()
+        assert net.state == AlState.OP
+        assert all(s.al_status & 0x0F == AlState.OP for s in net.segment.slaves)
+    assert [e.slave for e in events if e.kind == "derived"] == \
+        [*(s.name for s in plan.slaves), None]
+    assert not plan.slaves[0].init_cmds              # the caller's plan is left as it was
+
+
+def test_a_partial_eni_that_cannot_be_derived_is_refused(compiled, tmp_path):
+    """Without the cyclic command that carries the drive's data, where its FMMUs map to
+    is not in the file: refused, naming the slave and what is missing."""
+    eni = partial(compiled, tmp_path / "partial.xml")
+    tree = etree.parse(str(eni))
+    for cmd in tree.iterfind("Config/Cyclic/Frame/Cmd"):
+        if cmd.findtext("Cmd") in ("10", "11", "12"):           # LRD, LWR, LRW
+            cmd.getparent().remove(cmd)
+    tree.write(str(eni))
+    rc, report, err = apply_json(eni)
+    assert rc == 1 and report["frames"]["sent"] == 0
+    refused = {r["slave"]: r["what"] for r in report["refused"]}
+    assert refused["axis1"].startswith("no cyclic command carries the bits")
+    assert set(refused) == {"buttons", "sensors", "lamps", "axis1"}     # not the coupler
+    assert "cannot be derived" in err
 
 
 def test_requests_up_to_the_target_only(compiled, tmp_path):
