@@ -133,14 +133,17 @@ class _SlaveCmds:
     def ap(self, transitions: list[T], comment: str, cmd: Cmd, ado: int, data: bytes, *,
            cnt: int | None = None, validate: Validate | None = None,
            requires: str | None = None) -> None:
-        self.cmds.append(InitCmd(transitions, comment, cmd, len(data), adp=self.auto, ado=ado,
-                                 data=data, cnt=cnt, retries=3, validate=validate,
-                                 requires=requires))
+        self._add(self.auto, transitions, comment, cmd, ado, data, cnt, validate, requires)
 
     def fp(self, transitions: list[T], comment: str, cmd: Cmd, ado: int, data: bytes, *,
            cnt: int | None = None, validate: Validate | None = None,
            requires: str | None = None) -> None:
-        self.cmds.append(InitCmd(transitions, comment, cmd, len(data), adp=self.phys, ado=ado,
+        self._add(self.phys, transitions, comment, cmd, ado, data, cnt, validate, requires)
+
+    def _add(self, adp: int, transitions: list[T], comment: str, cmd: Cmd, ado: int,
+             data: bytes, cnt: int | None, validate: Validate | None,
+             requires: str | None) -> None:
+        self.cmds.append(InitCmd(transitions, comment, cmd, len(data), adp=adp, ado=ado,
                                  data=data, cnt=cnt, retries=3, validate=validate,
                                  requires=requires))
 

@@ -82,3 +82,15 @@ def device_xml(type_name: str = "FX1", product: str = "#x10", revision: str = "#
 def esi_xml(*devices: str, vendor: str = "#x00E0F1", encoding: str = "UTF-8") -> str:
     return ESI_TEMPLATE.format(devices="\n".join(devices) or device_xml(), vendor=vendor,
                                encoding=encoding)
+
+
+def compile_example(eni: Path) -> Path:
+    """``ecatcfg compile`` of the example topology (examples/) into ``eni``, as a user runs it."""
+    import subprocess
+    import sys
+    done = subprocess.run([sys.executable, "-m", "ecatcfg", "compile",
+                           str(EXAMPLES / "topology.yaml"), "--esi", str(EXAMPLES / "esi"),
+                           "-o", str(eni), "--no-cache"], capture_output=True, text=True,
+                          timeout=60)
+    assert done.returncode == 0, done.stderr
+    return eni

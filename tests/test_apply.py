@@ -35,7 +35,7 @@ from pathlib import Path
 import pytest
 from rig import serving
 
-from conftest import EXAMPLES
+from conftest import EXAMPLES, compile_example
 from rig import require_tshark, tshark_malformed
 from ecatcfg.compiler import build, topology
 from ecatcfg.eni import reader as eni_reader
@@ -617,16 +617,6 @@ def test_swapped_slaves_exit_1_before_any_configuration(veth_netns, corpus_lib, 
 
 # --------------------------------------------------------------------------- 7: --virtual
 
-def _compile_example(tmp_path: Path) -> Path:
-    eni = tmp_path / "example.eni.xml"
-    done = subprocess.run([sys.executable, "-m", "ecatcfg", "compile",
-                           str(EXAMPLES / "topology.yaml"), "--esi", str(EXAMPLES / "esi"),
-                           "-o", str(eni), "--no-cache"], capture_output=True, text=True,
-                          timeout=60)
-    assert done.returncode == 0, done.stderr
-    return eni
-
-
 def _apply_virtual(eni: Path, *args: str, env: dict | None = None) -> tuple[int, dict, str]:
     done = subprocess.run([sys.executable, "-m", "ecatcfg", "apply", str(eni), "--virtual",
                            "--esi", str(EXAMPLES / "esi"), "--format", "json", *args],
@@ -637,7 +627,7 @@ def _apply_virtual(eni: Path, *args: str, env: dict | None = None) -> tuple[int,
 def test_apply_with_a_cached_plan_is_the_same_apply(tmp_path):
     """The first apply stores the parsed ENI (eni/cache.py), the next one starts
     from it; --no-cache parses again.  All three configure the same slaves the same way."""
-    eni = _compile_example(tmp_path)
+    eni = compile_example(tmp_path / "example.eni.xml")
     env = dict(os.environ, XDG_CACHE_HOME=str(tmp_path / "xdg"))
     reports = []
     for args in ((), (), ("--no-cache",)):
@@ -654,7 +644,7 @@ def test_apply_with_a_cached_plan_is_the_same_apply(tmp_path):
 
 
 def test_virtual_apply_of_the_example_reaches_op(tmp_path):
-    eni = _compile_example(tmp_path)
+    eni = compile_example(tmp_path / "example.eni.xml")
     rc, report, err = _apply_virtual(eni, "--cycles", str(CYCLES))
     assert rc == 0, err
     check_reached_op(report, eni_reader.read_file(eni))
@@ -662,7 +652,7 @@ def test_virtual_apply_of_the_example_reaches_op(tmp_path):
 
 
 def test_virtual_apply_pcap_of_the_example(tshark_path, tmp_path):
-    eni = _compile_example(tmp_path)
+    eni = compile_example(tmp_path / "example.eni.xml")
     pcap = tmp_path / "example.pcapng"
     rc, report, err = _apply_virtual(eni, "--cycles", "5", "--pcap", str(pcap))
     assert rc == 0 and report["ok"], err

@@ -21,7 +21,7 @@ from pathlib import Path
 import pytest
 from lxml import etree
 
-from conftest import EXAMPLES
+from conftest import EXAMPLES, compile_example
 from ecatcfg.eni import reader as eni_reader
 from ecatcfg.eni.derive import complete
 from ecatcfg.eni.plan import SlavePlan
@@ -34,13 +34,7 @@ TIMEOUT = 90
 
 @pytest.fixture(scope="module")
 def compiled(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    eni = tmp_path_factory.mktemp("reached") / "example.eni.xml"
-    done = subprocess.run([sys.executable, "-m", "ecatcfg", "compile",
-                           str(EXAMPLES / "topology.yaml"), "--esi", str(EXAMPLES / "esi"),
-                           "-o", str(eni), "--no-cache"], capture_output=True, text=True,
-                          timeout=60)
-    assert done.returncode == 0, done.stderr
-    return eni
+    return compile_example(tmp_path_factory.mktemp("reached") / "example.eni.xml")
 
 
 def cut(src: Path, dst: Path, drop: Callable[[str, str], bool]) -> Path:

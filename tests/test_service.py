@@ -34,7 +34,7 @@ from pathlib import Path
 import pytest
 from rig import start_simulate
 
-from conftest import EXAMPLES
+from conftest import EXAMPLES, compile_example
 
 APPLY_TIMEOUT = 90
 SLOW_MS = 1500              # SAFEOP -> PREOP -> INIT each take this (simulate --timing)
@@ -42,13 +42,7 @@ SLOW_MS = 1500              # SAFEOP -> PREOP -> INIT each take this (simulate -
 
 @pytest.fixture(scope="module")
 def example_eni(tmp_path_factory) -> Path:
-    eni = tmp_path_factory.mktemp("svc") / "example.eni.xml"
-    done = subprocess.run([sys.executable, "-m", "ecatcfg", "compile",
-                           str(EXAMPLES / "topology.yaml"), "--esi", str(EXAMPLES / "esi"),
-                           "-o", str(eni), "--no-cache"], capture_output=True, text=True,
-                          timeout=60)
-    assert done.returncode == 0, done.stderr
-    return eni
+    return compile_example(tmp_path_factory.mktemp("svc") / "example.eni.xml")
 
 
 NAMES = ["coupler", "buttons", "sensors", "lamps", "axis1"]     # examples/topology.yaml
