@@ -1,14 +1,16 @@
-"""Capture conformance: replay every corpus capture against the virtual segment and print
-the per-capture table of docs/conformance.md.
+"""Capture conformance: replay every capture of both corpora against the virtual segment
+and print the per-capture table of docs/conformance.md.
 
 Run from the checkout (no root):
-    python3 bench/conformance.py [--corpus DIR] [--differences N]
+    python3 bench/conformance.py [--corpus DIR] [--corpus-extra DIR] [--differences N]
 
-For each wire capture in the corpus (``pcap/`` and its subfolders) the harness in
-``tests/conformance.py`` identifies the slaves from the capture's SII reads, builds the same
-line from the corpus ESI files, sends the master's frames through the emulated line in
+For each wire capture in the corpora (``pcap/`` and its subfolders) the harness in
+``tests/conformance.py`` identifies the slaves from the capture's SII reads (a revision the
+capture does not read from the corpus SII dumps that agree with it), builds the same line
+from the ESI files of both corpora, sends the master's frames through the emulated line in
 memory and classifies each returned datagram as equal, equal by rule, known limit or
-different.  Prints a markdown table and, per capture, the first N differences.
+different.  Prints a markdown table and, per capture, the first N differences.  Captures
+of the extra corpus are named with the prefix ``corpus-extra/``.
 """
 
 from __future__ import annotations
@@ -25,6 +27,8 @@ def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--corpus", type=Path, default=Path(os.environ.get(
         "ECATCFG_CORPUS", ROOT.parent / "shared" / "corpus")))
+    p.add_argument("--corpus-extra", type=Path, default=Path(os.environ.get(
+        "ECATCFG_CORPUS_EXTRA", ROOT.parent / "shared" / "corpus-extra")))
     p.add_argument("--differences", type=int, default=5, help="differences listed per capture")
     args = p.parse_args()
     sys.path.insert(0, str(ROOT.parent))
@@ -33,9 +37,13 @@ def main() -> int:
 
     from ecatcfg.esi.library import Library
 
-    library = Library([args.corpus / "esi"])
-    reports = [conformance.replay(path, library, str(path.relative_to(args.corpus / "pcap")))
-               for path in conformance.captures(args.corpus)]
+    corpora = [(args.corpus, "")] + ([(args.corpus_extra, "corpus-extra/")]
+                                     if args.corpus_extra.is_dir() else [])
+    library = Library([root / "esi" for root, _ in corpora])
+    dumps = conformance.sii_dumps(args.corpus / "sii")
+    reports = [conformance.replay(path, library,
+                                  prefix + str(path.relative_to(root / "pcap")), dumps)
+               for root, prefix in corpora for path in conformance.captures(root)]
     print(conformance.table(reports))
     for r in reports:
         if r.differences:

@@ -202,7 +202,9 @@ class ApplyReport:
                 f"{jitter['p50']:.0f} us, p99 {jitter['p99']:.0f} us, max "
                 f"{jitter['max']:.0f} us")
         if failure:
-            console.print(f"[bold red]failed:[/] {failure}", markup=True)
+            # escape: the message names the InitCmd as "[comment]", which is not markup.
+            from rich.markup import escape
+            console.print(f"[bold red]failed:[/] {escape(str(failure))}", markup=True)
 
     def as_json(self) -> dict[str, Any]:
         return dict(self.summary, events=self.events)

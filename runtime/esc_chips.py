@@ -67,6 +67,13 @@ KNOWN: dict[tuple[int, int], EscChip] = {
                                source="EL2828 in ethercrab-rs/ethercrab tests/replay-*.pcapng"),
     (0x2, 0x0B493052): EscChip("ET1200", 0x12, 0x01, 0x0001, 3, 4, 1, 0x01FC,
                                source="EL2889 in ethercrab-rs/ethercrab tests/replay-*.pcapng"),
+    # EL2004: the BWR clearing FMMU 3 counts only on the EK1100 in front of two EL2004, the
+    # BWRs to SM 0-3 on all three (ethercrab-rs/ethercrab dumps/rs-example-sii-el2004.pcapng):
+    # 3 FMMUs, at least 4 SyncManagers, as the ET1200 of the other Beckhoff terminals.  No
+    # DC register is accessed there: the DC unit stays the default.
+    (0x2, 0x07D43052): EscChip("ET1200", 0x12, 0x01, 0x0001, 3, 4, 1, 0x01FC,
+                               source="EL2004 in ethercrab-rs/ethercrab "
+                                      "dumps/rs-example-sii-el2004.pcapng"),
 }
 
 

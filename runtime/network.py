@@ -34,6 +34,7 @@ from ecatcfg.esc import AlState
 from ecatcfg.record import record
 from ecatcfg.runtime.master import (DC_THRESHOLD_NS, DC_TIMEOUT_S, Event, Master,
                                     check_requests)
+from ecatcfg.runtime.replay import ApplyError
 
 if TYPE_CHECKING:                   # imported where used: `import ecatcfg.runtime` stays light
     from ecatcfg.runtime.cyclic import CycleStats
@@ -94,7 +95,7 @@ class Network:
             link.close()                    # the Network owns the link from the start
             raise
         self.plan = eni
-        self.eni_name = eni_name
+        self.eni_name = eni_name            # the ENI file, for the lines of refused InitCmds
         self.link = link                    # the Network's from here on: close() closes it
         self.recorder: PcapRecorder | None = None
         if pcap is not None:
@@ -184,16 +185,34 @@ class Network:
 
     def up(self, state: AlState = AlState.OP, *, accept_newer_revision: bool = False) -> None:
         """Scan and verify the line, then bring it to ``state`` (default OP).  An ENI that
-        has no command requesting a state on the way (a partial ENI) is refused before
-        anything is sent; a slave not read back in a transition's target state is an
-        :class:`~ecatcfg.runtime.master.NotReachedError` (``runtime/reached.py``)."""
+        has no command requesting a state on the way is refused before anything is sent
+        (:class:`~ecatcfg.runtime.master.IncompleteEniError`); a slave not read back in a
+        transition's target state is a :class:`~ecatcfg.runtime.master.NotReachedError`
+        (``runtime/reached.py``); an InitCmd a slave refuses is an :class:`ApplyError`
+        naming the ENI file and the command's line."""
         check_requests(self.plan, state, self.eni_name)
-        self.master.scan_and_verify(accept_newer_revision)
-        self.master.bring_up(state)
+        try:
+            self.master.scan_and_verify(accept_newer_revision)
+            self.master.bring_up(state)
+        except ApplyError as exc:
+            self._locate(exc)
+            raise
 
     def down(self, state: AlState = AlState.INIT) -> None:
         self.stop()
-        self.master.bring_down(state)
+        try:
+            self.master.bring_down(state)
+        except ApplyError as exc:
+            self._locate(exc)
+            raise
+
+    def _locate(self, exc: ApplyError) -> None:
+        """Name the file and line of the InitCmd that failed (``eni/source.py``)."""
+        if exc.init_cmd is None or exc.file is not None or self.eni_name is None:
+            return
+        from ecatcfg.eni.source import init_cmd_line
+        exc.file = self.eni_name
+        exc.line = init_cmd_line(self.eni_name, self.plan, exc.init_cmd)
 
     # -- process data -----------------------------------------------------------------------
 

@@ -50,7 +50,9 @@ REPEAT_AFTER = 0.05            # s SM1 must stay empty after a lost read before 
 
 
 class ApplyError(EcatcfgError):
-    """A slave or command that did not do what the ENI expects."""
+    """A slave or command that did not do what the ENI expects.  ``init_cmd``: the slave's
+    InitCmd (the plan's object) that failed, when one did; the :class:`Network` names its
+    file and line from it (``eni/source.py``)."""
 
     def __init__(self, message: str, slave: str | None = None,
                  command: str | None = None, al_code: int | None = None,
@@ -62,6 +64,7 @@ class ApplyError(EcatcfgError):
         self.command = command
         self.al_code = al_code
         self.abort_code = abort_code
+        self.init_cmd: InitCmd | CoeInitCmd | EoeInitCmd | None = None
 
 
 @record
@@ -383,18 +386,27 @@ def slave_transition_job(slave: SlavePlan, transition: Transition,
     if (coe or eoe) and transition != Transition.IP:
         split = next((i for i, c in enumerate(cmds) if _writes_al_control(c)), len(cmds))
     for cmd in cmds[:split]:
-        yield from _register_cmd(slave, cmd, who, progress)
+        yield from _failing(cmd, _register_cmd(slave, cmd, who, progress))
     if mailbox is not None and (coe or eoe):
         channel = channel or MailboxChannel(slave.phys_addr, mailbox)
         if coe:                     # a station's plugged modules, before they are configured
             from ecatcfg.runtime.modules import check_modules
             yield from check_modules(channel, slave, transition, who)
         for c in coe:
-            yield from coe_init_cmd_job(channel, c, who, progress)
+            yield from _failing(c, coe_init_cmd_job(channel, c, who, progress))
         for e in eoe:
-            yield from eoe_init_cmd_job(channel, e, who, progress)
+            yield from _failing(e, eoe_init_cmd_job(channel, e, who, progress))
     for cmd in cmds[split:]:
-        yield from _register_cmd(slave, cmd, who, progress)
+        yield from _failing(cmd, _register_cmd(slave, cmd, who, progress))
+
+
+def _failing(cmd: InitCmd | CoeInitCmd | EoeInitCmd, job: Job) -> Job:
+    """``job``, whose ApplyError names ``cmd`` as the InitCmd that failed."""
+    try:
+        yield from job
+    except ApplyError as exc:
+        exc.init_cmd = exc.init_cmd or cmd
+        raise
 
 
 def _register_cmd(slave: SlavePlan, cmd: InitCmd, who: str,

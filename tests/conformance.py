@@ -279,14 +279,45 @@ class Replay:
                         report.differences.append(diff)
 
 
-def _describe(slave: Slave, library: Library) -> tuple[str, SlaveSpec | None, str]:
+def sii_dumps(folder: Path) -> dict[str, bytes]:
+    """Real SII EEPROM dumps (raw images, whatever the file's extension), by file name."""
+    return {p.name: p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+def _revision_from_dumps(slave: Slave, dumps: dict[str, bytes]) -> tuple[int, str] | None:
+    """The revision (SII words 0x0C-0x0D) of the dumps that hold every word the capture
+    read of ``slave``, when they agree on one; and which dumps those are."""
+    agree: dict[int, list[str]] = {}
+    for name, data in dumps.items():
+        if len(data) >= 0x1C and all(2 * a + 2 <= len(data) and
+                                     struct.unpack_from("<H", data, 2 * a)[0] == v
+                                     for a, v in slave.sii.items()):
+            agree.setdefault(struct.unpack_from("<I", data, 0x18)[0], []).append(name)
+    if len(agree) != 1:
+        return None
+    [(revision, names)] = agree.items()
+    return revision, ", ".join(names)
+
+
+def _describe(slave: Slave, library: Library,
+              dumps: dict[str, bytes]) -> tuple[str, SlaveSpec | None, str]:
     """The slave's label, the spec to emulate it (None when it cannot be) and why not.
 
+    A master that reads vendor and product but not the revision (EtherCrab in 2022) leaves
+    the revision to the corpus SII dumps: the one of the dumps that agree with every word
+    the capture read of the slave (the label says which and how many words).
     A revision the corpus lacks is emulated from the ESI of the nearest revision of the
     same product, with the revision number the hardware reports (the label says so): one
     product's revisions share their ESC, SMs and process data far more often than not, and
     every register the substitute gets wrong still shows up as a difference."""
     identity = slave.identity
+    source = ""
+    if identity is None and slave.dword(0x08) is not None and slave.dword(0x0A) is not None:
+        found = _revision_from_dumps(slave, dumps)
+        if found is not None:
+            identity = (slave.dword(0x08) or 0, slave.dword(0x0A) or 0, found[0])
+            source = (f", revision not read: SII dump {found[1]} holds the {len(slave.sii)} "
+                      "words read")
     if identity is None:
         return (f"#{slave.position} ?", None,
                 f"slave {slave.position}: vendor, product and revision not read from its SII")
@@ -306,11 +337,13 @@ def _describe(slave: Slave, library: Library) -> tuple[str, SlaveSpec | None, st
     device = replace(library.device(entry), revision=revision)
     spec = SlaveSpec(device, f"{entry.type}-{slave.position}", serial=slave.dword(0x0E) or 0,
                      alias=slave.word(0x04) or 0)
-    return f"{entry.type} ({label}{note})", spec, ""
+    return f"{entry.type} ({label}{note}{source})", spec, ""
 
 
-def replay(path: Path, library: Library, name: str | None = None) -> Report:
-    """Identify, build, replay and compare one capture."""
+def replay(path: Path, library: Library, name: str | None = None,
+           dumps: dict[str, bytes] | None = None) -> Report:
+    """Identify, build, replay and compare one capture; ``dumps``: real SII images
+    (:func:`sii_dumps`) for slaves whose revision the capture does not read."""
     name = name or path.name
     ex = exchanges(path)
     answered = sum(1 for e in ex if e.reply is not None)
@@ -323,7 +356,7 @@ def replay(path: Path, library: Library, name: str | None = None) -> Report:
     specs: list[SlaveSpec] = []
     reasons: list[str] = []
     for s in seen:
-        label, spec, reason = _describe(s, library)
+        label, spec, reason = _describe(s, library, dumps or {})
         labels.append(label)
         if spec is None:
             reasons.append(reason)

@@ -15,6 +15,9 @@ ROOT = Path(__file__).resolve().parent.parent
 EXAMPLES = ROOT / "examples"
 FIXTURES = Path(__file__).resolve().parent / "fixtures"
 CORPUS = Path(os.environ.get("ECATCFG_CORPUS", ROOT.parent / "shared" / "corpus"))
+# More real files, kept beside the corpus (its MANIFEST.md says what each is).
+CORPUS_EXTRA = Path(os.environ.get("ECATCFG_CORPUS_EXTRA",
+                                   ROOT.parent / "shared" / "corpus-extra"))
 
 
 def _require(what: str) -> None:
@@ -26,6 +29,35 @@ def corpus() -> Path:
     if not (CORPUS / "esi").is_dir():
         _require(f"the corpus at {CORPUS}")
     return CORPUS
+
+
+@pytest.fixture(scope="session")
+def corpus_extra() -> Path:
+    if not (CORPUS_EXTRA / "eni").is_dir():
+        prereq.missing(f"the extra corpus at {CORPUS_EXTRA}",
+                       "not found (set ECATCFG_CORPUS_EXTRA to its folder)", prereq.CORPUS)
+    return CORPUS_EXTRA
+
+
+# Every ENI of both corpora, named "<corpus>/<path below its eni/>", found by globbing (a
+# placeholder when a corpus is missing, so that its tests skip or fail rather than vanish).
+CORPORA = {"corpus": CORPUS, "corpus-extra": CORPUS_EXTRA}
+
+
+def corpus_enis() -> list[str]:
+    found = []
+    for name, root in CORPORA.items():
+        enis = sorted(p.relative_to(root / "eni").as_posix()
+                      for p in (root / "eni").rglob("*.xml"))
+        found += [f"{name}/{e}" for e in enis] or [f"{name}/(missing)"]
+    return found
+
+
+def corpus_eni(request: pytest.FixtureRequest, eni: str) -> Path:
+    """The file of ``corpus_enis()``'s ``eni`` through its corpus' fixture (which skips or
+    fails when the corpus is missing)."""
+    name, below = eni.split("/", 1)
+    return request.getfixturevalue(name.replace("-", "_")) / "eni" / below
 
 
 @pytest.fixture(scope="session")

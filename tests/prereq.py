@@ -6,7 +6,8 @@ the usual CI services) or the variable of that kind of prerequisite set to 1 (``
 sets all three):
 
 - ``ECATCFG_REQUIRE_CORPUS``: the real vendor files of the corpus (``ECATCFG_CORPUS``, by
-  default ``../shared/corpus`` beside the checkout);
+  default ``../shared/corpus`` beside the checkout) and of the extra corpus
+  (``ECATCFG_CORPUS_EXTRA``, by default ``../shared/corpus-extra``);
 - ``ECATCFG_REQUIRE_RUNTIME``: root with network namespaces, veth pairs and raw sockets,
   tshark, pysoem (``rig.py``);
 - ``ECATCFG_REQUIRE_TOOLS``: a C compiler (the generated headers are compiled).

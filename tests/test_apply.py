@@ -24,6 +24,7 @@ from __future__ import annotations
 import json
 import os
 import queue
+import re
 import struct
 import subprocess
 import sys
@@ -571,7 +572,9 @@ def test_refused_safeop_exit_1_from_the_cli(corpus_lib, corpus_esi, tmp_path, mo
     row = next(r for r in report["slaves"] if r["name"] == "in")
     assert row["al_status_code"] == 0x001E and row["highest_state"].endswith("+ERR"), row
     assert row["state"] == "INIT", row                  # after the way down
-    assert "ecatcfg apply: slave 'in'" in err and "0x001E" in err
+    # The ENI file and the line of the refused InitCmd lead the message (eni/source.py).
+    assert re.search(rf"ecatcfg apply: {re.escape(str(eni))}:\d+: slave 'in' ", err), err
+    assert "0x001E" in err
 
 
 # --------------------------------------------------------------------------- 6: swapped slaves

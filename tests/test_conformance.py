@@ -1,10 +1,11 @@
 """The virtual segment against wire captures of real slaves (docs/conformance.md).
 
-Every corpus capture is replayed by the harness in ``tests/conformance.py``: its slaves are
-identified from the capture's own SII reads, the same line is built from the corpus ESI
-files, the master's frames go through it in memory and every returned datagram is compared
-with the hardware's.  The expectations are the hardware's replies in the captures
-(ethercrab-rs/ethercrab ``dumps/`` and ``tests/``), never values the emulator computes.
+Every capture of both corpora is replayed by the harness in ``tests/conformance.py``: its
+slaves are identified from the capture's own SII reads, the same line is built from the ESI
+files of both corpora, the master's frames go through it in memory and every returned
+datagram is compared with the hardware's.  The expectations are the hardware's replies in
+the captures (ethercrab-rs/ethercrab ``dumps/`` and ``tests/``), never values the emulator
+computes.
 
 ``RECORDED`` is the table of docs/conformance.md: no usable capture has a difference, and
 the other figures may only get better.
@@ -15,10 +16,12 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-from conformance import BY_RULE, DIFFERENT, EQUAL, KNOWN_LIMIT, captures, replay
+from conformance import BY_RULE, DIFFERENT, EQUAL, KNOWN_LIMIT, captures, replay, sii_dumps
 
 from ecatcfg.esi.library import Library
 from ecatcfg.runtime.slave import EmulatedSlave
+
+EXTRA = "corpus-extra/"          # captures of ../shared/corpus-extra/pcap
 
 # capture -> (usable, compared, equal, by rule, known limit, different)
 RECORDED: dict[str, tuple[bool, int, int, int, int, int]] = {
@@ -36,27 +39,44 @@ RECORDED: dict[str, tuple[bool, int, int, int, int, int]] = {
     "twincat-akd-nc-mode.pcapng": (False, 0, 0, 0, 0, 0),
     "twincat-run-ek1100-el1004.pcapng": (False, 0, 0, 0, 0, 0),
     "twincat-scan-devices.pcapng": (False, 0, 0, 0, 0, 0),
+    # corpus-extra (its MANIFEST.md): EtherCrab on real Beckhoff lines.
+    EXTRA + "ethercrab/replay-issue-255.pcapng": (True, 1684, 1147, 5, 532, 0),
+    EXTRA + "ethercrab/rs-example-sii-el2004.pcapng": (True, 127, 96, 0, 31, 0),
+    # No ESI for the EL3004 rev 0x150000 (0x2:0xbbc3052) nor the Kollmorgen AKD in either
+    # corpus (test_slaves_without_an_esi_are_named).
+    EXTRA + "ethercrab/replay-ek1914-el3004-configure.pcapng": (False, 0, 0, 0, 0, 0),
+    EXTRA + "ethercrab/replay-ek1914-no-complete-access.pcapng": (False, 0, 0, 0, 0, 0),
+    EXTRA + "ethercrab/replay-ek1914-segmented-upload.pcapng": (False, 0, 0, 0, 0, 0),
+    EXTRA + "ethercrab/soem-sdinfo-akd.pcapng": (False, 0, 0, 0, 0, 0),
 }
 
 
 @pytest.fixture(scope="module")
-def library(corpus: Path) -> Library:
-    return Library([corpus / "esi"], cache=False)
+def library(corpus: Path, corpus_extra: Path) -> Library:
+    return Library([corpus / "esi", corpus_extra / "esi"], cache=False)
 
 
-def _report(corpus: Path, library: Library, name: str):
-    return replay(corpus / "pcap" / name, library, name)
+@pytest.fixture(scope="module")
+def dumps(corpus: Path) -> dict[str, bytes]:
+    return sii_dumps(corpus / "sii")
 
 
-def test_every_capture_is_listed(corpus):
+def _report(corpus: Path, library: Library, name: str, dumps: dict[str, bytes] | None = None):
+    """``corpus``: the corpus, or the extra corpus for a name starting with EXTRA."""
+    return replay(corpus / "pcap" / name.removeprefix(EXTRA), library, name, dumps)
+
+
+def test_every_capture_is_listed(corpus, corpus_extra):
     names = {str(p.relative_to(corpus / "pcap")) for p in captures(corpus)}
+    names |= {EXTRA + str(p.relative_to(corpus_extra / "pcap")) for p in captures(corpus_extra)}
     assert names == set(RECORDED)
 
 
 @pytest.mark.parametrize("name", sorted(RECORDED))
-def test_capture_conforms_no_worse_than_recorded(corpus, library, name):
+def test_capture_conforms_no_worse_than_recorded(request, library, dumps, name):
     usable, compared, equal, by_rule, limit, different = RECORDED[name]
-    r = _report(corpus, library, name)
+    corpus = request.getfixturevalue("corpus_extra" if name.startswith(EXTRA) else "corpus")
+    r = _report(corpus, library, name, dumps)
     assert r.usable == usable, r.reason
     assert r.compared == compared
     c = r.counts
@@ -103,3 +123,48 @@ def test_the_chip_the_captures_show_decides_working_counters(corpus, library, mo
     wkc = {d.what.split()[2] for d in r.differences if d.field == "wkc"}
     assert {"0x0630", "0x0820"} <= wkc, r.differences[:10]       # FMMU 3, SM 4
     assert any(d.field == "wkc" and "0x0910" in d.what for d in r.differences)
+
+
+def test_a_revision_the_master_does_not_read_comes_from_an_agreeing_sii_dump(
+        corpus_extra, library, dumps):
+    """EtherCrab in 2022 read SII words 0x08-0x0B (vendor, product) and the EL2004's
+    category area, never the revision.  The corpus dump el2004-eeprom-dump.bin (same
+    repository and commit as the capture) holds every one of the 102 words read of the
+    first EL2004: its revision 0x100000 is taken; the EK1100's 4 words agree with
+    ek1100.hex (0x120000) only.  Without the dumps the capture is not usable, and says why."""
+    name = EXTRA + "ethercrab/rs-example-sii-el2004.pcapng"
+    r = _report(corpus_extra, library, name, dumps)
+    assert r.slaves == [
+        "EK1100 (0x2:0x44c2c52:0x120000, revision not read: SII dump ek1100.hex holds the 4 "
+        "words read)",
+        "EL2004 (0x2:0x7d43052:0x100000, revision not read: SII dump el2004-eeprom-dump.bin "
+        "holds the 102 words read)",
+        "EL2004 (0x2:0x7d43052:0x100000, revision not read: SII dump el2004-eeprom-dump.bin "
+        "holds the 4 words read)"]
+    bare = _report(corpus_extra, library, name)
+    assert not bare.usable
+    assert bare.reason.startswith("slave 0: vendor, product and revision not read")
+
+
+def test_slaves_without_an_esi_are_named(corpus_extra, library, dumps):
+    """The EK1914 captures' EL3004 (rev 0x150000) and the AKD: no ESI in either corpus."""
+    for name, missing in (("ethercrab/replay-ek1914-el3004-configure.pcapng",
+                           "slave 1: no ESI for 0x2:0xbbc3052:0x150000"),
+                          ("ethercrab/soem-sdinfo-akd.pcapng",
+                           "slave 0: no ESI for 0x6a:0x414b44:0x2")):
+        r = _report(corpus_extra, library, EXTRA + name, dumps)
+        assert not r.usable and r.reason == missing + " in the corpus", r.reason
+
+
+def test_the_el2004s_three_fmmus_decide_a_working_counter(corpus_extra, library, dumps,
+                                                          monkeypatch):
+    """Break the ESC model on purpose: the EL2004 the most capable ESC again.  The BWR
+    clearing FMMU 3 then counts on all three slaves; the hardware counted only the EK1100."""
+    import ecatcfg.runtime.emulate as emulate
+    from ecatcfg.runtime.esc_chips import GENERIC, chip_for
+    name = EXTRA + "ethercrab/rs-example-sii-el2004.pcapng"
+    monkeypatch.setattr(emulate, "chip_for", lambda vendor, product: GENERIC
+                        if (vendor, product) == (0x2, 0x07D43052) else chip_for(vendor, product))
+    r = _report(corpus_extra, library, name, dumps)
+    assert [(d.what, d.field, d.expected, d.got) for d in r.differences] == [
+        ("BWR 0x0000 0x0630", "wkc", "1", "3")]

@@ -1,5 +1,6 @@
 """ENI writer and reader: our own files round-trip exactly and validate against the 2011
-ETG.2100 schema; every real ENI in ../shared/corpus/eni reads, with counts that agree with an
+ETG.2100 schema; every real ENI of both corpora (../shared/corpus/eni and
+../shared/corpus-extra/eni) reads, with counts that agree with an
 independent XPath count on the raw XML; bad input is a one-line EcatcfgError."""
 
 from __future__ import annotations
@@ -9,6 +10,8 @@ from pathlib import Path
 
 import pytest
 from lxml import etree
+
+from conftest import corpus_eni, corpus_enis
 
 from ecatcfg.eni.reader import EniReadError, read_bytes, read_file
 from ecatcfg.eni.writer import to_bytes, write
@@ -229,10 +232,6 @@ def test_plans_the_schema_cannot_express_are_refused(change, message):
 # --- the real files -------------------------------------------------------------------------
 
 
-def eni_files(corpus: Path) -> list[Path]:
-    return sorted((corpus / "eni").rglob("*.xml"))
-
-
 def _config(path: Path) -> etree._Element:
     root = etree.parse(str(path)).getroot()
     return root.find("Config")
@@ -274,26 +273,35 @@ def plan_facts(plan: NetworkPlan) -> dict:
     }
 
 
-def test_corpus_has_the_eni_files(corpus):
-    names = {p.relative_to(corpus / "eni").as_posix() for p in eni_files(corpus)}
-    assert len(names) == 10
-    assert {"rocos-ethercat/eni.xml", "rocos-ethercat/eni1.xml",
-            "jn-ec-master/mega_master_eni.xml", "murrelektronik-variox/eni.xml"} <= names
+def test_corpus_has_the_eni_files(corpus, corpus_extra):
+    names = set(corpus_enis())
+    assert len([n for n in names if n.startswith("corpus/")]) == 10
+    assert {"corpus/rocos-ethercat/eni.xml", "corpus/rocos-ethercat/eni1.xml",
+            "corpus/jn-ec-master/mega_master_eni.xml",
+            "corpus/murrelektronik-variox/eni.xml"} <= names
+    # corpus-extra's MANIFEST.md: 16 ENIs from 5 repositories' folders.
+    extra = {n.split("/")[1] for n in names if n.startswith("corpus-extra/")}
+    assert len([n for n in names if n.startswith("corpus-extra/")]) == 16
+    assert extra == {"hydra", "altinay-networkdata", "altinay-moobot", "rocos-ecm-history",
+                     "marcelgehrig-ethercattest"}
+    assert {"corpus-extra/hydra/hydra_wholebody_20160108_DC.xml",
+            "corpus-extra/rocos-ecm-history/eni_sea.xml"} <= names
 
 
-def test_every_corpus_eni_reads_with_matching_counts(corpus, eni_schema):
-    for path in eni_files(corpus):
-        plan = read_file(path)
-        assert plan_facts(plan) == xpath_facts(path), path
-        assert plan.slaves, path
-        # Re-written, every real file validates and reads back the same (InitCmd timeouts
-        # are the one thing the 2011 schema cannot carry).
-        data = to_bytes(plan)
-        assert eni_schema.validate(etree.fromstring(data)), (path, eni_schema.error_log)
-        for cmd in [*plan.master.init_cmds, *(c for s in plan.slaves for c in s.init_cmds)]:
-            cmd.timeout = None
-        plan.unsupported = []           # the writer writes what the plan holds, nothing refused
-        assert read_bytes(data, "rewritten.xml") == plan, path
+@pytest.mark.parametrize("eni", corpus_enis())
+def test_every_corpus_eni_reads_with_matching_counts(request, eni, eni_schema):
+    path = corpus_eni(request, eni)
+    plan = read_file(path)
+    assert plan_facts(plan) == xpath_facts(path), path
+    assert plan.slaves, path
+    # Re-written, every real file validates and reads back the same (InitCmd timeouts
+    # are the one thing the 2011 schema cannot carry).
+    data = to_bytes(plan)
+    assert eni_schema.validate(etree.fromstring(data)), (path, eni_schema.error_log)
+    for cmd in [*plan.master.init_cmds, *(c for s in plan.slaves for c in s.init_cmds)]:
+        cmd.timeout = None
+    plan.unsupported = []           # the writer writes what the plan holds, nothing refused
+    assert read_bytes(data, "rewritten.xml") == plan, path
 
 
 def test_ec_engineer_file_values(corpus):

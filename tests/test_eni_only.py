@@ -10,6 +10,7 @@ slaves have an ESI in the corpus is taken from its MANIFEST.md.
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -17,7 +18,7 @@ from pathlib import Path
 import pytest
 from rig import start_simulate
 from lxml import etree
-from conftest import CORPUS
+from conftest import corpus_eni, corpus_enis
 from test_soem import soem
 
 from ecatcfg.eni import reader as eni_reader
@@ -27,19 +28,59 @@ from ecatcfg.esi import sii
 from ecatcfg.esi.library import Library
 from ecatcfg.runtime import Network, emulate
 from ecatcfg.runtime.eni_device import device_from_eni, type_name
+from ecatcfg.runtime.replay import ApplyError
 
-ENCRYPTED = "murrelektronik-variox/eni.xml"      # refused: encrypted FMMU settings
-# Slaves whose device the corpus ESI files hold (MANIFEST.md); all others have none there.
-WITH_ESI = {"jn-ec-master/mega_master_eni.xml": {"Term 1 (EK1100)", "Term 2 (EL2008)",
-                                                  "Term 4 (EL1809)"},
-            "rocos-ethercat/eni.xml": {"Slave_1001 [Elmo Drive ]"},
-            "rocos-ethercat/eni1.xml": {"Elmo Drive"}}
+# The ENIs that do not reach OP, and why; each test asserts the exact failure (file, line,
+# cause).  A refusal belongs here only if a real device would refuse the file too, or the
+# file cannot be read (``None``: with and without ESI files).
+ENCRYPTED = "corpus/murrelektronik-variox/eni.xml"     # encrypted FMMU settings (TwinCAT)
+REFUSED = {
+    (ENCRYPTED, None): "FMMU settings encrypted (EncryptedEtherCATConfig)",
+    # Synapticon's ESI of this revision (0x0A000002) marks 0x1C12 read-only; its EC-Engineer
+    # ENI clears the assignment anyway.  The device emulated from the ESI aborts with
+    # 0x06010002 as a device that follows its ESI would; from the ENI alone the object is
+    # writable (nothing says otherwise) and the file reaches OP.
+    ("corpus-extra/rocos-ecm-history/eni_sea.xml", True):
+        "SDO abort 0x06010002: 0x1C12 is read-only in its ESI",
+}
+# Slaves whose device the ESI files of both corpora hold (each MANIFEST.md, "paired ESI",
+# and the identities checked by hand against the ESI files); all others have none there.
+ELMO_2 = {"Slave_1001 [Elmo Drive ]", "Slave_1002 [Elmo Drive ]"}
+SOMANET_3 = {"LiftMotor", "RightMotor", "LeftMotor"}
+WITH_ESI = {"corpus/jn-ec-master/mega_master_eni.xml": {"Term 1 (EK1100)", "Term 2 (EL2008)",
+                                                         "Term 4 (EL1809)"},
+            "corpus/rocos-ethercat/eni.xml": {"Slave_1001 [Elmo Drive ]"},
+            "corpus/rocos-ethercat/eni1.xml": {"Elmo Drive"},
+            # Beckhoff CUxxxx (corpus, and two more downloads in corpus-extra)
+            "corpus-extra/hydra/ET9000_TAMAx7_CU1561_SYNC_1000_devname.xml": {"Box 1 (CU1561)"},
+            # Synapticon SOMANET Node rev 0x0A00000C (corpus-extra esi/altinay)
+            "corpus-extra/altinay-networkdata/ENI.xml": SOMANET_3,
+            "corpus-extra/altinay-moobot/ENI.xml": SOMANET_3,
+            "corpus-extra/altinay-moobot/ENI2.xml": {"RightMotor"},
+            # Elmo Gold rev 0x10420 (corpus esi/drives)
+            "corpus-extra/rocos-ecm-history/bcr_eni.xml": ELMO_2 | {"Slave_1003 [Elmo Drive ]"},
+            "corpus-extra/rocos-ecm-history/eni_elmox4.xml":
+                ELMO_2 | {"Slave_1003 [Elmo Drive ]", "Slave_1004 [Elmo Drive ]"},
+            "corpus-extra/marcelgehrig-ethercattest/01_ENI_1Elmo_1000ms.xml":
+                {"Slave_1001 [Elmo Drive ]"},
+            "corpus-extra/marcelgehrig-ethercattest/10_ENI_2Elmo_1000ms_extended.xml": ELMO_2,
+            "corpus-extra/marcelgehrig-ethercattest/30_ENI_2Elmo_1Maxpos505_1000ms.xml": ELMO_2}
 
 
-def corpus_enis() -> list[str]:
-    root = CORPUS / "eni"
-    found = sorted(p.relative_to(root).as_posix() for p in root.rglob("*.xml"))
-    return found or ["(corpus missing)"]
+@pytest.fixture(scope="session")
+def esi_index(corpus, corpus_extra, tmp_path_factory) -> tuple[list[Path], Path]:
+    """The ESI folders of both corpora and an index cache over them, built once: a
+    library over them without a cache takes a second to build (116 files)."""
+    from ecatcfg.esi.cache import IndexCache
+    home = tmp_path_factory.mktemp("esi-index")
+    folders = [corpus / "esi", corpus_extra / "esi"]
+    Library(folders, cache=IndexCache(home / "ecatcfg"))
+    return folders, home
+
+
+def _line(path: Path, xpath: str) -> int:
+    [element] = etree.parse(str(path)).xpath(xpath)
+    return element.sourceline
 
 
 def xml_slaves(path: Path) -> list[dict]:
@@ -60,15 +101,18 @@ def xml_slaves(path: Path) -> list[dict]:
 
 @pytest.mark.parametrize("with_esi", [False, True], ids=["eni-only", "with-esi"])
 @pytest.mark.parametrize("eni", corpus_enis())
-def test_corpus_eni_reaches_op_and_cycles(corpus, eni, with_esi):
-    path = corpus / "eni" / eni
+def test_corpus_eni_reaches_op_and_cycles(request, monkeypatch, eni, with_esi):
+    path = corpus_eni(request, eni)
     events = []
-    esi = [corpus / "esi"] if with_esi else None
-    if eni == ENCRYPTED:
-        with pytest.raises(UnsupportedEniError, match="encrypted"):
-            Network.virtual(path, esi, esi_cache=False)
+    esi = None
+    if with_esi:
+        esi, home = request.getfixturevalue("esi_index")
+        monkeypatch.setenv("XDG_CACHE_HOME", str(home))
+    refused = REFUSED.get((eni, None), REFUSED.get((eni, with_esi)))
+    if refused is not None:
+        _assert_refused(path, esi, eni)
         return
-    net = Network.virtual(path, esi, esi_cache=False, on_event=events.append)
+    net = Network.virtual(path, esi, esi_cache=True, on_event=events.append)
     try:
         net.up(AlState.OP)
         net.run(100)
@@ -85,6 +129,42 @@ def test_corpus_eni_reaches_op_and_cycles(corpus, eni, with_esi):
     assert sorted(e.text for e in events if e.kind == "emulated") == sorted(
         e.text for e in events if "emulated from the ENI alone" in e.text)
     assert len([e for e in events if e.kind == "emulated"]) == len(from_eni)
+
+
+def _assert_refused(path: Path, esi: list[Path] | None, eni: str) -> None:
+    """The failure of each REFUSED file: its file, line and cause, the line found in the
+    file with plain XPath."""
+    if eni == ENCRYPTED:
+        with pytest.raises(UnsupportedEniError) as refused:
+            Network.virtual(path, esi, esi_cache=True)
+        # The second slave's two FMMU settings (PS), each at its InitCmd's line.
+        for fmmu, ado in ((0, 1536), (1, 1552)):
+            line = _line(path, f"//Slave[2]/InitCmds/InitCmd[Ado='{ado}'][Transition='PS']")
+            assert f"\n  {path}:{line}: slave 'Slave_1002 [54632]': FMMU {fmmu} setting " in str(
+                refused.value)
+        assert "(encrypted: EncryptedEtherCATConfig, ecatcfg cannot decrypt it)" in str(
+            refused.value)
+        return
+    assert eni == "corpus-extra/rocos-ecm-history/eni_sea.xml" and esi is not None
+    # The reason, from the ESI the library pairs with this identity (0x22D2:0x201 rev
+    # 0x0A000002): object 0x1C12 read-only.
+    somanet = etree.parse(str(esi[0] / "drives" / "SOMANET_CiA_402.xml"))
+    [access] = [o.findtext("Flags/Access") for o in somanet.xpath(
+        "//Device[Type/@RevisionNo='#x0a000002']/Profile/Dictionary/Objects/Object")
+        if o.findtext("Index").strip().upper() == "#X1C12"]
+    assert access == "ro"
+    net = Network.virtual(path, esi, esi_cache=True)
+    try:
+        with pytest.raises(ApplyError) as refused:
+            net.up(AlState.OP)
+    finally:
+        net.close()
+    line = _line(path, "//Slave/Mailbox/CoE/InitCmds/InitCmd[Index='7186'][SubIndex='0']"
+                       "[Data='00']")
+    assert str(refused.value) == (
+        f"{path}:{line}: slave 'Slave_1001 [CiA402 Motor Control Device]' [clear sm pdos "
+        "(0x1C12)]: SDO abort 0x06010002 (attempt to write a read-only object) at 0x1C12:00")
+    assert refused.value.abort_code == 0x06010002
 
 
 def test_apply_reports_which_slaves_come_from_the_eni(corpus):
@@ -105,6 +185,23 @@ def test_apply_reports_which_slaves_come_from_the_eni(corpus):
     assert text.returncode == 0, text.stderr
     words = " ".join(text.stdout.split())          # rich wraps text at 80 columns in a pipe
     assert words.count("emulated from the ENI alone (no ESI files given)") == 4
+
+
+def test_apply_names_the_file_line_and_cause_of_a_refused_sdo(esi_index):
+    """eni_sea.xml with the ESI files: ``apply`` exits 1 and prints the failure whole, the
+    command's comment in brackets included (rich would take it for markup)."""
+    esi, home = esi_index
+    eni = esi[1].parent / "eni" / "rocos-ecm-history" / "eni_sea.xml"
+    run = subprocess.run([sys.executable, "-m", "ecatcfg", "apply", str(eni), "--virtual",
+                          "--esi", str(esi[0]), "--esi", str(esi[1]), "--cycles", "3"],
+                         capture_output=True, text=True, timeout=120,
+                         env={**os.environ, "XDG_CACHE_HOME": str(home)})
+    assert run.returncode == 1, run.stderr
+    line = _line(eni, "//Slave/Mailbox/CoE/InitCmds/InitCmd[Index='7186'][SubIndex='0']"
+                      "[Data='00']")
+    assert (f"failed: {eni}:{line}: slave 'Slave_1001 [CiA402 Motor Control Device]' [clear "
+            "sm pdos (0x1C12)]: SDO abort 0x06010002 (attempt to write a read-only object) at "
+            "0x1C12:00") in " ".join(run.stdout.split()), run.stdout
 
 
 def test_esi_without_virtual_is_a_usage_error(corpus, tmp_path):
@@ -183,8 +280,8 @@ def _simulate(rig, args: list[str]) -> tuple[subprocess.Popen, list[str]]:
 
 
 @pytest.mark.parametrize("eni", corpus_enis())
-def test_soem_reaches_op_on_an_eni_without_esi(veth_netns, pysoem_module, corpus, eni):
-    path = corpus / "eni" / eni
+def test_soem_reaches_op_on_an_eni_without_esi(veth_netns, pysoem_module, request, eni):
+    path = corpus_eni(request, eni)
     sim, _ = _simulate(veth_netns, ["--eni", str(path)])
     report = soem(veth_netns, {"outputs": "5a", "cycles": 20})
     sim.terminate()

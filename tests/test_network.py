@@ -124,6 +124,29 @@ def test_refused_state_names_slave_command_and_code(example_plan):
     assert err.value.al_code == 0x001E
 
 
+def test_a_failed_init_cmd_is_named_with_its_file_and_line(example_plan, tmp_path):
+    """The ENI read from a file: the refused state names the file and the line of the
+    failing InitCmd, found here with plain XPath; a plan given in memory names none."""
+    from lxml import etree
+    path = tmp_path / "line.xml"
+    eni_writer.write(example_plan, path)
+    with Network.virtual(path, esi=[ESI]) as net:
+        net.segment.slaves[4].refuse["PS"] = 0x001E
+        with pytest.raises(ApplyError) as err:
+            net.up()
+    slave = etree.parse(str(path)).xpath("/EtherCATConfig/Config/Slave")[4]
+    [check] = slave.xpath("InitCmds/InitCmd[Comment='check device state for SAFEOP']"
+                          "[Transition='PS']")
+    assert check.sourceline > 100                   # the writer puts one element a line
+    assert str(err.value).startswith(f"{path}:{check.sourceline}: slave 'axis1' [check "
+                                     "device state for SAFEOP]: ")
+    with Network.virtual(example_plan, esi=[ESI]) as net:
+        net.segment.slaves[4].refuse["PS"] = 0x001E
+        with pytest.raises(ApplyError) as err:
+            net.up()
+    assert str(err.value).startswith("slave 'axis1' [check device state for SAFEOP]: ")
+
+
 def test_swapped_slaves_stop_before_any_configuration():
     plan = line_plan(["EX1100", "EX1004", "EX2008"])
     swapped = line_plan(["EX1100", "EX2008", "EX1004"])
