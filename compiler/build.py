@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from ecatcfg.compiler import hotconnect, initcmds, layout as layout_mod, pdocmds
+from ecatcfg.compiler import hotconnect, initcmds, layout as layout_mod, passive, pdocmds
 from ecatcfg.eni.plan import (Cyclic, DcPlan, MailboxArea, MailboxPlan, MasterPlan,
                                    NetworkPlan, PreviousPort, ProcessData, ProcessImage,
                                    SlavePlan, SmSettings, Variable)
@@ -49,7 +49,13 @@ def compile_topology(loaded: LoadedTopology, library: Library) -> CompileResult:
     current budget) and notes (which revision a selector took) for the user.  The plan is
     written as an ENI by :mod:`ecatcfg.eni.writer`.
     """
+    # Passive terminals (no ESC) take no position or address: the slaves with an ESC are
+    # compiled alone, the passive ones placed beside them at the end (compiler/passive.py).
+    whole = loaded
+    parts = passive.split(whole, library)
+    loaded = parts.active
     resolved, errors, wiring_notes = resolve_all(loaded, library)
+    errors = parts.errors + errors
     errors += _esi_value_errors(loaded, resolved)
     errors += _fmmu_errors(loaded, resolved)
     if errors:
@@ -101,6 +107,9 @@ def compile_topology(loaded: LoadedTopology, library: Library) -> CompileResult:
         slaves=slaves,
         cyclic=[Cyclic(lay.frames, cycle_time=topo.master.cycle_time_us)],
         process_image=ProcessImage(lay.image_size, lay.image_size, inputs, outputs))
+    placed = passive.place(plan, parts.passive, whole)
+    if placed:
+        raise TopologyError(placed)
     notes = wiring_notes + _notes(resolved)
     return CompileResult(plan, ebus_warnings(loaded, resolved), notes)
 

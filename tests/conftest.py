@@ -15,6 +15,8 @@ ROOT = Path(__file__).resolve().parent.parent
 EXAMPLES = ROOT / "examples"
 FIXTURES = Path(__file__).resolve().parent / "fixtures"
 CORPUS = Path(os.environ.get("ECATCFG_CORPUS", ROOT.parent / "shared" / "corpus"))
+CORPUS_EXTRA = Path(os.environ.get("ECATCFG_CORPUS_EXTRA",
+                                   ROOT.parent / "shared" / "corpus-extra"))
 
 
 def _require(what: str) -> None:
@@ -26,6 +28,15 @@ def corpus() -> Path:
     if not (CORPUS / "esi").is_dir():
         _require(f"the corpus at {CORPUS}")
     return CORPUS
+
+
+@pytest.fixture(scope="session")
+def corpus_extra() -> Path:
+    """The second corpus (more vendor ESIs and ENIs), skipped or failed like the first."""
+    if not (CORPUS_EXTRA / "esi").is_dir():
+        prereq.missing(f"the extra corpus at {CORPUS_EXTRA}",
+                       "not found (set ECATCFG_CORPUS_EXTRA to its folder)", prereq.CORPUS)
+    return CORPUS_EXTRA
 
 
 @pytest.fixture(scope="session")
