@@ -48,6 +48,23 @@ class Split:
     active: LoadedTopology          # the slaves with an ESC; errors still at the file's lines
     passive: list[PassiveEntry]
     errors: list[EcatcfgError]
+    file_index: list[int]           # file index of each slave of ``active``
+
+
+def in_line(active: list[tuple[str, Device, int]],
+            passive: list[PassiveEntry]) -> list[tuple[str, Device, int]]:
+    """``(name, device, file index)`` of the slaves with an ESC (in bus order) with the
+    passive ones put after the slave with an ESC the file lists before them: the line as
+    it is built, for what passive terminals take part in (the E-bus current budget)."""
+    out = list(active)
+    placed: set[int] = set()
+    for p in passive:
+        k = next((i + 1 for i, a in enumerate(out) if a[2] == p.previous), 0)
+        while k < len(out) and out[k][2] in placed:
+            k += 1                  # after the passive ones the file lists before it
+        out.insert(k, (p.cfg.name, p.device, p.index))
+        placed.add(p.index)
+    return out
 
 
 def _device(cfg: Slave, library: Library) -> Device | None:
@@ -78,7 +95,7 @@ def split(loaded: LoadedTopology, library: Library) -> Split:
                     f"terminal without an ESC (no ProductCode, no SyncManagers in its ESI): "
                     f"it cannot have {what}; '{key}' must go", "slaves", index, key))
     if not passive:
-        return Split(loaded, [], errors)
+        return Split(loaded, [], errors, list(range(len(slaves))))
     names: dict[str, int] = {}
     for index, cfg in enumerate(slaves):
         names.setdefault(cfg.name, index)
@@ -102,7 +119,7 @@ def split(loaded: LoadedTopology, library: Library) -> Split:
     if not active:
         errors.append(loaded.error("every slave is a passive terminal (no ESC): there is "
                                    "nothing for a master to configure", "slaves"))
-        return Split(loaded, passive, errors)
+        return Split(loaded, passive, errors, [])
     new_index = {old: new for new, old in enumerate(active)}
     lines: dict[Path_, int] = {}
     for path, line in loaded.lines.items():
@@ -112,7 +129,7 @@ def split(loaded: LoadedTopology, library: Library) -> Split:
         else:
             lines[path] = line
     topology = loaded.topology.model_copy(update={"slaves": [kept[i] for i in active]})
-    return Split(LoadedTopology(topology, loaded.file, lines), passive, errors)
+    return Split(LoadedTopology(topology, loaded.file, lines), passive, errors, active)
 
 
 def place(plan: NetworkPlan, passive: list[PassiveEntry],

@@ -454,3 +454,24 @@ def test_a_passive_slave_inside_a_compiled_hot_connect_group_is_an_error(tmp_pat
                             "{name: buttons, device: EX1004, hot_connect: true, alias: 7}")
     [problem] = _topology_error(tmp_path, text).problems
     assert problem.line == 5 and "inside the hot-connect group of 'buttons'" in problem.message
+
+
+def test_a_passive_power_feed_counts_in_the_ebus_budget(tmp_path):
+    """23 EX1004 (90 mA each) draw 2070 mA from the coupler's 2000: a warning at the 23rd,
+    its own line although a passive slave before it is not compiled with it.  A passive
+    EX9400 (-2000 mA, like Beckhoff's EL9400) after the 12th feeds the rest: none."""
+    lib = _library()
+
+    def warnings(feed_after: int | None) -> list[EcatcfgError]:
+        rows = ["slaves:", "  - {name: c, device: EX1100}", "  - {name: cap0, device: EX9100}"]
+        for i in range(23):
+            rows.append(f"  - {{name: t{i}, device: EX1004}}")
+            if i == feed_after:
+                rows.append("  - {name: feed, device: EX9400}")
+        path = tmp_path / "ebus.yaml"
+        path.write_text("\n".join(rows) + "\n")
+        return compile_topology(topology.load(str(path)), lib).warnings
+
+    [warning] = warnings(None)
+    assert warning.line == 3 + 23 and "2070 mA" in warning.message
+    assert warnings(11) == []
