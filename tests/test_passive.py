@@ -368,6 +368,46 @@ def test_fixture_devices_are_passive_and_the_examples_are_not():
     assert not any(v for k, v in kinds.items() if not k.startswith("EX9"))
 
 
+ODD_ESI = """<?xml version="1.0" encoding="UTF-8"?>
+<EtherCATInfo Version="1.17">
+  <Vendor><Id>#xE0000ECA</Id><Name>ecatcfg Example Devices</Name></Vendor>
+  <Descriptions>
+    <Groups><Group><Type>X</Type><Name>x</Name></Group></Groups>
+    <Devices>
+      <Device Physics="YY">
+        <Type ProductCode="#x7001" RevisionNo="#x1">EXJ7001</Type>
+        <Name>an ESC and nothing else described: a junction</Name>
+        <GroupType>X</GroupType>
+      </Device>
+      <Device Physics="KK">
+        <Type>EXB7002</Type>
+        <Name>SyncManagers but no identity: a broken ESI</Name>
+        <GroupType>X</GroupType>
+        <Sm ControlByte="#x64" Enable="1" StartAddress="#x1100">Outputs</Sm>
+      </Device>
+    </Devices>
+  </Descriptions>
+</EtherCATInfo>
+"""
+
+
+def test_passive_needs_both_no_product_code_and_no_esc(tmp_path):
+    """A ProductCode says an ESC answers with it (even with nothing else described); an
+    ESI without a ProductCode that describes SyncManagers is broken, not passive, and
+    compiling it stays an error."""
+    esi = tmp_path / "odd.xml"
+    esi.write_text(ODD_ESI)
+    lib = Library([esi], cache=False)
+    kinds = {e.type: lib.device(e).passive for e in lib.entries}
+    assert kinds == {"EXJ7001": False, "EXB7002": False}
+    topo = tmp_path / "odd.yaml"
+    topo.write_text("slaves:\n  - {name: j, device: EXJ7001}\n  - {name: b, device: EXB7002}\n")
+    with pytest.raises(TopologyError) as exc:
+        compile_topology(topology.load(str(topo)), lib)
+    [problem] = exc.value.problems
+    assert problem.line == 3 and "has no readable identity" in problem.message
+
+
 def test_beckhoff_passive_terminals_are_passive(corpus_extra):
     """Beckhoff's own ESI: the EL9011 end terminal and EL9100 potential feed have no ESC;
     the EL9110 (a potential feed with diagnostics) and the EL9410 (E-bus refresh) do."""
