@@ -117,6 +117,18 @@ def test_round_trip_is_equal_and_valid(passive_eni, eni_schema, tmp_path):
         assert el.find("ProcessData") is not None and len(el.find("ProcessData")) == 0
 
 
+def test_the_plan_cache_keeps_passive_slaves(passive_eni, tmp_path):
+    """``apply`` reads through the plan cache: a stored plan with passive slaves loads
+    (its unpickler builds plan classes only) and equals the parsed one."""
+    from ecatcfg.eni import cache as eni_cache
+    store = eni_cache.PlanCache(tmp_path / "cache")
+    first = eni_cache.read_file(passive_eni, cache=store)
+    assert len(list((tmp_path / "cache").rglob("*.pickle"))) == 1
+    again = eni_cache.read_file(passive_eni, cache=store)
+    assert again == first == eni_reader.read_file(passive_eni)
+    assert again is not first and len(again.passive) == 2
+
+
 def test_passive_slaves_in_every_place_round_trip():
     """First, two in a row, last: ``after`` and the order among equals survive."""
     from ecatcfg.eni.plan import MasterPlan, NetworkPlan
