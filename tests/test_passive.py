@@ -527,3 +527,44 @@ def test_a_passive_power_feed_counts_in_the_ebus_budget(tmp_path):
     [warning] = warnings(None)
     assert warning.line == 3 + 23 and "2070 mA" in warning.message
     assert warnings(11) == []
+
+
+def test_a_tree_with_hot_connect_groups_and_passive_terminals(tmp_path, eni_schema):
+    """examples/tree/hotconnect.yaml with a potential feed after ``inputs`` (just before
+    the junction's group) and an end cap after ``outputs`` (a group of its own): the
+    compiled ENI validates, the tree is verified port by port without them, both groups
+    are left out while the junction's cable is out and join when it is back; the passive
+    devices of the ESI library are never emulated."""
+    import time
+
+    text = (EXAMPLES / "tree" / "hotconnect.yaml").read_text()
+    text = text.replace("  - name: junction\n",
+                        "  - {name: feed, device: EX9100}\n  - name: junction\n")
+    text = text.replace("  - name: axis3\n", "  - {name: cap, device: EX9011}\n"
+                                             "  - name: axis3\n")
+    path = tmp_path / "hc.yaml"
+    path.write_text(text)
+    esi = [EXAMPLES / "tree" / "esi", EXAMPLES / "esi", PASSIVE_ESI]
+    built = compile_topology(topology.load(str(path)), Library(esi, cache=False)).plan
+    data = eni_writer.to_bytes(built)
+    assert eni_schema.validate(etree.fromstring(data).getroottree()), eni_schema.error_log
+    plan = eni_reader.read_bytes(data, "hc.eni.xml")
+    assert [s.name for s in plan.in_file_order()] == [
+        "coupler", "inputs", "feed", "junction", "axis1", "axis2", "outputs", "cap", "axis3"]
+    assert [s.position for s in plan.slaves] == list(range(7))
+    with Network.virtual(plan, esi=esi) as net:
+        seg = net.segment
+        assert [s.name for s in seg.slaves] == [s.name for s in plan.slaves]
+        seg.remove_cable("junction")
+        net.up()
+        assert [(s.name, s.state) for s in seg.slaves if s.state == AlState.OP] == [
+            ("coupler", AlState.OP), ("inputs", AlState.OP), ("axis3", AlState.OP)]
+        seg.restore_cable("junction")
+        start = time.monotonic()
+        while not all(h.online for h in net.health.values()):
+            assert time.monotonic() - start < 20, net.health
+            net.cycle()
+            time.sleep(0.0005)
+        assert set(net.health) == {s.name for s in plan.slaves}
+        assert all(s.state == AlState.OP for s in seg.slaves)
+        assert [s.station_address for s in seg.slaves] == list(range(1001, 1008))
