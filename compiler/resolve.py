@@ -114,8 +114,8 @@ def resolve_all(loaded: LoadedTopology, library: Library
         where = ("slaves", index)
         pos = tree.position(index)
         if cfg.name in names:
-            errors.add(f"slave name {cfg.name!r} is already used by slave {names[cfg.name]}",
-                       *where, "name")
+            errors.add(f"slave name {cfg.name!r} is already used by the slave at line "
+                       f"{loaded.line('slaves', names[cfg.name])}", *where, "name")
         names.setdefault(cfg.name, index)
         phys = cfg.station_address if cfg.station_address is not None else 1001 + pos
         if phys in used:

@@ -485,6 +485,18 @@ def test_what_needs_an_esc_is_a_topology_error(tmp_path, extra, key):
     assert "passive terminal without an ESC" in problem.message
 
 
+@pytest.mark.parametrize("old, new, line, first", [
+    ("{name: cap, device: EX9011}", "{name: feed, device: EX9011}", 8, 5),
+    ("{name: sensors, device: EX1004}", "{name: feed, device: EX1004}", 7, 5),
+    ("{name: lamps, device: EX2008}", "{name: buttons, device: EX2008}", 6, 4),
+])
+def test_slave_names_are_unique_with_passive_ones_among_them(tmp_path, old, new, line,
+                                                              first):
+    [problem] = _topology_error(tmp_path, TOPOLOGY.replace(old, new)).problems
+    assert problem.line == line
+    assert f"is already used by the slave at line {first}" in problem.message
+
+
 def test_a_slave_plugged_into_a_passive_one_is_an_error(tmp_path):
     text = TOPOLOGY.replace("{name: lamps, device: EX2008}",
                             "{name: lamps, device: EX2008, parent: feed}")
