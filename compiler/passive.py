@@ -96,14 +96,16 @@ def split(loaded: LoadedTopology, library: Library) -> Split:
                     f"it cannot have {what}; '{key}' must go", "slaves", index, key))
     if not passive:
         return Split(loaded, [], errors, list(range(len(slaves))))
+    # Names are unique among all slaves; the compile of the slaves with an ESC checks
+    # those among themselves, this the ones a passive slave takes part in.
     names: dict[str, int] = {}
+    passive_at = {p.index for p in passive}
     for index, cfg in enumerate(slaves):
-        names.setdefault(cfg.name, index)
-    for p in passive:
-        first = names[p.cfg.name]
-        if first != p.index:
-            errors.append(loaded.error(f"slave name {p.cfg.name!r} is already used by slave "
-                                       f"{first}", "slaves", p.index, "name"))
+        first = names.setdefault(cfg.name, index)
+        if first != index and (index in passive_at or first in passive_at):
+            errors.append(loaded.error(f"slave name {cfg.name!r} is already used by the "
+                                       f"slave at line {loaded.line('slaves', first)}",
+                                       "slaves", index, "name"))
     passive_names = {p.cfg.name: p for p in passive}
     kept = {index: slaves[index] for index in active}
     for index in active:
