@@ -182,6 +182,7 @@ def _run(args: argparse.Namespace, ctx: _Run) -> int:
                     status = (f"{up} slaves in {target.name}" + (
                         f" ({len(plan.slaves) - up} in hot-connect groups not on the line)"
                         if up < len(plan.slaves) else "")
+                        + (f", {len(plan.passive)} passive" if plan.passive else "")
                         + f"; way down at most {net.master.down_bound():.0f} s")
                     if target >= AlState.SAFEOP and args.cycles != 0:
                         report.cycling(args.cycles)

@@ -67,7 +67,8 @@ def run(args: argparse.Namespace) -> int:
             raise UsageError(f"cannot write {target}: {exc.strerror}") from None
     plan = result.plan
     frames = sum(len(c.frames) for c in plan.cyclic)
-    print(f"wrote {args.output}: {len(plan.slaves)} slaves, {frames} cyclic frame"
+    passive = f" and {len(plan.passive)} passive" if plan.passive else ""
+    print(f"wrote {args.output}: {len(plan.slaves)} slaves{passive}, {frames} cyclic frame"
           f"{'s' if frames != 1 else ''}, process image {plan.process_image.outputs_size} "
           f"bytes" + (f"; header {args.header}" if h is not None else ""))
     return 0

@@ -40,6 +40,15 @@ class _PlainConsole:
         print(text, file=self.file, flush=True)
 
 
+def slave_count(plan: NetworkPlan) -> str:
+    """"5 slaves" or, with passive terminals, "7 slaves: 5 with an ESC, 2 passive"."""
+    active, passive = len(plan.slaves), len(plan.passive)
+    if not passive:
+        return f"{active} slave{'s' if active != 1 else ''}"
+    return (f"{active + passive} slaves: {active} with an ESC, {passive} passive (no ESC, "
+            "not on the wire)")
+
+
 class ApplyReport:
     def __init__(self, plan: NetworkPlan, eni: str, json_output: bool = False) -> None:
         self.plan = plan
@@ -143,7 +152,7 @@ class ApplyReport:
             # The AL status code read before the way down: why a slave refused a state
             # (the way down acknowledges the error).
             code = top.code if top and top.code else st.code if st else None
-            row = {"position": slave.position, "name": slave.name,
+            row = {"position": slave.position, "name": slave.name, "passive": False,
                    "address": slave.phys_addr,
                    "state": where or (st.name if st else "no answer"),
                    "highest_state": where or (top.name if top else "no answer"),
@@ -151,6 +160,20 @@ class ApplyReport:
                    "al_status": al_status_name(code) if code else None,
                    "last_command": progress[slave.name].last_command}
             self.rows.append(row)
+        self._passive_rows()
+
+    def _passive_rows(self) -> None:
+        """The ENI's slaves without an ESC (passive terminals), each after the slave with an
+        ESC the file lists before it: never addressed, no state, no position."""
+        for p in sorted(self.plan.passive, key=lambda p: p.after, reverse=True):
+            before = self.plan.slaves[p.after - 1].name if p.after else None
+            k = next((i + 1 for i, r in enumerate(self.rows) if r["name"] == before), 0)
+            while k < len(self.rows) and self.rows[k]["passive"]:
+                k += 1              # after the passive ones the file lists before it
+            self.rows.insert(k, {"position": None, "name": p.name, "passive": True,
+                                 "address": None, "state": "passive", "highest_state":
+                                 "passive", "al_status_code": None, "al_status": None,
+                                 "last_command": None})
 
     def finish(self, net: Network, failure: EcatcfgError | None, target: AlState) -> None:
         # The cycles that ran (net.run, or net.cycle() after reset_stats()), not the ones
@@ -163,6 +186,8 @@ class ApplyReport:
             "eni": self.eni, "target": target.name, "ok": failure is None,
             "error": str(failure) if failure else None,
             "slaves": self.rows,
+            "slave_count": {"active": len(self.plan.slaves),
+                            "passive": len(self.plan.passive)},
             "cycles": {"count": stats.cycles, "lost_frames": stats.lost_frames,
                        "wkc_errors": stats.wkc_errors,
                        "wkc_error_commands": stats.wkc_error_cmds,
@@ -175,7 +200,11 @@ class ApplyReport:
         segment = getattr(net, "segment", None)         # set by Network.virtual only
         if segment is not None:
             # Which device each virtual slave behaves as: its ESI, or the ENI alone.
-            for row, slave in zip(self.rows, segment.slaves):
+            for row in self.rows:
+                if row["passive"]:
+                    row["emulated_from"] = None     # no ESC: nothing to emulate
+            active = [row for row in self.rows if not row["passive"]]
+            for row, slave in zip(active, segment.slaves):
                 row["emulated_from"] = "eni" if slave.eni_only is not None else "esi"
         if self.json_output:
             if failure:
@@ -190,11 +219,16 @@ class ApplyReport:
             table.add_column(col)
         for r in self.rows:
             code = r["al_status_code"]
+            if r["passive"]:
+                table.add_row("-", r["name"], "-", "passive (no ESC)", "-", "-", "-")
+                continue
             table.add_row(str(r["position"]), r["name"], str(r["address"]), r["state"],
                           r["highest_state"],
                           f"0x{code:04X} {r['al_status']}" if code else "-",
                           r["last_command"] or "-")
         console.print(table)
+        if self.plan.passive:
+            console.print(slave_count(self.plan))
         if stats.cycles:
             console.print(
                 f"{stats.cycles} cycles, {stats.lost_frames} lost frames, "

@@ -78,17 +78,25 @@ def run(args: argparse.Namespace) -> int:
         for problem in lib.problems:
             print(f"error: {problem}", file=sys.stderr)
         raise EcatcfgError(f"{len(lib.problems)} ESI file problem(s)")
+    # Passive slaves (no ESC): listed, never emulated. (name, device, vendor, product,
+    # revision, where the identity comes from)
+    passive: list[tuple[str, str, int, int, int, str]] = []
     if args.topology:
         assert lib is not None
         # The compiler resolves the topology (its checks, the modules in the slots); the
         # segment emulates the devices it resolved.
         from ecatcfg.compiler import topology
+        from ecatcfg.compiler.passive import split
         from ecatcfg.compiler.resolve import plugged_devices
         from ecatcfg.runtime.wiring import Plug
+        loaded = topology.load(args.topology)
         specs = [emulate.SlaveSpec(d.device, d.name, alias=d.alias, plug=None
                                    if d.parent is None or d.parent_port is None
                                    else Plug(d.parent, d.parent_port))
-                 for d in plugged_devices(topology.load(args.topology), lib)]
+                 for d in plugged_devices(loaded, lib)]
+        passive = [(p.cfg.name, p.device.type_name, p.device.vendor.id or 0,
+                    p.device.product_code or 0, p.device.revision or 0, "ESI")
+                   for p in split(loaded, lib).passive]
     else:
         from ecatcfg.eni import reader as eni_reader
         from ecatcfg.eni.contents import line_of
@@ -99,6 +107,8 @@ def run(args: argparse.Namespace) -> int:
             print(f"note: ignored (apply would refuse it): {line_of(part, args.eni)}",
                   file=sys.stderr)
         specs = emulate.specs_from_eni(plan, lib, args.eni)
+        passive = [(p.name, "passive", p.vendor_id, p.product_code, p.revision, "ENI")
+                   for p in plan.passive]
     if not specs:
         raise EcatcfgError(f"{source}: no slaves to emulate")
     timing = None
@@ -141,6 +151,11 @@ def run(args: argparse.Namespace) -> int:
               f"0x{dev.vendor.id or 0:08x} 0x{dev.product_code or 0:08x} "
               f"0x{dev.revision or 0:08x}  {'ENI' if s.eni_only else 'ESI':4} {mbx}"
               + (f"  {s.timing.kind}" if s.timing else ""))
+    for name, device, vendor, product, revision, origin in passive:
+        # A slave without an ESC (ETG.2100: no PhysAddr/AutoIncAddr) answers no frame:
+        # nothing to emulate.
+        print(f"  -  {name[:16]:16} {device[:14]:14} 0x{vendor:08x} 0x{product:08x} "
+              f"0x{revision:08x}  {origin:4} passive: no ESC, not emulated")
     for s in seg.slaves:
         if s.eni_only is not None:
             print(f"note: slave {s.position} ({s.name}) emulated from the ENI alone: "
@@ -160,7 +175,9 @@ def run(args: argparse.Namespace) -> int:
         try:
             seg.serve(link, duration=args.duration, stop=stop,
                       on_ready=lambda: print(f"ready: {len(seg.slaves)} slaves on "
-                                             f"{args.iface}", flush=True))
+                                             f"{args.iface}" + (
+                                                 f" ({len(passive)} passive not emulated)"
+                                                 if passive else ""), flush=True))
         except KeyboardInterrupt:
             pass
     print(f"stopped after {seg.frames} frames", flush=True)

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from ecatcfg.compiler import hotconnect, initcmds, layout as layout_mod, pdocmds
+from ecatcfg.compiler import hotconnect, initcmds, layout as layout_mod, passive, pdocmds
 from ecatcfg.eni.plan import (Cyclic, DcPlan, MailboxArea, MailboxPlan, MasterPlan,
                                    NetworkPlan, PreviousPort, ProcessData, ProcessImage,
                                    SlavePlan, SmSettings, Variable)
@@ -19,6 +19,7 @@ from ecatcfg.compiler.topology import LoadedTopology, TopologyError
 from ecatcfg.errors import EcatcfgError
 from ecatcfg.esc import MAILBOX_STATE_ADDR, PORT_LETTERS, SmConfig
 from ecatcfg.esi.library import Library
+from ecatcfg.esi.model import Device
 from ecatcfg.esi.physics import DEFAULT_PHYSICS, eni_physics
 
 # How often a master polls SM1 of a slave without a mailbox-state bit (ms; EC-Engineer
@@ -49,7 +50,13 @@ def compile_topology(loaded: LoadedTopology, library: Library) -> CompileResult:
     current budget) and notes (which revision a selector took) for the user.  The plan is
     written as an ENI by :mod:`ecatcfg.eni.writer`.
     """
+    # Passive terminals (no ESC) take no position or address: the slaves with an ESC are
+    # compiled alone, the passive ones placed beside them at the end (compiler/passive.py).
+    whole = loaded
+    parts = passive.split(whole, library)
+    loaded = parts.active
     resolved, errors, wiring_notes = resolve_all(loaded, library)
+    errors = parts.errors + errors
     errors += _esi_value_errors(loaded, resolved)
     errors += _fmmu_errors(loaded, resolved)
     if errors:
@@ -101,8 +108,13 @@ def compile_topology(loaded: LoadedTopology, library: Library) -> CompileResult:
         slaves=slaves,
         cyclic=[Cyclic(lay.frames, cycle_time=topo.master.cycle_time_us)],
         process_image=ProcessImage(lay.image_size, lay.image_size, inputs, outputs))
+    placed = passive.place(plan, parts.passive, whole)
+    if placed:
+        raise TopologyError(placed)
     notes = wiring_notes + _notes(resolved)
-    return CompileResult(plan, ebus_warnings(loaded, resolved), notes)
+    line = passive.in_line([(s.name, s.device, parts.file_index[s.index]) for s in resolved],
+                           parts.passive)
+    return CompileResult(plan, ebus_warnings(whole, line), notes)
 
 
 def _previous_port(s: ResolvedSlave, resolved: list[ResolvedSlave]) -> list[PreviousPort]:
@@ -281,27 +293,30 @@ def _unique(variables: list[Variable]) -> list[Variable]:
     return variables
 
 
-def ebus_warnings(loaded: LoadedTopology, resolved: list[ResolvedSlave]) -> list[EcatcfgError]:
+def ebus_warnings(loaded: LoadedTopology,
+                  line: list[tuple[str, Device, int]]) -> list[EcatcfgError]:
     """E-bus budget (ESI ``Electrical/EBusCurrent``, mA): a negative value supplies current
-    (a coupler: -2000), positive values draw it; warn when the terminals after a supplier
-    draw more than it gives."""
+    (a coupler: -2000; also a passive power feed, e.g. Beckhoff's EL9400), positive values
+    draw it; warn when the terminals after a supplier draw more than it gives.  ``line``:
+    ``(name, device, index in the topology file)`` of every slave, passive ones included,
+    in the order of the line."""
     warnings: list[EcatcfgError] = []
-    supplier: ResolvedSlave | None = None
+    supplier: tuple[str, Device, int] | None = None
     budget = drawn = 0
     warned = False
-    for s in resolved:
-        current = s.device.info.ebus_current if s.device.info else None
+    for name, device, index in line:
+        current = device.info.ebus_current if device.info else None
         if current is None:
             continue
         if current < 0:
-            supplier, budget, drawn, warned = s, -current, 0, False
+            supplier, budget, drawn, warned = (name, device, index), -current, 0, False
             continue
         drawn += current
         if supplier is not None and drawn > budget and not warned:
             warned = True
             warnings.append(loaded.error(
-                f"E-bus current: the terminals after {supplier.name!r} "
-                f"({supplier.device.type_name}) draw {drawn} mA up to slave {s.name!r}, more "
-                f"than the {budget} mA it supplies; add a power feed terminal",
-                "slaves", s.index))
+                f"E-bus current: the terminals after {supplier[0]!r} "
+                f"({supplier[1].type_name}) draw "
+                f"{drawn} mA up to slave {name!r}, more than the {budget} mA it supplies; "
+                "add a power feed terminal", "slaves", index))
     return warnings

@@ -114,8 +114,8 @@ def resolve_all(loaded: LoadedTopology, library: Library
         where = ("slaves", index)
         pos = tree.position(index)
         if cfg.name in names:
-            errors.add(f"slave name {cfg.name!r} is already used by slave {names[cfg.name]}",
-                       *where, "name")
+            errors.add(f"slave name {cfg.name!r} is already used by the slave at line "
+                       f"{loaded.line('slaves', names[cfg.name])}", *where, "name")
         names.setdefault(cfg.name, index)
         phys = cfg.station_address if cfg.station_address is not None else 1001 + pos
         if phys in used:
@@ -158,8 +158,12 @@ def plugged_devices(loaded: LoadedTopology, library: Library) -> list[PluggedDev
     """The devices of a topology's slaves in bus order (auto-increment positions 0, 1, ...:
     the frame's path through the tree), after the same checks as a compile (an unknown
     device, a module that does not fit its slot, a port that cannot be plugged is an error at
-    its line).  A slave's ``parent`` is an index into this list, always a smaller one."""
-    resolved, errors, _ = resolve_all(loaded, library)
+    its line).  A slave's ``parent`` is an index into this list, always a smaller one.
+    Passive terminals (no ESC, ``compiler/passive.py``) are not in it: nothing to emulate."""
+    from ecatcfg.compiler.passive import split
+    parts = split(loaded, library)
+    resolved, errors, _ = resolve_all(parts.active, library)
+    errors = parts.errors + errors
     if errors:
         raise TopologyError(errors)
     return [PluggedDevice(r.name, with_modules(r.device, r.modules), r.cfg.alias or 0,

@@ -229,6 +229,28 @@ class SlavePlan:
 
 
 @record
+class PassiveSlave:
+    """A slave without an EtherCAT Slave Controller: a passive terminal (an end cap, a
+    potential feed) that is part of the line as it is built but not of the EtherCAT line.
+
+    ETG.2100 makes ``Info/PhysAddr``, ``AutoIncAddr`` and ``Physics`` one optional group,
+    "slave device has EtherCAT Slave Controller"; TwinCAT writes passive terminals without
+    it, with an empty ``ProcessData`` and a ``PreviousPort``.  Such a slave answers no
+    datagram: it has no position, no station address, adds nothing to a working counter and
+    takes no state.  It is kept apart from :attr:`NetworkPlan.slaves` so that nothing that
+    addresses slaves can get one; ``after`` says where it sits in the ENI's order."""
+
+    name: str
+    after: int                                # slaves with an ESC before it in the file
+    vendor_id: int
+    product_code: int
+    revision: int
+    serial_no: int = 0
+    process_data: bool = True                 # the file has an (empty) <ProcessData/>
+    previous_ports: list[PreviousPort] = field(default_factory=list)
+
+
+@record
 class CyclicCmd:
     states: list[str]                         # INIT / PREOP / SAFEOP / OP
     comment: str
@@ -321,14 +343,26 @@ class Unsupported:
 @record
 class NetworkPlan:
     master: MasterPlan
-    slaves: list[SlavePlan] = field(default_factory=list)
+    slaves: list[SlavePlan] = field(default_factory=list)      # the slaves with an ESC
     cyclic: list[Cyclic] = field(default_factory=list)
     process_image: ProcessImage = field(default_factory=ProcessImage)
     version: str | None = "1.3"
     unsupported: list[Unsupported] = field(default_factory=list)
+    passive: list[PassiveSlave] = field(default_factory=list)  # without an ESC, file order
 
     def slave(self, name: str) -> SlavePlan:
         return next(s for s in self.slaves if s.name == name)
+
+    def in_file_order(self) -> list[SlavePlan | PassiveSlave]:
+        """All slaves as the ENI lists them: each passive one before the active slave
+        whose index is its ``after`` (at the end for ``after == len(slaves)``)."""
+        out: list[SlavePlan | PassiveSlave] = []
+        waiting = sorted(self.passive, key=lambda p: p.after)    # stable: file order kept
+        for k, slave in enumerate(self.slaves):
+            while waiting and waiting[0].after <= k:
+                out.append(waiting.pop(0))
+            out.append(slave)
+        return out + waiting
 
 
 def register_writes(slave: SlavePlan, first: int, size: int,

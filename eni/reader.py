@@ -35,6 +35,7 @@ from ecatcfg.eni.plan import (
     MailboxPlan,
     MasterPlan,
     NetworkPlan,
+    PassiveSlave,
     PdoDesc,
     PdoEntryDesc,
     PreviousPort,
@@ -276,9 +277,15 @@ class _Reader:
         image = config.find("ProcessImage")
         from ecatcfg.eni.contents import audit, dropped_init_cmds
         self._dropped = dropped_init_cmds(config)
-        slave_els = list(config.iterchildren("Slave"))
-        slaves = [self.slave(el) for el in slave_els]
+        slave_els, slaves, passive = [], [], []
+        for el in config.iterchildren("Slave"):
+            if self.has_esc(el):
+                slave_els.append(el)
+                slaves.append(self.slave(el))
+            else:
+                passive.append((el, self.passive(el, after=len(slaves))))
         self.hot_connect_groups(slave_els, slaves)
+        self.passive_outside_groups(slave_els, slaves, passive)
         return NetworkPlan(
             master=self.master(self.child(config, "Master")),
             slaves=slaves,
@@ -286,6 +293,7 @@ class _Reader:
             process_image=ProcessImage() if image is None else self.process_image(image),
             version=root.get("Version"),
             unsupported=audit(config),
+            passive=[p for _, p in passive],
         )
 
     # --- commands -------------------------------------------------------------------------
@@ -387,6 +395,70 @@ class _Reader:
             previous_ports=[self.previous_port(p) for p in el.iterchildren("PreviousPort")],
             hot_connect=None if hot is None else self.hot_connect(hot),
         )
+
+    def has_esc(self, el: Element) -> bool:
+        """Whether ``Info`` has the group ETG.2100 documents as "slave device has EtherCAT
+        Slave Controller" (``PhysAddr``, ``AutoIncAddr``, ``Physics``, all or none): a
+        slave without it is passive.  Part of the group is an error at ``Info``'s line."""
+        info = self.child(el, "Info")
+        present = [tag for tag in ("PhysAddr", "AutoIncAddr") if info.find(tag) is not None]
+        if len(present) == 1:
+            missing = "AutoIncAddr" if present == ["PhysAddr"] else "PhysAddr"
+            raise self.error(f"<Info> has <{present[0]}> but no <{missing}>: a slave with an "
+                             "ESC has both, a passive one neither", info)
+        if not present and info.find("Physics") is not None:
+            raise self.error("<Info> has <Physics> but no <PhysAddr> and <AutoIncAddr>: a "
+                             "slave with an ESC has all three, a passive one none", info)
+        return bool(present)
+
+    def passive(self, el: Element, after: int) -> PassiveSlave:
+        """A slave without an ESC (:class:`PassiveSlave`).  What only an ESC can do
+        (InitCmds, a mailbox, SyncManagers, PDOs or process image ranges, DC, identifying
+        a hot-connect group) is an error at its line: the master could not do it."""
+        info = self.child(el, "Info")
+        name = self.opt_text(info, "Name") or ""
+        pd = el.find("ProcessData")
+        init_cmds = el.find("InitCmds")
+        needs_esc = [
+            (pd[0] if pd is not None and len(pd) else None, "process data"),
+            (init_cmds[0] if init_cmds is not None and len(init_cmds) else None, "InitCmds"),
+            (el.find("Mailbox"), "a mailbox"),
+            (el.find("DC"), "distributed clocks"),
+            (el.find("HotConnect"), "a hot-connect group"),
+        ]
+        for part, what in needs_esc:
+            if part is not None:
+                raise self.error(
+                    f"slave {name!r} has no <PhysAddr> and <AutoIncAddr> (a passive slave, "
+                    f"without an ESC) but has <{part.tag!s}>: {what} needs an EtherCAT "
+                    "Slave Controller", part)
+        return PassiveSlave(
+            name=name,
+            after=after,
+            vendor_id=self.uint32(info, "VendorId"),
+            product_code=self.uint32(info, "ProductCode"),
+            revision=self.uint32(info, "RevisionNo"),
+            serial_no=self.int_or(info, "SerialNo", 0, S32) & 0xFFFFFFFF,
+            process_data=pd is not None,
+            previous_ports=[self.previous_port(p) for p in el.iterchildren("PreviousPort")],
+        )
+
+    def passive_outside_groups(self, elements: list[Element], slaves: list[SlavePlan],
+                               passive: list[tuple[Element, PassiveSlave]]) -> None:
+        """A passive slave between a hot-connect group's head and its last member is an
+        error: ETG.2100 does not say whether ``GroupMemberCnt`` counts it, and the two
+        readings make different groups.  One after a group's last member is outside it."""
+        for i, slave in enumerate(slaves):
+            if slave.hot_connect is None:
+                continue
+            last = i + slave.hot_connect.member_count - 1
+            for el, p in passive:
+                if i < p.after <= last:
+                    raise self.error(
+                        f"passive slave {p.name!r} sits inside the hot-connect group of "
+                        f"{slave.name!r} (line {elements[i].sourceline}): whether "
+                        "<GroupMemberCnt> counts it is not defined; move it after the "
+                        "group's last member", el)
 
     def hot_connect(self, element: Element) -> HotConnectPlan:
         """``HotConnect``: ``GroupMemberCnt`` and the ``IdentifyCmd`` commands (ETG.2100

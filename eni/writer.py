@@ -31,6 +31,7 @@ from ecatcfg.eni.plan import (
     MailboxPlan,
     MasterPlan,
     NetworkPlan,
+    PassiveSlave,
     PdoDesc,
     PdoEntryDesc,
     PreviousPort,
@@ -60,8 +61,11 @@ def to_bytes(plan: NetworkPlan, generator: str | None = None) -> bytes:
         root.addprevious(etree.Comment(f" Created with {re.sub('-(?=-)', '- ', generator)} "))
     config = _sub(root, "Config")
     _master(config, plan.master)
-    for slave in plan.slaves:
-        _slave(config, slave)
+    for slave in plan.in_file_order():
+        if isinstance(slave, PassiveSlave):
+            _passive(config, slave)
+        else:
+            _slave(config, slave)
     for cyclic in plan.cyclic:
         _cyclic(config, cyclic)
     _process_image(config, plan.process_image)
@@ -227,6 +231,23 @@ def _slave(config: Element, slave: SlavePlan) -> None:
         _hot_connect(el, slave.hot_connect)
     if slave.dc is not None:
         _dc(el, slave.dc)
+
+
+def _passive(config: Element, slave: PassiveSlave) -> None:
+    """A slave without an ESC as TwinCAT writes one: ``Info`` without the ESC group
+    (``PhysAddr``, ``AutoIncAddr``, ``Physics``; ETG.2100), an empty ``ProcessData``,
+    ``PreviousPort``."""
+    el = _sub(config, "Slave")
+    info = _sub(el, "Info")
+    _sub(info, "Name", slave.name)
+    _uint32(info, "VendorId", slave.vendor_id)
+    _uint32(info, "ProductCode", slave.product_code)
+    _uint32(info, "RevisionNo", slave.revision)
+    _uint32(info, "SerialNo", slave.serial_no)
+    if slave.process_data:
+        _sub(el, "ProcessData")
+    for port in slave.previous_ports:
+        _previous_port(el, port)
 
 
 def _bit_range(parent: Element, tag: str, bits: BitRange) -> None:

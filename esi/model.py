@@ -560,6 +560,18 @@ class Device:
     def pdos(self) -> list[Pdo]:
         return self.rx_pdos + self.tx_pdos
 
+    @property
+    def passive(self) -> bool:
+        """A device without an EtherCAT Slave Controller: a passive terminal (end cap,
+        potential feed).  ETG.2000 makes ``Type/@ProductCode`` optional; vendors describe
+        such terminals with no ProductCode and nothing an ESC would have (Beckhoff's
+        EL9011, EL9100: ``Type``, names, ``GroupType``).  A device that lacks a ProductCode
+        but has SyncManagers, FMMUs, PDOs, a mailbox, DC, an EEPROM or slots is not
+        passive: its identity is missing."""
+        return self.product_code is None and not (
+            self.sms or self.fmmus or self.rx_pdos or self.tx_pdos or self.mailbox
+            or self.dc or self.eeprom or self.slots)
+
     def sm_by_type(self, sm_type: str) -> list[SyncManager]:
         return [sm for sm in self.sms if sm.type == sm_type]
 

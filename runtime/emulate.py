@@ -198,7 +198,9 @@ def specs_from_eni(plan: NetworkPlan, library: Library | None, shown: str) -> li
     vendor objects), the objects its startup SDOs write are accepted as they are.  Any
     other slave (and every slave without a library) is emulated from the ENI alone
     (``runtime/eni_device.py``), with the objects its CoE InitCmds write; its spec says why
-    (``eni_only``).  ``shown`` names the ENI in the model's sources."""
+    (``eni_only``).  ``shown`` names the ENI in the model's sources.  The plan's passive
+    slaves (``NetworkPlan.passive``: no ESC) are not among ``plan.slaves``: nothing answers
+    for them on the wire, so nothing emulates them."""
     from ecatcfg.esi.library import SelectorError
     from ecatcfg.runtime.eni_device import device_from_eni
 

@@ -209,7 +209,11 @@ class Master:
         if problems:
             raise VerifyError(problems)
         self.found = found
-        self._event("scan", f"{len(found)} slaves match the ENI")
+        # Passive slaves (no ESC) are in the ENI but never on the wire (eni/plan.py).
+        passive = len(self.plan.passive)
+        self._event("scan", f"{len(found)} slaves match the ENI" + (
+            f" ({passive} passive slave{'s' if passive != 1 else ''} without an ESC not "
+            "on the wire)" if passive else ""))
         self.supervisor = None
         if absent_heads:
             for head, members in hotconnect.groups(self.plan.slaves).items():

@@ -248,6 +248,9 @@ class Network:
         try:
             return self.health[slave].online
         except KeyError:
+            if any(p.name == slave for p in self.plan.passive):
+                raise EcatcfgError(f"slave {slave!r} is a passive slave (no ESC): it is "
+                                   "never on the wire") from None
             raise EcatcfgError(f"no slave {slave!r} in the ENI") from None
 
     def valid(self, name: str) -> bool:

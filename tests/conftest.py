@@ -33,7 +33,8 @@ def corpus() -> Path:
 
 @pytest.fixture(scope="session")
 def corpus_extra() -> Path:
-    if not (CORPUS_EXTRA / "eni").is_dir():
+    """The second corpus (more vendor ESIs and ENIs), skipped or failed like the first."""
+    if not (CORPUS_EXTRA / "eni").is_dir() or not (CORPUS_EXTRA / "esi").is_dir():
         prereq.missing(f"the extra corpus at {CORPUS_EXTRA}",
                        "not found (set ECATCFG_CORPUS_EXTRA to its folder)", prereq.CORPUS)
     return CORPUS_EXTRA
