@@ -10,7 +10,7 @@ import sys
 from collections.abc import Callable
 from typing import IO, TYPE_CHECKING, Any
 
-from ecatcfg.eni.plan import NetworkPlan, Unsupported
+from ecatcfg.eni.plan import NetworkPlan, SlavePlan, Unsupported
 from ecatcfg.esc import AlState, al_status_name
 
 from ecatcfg.errors import EcatcfgError
@@ -263,12 +263,18 @@ def refusal_json(eni: str, target: int, error: EcatcfgError,
     elif isinstance(error, DeriveError):
         refused = [{"slave": name, "element": "Slave/InitCmds", "what": text, "line": None,
                     "commands": 0} for name, text in error.problems.items()]
-    slaves = [{"position": s.position, "name": s.name, "address": s.phys_addr,
-               "state": "not started", "highest_state": "not started", "al_status_code": None,
+    slaves = [{"position": s.position, "name": s.name, "passive": False,
+               "address": s.phys_addr, "state": "not started", "highest_state": "not started",
+               "al_status_code": None, "al_status": None, "last_command": ""}
+              if isinstance(s, SlavePlan) else
+              {"position": None, "name": s.name, "passive": True, "address": None,
+               "state": "passive", "highest_state": "passive", "al_status_code": None,
                "al_status": None, "last_command": ""}
-              for s in sorted(plan.slaves, key=lambda s: s.position)] if plan else []
+              for s in plan.in_file_order()] if plan else []
     return {"eni": eni, "target": AlState(target).name, "ok": False, "error": str(error),
             "refused": refused, "slaves": slaves,
+            "slave_count": {"active": len(plan.slaves) if plan else 0,
+                            "passive": len(plan.passive) if plan else 0},
             "cycles": {"count": 0, "lost_frames": 0, "wkc_errors": 0,
                        "wkc_error_commands": {}, "jitter_us": {}},
             "frames": {"sent": 0, "lost": 0}, "derived": [], "skipped": [], "events": []}
