@@ -243,7 +243,8 @@ TRANSITION_RULES: dict[Transition, TransitionRule] = {
     # ETG.2100: II are the commands for a slave in INIT asked for INIT, the state the
     # master starts every slave from; TwinCAT writes "assign EEPROM back to ECAT" there.
     Transition.II: TransitionRule(
-        "at the start of the way up from INIT (after the scan), before INIT->PREOP",
+        "at the start of each way up from INIT, before INIT->PREOP (at start-up after "
+        "the scan; for a slave brought back, after its INIT request)",
         _NO_MAILBOX_INIT, False),
     Transition.IP: TransitionRule(
         "on the way up; CoE and EoE once the slave is in PREOP",

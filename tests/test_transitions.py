@@ -15,6 +15,7 @@ from __future__ import annotations
 import functools
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -27,7 +28,7 @@ from ecatcfg.eni import reader as eni_reader
 from ecatcfg.eni import writer as eni_writer
 from ecatcfg.esc import TRANSITION_RULES, AlState, Transition
 from ecatcfg.esi.library import Library
-from ecatcfg.runtime import master
+from ecatcfg.runtime import Network, master
 
 SMS = ('<Fmmu>Outputs</Fmmu><Fmmu>Inputs</Fmmu>'
        '<Sm ControlByte="#x26" DefaultSize="128" Enable="1" StartAddress="#x1000">MBoxOut</Sm>'
@@ -284,3 +285,36 @@ def test_the_docs_table_is_the_rules():
     table = [line.strip() for line in doc.splitlines()
              if line.strip().startswith("| `") and "→" in line.split("|")[1]]
     assert table == rows
+
+
+def test_a_slave_brought_back_runs_its_ii_commands_again(line):
+    """A slave that lost power comes back in INIT; the master asks it for INIT and brings
+    it up again: its INIT->INIT commands run again before INIT->PREOP (the register the II
+    command writes is cleared by the power cycle and written again)."""
+    esi, _ = line
+    built = build.compile_topology(topology.loads(
+        "slaves:\n  - {name: s0, device: FX-EOE}\n  - {name: s1, device: FX-EOE}\n", "t.yaml"),
+        Library([esi], cache=False)).plan
+    root = etree.fromstring(eni_writer.to_bytes(built))
+    root.find("Config/Slave[2]/InitCmds").append(etree.fromstring(
+        f"<InitCmd><Transition>II</Transition><Comment>test II</Comment><Cmd>2</Cmd>"
+        f"<Adp>{0xFFFF}</Adp><Ado>{TEST_ADO}</Ado><Data>4949</Data><Cnt>1</Cnt></InitCmd>"))
+    plan = eni_reader.read_bytes(etree.tostring(root), "x.xml")
+    with Network.virtual(plan, esi=[esi]) as net:
+        net.up()
+        slave = net.segment.slaves[1]
+        assert slave.read(TEST_ADO, 2) == b"II"
+        net.segment.remove_cable("s1")
+        slave.power_cycle()
+        assert slave.read(TEST_ADO, 2) == bytes(2)
+        for _ in range(5):
+            net.cycle()
+        assert not net.online("s1")
+        net.segment.restore_cable("s1")
+        end = time.monotonic() + 5
+        while not net.online("s1"):
+            assert time.monotonic() < end, "s1 not back after 5 s"
+            net.cycle()
+            time.sleep(0.001)
+        assert slave.state == AlState.OP
+        assert slave.read(TEST_ADO, 2) == b"II"
