@@ -265,6 +265,10 @@ CONTENTS: dict[str, dict[str, Part]] = {
             "Disabled")},
         "IndexType": _accepted("Elmo Application Studio: who made the command, like the "
                                "Fixed attribute"),
+        # ETG.2000 (ESI) CoE InitCmds carry it, and a configurator may copy it along.
+        "Data@AdaptAutomatically": _accepted("the configurator may adapt Data to the PDO "
+                                             "configuration; the file holds the adapted "
+                                             "data, sent as written"),
     },
     "Mailbox/EoE": {"InitCmds": _read("set IP parameter requests", "EoE/InitCmds")},
     "EoE/InitCmds": {

@@ -184,3 +184,19 @@ def test_an_unknown_attribute_is_refused_by_name(fragment, element):
     [part] = [p for p in plan.unsupported if p.element == element]
     assert (part.slave, part.line) == ("Drive", line)
     assert "which ecatcfg does not know" in part.what
+
+
+def test_an_esi_style_adapt_automatically_on_coe_data_is_accepted():
+    """ETG.2000's ``Data AdaptAutomatically`` on a CoE InitCmd speaks to the configurator
+    (adapt the data to the PDO configuration); an ENI holds the adapted data."""
+    root = etree.parse(str(EVERY)).getroot()
+    data = root.find("Config/Slave[2]/Mailbox/CoE/InitCmds/InitCmd/Data")
+    data.set("AdaptAutomatically", "true")
+    before = [(p.element, p.what) for p in eni_reader.read_file(EVERY).unsupported]
+    after = eni_reader.read_bytes(etree.tostring(root), "x.xml").unsupported
+    assert [(p.element, p.what) for p in after] == before
+    data.set("Extra", "true")            # the attribute is listed, not any attribute
+    refused = eni_reader.read_bytes(etree.tostring(root), "x.xml").unsupported
+    assert ("Slave/Mailbox/CoE/InitCmds/InitCmd/Data/@Extra",
+            "the attribute Extra='true' of <Data>, which ecatcfg does not know") in [
+        (p.element, p.what) for p in refused]
