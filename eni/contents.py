@@ -539,16 +539,17 @@ def _attributes(el: Element, parts: dict[str, Part], where: str, slave: str | No
 
 
 def table() -> list[tuple[str, str, str]]:
-    """``(elements, kind, text)`` for every listed element, in the order above, elements of
-    one context with the same kind and text on one row: the table ``docs/runtime.md``
-    shows."""
+    """``(elements, kind, text)`` for every listed element and attribute, in the order
+    above, those of one context with the same kind and text on one row: the table
+    ``docs/runtime.md`` shows."""
     rows: dict[tuple[str, str, str], list[str]] = {}
     for tag, part in ROOT.items():
         rows.setdefault(("EtherCATConfig", part.kind, part.text), []).append(tag)
     for context, parts in CONTENTS.items():
         for tag, part in parts.items():
             rows.setdefault((context, part.kind, part.text), []).append(tag)
-    return [(f"{context}/{tags[0]}" if len(tags) == 1 else f"{context}/{{{', '.join(tags)}}}",
+    return [(f"{context}{'' if tags[0][0] == '@' else '/'}{tags[0]}" if len(tags) == 1
+             else f"{context}/{{{', '.join(tags)}}}",
              kind, text) for (context, kind, text), tags in rows.items()]
 
 

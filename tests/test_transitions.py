@@ -318,3 +318,37 @@ def test_a_slave_brought_back_runs_its_ii_commands_again(line):
             time.sleep(0.001)
         assert slave.state == AlState.OP
         assert slave.read(TEST_ADO, 2) == b"II"
+
+
+def test_the_masters_ii_commands_run_after_the_scan_before_init_to_preop(line, tmp_path,
+                                                                       tshark_path):
+    """The master's own InitCmds of II (before and after the slaves' ones) are sent in
+    the same place: after the scan, before the first INIT->PREOP command."""
+    esi, eni = line
+    root = etree.fromstring(eni)
+    cmds = root.find("Config/Master/InitCmds")
+    # The first write of INIT->PREOP (the scan before only reads).
+    first_ip = next(c for c in cmds if c.findtext("Transition") == "IP"
+                    and c.findtext("Cmd") == "8")
+    for before, data in (("true", "4242"), ("false", "4141")):
+        cmds.append(etree.fromstring(
+            f"<InitCmd><Transition>II</Transition><BeforeSlave>{before}</BeforeSlave>"
+            f"<Comment>master II</Comment><Cmd>8</Cmd><Adp>0</Adp><Ado>{TEST_ADO + 2}</Ado>"
+            f"<Data>{data}</Data><Cnt>1</Cnt></InitCmd>"))
+    path, pcap = tmp_path / "master.xml", tmp_path / "master.pcap"
+    path.write_bytes(etree.tostring(root))
+    done = _apply(path, esi, "--pcap", str(pcap))
+    assert done.returncode == 0, done.stderr
+    sent: list[tuple[int, str]] = []
+    for packet in tshark_fields(pcap, ["eth.src", "ecat.cmd", "ecat.ado", "ecat.data"]):
+        if int(packet["eth.src"][0][:2], 16) & 0x02:
+            continue
+        data = packet["ecat.data"]
+        if len(data) != len(packet["ecat.ado"]):
+            data = [""] * len(packet["ecat.ado"])     # reads show no data: no alignment
+        sent += [(int(ado, 16), value) for ado, value in zip(packet["ecat.ado"], data)]
+    ours = [i for i, (ado, _) in enumerate(sent) if ado == TEST_ADO + 2]
+    assert [sent[i][1] for i in ours] == ["4242", "4141"]
+    scan = max(i for i, (ado, _) in enumerate(sent[:ours[0]]) if ado == 0x0508)
+    ip = next(i for i, (ado, _) in enumerate(sent) if ado == int(first_ip.findtext("Ado")))
+    assert scan < ours[0] and ours[-1] < ip
