@@ -427,7 +427,6 @@ def _mailbox_without_mailbox(config: Element) -> list[tuple[Element, Unsupported
     return found
 
 
-
 # Logical commands (ETG.1000.4): the windows an FMMU's logical range must fall in.
 _FMMU_FIRST, _FMMU_END, _FMMU_SIZE = 0x0600, 0x0700, 16
 
