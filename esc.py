@@ -207,12 +207,75 @@ class Transition(str, Enum):
     BI = "BI"
 
     @property
+    def source(self) -> AlState:
+        return _STATE_BY_LETTER[self.value[0]]
+
+    @property
     def target(self) -> AlState:
         return _STATE_BY_LETTER[self.value[1]]
 
 
 _STATE_BY_LETTER = {"I": AlState.INIT, "P": AlState.PREOP, "S": AlState.SAFEOP,
                     "O": AlState.OP, "B": AlState.BOOT}
+
+
+@record(frozen=True)
+class TransitionRule:
+    """What ``apply`` does with the InitCmds of one transition (ETG.2100 ``TransitionType``).
+
+    ``sent``: where apply's sequence sends them, or ``""`` for a transition apply never
+    takes (its commands belong to a path apply does not go: nothing it promises needs
+    them).  ``mailbox``: whether the slave's mailbox works during the transition, so that a
+    CoE or EoE command there can be answered at all (ETG.1000.6: no mailbox in INIT; in
+    BOOT only the bootstrap mailbox, for FoE); a mailbox command in a transition without
+    one is refused by name, whoever would run it."""
+
+    sent: str
+    why: str
+    mailbox: bool
+
+
+_NO_MAILBOX_INIT = "a slave in INIT has no mailbox (SM0/SM1 start working in PREOP)"
+_BOOT = ("BOOT is for firmware updates (FoE over the bootstrap mailbox); apply does not "
+         "go there")
+
+TRANSITION_RULES: dict[Transition, TransitionRule] = {
+    # ETG.2100: II are the commands for a slave in INIT asked for INIT, the state the
+    # master starts every slave from; TwinCAT writes "assign EEPROM back to ECAT" there.
+    Transition.II: TransitionRule(
+        "at the start of each way up from INIT, before INIT->PREOP (at start-up after "
+        "the scan; for a slave brought back, after its INIT request)",
+        _NO_MAILBOX_INIT, False),
+    Transition.IP: TransitionRule(
+        "on the way up; CoE and EoE once the slave is in PREOP",
+        "the mailbox starts working in PREOP", True),
+    Transition.PS: TransitionRule("on the way up", "mailbox in PREOP (the PDO assignment "
+                                  "before SAFEOP)", True),
+    Transition.SO: TransitionRule("on the way up", "mailbox in SAFEOP", True),
+    Transition.OS: TransitionRule("on the way down", "mailbox in OP", True),
+    Transition.SP: TransitionRule("on the way down", "mailbox in SAFEOP", True),
+    Transition.PI: TransitionRule("on the way down", "mailbox until the INIT request", True),
+    # A state requested again of a slave already in it: apply requests each state once on
+    # its way up and once on its way down (a running master's restart in that state).
+    Transition.PP: TransitionRule("", "PREOP requested of a slave in PREOP: apply requests "
+                                  "each state once on each way", True),
+    Transition.SS: TransitionRule("", "SAFEOP requested of a slave in SAFEOP: apply requests "
+                                  "each state once on each way", True),
+    # Direct transitions: apply goes step by step and runs the steps' commands instead
+    # (what a direct transition sets up or clears, its steps do too: ETG.2100 exports
+    # repeat e.g. "clear sms" in SP and OP, the INIT request in PI, SI and OI).
+    Transition.PO: TransitionRule("", "a direct PREOP->OP: apply goes through SAFEOP "
+                                  "(PS, SO)", True),
+    Transition.SI: TransitionRule("", "a direct SAFEOP->INIT: apply goes through PREOP "
+                                  "(SP, PI)", True),
+    Transition.OP: TransitionRule("", "a direct OP->PREOP: apply goes through SAFEOP "
+                                  "(OS, SP)", True),
+    Transition.OI: TransitionRule("", "a direct OP->INIT: apply goes step by step "
+                                  "(OS, SP, PI)", True),
+    Transition.IB: TransitionRule("", f"{_BOOT}; {_NO_MAILBOX_INIT}", False),
+    Transition.BI: TransitionRule("", f"{_BOOT}; in BOOT only the bootstrap mailbox "
+                                  "works, for FoE", False),
+}
 
 
 def al_state_name(al_status: int) -> str:

@@ -26,8 +26,9 @@ if TYPE_CHECKING:                   # rich and the runtime are imported where th
     from ecatcfg.runtime.scan import FoundSlave
 
 _LOG_WIDTH = 1000          # columns for a pipe or a file: wide enough that nothing wraps
-_TRANSITION_TEXT = {"IP": "INIT -> PREOP", "PS": "PREOP -> SAFEOP", "SO": "SAFEOP -> OP",
-                    "OS": "OP -> SAFEOP", "SP": "SAFEOP -> PREOP", "PI": "PREOP -> INIT"}
+_TRANSITION_TEXT = {"II": "INIT -> INIT", "IP": "INIT -> PREOP", "PS": "PREOP -> SAFEOP",
+                    "SO": "SAFEOP -> OP", "OS": "OP -> SAFEOP", "SP": "SAFEOP -> PREOP",
+                    "PI": "PREOP -> INIT"}
 
 
 class _PlainConsole:

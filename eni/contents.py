@@ -14,13 +14,16 @@ one of three kinds:
   it (``--skip-unsupported``).
 
 The contexts named in :data:`CONTENTS` are *closed*: a child element not listed there is
-refused as unknown, since nothing tells whether it changes what the master must do.  The
-others are *open* (their reason in :data:`OPEN`): elements outside ``<Config>`` (vendor
-data such as Elmo Application Studio's ``ElmoSpecialResources``), and descriptions whose
-effect reaches the wire only through InitCmds (``ProcessData``, ``ProcessImage``, the
-master's ``Info``, ``PreviousPort``).  Attributes are not checked, except those named in a
-rule (``Slave/@HotPlug``, ``Frame/@CycleTimeFactor``).  ``docs/runtime.md`` shows this
-list as a table; a test keeps the two equal.
+refused as unknown, since nothing tells whether it changes what the master must do, and
+so is an attribute of a child that is not listed as ``Tag@Name`` (``Slave@HotPlug``).
+What is inside a part without a context of its own (``within`` None) is covered by that
+part, whatever it is: a description whose effect reaches the wire only through InitCmds
+(``ProcessData``, ``ProcessImage``, the master's ``Info``), a part read or accepted as a
+whole (``Validate``, ``Identification``), or refused as a whole (``SoE``).  Outside
+``<Config>`` is open too (:data:`OPEN`: vendor data such as Elmo Application Studio's
+``ElmoSpecialResources``), but for :data:`ROOT`.  Every element and attribute of the
+ETG.2100 schema has its part (:func:`covering`; a test parses the schema).
+``docs/runtime.md`` shows this list as a table; a test keeps the two equal.
 """
 
 from __future__ import annotations
@@ -32,7 +35,7 @@ from lxml import etree
 
 from ecatcfg.eni.plan import NetworkPlan, Unsupported
 from ecatcfg.errors import EcatcfgError, location
-from ecatcfg.esc import LOGICAL_CMDS
+from ecatcfg.esc import LOGICAL_CMDS, TRANSITION_RULES, Transition
 from ecatcfg.esi.values import parse_bool, parse_int
 from ecatcfg.record import record
 
@@ -107,16 +110,12 @@ def _identification(el: Element) -> str:
             f"{enabled!r}>, value {el.get('Value')!r} at {ado})")
 
 
-def _hot_plug(el: Element) -> str:
-    return "" if _zero_or_absent(el.get("HotPlug")) else \
-        f"hot plug (Slave HotPlug={el.get('HotPlug')!r})"
-
-
-def _frame_factors(el: Element) -> str:
-    for name in ("CycleTimeFactor", "CycleTimeShiftFactor"):
-        if not _zero_or_absent(el.get(name)):
-            return f"a frame sent on its own cycle (<Frame {name}={el.get(name)!r}>)"
-    return ""
+def _zero_attribute(name: str, what: str) -> Check:
+    """The attribute ``name`` is absent or 0; otherwise it asks for ``what``."""
+    def check(el: Element) -> str:
+        value = el.get(name)
+        return "" if _zero_or_absent(value) else f"{what} (<{el.tag!s} {name}={value!r}>)"
+    return check
 
 
 def _master_time_as_ref(el: Element) -> str:
@@ -137,11 +136,20 @@ def _frame_size(el: Element) -> str:
 
 _INIT_CMD = "InitCmds/InitCmd"   # ECatCmdType: register commands of the master and slaves
 _COMMAND = "a field of the command, replayed as written"
+_FIXED = ("the configurator may not change the command (ETG.2100): kept in the plan and "
+          "written back, no effect on the wire")
 
 CONTENTS: dict[str, dict[str, Part]] = {
     "Config": {
         "Master": _read("the master's frame addresses and InitCmds", "Config/Master"),
-        "Slave": _read("one slave", "Config/Slave", _hot_plug),
+        "Slave": _read("one slave", "Config/Slave"),
+        "Slave@HotPlug": _accepted("when 0: the slave is always there (Elmo Application "
+                                   "Studio)", _zero_attribute("HotPlug", "hot plug")),
+        "Slave@Physics": _accepted("the slave's ports' physical layer, as Info/Physics: "
+                                   "a description"),
+        **{f"Slave@{name}": _accepted("Elmo Application Studio: the line segment of the "
+                                      "slave, a description; its place is Info/AutoIncAddr")
+           for name in ("Segment", "SegmentSubIndex")},
         "Cyclic": _read("cyclic frames, run from SAFEOP on", "Config/Cyclic"),
         "ProcessImage": _read("the variables of the process image (Network API names)"),
         "ExternalDrivers": _accepted("Elmo Application Studio: when empty, no driver to "
@@ -189,13 +197,23 @@ CONTENTS: dict[str, dict[str, Part]] = {
         "ProcessData": _read("SyncManagers and PDOs, as a description: the SM and FMMU "
                              "writes are InitCmds"),
         "Mailbox": _read("SM0/SM1 and the mailbox protocols", "Slave/Mailbox"),
+        "Mailbox@DataLinkLayer": _read("the mailbox data link layer (repeat and counter "
+                                       "handling), kept in the plan"),
         "InitCmds": _read("replayed transition by transition", "InitCmds"),
         "PreviousPort": _read("where the slave is connected (the tree is checked port by "
-                              "port)"),
+                              "port)", "Slave/PreviousPort"),
+        "PreviousPort@Selected": _read("which of the slave's possible previous ports is "
+                                       "the connected one"),
         "DC": _read("SYNC cycle and shift; DC set-up before PREOP->SAFEOP", "Slave/DC"),
         "HotConnect": _read("a hot-connect group: the head and the slaves after it may be "
                             "absent, the rest runs; the group joins when its head answers "
                             "its IdentifyCmds", "Slave/HotConnect"),
+    },
+    "Slave/PreviousPort": {
+        "Port": _read("the port of the previous slave this one hangs on (checked)"),
+        "PhysAddr": _read("the previous slave's station address"),
+        "DeviceId": _accepted("the previous slave's device ID: a description; the tree is "
+                              "checked by positions and ports"),
     },
     "Slave/HotConnect": {
         "GroupMemberCnt": _read("the head and the slaves after it in the file, this many "
@@ -210,9 +228,13 @@ CONTENTS: dict[str, dict[str, Part]] = {
             "Name", "PhysAddr", "AutoIncAddr", "Physics")},
         **{tag: _accepted("a description") for tag in (
             "ProductRevision", "NameInResource", "ProductName", "RevisionReal")},
+        "NameInResource@DSType": _accepted("Elmo Application Studio: the kind of name, a "
+                                           "description"),
         "Identification": _accepted("when EnableIdentification is false; otherwise the "
                                     "master would check an ID register first",
                                     _identification),
+        **{f"Identification@{name}": _accepted("part of the Identification rule above")
+           for name in ("EnableIdentification", "Value")},
     },
     "Slave/Mailbox": {
         "Send": _read("SM0: where requests are written"),
@@ -231,16 +253,28 @@ CONTENTS: dict[str, dict[str, Part]] = {
         "InitCmds": _read("SDO downloads (and uploads)", "CoE/InitCmds"),
         "Profile": _accepted("the device profile (CiA 402 ...): a description"),
     },
-    "CoE/InitCmds": {"InitCmd": _read("one SDO transfer", "CoE/InitCmds/InitCmd")},
+    "CoE/InitCmds": {
+        "InitCmd": _read("one SDO transfer", "CoE/InitCmds/InitCmd"),
+        "InitCmd@CompleteAccess": _read("the whole object in one transfer (complete "
+                                        "access)"),
+        "InitCmd@Fixed": _read(_FIXED),
+    },
     "CoE/InitCmds/InitCmd": {
         **{tag: _read(_COMMAND) for tag in (
             "Transition", "Comment", "Timeout", "Ccs", "Index", "SubIndex", "Data",
             "Disabled")},
         "IndexType": _accepted("Elmo Application Studio: who made the command, like the "
                                "Fixed attribute"),
+        # ETG.2000 (ESI) CoE InitCmds carry it, and a configurator may copy it along.
+        "Data@AdaptAutomatically": _accepted("the configurator may adapt Data to the PDO "
+                                             "configuration; the file holds the adapted "
+                                             "data, sent as written"),
     },
     "Mailbox/EoE": {"InitCmds": _read("set IP parameter requests", "EoE/InitCmds")},
-    "EoE/InitCmds": {"InitCmd": _read("one EoE request", "EoE/InitCmds/InitCmd")},
+    "EoE/InitCmds": {
+        "InitCmd": _read("one EoE request", "EoE/InitCmds/InitCmd"),
+        "InitCmd@Fixed": _read(_FIXED),
+    },
     "EoE/InitCmds/InitCmd": {tag: _read(_COMMAND) for tag in (
         "Transition", "Comment", "Timeout", "Data", "Disabled")},
     "Mailbox/AoE": {
@@ -258,7 +292,11 @@ CONTENTS: dict[str, dict[str, Part]] = {
         "CycleTime": _read("the cycle time (µs)"),
         "Priority": _accepted("the task priority on the configurator's host"),
         "TaskId": _accepted("the task on the configurator's host"),
-        "Frame": _read("one Ethernet frame per cycle", "Cyclic/Frame", _frame_factors),
+        "Frame": _read("one Ethernet frame per cycle", "Cyclic/Frame"),
+        **{f"Frame@{name}": _accepted("when 0: the frame goes every cycle (Elmo "
+                                      "Application Studio)", _zero_attribute(
+                                          name, "a frame sent on its own cycle"))
+           for name in ("CycleTimeFactor", "CycleTimeShiftFactor")},
     },
     "Cyclic/Frame": {
         "Comment": _accepted("a description"),
@@ -288,6 +326,32 @@ OPEN = {
 
 # Where a child's context starts: root -> Config.
 ROOT_CONTEXT = "Config"
+# The root element's own parts (the rest of the root is open, OPEN).
+ROOT: dict[str, Part] = {
+    "Config": _read("all the master does", ROOT_CONTEXT),
+    "@Version": _read("the ETG.2100 version the file follows, kept in the plan"),
+}
+
+
+def covering(path: list[str]) -> Part | None:
+    """The part that says what apply does with the element or attribute at ``path``
+    below the root (``["Config", "Slave", "Mailbox", "@DataLinkLayer"]``), ``None`` when
+    the list has none.  An attribute is listed as ``Tag@Name`` next to its element; what
+    is inside a part without a context of its own is covered by that part."""
+    parts = ROOT
+    for i, step in enumerate(path):
+        if step.startswith("@"):
+            return parts.get(f"{path[i - 1]}{step}" if i else step) \
+                if i == len(path) - 1 else None
+        part = parts.get(step)
+        if part is None or i == len(path) - 1:
+            return part
+        if path[i + 1].startswith("@"):
+            continue                          # the attribute is listed in this context
+        if part.within is None:
+            return part
+        parts = CONTENTS[part.within]
+    return None
 
 
 def _number(text: str) -> int | str | None:
@@ -325,13 +389,42 @@ def audit(config: Element) -> list[Unsupported]:
             "Cyclic", f"cyclic tasks with different cycle times ({listed} µs): apply runs "
             "every frame in one cycle", first.sourceline))
     found += [part for _, part in _unmapped_fmmus(config)]
+    found += [part for _, part in _mailbox_without_mailbox(config)]
     return found
 
 
 def dropped_init_cmds(config: Element) -> set[Element]:
     """The refused parts that are InitCmds among commands the plan reads: the reader
     leaves them out of the plan, so that a skipping apply does not write them."""
-    return {init for init, _ in _unmapped_fmmus(config)}
+    return {init for init, _ in _unmapped_fmmus(config) + _mailbox_without_mailbox(config)}
+
+
+def _mailbox_without_mailbox(config: Element) -> list[tuple[Element, Unsupported]]:
+    """Enabled CoE and EoE InitCmds of a transition in which the slave has no mailbox to
+    answer them (``esc.TRANSITION_RULES``: INIT->INIT, INIT->BOOT, BOOT->INIT): no master
+    can run them there, and leaving them out unsaid would lose them."""
+    found: list[tuple[Element, Unsupported]] = []
+    for slave in config.iterchildren("Slave"):
+        name = slave.findtext("Info/Name", "").strip() or f"line {slave.sourceline}"
+        for protocol in ("CoE", "EoE"):
+            for init in slave.iterfind(f"Mailbox/{protocol}/InitCmds/InitCmd"):
+                if not _zero_or_absent(init.findtext("Disabled")):
+                    continue
+                for el in init.iterchildren("Transition"):
+                    try:
+                        transition = Transition(_text(el))
+                    except ValueError:
+                        continue              # the reader reports it with its line
+                    rule = TRANSITION_RULES[transition]
+                    if rule.mailbox:
+                        continue
+                    found.append((init, Unsupported(
+                        f"{protocol}/InitCmds/InitCmd",
+                        f"a {protocol} InitCmd in transition {transition.value} "
+                        f"({transition.source.name}->{transition.target.name}): {rule.why}",
+                        el.sourceline, name, 1)))
+                    break
+    return found
 
 
 # Logical commands (ETG.1000.4): the windows an FMMU's logical range must fall in.
@@ -408,27 +501,54 @@ def _walk(el: Element, context: str, path: str, slave: str | None,
                 continue                      # <FoE/>, or only disabled commands: no loss
             found.append(Unsupported(where, part.text, child.sourceline, slave, count))
             continue
+        name = slave
+        if tag == "Slave":
+            name = child.findtext("Info/Name", "").strip() or f"line {child.sourceline}"
         if part.check is not None:
             problem = part.check(child)
             if problem:
                 found.append(Unsupported(where, problem, child.sourceline, slave))
                 continue
-        if part.within is not None:
-            name = slave
-            if tag == "Slave":
-                name = child.findtext("Info/Name", "").strip() or f"line {child.sourceline}"
+        if _attributes(child, parts, where, name, found) and part.within is not None:
             _walk(child, part.within, where, name, found)
 
 
+def _attributes(el: Element, parts: dict[str, Part], where: str, slave: str | None,
+                found: list[Unsupported]) -> bool:
+    """Each attribute of ``el`` must be listed as ``Tag@Name`` in its context, like an
+    element: an attribute can change what the master does (``HotPlug``,
+    ``CycleTimeFactor``) as much as an element can.  ``False`` when one is refused."""
+    ok = True
+    for name, value in el.attrib.items():
+        if name.startswith("{"):
+            continue                          # xsi:... and other namespaces: schema hints
+        part = parts.get(f"{el.tag!s}@{name}")
+        at = f"{where}/@{name}"
+        if part is None:
+            found.append(Unsupported(at, f"the attribute {name}={value!r} of <{el.tag!s}>, "
+                                     "which ecatcfg does not know", el.sourceline, slave))
+        elif part.kind == "refused":
+            found.append(Unsupported(at, part.text, el.sourceline, slave))
+        elif part.check is not None and (problem := part.check(el)):
+            found.append(Unsupported(at, problem, el.sourceline, slave))
+        else:
+            continue
+        ok = False
+    return ok
+
+
 def table() -> list[tuple[str, str, str]]:
-    """``(elements, kind, text)`` for every listed element, in the order above, elements of
-    one context with the same kind and text on one row: the table ``docs/runtime.md``
-    shows."""
+    """``(elements, kind, text)`` for every listed element and attribute, in the order
+    above, those of one context with the same kind and text on one row: the table
+    ``docs/runtime.md`` shows."""
     rows: dict[tuple[str, str, str], list[str]] = {}
+    for tag, part in ROOT.items():
+        rows.setdefault(("EtherCATConfig", part.kind, part.text), []).append(tag)
     for context, parts in CONTENTS.items():
         for tag, part in parts.items():
             rows.setdefault((context, part.kind, part.text), []).append(tag)
-    return [(f"{context}/{tags[0]}" if len(tags) == 1 else f"{context}/{{{', '.join(tags)}}}",
+    return [(f"{context}{'' if tags[0][0] == '@' else '/'}{tags[0]}" if len(tags) == 1
+             else f"{context}/{{{', '.join(tags)}}}",
              kind, text) for (context, kind, text), tags in rows.items()]
 
 

@@ -574,7 +574,8 @@ class _Reader:
         cmds = eoe.find("InitCmds")
         if cmds is None:
             return []
-        return [self.eoe_init_cmd(c) for c in cmds.iterchildren("InitCmd")]
+        return [self.eoe_init_cmd(c) for c in cmds.iterchildren("InitCmd")
+                if c not in self._dropped]
 
     def eoe_init_cmd(self, element: Element) -> EoeInitCmd:
         """ETG.2100 ``MailboxCmdType``; ``Data`` must be a set IP parameter request in one
@@ -601,7 +602,8 @@ class _Reader:
         cmds = coe.find("InitCmds")
         if cmds is None:
             return []
-        return [self.coe_init_cmd(c) for c in cmds.iterchildren("InitCmd")]
+        return [self.coe_init_cmd(c) for c in cmds.iterchildren("InitCmd")
+                if c not in self._dropped]
 
     def coe_init_cmd(self, element: Element) -> CoeInitCmd:
         el = _Children(element)

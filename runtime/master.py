@@ -248,6 +248,10 @@ class Master:
         status is read back, and a slave that is not in the transition's target state is
         an :class:`ApplyError` (``runtime/reached.py``): the state is reached when the
         slaves say so, not when the ENI's commands have been sent."""
+        # INIT->INIT first, where ETG.2100 puts it (esc.TRANSITION_RULES): only when the
+        # ENI has such commands, so the wire of an ENI without them stays the same.
+        if self.state == AlState.INIT and self._has_commands(Transition.II):
+            self.run_transition(Transition.II)
         for transition in UP:
             if self.state >= target:
                 return
@@ -264,6 +268,11 @@ class Master:
         lines = not_reached(self.slaves, self.read_states(), transition.target)
         if lines:
             raise NotReachedError(transition, lines)
+
+    def _has_commands(self, transition: Transition) -> bool:
+        return any(transition in c.transitions for c in self.plan.master.init_cmds) or any(
+            transition in c.transitions for s in self.slaves for c in s.init_cmds) or any(
+            any(mailbox_init_cmds(s, transition)) for s in self.slaves)
 
     def bring_down(self, target: AlState = AlState.INIT) -> None:
         """Down to ``target`` in order (OP->SAFEOP->PREOP->INIT).  Slaves with an AL error

@@ -484,6 +484,10 @@ class Supervisor:
                 state = AlState.INIT
                 channel = MailboxChannel(slave.phys_addr, slave.mailbox) \
                     if slave.mailbox is not None else None
+                # A slave in INIT asked for INIT: its INIT->INIT commands, as at start-up
+                # (esc.TRANSITION_RULES).
+                yield from slave_transition_job(slave, Transition.II,
+                                                master.progress[plan.name])
             else:
                 channel = master.mailboxes.get(plan.name)
             if channel is not None:

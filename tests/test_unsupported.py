@@ -256,7 +256,8 @@ def test_hot_plug_attribute_and_frame_factor(example_eni, tmp_path):
     tree.xpath(f"//Slave[Info/Name='{DRIVE}']")[0].set("HotPlug", "1")
     tree.xpath("//Cyclic/Frame")[0].set("CycleTimeFactor", "4")
     plan = eni_reader.read_bytes(etree.tostring(tree), "x.xml")
-    assert sorted(p.element for p in plan.unsupported) == ["Cyclic/Frame", "Slave"]
+    assert sorted((p.element, p.slave) for p in plan.unsupported) == [
+        ("Cyclic/Frame/@CycleTimeFactor", None), ("Slave/@HotPlug", DRIVE)]
     # The values Elmo Application Studio writes when the feature is off are accepted.
     tree.xpath(f"//Slave[Info/Name='{DRIVE}']")[0].set("HotPlug", "0")
     tree.xpath("//Cyclic/Frame")[0].set("CycleTimeFactor", "0")
