@@ -216,10 +216,7 @@ def _slave(config: Element, slave: SlavePlan) -> None:
     _int(info, "PhysAddr", slave.phys_addr)
     _int(info, "AutoIncAddr", slave.auto_inc_addr)
     _sub(info, "Physics", slave.physics)
-    _uint32(info, "VendorId", slave.vendor_id)
-    _uint32(info, "ProductCode", slave.product_code)
-    _uint32(info, "RevisionNo", slave.revision)
-    _uint32(info, "SerialNo", slave.serial_no)
+    _identity(info, slave)
     if slave.process_data is not None:
         _process_data(el, slave.process_data)
     if slave.mailbox is not None:
@@ -233,6 +230,13 @@ def _slave(config: Element, slave: SlavePlan) -> None:
         _dc(el, slave.dc)
 
 
+def _identity(info: Element, slave: SlavePlan | PassiveSlave) -> None:
+    _uint32(info, "VendorId", slave.vendor_id)
+    _uint32(info, "ProductCode", slave.product_code)
+    _uint32(info, "RevisionNo", slave.revision)
+    _uint32(info, "SerialNo", slave.serial_no)
+
+
 def _passive(config: Element, slave: PassiveSlave) -> None:
     """A slave without an ESC as TwinCAT writes one: ``Info`` without the ESC group
     (``PhysAddr``, ``AutoIncAddr``, ``Physics``; ETG.2100), an empty ``ProcessData``,
@@ -240,10 +244,7 @@ def _passive(config: Element, slave: PassiveSlave) -> None:
     el = _sub(config, "Slave")
     info = _sub(el, "Info")
     _sub(info, "Name", slave.name)
-    _uint32(info, "VendorId", slave.vendor_id)
-    _uint32(info, "ProductCode", slave.product_code)
-    _uint32(info, "RevisionNo", slave.revision)
-    _uint32(info, "SerialNo", slave.serial_no)
+    _identity(info, slave)
     if slave.process_data:
         _sub(el, "ProcessData")
     for port in slave.previous_ports:

@@ -17,7 +17,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from conftest import EXAMPLES, FIXTURES
+from conftest import EXAMPLES, FIXTURES, compile_example
 from lxml import etree
 from rig import start_simulate
 from test_soem import soem
@@ -72,13 +72,7 @@ def xml_slaves(path: Path) -> tuple[list[etree._Element], list[etree._Element]]:
 
 @pytest.fixture(scope="module")
 def example_eni(tmp_path_factory) -> Path:
-    out = tmp_path_factory.mktemp("example") / "example.eni.xml"
-    done = subprocess.run([sys.executable, "-m", "ecatcfg", "compile",
-                           str(EXAMPLES / "topology.yaml"), "--esi", str(EXAMPLES / "esi"),
-                           "-o", str(out), "--no-cache"], capture_output=True, text=True,
-                          timeout=60)
-    assert done.returncode == 0, done.stderr
-    return out
+    return compile_example(tmp_path_factory.mktemp("example") / "example.eni.xml")
 
 
 @pytest.fixture()
