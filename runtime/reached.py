@@ -33,8 +33,6 @@ if TYPE_CHECKING:
 # address), or to every slave (broadcast; the master's InitCmds).
 _OWN_WRITES = (Cmd.APWR, Cmd.FPWR, Cmd.APRW, Cmd.FPRW)
 _BROADCAST_WRITES = (Cmd.BWR, Cmd.BRW)
-_TEXT = {Transition.IP: "INIT -> PREOP", Transition.PS: "PREOP -> SAFEOP",
-         Transition.SO: "SAFEOP -> OP"}
 
 
 def _requested_state(cmd: InitCmd, transition: Transition) -> int | None:
@@ -74,7 +72,7 @@ def describe_missing(plan: NetworkPlan, name: str, steps: list[Transition]) -> s
     """``no InitCmd requests PREOP (INIT -> PREOP)``, with ``; no register InitCmds at all``
     for a slave of a partial ENI."""
     text = "no InitCmd requests " + ", ".join(
-        f"{t.target.name} ({_TEXT.get(t, t.value)})" for t in steps)
+        f"{t.target.name} ({t.source.name} -> {t.target.name})" for t in steps)
     return text + ("; no register InitCmds at all" if not plan.slave(name).init_cmds else "")
 
 
