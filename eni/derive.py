@@ -107,9 +107,9 @@ class _Missing(Exception):
 def slave_setup(plan: NetworkPlan, slave: SlavePlan) -> SlaveSetup:
     """The standard set-up of ``slave`` from what the ENI says of it."""
     pd = slave.process_data or ProcessData()
-    pd_sms = _pd_sms(pd)
-    fmmus = [(f, "outputs") for f in _fmmus(plan, slave, pd_sms, True)]
-    fmmus += [(f, "inputs") for f in _fmmus(plan, slave, pd_sms, False)]
+    sized = _pd_sms(pd)
+    fmmus = [(f, "outputs") for f in _fmmus(plan, pd, sized, True)]
+    fmmus += [(f, "inputs") for f in _fmmus(plan, pd, sized, False)]
     mailbox = slave.mailbox
     if mailbox is not None and mailbox.status_bit_addr is not None:
         if plan.master.mailbox_states is None:
@@ -127,7 +127,7 @@ def slave_setup(plan: NetworkPlan, slave: SlavePlan) -> SlaveSetup:
                    _mailbox_sm(mailbox.bootstrap_recv, False))
         if mailbox is not None and mailbox.bootstrap_send is not None
         and mailbox.bootstrap_recv is not None else None,
-        pd_sms=pd_sms, fmmus=fmmus, dc=dc,
+        pd_sms=[sm for sm, _ in sized], fmmus=fmmus, dc=dc,
         assign_activate=(DC_SYNC0_SYNC1 if dc.cycle_time1 else DC_SYNC0) if dc else 0)
 
 
@@ -136,9 +136,9 @@ def _mailbox_sm(area: MailboxArea, out: bool) -> SmConfig:
                     True)
 
 
-def _pd_sms(pd: ProcessData) -> list[PdSm]:
-    """The process-data SMs: size from the entries of the PDOs assigned to each, else its
-    DefaultSize; a disabled one is written disabled (as the compiler does)."""
+def _pd_sms(pd: ProcessData) -> list[tuple[PdSm, int]]:
+    """The process-data SMs with their data in bits: the entries of the PDOs assigned to
+    each, else its DefaultSize; a disabled one is written disabled (as the compiler does)."""
     pdos = {p.index: p for p in pd.pdos}
     out = []
     for sm in sorted(pd.sms, key=lambda s: s.number):
@@ -155,27 +155,25 @@ def _pd_sms(pd: ProcessData) -> list[PdSm]:
                 raise _Missing(f"ProcessData/Sm{sm.number} is enabled but its size is not "
                                f"known (PDOs {', '.join(f'0x{i:04X}' for i in sm.pdos)} not "
                                "described, no DefaultSize)")
-        out.append(PdSm(sm.number, sm.type == "Outputs",
-                        pd_sm_config(sm.start_address, bits, sm.control_byte)))
+        out.append((PdSm(sm.number, sm.type == "Outputs",
+                         pd_sm_config(sm.start_address, bits, sm.control_byte)), bits))
     return out
 
 
-def _fmmus(plan: NetworkPlan, slave: SlavePlan, sms: list[PdSm], outputs: bool
+def _fmmus(plan: NetworkPlan, pd: ProcessData, sms: list[tuple[PdSm, int]], outputs: bool
            ) -> list[FmmuConfig]:
     """One FMMU per SM with data of one direction, the SMs laid one after the other over
     the slave's ``Send`` (outputs) or ``Recv`` (inputs) bits, each mapped to the logical
     address of the cyclic command that carries that part of the image."""
-    pd = slave.process_data or ProcessData()
     ranges = [(r.bit_start, r.bit_length) for r in (pd.send if outputs else pd.recv)
               if r.bit_length]
-    with_data = [sm for sm in sms if sm.outputs == outputs and sm.config.length]
+    with_data = [(sm, bits) for sm, bits in sms if sm.outputs == outputs and bits]
     what = "Send" if outputs else "Recv"
     if not with_data:
         return []
     fmmus = []
     at = list(ranges)
-    for sm in with_data:
-        bits = _sm_bits(slave, sm)
+    for sm, bits in with_data:
         if not at or at[0][1] < bits:
             raise _Missing(f"ProcessData/{what} does not hold the {bits} bits of "
                            f"ProcessData/Sm{sm.number}")
@@ -191,16 +189,6 @@ def _fmmus(plan: NetworkPlan, slave: SlavePlan, sms: list[PdSm], outputs: bool
         if not at[0][1]:
             at.pop(0)
     return fmmus
-
-
-def _sm_bits(slave: SlavePlan, sm: PdSm) -> int:
-    """An SM's data in bits: its PDOs' entries, else its length in bytes."""
-    pd = slave.process_data or ProcessData()
-    settings = next(s for s in pd.sms if s.number == sm.number)
-    pdos = {p.index: p for p in pd.pdos}
-    if settings.pdos and all(i in pdos for i in settings.pdos):
-        return sum(e.bit_len for i in settings.pdos for e in pdos[i].entries)
-    return 8 * sm.config.length
 
 
 _WRITES_IMAGE = (Cmd.LWR, Cmd.LRW)

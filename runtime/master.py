@@ -43,19 +43,6 @@ if TYPE_CHECKING:
     from ecatcfg.runtime.recovery import Supervisor
 
 UP = [Transition.IP, Transition.PS, Transition.SO]
-
-
-def up_to(target: AlState) -> list[Transition]:
-    """The transitions from INIT to ``target`` (none for INIT)."""
-    return [t for t in UP if t.target <= target]
-
-
-def check_requests(plan: NetworkPlan, target: AlState, eni: str | None = None) -> None:
-    """Raise :class:`IncompleteEniError` when some slave's way to ``target`` has a state
-    that no InitCmd requests (a partial ENI), before anything is sent."""
-    missing = missing_requests(plan, plan.slaves, up_to(target))
-    if missing:
-        raise IncompleteEniError(plan, target, missing, eni)
 DOWN = {AlState.OP: [Transition.OS, Transition.SP, Transition.PI],
         AlState.SAFEOP: [Transition.SP, Transition.PI],
         AlState.PREOP: [Transition.PI]}
@@ -134,6 +121,19 @@ class IncompleteEniError(ApplyError):
             f"nothing was sent:\n" + "\n".join(f"  slave {name!r}: {text}"
                                                 for name, text in self.missing.items())
             + "\n" + EXPLAIN)
+
+
+def up_to(target: AlState) -> list[Transition]:
+    """The transitions from INIT to ``target`` (none for INIT)."""
+    return [t for t in UP if t.target <= target]
+
+
+def check_requests(plan: NetworkPlan, target: AlState, eni: str | None = None) -> None:
+    """Raise :class:`IncompleteEniError` when some slave's way to ``target`` has a state
+    that no InitCmd requests (a partial ENI), before anything is sent."""
+    missing = missing_requests(plan, plan.slaves, up_to(target))
+    if missing:
+        raise IncompleteEniError(plan, target, missing, eni)
 
 
 class DcSyncError(ApplyError):

@@ -127,3 +127,22 @@ def compile_example(eni: Path) -> Path:
                           timeout=60)
     assert done.returncode == 0, done.stderr
     return eni
+
+
+def _pdo_entry(index: int, bits: int, type_: str) -> str:
+    return (f"<Entry><Index>#x{index:04X}</Index><SubIndex>1</SubIndex><BitLen>{bits}"
+            f"</BitLen><Name>e</Name><DataType>{type_}</DataType></Entry>")
+
+
+# A device body with a 128-byte mailbox (SM0/SM1), one byte of outputs (SM2, 0x1600) and one
+# of inputs (SM3, 0x1A00): add a <Mailbox> with the protocols a test needs.
+MAILBOX_PD_SMS = (
+    '<Fmmu>Outputs</Fmmu><Fmmu>Inputs</Fmmu>'
+    '<Sm ControlByte="#x26" DefaultSize="128" Enable="1" StartAddress="#x1000">MBoxOut</Sm>'
+    '<Sm ControlByte="#x22" DefaultSize="128" Enable="1" StartAddress="#x1080">MBoxIn</Sm>'
+    '<Sm ControlByte="#x64" Enable="1" StartAddress="#x1100">Outputs</Sm>'
+    '<Sm ControlByte="#x20" Enable="1" StartAddress="#x1180">Inputs</Sm>'
+    '<RxPdo Fixed="1" Mandatory="1" Sm="2"><Index>#x1600</Index><Name>Out</Name>'
+    f'{_pdo_entry(0x7000, 8, "USINT")}</RxPdo>'
+    '<TxPdo Fixed="1" Mandatory="1" Sm="3"><Index>#x1A00</Index><Name>In</Name>'
+    f'{_pdo_entry(0x6000, 8, "USINT")}</TxPdo>')

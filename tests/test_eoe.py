@@ -20,7 +20,7 @@ from pathlib import Path
 
 import pytest
 
-from conftest import device_xml, esi_xml
+from conftest import MAILBOX_PD_SMS, device_xml, esi_xml
 from rig import tshark_fields, tshark_malformed
 from ecatcfg import eoe
 from ecatcfg.compiler import build, topology
@@ -176,20 +176,6 @@ def test_ec_engineer_eni_writes_the_eoe_header_in_front(corpus):
 
 # --------------------------------------------------------------------------- fixture devices
 
-def _entry(index: int, bits: int, type_: str) -> str:
-    return (f"<Entry><Index>#x{index:04X}</Index><SubIndex>1</SubIndex><BitLen>{bits}"
-            f"</BitLen><Name>e</Name><DataType>{type_}</DataType></Entry>")
-
-
-SMS = ('<Fmmu>Outputs</Fmmu><Fmmu>Inputs</Fmmu>'
-       '<Sm ControlByte="#x26" DefaultSize="128" Enable="1" StartAddress="#x1000">MBoxOut</Sm>'
-       '<Sm ControlByte="#x22" DefaultSize="128" Enable="1" StartAddress="#x1080">MBoxIn</Sm>'
-       '<Sm ControlByte="#x64" Enable="1" StartAddress="#x1100">Outputs</Sm>'
-       '<Sm ControlByte="#x20" Enable="1" StartAddress="#x1180">Inputs</Sm>'
-       '<RxPdo Fixed="1" Mandatory="1" Sm="2"><Index>#x1600</Index><Name>Out</Name>'
-       f'{_entry(0x7000, 8, "USINT")}</RxPdo>'
-       '<TxPdo Fixed="1" Mandatory="1" Sm="3"><Index>#x1A00</Index><Name>In</Name>'
-       f'{_entry(0x6000, 8, "USINT")}</TxPdo>')
 DEVICES = {"FX-EOE": ("#x20", "<EoE/><CoE/>"),                    # EoE and CoE
            "FX-COE": ("#x21", "<CoE/>"),                          # no EoE
            "FX-NOIP": ("#x22", '<EoE IP="false" MAC="true"/><CoE/>'),   # as SV660_EOE
@@ -197,7 +183,8 @@ DEVICES = {"FX-EOE": ("#x20", "<EoE/><CoE/>"),                    # EoE and CoE
 
 
 def fixture_esi() -> str:
-    return esi_xml(*(device_xml(name, product, body=SMS + f"<Mailbox>{mailbox}</Mailbox>")
+    return esi_xml(*(device_xml(name, product,
+                                body=MAILBOX_PD_SMS + f"<Mailbox>{mailbox}</Mailbox>")
                      for name, (product, mailbox) in DEVICES.items()))
 
 

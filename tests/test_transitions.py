@@ -21,7 +21,7 @@ from pathlib import Path
 import pytest
 from lxml import etree
 
-from conftest import device_xml, esi_xml
+from conftest import MAILBOX_PD_SMS, device_xml, esi_xml
 from rig import tshark_fields
 from ecatcfg.compiler import build, topology
 from ecatcfg.eni import reader as eni_reader
@@ -30,18 +30,8 @@ from ecatcfg.esc import TRANSITION_RULES, AlState, Transition
 from ecatcfg.esi.library import Library
 from ecatcfg.runtime import Network, master
 
-SMS = ('<Fmmu>Outputs</Fmmu><Fmmu>Inputs</Fmmu>'
-       '<Sm ControlByte="#x26" DefaultSize="128" Enable="1" StartAddress="#x1000">MBoxOut</Sm>'
-       '<Sm ControlByte="#x22" DefaultSize="128" Enable="1" StartAddress="#x1080">MBoxIn</Sm>'
-       '<Sm ControlByte="#x64" Enable="1" StartAddress="#x1100">Outputs</Sm>'
-       '<Sm ControlByte="#x20" Enable="1" StartAddress="#x1180">Inputs</Sm>'
-       '<RxPdo Fixed="1" Mandatory="1" Sm="2"><Index>#x1600</Index><Name>Out</Name>'
-       '<Entry><Index>#x7000</Index><SubIndex>1</SubIndex><BitLen>8</BitLen><Name>o</Name>'
-       '<DataType>USINT</DataType></Entry></RxPdo>'
-       '<TxPdo Fixed="1" Mandatory="1" Sm="3"><Index>#x1A00</Index><Name>In</Name>'
-       '<Entry><Index>#x6000</Index><SubIndex>1</SubIndex><BitLen>8</BitLen><Name>i</Name>'
-       '<DataType>USINT</DataType></Entry></TxPdo>')
-ESI = esi_xml(device_xml("FX-EOE", "#x20", body=SMS + "<Mailbox><EoE/><CoE/></Mailbox>"))
+ESI = esi_xml(device_xml("FX-EOE", "#x20",
+                         body=MAILBOX_PD_SMS + "<Mailbox><EoE/><CoE/></Mailbox>"))
 
 AL_CONTROL = 0x0120
 SM2 = 0x0810
@@ -90,27 +80,20 @@ def _with_commands(eni: bytes, transition: Transition, kinds: tuple[str, ...]) -
         else:
             cmds.append(cmd)
     mailbox = slave.find("Mailbox")
-    if "CoE" in kinds:
-        coe = mailbox.find("CoE")
-        if coe is None:
-            coe = etree.SubElement(mailbox, "CoE")
-        cmds = coe.find("InitCmds")
+    bodies = {"CoE": f"<Ccs>2</Ccs><Index>#x{SDO_INDEX:04x}</Index><SubIndex>1</SubIndex>",
+              "EoE": f"<Data>{EOE_DATA}</Data>"}
+    for kind, body in bodies.items():
+        if kind not in kinds:
+            continue
+        protocol = mailbox.find(kind)
+        if protocol is None:
+            protocol = etree.SubElement(mailbox, kind)
+        cmds = protocol.find("InitCmds")
         if cmds is None:
-            cmds = etree.SubElement(coe, "InitCmds")
+            cmds = etree.SubElement(protocol, "InitCmds")
         cmds.append(etree.fromstring(
-            f"<InitCmd><Transition>{t}</Transition><Comment>coe {t}</Comment>"
-            f"<Timeout>2000</Timeout><Ccs>2</Ccs><Index>#x{SDO_INDEX:04x}</Index>"
-            "<SubIndex>1</SubIndex></InitCmd>"))
-    if "EoE" in kinds:
-        eoe = mailbox.find("EoE")
-        if eoe is None:
-            eoe = etree.SubElement(mailbox, "EoE")
-        cmds = eoe.find("InitCmds")
-        if cmds is None:
-            cmds = etree.SubElement(eoe, "InitCmds")
-        cmds.append(etree.fromstring(
-            f"<InitCmd><Transition>{t}</Transition><Comment>eoe {t}</Comment>"
-            f"<Timeout>2000</Timeout><Data>{EOE_DATA}</Data></InitCmd>"))
+            f"<InitCmd><Transition>{t}</Transition><Comment>{kind.lower()} {t}</Comment>"
+            f"<Timeout>2000</Timeout>{body}</InitCmd>"))
     return etree.tostring(root, xml_declaration=True, encoding="UTF-8", pretty_print=True)
 
 
