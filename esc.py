@@ -423,6 +423,9 @@ SM_COMM_TYPE = 0x1C00                         # communication type of each SM
 SM_PDO_ASSIGN = 0x1C10                        # + SM number: the PDOs assigned to that SM
 SM_PDO_ASSIGN_RANGE = range(0x1C10, 0x1C30)   # 32 SyncManagers
 MODULE_IDENT_LIST = 0xF030                    # configured module ident list (modular devices)
+# The most entries a PDO mapping object can hold: subindex 0 counts them in a UINT8, and
+# subindex 0xFF is reserved for the object's structure (CiA 301, which CoE follows).
+MAX_PDO_ENTRIES = 254
 DETECTED_MODULE_IDENT_LIST = 0xF050           # the modules the device detected
 
 

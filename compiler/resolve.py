@@ -14,9 +14,10 @@ from dataclasses import dataclass, field
 
 from ecatcfg.eni.plan import CoeInitCmd, PdoDesc, PdoEntryDesc
 from ecatcfg.compiler import wiring
-from ecatcfg.compiler.topology import LoadedTopology, Sdo, Slave, TopologyError
+from ecatcfg.compiler.topology import (LoadedTopology, MappingEntry, MappingVariable, Sdo,
+                                       Slave, TopologyError)
 from ecatcfg.errors import EcatcfgError
-from ecatcfg.esc import MODULE_IDENT_LIST, Transition
+from ecatcfg.esc import MAX_PDO_ENTRIES, MODULE_IDENT_LIST, Transition
 from ecatcfg.esi import datatypes
 from ecatcfg.esi.coe import TRANSITION_STATE, DictEntry, device_dictionary, has_coe, lookup
 from ecatcfg.esi.index import DeviceEntry
@@ -381,7 +382,10 @@ def _choose_pdos(slave: ResolvedSlave, modules: list[PluggedModule], errors: _Er
         wanted = "Outputs" if direction == "rx" else "Inputs"
         fitting = {s.number for s in dev.sms if s.type == wanted}
         for p in mine:
-            if p.sm is not None and p.virtual:
+            if p.virtual and p.sm is not None and p.index not in cfg.pdo_mapping:
+                # ETG.2100 Pdo@Virtual: the PDO is configured from the variables mapped
+                # into it.  Without a user mapping it stays out of the process image; with
+                # one it goes to the SM its Sm names (a bridge terminal's "IO Outputs").
                 p.sm = None
             elif p.sm is not None and p.sm not in fitting:
                 p.sm = sm.number if sm else None
@@ -402,9 +406,12 @@ def _choose_pdos(slave: ResolvedSlave, modules: list[PluggedModule], errors: _Er
             elif index in seen:
                 errors.add(f"slave {cfg.name!r}: PDO 0x{index:04X} is listed twice", *where, i)
                 ok = False
-            elif pick.virtual:
-                errors.add(f"slave {cfg.name!r}: PDO 0x{index:04X} is virtual and cannot be "
-                           "assigned", *where, i)
+            elif pick.virtual and not pick.entries and index not in cfg.pdo_mapping:
+                # Entries the ESI gives a virtual PDO are its default mapping; without
+                # them there is nothing to assign until the user maps its variables.
+                errors.add(f"slave {cfg.name!r}: PDO 0x{index:04X} ({pick.name}) is virtual "
+                           "and its ESI gives it no entries: give its variables in "
+                           "pdo_mapping", *where, i)
                 ok = False
             seen.add(index)
         if not ok:
@@ -480,16 +487,19 @@ def _apply_mappings(slave: ResolvedSlave, errors: _Errors) -> None:
             errors.add(f"slave {cfg.name!r}: PDO 0x{index:04X} is mapped but not assigned; "
                        f"add it to {key}", *where)
             continue
-        # The mapping object's own dictionary entry says how many entries it holds.
+        # The mapping object's own dictionary entry says how many entries it holds;
+        # without one, what any mapping object can hold.
         room = sum(1 for n in range(1, 256)
                    if dic is not None and isinstance(lookup(dic, index, n), DictEntry))
-        if room and len(entries) > room:
-            errors.add(f"slave {cfg.name!r}: PDO 0x{index:04X} holds at most {room} entries "
-                       f"(its object in the dictionary), not {len(entries)}", *where)
+        if len(entries) > (room or MAX_PDO_ENTRIES):
+            held = "its object in the dictionary" if room else "a mapping object's count"
+            errors.add(f"slave {cfg.name!r}: PDO 0x{index:04X} holds at most "
+                       f"{room or MAX_PDO_ENTRIES} entries ({held}), not {len(entries)}",
+                       *where)
             continue
         new: list[PdoEntryDesc] = []
-        for i, (obj, sub, bits) in enumerate(entries):
-            entry = _mapped_entry(slave, pdo, dic, obj, sub, bits, (*where, i), errors)
+        for i, given in enumerate(entries):
+            entry = _mapped_entry(slave, pdo, dic, _Mapped.of(given), (*where, i), errors)
             if entry is not None:
                 new.append(entry)
         if len(new) == len(entries):
@@ -497,10 +507,39 @@ def _apply_mappings(slave: ResolvedSlave, errors: _Errors) -> None:
             slave.remapped.add(index)
 
 
-def _mapped_entry(slave: ResolvedSlave, pdo: PdoDesc, dic: Dictionary | None, obj: int,
-                  sub: int, bits: int, where: Where, errors: _Errors) -> PdoEntryDesc | None:
+@dataclass(frozen=True, slots=True)
+class _Mapped:
+    """One entry of a user mapping, from either spelling of the topology."""
+
+    index: int
+    subindex: int
+    bits: int
+    name: str | None = None
+    type: str | None = None
+
+    @staticmethod
+    def of(given: MappingEntry) -> _Mapped:
+        if isinstance(given, MappingVariable):
+            return _Mapped(given.index, given.subindex, given.bit_len, given.name,
+                           datatypes.canonical(given.type) if given.type else None)
+        return _Mapped(*given)
+
+
+def _mapped_entry(slave: ResolvedSlave, pdo: PdoDesc, dic: Dictionary | None, m: _Mapped,
+                  where: Where, errors: _Errors) -> PdoEntryDesc | None:
+    obj, sub, bits = m.index, m.subindex, m.bits
     if obj == 0:                                  # a gap (padding) of `bits` bits
+        if sub or m.type:
+            errors.add(f"slave {slave.name!r}: a gap (index 0) has subindex 0 and no type",
+                       *where)
+            return None
         return PdoEntryDesc(0, 0, bits)
+    described, local = slave.dictionary_for(obj)
+    if pdo.virtual and (described is None or lookup(described, local, sub) is None):
+        # A variable of a virtual PDO that the dictionary does not describe: the device
+        # configures itself from the mapping the master downloads (ETG.2100 Pdo@Virtual),
+        # as a bridge terminal does with the variables its user adds.
+        return PdoEntryDesc(obj, sub, bits, m.name or "", m.type)
     if dic is None and slave.dictionary_for(obj)[0] is None:
         errors.add(f"slave {slave.name!r}: {slave.device.type_name} has no object dictionary "
                    f"in its ESI, so 0x{obj:04X}:{sub:02X} cannot be checked or mapped", *where)
@@ -526,9 +565,14 @@ def _mapped_entry(slave: ResolvedSlave, pdo: PdoDesc, dic: Dictionary | None, ob
         errors.add(f"slave {slave.name!r}: object 0x{obj:04X}:{sub:02X} is {found.bit_size} "
                    f"bits, not {bits}", *where)
         return None
+    if m.type is not None and found.type and datatypes.canonical(found.type) not in (
+            None, m.type):
+        errors.add(f"slave {slave.name!r}: object 0x{obj:04X}:{sub:02X} is {found.type}, "
+                   f"not {m.type}", *where)
+        return None
     name = found.obj.name if sub == 0 or found.obj.type == found.type else \
         _sub_name(dic, found.obj.type, sub) or f"{found.obj.name} {sub}"
-    return PdoEntryDesc(obj, sub, bits, name, found.type or None)
+    return PdoEntryDesc(obj, sub, bits, m.name or name, found.type or None)
 
 
 def _sub_name(dic: Dictionary, type_name: str, sub: int) -> str | None:

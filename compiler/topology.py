@@ -22,6 +22,7 @@ from pydantic import (AfterValidator, BaseModel, BeforeValidator, ConfigDict, Fi
 
 from ecatcfg.errors import EcatcfgError
 from ecatcfg.esc import PORT_LETTERS, Transition
+from ecatcfg.esi.datatypes import bit_size as type_bits
 from ecatcfg.esi.values import parse_int
 
 Path_ = tuple[str | int, ...]
@@ -212,7 +213,46 @@ class Sdo(_Model):
 
 
 BitLen = Annotated[int, *_num(1, 0xFF)]
-MappingEntry = tuple[Index, SubIndex, BitLen]
+
+
+class MappingVariable(_Model):
+    """A mapped entry with its name and data type: how the variables of a virtual PDO are
+    given (ETG.2100 ``Pdo@Virtual``: the PDO is configured from the variables mapped into
+    it, which the device's dictionary need not describe)."""
+
+    index: Index
+    subindex: SubIndex = 0
+    bits: BitLen | None = Field(default=None, description="Bit length (default: the type's)")
+    type: str | None = Field(default=None, description="Data type, e.g. UINT, BOOL, BIT4")
+    name: XmlText | None = Field(default=None, min_length=1,
+                                 description="Variable name (default: the dictionary's)")
+
+    @model_validator(mode="after")
+    def _sized(self) -> MappingVariable:
+        if self.type is not None:
+            size = type_bits(self.type)
+            if size is None:
+                raise ValueError(f"unknown data type {self.type!r} (a base type such as "
+                                 "BOOL, BIT4, USINT, UINT, UDINT, REAL)")
+            if self.bits is not None and self.bits != size:
+                raise ValueError(f"type {self.type} is {size} bits, not {self.bits}")
+            if not 1 <= size <= 0xFF:
+                raise ValueError(f"type {self.type} ({size} bits) cannot be mapped "
+                                 "(a PDO entry is 1 to 255 bits)")
+        elif self.bits is None:
+            raise ValueError("give 'bits' or 'type'")
+        return self
+
+    @property
+    def bit_len(self) -> int:
+        if self.bits is not None:
+            return self.bits
+        size = type_bits(self.type or "")
+        assert size is not None                       # checked by _sized
+        return size
+
+
+MappingEntry = tuple[Index, SubIndex, BitLen] | MappingVariable
 
 
 class Slave(_Model):
@@ -244,7 +284,10 @@ class Slave(_Model):
                                         description="TxPDOs to assign (default: ESI)")
     # At least one entry: an empty PDO is left out of rx_pdos/tx_pdos, not assigned.
     pdo_mapping: dict[Index, Annotated[list[MappingEntry], Field(min_length=1)]] = Field(
-        default_factory=dict, description="PDO index -> [[index, subindex, bit length], ...]")
+        default_factory=dict,
+        description="PDO index -> its entries, each [index, subindex, bit length] or "
+                    "{index, subindex, bits or type, name}; index 0 is a gap of that many "
+                    "bits")
     modules: dict[SlotNumber, SlotModules] = Field(
         default_factory=dict,
         description="Slot number (from 1) -> its module, or the list of modules in a slot "

@@ -18,8 +18,8 @@ from __future__ import annotations
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 
-from ecatcfg.esc import (RX_PDO_MAPPING, SM_COMM_TYPE, SM_PDO_ASSIGN, SM_TYPE_CODES, TX_PDO_MAPPING,
-                         AlState, is_pdo_object)
+from ecatcfg.esc import (MAX_PDO_ENTRIES, RX_PDO_MAPPING, SM_COMM_TYPE, SM_PDO_ASSIGN,
+                         SM_TYPE_CODES, TX_PDO_MAPPING, AlState, is_pdo_object)
 from ecatcfg.esi.coe import device_dictionary
 from ecatcfg.esi.datatypes import bit_size as base_bit_size
 from ecatcfg.esi.datatypes import canonical
@@ -110,6 +110,10 @@ class OdObject:
     name: str
     entries: dict[int, OdEntry] = field(default_factory=dict)
     variable: bool = False
+    # The mapping object of a virtual PDO (ETG.2000 Pdo@Virtual): the device configures its
+    # variables from the mapping the master writes, so an entry may name an object the
+    # dictionary does not have.
+    virtual_pdo: bool = False
 
     def __getitem__(self, subindex: int) -> OdEntry:
         return self.entries[subindex]
@@ -356,9 +360,11 @@ class _Builder:
                 self.objects[index] = self.from_dictionary(self.dic, index,
                                                            self.dic.objects[index])
         pdos = [p for p in self.device.pdos if not p.virtual and p.index is not None]
-        self.mapped_objects(pdos)
+        virtual = [p for p in self.device.pdos if p.virtual and p.index is not None]
+        self.mapped_objects(pdos + virtual)     # a virtual PDO's ESI entries: its default
         self.mapping_objects(pdos)
-        self.sm_objects(pdos)
+        self.virtual_mapping_objects(virtual, {p.index for p in pdos})
+        self.sm_objects(pdos, virtual)
         self.identity()
         return dict(sorted(self.objects.items()))
 
@@ -447,9 +453,30 @@ class _Builder:
                            if configurable and not obj.entries else 0)
             self._array(obj, values, capacity, "UDINT", 32, writes)
 
-    def sm_objects(self, pdos: list[Pdo]) -> None:
+    def virtual_mapping_objects(self, pdos: list[Pdo], taken: set[int | None]) -> None:
+        """0x16xx / 0x1Axx of the virtual PDOs (where no fixed PDO has the index): the
+        master chooses their mapping (ETG.2000 Pdo@Virtual), so they hold the ESI's entries
+        as the default (none for a bridge terminal's "IO Outputs") and take the master's
+        downloads in PREOP unless the PDO is fixed or the device has no PdoConfig.  Without
+        a dictionary object, room for as many entries as a mapping object can count."""
+        for pdo in pdos:
+            if pdo.index is None or pdo.index in taken:
+                continue                    # a fixed PDO or an alternative has the index
+            taken.add(pdo.index)
+            configurable = not pdo.fixed and self.pdo_config
+            writes = PREOP_ONLY if configurable else frozenset()
+            obj = self._object(pdo.index, pdo.name)
+            obj.virtual_pdo = True
+            values = [((pe.index or 0) << 16 | (pe.subindex or 0) << 8
+                       | (pe.bit_len or 0) & 0xFF) for pe in pdo.entries]
+            capacity = max(len(values), obj.max_subindex,
+                           MAX_PDO_ENTRIES if configurable and not obj.entries else 0)
+            self._array(obj, values, capacity, "UDINT", 32, writes)
+
+    def sm_objects(self, pdos: list[Pdo], virtual: list[Pdo]) -> None:
         """0x1C00 (SM communication types) and 0x1C10+n (PDO assignment of each
-        process-data SM n; default = the PDOs whose ``Sm`` is n, in ESI order)."""
+        process-data SM n; default = the (non-virtual) PDOs whose ``Sm`` is n, in ESI
+        order, with room for the virtual ones the master may assign)."""
         sms = self.device.sms
         types = [SM_TYPE_CODES.get(sm.type, 0) for sm in sms]
         obj = self._object(SM_COMM_TYPE, "Sync manager type")
@@ -478,7 +505,7 @@ class _Builder:
                 capacity = max(len(assigned), obj.max_subindex)
             else:
                 # Room for every PDO that could go to this SM (our choice).
-                candidates = {p.index for p in pdos if p.direction == direction}
+                candidates = {p.index for p in pdos + virtual if p.direction == direction}
                 capacity = max(len(assigned), len(candidates), 1)
             self._array(obj, assigned, capacity, "UINT", 16, writes)
 
@@ -852,8 +879,11 @@ class ObjectDictionary:
                     target = self.objects.get(index)
                     entry = target.entries.get(sub) if target is not None else None
                     # The mapping's bit length is taken as given (not compared with the
-                    # object's size), as SOES sizes PDOs from the mapping alone.
-                    if entry is None or direction not in entry.mappable:
+                    # object's size), as SOES sizes PDOs from the mapping alone.  A
+                    # virtual PDO's variable need not be an object (OdObject.virtual_pdo).
+                    if target is None and mapping.virtual_pdo:
+                        pass
+                    elif entry is None or direction not in entry.mappable:
                         return None
                 out.append((index, sub, bits))
         return out

@@ -5,7 +5,10 @@ Options: ``outputs`` (hex, written to every slave with outputs once in SAFEOP an
 ``assign`` ({"slave": N, "index": 0x1C13, "pdos": [...]}: after config_map, i.e. after
 SOEM sized the SyncManagers, the slave goes back to PREOP and gets this PDO assignment by
 SDO download), ``cycles`` (process
-data cycles in OP), ``read`` ([[slave, index, subindex], ...]: SDO uploads after config_map,
+data cycles in OP), ``writes`` ([[slave, index, subindex, hex, complete_access], ...]: SDO
+downloads in PREOP after config_init, before config_map reads the PDO configuration, as a
+SOEM user configures a slave whose mapping the master chooses; aborts in ``writes``),
+``read`` ([[slave, index, subindex], ...]: SDO uploads after config_map,
 as hex in ``read``), ``dc`` (true: SOEM's ``config_dc`` after config_map, which works out
 the tree from the DL statuses and writes each slave's propagation delay; read back from
 0x0928 into ``delays``), ``sii_words`` (N: read the first N SII words of every slave with
@@ -48,6 +51,16 @@ def main() -> None:
             result["alias"] = [struct.unpack("<H", s._fprd(0x0012, 2))[0]
                                for s in master.slaves]
             return
+        if options.get("writes"):
+            # config_init leaves the slaves in PREOP: the mailbox works, PDOs are writable.
+            done = []
+            for n, index, sub, data, ca in options["writes"]:
+                try:
+                    master.slaves[n].sdo_write(index, sub, bytes.fromhex(data), ca)
+                    done.append("ok")
+                except pysoem.SdoError as exc:
+                    done.append(f"abort 0x{exc.abort_code:08X}")
+            result["writes"] = done
         result["iomap"] = master.config_map()
         result["sizes"] = [(len(s.output), len(s.input)) for s in master.slaves]
         result["read"] = [master.slaves[n].sdo_read(index, sub).hex()
