@@ -474,7 +474,11 @@ def _apply_mappings(slave: ResolvedSlave, errors: _Errors) -> None:
             errors.add(f"slave {cfg.name!r}: {dev.type_name} has no PDO 0x{index:04X} to map",
                        *where)
             continue
-        if not (coe and coe.pdo_config):
+        if not (coe and coe.pdo_config) and not pdo.virtual:
+            # A virtual PDO needs no PdoConfig: without it the device configures the PDO
+            # itself from the SM length the master gives (ETG.2100 Pdo@Virtual, "configured
+            # internally"; an EL6690 bridge, a CX's EtherCAT slave): the ENI carries its
+            # variables, and no mapping is downloaded (compiler/pdocmds.py).
             errors.add(f"slave {cfg.name!r}: {dev.type_name} does not support PDO mapping "
                        "(no CoE PdoConfig in its ESI)", *where)
             continue

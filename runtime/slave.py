@@ -180,6 +180,7 @@ class EmulatedSlave:
         for start, end in _READ_ONLY:
             self._ro[start:end] = b"\x01" * (end - start)
         self._expected_pd = self._default_pd_bits()
+        self._internal_sms = self._internally_mapped_sms()
         # The firmware's own mailbox: the SMs the ESI names MBoxOut/MBoxIn (SOES keeps
         # them in its configuration, ESCvar.mb[0..1], and writes replies to its own SM1).
         self._mbx_in = next((sm.number for sm in device.sms if sm.type == "MBoxIn"), None)
@@ -783,6 +784,25 @@ class EmulatedSlave:
                 bits[pdo.sm] += sum(e.bit_len or 0 for e in pdo.entries)
         return bits
 
+    def _internally_mapped_sms(self) -> frozenset[int]:
+        """The process-data SMs whose length the master decides: those of a virtual PDO on
+        a device the master cannot map over CoE (no PdoConfig).  ETG.2100 Pdo@Virtual: "pdo
+        will be configured internally (based on the configured variables)"; a bridge such
+        as the EL6690 or a PC's EtherCAT slave (CX, FC11xx) takes the length its SM is given
+        for the variables its user configured on both sides."""
+        coe = self.device.mailbox.coe if self.device.mailbox is not None else None
+        if coe is not None and coe.pdo_config:
+            return frozenset()
+        numbers: set[int] = set()
+        for pdo in self.device.rx_pdos + self.device.tx_pdos:
+            if not pdo.virtual:
+                continue
+            sm = self.device.default_sm(pdo.direction)
+            number = pdo.sm if pdo.sm in self._expected_pd else sm.number if sm else None
+            if number is not None:
+                numbers.add(number)
+        return frozenset(numbers)
+
     def _check_process_data(self, op: bool) -> int:
         """PREOP->SAFEOP (and SAFEOP->OP for OpOnly SMs): each process-data SM as the ESI
         places it, with the length the assigned PDOs need, enabled exactly when there is
@@ -801,11 +821,14 @@ class EmulatedSlave:
             sm = self.sms[esi_sm.number]
             if esi_sm.op_only and not op and not sm.enabled:
                 continue               # enabled only in SAFEOP->OP (ESI OpOnly)
-            if not length:
+            # An internally mapped SM takes any length from the fixed PDOs' bits on.
+            free = esi_sm.number in self._internal_sms
+            if not length and not (free and sm.active):
                 if sm.active:
                     return code
                 continue
-            if (not sm.enabled or sm.start != esi_sm.start_address or sm.length != length
+            if (not sm.enabled or sm.start != esi_sm.start_address
+                    or (sm.length < length if free else sm.length != length)
                     or sm.control & SM_MODE_AND_DIRECTION
                     != (esi_sm.control_byte or 0) & SM_MODE_AND_DIRECTION):
                 return code

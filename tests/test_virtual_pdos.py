@@ -33,6 +33,7 @@ from ecatcfg.esi.reader import read_bytes, read_file
 from ecatcfg.runtime.mailbox import SdoAbort
 from ecatcfg.runtime.network import Network
 from ecatcfg.runtime.objects import ObjectDictionary
+from ecatcfg.runtime.syncman import SmKind
 
 FIXTURE = Path(__file__).with_name("fixtures") / "ecatcfg-EXB6695-bridge.xml"
 
@@ -233,6 +234,42 @@ def test_bridge_reaches_op_virtually_and_moves_its_variables(tmp_path, complete_
         assert int(net["bridge.IO Inputs.Bridge status"]) == 0xABCD
 
 
+def test_bridge_reaches_op_from_the_eni_alone():
+    """Without the ESI the emulated slave comes from the ENI (runtime/eni_device.py): its
+    virtual PDOs get mapping objects that take the ENI's downloads too."""
+    plan = _compile(MAPPING, FIXTURE)
+    with Network.virtual(plan, esi=None) as net:
+        net.up()
+        assert net.state == AlState.OP
+        assert net.segment.slaves[0].od.sm_bits(2) == 8 * RX_BYTES
+
+
+def test_internally_configured_bridge_takes_the_sm_length(tmp_path):
+    """Without CoE PdoConfig (an EL6690 bridge, a CX's EtherCAT slave) the master cannot
+    download a mapping: the ENI carries the variables and the SM lengths, no mapping write,
+    and the device takes the length its SM is given (ETG.2100 Pdo@Virtual, "configured
+    internally")."""
+    esi = tmp_path / "bridge-internal.xml"
+    esi.write_text(FIXTURE.read_text(encoding="utf-8").replace('PdoConfig="true" ', ""),
+                   encoding="utf-8")
+    plan = _compile(MAPPING, esi)
+    writes = _pdo_writes(plan)
+    assert not any(0x1600 <= w[0] < 0x1C00 for w in writes), writes
+    assert writes[-2:] == [(0x1C12, 0, b"\x01\x00\x08\x16", True),
+                           (0x1C13, 0, b"\x01\x00\x08\x1a", True)]
+    assert [r.bit_length for r in plan.slaves[0].process_data.send] == [8 * RX_BYTES]
+    with Network.virtual(plan, esi=[esi], esi_cache=False) as net:
+        net.up()
+        assert net.state == AlState.OP
+        slave = net.segment.slaves[0]
+        assert [sm.length for kind in (SmKind.OUTPUTS, SmKind.INPUTS)
+                for sm in slave.process_sms(kind)] == [RX_BYTES, TX_BYTES]
+        net["bridge.IO Outputs.Setpoint"] = 0x4321
+        net.cycle()
+        net.cycle()
+        assert slave.outputs()[:2] == b"\x21\x43"
+
+
 def test_apply_virtual_cli_reaches_op(tmp_path):
     topo = tmp_path / "bridge.yaml"
     topo.write_text(MAPPING)
@@ -277,3 +314,35 @@ def test_soem_configures_the_bridge_on_simulate(veth_netns, pysoem_module, tmp_p
     assert got == [0x1608, 0x1A08, len(RX_WORDS), TX_WORDS[1]], report
     assert report["op"] == 8, report
     assert report["wkc"] == report["expected_wkc"], report
+
+
+# -- real bridge and PC-slave descriptions ----------------------------------------------------
+
+@pytest.mark.parametrize("file, device, rx, tx", [
+    ("Beckhoff EL66xx.xml", "EL6695", 0x1608, 0x1A08),       # PdoConfig: mapping downloaded
+    ("Beckhoff EL66xx.xml", "EL6692", 0x1600, 0x1A00),
+    ("Beckhoff EL66xx.xml", "EL6690", 0x1610, 0x1A10),       # CoE without PdoAssign/Config
+    ("Beckhoff CXxxxx.xml", "CX5010 EtherCAT slave", 0x1600, 0x1A00),   # PdoAssign only
+    ("Beckhoff FCxxxx.xml", "FC1100 EtherCAT PCI slave card", 0x1600, 0x1A00),
+])
+def test_real_virtual_pdo_devices_compile_and_reach_op(corpus_extra, eni_schema, file,
+                                                       device, rx, tx):
+    """Vendor files whose process data are virtual PDOs: each compiles with a user
+    mapping into a schema-valid ENI with those variables and reaches OP on its own
+    emulation."""
+    esi = corpus_extra / "esi" / "dls" / file
+    text = (f"slaves:\n  - name: b\n    device: {device}\n    pdo_mapping:\n"
+            f"      {rx}: [{{index: 0x7000, subindex: 1, type: UINT, name: Out}}]\n"
+            f"      {tx}: [{{index: 0x6000, subindex: 1, type: UDINT, name: In}}]\n")
+    result = build.compile_topology(topology.loads(text, "t.yaml"), Library([esi], cache=False))
+    data = eni_writer.to_bytes(result.plan)
+    from lxml import etree
+    eni_schema.assertValid(etree.fromstring(data))
+    plan = eni_reader.read_bytes(data, "t.eni.xml")
+    outputs = {v.name: v.bit_size for v in plan.process_image.outputs}
+    inputs = {v.name: v.bit_size for v in plan.process_image.inputs}
+    assert [bits for name, bits in outputs.items() if name.endswith(".Out")] == [16]
+    assert [bits for name, bits in inputs.items() if name.endswith(".In")] == [32]
+    with Network.virtual(plan, esi=[esi], esi_cache=False) as net:
+        net.up()
+        assert net.state == AlState.OP
