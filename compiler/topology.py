@@ -17,8 +17,9 @@ from pathlib import Path
 from typing import Annotated, Any, Literal
 
 import yaml
-from pydantic import (AfterValidator, BaseModel, BeforeValidator, ConfigDict, Field,
-                      ValidationError, WithJsonSchema, field_validator, model_validator)
+from pydantic import (AfterValidator, BaseModel, BeforeValidator, ConfigDict, Discriminator,
+                      Field, Tag, ValidationError, WithJsonSchema, field_validator,
+                      model_validator)
 
 from ecatcfg.errors import EcatcfgError
 from ecatcfg.esc import PORT_LETTERS, Transition
@@ -252,7 +253,16 @@ class MappingVariable(_Model):
         return size
 
 
-MappingEntry = tuple[Index, SubIndex, BitLen] | MappingVariable
+def _entry_form(value: Any) -> str:
+    """Which spelling a mapping entry is: a mapping is the written-out one, anything else
+    the [index, subindex, bits] list (so an error speaks of the one the user wrote)."""
+    return "dict" if isinstance(value, (dict, MappingVariable)) else "list"
+
+
+MappingEntry = Annotated[
+    Annotated[tuple[Index, SubIndex, BitLen], Tag("list")]
+    | Annotated[MappingVariable, Tag("dict")],
+    Discriminator(_entry_form)]
 
 
 class Slave(_Model):
@@ -509,6 +519,7 @@ def _problem(err: Any, shown: str, lines: dict[Path_, int]) -> EcatcfgError:
 
 
 def _is_pydantic_tag(part: str | int) -> bool:
-    return isinstance(part, str) and (part in ("int", "float", "str", "tuple", "list")
+    return isinstance(part, str) and (part in ("int", "float", "str", "tuple", "list",
+                                               "dict")
                                       or part.startswith("function-")
                                       or part.endswith("[...]") or "[" in part)
