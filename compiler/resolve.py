@@ -533,9 +533,9 @@ def _mapped_entry(slave: ResolvedSlave, pdo: PdoDesc, dic: Dictionary | None, m:
                   where: Where, errors: _Errors) -> PdoEntryDesc | None:
     obj, sub, bits = m.index, m.subindex, m.bits
     if obj == 0:                                  # a gap (padding) of `bits` bits
-        if sub or m.type:
-            errors.add(f"slave {slave.name!r}: a gap (index 0) has subindex 0 and no type",
-                       *where)
+        if sub or m.type or m.name:
+            errors.add(f"slave {slave.name!r}: a gap (index 0) has subindex 0, and neither "
+                       "a type nor a name", *where)
             return None
         return PdoEntryDesc(0, 0, bits)
     described, local = slave.dictionary_for(obj)
@@ -544,7 +544,7 @@ def _mapped_entry(slave: ResolvedSlave, pdo: PdoDesc, dic: Dictionary | None, m:
         # configures itself from the mapping the master downloads (ETG.2100 Pdo@Virtual),
         # as a bridge terminal does with the variables its user adds.
         return PdoEntryDesc(obj, sub, bits, m.name or "", m.type)
-    if dic is None and slave.dictionary_for(obj)[0] is None:
+    if dic is None and described is None:
         errors.add(f"slave {slave.name!r}: {slave.device.type_name} has no object dictionary "
                    f"in its ESI, so 0x{obj:04X}:{sub:02X} cannot be checked or mapped", *where)
         return None

@@ -881,9 +881,8 @@ class ObjectDictionary:
                     # The mapping's bit length is taken as given (not compared with the
                     # object's size), as SOES sizes PDOs from the mapping alone.  A
                     # virtual PDO's variable need not be an object (OdObject.virtual_pdo).
-                    if target is None and mapping.virtual_pdo:
-                        pass
-                    elif entry is None or direction not in entry.mappable:
+                    variable = target is None and mapping.virtual_pdo
+                    if not variable and (entry is None or direction not in entry.mappable):
                         return None
                 out.append((index, sub, bits))
         return out

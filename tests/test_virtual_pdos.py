@@ -157,6 +157,8 @@ def test_a_virtual_pdo_with_esi_entries_is_assigned_with_them():
     ("    pdo_mapping: {0x1608: [[0x1000, 0, 32]]}\n",
      "object 0x1000:00 (Device type) cannot be mapped into an RxPDO"),
     ("    pdo_mapping: {0x1608: [[0, 1, 8]]}\n", "a gap (index 0) has subindex 0"),
+    ("    pdo_mapping: {0x1608: [{index: 0, bits: 8, name: Spare}]}\n",
+     "a gap (index 0) has subindex 0, and neither a type nor a name"),
     ("    pdo_mapping:\n      0x1608: [" + ", ".join(["[0x7000, 1, 8]"] * 255) + "]\n",
      "PDO 0x1608 holds at most 254 entries (a mapping object's count), not 255"),
     ("    pdo_mapping:\n      0x1608: [" + ", ".join(["[0x7000, 1, 8]"] * 129) + "]\n",
