@@ -18,6 +18,7 @@ from ecatcfg.esi.duplicates import Description, describe, device_elements, diffe
 from ecatcfg.esi.lint.finding import DeviceRef, FileResult, Finding
 from ecatcfg.esi.lint.rules import RULES
 
+ACROSS = ("ESI007", "ESI008")          # the rules this pass reports
 Member = tuple[int, int]                 # (index of the file's result, ordinal of the Device)
 
 
