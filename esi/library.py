@@ -26,6 +26,8 @@ from dataclasses import dataclass
 from typing import Iterable
 from pathlib import Path, PureWindowsPath
 
+from lxml import etree
+
 from ecatcfg.errors import EcatcfgError, UsageError
 from ecatcfg.esi import reader, xmlsafe
 from ecatcfg.esi.cache import IndexCache, content_digest
@@ -107,6 +109,7 @@ class Library:
         self.entries: list[DeviceEntry] = self._entries()
         self.prefer: list[Path] = [self._preferred(p) for p in prefer or []]
         self._descriptions: dict[tuple[str, int], Description] = {}
+        self._trees: dict[str, etree._ElementTree] = {}
 
     def _preferred(self, given: str | Path) -> Path:
         path = Path(given)
@@ -342,11 +345,16 @@ class Library:
         key = (entry.file, entry.ordinal)
         found = self._descriptions.get(key)
         if found is None:
-            lf = self._file(entry.file)
-            tree = xmlsafe.parse_file(lf.path, lf.shown)
-            for ordinal, el in enumerate(device_elements(tree)):
-                self._descriptions[(entry.file, ordinal)] = describe(el)
-            found = self._descriptions[key]
+            tree = self._trees.pop(entry.file, None)
+            if tree is None:
+                lf = self._file(entry.file)
+                tree = xmlsafe.parse_file(lf.path, lf.shown)
+            # Keep the last few trees: the devices of one family file are often compared
+            # one after another (a listing of duplicates), a tree is ten times its file.
+            self._trees[entry.file] = tree
+            while len(self._trees) > 4:
+                del self._trees[next(iter(self._trees))]
+            found = self._descriptions[key] = describe(device_elements(tree)[entry.ordinal])
         return found
 
     def differing(self, group: list[DeviceEntry]) -> list[tuple[DeviceEntry, list[str]]]:

@@ -295,3 +295,13 @@ def test_real_copies_of_one_download_are_one_device(corpus: Path, corpus_extra: 
     lib = Library(files, cache=False)
     sel = lib.find("0x2:0x44c2c52:0x110000")
     assert sel.entry.file == str(files[0]) and sel.note is None and sel.preferred is None
+
+
+def test_two_device_elements_of_one_file(tmp_path: Path):
+    """The rule inside one file too: the same description twice is one device, two different
+    ones are refused (lint's ESI004 reports both)."""
+    write(tmp_path, "same.xml", esi_xml(io_device(ONE_INPUT), io_device(ONE_INPUT, name="x")))
+    assert Library([tmp_path / "same.xml"], cache=False).find("IO8").entry.ordinal == 0
+    write(tmp_path, "differ.xml", esi_xml(io_device(ONE_INPUT), io_device(TWO_INPUTS)))
+    with pytest.raises(DuplicateError, match="by 2 Device elements of one file"):
+        Library([tmp_path / "differ.xml"], cache=False).find("IO8")
