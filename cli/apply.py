@@ -32,6 +32,8 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
     p.add_argument("--esi", action="append", metavar="PATH",
                    help="ESI file or folder for --virtual; repeatable.  A slave whose "
                         "device is not there is emulated from the ENI alone")
+    p.add_argument("--prefer", action="append", default=[], metavar="PATH",
+                   help="an ESI file or folder of --esi whose description wins where files describe one device (vendor, product, revision) differently; repeatable, first wins (default: such a device is an error naming the files)")
     p.add_argument("--state", choices=list(STATES), default="op",
                    help="state to bring the slaves to (default: op)")
     p.add_argument("--cycles", type=int, metavar="N",
@@ -120,6 +122,8 @@ def _run(args: argparse.Namespace, ctx: _Run) -> int:
         raise UsageError(f"{args.eni}: no such file")
     if args.esi and not args.virtual:
         raise UsageError("--esi is for --virtual (the ESI files of the slaves to emulate)")
+    if args.prefer and not args.esi:
+        raise UsageError("--prefer ranks files of --esi: give them with --esi")
     if args.cycles is not None and args.cycles < 0:
         raise UsageError(f"--cycles {args.cycles}: must be 0 or more")
     from ecatcfg.runtime.master import DC_THRESHOLD_NS, DC_TIMEOUT_S, check_dc_wait
@@ -161,7 +165,8 @@ def _run(args: argparse.Namespace, ctx: _Run) -> int:
         notify.watchdog()               # a step that reports progress is alive
         report.event(event)
     if args.virtual:
-        net = Network.virtual(plan, args.esi, pcap=args.pcap, on_event=on_event,
+        net = Network.virtual(plan, args.esi, esi_prefer=args.prefer, pcap=args.pcap,
+                              on_event=on_event,
                               esi_cache=not args.no_cache, skip_unsupported=True,
                               eni_name=args.eni,
                               dc_threshold_ns=dc_threshold, dc_timeout_s=dc_timeout)

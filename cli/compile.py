@@ -16,6 +16,8 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
     p.add_argument("topology", metavar="TOPOLOGY", help="topology file (.yaml, .yml, .json)")
     p.add_argument("--esi", action="append", required=True, metavar="PATH",
                    help="ESI file or folder (searched recursively); repeatable")
+    p.add_argument("--prefer", action="append", default=[], metavar="PATH",
+                   help="an ESI file or folder of --esi whose description wins where files describe one device (vendor, product, revision) differently; repeatable, first wins (default: such a device is an error naming the files)")
     p.add_argument("-o", "--output", required=True, metavar="ENI", help="ENI file to write")
     p.add_argument("--header", metavar="FILE.h",
                    help="also write a C header of the process image")
@@ -46,7 +48,7 @@ def run(args: argparse.Namespace) -> int:
     if len(set(targets)) < len(targets):
         raise UsageError("the topology, -o and --header must be three different files")
     loaded = topology.load(args.topology)
-    lib = Library(args.esi, cache=not args.no_cache)
+    lib = Library(args.esi, cache=not args.no_cache, prefer=args.prefer)
     if lib.problems:
         for problem in lib.problems:
             print(f"error: {problem}", file=sys.stderr)

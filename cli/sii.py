@@ -37,6 +37,8 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                                                          "recursively)")
     b.add_argument("--device", required=True, metavar="SELECTOR",
                    help="Type name or VENDOR:PRODUCT[:REVISION] (hex 0x.. or decimal)")
+    b.add_argument("--prefer", action="append", default=[], metavar="PATH",
+                   help="an ESI file or folder of --esi whose description wins where files describe one device (vendor, product, revision) differently; repeatable, first wins (default: such a device is an error naming the files)")
     b.add_argument("-o", "--output", required=True, metavar="FILE.bin",
                    help="image file to write")
     b.add_argument("--serial", type=_number(0xFFFFFFFF), default=0, metavar="N",
@@ -167,14 +169,15 @@ def _build(args: argparse.Namespace) -> int:
     from ecatcfg.fileio import write_atomic
 
     out = output_file(args.output)
-    lib = Library(args.esi, cache=not args.no_cache)
+    lib = Library(args.esi, cache=not args.no_cache, prefer=args.prefer)
     if lib.problems:
         for problem in lib.problems:
             print(f"error: {problem}", file=sys.stderr)
         raise EcatcfgError(f"{len(lib.problems)} ESI file problem(s); nothing written")
     selection = lib.find(args.device)
-    if selection.note:
-        print(f"note: {selection.note}", file=sys.stderr)
+    for note in (selection.note, selection.preferred):
+        if note:
+            print(f"note: {note}", file=sys.stderr)
     device = lib.device(selection.entry)
     result = sii.build_image(device, serial=args.serial, alias=args.alias)
     where = f"{device.source.file}:{device.source.line}"

@@ -26,6 +26,8 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                    help="ESI file or folder (searched recursively); repeatable.  Needed for "
                         "--topology; with --eni a slave whose device is not there is "
                         "emulated from the ENI alone")
+    p.add_argument("--prefer", action="append", default=[], metavar="PATH",
+                   help="an ESI file or folder of --esi whose description wins where files describe one device (vendor, product, revision) differently; repeatable, first wins (default: such a device is an error naming the files)")
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--topology", metavar="T",
                      help="the slaves of a topology file, plugged as it says")
@@ -73,7 +75,9 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"{source}: no such file")
     if args.topology and not args.esi:
         raise UsageError("--topology needs --esi (the ESI files of the slaves to emulate)")
-    lib = Library(args.esi, cache=not args.no_cache) if args.esi else None
+    if args.prefer and not args.esi:
+        raise UsageError("--prefer ranks files of --esi: give them with --esi")
+    lib = Library(args.esi, cache=not args.no_cache, prefer=args.prefer) if args.esi else None
     if lib is not None and lib.problems:
         for problem in lib.problems:
             print(f"error: {problem}", file=sys.stderr)

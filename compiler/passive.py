@@ -67,11 +67,12 @@ def in_line(active: list[tuple[str, Device, int]],
     return out
 
 
-def _device(cfg: Slave, library: Library) -> Device | None:
+def _device(cfg: Slave, library: Library, loaded: LoadedTopology) -> Device | None:
     """The slave's device when its selector names one; None otherwise (the compile of the
     active slaves reports the selector's error at its line)."""
+    from ecatcfg.compiler.resolve import select
     try:
-        return library.device(library.find(cfg.device).entry)
+        return library.device(select(cfg, library, loaded).entry)
     except SelectorError:
         return None
 
@@ -83,7 +84,7 @@ def split(loaded: LoadedTopology, library: Library) -> Split:
     active: list[int] = []
     errors: list[EcatcfgError] = []
     for index, cfg in enumerate(slaves):
-        device = _device(cfg, library)
+        device = _device(cfg, library, loaded)
         if device is None or not device.passive:
             active.append(index)
             continue

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import difflib
 from dataclasses import dataclass, field
+from pathlib import Path
 
 from ecatcfg.eni.plan import CoeInitCmd, PdoDesc, PdoEntryDesc
 from ecatcfg.compiler import wiring
@@ -21,7 +22,7 @@ from ecatcfg.esc import MAX_PDO_ENTRIES, MODULE_IDENT_LIST, Transition
 from ecatcfg.esi import datatypes
 from ecatcfg.esi.coe import TRANSITION_STATE, DictEntry, device_dictionary, has_coe, lookup
 from ecatcfg.esi.index import DeviceEntry
-from ecatcfg.esi.library import Library, SelectorError
+from ecatcfg.esi.library import EsiChoiceError, Library, SelectorError, Selection
 from ecatcfg.esi.model import CoeInitCmd as EsiCoeInitCmd
 from ecatcfg.esi.model import DcOpMode, Device, Dictionary, Module, Pdo
 from ecatcfg.esi.physics import DEFAULT_PHYSICS
@@ -100,7 +101,7 @@ def resolve_all(loaded: LoadedTopology, library: Library
     slaves = loaded.topology.slaves
     # The devices first: their ports (ESI Physics) decide the wiring, the wiring the bus
     # positions, the positions the default station addresses.
-    found: list[tuple[Device, str | None] | None] = []
+    found: list[tuple[Device, str | None, DeviceEntry] | None] = []
     lookup_errors: list[list[EcatcfgError]] = []
     for index, cfg in enumerate(slaves):
         mine = _Errors(loaded)
@@ -133,7 +134,7 @@ def resolve_all(loaded: LoadedTopology, library: Library
         slave = ResolvedSlave(cfg, pos, choice[0], phys, [], note=choice[1], index=index,
                               parent=None if parent is None else tree.position(parent),
                               parent_port=port)
-        _resolve(slave, library, errors)
+        _resolve(slave, library, errors, choice[2])
         if len(errors.items) == before:
             resolved.append(slave)
     errors.items += wiring_errors
@@ -172,13 +173,17 @@ def plugged_devices(loaded: LoadedTopology, library: Library) -> list[PluggedDev
             for r in resolved]
 
 
-def _find_device(cfg: Slave, index: int, library: Library,
-                 errors: _Errors) -> tuple[Device, str | None] | None:
-    """The slave's device and, when its selector had a choice of revisions, which it took."""
+def _find_device(cfg: Slave, index: int, library: Library, errors: _Errors
+                 ) -> tuple[Device, str | None, DeviceEntry] | None:
+    """The slave's device, and a note when its selector had a choice (of revisions, or of
+    ESI files that describe it differently: ``--prefer``), and its library entry."""
     where = ("slaves", index)
     try:
-        selection = library.find(cfg.device)
+        selection = select(cfg, library, errors.loaded)
         device = library.device(selection.entry)
+    except EsiChoiceError as exc:
+        errors.add(f"slave {cfg.name!r}: esi: {exc.message}", *where, "esi")
+        return None
     except SelectorError as exc:
         errors.add(f"slave {cfg.name!r}: {exc.message}", *where, "device")
         return None
@@ -190,12 +195,19 @@ def _find_device(cfg: Slave, index: int, library: Library,
     e = selection.entry
     choices = {x.revision for x in library.entries
                if (x.vendor_id, x.product_code) == (e.vendor_id, e.product_code)}
-    return device, selection.note if len(choices) > 1 else None
+    notes = [selection.note if len(choices) > 1 else None, selection.preferred]
+    return device, "; ".join(n for n in notes if n) or None, e
 
 
-def _resolve(slave: ResolvedSlave, library: Library, errors: _Errors) -> None:
-    selection = library.find(slave.cfg.device)      # found before: _find_device
-    modules = _plug_modules(slave, library, selection.entry, errors)
+def select(cfg: Slave, library: Library, loaded: LoadedTopology) -> Selection:
+    """The library's answer to a slave's ``device`` (and ``esi``: a path relative to the
+    topology file's folder, or a library file's name)."""
+    return library.select(cfg.device, cfg.esi, Path(loaded.file).parent)
+
+
+def _resolve(slave: ResolvedSlave, library: Library, errors: _Errors,
+             entry: DeviceEntry) -> None:
+    modules = _plug_modules(slave, library, entry, errors)
     slave.modules = modules
     slave.module_cmds = _module_ident_list(slave, modules)
     slave.module_dicts = module_dictionaries(modules)

@@ -272,6 +272,11 @@ class Slave(_Model):
                           description="Unique name; prefixes its process variables")
     device: str = Field(min_length=1,
                         description='ESI Type name or "VENDOR:PRODUCT[:REVISION]"')
+    esi: str | None = Field(
+        default=None, min_length=1,
+        description="The ESI file that describes the device, where several describe it "
+                    "differently: a path relative to the topology file, or a file of the "
+                    "library by its name as given with --esi or its file name")
     station_address: Address | None = Field(default=None,
                                             description="Default 1001, 1002, ...")
     alias: Address | None = Field(

@@ -8,6 +8,14 @@ command-line contract (``docs/architecture.md``) defines them::
     Type name                   compared with surrounding white space trimmed
 
 Full device models are read on demand (``Library.device``) and kept per file.
+
+One identity (vendor, product, revision) described by several Device elements (two downloads
+of a family file, a vendor's own builds of one product) is one device when the descriptions
+are the same (``esi/duplicates.py``: what changes what a master does, not the bytes); when
+they differ, a selector naming it is an error listing each file and what differs, unless the
+caller names the file (``within``: a topology's ``esi:``) or the library was given an order
+of precedence (``prefer``: the command line's ``--prefer``).  Descriptions are compared only
+for identities that occur more than once, when one is selected.
 """
 
 from __future__ import annotations
@@ -18,9 +26,12 @@ from dataclasses import dataclass
 from typing import Iterable
 from pathlib import Path, PureWindowsPath
 
+from lxml import etree
+
 from ecatcfg.errors import EcatcfgError, UsageError
 from ecatcfg.esi import reader, xmlsafe
 from ecatcfg.esi.cache import IndexCache, content_digest
+from ecatcfg.esi.duplicates import Description, describe, device_elements, differences
 from ecatcfg.esi.index import DeviceEntry, FileSummary, summarize
 from ecatcfg.esi.model import Device, EsiFile, Module, format_selector
 from ecatcfg.esi.values import parse_int
@@ -30,10 +41,20 @@ class SelectorError(EcatcfgError):
     """A selector that names no device, or several."""
 
 
+class DuplicateError(SelectorError):
+    """An identity that several ESI descriptions give differently, none of them chosen."""
+
+
+class EsiChoiceError(SelectorError):
+    """An ESI file named for a device (a topology's ``esi:``) that is not in the library or
+    does not describe the device."""
+
+
 @dataclass(slots=True)
 class Selection:
     entry: DeviceEntry
     note: str | None = None      # e.g. which revision was taken when none was given
+    preferred: str | None = None  # which of differing descriptions --prefer took, and why
 
 
 @dataclass(slots=True)
@@ -59,7 +80,8 @@ class Library:
     rest).
     """
 
-    def __init__(self, paths: list[str | Path], cache: IndexCache | None | bool = True) -> None:
+    def __init__(self, paths: list[str | Path], cache: IndexCache | None | bool = True,
+                 prefer: list[str | Path] | None = None) -> None:
         """Index ``paths``: ESI files, and folders searched recursively for ``*.xml``.
 
         ``cache``: an :class:`IndexCache`, ``True`` for the default one
@@ -67,6 +89,12 @@ class Library:
         must be ESI files (a file that is not one is a problem); inside folders, XML files
         with another root element (an ENI beside the ESIs, say) are skipped and listed in
         ``skipped``.  A path that does not exist raises :class:`UsageError`.
+
+        ``prefer``: files or folders of the library, most preferred first.  Where an identity
+        is described differently by several files, the description from the first of these
+        that holds one is taken (with a note) if that leaves one description; files under
+        none of them come last.  A ``prefer`` path that does not exist or holds no file of
+        the library raises :class:`UsageError`.
         """
         self.cache = IndexCache() if cache is True else (cache or None)
         self.files: list[LibraryFile] = []
@@ -79,6 +107,19 @@ class Library:
         if self.cache is not None:
             self.cache.flush()
         self.entries: list[DeviceEntry] = self._entries()
+        self.prefer: list[Path] = [self._preferred(p) for p in prefer or []]
+        self._descriptions: dict[tuple[str, int], Description] = {}
+        self._trees: dict[str, etree._ElementTree] = {}
+
+    def _preferred(self, given: str | Path) -> Path:
+        path = Path(given)
+        if not path.exists():
+            raise UsageError(f"--prefer {given}: no such file or folder")
+        path = path.resolve()
+        if not any(_under(lf.path, path) for lf in self.files):
+            raise UsageError(f"--prefer {given}: no ESI file of the library is there (give it "
+                             "with --esi too)")
+        return path
 
     # -- indexing -------------------------------------------------------------------------
 
@@ -172,16 +213,40 @@ class Library:
 
     # -- lookup ---------------------------------------------------------------------------
 
-    def find(self, selector: str) -> Selection:
-        """The one device ``selector`` names, or :class:`SelectorError` saying why not."""
+    def find(self, selector: str, within: LibraryFile | None = None) -> Selection:
+        """The one device ``selector`` names, or :class:`SelectorError` saying why not.
+
+        ``within``: look only at the devices of that file (a topology's ``esi:``); a file
+        that does not describe the device is an :class:`EsiChoiceError`.  An identity that
+        several descriptions give differently, with no ``within`` and no ``prefer`` to
+        choose, is a :class:`DuplicateError` naming each file and what differs.
+        """
+        scope = self.entries if within is None else [
+            e for e in self.entries if e.file == within.shown]
+        try:
+            found = self._find(selector, scope)
+        except SelectorError as exc:
+            if within is None:
+                raise
+            raise EsiChoiceError(f"{within.shown} does not describe {selector!r}: "
+                                 f"{exc.message}") from None
+        return self._one_description(found, scope)
+
+    def select(self, selector: str, esi: str | None = None, base: Path | None = None
+               ) -> Selection:
+        """:meth:`find`, within the file ``esi`` names when one is given (a topology slave's
+        ``esi:``, relative to ``base``: see :meth:`file_named`)."""
+        return self.find(selector, self.file_named(esi, base) if esi is not None else None)
+
+    def _find(self, selector: str, scope: list[DeviceEntry]) -> Selection:
         numbers = parse_selector(selector)
         if numbers is None:
-            return self._find_by_name(selector)
+            return self._find_by_name(selector, scope)
         vendor, product, revision = numbers
-        same = [e for e in self.entries if e.vendor_id == vendor and e.product_code == product]
+        same = [e for e in scope if e.vendor_id == vendor and e.product_code == product]
         if not same:
             raise SelectorError(f"no device {format_selector(vendor, product, revision)} in "
-                                f"the library ({self._describe_paths()})")
+                                f"the library ({self._describe_paths(scope)})")
         if revision is not None:
             exact = [e for e in same if e.revision == revision]
             if exact:
@@ -192,18 +257,18 @@ class Library:
                 + ", ".join(_selector(e) for e in _by_revision(same)))
         return _highest(same)
 
-    def _find_by_name(self, name: str) -> Selection:
+    def _find_by_name(self, name: str, scope: list[DeviceEntry]) -> Selection:
         wanted = name.strip()
-        matches = [e for e in self.entries if e.type.strip() == wanted]
+        matches = [e for e in scope if e.type.strip() == wanted]
         if not matches:
             folded = wanted.casefold()
-            matches = [e for e in self.entries if e.type.strip().casefold() == folded]
+            matches = [e for e in scope if e.type.strip().casefold() == folded]
         if not matches:
-            names = sorted({e.type.strip() for e in self.entries})
+            names = sorted({e.type.strip() for e in scope})
             close = difflib.get_close_matches(wanted, names, n=5, cutoff=0.6)
             hint = f"; closest: {', '.join(close)}" if close else ""
             raise SelectorError(f"no device with Type name {wanted!r} in the library "
-                                f"({self._describe_paths()}){hint}")
+                                f"({self._describe_paths(scope)}){hint}")
         products = {(e.vendor_id, e.product_code) for e in matches}
         if len(products) > 1:
             listed = ", ".join(f"{_selector(e)} ({e.file}:{e.line})"
@@ -226,9 +291,103 @@ class Library:
     def _file(self, shown: str) -> LibraryFile:
         return next(lf for lf in self.files if lf.shown == shown)
 
-    def _describe_paths(self) -> str:
+    def _describe_paths(self, scope: list[DeviceEntry] | None = None) -> str:
+        if scope is not None and scope is not self.entries:
+            n = len(scope)
+            return f"{n} device{'s' if n != 1 else ''} in {scope[0].file if scope else 'it'}"
         n = len(self.entries)
         return f"{n} device{'s' if n != 1 else ''} in {len(self.files)} files"
+
+    # -- one identity, several descriptions -----------------------------------------------
+
+    def file_named(self, name: str, base: Path | None = None) -> LibraryFile:
+        """The library file ``name`` names (a topology's ``esi:``): as the library shows it,
+        a path (relative to ``base``, the topology's folder), or a file name that one
+        library file has.  Anything else is an :class:`EsiChoiceError`."""
+        for lf in self.files:
+            if lf.shown == name:
+                return lf
+        path = Path(name)
+        if base is not None and not path.is_absolute():
+            path = base / path
+        try:
+            resolved = path.resolve()
+        except (OSError, RuntimeError):
+            resolved = path.absolute()
+        for lf in self.files:
+            if lf.path == resolved:
+                return lf
+        by_name = [lf for lf in self.files if lf.path.name == Path(name).name]
+        if len(by_name) == 1 and Path(name).name == name:
+            return by_name[0]
+        if len(by_name) > 1 and Path(name).name == name:
+            raise EsiChoiceError(f"{len(by_name)} ESI files are named {name!r}: "
+                                 + ", ".join(lf.shown for lf in by_name)
+                                 + "; give its path")
+        names = sorted({lf.path.name for lf in self.files})
+        close = difflib.get_close_matches(Path(name).name, names, n=3, cutoff=0.6)
+        hint = f"; closest: {', '.join(close)}" if close else ""
+        where = f" ({resolved})" if str(resolved) != name else ""
+        raise EsiChoiceError(f"ESI file {name!r}{where} is not one of the library's "
+                             f"{len(self.files)} files (given with --esi){hint}")
+
+    def duplicates(self) -> list[list[DeviceEntry]]:
+        """The entries of each identity that more than one Device element describes, in
+        library order (devices without a product code have no identity to share)."""
+        groups: dict[tuple[int | None, int, int | None], list[DeviceEntry]] = {}
+        for e in self.entries:
+            if e.product_code is not None:
+                groups.setdefault((e.vendor_id, e.product_code, e.revision), []).append(e)
+        return [g for g in groups.values() if len(g) > 1]
+
+    def description(self, entry: DeviceEntry) -> Description:
+        """What ``entry`` describes, normalised (``esi/duplicates.py``); parsed on demand."""
+        key = (entry.file, entry.ordinal)
+        found = self._descriptions.get(key)
+        if found is None:
+            tree = self._trees.pop(entry.file, None)
+            if tree is None:
+                lf = self._file(entry.file)
+                tree = xmlsafe.parse_file(lf.path, lf.shown)
+            # Keep the last few trees: the devices of one family file are often compared
+            # one after another (a listing of duplicates), a tree is ten times its file.
+            self._trees[entry.file] = tree
+            while len(self._trees) > 4:
+                del self._trees[next(iter(self._trees))]
+            found = self._descriptions[key] = describe(device_elements(tree)[entry.ordinal])
+        return found
+
+    def differing(self, group: list[DeviceEntry]) -> list[tuple[DeviceEntry, list[str]]]:
+        """The entries of ``group`` whose description is not the first's, each with what
+        differs (empty: all describe the same device)."""
+        first = self.description(group[0])
+        return [(e, differences(first, self.description(e), _short(group[0]), _short(e)))
+                for e in group[1:] if self.description(e).digest != first.digest]
+
+    def _one_description(self, found: Selection, scope: list[DeviceEntry]) -> Selection:
+        chosen = found.entry
+        if chosen.product_code is None:
+            return found
+        same = [e for e in scope if (e.vendor_id, e.product_code, e.revision)
+                == (chosen.vendor_id, chosen.product_code, chosen.revision)]
+        if len(same) == 1 or not self.differing(same):
+            return found                   # one description, however many files hold it
+        ranks = [self._rank(e) for e in same]
+        best = min(ranks)
+        top = [e for e, r in zip(same, ranks) if r == best]
+        if best < len(self.prefer) and not self.differing(top):
+            others = [e for e in same if e not in top]
+            said = "; ".join(f"{_where(e)}: {', '.join(d)}"
+                             for e, d in self.differing([top[0]] + others))
+            note = (f"{_selector(chosen)} ({chosen.type}) is described differently by "
+                    f"{len({e.file for e in same})} ESI files; took {_where(top[0])} "
+                    f"(--prefer {self.prefer[best]}); differs: {said}")
+            return Selection(top[0], found.note, note)
+        raise DuplicateError(duplicate_message(chosen, same, self.differing(same)))
+
+    def _rank(self, entry: DeviceEntry) -> int:
+        path = self._file(entry.file).path
+        return next((i for i, p in enumerate(self.prefer) if _under(path, p)), len(self.prefer))
 
 
 def parse_selector(selector: str) -> tuple[int, int, int | None] | None:
@@ -247,20 +406,49 @@ def _selector(e: DeviceEntry) -> str:
     return format_selector(e.vendor_id, e.product_code, e.revision)
 
 
+def _where(e: DeviceEntry) -> str:
+    return f"{e.file}:{e.line}"
+
+
+def _short(e: DeviceEntry) -> str:
+    """A file's name and line, for the items of what differs (the message lists the paths)."""
+    return f"{PureWindowsPath(e.file).name}:{e.line}"
+
+
+def _under(path: Path, folder: Path) -> bool:
+    return path == folder or folder in path.parents
+
+
+def duplicate_message(chosen: DeviceEntry, same: list[DeviceEntry],
+                      differing: list[tuple[DeviceEntry, list[str]]]) -> str:
+    """``0x2:...:... (EL1008) is described differently by 2 ESI files: A:12, B:40 (B:40 vs
+    A:12: TxPdo 0x1A00 entries differ); ...``: every file, and what differs from the first."""
+    files = len({e.file for e in same})
+    by = f"{files} ESI files" if files > 1 else f"{len(same)} Device elements of one file"
+    said = "; ".join(f"{_where(e)} vs {_where(same[0])}: {', '.join(d)}" for e, d in differing)
+    return (f"{_selector(chosen)} ({chosen.type}) is described differently by {by}: "
+            + ", ".join(_where(e) for e in same) + f" ({said}); choose one: 'esi: FILE' on "
+            "the slave in the topology, or --prefer FILE_OR_FOLDER")
+
+
 def _by_revision(entries: list[DeviceEntry]) -> list[DeviceEntry]:
     return sorted(entries, key=lambda e: (e.vendor_id or 0, e.product_code or 0,
                                           e.revision if e.revision is not None else -1))
 
 
 def _highest(entries: list[DeviceEntry]) -> Selection:
+    # The first entry of the highest revision (library order: a duplicate is settled by
+    # Library._one_description).  The note names its file: a family file of another age
+    # can hold a revision far above the others (a placeholder 0x270B0000, say).
     ordered = _by_revision(entries)
-    best = ordered[-1]
+    top = ordered[-1].revision
+    best = next(e for e in entries if e.revision == top)
     revisions = sorted({e.revision for e in entries if e.revision is not None})
-    if len(revisions) <= 1 and len(entries) == 1:
+    if len(revisions) <= 1:
         note = None if best.revision is None else (
             f"no revision given; took {_selector(best)}, the only revision")
     else:
-        note = (f"no revision given; took {_selector(best)}, the highest of "
+        note = (f"no revision given; took {_selector(best)} ({_where(best)}), the highest of "
                 + ", ".join(f"0x{r:x}" for r in revisions))
     return Selection(best, note)
 

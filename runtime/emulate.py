@@ -201,7 +201,7 @@ def specs_from_eni(plan: NetworkPlan, library: Library | None, shown: str) -> li
     (``eni_only``).  ``shown`` names the ENI in the model's sources.  The plan's passive
     slaves (``NetworkPlan.passive``: no ESC) are not among ``plan.slaves``: nothing answers
     for them on the wire, so nothing emulates them."""
-    from ecatcfg.esi.library import SelectorError
+    from ecatcfg.esi.library import DuplicateError, SelectorError
     from ecatcfg.runtime.eni_device import device_from_eni
 
     specs: list[SlaveSpec] = []
@@ -215,6 +215,11 @@ def specs_from_eni(plan: NetworkPlan, library: Library | None, shown: str) -> li
             if library is None:
                 raise SelectorError("no ESI files given")
             entry = library.find(selector).entry
+        except DuplicateError as exc:
+            # Files that describe the device differently: emulating either, or the ENI
+            # alone, would hide the choice.
+            from ecatcfg.errors import EcatcfgError
+            raise EcatcfgError(f"slave {s.name!r}: {exc.message}", shown) from None
         except SelectorError as exc:
             writes = tuple(Write(c.index, c.subindex, c.data, c.complete_access)
                            for c in coe if not c.disabled and c.ccs == 1)

@@ -120,6 +120,7 @@ class Network:
     @classmethod
     def virtual(cls, eni: NetworkPlan | str | Path, esi: list[str | Path] | None = None, *,
                 faults: Faults | None = None, esi_cache: bool = True,
+                esi_prefer: list[str | Path] | None = None,
                 pcap: str | Path | None = None,
                 on_event: Callable[[Event], None] | None = None,
                 skip_unsupported: bool = False, eni_name: str | None = None,
@@ -136,7 +137,9 @@ class Network:
         ``timing``: slaves that take the time real ones do (``runtime/timing.py``, e.g.
         ``Timing()`` for the table); instantaneous slaves by default.  ``dc``: the emulated
         clocks and line timing (``runtime/dc_clock.py``; seeded ±100 ppm drift by
-        default)."""
+        default).  ``esi_prefer``: the ESI files or folders whose description wins where
+        several describe one device differently (``Library``'s ``prefer``); without it such
+        a device is an error naming the files."""
         from ecatcfg.eni import reader as eni_reader
         from ecatcfg.esi.library import Library
         from ecatcfg.runtime import emulate
@@ -150,7 +153,8 @@ class Network:
         # The slaves of a partial ENI are emulated as configured by its derived set-up.
         plan = _completed(plan, eni_name or (None if isinstance(eni, NetworkPlan)
                                              else str(eni)), on_event)
-        library = Library([str(p) for p in esi], cache=esi_cache) if esi else None
+        library = Library([str(p) for p in esi], cache=esi_cache,
+                          prefer=list(esi_prefer or [])) if esi else None
         segment = emulate.segment(emulate.specs_from_eni(plan, library, shown), faults,
                                   timing, dc=dc)
         if on_event is not None:

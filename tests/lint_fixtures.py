@@ -124,6 +124,13 @@ CASES: list[Case] = [
                           "</Eeprom>"))),
     Case("ESI004", esi(drive(), drive(type_name="FX1-B").replace("<Device", f"{M}<Device")),
          esi(drive(), drive(type_name="FX1-B", revision="#x2"))),
+    # Across files (a second file with the same identity beside it): the same description,
+    # with another name; a different one, with another output entry.
+    Case("ESI007", esi(drive().replace("<Device", f"{M}<Device")), esi(drive(revision="#x2")),
+         files=(("other/FX1.xml", esi(drive(names='<Name LcId="1033">FX1, another download'
+                                                   '</Name>'))),)),
+    Case("ESI008", esi(drive().replace("<Device", f"{M}<Device")), esi(drive(revision="#x2")),
+         files=(("other/FX1.xml", esi(drive(rx=rx(entry=entry("#x7000", 1, 8, "USINT"))))),)),
     Case("ESI005", esi(drive(names='<Name LcId="1031">FX1 Antrieb</Name>').replace(
         "<Device", f"{M}<Device")),
          esi(drive(names='<Name LcId="1031">FX1 Antrieb</Name><Name>FX1 drive</Name>'))),

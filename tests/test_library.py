@@ -31,10 +31,14 @@ def test_exact_revision(lib):
     assert (sel.entry.revision, sel.note) == (2, None)
 
 
-def test_omitted_revision_takes_highest_and_says_so(lib):
+def test_omitted_revision_takes_highest_and_says_so(lib, tmp_path):
     sel = lib.find("0xE0F1:16")
     assert sel.entry.revision == 3
-    assert sel.note == "no revision given; took 0xe0f1:0x10:0x3, the highest of 0x1, 0x2, 0x3"
+    # The note names the file and line of the Device element taken (its third in a.xml).
+    line = (tmp_path / "a.xml").read_text().splitlines().index(
+        device_xml("Drive ", "#x10", "#x3")) + 1
+    assert sel.note == (f"no revision given; took 0xe0f1:0x10:0x3 ({tmp_path / 'a.xml'}:{line}), "
+                        "the highest of 0x1, 0x2, 0x3")
 
 
 def test_missing_revision_lists_the_available_ones(lib):

@@ -26,13 +26,14 @@ def lint(*args: str, cwd: Path | None = None, timeout: float = 60) -> subprocess
 @pytest.fixture
 def mixed(tmp_path: Path) -> Path:
     """A folder with a clean file, a file with errors and warnings, a two-device file with a
-    finding in one device, and an ENI-like XML that must be skipped."""
+    finding in one device, and an ENI-like XML that must be skipped.  Each device has an
+    identity of its own (one described by two files would be ESI007/ESI008)."""
     folder = tmp_path / "esi"
     folder.mkdir()
-    write(folder, "clean.xml", esi())
+    write(folder, "clean.xml", esi(drive(revision="#x3")))
     write(folder, "broken.xml", BROKEN)
-    write(folder, "two.xml", esi(drive(), drive(type_name="FX2", revision="#x2",
-                                                rx=rx("#x1800"))))
+    write(folder, "two.xml", esi(drive(revision="#x4"), drive(type_name="FX2", revision="#x2",
+                                                              rx=rx("#x1800"))))
     write(folder, "config.xml", "<EtherCATConfig><Config/></EtherCATConfig>")
     return folder
 

@@ -7,6 +7,8 @@ from pathlib import Path
 import pytest
 
 from ecatcfg.esi.lint import LintOptions, Target, all_rules, lint_file, select_rules
+from ecatcfg.esi.lint.across import ACROSS
+from ecatcfg.esi.lint.runner import lint_paths
 from lint_fixtures import CASES, Case, marked_line
 
 ALL = select_rules(None, None)
@@ -19,6 +21,9 @@ def _lint(tmp_path: Path, case: Case, text: str):
         extra.write_text(content)
     path = tmp_path / f"{case.rule}.xml"
     path.write_text(text)
+    if case.rule in ACROSS:         # found by the pass over all the files of one run
+        extra = [Target(tmp_path / name, str(tmp_path / name), True) for name, _ in case.files]
+        return lint_paths([Target(path, str(path), True)] + extra, LintOptions(ALL), 1)[0]
     result = lint_file(Target(path, str(path), True), LintOptions(ALL), [])
     assert result is not None
     return result

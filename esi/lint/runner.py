@@ -19,6 +19,7 @@ from lxml import etree
 
 from ecatcfg.esi import reader, xmlsafe
 from ecatcfg.esi.library import expand_paths
+from ecatcfg.esi.lint.across import add_duplicate_findings
 from ecatcfg.esi.lint.context import FileContext
 from ecatcfg.esi.lint.finding import DeviceRef, FileResult, Finding
 from ecatcfg.esi.lint.rules import RULES, iter_checks
@@ -198,6 +199,8 @@ def lint_paths(targets: list[Target], options: LintOptions, jobs: int | None = N
                 done += 1
                 if progress:
                     progress(done, len(targets))
+    add_duplicate_findings([(t.path, r) for t, r in zip(targets, results) if r is not None],
+                           options.active)
     return [r for r in results if r is not None]
 
 

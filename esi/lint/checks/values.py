@@ -51,7 +51,9 @@ def unreadable_value(ctx: FileContext) -> Iterator[Hit]:
            """
     A configurator finds a device by vendor id, product code and revision number: the slave
     reports exactly these in its SII.  Two Device elements with the same pair in one file make
-    the choice arbitrary (ecatcfg takes the first).  Give each revision its own RevisionNo.""")
+    the choice arbitrary (ecatcfg treats them as one device when they describe the same,
+    and refuses the device when they differ, as for two files: ESI008).  Give each revision
+    its own RevisionNo.""")
 def duplicate_identity(ctx: FileContext) -> Iterator[Hit]:
     def identity(dev: Device) -> tuple[int, int] | None:
         if dev.product_code is None or dev.revision is None:
@@ -62,6 +64,24 @@ def duplicate_identity(ctx: FileContext) -> Iterator[Hit]:
         yield Hit(dev.source, f"{dev.type_name!r} has the identity "
                   f"{format_selector(dev.vendor.id, dev.product_code, dev.revision)} already "
                   f"used by {first.type_name!r} at line {first.source.line}")
+
+
+# Found across the files of one run, after each was linted (``esi/lint/across.py``).
+ESI007 = declare("ESI007", "info", "another file describes the same device identically", """
+    Another file given to lint has a Device with this vendor id, product code and revision,
+    and the two describe the same device: they differ at most in what a master does not use
+    (names, comments, images, the catalogue group, VendorSpecific tool data; numbers compared
+    by value).  Configurators treat them as one device; ecatcfg compile and apply take either
+    without a note.  Two copies of one vendor download, usually: keep one.""")
+
+ESI008 = declare("ESI008", "error", "another file describes the same device differently", """
+    Another file given to lint has a Device with this vendor id, product code and revision,
+    and the two differ in what a master configures (PDOs and their entries, SyncManagers,
+    FMMUs, mailbox, InitCmds, DC, the object dictionary, slots and modules); the message says
+    what.  A slave reports only its identity, so a configurator cannot tell which file is
+    right and a wrong pick gives a wrong process image.  ecatcfg compile and apply refuse the
+    device until the topology names the file (esi: FILE) or the command ranks the files
+    (--prefer).  Remove the outdated file, or give the devices their own revisions.""")
 
 
 @file_rule("ESI005", "warning", "a name has no text in the default language", """
