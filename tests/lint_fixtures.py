@@ -223,6 +223,12 @@ CASES: list[Case] = [
                  + "</Modules></EtherCATModule>\n"),)),
     Case("ESI603", esi(drive(), modules=module("#x100") + "\n" + M + module("#x100", "N")),
          esi(drive(), modules=module("#x100") + "\n" + module("#x101", "N"))),
+    # A slot of a slot group (the shape of Beckhoff's EL6900 and EP1908 files).
+    Case("ESI604", esi(drive(slots=f'<Slots>\n{M}<Slot MinInstances="0" MaxInstances="1" '
+                                   'SlotGroup="0"><Name>Slot 1</Name><ModuleIdent>#x100'
+                                   '</ModuleIdent></Slot>\n<SlotGroupData SlotGroup="0"/>'
+                                   '</Slots>'), modules=module("#x100")),
+         esi(drive(slots=slots("<ModuleIdent>#x100</ModuleIdent>")), modules=module("#x100"))),
 ]
 
 
