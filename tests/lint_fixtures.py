@@ -153,6 +153,9 @@ CASES: list[Case] = [
          esi(drive(sm2=SM2.replace("<Sm ", '<Sm MaxSize="2" ')))),
     Case("ESI113", esi(drive(rx=rx(entry=f"{M}<Entry><Index>0</Index><BitLen>256</BitLen></Entry>"))),
          esi(drive(rx=rx(entry="<Entry><Index>0</Index><BitLen>255</BitLen></Entry>")))),
+    # The Ref/Chn form of old Beckhoff files (EL3142 in "Beckhoff EtherCAT Terminals.xml").
+    Case("ESI114", esi(drive(tx=f'{M}<TxPdo Mandatory="1" Sm="3"><Name>In</Name></TxPdo>')),
+         esi()),
 
     Case("ESI201", esi(drive(sm3=M + SM3.replace("#x1180", "#x1101"))), esi()),
     Case("ESI202", esi(drive(sm2=M + SM2, sm3=SM3.replace("#x1180", "#x1104"))),

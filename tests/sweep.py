@@ -229,7 +229,7 @@ class Worker:
             # passive terminals alone, rightly).
             result.outcome, result.message = "passive", "no ESC (passive terminal)"
             return
-        needed = _required_modules(device)
+        needed = _required_modules(device, lib.modules_for(entry))
         if needed:
             slave["modules"] = needed
         text = json.dumps({"master": {"name": "sweep"}, "slaves": [slave]})
@@ -292,17 +292,23 @@ class Worker:
             result.seconds["apply"] = _lap(t)
 
 
-def _required_modules(device: Any) -> dict[int, list[int]]:
+def _required_modules(device: Any, modules: dict[int, Any]) -> dict[int, list[int]]:
     """Slot -> modules for the slots that need a module and name no default one: the first
-    module the slot lists, as often as the slot needs it (a device "with its default
-    modules" is otherwise not compilable alone)."""
+    module the slot lists (by ident, else the first of the library's modules, in ident
+    order, of a class the slot takes), as often as the slot needs it; a device "with its
+    default modules" is otherwise not compilable alone."""
     out: dict[int, list[int]] = {}
     if device.slots is None:
         return out
     for number, slot in enumerate(device.slots.slots, start=1):
         low = slot.min_instances or 0
-        if low and slot.default_ident is None and slot.module_idents:
-            out[number] = [slot.module_idents[0]] * low
+        if not low or slot.default_ident is not None:
+            continue
+        fits = list(slot.module_idents) or [
+            ident for ident, m in sorted(modules.items())
+            if m.module_class is not None and m.module_class in slot.module_classes]
+        if fits:
+            out[number] = [fits[0]] * low
     return out
 
 

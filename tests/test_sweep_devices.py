@@ -110,3 +110,21 @@ def test_a_mailbox_device_in_device_emulation_reaches_op(tmp_path: Path) -> None
         assert net.segment is not None and net.segment.slaves[0].device_emulation
         net.up(AlState.OP)
         assert [s.state for s in net.master.read_states() if s] == [AlState.OP]
+
+
+# -- a PDO without an Index ------------------------------------------------------------------
+
+def test_a_pdo_without_an_index_is_an_error_naming_its_esi_line(tmp_path: Path) -> None:
+    """The Ref/Chn PDOs of old Beckhoff files (EL3142 in the extra corpus): compiled as PDO
+    0x0000 with no entries, the device's inputs were lost and apply failed at 0x1C13:02."""
+    from ecatcfg.compiler.topology import TopologyError
+    body = MAILBOX_PD_SMS.replace(
+        '<TxPdo Fixed="1" Mandatory="1" Sm="3"><Index>#x1A00</Index>',
+        '<TxPdo Fixed="1" Mandatory="1" Sm="3">') + '<Mailbox><CoE PdoAssign="1"/></Mailbox>'
+    assert body != MAILBOX_PD_SMS + '<Mailbox><CoE PdoAssign="1"/></Mailbox>'
+    text = esi_xml(device_xml("FXR", "#x22", "#x1", body=body))
+    esi = write(tmp_path, "fxr.xml", text)
+    line = text[:text.index("<TxPdo")].count("\n") + 1
+    with pytest.raises(TopologyError) as exc:
+        _compile(esi, "FXR")
+    assert f"TxPdo at {esi}:{line} has no Index" in str(exc.value)
