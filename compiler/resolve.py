@@ -352,11 +352,11 @@ def _choose_pdos(slave: ResolvedSlave, modules: list[PluggedModule], errors: _Er
     # A PDO without an Index (ETG.2000 requires one; older Beckhoff files wrote a Ref to a
     # shared description instead) cannot be assigned: compiled as 0x0000 with no entries, the
     # device's process data would be lost without a word.
-    for p in own + [q for plug in modules for q in plug.module.rx_pdos + plug.module.tx_pdos]:
-        if p.index is None:
-            errors.add(f"slave {cfg.name!r}: the {'RxPdo' if p.direction == 'rx' else 'TxPdo'}"
-                       f" at {p.source} has no Index; it cannot be assigned",
-                       "slaves", slave.index, "device")
+    for raw in own + [q for plug in modules for q in plug.module.rx_pdos + plug.module.tx_pdos]:
+        if raw.index is None:
+            errors.add(f"slave {cfg.name!r}: the "
+                       f"{'RxPdo' if raw.direction == 'rx' else 'TxPdo'} at {raw.source} has "
+                       "no Index; it cannot be assigned", "slaves", slave.index, "device")
     grouped: list[tuple[int, PdoDesc]] = [(dev.module_pdo_group or 0, _desc(p))
                                           for p in sorted(own, key=lambda p: p.source.line)]
     for plug in modules:
