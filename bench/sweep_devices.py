@@ -6,7 +6,7 @@ Run from the checkout (no root):
     python3 bench/sweep_devices.py [--corpus DIR] [--corpus-extra DIR] [--jobs N]
                                    [--limit N] [--only SUBSTRING] [--json FILE]
 
-The work per device is ``tests/sweep.py`` (``run_case`` of ``Worker``), the same code the CI
+The work per device is ``tests/sweep.py`` (``Worker.run``), the same code the CI
 sample (``tests/test_sweep_devices.py``) runs: a one-slave topology selecting the device by
 vendor, product and revision, compiled in-process with the library API against a library of
 its file (and the module libraries it references), the ENI validated with

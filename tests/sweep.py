@@ -2,18 +2,20 @@
 ETG.2100 schema, bring it up on a virtual segment built from the same ESI, and say why not.
 
 For one device (one ``Descriptions/Devices/Device`` of an ESI file, every revision its own)
-:func:`run_case`
+``Worker.run``
 
 1. writes a one-slave topology that selects it by ``VENDOR:PRODUCT:REVISION`` (its Type
    name when the file gives no numbers) and compiles it with the library API
    (``compiler.build.compile_topology``, what ``ecatcfg compile`` runs) against a library of
    that file alone plus the module libraries its ``InfoReference`` names, so another file
-   with the same identity cannot stand in for it;
+   with the same identity cannot stand in for it; with its default modules, and where a
+   slot needs a module and names no default, the first module it takes;
 2. writes the ENI (``eni.writer``) and validates it against ``EtherCATConfig.xsd``;
 3. reads it back (``eni.reader``) and brings it up to OP on ``Network.virtual`` with the
    same library, the way ``ecatcfg apply --virtual --esi FILE`` does (the partial-ENI
    completion, the request check, the unsupported-content skip), then back to INIT;
-4. classifies the result: ``op``; ``refused`` (compile said no: the message, grouped into a
+4. classifies the result: ``op``; ``passive`` (a terminal without an ESC: nothing to
+   configure, and compile rightly refuses a line of passive terminals alone); ``refused`` (compile said no: the message, grouped into a
    category); ``schema-invalid``; ``not-emulated`` (the segment fell back to the ENI alone:
    the ESI did not reach the emulator); ``apply-failed`` (an error naming the slave and
    command, or the state it was left in); ``crash`` (an exception that is no
