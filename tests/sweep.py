@@ -15,14 +15,14 @@ For one device (one ``Descriptions/Devices/Device`` of an ESI file, every revisi
    same library, the way ``ecatcfg apply --virtual --esi FILE`` does (the partial-ENI
    completion, the request check, the unsupported-content skip), then back to INIT;
 4. classifies the result: ``op``; ``passive`` (a terminal without an ESC: nothing to
-   configure, and compile rightly refuses a line of passive terminals alone); ``refused`` (compile said no: the message, grouped into a
-   category); ``schema-invalid``; ``not-emulated`` (the segment fell back to the ENI alone:
+   configure, and compile rightly refuses a line of passive terminals alone); ``refused``
+   (compile said no: the message, grouped into a category); ``schema-invalid``; ``not-emulated`` (the segment fell back to the ENI alone:
    the ESI did not reach the emulator); ``apply-failed`` (an error naming the slave and
    command, or the state it was left in); ``crash`` (an exception that is no
    ``EcatcfgError``: a bug by definition).
 
-``lint_errors`` gives, per device, the error findings ``ecatcfg lint`` reports for it (and
-for its file outside any device); the sweep requires every refusal and every failure to be
+``lint_errors`` gives, per device, the error findings ``ecatcfg lint`` reports inside its
+Device element; the sweep requires every refusal and every failure to be
 explained by one.  ``bench/sweep_devices.py`` runs every device of both corpora;
 ``tests/test_sweep_devices.py`` a fixed sample of them.
 """
@@ -160,8 +160,9 @@ def lint_errors(corpora: dict[str, Path], files: set[tuple[str, str]] | None = N
 
 
 def errors_for(case: Case, errors: dict[str, list[str]]) -> list[str]:
-    base = f"{case.corpus}/{case.file}#"
-    return errors.get(f"{base}{case.line}", []) + errors.get(base, [])
+    """The lint errors inside the case's Device element (not those elsewhere in its file:
+    a finding about another device explains nothing about this one)."""
+    return errors.get(f"{case.corpus}/{case.file}#{case.line}", [])
 
 
 def _schema_root(corpora: dict[str, Path]) -> Path:
