@@ -47,7 +47,7 @@ def setup(slave: ResolvedSlave, lay: SlaveLayout, dc: DcPlan | None, assign_acti
                                               mailbox[1].mailbox_control, True)))
         if len(mailbox) >= 2 else None,
         bootstrap=bootstrap, pd_sms=pd_sms, fmmus=list(lay.fmmus), dc=dc,
-        assign_activate=assign_activate,
+        assign_activate=assign_activate, device_emulation=dev.device_emulation,
         preop_timeout=(info and info.preop_timeout) or 0,
         safeop_op_timeout=(info and info.safeop_op_timeout) or 0,
         back_to_init_timeout=(info and info.back_to_init_timeout) or 0,

@@ -362,6 +362,14 @@ def _choose_pdos(slave: ResolvedSlave, modules: list[PluggedModule], errors: _Er
     # A device PDO marked OverwrittenByModule gives way to the plugged modules' PDOs (the
     # same index when SlotPdoIncrement is 0: keeping both assigned it twice).
     own = [p for p in dev.rx_pdos + dev.tx_pdos if not (modules and p.overwritten_by_module)]
+    # A PDO without an Index (ETG.2000 requires one; older Beckhoff files wrote a Ref to a
+    # shared description instead) cannot be assigned: compiled as 0x0000 with no entries, the
+    # device's process data would be lost without a word.
+    for raw in own + [q for plug in modules for q in plug.module.rx_pdos + plug.module.tx_pdos]:
+        if raw.index is None:
+            errors.add(f"slave {cfg.name!r}: the "
+                       f"{'RxPdo' if raw.direction == 'rx' else 'TxPdo'} at {raw.source} has "
+                       "no Index; it cannot be assigned", "slaves", slave.index, "device")
     grouped: list[tuple[int, PdoDesc]] = [(dev.module_pdo_group or 0, _desc(p))
                                           for p in sorted(own, key=lambda p: p.source.line)]
     for plug in modules:

@@ -65,6 +65,10 @@ class SlaveSetup:
     fmmus: list[tuple[FmmuConfig, str]] = field(default_factory=list)  # FMMU 0, 1, ...
     dc: DcPlan | None = None
     assign_activate: int = 0                  # 0x0980 with DC
+    # The ESC mirrors AL control into AL status (ESC configuration 0x0141 bit 0): a state
+    # request must not carry the error-acknowledge bit, which would read back as the error
+    # flag (docs/protocol-notes.md §2).
+    device_emulation: bool = False
     # State-machine timeouts (ms): ESI Info/StateMachine/Timeout, else the tools' defaults.
     preop_timeout: int = 0
     safeop_op_timeout: int = 0
@@ -164,7 +168,10 @@ def slave_init_cmds(slave: SlaveSetup) -> list[InitCmd]:
     init_to = slave.back_to_init_timeout or BACK_TO_INIT_TIMEOUT
     back_safeop_to = slave.back_to_safeop_timeout or BACK_TO_SAFEOP_TIMEOUT
     bootstrap, dc = slave.bootstrap, slave.dc
-    has_mbx = slave.mailbox is not None
+    # State requests acknowledge errors where firmware answers them: a slave with a mailbox
+    # (TwinCAT and EC-Engineer write 0x0012 to those, 0x0002 to the others; eni-exports §3),
+    # unless its ESC mirrors AL control, which shows the acknowledge bit as an error.
+    ack = slave.mailbox is not None and not slave.device_emulation
     boot = [T.IB] if bootstrap else []
     c = _SlaveCmds(slave)
 
@@ -178,7 +185,7 @@ def slave_init_cmds(slave: SlaveSetup) -> list[InitCmd]:
 
     # Back to INIT from any state (eni-exports §3 PI/BI/SI/OI).
     c.ap([T.PI, *([T.BI] if bootstrap else []), T.SI, T.OI], "set device state to INIT",
-         Cmd.APWR, Reg.AL_CONTROL, _al(AlState.INIT, has_mbx), requires="cycle")
+         Cmd.APWR, Reg.AL_CONTROL, _al(AlState.INIT, ack), requires="cycle")
     if dc:
         c.ap([T.SI, T.OI], "clear DC activation", Cmd.APWR, Reg.DC_CYCLIC_UNIT_CONTROL,
              bytes(2), requires="cycle")
@@ -190,7 +197,7 @@ def slave_init_cmds(slave: SlaveSetup) -> list[InitCmd]:
 
     # INIT -> PREOP: identity, address, mailbox (eni-exports §3 I→P).
     c.ap([T.IP, *boot], "set device state to INIT", Cmd.APWR, Reg.AL_CONTROL,
-         _al(AlState.INIT, has_mbx), cnt=1, requires="cycle")
+         _al(AlState.INIT, ack), cnt=1, requires="cycle")
     c.ap([T.IP, *boot], "check device state for INIT", Cmd.APRD, Reg.AL_STATUS, bytes(2), cnt=1,
          validate=Validate(b"\x01\x00", b"\x0f\x00", preop_to), requires="cycle")
     c.ap([T.IP], "assign EEPROM to ECAT", Cmd.APWR, Reg.EEPROM_CONFIG, b"\x00", cnt=1,
@@ -207,7 +214,7 @@ def slave_init_cmds(slave: SlaveSetup) -> list[InitCmd]:
     c.ap([T.IP, *boot], "set physical address", Cmd.APWR, Reg.STATION_ADDRESS,
          struct.pack("<H", slave.phys_addr), cnt=1, requires="cycle")
     c.fp([T.SP, T.OP], "set device state to PREOP", Cmd.FPWR, Reg.AL_CONTROL,
-         _al(AlState.PREOP, has_mbx), requires="cycle")
+         _al(AlState.PREOP, ack), requires="cycle")
     c.cmds[-1].retries = PREOP_RETRIES
     if slave.mailbox is not None:
         c.fp([T.IP, *boot, T.PI, T.SI, T.OI], "clear sm 0/1 (mailbox out/in)", Cmd.FPWR, Reg.SM0,
@@ -280,7 +287,7 @@ def slave_init_cmds(slave: SlaveSetup) -> list[InitCmd]:
     c.ap([T.II], "assign EEPROM back to ECAT", Cmd.APWR, Reg.EEPROM_CONFIG, b"\x00",
          requires="cycle")
     c.fp([T.IP], "set device state to PREOP", Cmd.FPWR, Reg.AL_CONTROL,
-         _al(AlState.PREOP, has_mbx), cnt=1, requires="cycle")
+         _al(AlState.PREOP, ack), cnt=1, requires="cycle")
     c.cmds[-1].retries = PREOP_RETRIES
     c.fp([T.IP], "check device state for PREOP", Cmd.FPRD, Reg.AL_STATUS, bytes(6), cnt=1,
          validate=_status(AlState.PREOP, 0x1F, preop_to), requires="cycle")

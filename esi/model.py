@@ -15,7 +15,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Literal, NamedTuple
 
-from ecatcfg.esc import SM_CONTROL_MBOX_IN, SM_CONTROL_MBOX_OUT
+from ecatcfg.esc import ESC_DEVICE_EMULATION, SM_CONTROL_MBOX_IN, SM_CONTROL_MBOX_OUT
 
 # LcId 1033 is English (US); ETG.2000 makes it the default language of a NameType.
 ENGLISH = 1033
@@ -571,6 +571,16 @@ class Device:
         return self.product_code is None and not (
             self.sms or self.fmmus or self.rx_pdos or self.tx_pdos or self.mailbox
             or self.dc or self.eeprom or self.slots)
+
+    @property
+    def device_emulation(self) -> bool:
+        """The ESC mirrors AL control into AL status itself (no firmware sets it): bit 0 of
+        the ESC configuration, the high byte of SII word 0, which the ESC loads into 0x0141
+        (ESC doc Section II, 0x0141; ``docs/protocol-notes.md`` §2).  Read from the ESI's
+        ``Eeprom/ConfigData`` (or its whole image, ``Eeprom/Data``); without either, no."""
+        eep = self.eeprom
+        word0 = eep and (eep.config_data or eep.data)
+        return bool(word0 and len(word0) >= 2 and word0[1] & ESC_DEVICE_EMULATION)
 
     def sm_by_type(self, sm_type: str) -> list[SyncManager]:
         return [sm for sm in self.sms if sm.type == sm_type]

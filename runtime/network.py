@@ -37,6 +37,7 @@ from ecatcfg.runtime.master import (DC_THRESHOLD_NS, DC_TIMEOUT_S, Event, Master
 from ecatcfg.runtime.replay import ApplyError
 
 if TYPE_CHECKING:                   # imported where used: `import ecatcfg.runtime` stays light
+    from ecatcfg.esi.library import Library
     from ecatcfg.runtime.cyclic import CycleStats
     from ecatcfg.runtime.dc_clock import DcModel
     from ecatcfg.runtime.link import Link
@@ -118,7 +119,8 @@ class Network:
         self._lock = threading.Lock()
 
     @classmethod
-    def virtual(cls, eni: NetworkPlan | str | Path, esi: list[str | Path] | None = None, *,
+    def virtual(cls, eni: NetworkPlan | str | Path,
+                esi: list[str | Path] | Library | None = None, *,
                 faults: Faults | None = None, esi_cache: bool = True,
                 esi_prefer: list[str | Path] | None = None,
                 pcap: str | Path | None = None,
@@ -128,7 +130,8 @@ class Network:
                 dc_threshold_ns: int = DC_THRESHOLD_NS,
                 dc_timeout_s: float = DC_TIMEOUT_S, recovery: bool = True) -> Network:
         """The ENI on a virtual segment that emulates its slaves from the ESI files
-        (``esi_cache``: through the ESI index cache).  A slave whose device the files do not
+        (``esi_cache``: through the ESI index cache), or from a :class:`Library` already
+        built (a caller that brings up many ENIs from one library reads its files once).  A slave whose device the files do not
         hold, and every slave without ``esi``, is emulated from the ENI alone
         (``runtime/eni_device.py``); each such slave is an ``Event("emulated", ...)`` to
         ``on_event`` and has ``eni_only`` set in ``net.segment.slaves``.
@@ -153,8 +156,9 @@ class Network:
         # The slaves of a partial ENI are emulated as configured by its derived set-up.
         plan = _completed(plan, eni_name or (None if isinstance(eni, NetworkPlan)
                                              else str(eni)), on_event)
-        library = Library([str(p) for p in esi], cache=esi_cache,
-                          prefer=list(esi_prefer or [])) if esi else None
+        library = (esi if isinstance(esi, Library) else
+                   Library([str(p) for p in esi], cache=esi_cache,
+                           prefer=list(esi_prefer or [])) if esi else None)
         segment = emulate.segment(emulate.specs_from_eni(plan, library, shown), faults,
                                   timing, dc=dc)
         if on_event is not None:

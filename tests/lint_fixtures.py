@@ -160,6 +160,9 @@ CASES: list[Case] = [
          esi(drive(sm2=SM2.replace("<Sm ", '<Sm MaxSize="2" ')))),
     Case("ESI113", esi(drive(rx=rx(entry=f"{M}<Entry><Index>0</Index><BitLen>256</BitLen></Entry>"))),
          esi(drive(rx=rx(entry="<Entry><Index>0</Index><BitLen>255</BitLen></Entry>")))),
+    # The Ref/Chn form of old Beckhoff files (EL3142 in "Beckhoff EtherCAT Terminals.xml").
+    Case("ESI114", esi(drive(tx=f'{M}<TxPdo Mandatory="1" Sm="3"><Name>In</Name></TxPdo>')),
+         esi()),
 
     Case("ESI201", esi(drive(sm3=M + SM3.replace("#x1180", "#x1101"))), esi()),
     Case("ESI202", esi(drive(sm2=M + SM2, sm3=SM3.replace("#x1180", "#x1104"))),
@@ -230,6 +233,12 @@ CASES: list[Case] = [
                  + "</Modules></EtherCATModule>\n"),)),
     Case("ESI603", esi(drive(), modules=module("#x100") + "\n" + M + module("#x100", "N")),
          esi(drive(), modules=module("#x100") + "\n" + module("#x101", "N"))),
+    # A slot of a slot group (the shape of Beckhoff's EL6900 and EP1908 files).
+    Case("ESI604", esi(drive(slots=f'<Slots>\n{M}<Slot MinInstances="0" MaxInstances="1" '
+                                   'SlotGroup="0"><Name>Slot 1</Name><ModuleIdent>#x100'
+                                   '</ModuleIdent></Slot>\n<SlotGroupData SlotGroup="0"/>'
+                                   '</Slots>'), modules=module("#x100")),
+         esi(drive(slots=slots("<ModuleIdent>#x100</ModuleIdent>")), modules=module("#x100"))),
 ]
 
 

@@ -230,3 +230,16 @@ def entry_bit_length(dev: Device, ctx: FileContext) -> Iterator[Hit]:
             if entry.bit_len is not None and not 1 <= entry.bit_len <= MAX_ENTRY_BITS:
                 yield Hit(entry.source, f"{_tag(pdo)} entry has BitLen {entry.bit_len}; "
                           f"it must be 1-{MAX_ENTRY_BITS}")
+
+
+@device_rule("ESI114", "error", "a PDO has no Index", """
+    ETG.2000 requires every RxPdo and TxPdo to have an Index: it is the mapping object and
+    the value of the assignment objects 0x1C12/0x1C13, and the SII PDO category stores it.
+    Some old Beckhoff files describe a PDO by ``Ref`` and ``Chn`` attributes that point at a
+    shared description; no ETG schema defines them, and a configurator cannot assign such a
+    PDO (``ecatcfg compile`` refuses it rather than lose the device's process data).""")
+def pdo_without_index(dev: Device, ctx: FileContext) -> Iterator[Hit]:
+    for pdo in dev.pdos:
+        if pdo.index is None:
+            yield Hit(pdo.source, f"{'RxPdo' if pdo.direction == 'rx' else 'TxPdo'} has no "
+                      "Index")
