@@ -121,7 +121,8 @@ def test_only_the_given_parameters_are_flagged(esi_file):
 
 def test_the_eni_is_schema_valid_and_reads_back_equal(esi_file, eni_schema):
     plan = compile_text("master: {watchdog: {sm_ms: 50}}\nslaves:\n"
-                        "  - {name: s, device: TS-EOE, eoe: {ip: 10.0.0.7/255.0.0.0, dns_name: a}}\n"
+                        "  - {name: s, device: TS-EOE,\n"
+                        "     eoe: {ip: 10.0.0.7/255.0.0.0, dns_name: a}}\n"
                         "  - {name: t, device: TS-COE}\n", [esi_file])
     data = eni_writer.to_bytes(plan)
     assert eni_schema.validate(etree.fromstring(data)), eni_schema.error_log
