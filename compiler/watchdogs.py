@@ -8,7 +8,8 @@ not a whole number of bases, or more bases than the 16-bit register (0x0410, 0x0
 is an error at its line: writing a rounded value would be a watchdog the user did not ask
 for.  The ESI gives no watchdog times (ETG.2000 has only the obsolete ``Sm/@Watchdog``
 flag; the SM watchdog runs for an SM whose control byte has bit 6 set), so keys left out
-take the ESC's power-on values, which are also what TwinCAT and EC-Engineer write.
+take the ESC's power-on values, which are also what TwinCAT and EC-Engineer write: divider
+2498 and 100 ms (with another divider, still 100 ms: the times are what the user reads).
 """
 
 from __future__ import annotations
@@ -21,6 +22,8 @@ from ecatcfg.eni.standard import Watchdogs
 from ecatcfg.esc import WATCHDOG_DIVIDER_DEFAULT, WATCHDOG_TIME_DEFAULT, Reg, watchdog_base_ns
 
 REGISTER_MAX = 0xFFFF
+# The time a key left out stands for: the power-on 1000 x 100 us (what both tools write).
+DEFAULT_MS = WATCHDOG_TIME_DEFAULT * watchdog_base_ns(WATCHDOG_DIVIDER_DEFAULT) // 1_000_000
 
 
 class Errors(Protocol):
@@ -31,27 +34,26 @@ def resolve(name: str, own: Watchdog | None, master: Watchdog | None,
             where: tuple[str | int, ...], errors: Errors) -> Watchdogs | None:
     """The register values for a slave, or None when neither the slave nor the master sets
     watchdogs (or a time does not fit: an error is added).  ``where``: the slave's place in
-    the topology; a key's value comes from the slave, else from the master."""
+    the topology; a key's value comes from the slave, else from the master, else the
+    default: divider 2498 and 100 ms (the time, whatever the divider)."""
     if own is None and master is None:
         return None
     given = [(cfg, at) for cfg, at in ((own, (*where, "watchdog")),
                                        (master, ("master", "watchdog"))) if cfg is not None]
-    divider = next((cfg.divider for cfg, _ in given if cfg.divider is not None),
-                   WATCHDOG_DIVIDER_DEFAULT)
+    divider, divider_at = next(((cfg.divider, (*at, "divider")) for cfg, at in given
+                                if cfg.divider is not None),
+                               (WATCHDOG_DIVIDER_DEFAULT, given[0][1]))
     base_ns = watchdog_base_ns(divider)
     values: dict[str, int] = {}
     for key, register in (("pdi_ms", Reg.WATCHDOG_PDI), ("sm_ms", Reg.WATCHDOG_SM)):
-        found = next(((ms, at) for cfg, at in given
-                      if (ms := getattr(cfg, key)) is not None), None)
-        if found is None:
-            values[key] = WATCHDOG_TIME_DEFAULT
-            continue
-        ms, at = found
-        exact = Decimal(repr(ms))
+        ms, at, told = next(((ms, (*at, key), "") for cfg, at in given
+                             if (ms := getattr(cfg, key)) is not None),
+                            (DEFAULT_MS, divider_at, " (the default; give it)"))
+        exact = Decimal(repr(float(ms)))
         ticks = _ticks(exact, base_ns)
         if ticks is None or ticks > REGISTER_MAX:
-            errors.add(f"slave {name!r}: watchdog {key} {ms:g}: "
-                       + _why(exact, base_ns, register), *at, key)
+            errors.add(f"slave {name!r}: watchdog {key} {ms:g}{told}: "
+                       + _why(exact, base_ns, register), *at)
             continue
         values[key] = ticks
     if len(values) < 2:

@@ -281,8 +281,9 @@ def test_the_master_gives_every_slave_its_watchdogs_and_a_slave_its_own_keys(esi
         "  - {name: a, device: TS-EOE}\n"
         "  - {name: b, device: TS-COE, watchdog: {sm_ms: 2.5, divider: 2498}}\n"
         "  - {name: c, device: TS-COE, watchdog: {sm_ms: 0.06}}\n", [esi_file])
-    # divider 498: (498 + 2) x 40 ns = 20 us; 2.5 ms at 100 us = 25; 0.06 ms at 20 us = 3.
-    assert watchdog_values(plan, 0) == [498, 0, 1000]
+    # divider 498: (498 + 2) x 40 ns = 20 us, the default 100 ms = 5000; 2.5 ms at 100 us
+    # = 25; 0.06 ms at 20 us = 3.
+    assert watchdog_values(plan, 0) == [498, 0, 5000]
     assert watchdog_values(plan, 1) == [2498, 0, 25]
     assert watchdog_values(plan, 2) == [498, 0, 3]
 
@@ -299,6 +300,11 @@ def test_the_master_gives_every_slave_its_watchdogs_and_a_slave_its_own_keys(esi
      "  - {name: s, device: TS-EOE}\n",
      "t.yaml:4: slave 's': watchdog sm_ms 10: 125000 time bases of 80 ns; register 0x0420 "
      "holds at most 65535 (5.2428 ms)"),
+    # The default 100 ms does not fit an 80 ns base: said at the divider's line.
+    ("slaves:\n  - name: s\n    device: TS-EOE\n    watchdog:\n      sm_ms: 1\n"
+     "      divider: 0\n",
+     "t.yaml:6: slave 's': watchdog pdi_ms 100 (the default; give it): 1250000 time bases of "
+     "80 ns; register 0x0410 holds at most 65535 (5.2428 ms)"),
     ("slaves:\n  - {name: s, device: TS-EOE, watchdog: {sm_ms: -1}}\n",
      "t.yaml:2: slaves.0.watchdog.sm_ms: Input should be greater than or equal to 0"),
     ("slaves:\n  - {name: s, device: TS-EOE, watchdog: {divider: 0x10000}}\n",
