@@ -334,8 +334,14 @@ class Eoe(_Model):
         return self
 
 
+def _not_bool(value: Any) -> Any:
+    if isinstance(value, bool):
+        raise ValueError("expected a number, not true/false")
+    return value
+
+
 # A watchdog time in ms: a number (decimals allowed: 0.5), 0 = off.
-WatchdogMs = Annotated[float, Field(ge=0, allow_inf_nan=False)]
+WatchdogMs = Annotated[float, Field(ge=0, allow_inf_nan=False), BeforeValidator(_not_bool)]
 
 
 class Watchdog(_Model):

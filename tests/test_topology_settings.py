@@ -305,6 +305,8 @@ def test_the_master_gives_every_slave_its_watchdogs_and_a_slave_its_own_keys(esi
      "      divider: 0\n",
      "t.yaml:6: slave 's': watchdog pdi_ms 100 (the default; give it): 1250000 time bases of "
      "80 ns; register 0x0410 holds at most 65535 (5.2428 ms)"),
+    ("slaves:\n  - {name: s, device: TS-EOE, watchdog: {sm_ms: true}}\n",
+     "t.yaml:2: slaves.0.watchdog.sm_ms: Value error, expected a number, not true/false"),
     ("slaves:\n  - {name: s, device: TS-EOE, watchdog: {sm_ms: -1}}\n",
      "t.yaml:2: slaves.0.watchdog.sm_ms: Input should be greater than or equal to 0"),
     ("slaves:\n  - {name: s, device: TS-EOE, watchdog: {divider: 0x10000}}\n",
