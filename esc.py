@@ -102,6 +102,21 @@ class Reg(IntEnum):
     DC_LATCH0_CONTROL = 0x09A8
 
 
+# -- watchdogs (ESC Section II, registers 0x0400-0x0443; docs/protocol-notes.md) -------------
+# The time base of both watchdogs is (0x0400 + 2) x 40 ns; 0x0410 (PDI) and 0x0420 (SM,
+# process data) count in that base, 0 disables the watchdog.  The power-on values, which are
+# also what TwinCAT and EC-Engineer write when a device's watchdogs are set
+# (docs/eni-exports.md §3): 2498 -> 100 us, 1000 x 100 us = 100 ms.
+WATCHDOG_DIVIDER_DEFAULT = 0x09C2
+WATCHDOG_TIME_DEFAULT = 0x03E8
+WATCHDOG_TICK_NS = 40             # one divider step: 40 ns (25 MHz)
+
+
+def watchdog_base_ns(divider: int) -> int:
+    """The watchdog time base in ns that divider ``divider`` (register 0x0400) gives."""
+    return (divider + 2) * WATCHDOG_TICK_NS
+
+
 FMMU_SIZE = 16
 SM_SIZE = 8
 # Logical address of the mailbox-state bits both TwinCAT and EC-Engineer use.

@@ -25,7 +25,7 @@ def setup(slave: ResolvedSlave, lay: SlaveLayout, dc: DcPlan | None, assign_acti
           bootstrap: tuple[SmConfig, SmConfig] | None) -> SlaveSetup:
     """The slave as the standard set-up needs it: identity and addresses, its mailbox and
     process-data SyncManagers from the ESI (``OpOnly`` included), the FMMUs of the layout,
-    DC, the ESI's state-machine timeouts and the topology's alias."""
+    DC, the ESI's state-machine timeouts, the topology's alias and watchdogs."""
     dev = slave.device
     info = dev.info
     mailbox = [sm for sm in dev.sms if sm.is_mailbox]
@@ -51,4 +51,5 @@ def setup(slave: ResolvedSlave, lay: SlaveLayout, dc: DcPlan | None, assign_acti
         preop_timeout=(info and info.preop_timeout) or 0,
         safeop_op_timeout=(info and info.safeop_op_timeout) or 0,
         back_to_init_timeout=(info and info.back_to_init_timeout) or 0,
-        back_to_safeop_timeout=(info and info.back_to_safeop_timeout) or 0)
+        back_to_safeop_timeout=(info and info.back_to_safeop_timeout) or 0,
+        watchdog=slave.watchdog)

@@ -28,7 +28,8 @@ _NEEDS_ESC = {"station_address": "a station address", "alias": "a station alias"
               "device_id": "a device ID", "hot_connect": "a hot-connect group",
               "rx_pdos": "PDOs", "tx_pdos": "PDOs", "pdo_mapping": "a PDO mapping",
               "modules": "modules", "sdos": "SDOs", "dc": "distributed clocks",
-              "parent": "a place in a tree", "port": "a place in a tree"}
+              "parent": "a place in a tree", "port": "a place in a tree",
+              "eoe": "EoE IP parameters", "watchdog": "watchdogs"}
 # The port a passive terminal's PreviousPort names on the slave before it: port B (ESC
 # port 1), where a line of terminals continues (TwinCAT writes the next terminal's
 # PreviousPort the same way, with the PhysAddr of the slave with an ESC before it).

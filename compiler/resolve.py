@@ -13,8 +13,9 @@ import difflib
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ecatcfg.eni.plan import CoeInitCmd, PdoDesc, PdoEntryDesc
-from ecatcfg.compiler import wiring
+from ecatcfg.eni.plan import CoeInitCmd, EoeInitCmd, PdoDesc, PdoEntryDesc
+from ecatcfg.eni.standard import Watchdogs
+from ecatcfg.compiler import eoe_params, watchdogs, wiring
 from ecatcfg.compiler.topology import (LoadedTopology, MappingEntry, MappingVariable, Sdo,
                                        Slave, TopologyError)
 from ecatcfg.errors import EcatcfgError
@@ -44,6 +45,8 @@ class ResolvedSlave:
     esi_cmds: list[CoeInitCmd] = field(default_factory=list)   # device + modules, user-edited
     user_cmds: list[CoeInitCmd] = field(default_factory=list)  # user SDOs replacing nothing
     module_cmds: list[CoeInitCmd] = field(default_factory=list)   # module ident list (0xF030)
+    eoe_cmds: list[EoeInitCmd] = field(default_factory=list)     # topology eoe: (IP params)
+    watchdog: Watchdogs | None = None        # topology watchdog: (slave's, else master's)
     remapped: set[int] = field(default_factory=set)
     pdo_prefix: dict[int, str] = field(default_factory=dict)  # module PDOs: "Module 2 (X)"
     module_dicts: list[tuple[int, Dictionary]] = field(default_factory=list)  # (offset, dic)
@@ -216,6 +219,11 @@ def _resolve(slave: ResolvedSlave, library: Library, errors: _Errors,
     _check_sm_sizes(slave, errors)          # after the mappings: they change the sizes
     slave.dc_mode = _dc_mode(slave, errors)
     _sdos(slave, modules, errors)
+    where = ("slaves", slave.index)
+    slave.eoe_cmds = eoe_params.init_cmds(slave.name, slave.device, slave.phys_addr,
+                                          slave.cfg.eoe, where, errors)
+    slave.watchdog = watchdogs.resolve(slave.name, slave.cfg.watchdog,
+                                       errors.loaded.topology.master.watchdog, where, errors)
 
 
 # -- modules ------------------------------------------------------------------------------

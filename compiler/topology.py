@@ -9,6 +9,7 @@ Schema); unknown keys are errors (a typo must not be silently ignored).
 
 from __future__ import annotations
 
+import ipaddress
 import json
 import re
 import sys
@@ -21,6 +22,7 @@ from pydantic import (AfterValidator, BaseModel, BeforeValidator, ConfigDict, Di
                       Field, Tag, ValidationError, WithJsonSchema, field_validator,
                       model_validator)
 
+from ecatcfg.eoe import DNS_NAME_SIZE
 from ecatcfg.errors import EcatcfgError
 from ecatcfg.esc import PORT_LETTERS, Transition
 from ecatcfg.esi.datatypes import bit_size as type_bits
@@ -168,6 +170,9 @@ class Master(_Model):
                           description="Master name in the ENI")
     cycle_time_us: CycleTime = Field(default=1000, description="Bus cycle in microseconds "
                                                        "(DC SYNC0 factor 1)")
+    watchdog: Watchdog | None = Field(
+        default=None, description="Watchdogs of every slave with an ESC (a slave's own keys "
+                                  "win); default: none written, the ESCs keep theirs")
     layout: Literal["lrw", "lrd_lwr"] = Field(
         default="lrw", description="lrw: one LRW per frame, outputs and inputs of a slave "
                                    "overlap (EC-Engineer style); lrd_lwr: separate LWR and "
@@ -265,6 +270,146 @@ MappingEntry = Annotated[
     Discriminator(_entry_form)]
 
 
+# -- EoE IP parameters and watchdogs (docs/compile.md "EoE IP parameters", "Watchdogs") -----
+
+_MAC = re.compile(r"[0-9A-Fa-f]{2}([:-])[0-9A-Fa-f]{2}(?:\1[0-9A-Fa-f]{2}){4}")
+MAC_AUTO = "auto"
+
+
+def _ipv4(value: Any) -> str:
+    """A dotted IPv4 address (the text is kept; the compiler converts it)."""
+    if not isinstance(value, str):
+        raise ValueError(f"an IPv4 address is written a.b.c.d, not {value!r}")
+    try:
+        ipaddress.IPv4Address(value.strip())
+    except ValueError as exc:
+        raise ValueError(f"{value!r} is not an IPv4 address: {exc}") from None
+    return value.strip()
+
+
+def _ip_interface(value: Any) -> str:
+    """An IPv4 address with an optional prefix length or netmask: 192.168.1.10/24,
+    192.168.1.10/255.255.255.0 or 192.168.1.10."""
+    if not isinstance(value, str):
+        raise ValueError(f"an IPv4 address is written a.b.c.d[/prefix], not {value!r}")
+    try:
+        ipaddress.IPv4Interface(value.strip())
+    except ValueError as exc:
+        raise ValueError(f"{value!r} is not an IPv4 address with an optional /prefix or "
+                         f"/netmask: {exc}") from None
+    mask = value.strip().partition("/")[2]
+    if "." in mask:
+        _netmask(mask)
+    return value.strip()
+
+
+def _netmask(value: Any) -> str:
+    text = _ipv4(value)
+    # Ones, then zeros (ipaddress would also take a host mask, 0.0.0.255).
+    zeros = ~int(ipaddress.IPv4Address(text)) & 0xFFFFFFFF
+    if zeros & (zeros + 1):
+        raise ValueError(f"{text!r} is not a netmask (ones, then zeros)")
+    return text
+
+
+def _mac(value: Any) -> str:
+    """Six bytes in hex, separated by ':' or '-', or ``auto``; a unicast address (the
+    group bit, bit 0 of the first byte, clear: IEEE 802)."""
+    if isinstance(value, int) and not isinstance(value, bool):
+        # YAML 1.1 reads 10:18:20:11:01:04 as a base-60 number.
+        raise ValueError("write the MAC address in quotes (YAML reads digits separated by "
+                         "':' as a base-60 number)")
+    if not isinstance(value, str):
+        raise ValueError(f"a MAC address is six hex bytes (02:00:00:00:03:e9), not {value!r}")
+    text = value.strip()
+    if text == MAC_AUTO:
+        return text
+    if not _MAC.fullmatch(text):
+        raise ValueError(f"{value!r} is not a MAC address (six hex bytes separated by ':' "
+                         "or '-', e.g. 02:00:00:00:03:e9), nor 'auto'")
+    if int(text[:2], 16) & 0x01:
+        raise ValueError(f"{text} is a group (multicast) address; a device's is unicast")
+    return text
+
+
+def _dns_name(value: str) -> str:
+    if not value.isascii() or not value.isprintable():
+        raise ValueError(f"{value!r}: a DNS name is printable ASCII")
+    if len(value) > DNS_NAME_SIZE:
+        raise ValueError(f"{value!r} has {len(value)} characters; the set IP parameter "
+                         f"request holds {DNS_NAME_SIZE} (ETG.1000.6)")
+    return value
+
+
+Ipv4 = Annotated[str, BeforeValidator(_ipv4),
+                 WithJsonSchema({"type": "string", "format": "ipv4"})]
+Ipv4Interface = Annotated[str, BeforeValidator(_ip_interface), WithJsonSchema(
+    {"type": "string", "pattern": r"^\s*[0-9.]+(/[0-9.]+)?\s*$"})]
+Netmask = Annotated[str, BeforeValidator(_netmask),
+                    WithJsonSchema({"type": "string", "format": "ipv4"})]
+Mac = Annotated[str, BeforeValidator(_mac), WithJsonSchema(
+    {"type": "string", "pattern": r"^\s*(auto|[0-9A-Fa-f]{2}([:-][0-9A-Fa-f]{2}){5})\s*$"})]
+
+
+class Eoe(_Model):
+    """EoE IP parameters of a slave: one set IP parameter request (ETG.1000.6 EoE) in
+    INIT->PREOP, written as EC-Engineer writes it.  Parameters left out are not set."""
+
+    ip: Ipv4Interface | None = Field(
+        default=None, description="IPv4 address, with the subnet as /prefix or /netmask "
+                                  "(192.168.1.10/24)")
+    subnet_mask: Netmask | None = Field(
+        default=None, description="Subnet mask, if not given with 'ip'")
+    gateway: Ipv4 | None = Field(default=None, description="Default gateway")
+    dns: Ipv4 | None = Field(default=None, description="DNS server")
+    dns_name: Annotated[str, AfterValidator(_dns_name), WithJsonSchema(
+        {"type": "string", "maxLength": DNS_NAME_SIZE})] | None = Field(
+        default=None, description=f"Host name (DNS name), at most {DNS_NAME_SIZE} characters")
+    mac: Mac | None = Field(
+        default=None, description="MAC address of the slave's EoE port; 'auto': "
+                                  "02:00:00:00 and the station address, as EC-Engineer "
+                                  "writes it")
+
+    @model_validator(mode="after")
+    def _consistent(self) -> Eoe:
+        if all(v is None for v in (self.ip, self.subnet_mask, self.gateway, self.dns,
+                                   self.dns_name, self.mac)):
+            raise ValueError("sets nothing: give ip, subnet_mask, gateway, dns, dns_name "
+                             "or mac")
+        if self.ip is not None and "/" in self.ip and self.subnet_mask is not None:
+            given = ipaddress.IPv4Interface(self.ip).netmask
+            if given != ipaddress.IPv4Address(self.subnet_mask):
+                raise ValueError(f"ip {self.ip} gives subnet mask {given}, subnet_mask says "
+                                 f"{self.subnet_mask}")
+        return self
+
+
+def _not_bool(value: Any) -> Any:
+    if isinstance(value, bool):
+        raise ValueError("expected a number, not true/false")
+    return value
+
+
+# A watchdog time in ms: a number (decimals allowed: 0.5), 0 = off.
+WatchdogMs = Annotated[float, Field(ge=0, allow_inf_nan=False), BeforeValidator(_not_bool)]
+
+
+class Watchdog(_Model):
+    """The ESC watchdogs, written in INIT->PREOP as TwinCAT and EC-Engineer write them
+    (registers 0x0400, 0x0410, 0x0420).  A key left out takes the master's value, else the
+    ESC's power-on value (divider 2498, 100 ms)."""
+
+    divider: Annotated[int, *_num(0, 0xFFFF)] | None = Field(
+        default=None, description="Register 0x0400 (TwinCAT: multiplier): time base "
+                                  "(divider + 2) x 40 ns; default 2498 = 100 us")
+    pdi_ms: WatchdogMs | None = Field(
+        default=None, description="PDI watchdog (0x0410) in ms, a whole number of time "
+                                  "bases; 0 = off; default 100")
+    sm_ms: WatchdogMs | None = Field(
+        default=None, description="SyncManager (process data) watchdog (0x0420) in ms, a "
+                                  "whole number of time bases; 0 = off; default 100")
+
+
 class Slave(_Model):
     """One slave; plugged into the slave before it unless it names its parent."""
 
@@ -309,6 +454,10 @@ class Slave(_Model):
                     "that takes several (a station's row of I/O modules, in order)")
     sdos: list[Sdo] = Field(default_factory=list)
     dc: str | None = Field(default=None, description="DC OpMode name from the ESI")
+    eoe: Eoe | None = Field(default=None, description="EoE IP parameters to set")
+    watchdog: Watchdog | None = Field(
+        default=None, description="Watchdogs to write ({}: the master's, else the "
+                                  "defaults); its keys win over the master's")
     parent: XmlText | None = Field(
         default=None, min_length=1,
         description="Name of the slave this one is plugged into (default: the nearest slave "

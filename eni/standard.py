@@ -25,6 +25,7 @@ from ecatcfg.eni.plan import DcPlan, InitCmd, Validate
 from ecatcfg.esc import (AL_ERROR_ACK, SII_PRODUCT_CODE, SII_VENDOR_ID, SM1_STATUS,
                          AlState, Cmd, FmmuConfig, FmmuType, Reg, SmConfig, Transition as T,
                          eeprom_read_request, fmmu_register, sm_register)
+from ecatcfg.esc import WATCHDOG_DIVIDER_DEFAULT, WATCHDOG_TIME_DEFAULT
 from ecatcfg.record import field, record
 
 # Default state-machine timeouts (ms) when the ESI's Info/StateMachine/Timeout gives none:
@@ -47,6 +48,18 @@ class PdSm:
     outputs: bool
     config: SmConfig
     op_only: bool = False
+
+
+@record(frozen=True)
+class Watchdogs:
+    """The ESC watchdog registers as the set-up writes them, in register units: the divider
+    (0x0400; time base (divider + 2) x 40 ns, ``esc.watchdog_base_ns``), the PDI watchdog
+    (0x0410) and the SM watchdog (0x0420) in that base, 0 = off.  The defaults are the ESC's
+    power-on values, which TwinCAT and EC-Engineer write for drives (eni-exports §3)."""
+
+    divider: int = WATCHDOG_DIVIDER_DEFAULT
+    pdi: int = WATCHDOG_TIME_DEFAULT
+    sm: int = WATCHDOG_TIME_DEFAULT
 
 
 @record(frozen=True)
@@ -74,6 +87,8 @@ class SlaveSetup:
     safeop_op_timeout: int = 0
     back_to_init_timeout: int = 0
     back_to_safeop_timeout: int = 0
+    # Watchdog registers to write in INIT->PREOP; None: none written (the ESC keeps its own).
+    watchdog: Watchdogs | None = None
 
 
 def pd_fmmu(logical_bit: int, bits: int, physical_start: int, kind: FmmuType) -> FmmuConfig:
@@ -213,6 +228,14 @@ def slave_init_cmds(slave: SlaveSetup) -> list[InitCmd]:
              validate=Validate(struct.pack("<H", slave.alias), None, EEPROM_TIMEOUT))
     c.ap([T.IP, *boot], "set physical address", Cmd.APWR, Reg.STATION_ADDRESS,
          struct.pack("<H", slave.phys_addr), cnt=1, requires="cycle")
+    if slave.watchdog is not None:
+        # Right after the address, FPWR, no Requires (EC-Engineer's Elmo and TwinCAT's
+        # Copley exports: eni-exports §3 I->P).
+        for comment, ado, value in (
+                ("set watchdog divider", Reg.WATCHDOG_DIVIDER, slave.watchdog.divider),
+                ("set PDI watchdog", Reg.WATCHDOG_PDI, slave.watchdog.pdi),
+                ("set SM watchdog", Reg.WATCHDOG_SM, slave.watchdog.sm)):
+            c.fp([T.IP], comment, Cmd.FPWR, ado, struct.pack("<H", value), cnt=1)
     c.fp([T.SP, T.OP], "set device state to PREOP", Cmd.FPWR, Reg.AL_CONTROL,
          _al(AlState.PREOP, ack), requires="cycle")
     c.cmds[-1].retries = PREOP_RETRIES

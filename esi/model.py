@@ -369,6 +369,9 @@ class EoeSettings:
     ip: bool | None = None
     mac: bool | None = None
     timestamp: bool | None = None
+    # Where the ESI's own EoE InitCmds are (ETG.2000 EoE/InitCmd: Transition, Type, Data):
+    # not implemented, so a compile that would lose them refuses the device.
+    init_cmds: list[Source] = field(default_factory=list)
 
 
 @dataclass(slots=True)

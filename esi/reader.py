@@ -420,7 +420,8 @@ class _Reader:
             return None if raw is None else self.bool_(raw, el, f"EoE/@{name}")
 
         return EoeSettings(self.src(el), ip=flag("IP"), mac=flag("MAC"),
-                           timestamp=flag("TimeStamp"))
+                           timestamp=flag("TimeStamp"),
+                           init_cmds=[self.src(ch) for ch in el if ch.tag == "InitCmd"])
 
     def coe(self, el: etree._Element) -> CoeSettings:
         g = el.get

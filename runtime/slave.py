@@ -32,6 +32,7 @@ from ecatcfg.esc import (AL_ERROR_ACK, AL_ID_REQUEST, AL_STATE_MASK, AL_STATUS_E
                          SM_ACTIVATE_REPEAT, SM_DIR_MASK, SM_MODE_MASK, SM_WATCHDOG_ENABLE,
                          AlState, AlStatusCode, FmmuConfig, FmmuType, Reg, fmmu_register,
                          sm_register)
+from ecatcfg.esc import WATCHDOG_DIVIDER_DEFAULT, WATCHDOG_TIME_DEFAULT, watchdog_base_ns
 from ecatcfg.esi.model import Device
 from ecatcfg.runtime.dc_clock import (SPEED_COUNTER_START, SPEED_FILTER_DEPTH,
                                       TIME_FILTER_DEPTH, DcClock)
@@ -49,8 +50,8 @@ PROCESS_RAM = 0x1000
 N_FMMU = 8
 N_SM = 8
 
-DEFAULT_WD_DIVIDER = 0x09C2        # (0x09C2 + 2) x 40 ns = 100 us watchdog time base
-DEFAULT_WD_TIME = 1000             # x 100 us = 100 ms
+DEFAULT_WD_DIVIDER = WATCHDOG_DIVIDER_DEFAULT     # (0x09C2 + 2) x 40 ns = 100 us time base
+DEFAULT_WD_TIME = WATCHDOG_TIME_DEFAULT           # x 100 us = 100 ms
 # SM control bits a slave checks against its own SM configuration: mode and direction.
 SM_MODE_AND_DIRECTION = SM_MODE_MASK | SM_DIR_MASK
 
@@ -676,7 +677,7 @@ class EmulatedSlave:
         divider, = struct.unpack_from("<H", self.mem, Reg.WATCHDOG_DIVIDER)
         time_units, = struct.unpack_from("<H", self.mem, Reg.WATCHDOG_SM)
         if watched and time_units:
-            self._watchdog_limit = time_units * (divider + 2) * 40e-9
+            self._watchdog_limit = time_units * watchdog_base_ns(divider) * 1e-9
 
     # -- AL state machine --------------------------------------------------------------------
 

@@ -187,6 +187,10 @@ CASES: list[Case] = [
     Case("ESI212", esi(drive(sm1=M + SM1.replace('DefaultSize="128"', 'MinSize="128"'))),
          esi(drive(sm1=SM1.replace('DefaultSize="128"', 'MinSize="64" DefaultSize="128"')))),
     Case("ESI213", esi(drive(sm0=M + SM0.replace('DefaultSize="128" ', ''))), esi()),
+    Case("ESI214", esi(drive(mailbox=MAILBOX.replace(
+        "<Mailbox>", f"<Mailbox><EoE>\n{M}<InitCmd><Transition>IP</Transition><Type>2</Type>"
+                     "<Data>0300000002000000000701000000</Data></InitCmd>\n</EoE>"))),
+         esi(drive(mailbox=MAILBOX.replace("<Mailbox>", "<Mailbox><EoE IP=\"1\"/>")))),
 
     Case("ESI301", esi(drive(mailbox=init_cmd("#x8001", "0100", mark=True))), esi()),
     Case("ESI302", esi(drive(mailbox=init_cmd("#x8000", "0100", "SO", mark=True))),

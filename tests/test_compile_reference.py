@@ -9,7 +9,9 @@ also the LRW working counter and the process-data sizes.
 
 Deliberate differences (asserted, so a change shows up):
 * EC-Engineer writes the watchdog divider, PDI and SM watchdog in I→P for the Elmo drive;
-  the ESI gives no values for them, so we leave the ESC's defaults.
+  the ESI gives no values for them, so without the topology's ``watchdog:`` we write none
+  (``tests/test_topology_settings.py`` compiles the same drive with it and gets the
+  export's commands).
 * EC-Engineer's cyclic frame also carries NOP 0x0900 and APWR 0x0910 (bus shift); ours has
   only the ARMW (the runtime adds what its DC mode needs), so the image is smaller.
 * TwinCAT writes I→B / B→I commands also for terminals without a bootstrap mailbox; we
@@ -106,8 +108,8 @@ def test_elmo_gold_matches_ec_engineer(tmp_path, corpus):
     assert _by_transition(_our_cmds(ours, 0x980, 0x9B0)) == \
         _by_transition(_reg_cmds(ref, 0x980, 0x9B0))
     # Every transition's register commands, in execution order, with the same bytes, except
-    # the watchdog writes EC-Engineer adds for drives (we keep the ESC defaults: the ESI
-    # gives no watchdog values).
+    # the watchdog writes EC-Engineer adds for drives (none without the topology's
+    # ``watchdog:``: the ESI gives no watchdog values).
     watchdogs = {"set watchdog divider", "set PDI watchdog", "set SM watchdog"}
     ref_all = [c for c in _reg_cmds(ref, 0, 0x10000) if c[0] not in watchdogs]
     assert _by_transition(_our_cmds(ours, 0, 0x10000)) == _by_transition(ref_all)

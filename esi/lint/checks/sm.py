@@ -250,3 +250,16 @@ def mailbox_without_size(dev: Device, ctx: FileContext) -> Iterator[Hit]:
         if sm.is_mailbox and not sm.virtual and not _has_size(sm):
             yield Hit(sm.source, f"{sm.type} Sm {sm.number} has no DefaultSize, MinSize or "
                       "MaxSize: the mailbox would be 0 bytes")
+
+
+@device_rule("ESI214", "error", "an EoE InitCmd ecatcfg does not send", """
+    ETG.2000 lets an ESI give EoE InitCmds (Mailbox/EoE/InitCmd: Transition, Type, Data) for
+    the master to send, but no public source says how their Type and Data are encoded, so
+    ecatcfg does not implement them: compile refuses the device rather than leave out what
+    its file asks for.  Set the device's IP parameters with the topology's 'eoe:' key
+    instead (docs/compile.md), and remove the InitCmd from a file ecatcfg is to use.""")
+def eoe_init_cmds(dev: Device, ctx: FileContext) -> Iterator[Hit]:
+    eoe = dev.mailbox.eoe if dev.mailbox else None
+    for source in eoe.init_cmds if eoe else []:
+        yield Hit(source, "an EoE InitCmd: ecatcfg does not implement them; compile refuses "
+                  "the device (set IP parameters with the topology's 'eoe:')")
