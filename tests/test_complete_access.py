@@ -23,8 +23,10 @@ from pathlib import Path
 import pytest
 
 from conftest import MAILBOX_PD_SMS, device_xml, esi_xml, write
+from rig import start_simulate
 from test_apply import check_pcap
 from test_sdo_server import SI0, Slave, sub
+from test_soem import soem
 
 from ecatcfg.eni import reader as eni_reader
 from ecatcfg.esi.reader import read_bytes
@@ -153,3 +155,19 @@ def test_a_slave_from_the_eni_alone_takes_it_too(compiled):
     od.write(0x8000, 1, IMAGE_FROM_1, None, complete_access=True)
     assert od.read(0x8000, 1, None, complete_access=True) == IMAGE_FROM_1
     assert od.int_value(0x8000, 0) == 1
+
+
+def test_soem_writes_and_reads_from_subindex_1_on_simulate(veth_netns, pysoem_module,
+                                                             tmp_path):
+    """SOEM, an independent master, downloads the settings with its own complete access
+    from subindex 1 to ``ecatcfg simulate`` and reads them back the same way, then from
+    subindex 0 (SI0 and its pad byte first)."""
+    esi = write(tmp_path, "ca.xml", esi_xml(device_xml("CA1", body=SETTINGS)))
+    topo = write(tmp_path, "line.yaml", "slaves:\n  - {name: rtd, device: CA1}\n")
+    sim, lines = start_simulate(veth_netns, "--esi", str(esi), "--topology", str(topo))
+    assert lines and lines[-1].startswith("ready:"), "".join(lines) + sim.stderr.read()
+    report = soem(veth_netns, {"ca_write": [[0, 0x8000, 1, IMAGE_FROM_1.hex()]],
+                               "ca_read": [[0, 0x8000, 1], [0, 0x8000, 0]], "cycles": 2})
+    sim.terminate()
+    sim.communicate(timeout=10)
+    assert report["ca_read"] == [IMAGE_FROM_1.hex(), "1200" + IMAGE_FROM_1.hex()]
