@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING
 from ecatcfg.esc import (DETECTED_MODULE_IDENT_LIST, MIN_MAILBOX_SIZE, MODULE_IDENT_LIST,
                          Reg, is_pdo_object)
 from ecatcfg.esi import sii
-from ecatcfg.esi.coe import has_coe
+from ecatcfg.esi.coe import dictionary_with_objects, has_coe
 from ecatcfg.eni.plan import NetworkPlan, PdoDesc, SlavePlan
 from ecatcfg.esi.model import Device, Module, Pdo, PdoEntry, Slots
 from ecatcfg.esi.slots import ident_list_from_writes, plug_positions, with_modules
@@ -240,6 +240,11 @@ def specs_from_eni(plan: NetworkPlan, library: Library | None, shown: str) -> li
                 # Modules the ENI does not name: accept the objects its startup SDOs write.
                 extra = tuple(Write(c.index, c.subindex, c.data) for c in coe
                               if not c.complete_access and not is_pdo_object(c.index))
+        elif has_coe(device) and dictionary_with_objects(device) is None:
+            # An ESI without an object dictionary says nothing of the objects the device
+            # has: it takes what the ENI's CoE InitCmds write, as a slave from the ENI alone.
+            extra = tuple(Write(c.index, c.subindex, c.data, c.complete_access) for c in coe
+                          if not c.disabled and c.ccs == 1 and not is_pdo_object(c.index))
         specs.append(SlaveSpec(device, s.name, serial=s.serial_no, alias=alias,
                                device_id=device_id, extra_writes=extra,
                                plug=plugs[len(specs)]))

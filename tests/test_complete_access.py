@@ -171,3 +171,26 @@ def test_soem_writes_and_reads_from_subindex_1_on_simulate(veth_netns, pysoem_mo
     sim.terminate()
     sim.communicate(timeout=10)
     assert report["ca_read"] == [IMAGE_FROM_1.hex(), "1200" + IMAGE_FROM_1.hex()]
+
+
+def test_a_device_whose_esi_has_no_dictionary_takes_it(tmp_path):
+    """Its ESI declares CoE but no object dictionary: nothing says the object is missing, so
+    the emulated device takes the ENI's download (it used to abort with 0x06020000) and
+    keeps its bytes."""
+    bare = SETTINGS[SETTINGS.index("</Profile>") + len("</Profile>"):]
+    esi = write(tmp_path, "bare.xml", esi_xml(device_xml("CA1", body=bare)))
+    full = write(tmp_path, "ca.xml", esi_xml(device_xml("CA1", body=SETTINGS)))
+    topo = write(tmp_path, "line.yaml", TOPOLOGY)
+    eni = tmp_path / "line.eni.xml"
+    done = subprocess.run([sys.executable, "-m", "ecatcfg", "compile", str(topo), "--esi",
+                           str(full), "-o", str(eni), "--no-cache"], capture_output=True,
+                          text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    rc, report, err = _apply(eni, "--esi", str(esi), "--no-cache")
+    assert rc == 0 and report["slaves"][0]["highest_state"] == "OP", err
+    plan = eni_reader.read_file(eni)
+    from ecatcfg.esi.library import Library
+    [spec] = emulate.specs_from_eni(plan, Library([esi], cache=False), "line.eni.xml")
+    assert spec.eni_only is None and spec.extra_writes
+    slave = emulate.emulated_slave(spec)
+    assert slave.od is not None and 0x8000 in slave.od
