@@ -196,6 +196,11 @@ AL_STATUS_ID = 0x20           # AL status bit 5: device identification loaded (i
 # register description, AL Control 0x0120 and AL Status 0x0130 notes; Section I "Device
 # Emulation").  Loaded from SII word 0 (ESI Eeprom/ConfigData byte 1).
 ESC_DEVICE_EMULATION = 0x01
+# ESC configuration 0x0141 bits 2 and 3: the DC SYNC output unit and the DC latch input unit
+# are enabled (Beckhoff ESC Section II, ESC Configuration 0x0141: "0: disabled (power
+# saving)").  Loaded from SII word 0 like bit 0.
+ESC_DC_SYNC_UNIT = 0x04
+ESC_DC_LATCH_UNIT = 0x08
 # PDI control 0x0140: the process data interface.  0x04 = digital I/O, the PDI of simple
 # terminals (EL1xxx, EL2xxx): the ESC drives the I/O pins from process memory itself
 # (ESC Section II, PDI Control 0x0140).

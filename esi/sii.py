@@ -754,17 +754,20 @@ def _pdo_category(pdos: list[Pdo], strings: _Strings, device: Device, names: int
 def _dc(opmodes: list[DcOpMode], strings: _Strings, names: int) -> bytes:
     out = bytearray()
     for mode in current_modes(opmodes):
-        name, desc = (mode.name, mode.desc) if names > NAMES_NONE else (None, None)
+        # The name only: the real NI 9144 and EL2262 images leave the description string
+        # index 0 although their ESIs give every mode a Desc.
+        name = mode.name if names > NAMES_NONE else None
         sync0_factor = mode.cycle_time_sync0_factor
         if sync0_factor is None:
             # No factor: the cycle time is absolute, or (not given either) the bus cycle.
-            # The NI 9144, AKD and SOES images write 1 for a mode without one (DcOff).
+            # The real NI 9144 images write 1 for their DcOff mode, which has no
+            # CycleTimeSync0 in the ESI (as the AKD's and SOES's images for theirs).
             sync0_factor = 0 if mode.cycle_time_sync0 else 1
         out += DC_MODE.pack(
             (mode.cycle_time_sync0 or 0) & 0xFFFFFFFF, (mode.shift_time_sync0 or 0) & 0xFFFFFFFF,
             (mode.shift_time_sync1 or 0) & 0xFFFFFFFF,
             _i16(mode.cycle_time_sync1_factor), (mode.assign_activate or 0) & 0xFFFF,
-            _i16(sync0_factor), strings.add(name), strings.add(desc))
+            _i16(sync0_factor), strings.add(name), 0)
     return bytes(out)
 
 

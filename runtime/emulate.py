@@ -15,11 +15,11 @@ from typing import TYPE_CHECKING
 from ecatcfg.esc import (DETECTED_MODULE_IDENT_LIST, MIN_MAILBOX_SIZE, MODULE_IDENT_LIST,
                          Reg, is_pdo_object)
 from ecatcfg.esi import sii
-from ecatcfg.esi.coe import has_coe
+from ecatcfg.esi.coe import dictionary_with_objects, has_coe
 from ecatcfg.eni.plan import NetworkPlan, PdoDesc, SlavePlan
 from ecatcfg.esi.model import Device, Module, Pdo, PdoEntry, Slots
 from ecatcfg.esi.slots import ident_list_from_writes, plug_positions, with_modules
-from ecatcfg.runtime.esc_chips import chip_for
+from ecatcfg.runtime.esc_chips import chip_for, chip_of
 from ecatcfg.runtime.segment import Faults, VirtualSegment
 from ecatcfg.runtime.slave import EmulatedSlave
 from ecatcfg.runtime.wiring import Plug, Wiring, eni_plugs
@@ -74,9 +74,10 @@ def emulated_slave(spec: SlaveSpec) -> EmulatedSlave:
         from ecatcfg.runtime.objects import ObjectDictionary
         od = ObjectDictionary.from_device(dev)
         esi_cmds = dev.mailbox.coe.init_cmds if dev.mailbox and dev.mailbox.coe else []
-        _add_written_objects(od, [Write(c.index, c.subindex or 0, c.data) for c in esi_cmds
-                                  if c.index is not None and c.data is not None
-                                  and not c.complete_access] + list(spec.extra_writes))
+        _add_written_objects(od, [Write(c.index, c.subindex or 0, c.data, c.complete_access)
+                                  for c in esi_cmds
+                                  if c.index is not None and c.data is not None]
+                             + list(spec.extra_writes))
         if dev.plugged:
             _detected_modules(od, list(dev.plugged))
     # One too small for an SDO (lint ESI204, ESI213): no mailbox server, as such firmware
@@ -92,7 +93,7 @@ def emulated_slave(spec: SlaveSpec) -> EmulatedSlave:
             mailbox.eoe = EoeServer(dev.mailbox.eoe, sizes[1])
     image = sii.build(dev, serial=spec.serial, alias=spec.alias)
     slave = EmulatedSlave(dev, image, name=spec.name, od=od, mailbox=mailbox,
-                          chip=chip_for(dev.vendor.id, dev.product_code),
+                          chip=chip_of(dev, chip_for(dev.vendor.id, dev.product_code)),
                           device_id=spec.device_id)
     slave.eni_only = spec.eni_only
     return slave
@@ -107,7 +108,11 @@ def _add_written_objects(od: ObjectDictionary, writes: list[Write]) -> None:
     8 bytes as an unsigned number of that size, other lengths as an octet string of that
     length, and an entry written with several lengths as a variable-length one.  A complete
     access to an object not described splits its data into equal entries after subindex 0
-    (which travels in a 16-bit slot, ETG.1000.6 complete access)."""
+    (which travels in a 16-bit slot, ETG.1000.6 complete access); one from subindex 1
+    (ETG.1000.6 allows 0 or 1; TwinCAT writes a terminal's settings record that way)
+    carries no count, so its data becomes one octet-string entry, subindex 1, that a
+    complete access from subindex 1 writes and reads back whole (our choice: nothing says
+    how the bytes split into entries)."""
     from ecatcfg.runtime.objects import OdEntry, OdObject
 
     sizes: dict[tuple[int, int], set[int]] = {}
@@ -115,7 +120,11 @@ def _add_written_objects(od: ObjectDictionary, writes: list[Write]) -> None:
         if w.index in od and not w.complete_access and w.subindex in od[w.index].entries:
             continue
         if w.complete_access:
-            if w.index in od or w.subindex != 0 or len(w.data) < 2:
+            if w.index in od or w.subindex > 1 or len(w.data) < 2 - w.subindex:
+                continue
+            if w.subindex == 1:
+                sizes.setdefault((w.index, 1), set()).add(len(w.data))
+                sizes.setdefault((w.index, 0), set()).add(1)
                 continue
             count, body = w.data[0], w.data[2:]
             if count and len(body) % count == 0:
@@ -236,6 +245,11 @@ def specs_from_eni(plan: NetworkPlan, library: Library | None, shown: str) -> li
                 # Modules the ENI does not name: accept the objects its startup SDOs write.
                 extra = tuple(Write(c.index, c.subindex, c.data) for c in coe
                               if not c.complete_access and not is_pdo_object(c.index))
+        elif has_coe(device) and dictionary_with_objects(device) is None:
+            # An ESI without an object dictionary says nothing of the objects the device
+            # has: it takes what the ENI's CoE InitCmds write, as a slave from the ENI alone.
+            extra = tuple(Write(c.index, c.subindex, c.data, c.complete_access) for c in coe
+                          if not c.disabled and c.ccs == 1 and not is_pdo_object(c.index))
         specs.append(SlaveSpec(device, s.name, serial=s.serial_no, alias=alias,
                                device_id=device_id, extra_writes=extra,
                                plug=plugs[len(specs)]))

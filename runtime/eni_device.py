@@ -37,9 +37,10 @@ import re
 import struct
 from dataclasses import dataclass, field
 
-from ecatcfg.esc import (FMMU_SIZE, RX_PDO_MAPPING, SM1_STATUS, SM_DIR_ECAT_WRITES, SM_DIR_MASK,
-                         SM_PDO_ASSIGN, SM_PDO_ASSIGN_RANGE, SM_SIZE, TX_PDO_MAPPING, Cmd,
-                         FmmuConfig, FmmuType, Reg, SmConfig, Transition, array_downloads)
+from ecatcfg.esc import (ESC_DC_LATCH_UNIT, ESC_DC_SYNC_UNIT, FMMU_SIZE, RX_PDO_MAPPING,
+                         SM1_STATUS, SM_DIR_ECAT_WRITES, SM_DIR_MASK, SM_PDO_ASSIGN,
+                         SM_PDO_ASSIGN_RANGE, SM_SIZE, TX_PDO_MAPPING, Cmd, FmmuConfig, FmmuType,
+                         Reg, SmConfig, Transition, array_downloads)
 from ecatcfg.eni.plan import (CoeInitCmd, NetworkPlan, PdoDesc, SlavePlan,
                               register_writes)
 from ecatcfg.esi.model import (CoeSettings, Dc, DcOpMode, Device, Eeprom, EoeSettings, Fmmu,
@@ -53,6 +54,9 @@ from ecatcfg.esi.model import (CoeSettings, Dc, DcOpMode, Device, Eeprom, EoeSet
 CONFIG_DEVICE_EMULATION = 0x0104
 CONFIG_NO_PDI = 0x0100
 CONFIG_FIRMWARE = 0x0008
+# SII word 0 bits 10 and 11 (0x0141 bits 2 and 3): the DC SYNC output and latch input units
+# enabled, as an EK1100's 0x0D00 has them.
+CONFIG_DC_UNITS = (ESC_DC_SYNC_UNIT | ESC_DC_LATCH_UNIT) << 8
 _MAX_ENTRY_BITS = 0xFF              # a mapping entry's length field (one byte)
 _LANGUAGE = 1033
 
@@ -100,6 +104,10 @@ def device_from_eni(slave: SlavePlan, plan: NetworkPlan, file: str) -> Device:
                   else CONFIG_DEVICE_EMULATION if any(sm.type in ("Outputs", "Inputs")
                                                       for sm in sms)
                   else CONFIG_NO_PDI)
+        if dc is not None:
+            # The ENI runs the slave's DC unit: its ESC configuration enables it (the rule
+            # runtime/esc_chips.py reads back).
+            config |= CONFIG_DC_UNITS
     profiles = [Profile(source, profile_no=no) for no, _ in
                 (slave.mailbox.coe_profiles if slave.mailbox else [])[:1]]
     return Device(

@@ -9,13 +9,20 @@ ESCs that have it).
 
 :data:`KNOWN` records the chip of the devices whose real replies we have, each with the
 public capture that shows it.  Every other device gets :data:`GENERIC`, the most capable
-ESC (the ET1100's 8 FMMUs and 8 SyncManagers, a DC unit), with RAM up to the end of the
-address space so any SyncManager address an ESI gives fits.
+ESC (the ET1100's 8 FMMUs and 8 SyncManagers), with RAM up to the end of the address space
+so any SyncManager address an ESI gives fits, and a DC unit where its description says the
+device's ESC runs one (:func:`has_dc_unit`).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING
+
+from ecatcfg.esc import ESC_DC_LATCH_UNIT, ESC_DC_SYNC_UNIT
+
+if TYPE_CHECKING:
+    from ecatcfg.esi.model import Device
 
 
 @dataclass(frozen=True, slots=True)
@@ -80,3 +87,51 @@ KNOWN: dict[tuple[int, int], EscChip] = {
 def chip_for(vendor: int | None, product: int | None) -> EscChip:
     """The ESC of a device: the one its real replies show, else :data:`GENERIC`."""
     return KNOWN.get((vendor or 0, product or 0), GENERIC)
+
+
+def esc_configuration(device: Device) -> int | None:
+    """ESC configuration 0x0141 as the device's SII loads it: byte 1 of SII word 0, i.e. of
+    the ESI's ``Eeprom/ConfigData`` (or of a whole ``Eeprom/Data`` image); None when the
+    ESI gives neither."""
+    eeprom = device.eeprom
+    if eeprom is None:
+        return None
+    for data in (eeprom.config_data, eeprom.data):
+        if data is not None and len(data) >= 2:
+            return data[1]
+    return None
+
+
+def has_dc_unit(device: Device) -> bool:
+    """Whether the device's ESC runs a DC system-time unit (0x0910-0x09FF), from what its
+    ESI (and so its SII) says:
+
+    1. a DC op mode with a non-zero ``AssignActivate``: the master writes it to the SYNC
+       activation registers 0x0980-0x0981 (ETG.2000 ``Dc/OpMode``; the SII DC category
+       carries it, ETG.2010), which only an ESC with a DC unit has;
+    2. else the ESC configuration the SII loads into 0x0141: the DC SYNC output or latch
+       input unit enabled (bit 2 or 3; ESC Section II, 0x0141, where 0 means "disabled,
+       power saving").  A real EK1100 loads 0x0D and runs its DC unit; a real EK1914
+       (0x00), EL1004 and EL2828 (0x01) give no working counter for 0x0910-0x09FF;
+    3. an ESI that gives no ESC configuration at all says nothing either way: the most
+       capable ESC, with a DC unit.
+
+    The rule cannot see every chip: a real EL2889 runs a DC unit with 0x0141 = 0x01 and no
+    DC op mode, so :data:`KNOWN` keeps what its capture shows (docs/protocol-notes.md §2).
+    The feature register 0x0008 is the chip's and keeps bit 2 either way, as on those
+    real EK1914s, EL1004s and EL2828s."""
+    modes = device.dc.opmodes if device.dc is not None else []
+    if any(mode.assign_activate for mode in modes):
+        return True
+    config = esc_configuration(device)
+    return config is None or bool(config & (ESC_DC_SYNC_UNIT | ESC_DC_LATCH_UNIT))
+
+
+def chip_of(device: Device, chip: EscChip) -> EscChip:
+    """The ESC an emulated ``device`` gets: ``chip`` (from :func:`chip_for`) when a capture
+    shows the device's own, else :data:`GENERIC` with the DC unit its description gives."""
+    if chip is not GENERIC or has_dc_unit(device):
+        return chip
+    return replace(GENERIC, dc_unit=False,
+                   source="no capture of this device: the most capable ESC, without the "
+                          "DC unit its ESC configuration leaves off")

@@ -78,6 +78,9 @@ class OdEntry:
     mappable: str = ""            # "R" (RxPDO), "T" (TxPDO) or both
     min_value: int | None = None
     max_value: int | None = None
+    # Where the entry sits in the object's complete-access image (ESI DataType SubItem
+    # BitOffs, counted from subindex 0); None: packed by the rule in ObjectDictionary._layout.
+    bit_offset: int | None = None
 
     @property
     def kind(self) -> str:
@@ -185,15 +188,16 @@ def _signed_bound(value: int | None, bits: int, signed: bool) -> int | None:
 class _EntrySpec:
     """A subentry as the dictionary's data types describe it, before values are set."""
 
-    __slots__ = ("subindex", "name", "type", "bit_size", "flags")
+    __slots__ = ("subindex", "name", "type", "bit_size", "flags", "bit_offset")
 
     def __init__(self, subindex: int, name: str, type_: str, bit_size: int | None,
-                 flags: ObjectFlags | None) -> None:
+                 flags: ObjectFlags | None, bit_offset: int | None = None) -> None:
         self.subindex = subindex
         self.name = name
         self.type = type_
         self.bit_size = bit_size
         self.flags = flags
+        self.bit_offset = bit_offset
 
 
 def _object_layout(dic: Dictionary, obj: DictObject) -> tuple[bool, list[_EntrySpec]]:
@@ -223,7 +227,8 @@ def _object_layout(dic: Dictionary, obj: DictObject) -> tuple[bool, list[_EntryS
             etype, esize = _resolve_type(dic, item.type)
             if item.bit_size is not None:
                 esize = item.bit_size
-            specs.append(_EntrySpec(sub, item.name, etype, esize, item.flags or obj.flags))
+            specs.append(_EntrySpec(sub, item.name, etype, esize, item.flags or obj.flags,
+                                    item.bit_offset))
             last = max(last, sub)
         if not any(s.subindex == 0 for s in specs):
             specs.insert(0, _EntrySpec(0, "SubIndex 000", "USINT", 8, obj.flags))
@@ -301,7 +306,7 @@ def _entry_from_spec(spec: _EntrySpec, info: ObjectInfo | None,
                      defaults: set[int]) -> OdEntry:
     mode, reads, writes = _access(spec.flags)
     entry = OdEntry(spec.subindex, spec.name, spec.type, max(spec.bit_size or 0, 0), b"",
-                    mode, reads, writes, _mappable(spec.flags))
+                    mode, reads, writes, _mappable(spec.flags), bit_offset=spec.bit_offset)
     raw = _default(info, entry.kind, entry.byte_size)
     if raw is not None:
         defaults.add(spec.subindex)
@@ -339,6 +344,7 @@ def _standard(entry: OdEntry, type_: str, bits: int) -> None:
         entry.type, entry.bit_size = type_, bits
         entry.value = _fit(entry.value, (bits + 7) // 8)
         entry.min_value = entry.max_value = None
+        entry.bit_offset = None               # the ESI's record layout no longer applies
 
 
 class _Builder:
@@ -777,7 +783,10 @@ class ObjectDictionary:
             if entry.kind == "string" or entry.variable_length:
                 raise SdoAbort(ABORT_CA_NOT_SUPPORTED, obj.index, sub)
             return [entry]
-        self._sub(obj, sub)
+        if sub == 0 or not any(s >= 1 for s in obj.entries):
+            self._sub(obj, sub)
+        # From subindex 1: the entries from 1 on, also when the ESI declares no subindex 1
+        # (a record whose first bits are reserved, as many Beckhoff settings objects).
         last = min(obj.count, obj.max_subindex) if upload else obj.max_subindex
         entries = [e for s, e in obj.entries.items() if sub <= s and (s == 0 or s <= last)]
         if any(e.variable_length for e in entries):
@@ -787,9 +796,21 @@ class ObjectDictionary:
     @staticmethod
     def _layout(obj: OdObject,
                 entries: list[OdEntry]) -> tuple[list[tuple[OdEntry, int, int]], int]:
-        """(entry, bit offset, bit length on the wire): SI0 takes 16 bits unless the object
-        is a variable, bit-sized entries are packed, the others start on a byte boundary
-        (SOES ``complete_access_subindex_loop``)."""
+        """(entry, bit offset, bit length on the wire) and the total bits.
+
+        Where the ESI places every entry of a record (DataType SubItem BitOffs, consistent:
+        SI0 at 0, the others from bit 16 on, none overlapping), the image follows it, gaps
+        included: the bits of subindices the ESI does not describe are the device's
+        reserved bits, and a configurator writes the record as the ESI lays it out (a
+        complete access from subindex 1 starts at the record's bit 16).  Otherwise SI0
+        takes 16 bits unless the object is a variable, bit-sized entries are packed, the
+        others start on a byte boundary (SOES ``complete_access_subindex_loop``)."""
+        placed = ObjectDictionary._placed(obj)
+        if placed is not None and entries:
+            start = 0 if entries[0].subindex == 0 else 16
+            out = [(e, placed[e.subindex] - start, 8 if e.subindex == 0 else e.bit_size)
+                   for e in entries]
+            return out, max(off + bits for _, off, bits in out)
         out = []
         pos = 0
         for e in entries:
@@ -802,6 +823,24 @@ class ObjectDictionary:
             out.append((e, pos, e.bit_size))
             pos += e.bit_size
         return out, pos
+
+    @staticmethod
+    def _placed(obj: OdObject) -> dict[int, int] | None:
+        """Subindex -> BitOffs when the ESI gives a consistent one for every entry of the
+        record, else None."""
+        if obj.variable or any(e.bit_offset is None for e in obj.entries.values()):
+            return None
+        end = 0
+        placed: dict[int, int] = {}
+        for sub, e in obj.entries.items():                  # in subindex order
+            off = e.bit_offset
+            assert off is not None
+            if (sub == 0) != (off == 0) or (sub > 0 and off < 16) or off < end \
+                    or e.variable_length:
+                return None
+            placed[sub] = off
+            end = off + (16 if sub == 0 else e.bit_size)
+        return placed
 
     def _read_complete(self, obj: OdObject, sub: int, state: AlState | None) -> bytes:
         entries = self._ca_entries(obj, sub, upload=True)

@@ -65,6 +65,11 @@ def main() -> None:
         result["sizes"] = [(len(s.output), len(s.input)) for s in master.slaves]
         result["read"] = [master.slaves[n].sdo_read(index, sub).hex()
                           for n, index, sub in options.get("read", [])]
+        # Complete access (SOEM's own request, from subindex 0 or 1), written then read.
+        for n, index, sub, data in options.get("ca_write", []):
+            master.slaves[n].sdo_write(index, sub, bytes.fromhex(data), ca=True)
+        result["ca_read"] = [master.slaves[n].sdo_read(index, sub, ca=True).hex()
+                             for n, index, sub in options.get("ca_read", [])]
         if options.get("dc"):
             result["dc"] = bool(master.config_dc())
             result["delays"] = [struct.unpack("<I", s._fprd(0x0928, 4))[0]

@@ -591,7 +591,7 @@ def test_full_device(tmp_path):
                                                                          (0x03, 16)]
     assert [(m.name, m.desc, m.assign_activate, m.sync0_cycle_factor, m.shift_time0,
              m.sync1_cycle_factor, m.shift_time1) for m in img.dc] == [
-        ("DcOff", "free run", 0, 1, 0, 0, 0), ("DcSync", None, 0x300, 1, 1000, -2, 500)]
+        ("DcOff", None, 0, 1, 0, 0, 0), ("DcSync", None, 0x300, 1, 1000, -2, 500)]
     # The explicit device-specific category is copied (first, padded to a word); the
     # explicit SYNCM is not: the generated one describes the Sm elements.
     assert img.categories[0].type == 1 and img.other_categories == [(1, b"\x0a\x0b\x0c\x00")]
