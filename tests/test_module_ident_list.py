@@ -282,3 +282,59 @@ def test_a_read_only_pdo_assignment_is_kept_as_the_slave_has_it(tmp_path):
     with pytest.raises(TopologyError) as err:
         _compile_text(tmp_path, text, "    rx_pdos: [0x1600, 0x1601]\n")
     assert "t.yaml:4" in str(err.value) and "0x1C12" in str(err.value), str(err.value)
+
+
+# -- what a download writes: strings written shorter, CompleteAccess from subindex 1 -------
+
+def _string_and_record_profile() -> str:
+    """The reference drive's dictionary with a STRING(8) 0x8010 and a record 0x8020 whose
+    entries start at subindex 4 (as Beckhoff's IO-Link settings 0x80n0 do)."""
+    from lint_fixtures import PROFILE
+    return PROFILE.replace("</DataTypes>", (
+        "<DataType><Name>STRING(8)</Name><BitSize>64</BitSize></DataType>"
+        "<DataType><Name>DT8020</Name><BitSize>48</BitSize>"
+        "<SubItem><SubIdx>0</SubIdx><Name>Count</Name><Type>USINT</Type><BitSize>8</BitSize>"
+        "<BitOffs>0</BitOffs><Flags><Access>ro</Access></Flags></SubItem>"
+        "<SubItem><SubIdx>4</SubIdx><Name>Id</Name><Type>DINT</Type><BitSize>32</BitSize>"
+        "<BitOffs>16</BitOffs><Flags><Access>rw</Access></Flags></SubItem></DataType>"
+        "</DataTypes>")).replace("</Objects>", (
+            "<Object><Index>#x8010</Index><Name>Name</Name><Type>STRING(8)</Type><BitSize>64"
+            "</BitSize><Flags><Access>rw</Access></Flags></Object>"
+            "<Object><Index>#x8020</Index><Name>Settings</Name><Type>DT8020</Type><BitSize>48"
+            "</BitSize></Object></Objects>"))
+
+
+@pytest.mark.parametrize("index, data, complete, rule", [
+    ("#x8010", "414243", False, None),                  # a string written shorter: fits
+    ("#x8010", "414243444546474849", False, "ESI304"),  # longer than STRING(8)
+    ("#x8010", "", False, "ESI304"),                    # empty
+    ("#x8000", "01000000", False, "ESI304"),            # a UINT given four bytes
+    ("#x8020", "00000000", True, None),                 # whole record from subindex 1
+])
+def test_what_a_download_writes(tmp_path, index, data, complete, rule):
+    attrs = ' CompleteAccess="1"' if complete else ""
+    cmd = (f"<InitCmd{attrs}><Transition>PS</Transition>"
+           f"<Index>{index}</Index><SubIndex>{1 if complete else 0}</SubIndex>"
+           f"<Data>{data}</Data></InitCmd>")
+    path = tmp_path / "d.xml"
+    path.write_text(esi(drive(profile=_string_and_record_profile(), mailbox=(
+        f'<Mailbox><CoE SdoInfo="1" PdoAssign="1" CompleteAccess="1">{cmd}</CoE></Mailbox>'))))
+    assert [f.rule for f in _lint(path, "ESI3")] == ([rule] if rule else [])
+
+
+def test_the_emulated_slave_takes_what_lint_lets_through(tmp_path):
+    """The same length rule answers on the wire: a shorter string is taken (the rest NULs),
+    a longer one refused with 0x06070012, a number of the wrong size with 0x06070010."""
+    from ecatcfg.runtime import emulate
+    from ecatcfg.runtime.mailbox import SdoAbort
+    path = tmp_path / "d.xml"
+    path.write_text(esi(drive(profile=_string_and_record_profile())))
+    device = Library([path], cache=False)
+    od = emulate.emulated_slave(emulate.SlaveSpec(device.device(device.entries[0]), "d")).od
+    assert od is not None
+    od.write(0x8010, 0, b"ABC", AlState.PREOP)
+    assert od.read(0x8010, 0, AlState.PREOP) == b"ABC" + bytes(5)
+    for index, data, code in ((0x8010, b"ABCDEFGHI", 0x06070012), (0x8000, bytes(4), 0x06070010)):
+        with pytest.raises(SdoAbort) as err:
+            od.write(index, 0, data, AlState.PREOP)
+        assert err.value.code == code
