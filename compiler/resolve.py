@@ -320,7 +320,7 @@ def _module_ident_list(slave: ResolvedSlave, modules: list[PluggedModule],
                    for n, ident in enumerate(idents, start=1)]
                 + [CoeInitCmd([transition], f"{comment}: count", MODULE_IDENT_LIST, 0,
                               bytes([len(idents)]), fixed=True)])
-    refused = [why for c in cmds for why in refusals(slave, c)]
+    refused = [why for c in cmds for why in _refusals(slave, c)]
     if refused:
         errors.add(f"slave {slave.name!r}: the ESI of {dev.type_name} asks for the module "
                    f"ident list download (Slots DownloadModuleIdentList, {dev.slots.source}) "
@@ -343,7 +343,7 @@ def kept_by_dictionary(slave: ResolvedSlave, index: int) -> str | None:
     return write_refusal(found, "PreOp") if isinstance(found, DictEntry) else None
 
 
-def refusals(slave: ResolvedSlave, cmd: CoeInitCmd) -> list[str]:
+def _refusals(slave: ResolvedSlave, cmd: CoeInitCmd) -> list[str]:
     """Why the slave's dictionary refuses ``cmd`` in the transitions it runs in: one text
     per refused transition naming the object, the transition and the access
     (``esi/coe.py`` ``write_refusal``); empty when every download may be made or the
@@ -636,7 +636,7 @@ def _sdos(slave: ResolvedSlave, modules: list[PluggedModule], errors: _Errors) -
     esi = []
     for c, offset, owner in given:
         cmd = _coe_cmd(c, offset)
-        refused = refusals(slave, cmd)
+        refused = _refusals(slave, cmd)
         if refused:
             # The slave would refuse it and stop in that transition: the ESI contradicts
             # its own dictionary, which lint reports as ESI302.
@@ -666,7 +666,7 @@ def _sdos(slave: ResolvedSlave, modules: list[PluggedModule], errors: _Errors) -
         cmd = CoeInitCmd([user.transition], user.comment or _sdo_comment(
             dic, local, user.index, user.subindex), user.index, user.subindex, data,
             complete_access=user.complete_access)
-        refused = refusals(slave, cmd)
+        refused = _refusals(slave, cmd)
         if refused:
             errors.add(f"slave {slave.name!r}: {refused[0]}", *where)
             continue

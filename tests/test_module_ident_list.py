@@ -338,3 +338,26 @@ def test_the_emulated_slave_takes_what_lint_lets_through(tmp_path):
         with pytest.raises(SdoAbort) as err:
             od.write(index, 0, data, AlState.PREOP)
         assert err.value.code == code
+
+
+def test_lint_of_the_real_module_library_flags_the_strings_that_do_not_fit(corpus):
+    """Weidmüller's UR20 module library: every module InitCmd that writes more bytes than
+    its module's dictionary gives the subitem (read here with lxml) is ESI304, at its line;
+    no other InitCmd is flagged (a name shorter than its STRING(25) fits)."""
+    path = corpus / "esi/modular/Weidmueller_UR20_IO.xml"
+    root = etree.parse(str(path)).getroot()
+    want, total = set(), 0
+    for module in root.iter("Module"):
+        types = {d.findtext("Name"): d for d in module.iter("DataType")}
+        objects = {o.findtext("Index").lower(): o for o in module.iter("Object")}
+        for cmd in module.iterfind("Mailbox/CoE/InitCmd"):
+            total += 1
+            obj = objects[cmd.findtext("Index").lower()]
+            item = next(i for i in types[obj.findtext("Type")].iter("SubItem")
+                        if i.findtext("SubIdx") == cmd.findtext("SubIndex"))
+            if len(bytes.fromhex(cmd.findtext("Data"))) > int(item.findtext("BitSize")) // 8:
+                want.add(cmd.sourceline)
+    findings = _lint(path, "ESI3")
+    assert {f.line for f in findings if f.rule == "ESI304"} == want
+    assert {f.rule for f in findings} <= {"ESI304"}
+    assert (total, len(want)) == (164, 3)           # the figure docs/lint.md gives

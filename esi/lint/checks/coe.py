@@ -144,12 +144,14 @@ def unknown_data_type(dev: Device, ctx: FileContext) -> Iterator[Hit]:
                                f"PDO {hex4(pdo.index)} entry {hex4(entry.index)}")
 
 
-@file_rule("ESI304", "warning", "a CoE InitCmd's data size differs from the object's size", """
-    The InitCmd's Data has another length than the object (or subitem) it writes, from its
-    BitSize in the dictionary.  Slaves check the length of an SDO download and answer abort
-    0x06070010 (length of service parameter does not match) / 0x06070012 / 0x06070013.
-    CompleteAccess commands write whole objects and are not compared.  Module InitCmds are
-    checked too (see ESI301 for their dictionaries).""")
+@file_rule("ESI304", "error", "a CoE InitCmd's data does not fit the object's size", """
+    The InitCmd's Data has a length the object (or subitem) it writes does not take, from
+    its BitSize in the dictionary: a number of another size, a string longer than declared
+    or empty (a shorter string fits: CANopen strings are as long as written).  Slaves check
+    the length of an SDO download and answer abort 0x06070010 (length of service parameter
+    does not match) / 0x06070012 (too long) / 0x06070013 (too short), and the transition
+    fails.  CompleteAccess commands write whole objects and are not compared.  Module
+    InitCmds are checked too (see ESI301 for their dictionaries).""")
 def init_cmd_size(ctx: FileContext) -> Iterator[Hit]:
     for cmd, found, owner, shown in _init_cmd_targets(ctx):
         if cmd.complete_access or cmd.data is None:
