@@ -18,10 +18,9 @@ from __future__ import annotations
 import struct
 
 from ecatcfg.eni.plan import CoeInitCmd, PdoDesc, PdoEntryDesc
-from ecatcfg.compiler.resolve import ResolvedSlave
+from ecatcfg.compiler.resolve import ResolvedSlave, kept_by_dictionary
 from ecatcfg.esc import SM_PDO_ASSIGN, Transition
-from ecatcfg.esi.coe import DictEntry, lookup
-from ecatcfg.esi.model import Dictionary
+from ecatcfg.esi.coe import DictEntry, lookup, write_refusal
 
 
 
@@ -31,14 +30,14 @@ def _cmd(comment: str, index: int, subindex: int, data: bytes,
                       complete_access=complete_access, fixed=True)
 
 
-def _writable(dic: Dictionary | None, index: int) -> bool:
+def _clearable(slave: ResolvedSlave, index: int) -> bool:
+    """Whether PDO ``index`` may be cleared: its object is in the dictionary (when the
+    slave has one) and writable in PREOP."""
+    dic, local = slave.dictionary_for(index)
     if dic is None or not dic.objects:
         return True
-    found = lookup(dic, index, 0)
-    if not isinstance(found, DictEntry):
-        return False
-    access = found.flags.access if found.flags else None
-    return access is None or access.writable_in("PreOp")
+    found = lookup(dic, local, 0)
+    return isinstance(found, DictEntry) and write_refusal(found, "PreOp") is None
 
 
 def _entry_word(e: PdoEntryDesc) -> bytes:
@@ -51,28 +50,31 @@ def pdo_cmds(slave: ResolvedSlave) -> list[CoeInitCmd]:
     if coe is None or not (coe.pdo_assign or coe.pdo_config):
         return []
     ca = coe.complete_access
-    dic = slave.dictionary
     sms = sorted({sm.number for sm in dev.sms
                   if not sm.is_mailbox and not sm.virtual and sm.type in ("Outputs", "Inputs")})
     # PdoConfig without PdoAssign (a fixed assignment of configurable PDOs): a remapped PDO
     # is still downloaded, or the slave would keep its old entries while the SMs are sized
     # for the new ones.
+    # An assignment or mapping the dictionary does not let PREOP write stays as the slave
+    # has it (resolve refuses a topology that changes it): writing it would stop PS.
+    assigned = [n for n in sms if not kept_by_dictionary(slave, SM_PDO_ASSIGN + n)] \
+        if coe.pdo_assign else []
     cmds = [_cmd(f"clear sm pdos (0x{SM_PDO_ASSIGN + n:04X})", SM_PDO_ASSIGN + n, 0, b"\x00")
-            for n in sms] if coe.pdo_assign else []
+            for n in assigned]
     if coe.pdo_config:
         # TxPDOs first, as EC-Engineer lists and clears them.
         for p in sorted(slave.pdos, key=lambda p: p.direction != "tx"):
             if coe.pdo_assign and not p.fixed and not p.virtual and p.sm is None \
-                    and _writable(dic, p.index):
+                    and _clearable(slave, p.index):
                 cmds.append(_cmd(f"clear pdo 0x{p.index:04X} entries", p.index, 0, b"\x00"))
         for p in slave.pdos:
             # Without PdoAssign only what the user remapped: the rest stays as the slave has it.
             if p.sm is not None and not p.fixed and (
-                    p.index in slave.remapped or (coe.pdo_assign and p.entries)):
+                    p.index in slave.remapped or (coe.pdo_assign and p.entries)) \
+                    and not kept_by_dictionary(slave, p.index):
                 cmds += _mapping(p, ca)
-    if coe.pdo_assign:
-        for n in sms:
-            cmds += _assignment(SM_PDO_ASSIGN + n, slave.assigned(n), ca)
+    for n in assigned:
+        cmds += _assignment(SM_PDO_ASSIGN + n, slave.assigned(n), ca)
     return cmds
 
 

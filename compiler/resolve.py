@@ -19,9 +19,10 @@ from ecatcfg.compiler import eoe_params, watchdogs, wiring
 from ecatcfg.compiler.topology import (LoadedTopology, MappingEntry, MappingVariable, Sdo,
                                        Slave, TopologyError)
 from ecatcfg.errors import EcatcfgError
-from ecatcfg.esc import MAX_PDO_ENTRIES, MODULE_IDENT_LIST, Transition
+from ecatcfg.esc import MAX_PDO_ENTRIES, MODULE_IDENT_LIST, SM_PDO_ASSIGN, Transition
 from ecatcfg.esi import datatypes
-from ecatcfg.esi.coe import TRANSITION_STATE, DictEntry, device_dictionary, has_coe, lookup
+from ecatcfg.esi.coe import (TRANSITION_STATE, DictEntry, device_dictionary, has_coe, lookup,
+                             write_refusal, write_target)
 from ecatcfg.esi.index import DeviceEntry
 from ecatcfg.esi.library import EsiChoiceError, Library, SelectorError, Selection
 from ecatcfg.esi.model import CoeInitCmd as EsiCoeInitCmd
@@ -212,8 +213,8 @@ def _resolve(slave: ResolvedSlave, library: Library, errors: _Errors,
              entry: DeviceEntry) -> None:
     modules = _plug_modules(slave, library, entry, errors)
     slave.modules = modules
-    slave.module_cmds = _module_ident_list(slave, modules)
     slave.module_dicts = module_dictionaries(modules)
+    slave.module_cmds = _module_ident_list(slave, modules, errors)
     _choose_pdos(slave, modules, errors)
     _apply_mappings(slave, errors)
     _check_sm_sizes(slave, errors)          # after the mappings: they change the sizes
@@ -312,33 +313,74 @@ def _plug_modules(slave: ResolvedSlave, library: Library, entry: DeviceEntry,
     return plugged
 
 
-def _module_ident_list(slave: ResolvedSlave, modules: list[PluggedModule]
-                       ) -> list[CoeInitCmd]:
+def _module_ident_list(slave: ResolvedSlave, modules: list[PluggedModule],
+                       errors: _Errors) -> list[CoeInitCmd]:
     """The configured module ident list (0xF030: one UDINT per module position, 0 for an
-    empty slot), written where the ESI asks for it (``Slots@DownloadModuleIdentList``) or
-    its dictionary has the object, in ``DownloadModuleListTransition`` (PS by default), as
-    TwinCAT and EC-Engineer do; a station compares it with what it detected (0xF050)."""
+    empty slot), written only where the ESI asks for it (ETG.2000
+    ``Slots@DownloadModuleIdentList``), in ``DownloadModuleListTransition`` (PS by
+    default), as TwinCAT does: a station compares it with what it detected (0xF050).  A
+    dictionary that has 0xF030 does not ask for it: a BK1120-style coupler declares it
+    read-only and refuses the write (abort 0x06010002).  Asked for but not writable in
+    that state by the dictionary is an error naming the ESI's line."""
     dev = slave.device
     coe = dev.mailbox.coe if dev.mailbox else None
-    dic = slave.dictionary
-    if dev.slots is None or coe is None or not modules:
-        return []
-    if not (dev.slots.download_module_ident_list
-            or (dic is not None and MODULE_IDENT_LIST in dic.objects)):
+    if dev.slots is None or coe is None or not modules \
+            or not dev.slots.download_module_ident_list:
         return []
     transition = Transition.__members__.get(dev.slots.download_transition, Transition.PS)
     idents = ident_list(modules)
     comment = "download module ident list (0xF030)"
     if coe.complete_access:
-        return [CoeInitCmd([transition], comment, MODULE_IDENT_LIST, 0,
+        cmds = [CoeInitCmd([transition], comment, MODULE_IDENT_LIST, 0,
                            ident_list_data(idents), complete_access=True, fixed=True)]
-    return ([CoeInitCmd([transition], f"{comment}: clear", MODULE_IDENT_LIST, 0, b"\x00",
-                        fixed=True)]
-            + [CoeInitCmd([transition], f"{comment}: position {n}", MODULE_IDENT_LIST, n,
-                          ident.to_bytes(4, "little"), fixed=True)
-               for n, ident in enumerate(idents, start=1)]
-            + [CoeInitCmd([transition], f"{comment}: count", MODULE_IDENT_LIST, 0,
-                          bytes([len(idents)]), fixed=True)])
+    else:
+        cmds = ([CoeInitCmd([transition], f"{comment}: clear", MODULE_IDENT_LIST, 0, b"\x00",
+                            fixed=True)]
+                + [CoeInitCmd([transition], f"{comment}: position {n}", MODULE_IDENT_LIST, n,
+                              ident.to_bytes(4, "little"), fixed=True)
+                   for n, ident in enumerate(idents, start=1)]
+                + [CoeInitCmd([transition], f"{comment}: count", MODULE_IDENT_LIST, 0,
+                              bytes([len(idents)]), fixed=True)])
+    refused = [why for c in cmds for why in _refusals(slave, c)]
+    if refused:
+        errors.add(f"slave {slave.name!r}: the ESI of {dev.type_name} asks for the module "
+                   f"ident list download (Slots DownloadModuleIdentList, {dev.slots.source}) "
+                   f"but {refused[0]}", "slaves", slave.index, "modules")
+        return []
+    return cmds
+
+
+def kept_by_dictionary(slave: ResolvedSlave, index: int) -> str | None:
+    """Why the slave keeps PDO object ``index`` (an assignment 0x1C1n or a mapping
+    0x16xx/0x1Axx) as it is: its dictionary declares it and refuses its download in PREOP,
+    where PREOP->SAFEOP writes it (a device with fixed PDOs often declares 0x1C12
+    read-only although its ESI says PdoAssign for its other SyncManager).  ``None`` when
+    it may be written or the dictionary does not say."""
+    dic, local = slave.dictionary_for(index)
+    if dic is None or not dic.objects:
+        return None
+    coe = slave.device.mailbox.coe if slave.device.mailbox else None
+    found = write_target(dic, local, 0, bool(coe and coe.complete_access))
+    return write_refusal(found, "PreOp") if isinstance(found, DictEntry) else None
+
+
+def _refusals(slave: ResolvedSlave, cmd: CoeInitCmd) -> list[str]:
+    """Why the slave's dictionary refuses ``cmd`` in the transitions it runs in: one text
+    per refused transition naming the object, the transition and the access
+    (``esi/coe.py`` ``write_refusal``); empty when every download may be made or the
+    dictionary does not say."""
+    dic, local = slave.dictionary_for(cmd.index)
+    if dic is None or not dic.objects:
+        return []
+    found = write_target(dic, local, cmd.subindex, cmd.complete_access)
+    out = []
+    for t in cmd.transitions:
+        state = TRANSITION_STATE.get(t.value)
+        why = write_refusal(found, state) if state is not None else None
+        if why is not None:
+            out.append(f"0x{cmd.index:04X}:{cmd.subindex:02X} is not writable in {state}, "
+                       f"where its {t.value} download runs ({why})")
+    return out
 
 
 def _find_module(selector: int | str, by_ident: dict[int, Module],
@@ -454,9 +496,13 @@ def _choose_pdos(slave: ResolvedSlave, modules: list[PluggedModule], errors: _Er
                 errors.add(f"slave {cfg.name!r}: mandatory PDO 0x{p.index:04X} "
                            f"({p.name}) is left out", *where)
         default = [p.index for p in mine if p.sm is not None]
-        if list(chosen) != default and not can_assign:
+        kept = kept_by_dictionary(slave, SM_PDO_ASSIGN + sm.number) if sm else None
+        if list(chosen) != default and (not can_assign or kept):
+            why = (f"its dictionary declares 0x{SM_PDO_ASSIGN + sm.number:04X} not "
+                   f"writable in PreOp: {kept}" if can_assign and sm else
+                   "no CoE PdoAssign in its ESI")
             errors.add(f"slave {cfg.name!r}: {dev.type_name} does not support PDO assignment "
-                       "(no CoE PdoAssign in its ESI); its fixed assignment is "
+                       f"({why}); its fixed assignment is "
                        + (", ".join(f"0x{x:04X}" for x in default) or "empty"), *where)
             continue
         if sm is None and chosen:
@@ -510,9 +556,12 @@ def _apply_mappings(slave: ResolvedSlave, errors: _Errors) -> None:
             errors.add(f"slave {cfg.name!r}: {dev.type_name} does not support PDO mapping "
                        "(no CoE PdoConfig in its ESI)", *where)
             continue
-        if pdo.fixed:
+        kept = kept_by_dictionary(slave, index)
+        if pdo.fixed or kept:
+            why = "Fixed in the ESI" if pdo.fixed else \
+                f"its object is not writable in PreOp in the dictionary: {kept}"
             errors.add(f"slave {cfg.name!r}: PDO 0x{index:04X} ({pdo.name}) has a fixed "
-                       "mapping (Fixed in the ESI)", *where)
+                       f"mapping ({why})", *where)
             continue
         if pdo.sm is None:
             key = "rx_pdos" if pdo.direction == "rx" else "tx_pdos"
@@ -651,12 +700,26 @@ def _coe_cmd(cmd: EsiCoeInitCmd, offset: int = 0) -> CoeInitCmd:
 
 def _sdos(slave: ResolvedSlave, modules: list[PluggedModule], errors: _Errors) -> None:
     dev, cfg = slave.device, slave.cfg
-    esi = [_coe_cmd(c) for c in (dev.mailbox.coe.init_cmds
-                                 if dev.mailbox and dev.mailbox.coe else [])]
+    # The device's own InitCmds, then each plugged module's (ETG.2000
+    # Module/Mailbox/CoE/InitCmd), in module order, DependOnSlot indices moved by the slot.
+    given: list[tuple[EsiCoeInitCmd, int, str]] = [
+        (c, 0, "") for c in (dev.mailbox.coe.init_cmds if dev.mailbox and dev.mailbox.coe
+                             else [])]
     for plug in modules:
         mb = plug.module.mailbox
         if mb and mb.coe:
-            esi += [_coe_cmd(c, plug.index_offset) for c in mb.coe.init_cmds]
+            given += [(c, plug.index_offset, f" of {plug.label}") for c in mb.coe.init_cmds]
+    esi = []
+    for c, offset, owner in given:
+        cmd = _coe_cmd(c, offset)
+        refused = _refusals(slave, cmd)
+        if refused:
+            # The slave would refuse it and stop in that transition: the ESI contradicts
+            # its own dictionary, which lint reports as ESI302.
+            errors.add(f"slave {slave.name!r}: the InitCmd{owner} at {c.source}: "
+                       f"{refused[0]}; the slave would refuse it (lint ESI302)", "slaves",
+                       slave.index, "modules" if owner else "device")
+        esi.append(cmd)
     slave.esi_cmds = esi
     if not cfg.sdos:
         return
@@ -673,15 +736,20 @@ def _sdos(slave: ResolvedSlave, modules: list[PluggedModule], errors: _Errors) -
                        + ", ".join(TRANSITION_STATE), *where, "transition")
             continue
         dic, local = slave.dictionary_for(user.index)
-        data = _sdo_data(slave, dic, local, user, state, where, errors)
+        data = _sdo_data(slave, dic, local, user, where, errors)
         if data is None:
             continue
-        _place_sdo(slave, CoeInitCmd([user.transition], user.comment or _sdo_comment(
+        cmd = CoeInitCmd([user.transition], user.comment or _sdo_comment(
             dic, local, user.index, user.subindex), user.index, user.subindex, data,
-            complete_access=user.complete_access))
+            complete_access=user.complete_access)
+        refused = _refusals(slave, cmd)
+        if refused:
+            errors.add(f"slave {slave.name!r}: {refused[0]}", *where)
+            continue
+        _place_sdo(slave, cmd)
 
 
-def _sdo_data(slave: ResolvedSlave, dic: Dictionary | None, local: int, user: Sdo, state: str,
+def _sdo_data(slave: ResolvedSlave, dic: Dictionary | None, local: int, user: Sdo,
               where: Where, errors: _Errors) -> bytes | None:
     """``local``: the object's index in ``dic`` (a module's own, for a slot object)."""
     if user.data is not None:
@@ -699,11 +767,6 @@ def _sdo_data(slave: ResolvedSlave, dic: Dictionary | None, local: int, user: Sd
         if not isinstance(found, DictEntry):
             errors.add(f"slave {slave.name!r}: object 0x{user.index:04X} ({found.name}) has "
                        f"no subindex {user.subindex}", *where, "subindex")
-            return None
-        access = found.flags.access if found.flags else None
-        if access is not None and not access.writable_in(state):
-            errors.add(f"slave {slave.name!r}: {target} ({found.obj.name}) is not writable in "
-                       f"{state} (access {access.value})", *where)
             return None
         # A 'type' of another size than the object would be refused by the slave (SDO abort
         # "length of service parameter does not match"): say so here instead.

@@ -87,3 +87,43 @@ def lookup(dic: Dictionary, index: int, subindex: int | None) -> DictEntry | Dic
             size = dt.bit_size // ai.elements if dt.bit_size else None
             return DictEntry(obj, dt.base_type or "", size, obj.flags)
     return obj
+
+
+def write_target(dic: Dictionary, index: int, subindex: int | None,
+                 complete_access: bool = False) -> DictEntry | DictObject | None:
+    """What a download of ``index:subindex`` writes, as :func:`lookup` says it.  A
+    CompleteAccess download writes the whole object from its SubIndex (0 or 1; ETG.1000.6
+    5.6.2.1): subindex 0 of a record or array is often read-only (the count is fixed)
+    while its entries are writable, and a record may have no subindex 1 (its entries
+    numbered from 4, Beckhoff's IO-Link settings 0x80n0), so such a download is judged by
+    the first entry it really changes: the first subindex from its SubIndex on (from 1
+    past a read-only subindex 0) that the object has."""
+    found = lookup(dic, index, subindex)
+    if not complete_access or found is None:
+        return found
+    sub = subindex or 0
+    if isinstance(found, DictEntry):
+        access = found.flags.access if found.flags else None
+        if sub or access is None or "w" in access.value:
+            return found
+    for later in range(max(sub, 1), 256):
+        entry = lookup(dic, index, later)
+        if isinstance(entry, DictEntry):
+            return entry
+    return found
+
+
+def write_refusal(found: DictEntry | DictObject | None, state: str) -> str | None:
+    """Why the slave refuses a download in AL ``state`` to what :func:`write_target`
+    found (SDO abort 0x06010002 for a read-only object, 0x08000022 for one writable in
+    other states only), from the dictionary's ``Flags/Access`` and its
+    ``WriteRestrictions`` (ETG.2000); ``None`` when the download may be made, or when the
+    dictionary does not say (no such entry, no access flags)."""
+    if not isinstance(found, DictEntry) or found.flags is None or found.flags.access is None:
+        return None
+    access = found.flags.access
+    if access.writable_in(state):
+        return None
+    if "w" not in access.value:
+        return f"access {access.value!r}"
+    return "writes allowed only in " + (", ".join(sorted(access.write_states)) or "no state")

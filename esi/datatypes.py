@@ -87,6 +87,19 @@ def bit_size(name: str) -> int | None:
     return None
 
 
+def download_fits(type_name: str, size: int, length: int) -> bool:
+    """Whether an SDO download of ``length`` bytes fits an object entry of ``type_name``
+    that holds ``size`` bytes: a number takes exactly its size (a slave answers another
+    length with abort 0x06070010); a visible, unicode or octet string also takes a shorter
+    non-empty value, the rest reading as NULs (CANopen strings are as long as written).
+    Lint judges ESI InitCmds by it and the emulated slave answers by it
+    (runtime/objects.py)."""
+    base = canonical(type_name) or type_name.strip().upper()
+    if base.startswith(("STRING", "WSTRING", "OCTET_STRING", "UNICODE_STRING")):
+        return 0 < length <= size
+    return length == size
+
+
 # -- values on the wire ----------------------------------------------------------------------
 
 _SIGNED = {"SINT", "INT", "INT24", "DINT", "INT40", "INT48", "INT56", "LINT"}

@@ -163,10 +163,16 @@ def _detected_modules(od: ObjectDictionary, idents: list[int]) -> None:
         obj = od[index] if index in od else od.add(OdObject(index, name, variable=False))
         if 0 not in obj.entries:
             obj.add(OdEntry(0, "Number of entries", "USINT", 8, b"\0", access=access))
+        # Positions beyond those the ESI lists take the rights of its first one: a device
+        # whose ESI declares 0xF030 read-only (a BK1120-style coupler) refuses every
+        # download of it with 0x06010002, as the real one does.
+        like = obj.entries.get(1)
         for sub in range(1, len(idents) + 1):
             if sub not in obj.entries:
-                obj.add(OdEntry(sub, f"SubIndex {sub:03d}", "UDINT", 32, bytes(4),
-                                access=access))
+                entry = obj.add(OdEntry(sub, f"SubIndex {sub:03d}", "UDINT", 32, bytes(4),
+                                        access=like.access if like else access))
+                if like is not None:
+                    entry.read_states, entry.write_states = like.read_states, like.write_states
         if index == DETECTED_MODULE_IDENT_LIST:
             obj[0].value = bytes([len(idents)])
             for sub, ident in enumerate(idents, start=1):

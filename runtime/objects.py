@@ -22,7 +22,7 @@ from ecatcfg.esc import (MAX_PDO_ENTRIES, RX_PDO_MAPPING, SM_COMM_TYPE, SM_PDO_A
                          SM_TYPE_CODES, TX_PDO_MAPPING, AlState, is_pdo_object)
 from ecatcfg.esi.coe import device_dictionary
 from ecatcfg.esi.datatypes import bit_size as base_bit_size
-from ecatcfg.esi.datatypes import canonical
+from ecatcfg.esi.datatypes import canonical, download_fits
 from ecatcfg.esi.model import (
     Device, DictObject, Dictionary, ObjectFlags, ObjectInfo, Pdo, pick_name,
 )
@@ -723,13 +723,12 @@ class ObjectDictionary:
     @staticmethod
     def _length_abort(entry: OdEntry, length: int) -> int | None:
         """The abort for writing ``length`` bytes to ``entry`` (None: fine)."""
-        if entry.variable_length or length == entry.byte_size:
+        # Which lengths fit is the rule lint checks ESI InitCmds by (esi/datatypes.py): a
+        # visible/octet string may be written shorter than its declared size, the rest
+        # zero (CANopen visible strings are NUL-terminated); a number takes its size.
+        if entry.variable_length or download_fits(entry.type, entry.byte_size, length):
             return None
         if entry.kind == "string":
-            # Our choice: a visible/octet string may be written shorter than its declared
-            # size; the rest is zero (CANopen visible strings are NUL-terminated).
-            if 0 < length < entry.byte_size:
-                return None
             return ABORT_LENGTH_TOO_HIGH if length > entry.byte_size else ABORT_LENGTH_TOO_LOW
         # Numbers: SOES answers any length mismatch with 0x06070010 (ABORT_TYPEMISMATCH).
         return ABORT_TYPE_MISMATCH

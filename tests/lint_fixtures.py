@@ -105,6 +105,26 @@ def opmode(aa: str, cycle: str = '<CycleTimeSync0 Factor="1">0</CycleTimeSync0>'
             f"</ShiftTimeSync0>{extra}</OpMode>")
 
 
+def ident_list_profile(access: str) -> str:
+    """PROFILE with a configured module ident list 0xF030 (count and one module), every
+    subindex of access ``access``."""
+    return PROFILE.replace("</DataTypes>", (
+        "<DataType><Name>UDINT</Name><BitSize>32</BitSize></DataType>\n"
+        "<DataType><Name>DTF030</Name><BitSize>48</BitSize>"
+        "<SubItem><SubIdx>0</SubIdx><Name>Count</Name><Type>USINT</Type><BitSize>8</BitSize>"
+        f"<BitOffs>0</BitOffs><Flags><Access>{access}</Access></Flags></SubItem>"
+        "<SubItem><SubIdx>1</SubIdx><Name>Module 1</Name><Type>UDINT</Type><BitSize>32"
+        f"</BitSize><BitOffs>16</BitOffs><Flags><Access>{access}</Access></Flags></SubItem>"
+        "</DataType>\n</DataTypes>")).replace("</Objects>", (
+            "<Object><Index>#xF030</Index><Name>Configured module ident list</Name>"
+            "<Type>DTF030</Type><BitSize>48</BitSize></Object>\n</Objects>"))
+
+
+def ident_list_slots(mark: bool = False) -> str:
+    return (MARK if mark else "") + slots("<ModuleIdent>#x100</ModuleIdent>").replace(
+        "<Slots>", '<Slots DownloadModuleIdentList="true">')
+
+
 @dataclass(frozen=True)
 class Case:
     rule: str
@@ -243,6 +263,10 @@ CASES: list[Case] = [
                                    '</ModuleIdent></Slot>\n<SlotGroupData SlotGroup="0"/>'
                                    '</Slots>'), modules=module("#x100")),
          esi(drive(slots=slots("<ModuleIdent>#x100</ModuleIdent>")), modules=module("#x100"))),
+    Case("ESI605", esi(drive(profile=ident_list_profile("ro"), slots=ident_list_slots(True)),
+                       modules=module("#x100")),
+         esi(drive(profile=ident_list_profile("rw"), slots=ident_list_slots()),
+             modules=module("#x100"))),
 ]
 
 

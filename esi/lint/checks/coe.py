@@ -2,16 +2,18 @@
 
 from __future__ import annotations
 
-from typing import Iterator
+from typing import Iterator, NamedTuple
 
 from ecatcfg.esi import datatypes
 from ecatcfg.esi.coe import (
-    TRANSITION_STATE, DictEntry, device_dictionary, dictionary_with_objects, lookup,
+    TRANSITION_STATE, DictEntry, device_dictionary, dictionary_with_objects, write_refusal,
+    write_target,
 )
 from ecatcfg.esi.lint.checks.common import hex4
 from ecatcfg.esi.lint.context import FileContext
-from ecatcfg.esi.lint.rules import Hit, device_rule
-from ecatcfg.esi.model import CoeInitCmd, Device, DictObject, Source
+from ecatcfg.esi.lint.rules import Hit, device_rule, file_rule
+from ecatcfg.esi.model import CoeInitCmd, Device, Dictionary, DictObject, Source
+from ecatcfg.esi.slots import fits, plugged_module
 
 
 def _init_cmds(dev: Device) -> list[CoeInitCmd]:
@@ -20,59 +22,98 @@ def _init_cmds(dev: Device) -> list[CoeInitCmd]:
     return [c for c in dev.mailbox.coe.init_cmds if not c.depend_on_slot]
 
 
-def _init_cmd_targets(dev: Device) -> Iterator[tuple[CoeInitCmd, DictEntry | DictObject | None]]:
-    """(InitCmd, dictionary lookup of the subindex it writes) for a device whose dictionary
-    lists objects.  A CompleteAccess command writes the whole object from its SubIndex (0 or
-    1); subindex 0 of a record is often read-only and is then judged by subindex 1, the
-    first entry the command really changes."""
-    dic = dictionary_with_objects(dev)
-    if dic is None:
-        return
-    for cmd in _init_cmds(dev):
-        if cmd.index is None:
+class _Target(NamedTuple):
+    """A CoE InitCmd of the file, what the dictionary says of the subindex it writes
+    (``write_target``), and whose command it is: ``""`` for a device's own, ``"Module
+    'X': "`` for a module's (the findings' prefix)."""
+
+    cmd: CoeInitCmd
+    found: DictEntry | DictObject | None
+    owner: str
+    shown: str           # the object written, as messages show it
+
+
+
+def _init_cmd_targets(ctx: FileContext) -> Iterator[_Target]:
+    """Every CoE InitCmd of the file with its dictionary lookup: each device's own
+    commands against the device's dictionary, then each module's (ETG.2000
+    ``Module/Mailbox/CoE/InitCmd``, downloaded for the plugged module after the device's)
+    against the module's own dictionary and the dictionaries of this file's devices that
+    take the module in a slot, its ``DependOnSlot`` index moved to the first slot it fits
+    (``esi/slots.py``).  A command is left out when no dictionary that could hold its
+    object lists objects (a device without a dictionary, a module library whose stations
+    are in other files): nothing to check it against."""
+    for dev in ctx.esi.devices:
+        dic = dictionary_with_objects(dev)
+        if dic is None:
             continue
-        found = lookup(dic, cmd.index, cmd.subindex)
-        if cmd.complete_access and not cmd.subindex and isinstance(found, DictEntry) \
-                and found.flags is not None and found.flags.access is not None \
-                and "w" not in found.flags.access.value:
-            first = lookup(dic, cmd.index, 1)
-            found = first if isinstance(first, DictEntry) else found
-        yield cmd, found
+        for cmd in _init_cmds(dev):
+            if cmd.index is not None:
+                yield _Target(cmd, write_target(dic, cmd.index, cmd.subindex,
+                                                cmd.complete_access), "", hex4(cmd.index))
+    for mod in ctx.esi.modules:
+        coe = mod.mailbox.coe if mod.mailbox else None
+        if coe is None or not coe.init_cmds:
+            continue
+        own = mod.profile.dictionary if mod.profile else None
+        places: list[tuple[Dictionary, int, str]] = []       # (dictionary, offset, where)
+        if own is not None and own.objects:
+            places.append((own, 0, ""))
+        stations = 0
+        for dev in ctx.esi.devices:
+            dic = dictionary_with_objects(dev)
+            number = next((n for n, slot in enumerate(dev.slots.slots, start=1)
+                           if fits(slot, mod)), None) if dev.slots else None
+            if dic is not None and number is not None:
+                offset = plugged_module(dev, number, mod).index_offset
+                places.append((dic, offset, f"{dev.type_name} slot {number}"))
+                stations += 1
+        for cmd in coe.init_cmds:
+            if cmd.index is None or not places:
+                continue
+            found: DictEntry | DictObject | None = None
+            shown = hex4(cmd.index)
+            for dic, offset, where in places:
+                moved = cmd.index + (offset if cmd.depend_on_slot else 0)
+                found = write_target(dic, moved, cmd.subindex, cmd.complete_access)
+                shown = hex4(cmd.index) + (f" ({hex4(moved)} in {where})"
+                                           if moved != cmd.index else "")
+                if found is not None:
+                    break
+            if found is None and not stations:
+                continue          # maybe the station's object: its file is another
+            yield _Target(cmd, found, f"Module {mod.type_name!r}: ", shown)
 
 
-@device_rule("ESI301", "error", "a CoE InitCmd writes an object the dictionary does not have", """
+@file_rule("ESI301", "error", "a CoE InitCmd writes an object the dictionary does not have", """
     Mailbox/CoE/InitCmd makes every configurator download this value at start-up.  The
     device's dictionary lists objects, but not this one (or not this subindex), so the slave
-    will most likely answer abort 0x06020000 / 0x06090011 and the state change fails.""")
-def init_cmd_object_missing(dev: Device, ctx: FileContext) -> Iterator[Hit]:
-    for cmd, found in _init_cmd_targets(dev):
+    will most likely answer abort 0x06020000 / 0x06090011 and the state change fails.  A
+    module's InitCmds (downloaded when it is plugged) are looked up in the module's own
+    dictionary and in the dictionaries of the file's devices whose slots take it.""")
+def init_cmd_object_missing(ctx: FileContext) -> Iterator[Hit]:
+    for cmd, found, owner, shown in _init_cmd_targets(ctx):
+        what = f"{owner}InitCmd writes {shown}:{cmd.subindex or 0:02X}"
         if found is None:
-            yield Hit(cmd.source, f"InitCmd writes {hex4(cmd.index)}:{cmd.subindex or 0:02X}; "
-                      f"the dictionary has no object {hex4(cmd.index)}")
+            yield Hit(cmd.source, f"{what}; the dictionary has no such object")
         elif not isinstance(found, DictEntry):
-            yield Hit(cmd.source, f"InitCmd writes {hex4(cmd.index)}:{cmd.subindex or 0:02X}; "
-                      f"object {hex4(cmd.index)} has no such subindex")
+            yield Hit(cmd.source, f"{what}; the object has no such subindex")
 
 
-@device_rule("ESI302", "error", "a CoE InitCmd writes an object that is read-only then", """
+@file_rule("ESI302", "error", "a CoE InitCmd writes an object that is read-only then", """
     The dictionary's Flags/Access for the object (or subitem) do not allow writing in the AL
     state the InitCmd runs in (I->P and P->S commands run in PREOP, S->O in SAFEOP, ...): ro,
     or a WriteRestrictions list without that state.  The slave answers abort 0x06010002
-    (read-only) or 0x08000022 (wrong state) and the transition fails.""")
-def init_cmd_read_only(dev: Device, ctx: FileContext) -> Iterator[Hit]:
-    for cmd, found in _init_cmd_targets(dev):
-        if not isinstance(found, DictEntry) or found.flags is None \
-                or found.flags.access is None:
-            continue
-        access = found.flags.access
+    (read-only) or 0x08000022 (wrong state) and the transition fails.  Module InitCmds
+    are checked too (see ESI301 for their dictionaries); compile refuses such a command.""")
+def init_cmd_read_only(ctx: FileContext) -> Iterator[Hit]:
+    for cmd, found, owner, shown in _init_cmd_targets(ctx):
         for transition in cmd.transitions:
             state = TRANSITION_STATE.get(transition.upper())
-            if state is not None and not access.writable_in(state):
-                why = (f"access {access.value!r}" if "w" not in access.value else
-                       "writes allowed only in "
-                       + (", ".join(sorted(access.write_states)) or "no state"))
-                yield Hit(cmd.source, f"InitCmd ({transition}, runs in {state}) writes "
-                          f"{hex4(cmd.index)}:{cmd.subindex or 0:02X}: {why}")
+            why = write_refusal(found, state) if state is not None else None
+            if why is not None:
+                yield Hit(cmd.source, f"{owner}InitCmd ({transition}, runs in {state}) "
+                          f"writes {shown}:{cmd.subindex or 0:02X}: {why}")
 
 
 @device_rule("ESI303", "error", "a data type name is not known", """
@@ -103,19 +144,22 @@ def unknown_data_type(dev: Device, ctx: FileContext) -> Iterator[Hit]:
                                f"PDO {hex4(pdo.index)} entry {hex4(entry.index)}")
 
 
-@device_rule("ESI304", "warning", "a CoE InitCmd's data size differs from the object's size", """
-    The InitCmd's Data has another length than the object (or subitem) it writes, from its
-    BitSize in the dictionary.  Slaves check the length of an SDO download and answer abort
-    0x06070010 (length of service parameter does not match) / 0x06070012 / 0x06070013.
-    CompleteAccess commands write whole objects and are not compared.""")
-def init_cmd_size(dev: Device, ctx: FileContext) -> Iterator[Hit]:
-    for cmd, found in _init_cmd_targets(dev):
+@file_rule("ESI304", "error", "a CoE InitCmd's data does not fit the object's size", """
+    The InitCmd's Data has a length the object (or subitem) it writes does not take, from
+    its BitSize in the dictionary: a number of another size, a string longer than declared
+    or empty (a shorter string fits: CANopen strings are as long as written).  Slaves check
+    the length of an SDO download and answer abort 0x06070010 (length of service parameter
+    does not match) / 0x06070012 (too long) / 0x06070013 (too short), and the transition
+    fails.  CompleteAccess commands write whole objects and are not compared.  Module
+    InitCmds are checked too (see ESI301 for their dictionaries).""")
+def init_cmd_size(ctx: FileContext) -> Iterator[Hit]:
+    for cmd, found, owner, shown in _init_cmd_targets(ctx):
         if cmd.complete_access or cmd.data is None:
             continue
         if not isinstance(found, DictEntry) or not found.bit_size:
             continue
         want = (found.bit_size + 7) // 8
-        if len(cmd.data) != want and datatypes.bit_size(found.type) is not None:
-            yield Hit(cmd.source, f"InitCmd writes {len(cmd.data)} byte(s) to "
-                      f"{hex4(cmd.index)}:{cmd.subindex or 0:02X}, a {found.type} of "
-                      f"{want} byte(s)")
+        if datatypes.bit_size(found.type) is not None \
+                and not datatypes.download_fits(found.type, want, len(cmd.data)):
+            yield Hit(cmd.source, f"{owner}InitCmd writes {len(cmd.data)} byte(s) to "
+                      f"{shown}:{cmd.subindex or 0:02X}, a {found.type} of {want} byte(s)")

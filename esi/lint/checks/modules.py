@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from typing import Iterator
 
+from ecatcfg.esc import MODULE_IDENT_LIST
+from ecatcfg.esi.coe import TRANSITION_STATE, dictionary_with_objects, write_refusal, write_target
 from ecatcfg.esi.lint.checks.common import repeats
 from ecatcfg.esi.lint.context import FileContext
 from ecatcfg.esi.lint.rules import Hit, device_rule, file_rule
@@ -69,3 +71,28 @@ def slot_group(dev: Device, ctx: FileContext) -> Iterator[Hit]:
             yield Hit(slot.source, f"Slot {slot.name!r} belongs to slot group "
                       f"{slot.slot_group}; ecatcfg compile refuses modules in it "
                       "(SlotGroupData offsets are not implemented)")
+@device_rule("ESI605", "error", "the module ident list is to be downloaded but 0xF030 cannot be "
+             "written", """
+    Slots/@DownloadModuleIdentList makes a configurator download the configured module
+    ident list (object 0xF030, ETG.5001) in DownloadModuleListTransition (PS by default).
+    The device's dictionary lists objects, but not 0xF030, or declares it read-only in the
+    state that transition runs in: the slave answers abort 0x06020000 or 0x06010002 and
+    never reaches SAFEOP (compile refuses such a device with modules plugged).  Without
+    the attribute the list is not downloaded, whatever the dictionary has.""")
+def module_ident_list_not_writable(dev: Device, ctx: FileContext) -> Iterator[Hit]:
+    slots = dev.slots
+    dic = dictionary_with_objects(dev)
+    if slots is None or not slots.download_module_ident_list or dic is None:
+        return
+    transition = slots.download_transition.upper()
+    state = TRANSITION_STATE.get(transition)
+    coe = dev.mailbox.coe if dev.mailbox else None
+    found = write_target(dic, MODULE_IDENT_LIST, 0, bool(coe and coe.complete_access))
+    if found is None:
+        yield Hit(slots.source, "DownloadModuleIdentList, but the dictionary has no object "
+                  f"0x{MODULE_IDENT_LIST:04X}")
+        return
+    why = write_refusal(found, state) if state is not None else None
+    if why is not None:
+        yield Hit(slots.source, f"DownloadModuleIdentList ({transition}, runs in {state}), "
+                  f"but 0x{MODULE_IDENT_LIST:04X} is not writable then: {why}")
