@@ -7,7 +7,7 @@ Run from the checkout, as root:
                              [--realistic]
 
 ``--realistic``: slaves that take time (``simulate --realistic``, runtime/timing.py: the
-drives' mailbox replies 28.5 ms, PS and SO 100 ms each ...) on lines of CiA 402 drives
+drives' mailbox replies 1.749 ms, PS and SO 100 ms each ...) on lines of CiA 402 drives
 only, 8 and 64 (``402x8``, ``402x64``), each with its PDO assignment over CoE.  apply runs
 ``--cycles 1``; the SOEM script writes the same PDO assignment SDOs as the ENI's PS
 InitCmds (pysoem ``sdo_write``, slave after slave, in PREOP before ``config_map``), so both

@@ -159,7 +159,7 @@ def test_a_new_request_replaces_the_transition_in_progress(lib):
     run(seg, fp(Cmd.FPWR, 0x0120, struct.pack("<H", AlState.INIT)))
     clock.advance(MS)
     [d] = run(seg, Datagram.physical(Cmd.BRD, 0, 0x0130, 2))
-    assert d.data[0] == AlState.PREOP                # PI takes 4.5 ms, broadcast or not
+    assert d.data[0] == AlState.PREOP                # PI takes 3 ms, broadcast or not
     run(seg, fp(Cmd.FPWR, 0x0120, struct.pack("<H", AlState.PREOP)))   # stay after all
     clock.advance(timing.TABLE["drive"].transition_ns("PI"))
     assert al_status(seg) == AlState.PREOP and not seg.slaves[0].busy
@@ -186,16 +186,28 @@ def test_mailbox_reply_is_not_readable_before_its_latency(lib):
 
 
 def test_replies_in_progress_are_dropped_when_the_mailbox_stops(lib):
+    # A reply slower than PI (the table's drive answers faster than it leaves PREOP), so
+    # that it is still in progress when the slave reaches INIT.
+    model = timing.overridden({"drive": {"mailbox_reply_ms": 10, "state_change_ms":
+                                         {"IP": 1, "PI": 2}}})
     clock = Clock()
-    seg = line(lib, "EXD-402", clock=clock)
+    seg = line(lib, "EXD-402", clock=clock, model=model)
     addressed(seg)
-    to_preop(seg, clock)
+    run(seg, fp(Cmd.FPWR, sm_register(0), SmConfig(0x1000, 128, 0x26, True).to_bytes()),
+        fp(Cmd.FPWR, sm_register(1), SmConfig(0x1080, 128, 0x22, True).to_bytes()),
+        fp(Cmd.FPWR, 0x0120, struct.pack("<H", AlState.PREOP)))
+    clock.advance(MS)
+    assert al_status(seg) == AlState.PREOP
     run(seg, fp(Cmd.FPWR, 0x1000, SDO_UPLOAD_1018_01.ljust(128, b"\0")),
         fp(Cmd.FPWR, 0x0120, struct.pack("<H", AlState.INIT)))
-    clock.advance(timing.TABLE["drive"].transition_ns("PI"))
+    clock.advance(MS)
+    assert al_status(seg) == AlState.PREOP and seg.slaves[0]._replies   # in progress
+    clock.advance(MS)
     assert al_status(seg) == AlState.INIT
-    clock.advance(timing.TABLE["drive"].mailbox_reply_ns)
+    clock.advance(10 * MS)
     assert not seg.slaves[0].busy and not seg.slaves[0].mailbox_queue
+    [status] = run(seg, fp(Cmd.FPRD, 0x080D, 1))
+    assert status.data[0] & 0x08 == 0               # and never shows in SM1
 
 
 # -- overrides ---------------------------------------------------------------------------------

@@ -1,0 +1,135 @@
+"""The timing model's table (runtime/timing.py) against every capture of both corpora.
+
+``bench/capture_timing.py`` measures the captures: for each timed event of each real slave
+(mailbox reply, state change per transition, EEPROM read) the window its duration lies in,
+from the timestamps of the master's polls (docs/timing.md).  Nothing in that measurement
+reads the table.  These tests then hold the table to the windows:
+
+- every window of a slave an ESI of the corpora describes (the slaves the emulator can
+  build: EK1100, EL1004, EL2004, EL2828, EL2889, EK1914) holds the table's figure for its
+  kind, so an emulated one answers at the poll where the real one did;
+- for every kind and quantity no other figure keeps more windows in step (counted here,
+  over the windows' endpoints, independently of the bench's fit);
+- what stays out of step is exactly what docs/timing.md names.
+
+A change to the table that falls out of step with a capture fails here.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import subprocess
+import sys
+from collections import Counter
+from pathlib import Path
+from types import ModuleType
+
+import pytest
+
+from conftest import ROOT
+from ecatcfg.esi.library import Library
+from ecatcfg.runtime.timing import KINDS, TABLE
+
+EXTRA = "corpus-extra/"
+
+
+def _bench() -> ModuleType:
+    spec = importlib.util.spec_from_file_location("capture_timing",
+                                                  ROOT / "bench" / "capture_timing.py")
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    sys.modules["capture_timing"] = module          # its dataclasses look themselves up
+    spec.loader.exec_module(module)
+    return module
+
+
+ct = _bench()
+
+
+@pytest.fixture(scope="module")
+def windows(corpus: Path, corpus_extra: Path) -> list:
+    library = Library([corpus / "esi", corpus_extra / "esi"], cache=False)
+    dumps = ct.sii_dumps(corpus / "sii")
+    return [w for path, name in ct.corpus_captures([corpus, corpus_extra])
+            for w in ct.measure(path, library, dumps, name)]
+
+
+def table_ms(kind: str, quantity: str) -> float:
+    if quantity == ct.EEPROM:
+        [ns] = {TABLE[k].eeprom_read_ns for k in KINDS}      # one figure: the ESC's
+        return ns / 1e6
+    t = TABLE[kind]
+    return (t.mailbox_reply_ns if quantity == ct.MAILBOX else t.transition_ns(quantity)) / 1e6
+
+
+def held(ws: list, figure_ms: float) -> tuple[int, int]:
+    """(windows of slaves with an ESI holding the figure, all windows holding it)."""
+    inside = [w for w in ws if w.lo_ms <= figure_ms <= w.hi_ms]
+    return sum(1 for w in inside if w.device.esi), len(inside)
+
+
+def test_the_captured_devices_and_their_kinds(windows):
+    """Each captured slave's kind, as kind_of decides from its ESI or, without one, the
+    same rule from its SII (the AKD's real EEPROM dump declares a CiA 402 channel)."""
+    kinds = {(w.device.label.split(" (")[0], w.device.kind, w.device.esi) for w in windows}
+    assert kinds == {
+        ("EK1100", "esc", True), ("EL1004", "esc", True), ("EL2004", "esc", True),
+        ("EL2828", "esc", True), ("EL2889", "esc", True), ("EK1914", "firmware", True),
+        ("0x2:0xbbc3052:0x150000", "firmware", False),       # the EL3004: no ESI
+        ("0x9:0x9252:0x1", "firmware", False),               # SOES on a LAN9252: no ESI
+        ("0x9:0x9252:0x1", None, False),     # the second LAN9252: SII word 0 never read
+        ("0x6a:0x414b44", "drive", False), ("0x6a:0x414b44:0x2", "drive", False)}
+    captures = {w.capture for w in windows if w.device.label.startswith(("EK1914", "0x6a"))}
+    assert captures == {EXTRA + "ethercrab/replay-ek1914-el3004-configure.pcapng",
+                        EXTRA + "ethercrab/replay-ek1914-no-complete-access.pcapng",
+                        EXTRA + "ethercrab/replay-ek1914-segmented-upload.pcapng",
+                        EXTRA + "ethercrab/soem-sdinfo-akd.pcapng",
+                        "twincat-akd-nc-mode.pcapng"}
+
+
+def test_every_mailbox_request_is_timed(windows, corpus, corpus_extra, tshark_path):
+    """tshark counts, per capture, the mailbox writes the slave took (a returned FPWR with
+    an EtherCAT mailbox header and working counter 1): each is one timed reply."""
+    ours = Counter(w.capture for w in windows if w.quantity == ct.MAILBOX)
+    for path, name in ct.corpus_captures([corpus, corpus_extra]):
+        out = subprocess.run(
+            [tshark_path, "-r", str(path), "-Y",
+             "ecat_mailbox && (eth.src[0] & 02) && ecat.cmd == 5 && ecat.cnt == 1"],
+            capture_output=True, text=True, check=True).stdout
+        assert ours[name] == len(out.splitlines()), name
+    assert ours[EXTRA + "ethercrab/replay-ek1914-no-complete-access.pcapng"] == 84
+
+
+def test_every_window_of_a_device_with_an_esi_holds_the_table(windows):
+    for w in windows:
+        if w.device.esi:
+            figure = table_ms(w.device.kind, w.quantity)
+            assert w.lo_ms <= figure <= w.hi_ms, (w, figure)
+
+
+def test_no_figure_keeps_more_windows_in_step_than_the_tables(windows):
+    for (kind, quantity), ws in ct.by_kind(windows).items():
+        candidates = {w.lo_ms for w in ws} | {w.hi_ms for w in ws}
+        best = max(held(ws, x) for x in candidates)
+        assert held(ws, table_ms("esc" if kind == "all" else kind, quantity)) == best, \
+            (kind, quantity, best)
+
+
+def test_what_stays_out_of_step(windows):
+    """docs/timing.md: one figure per kind cannot hold the SOES demo firmware on a LAN9252
+    (SDO replies after 37-40 ms, state changes after 9-19 ms) together with the EK1914
+    and EL3004, nor the AKD's EoE replies (7-46 ms, not even agreeing with each other)
+    together with its CoE replies, nor one AKD start-up to PREOP of 16-19 ms; and the
+    EL3004 (no ESI) reaches PREOP within 0.55 ms, where the EK1914 beside it takes at least
+    0.94 ms."""
+    out = Counter()
+    for w in windows:
+        if w.device.kind is not None and not \
+                w.lo_ms <= table_ms(w.device.kind, w.quantity) <= w.hi_ms:
+            out[(w.device.label.split(" (")[0], w.quantity, w.what)] += 1
+    assert out == {("0x9:0x9252:0x1", "mailbox", "CoE SDO upload"): 12,
+                   ("0x9:0x9252:0x1", "IP", "INIT->PREOP"): 2,
+                   ("0x9:0x9252:0x1", "PS", "PREOP->SAFEOP"): 1,
+                   ("0x2:0xbbc3052:0x150000", "IP", "INIT->PREOP"): 3,
+                   ("0x6a:0x414b44", "mailbox", "EoE"): 4,
+                   ("0x6a:0x414b44", "IP", "INIT->PREOP"): 1}
