@@ -485,13 +485,20 @@ def _prescan_any_library(data: str, shown: str) -> None:
     ahead, looking for a simple key.  PyYAML's own parser keeps its state on a list (no
     limit, no recursion) and gives the same marks, so the refused text is scanned again
     with it: too deep or too big gives this reader's own message, with its line; input
-    that is not YAML fails there too, and the library's first error is what is reported."""
+    that is not YAML fails there too, and the library's first error is what is reported.
+    Only the text up to where the library stopped is scanned again, and only when it
+    opens more flow collections than MAX_DEPTH: block nesting takes a line per level, so
+    its events reach the check before any library reads that far ahead (PyYAML's parser is
+    some 50 times slower than libyaml on a long scalar)."""
     try:
         _prescan(data, shown, _LOADER)
-    except yaml.YAMLError:
-        if _LOADER is not yaml.SafeLoader:
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        # libyaml counts marks in characters; an offset in bytes would only reach further.
+        upto = data if mark is None else data[:mark.index + 1]
+        if _LOADER is not yaml.SafeLoader and upto.count("[") + upto.count("{") > MAX_DEPTH:
             try:
-                _prescan(data, shown, yaml.SafeLoader)
+                _prescan(upto, shown, yaml.SafeLoader)
             except yaml.YAMLError:
                 pass
         raise

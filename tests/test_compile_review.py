@@ -193,6 +193,25 @@ def test_what_only_the_yaml_library_refuses_keeps_its_error(tmp_path, capsys, mo
     assert "bad.yaml:1:12: not valid YAML/JSON: library limit hit" in err, err
 
 
+def test_a_yaml_error_is_scanned_again_only_where_nesting_could_be_deep(tmp_path, capsys,
+                                                                       monkeypatch):
+    # PyYAML's own parser is some 50 times slower than libyaml: a long scalar before a tab
+    # is not read again by it (20 MB took 15 s that way), one flow collection deep is not
+    # deep.
+    monkeypatch.setattr(topology, "_LOADER", _LimitedLoader)
+    parse, loaders = topology.yaml.parse, []
+
+    def recorded(data, Loader):
+        loaders.append(Loader)
+        return parse(data, Loader=Loader)
+
+    monkeypatch.setattr(topology.yaml, "parse", recorded)
+    err = run_bad(tmp_path, capsys, 'slaves:\n  - {name: "' + "[" * 60 + 'x", '
+                  "device: EX1100}\n\tbad: 1\n")
+    assert "bad.yaml:3:1: not valid YAML/JSON: a tab" in err, err
+    assert loaders == [_LimitedLoader]
+
+
 def test_a_huge_topology_is_refused_quickly(tmp_path, capsys, monkeypatch):
     # Was: every value composed before the value limit was looked at (100 MB: minutes and
     # gigabytes of memory); now the parser's events are counted first.  The work done shows
