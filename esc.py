@@ -181,6 +181,11 @@ class AlState(IntEnum):
     SAFEOP = 4
     OP = 8
 
+    def __str__(self) -> str:
+        # print(net.state) shows OP, not 8 (an IntEnum prints its number since Python
+        # 3.11); repr() and int() are unchanged, and a format spec (f"{s:02x}") is numeric.
+        return self.name
+
 
 AL_ERROR_ACK = 0x10           # AL control bit 4: acknowledge an error indication
 AL_STATUS_ERROR = 0x10        # AL status bit 4: error indication (code in 0x0134)

@@ -111,9 +111,7 @@ def worker_ecatcfg(args: argparse.Namespace) -> dict:
             n = int(args.seconds * 1000)
             net.master.cyclic.cycle_time_us = 1000
             cpu = time.process_time()
-            net.run(n, realtime=opts, background=True)
-            assert net._thread is not None
-            net._thread.join()
+            net.run(n, realtime=opts, background=True).join()
             st = net.run_stats
             assert st is not None
             out["cpu_us"] = (time.process_time() - cpu) / n * 1e6

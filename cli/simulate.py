@@ -172,17 +172,25 @@ def run(args: argparse.Namespace) -> int:
               flush=True)
 
     seg.on_state_change = report
-    # Ctrl-C and SIGTERM end the run the same clean way as --duration.
+    # SIGINT (Ctrl-C), SIGTERM and SIGHUP end the run the same clean way as --duration, as
+    # they stop apply.  Each is set explicitly: a shell starts a background job (`&`) with
+    # SIGINT ignored (POSIX, "Signals" of the Shell Command Language) and Python then leaves
+    # it ignored, so `kill -INT` would not stop a simulate started from a script.
     stop = threading.Event()
-    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    stopped_by: list[str] = []
+
+    def on_signal(number: int, _frame: object) -> None:
+        stopped_by.append(signal.Signals(number).name)
+        stop.set()
+
+    for number in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+        signal.signal(number, on_signal)
     with RawLink(args.iface) as link:
-        try:
-            seg.serve(link, duration=args.duration, stop=stop,
-                      on_ready=lambda: print(f"ready: {len(seg.slaves)} slaves on "
-                                             f"{args.iface}" + (
-                                                 f" ({len(passive)} passive not emulated)"
-                                                 if passive else ""), flush=True))
-        except KeyboardInterrupt:
-            pass
-    print(f"stopped after {seg.frames} frames", flush=True)
+        seg.serve(link, duration=args.duration, stop=stop,
+                  on_ready=lambda: print(f"ready: {len(seg.slaves)} slaves on "
+                                         f"{args.iface}" + (
+                                             f" ({len(passive)} passive not emulated)"
+                                             if passive else ""), flush=True))
+    by = f" ({stopped_by[0]})" if stopped_by else ""
+    print(f"stopped after {seg.frames} frames{by}", flush=True)
     return 0

@@ -594,7 +594,7 @@ def loads(data: bytes | str, shown: str) -> LoadedTopology:
             raise EcatcfgError(f"not UTF-8 text (byte {exc.start})", shown, line,
                                exc.start - raw.rfind(b"\n", 0, exc.start)) from None
     try:
-        _prescan(data, shown)
+        _prescan_any_library(data, shown)
         node = yaml.compose(data, Loader=_LOADER)
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark or exc.context_mark
@@ -630,11 +630,39 @@ def loads(data: bytes | str, shown: str) -> LoadedTopology:
     return LoadedTopology(topology, shown, walker.lines)
 
 
-def _prescan(data: str, shown: str) -> None:
+def _prescan_any_library(data: str, shown: str) -> None:
+    """:func:`_prescan` with ``_LOADER``, whatever limits of its own the YAML library has.
+
+    libyaml 0.2.6 (in PyYAML 6.0.4's wheels) refuses a document nested deeper than its own
+    limit (1000) with its own ScannerError, and it does so before the parser's events
+    reach our depth check: in a flow collection its scanner reads the opening brackets
+    ahead, looking for a simple key.  PyYAML's own parser keeps its state on a list (no
+    limit, no recursion) and gives the same marks, so the refused text is scanned again
+    with it: too deep or too big gives this reader's own message, with its line; input
+    that is not YAML fails there too, and the library's first error is what is reported.
+    Only the text up to where the library stopped is scanned again, and only when it
+    opens more flow collections than MAX_DEPTH: block nesting takes a line per level, so
+    its events reach the check before any library reads that far ahead (PyYAML's parser is
+    some 50 times slower than libyaml on a long scalar)."""
+    try:
+        _prescan(data, shown, _LOADER)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        # libyaml counts marks in characters; an offset in bytes would only reach further.
+        upto = data if mark is None else data[:mark.index + 1]
+        if _LOADER is not yaml.SafeLoader and upto.count("[") + upto.count("{") > MAX_DEPTH:
+            try:
+                _prescan(upto, shown, yaml.SafeLoader)
+            except yaml.YAMLError:
+                pass
+        raise
+
+
+def _prescan(data: str, shown: str, loader: Any) -> None:
     """Refuse huge or deeply nested input from the parser's event stream, before composing
     builds a node for every value (a 100 MB file would take minutes and gigabytes)."""
     events = depth = 0
-    for event in yaml.parse(data, Loader=_LOADER):
+    for event in yaml.parse(data, Loader=loader):
         events += 1
         if isinstance(event, yaml.CollectionStartEvent):
             depth += 1

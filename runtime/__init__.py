@@ -9,18 +9,19 @@ and datagrams), ``mailbox.py`` (mailbox, CoE, SDO), ``ecatcfg/eoe.py`` (EoE) and
 
 The runtime consumes ENIs (:mod:`ecatcfg.eni`), never the compiler's objects, and never
 imports :mod:`ecatcfg.compiler` (``docs/architecture.md``).  Nothing here is imported by
-``ecatcfg --help`` or ``ecatcfg devices``; ``Network`` is loaded on first use.
+``ecatcfg --help`` or ``ecatcfg devices``; ``Network`` (and the
+:class:`BackgroundRun` of its ``run(background=True)``) is loaded on first use.
 """
 
 from __future__ import annotations
 
 from typing import Any
 
-__all__ = ["Network"]
+__all__ = ["BackgroundRun", "Network"]
 
 
 def __getattr__(name: str) -> Any:
-    if name == "Network":
-        from ecatcfg.runtime.network import Network
-        return Network
+    if name in ("Network", "BackgroundRun"):
+        from ecatcfg.runtime import network
+        return getattr(network, name)
     raise AttributeError(f"module 'ecatcfg.runtime' has no attribute {name!r}")

@@ -21,7 +21,7 @@ from array import array
 
 from ecatcfg.eni.plan import CyclicCmd, NetworkPlan
 from ecatcfg.esc import AlState, Cmd, Reg
-from ecatcfg.record import field, record
+from ecatcfg.record import record
 from ecatcfg.runtime import wire
 from ecatcfg.runtime.transport import Transport
 
@@ -42,16 +42,25 @@ class _Slot:
     wkc: int = -1               # what the last cycle brought back; -1: its frame was lost
 
 
-@record
 class CycleStats:
-    cycles: int = 0
-    lost_frames: int = 0
-    wkc_errors: int = 0
-    wkc_error_cmds: dict[str, int] = field(default_factory=dict)
-    # The periods in a ring of doubles, made at the first period: appending to a list
-    # would allocate a float per cycle.
-    _ring: array[float] | None = None
-    _count: int = 0
+    """What the cycles run since the last reset counted.  A plain class, not a ``@record``:
+    its repr is a summary (``print(net.run_stats)``), not the 65,536 periods it keeps."""
+
+    __slots__ = ("cycles", "lost_frames", "wkc_errors", "wkc_error_cmds", "late", "_ring",
+                 "_count")
+
+    def __init__(self) -> None:
+        self.cycles = 0
+        self.lost_frames = 0
+        self.wkc_errors = 0
+        self.wkc_error_cmds: dict[str, int] = {}
+        # Cycles that ended after the next one's deadline (Network.run starts that one at
+        # once, without catching up): the deadline misses of the run.
+        self.late = 0
+        # The periods in a ring of doubles, made at the first period: appending to a list
+        # would allocate a float per cycle.
+        self._ring: array[float] | None = None
+        self._count = 0
 
     def add_period(self, us: float) -> None:
         ring = self._ring
@@ -75,15 +84,26 @@ class CycleStats:
         """p50/p99/max of the cycle period's deviation from the nominal, in us."""
         if len(self.periods_us) < 2:
             return {"p50": 0.0, "p99": 0.0, "max": 0.0}
-        # The median without the statistics module (it imports decimal and fractions, 4 ms
-        # that apply's startup need not pay).
-        ordered = sorted(self.periods_us)
-        n = len(ordered)
-        middle = (ordered[(n - 1) // 2] + ordered[n // 2]) / 2
+        middle = _median(sorted(self.periods_us))
         devs = sorted(abs(p - middle) for p in self.periods_us)
         return {"p50": devs[len(devs) // 2], "p99": devs[min(len(devs) - 1,
                                                              int(len(devs) * 0.99))],
                 "max": devs[-1]}
+
+    def __repr__(self) -> str:
+        periods = sorted(self.periods_us)
+        measured = (f"period min/median/max {periods[0]:.1f}/{_median(periods):.1f}/"
+                    f"{periods[-1]:.1f} us over the last {len(periods)}" if periods
+                    else "no period measured")
+        return (f"CycleStats({self.cycles} cycles, {self.lost_frames} lost frames, "
+                f"{self.wkc_errors} working-counter errors, {self.late} late; {measured})")
+
+
+def _median(ordered: list[float]) -> float:
+    # Without the statistics module (it imports decimal and fractions, 4 ms that apply's
+    # startup need not pay).
+    n = len(ordered)
+    return (ordered[(n - 1) // 2] + ordered[n // 2]) / 2
 
 
 class _Prepared:

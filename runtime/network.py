@@ -14,8 +14,9 @@
 
 Variables are the ENI's process image names (``<slave>.<pdo>.<entry>``) with their IEC
 types: BOOL/BIT as ``bool``, integers as ``int``, REAL/LREAL as ``float``.  ``run()``
-cycles at the ENI's cycle time, on the caller's thread or a thread of its own, calling a
-callback between the frames.
+cycles at the ENI's cycle time, on the caller's thread or a thread of its own (then it
+returns a :class:`BackgroundRun` to join or stop), calling ``callback(network)`` after
+every cycle.
 """
 
 from __future__ import annotations
@@ -26,7 +27,7 @@ import threading
 import time
 from collections.abc import Callable, Iterable
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Literal, overload
 
 from ecatcfg.eni.plan import NetworkPlan, Variable
 from ecatcfg.errors import EcatcfgError
@@ -114,7 +115,7 @@ class Network:
                        for v in self._vars}
         self._closers = list(_closers)
         self.run_stats: CycleStats | None = None
-        self._thread: threading.Thread | None = None
+        self._run: BackgroundRun | None = None     # the last run(background=True)
         self._stop = threading.Event()
         self._lock = threading.Lock()
 
@@ -296,28 +297,55 @@ class Network:
             raise EcatcfgError(f"no process variable {name!r}" + (
                 f"; did you mean {', '.join(map(repr, close))}?" if close else "")) from None
 
+    @overload
+    def run(self, cycles: int | None = None,
+            callback: Callable[[Network], None] | None = None, *,
+            background: Literal[False] = False,
+            realtime: RealtimeOptions | None = None) -> None: ...
+
+    @overload
+    def run(self, cycles: int | None = None,
+            callback: Callable[[Network], None] | None = None, *,
+            background: Literal[True], realtime: RealtimeOptions | None = None,
+            ) -> BackgroundRun: ...
+
     def run(self, cycles: int | None = None, callback: Callable[[Network], None] | None = None,
-            *, background: bool = False, realtime: RealtimeOptions | None = None) -> None:
+            *, background: bool = False,
+            realtime: RealtimeOptions | None = None) -> BackgroundRun | None:
         """Cycle at the ENI's cycle time (``cycles`` times, or until :meth:`stop`), calling
-        ``callback(network)`` after every cycle.  ``realtime``: the options of
-        ``runtime/realtime.py`` (SCHED_FIFO, mlockall, CPU affinity, busy-wait), applied to
-        the cycling thread for the run and undone after it; a refusal raises
-        :class:`~ecatcfg.runtime.realtime.RealtimeError` here, before the first cycle."""
+        ``callback(network)`` after every cycle (on the cycling thread; what it returns is
+        not used; an exception it raises ends the run).  ``background``: cycle on a thread
+        of its own and return a :class:`BackgroundRun` at once (``join``, ``stop``,
+        ``done``, ``error``); otherwise return when the run ends.  ``realtime``: the
+        options of ``runtime/realtime.py`` (SCHED_FIFO, mlockall, CPU affinity,
+        busy-wait), applied to the cycling thread for the run and undone after it; a
+        refusal raises :class:`~ecatcfg.runtime.realtime.RealtimeError` here, before the
+        first cycle."""
+        if self._run is not None and not self._run.done:
+            raise EcatcfgError("the network is already cycling on its own thread: "
+                               "stop() or join() that run first")
         self._stop.clear()
         if not background:
             self._loop(cycles, callback, realtime)
-            return
+            return None
         started = threading.Event()
         refused: list[BaseException] = []
-        self._thread = threading.Thread(target=self._loop,
-                                        args=(cycles, callback, realtime, started, refused),
-                                        daemon=True, name="ecat-cycle")
-        self._thread.start()
+        run = BackgroundRun(self._stop)
+
+        def cycling() -> None:
+            try:
+                self._loop(cycles, callback, realtime, started, refused)
+            except BaseException as exc:        # the application's to see: join(), error
+                run._error = exc
+
+        run._thread = threading.Thread(target=cycling, daemon=True, name="ecat-cycle")
+        run._thread.start()
         started.wait()
         if refused:
-            self._thread.join()
-            self._thread = None
+            run._thread.join()
             raise refused[0]
+        self._run = run
+        return run
 
     def reset_stats(self) -> CycleStats:
         """Count cycles from here on in :attr:`run_stats` (apart from the cycles run while
@@ -366,6 +394,7 @@ class Network:
                 now = clock()
                 if now >= next_at:
                     next_at = now               # late: do not try to catch up
+                    self.master.cyclic.stats.late += 1
                     continue
                 # An absolute deadline: sleep to it, or to ``margin`` before it and spin on
                 # the clock to it, so neither the cycle's time nor a late wake-up adds up.
@@ -385,10 +414,11 @@ class Network:
             self.master.cyclic.stats = CycleStats()
 
     def stop(self) -> None:
+        """End :meth:`run` after the cycle under way; a run on its own thread is waited
+        for (its error stays in its :class:`BackgroundRun`)."""
         self._stop.set()
-        if self._thread is not None and self._thread is not threading.current_thread():
-            self._thread.join(5)
-            self._thread = None
+        if self._run is not None:
+            self._run.stop()
 
     def close(self) -> None:
         """Stop cycling, finish the pcap and close the link (a raw socket is released)."""
@@ -406,17 +436,75 @@ class Network:
         return self
 
     def __exit__(self, *exc: object) -> None:
-        """Leaving the block brings the line back to INIT, also after an error (whose
-        exception then wins over one from the way down)."""
+        """Leaving the block stops a run on its own thread (after the cycle under way),
+        brings the line back to INIT, also after an error (whose exception then wins over
+        one from the way down), and raises the error of a run on its own thread that
+        failed and was not joined: a failed run is never lost silently."""
         try:
+            failed = None
+            if self._run is not None:
+                self._run.stop()        # no cycle of it between the way down's frames
+                failed = self._run.unreported()
             if self.master.state > AlState.INIT:
                 try:
                     self.down()
                 except EcatcfgError:
-                    if exc[0] is None:
+                    if exc[0] is None and failed is None:
                         raise
+            if failed is not None and exc[0] is None:
+                raise failed
         finally:
             self.close()
+
+
+class BackgroundRun:
+    """A :meth:`Network.run` on a thread of its own (``background=True``).
+
+    ``done``: the run has ended (its cycles run, stopped, or failed); ``error``: the
+    exception that ended it, else ``None``; ``join(timeout)`` waits for the end and
+    re-raises that exception; ``stop()`` ends the run after the cycle under way and waits
+    for it.  Leaving the Network's ``with`` block stops it too."""
+
+    def __init__(self, stop_event: threading.Event) -> None:
+        self._stop_event = stop_event
+        self._thread: threading.Thread | None = None
+        self._error: BaseException | None = None
+        self._reported = False
+
+    @property
+    def done(self) -> bool:
+        return self._thread is None or not self._thread.is_alive()
+
+    @property
+    def error(self) -> BaseException | None:
+        """The exception that ended the run (the callback's, a link's ...), else None."""
+        return self._error if self.done else None
+
+    def join(self, timeout: float | None = None) -> bool:
+        """Wait for the run to end (at most ``timeout`` s); ``True`` when it has.  An error
+        that ended it is raised here."""
+        if self._thread is not None and self._thread is not threading.current_thread():
+            self._thread.join(timeout)
+        if self.done and self._error is not None:
+            self._reported = True
+            raise self._error
+        return self.done
+
+    def stop(self) -> None:
+        """End the run after the cycle under way and wait for it (from the callback, on
+        the cycling thread itself: only ask it to end)."""
+        self._stop_event.set()
+        if self._thread is not None and self._thread is not threading.current_thread():
+            self._thread.join()
+
+    def unreported(self) -> BaseException | None:
+        """The error of an ended run that no join() has raised yet."""
+        return None if self._reported or not self.done else self._error
+
+    def __repr__(self) -> str:
+        what = ("failed: " + repr(self._error) if self.done and self._error is not None
+                else "done" if self.done else "cycling")
+        return f"<BackgroundRun {what}>"
 
 
 class SkippedConfigWarning(UserWarning):

@@ -156,6 +156,64 @@ def test_deep_nesting_is_refused(tmp_path, capsys):
     assert "nested more than 64 levels" in run_bad(tmp_path, capsys, chain)
 
 
+class _LimitedLoader(topology.yaml.SafeLoader):
+    """A YAML library with a nesting limit of its own, enforced by its scanner while it reads
+    a flow collection's brackets ahead (what libyaml 0.2.6, in PyYAML 6.0.4, does at 1000
+    levels), worded as no release words it."""
+
+    LIMIT = 100
+
+    def fetch_flow_collection_start(self, token_class):
+        if self.flow_level >= self.LIMIT:
+            raise topology.yaml.scanner.ScannerError(
+                None, None, "library limit hit", self.get_mark())
+        super().fetch_flow_collection_start(token_class)
+
+
+@pytest.mark.parametrize("text, line", [
+    ("slaves: " + "[" * 5000 + "]" * 5000 + "\n", 1),
+    ("master: {name: m}\nslaves:\n  - " + "{a: " * 3000 + "1" + "}" * 3000 + "\n", 3),
+], ids=["sequences", "mappings"])
+def test_deep_nesting_is_ours_whatever_the_yaml_library_stops_first(tmp_path, capsys,
+                                                                    monkeypatch, text, line):
+    # Was (PyYAML 6.0.4): "not valid YAML/JSON: exceeded maximum nesting depth", libyaml's
+    # words, and the suite failed on a fresh machine.  The message is the reader's, with
+    # the file and the line, whichever loader stops first and however it words it.
+    monkeypatch.setattr(topology, "_LOADER", _LimitedLoader)
+    err = run_bad(tmp_path, capsys, text)
+    assert f"bad.yaml:{line}: values nested more than 64 levels deep; this is not a " \
+           "topology" in err, err
+    assert "library limit" not in err
+
+
+def test_what_only_the_yaml_library_refuses_keeps_its_error(tmp_path, capsys, monkeypatch):
+    # Nested deeper than the library allows but not deeper than the reader does: the
+    # library's refusal is the error (located), not silently accepted.
+    monkeypatch.setattr(topology, "_LOADER", _LimitedLoader)
+    monkeypatch.setattr(_LimitedLoader, "LIMIT", 3)
+    err = run_bad(tmp_path, capsys, "slaves: [[[[[1]]]]]\n")
+    assert "bad.yaml:1:12: not valid YAML/JSON: library limit hit" in err, err
+
+
+def test_a_yaml_error_is_scanned_again_only_where_nesting_could_be_deep(tmp_path, capsys,
+                                                                       monkeypatch):
+    # PyYAML's own parser is some 50 times slower than libyaml: a long scalar before a tab
+    # is not read again by it (20 MB took 15 s that way), one flow collection deep is not
+    # deep.
+    monkeypatch.setattr(topology, "_LOADER", _LimitedLoader)
+    parse, loaders = topology.yaml.parse, []
+
+    def recorded(data, Loader):
+        loaders.append(Loader)
+        return parse(data, Loader=Loader)
+
+    monkeypatch.setattr(topology.yaml, "parse", recorded)
+    err = run_bad(tmp_path, capsys, 'slaves:\n  - {name: "' + "[" * 60 + 'x", '
+                  "device: EX1100}\n\tbad: 1\n")
+    assert "bad.yaml:3:1: not valid YAML/JSON: a tab" in err, err
+    assert loaders == [_LimitedLoader]
+
+
 def test_a_huge_topology_is_refused_quickly(tmp_path, capsys, monkeypatch):
     # Was: every value composed before the value limit was looked at (100 MB: minutes and
     # gigabytes of memory); now the parser's events are counted first.  The work done shows

@@ -65,6 +65,40 @@ def test_ci_runs_the_readme_test_command_verbatim():
         assert ci.index(f"export {kind}=1") < ci.index(command)
 
 
+def test_ci_runs_the_newest_allowed_versions_after_the_locked_run(tmp_path):
+    """The second step: .ci/newest, after the README's (locked) command, only when that one
+    passed; it installs without the lock, upgrading every dependency, into a venv of its
+    own, and runs pytest with the arguments given."""
+    command = readme_test_command()
+    ci = (ROOT / ".ci" / "run").read_text().splitlines()
+    assert ".ci/newest" in ci and ci.index(command) < ci.index(".ci/newest")
+    newest = ROOT / ".ci" / "newest"
+    assert os.access(newest, os.X_OK)
+    script = newest.read_text()
+    install = next(line for line in script.splitlines() if "-e \".[test]\"" in line)
+    assert "--upgrade-strategy eager" in install and "test-lock" not in install
+    assert "python3 -m venv" in script and '-m pytest "$@"' in script
+    assert ".ci/newest" in (ROOT / "README.md").read_text()
+    # The locked step's failure stops CI before the second one, wherever in the README's
+    # && list it fails (set -e alone stops only on the list's last command): .ci/run run
+    # with a python3 whose pip fails, in a copy of the checkout's .ci.
+    (tmp_path / ".ci").mkdir()
+    for name in ("run", "newest"):
+        (tmp_path / ".ci" / name).write_text((ROOT / ".ci" / name).read_text())
+        (tmp_path / ".ci" / name).chmod(0o755)
+    (tmp_path / ".ci" / "newest").write_text(f"#!/bin/sh\ntouch {tmp_path}/ran-newest\n")
+    bin_dir = tmp_path / "bin"
+    bin_dir.mkdir()
+    for tool in ("python3", "tshark"):
+        (bin_dir / tool).write_text("#!/bin/sh\nexit 3\n" if tool == "python3" else
+                                    "#!/bin/sh\nexit 0\n")
+        (bin_dir / tool).chmod(0o755)
+    env = {**os.environ, "PATH": f"{bin_dir}:{os.environ['PATH']}"}
+    done = subprocess.run([str(tmp_path / ".ci" / "run")], env=env, capture_output=True,
+                          timeout=30)
+    assert done.returncode == 3 and not (tmp_path / "ran-newest").exists()
+
+
 def test_missing_prerequisites_skip_locally_and_fail_in_ci(monkeypatch):
     monkeypatch.delenv("CI", raising=False)
     monkeypatch.delenv(rig.REQUIRE_ENV, raising=False)

@@ -76,11 +76,11 @@ def test_options_reach_the_cycling_thread_and_are_undone(example_plan, backgroun
     seen: list[tuple[tuple[int, int, set[int], int], str]] = []
     with Network.virtual(example_plan, esi=[ESI]) as net:
         net.up()
-        net.run(20, lambda n: seen.append((_thread_view(), threading.current_thread().name)),
-                background=background, realtime=opts)
+        run = net.run(20, lambda n: seen.append((_thread_view(),
+                                                 threading.current_thread().name)),
+                      background=background, realtime=opts)
         if background:
-            assert net._thread is not None
-            net._thread.join(10)
+            assert run is not None and run.join(10)
         assert net.run_stats is not None and net.run_stats.cycles == 20
     assert len(seen) == 20
     (policy, priority, cpus, locked), thread = seen[0]
@@ -412,5 +412,5 @@ def test_a_refusal_on_the_background_thread_is_raised_in_the_caller(example_plan
         net.up()
         with pytest.raises(realtime.RealtimeError, match="CPU 4096 does not exist"):
             net.run(10, background=True, realtime=realtime.options(cpus=[4096]))
-        assert net._thread is None
+        assert not [t for t in threading.enumerate() if t.name == "ecat-cycle"]
         assert net.cycle()                       # nothing ran, the network is as it was
