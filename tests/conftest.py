@@ -129,6 +129,18 @@ def compile_example(eni: Path) -> Path:
     return eni
 
 
+@pytest.fixture(scope="module")
+def example_plan():
+    """The example topology compiled, written and read back: the runtime gets what the file
+    says, not the compiler's objects."""
+    from ecatcfg.compiler import build, topology
+    from ecatcfg.eni import reader as eni_reader, writer as eni_writer
+    from ecatcfg.esi.library import Library
+    plan = build.compile_topology(topology.load(EXAMPLES / "topology.yaml"),
+                                  Library([EXAMPLES / "esi"], cache=False)).plan
+    return eni_reader.read_bytes(eni_writer.to_bytes(plan), "example.eni.xml")
+
+
 def _pdo_entry(index: int, bits: int, type_: str) -> str:
     return (f"<Entry><Index>#x{index:04X}</Index><SubIndex>1</SubIndex><BitLen>{bits}"
             f"</BitLen><Name>e</Name><DataType>{type_}</DataType></Entry>")

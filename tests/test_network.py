@@ -33,13 +33,6 @@ from ecatcfg.runtime.transport import Transport
 ESI = EXAMPLES / "esi"
 
 
-@pytest.fixture(scope="module")
-def example_plan():
-    plan = build.compile_topology(topology.load(EXAMPLES / "topology.yaml"),
-                                  Library([ESI], cache=False)).plan
-    # What the runtime gets is what the file says: read our own ENI back.
-    return eni_reader.read_bytes(eni_writer.to_bytes(plan), "example.eni.xml")
-
 
 def line_plan(kinds: list[str]):
     text = "slaves:\n" + "".join(f"  - {{name: s{i}, device: {k}}}\n"

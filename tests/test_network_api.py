@@ -13,22 +13,12 @@ import time
 import pytest
 
 from conftest import EXAMPLES
-from ecatcfg.compiler import build, topology
-from ecatcfg.eni import reader as eni_reader
-from ecatcfg.eni import writer as eni_writer
 from ecatcfg.errors import EcatcfgError
 from ecatcfg.esc import AlState
-from ecatcfg.esi.library import Library
 from ecatcfg.runtime import BackgroundRun, Network
 
 ESI = EXAMPLES / "esi"
 
-
-@pytest.fixture(scope="module")
-def example_plan():
-    plan = build.compile_topology(topology.load(EXAMPLES / "topology.yaml"),
-                                  Library([ESI], cache=False)).plan
-    return eni_reader.read_bytes(eni_writer.to_bytes(plan), "example.eni.xml")
 
 
 def cycling_threads() -> list[threading.Thread]:

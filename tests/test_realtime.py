@@ -27,8 +27,6 @@ from pathlib import Path
 import pytest
 import rig
 from conftest import EXAMPLES
-from ecatcfg.compiler import build, topology
-from ecatcfg.eni import reader as eni_reader
 from ecatcfg.eni import writer as eni_writer
 from ecatcfg.errors import UsageError
 from ecatcfg.esc import AlState, Cmd
@@ -38,12 +36,6 @@ from ecatcfg.runtime import Network, realtime, wire
 ESI = EXAMPLES / "esi"
 CYCLE_US = 1000
 
-
-@pytest.fixture(scope="module")
-def example_plan():
-    plan = build.compile_topology(topology.load(EXAMPLES / "topology.yaml"),
-                                  Library([ESI], cache=False)).plan
-    return eni_reader.read_bytes(eni_writer.to_bytes(plan), "example.eni.xml")
 
 
 @pytest.fixture(scope="module")
