@@ -2,8 +2,8 @@
 model's table (``runtime/timing.py``, ``docs/timing.md``) and its fit per device kind.
 
 Run: ``python3 bench/capture_timing.py [CAPTURE.pcapng ...] [--events]``; without captures,
-every capture of both corpora (``pcap/`` of ``ECATCFG_CORPUS`` and ``ECATCFG_CORPUS_EXTRA``,
-by default ``../shared/corpus`` and ``../shared/corpus-extra`` beside the checkout).  The
+every capture of both test corpora (the ``pcap/`` folders of the corpus folders named by
+``ECATCFG_CORPUS`` and ``ECATCFG_CORPUS_EXTRA``, as for the tests).  The
 captures are pcapng files with both the master's frames and the slaves' replies, e.g.
 ethercrab-rs/ethercrab ``dumps/*.pcapng`` and ``tests/replay-*.pcapng``.  Prints, per
 capture and slave (station address, the identity read from its SII, its device kind), every
