@@ -79,7 +79,9 @@ Method (targets: apply's whole process no slower than SOEM's, and apply's frames
 
 Reported per line: wall time min / median over the timed runs for apply, apply cold and
 SOEM, apply / SOEM (min / median), frames (apply: sent, configuration, cyclic; SOEM: the segment's
-count), the minimum and the ratios.  Benchmarks are not tests: nothing is asserted.
+count), the minimum and the ratios.  A run whose master does not reach OP is listed as
+failed, with what the master said (SOEM's exception, apply's JSON), and the figures are
+taken over the runs that did.  Benchmarks are not tests: nothing is asserted.
 """
 
 from __future__ import annotations
