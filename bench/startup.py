@@ -79,7 +79,9 @@ Method (targets: apply's whole process no slower than SOEM's, and apply's frames
 
 Reported per line: wall time min / median over the timed runs for apply, apply cold and
 SOEM, apply / SOEM (min / median), frames (apply: sent, configuration, cyclic; SOEM: the segment's
-count), the minimum and the ratios.  Benchmarks are not tests: nothing is asserted.
+count), the minimum and the ratios.  A run whose master does not reach OP is listed as
+failed, with what the master said (SOEM's exception, apply's JSON), and the figures are
+taken over the runs that did.  Benchmarks are not tests: nothing is asserted.
 """
 
 from __future__ import annotations
@@ -154,6 +156,10 @@ try:
         m.read_state()
         r["states"] = sorted({s.state for s in m.slaves})
         r["op"] = r["states"] == [pysoem.OP_STATE]
+except Exception as exc:
+    # Reported as a failed run (report_line), with what SOEM said.
+    r["error"] = f"{type(exc).__name__}: {exc}"
+    raise
 finally:
     m.close()
     print(json.dumps(r), flush=True)
@@ -643,14 +649,21 @@ def run(args: argparse.Namespace, tmp: Path) -> None:
 
 def report_line(label: str, runs: dict[str, list[Run]], warm: dict[str, Run],
                 minimum: Minimum, per_cycle: int) -> None:
-    a, s, cold = runs["apply"], runs["SOEM"], runs["apply cold"]
     print(f"\n## {label}")
-    bad = [r.result for r in a + cold if not r.result.get("ok")] + \
-          [r.result for r in s if not r.result.get("op")]
-    if bad:
-        print(f"NOT ALL RUNS REACHED OP: {json.dumps(bad)[:1500]}")
+    a, s, cold = (reached(runs[k], k) for k in ("apply", "SOEM", "apply cold"))
+    for kind, all_runs in runs.items():
+        for i, r in enumerate(all_runs, 1):
+            if r not in reached(all_runs, kind):
+                print(f"{kind} run {i} FAILED (not in OP): "
+                      f"{r.result.get('error') or json.dumps(r.result)[:500]}")
+    print("runs that reached OP: " + ", ".join(
+        f"{k} {len(reached(v, k))} of {len(v)}" for k, v in runs.items()))
+    if not (a and s and cold):
+        print("no figures: a master has no run that reached OP")
+        return
     aw, sw, cw = [r.wall for r in a], [r.wall for r in s], [r.wall for r in cold]
-    print(f"wall ms (min / median): apply {ms(aw)}, SOEM {ms(sw)}; apply / SOEM "
+    print(f"wall ms (min / median, runs that reached OP): apply {ms(aw)}, SOEM {ms(sw)}; "
+          f"apply / SOEM "
           f"{min(aw) / min(sw):.2f}x / {statistics.median(aw) / statistics.median(sw):.2f}x; "
           f"apply with a cold plan cache {ms(cw)}, / SOEM {min(cw) / min(sw):.2f}x / "
           f"{statistics.median(cw) / statistics.median(sw):.2f}x")
@@ -705,6 +718,13 @@ def report_line(label: str, runs: dict[str, list[Run]], warm: dict[str, Run],
           f"cold plan cache {_met(statistics.median(cw) <= target() * statistics.median(sw))}")
 
 
+def reached(runs: list[Run], kind: str) -> list[Run]:
+    """The runs of ``kind`` ("apply", "apply cold", "SOEM") whose master reached OP: the
+    ones the figures are taken over (a failed run has no phase times to take)."""
+    key = "op" if kind == "SOEM" else "ok"
+    return [r for r in runs if r.result.get(key) is True]
+
+
 def target() -> float:
     return REALISTIC_TARGET if REALISTIC else TIME_TARGET
 
@@ -732,10 +752,14 @@ def summary(results: dict[str, dict], prepared: dict) -> None:
           "config / cyclic) | SOEM frames | minimum (lockstep) | config / min | all / min |")
     print("|---|---|---|---|---|---|---|---|---|---|---|")
     for (label, layout), res in results.items():
-        a, s = res["runs"]["apply"], res["runs"]["SOEM"]
+        a, s, c = (reached(res["runs"][k], k) for k in ("apply", "SOEM", "apply cold"))
         minimum, per_cycle = prepared[label][4], prepared[label][5]
+        if not (a and s and c):
+            print(f"| {label} | {layout} | no figures: a master has no run that reached OP "
+                  "(report above) |")
+            continue
         aw, sw = [r.wall for r in a], [r.wall for r in s]
-        cw = [r.wall for r in res["runs"]["apply cold"]]
+        cw = [r.wall for r in c]
         af = [apply_frames(r, per_cycle) for r in a]
         total = statistics.median(f["sent"] for f in af)
         cyc = statistics.median(f["cyclic"] for f in af)

@@ -185,6 +185,52 @@ def test_mailbox_reply_is_not_readable_before_its_latency(lib):
     assert reply.wkc == 1 and reply.data[8] == 0x43 and reply.data[9:12] == b"\x18\x10\x01"
 
 
+def test_a_request_written_again_is_answered_once(lib):
+    """SOEM sends a frame again when no answer came back within 2 ms (ecx_srconfirm, up to
+    three sends of an SM0 write): the same bytes, so the same mailbox counter.  The slave
+    takes each copy into SM0 and its firmware drops the copies as repeats (ETG.1000.6
+    counter; SOES ``mbxincnt``): one reply after the latency, and SM1 stays empty after it
+    is read.  A second reply would be read as the answer to the master's next request."""
+    clock = Clock()
+    seg = line(lib, "EXD-402", clock=clock)
+    addressed(seg)
+    to_preop(seg, clock)
+    latency = timing.TABLE["drive"].mailbox_reply_ns
+    request = fp(Cmd.FPWR, 0x1000, SDO_UPLOAD_1018_01.ljust(128, b"\0"))
+    for _ in range(3):
+        [d] = run(seg, request)
+        assert d.wkc == 1                              # SM0 taken: the firmware read it
+        clock.advance(2 * MS)
+    [status, reply] = run(seg, fp(Cmd.FPRD, 0x080D, 1), fp(Cmd.FPRD, 0x1080, 128))
+    assert status.data[0] & 0x08 and reply.wkc == 1 and reply.data[9:12] == b"\x18\x10\x01"
+    clock.advance(latency * 4)
+    [status, again] = run(seg, fp(Cmd.FPRD, 0x080D, 1), fp(Cmd.FPRD, 0x1080, 128))
+    assert status.data[0] & 0x08 == 0 and again.wkc == 0          # nothing more in SM1
+
+
+def test_a_lost_reply_is_posted_again_on_a_repeat_request(lib):
+    """The frame that read SM1 is lost on its way back (the slave emptied SM1, SOEM saw no
+    working counter): SOEM toggles the repeat request (0x080E bit 1), waits for the
+    acknowledge (0x080F bit 1) and reads the same reply again (ETG.1000.4 mailbox
+    repeat)."""
+    clock = Clock()
+    seg = line(lib, "EXD-402", clock=clock)
+    addressed(seg)
+    to_preop(seg, clock)
+    run(seg, fp(Cmd.FPWR, 0x1000, SDO_UPLOAD_1018_01.ljust(128, b"\0")))
+    clock.advance(timing.TABLE["drive"].mailbox_reply_ns)
+    [first] = run(seg, fp(Cmd.FPRD, 0x1080, 128))                    # lost on the way back
+    assert first.wkc == 1
+    [sm1] = run(seg, fp(Cmd.FPRD, 0x080D, 2))
+    assert sm1.data[0] & 0x08 == 0
+    toggled = bytes([sm1.data[0], sm1.data[1] ^ 0x02])
+    run(seg, fp(Cmd.FPWR, 0x080D, toggled))
+    [ack, status] = run(seg, fp(Cmd.FPRD, 0x080F, 1), fp(Cmd.FPRD, 0x080D, 1))
+    assert ack.data[0] & 0x02 and status.data[0] & 0x08
+    [again] = run(seg, fp(Cmd.FPRD, 0x1080, 128))
+    assert again.wkc == 1 and again.data == first.data
+
+
 def test_replies_in_progress_are_dropped_when_the_mailbox_stops(lib):
     # A reply slower than PI (the table's drive answers faster than it leaves PREOP), so
     # that it is still in progress when the slave reaches INIT.
