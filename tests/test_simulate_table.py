@@ -55,3 +55,15 @@ def test_long_names_are_cut_and_the_columns_stay(veth_netns, tmp_path):
     assert rows[1].startswith("  1  io               EX1004         0xe0000eca"), rows
     assert rows[2].startswith("  2  exactly_16_chars EX1004         0xe0000eca"), rows
     assert header.index("device") == rows[0].index("EX1100") == rows[2].index("EX1004")
+
+
+def test_simulate_reports_unknown_keys_with_the_rest_before_opening_anything(tmp_path):
+    topo = write(tmp_path, "t.yaml", "slaves:\n  - {name: a, device: EX1100, aliass: 3}\n"
+                                     "  - {name: b, device: NOPE}\n")
+    done = subprocess.run([sys.executable, "-m", "ecatcfg", "simulate", "--topology",
+                           str(topo), "--esi", str(ESI), "--iface", "ecatnosuch0",
+                           "--no-cache"], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 1, done
+    assert done.stdout == ""
+    assert f"{topo}:2: slaves.0.aliass: unknown key; did you mean 'alias'?" in done.stderr
+    assert f"{topo}:3: slave 'b': no device with Type name 'NOPE'" in done.stderr

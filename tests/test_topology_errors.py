@@ -183,3 +183,15 @@ def test_yaml_that_merely_mentions_xml_is_a_topology(tmp_path):
     path = write(tmp_path, "t.yaml", "# <EtherCATConfig> is what compile writes\n"
                                      "slaves:\n  - {name: '<a>', device: EX1004}\n")
     assert topology.load(path).topology.slaves[0].name == "<a>"
+
+
+def test_an_unknown_key_deep_in_a_mapping_entry_is_left_out_and_the_rest_compiled(tmp_path,
+                                                                                  capsys):
+    lines = compile_cli(tmp_path, "slaves:\n  - name: a\n    device: EXD-402\n"
+                                  "    tx_pdos: [0x1A00, 0x1A01]\n    pdo_mapping:\n"
+                                  "      0x1A01: [{index: 0x6041, bits: 16, nmae: x}]\n"
+                                  "  - {name: b, device: NOPE}\n", capsys)
+    topo = tmp_path / "t.yaml"
+    assert [line.split(": ", 1)[0] for line in lines] == [f"{topo}:6", f"{topo}:7"]
+    assert lines[0].endswith("0x1A01.0.nmae: unknown key; did you mean 'name'?"), lines
+    assert "'NOPE'" in lines[1]
