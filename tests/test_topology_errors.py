@@ -193,5 +193,5 @@ def test_an_unknown_key_deep_in_a_mapping_entry_is_left_out_and_the_rest_compile
                                   "  - {name: b, device: NOPE}\n", capsys)
     topo = tmp_path / "t.yaml"
     assert [line.split(": ", 1)[0] for line in lines] == [f"{topo}:6", f"{topo}:7"]
-    assert lines[0].endswith("0x1A01.0.nmae: unknown key; did you mean 'name'?"), lines
+    assert lines[0].endswith(".0.nmae: unknown key; did you mean 'name'?"), lines
     assert "'NOPE'" in lines[1]
