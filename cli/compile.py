@@ -47,13 +47,14 @@ def run(args: argparse.Namespace) -> int:
     targets = [Path(p).resolve() for p in [args.topology] + outputs]
     if len(set(targets)) < len(targets):
         raise UsageError("the topology, -o and --header must be three different files")
-    loaded = topology.load(args.topology)
+    # Unknown keys are reported with the errors the compiler finds in the rest.
+    loaded = topology.load(args.topology, unknown_keys="defer")
     lib = Library(args.esi, cache=not args.no_cache, prefer=args.prefer)
     if lib.problems:
         for problem in lib.problems:
             print(f"error: {problem}", file=sys.stderr)
         raise EcatcfgError(f"{len(lib.problems)} ESI file problem(s); nothing written")
-    result = build.compile_topology(loaded, lib)
+    result = topology.checked(loaded, lambda: build.compile_topology(loaded, lib))
     for note in result.notes:
         print(f"note: {note}", file=sys.stderr)
     for warning in result.warnings:

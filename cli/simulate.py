@@ -10,6 +10,17 @@ if TYPE_CHECKING:
     from ecatcfg.runtime.slave import StateChange
 
 
+# Columns of the slave table: a longer name or device is cut with an ellipsis, so the
+# columns after it stay aligned (the full names are in the state-change lines).
+NAME_WIDTH = 16
+DEVICE_WIDTH = 14
+
+
+def cut_to(text: str, width: int) -> str:
+    """``text`` padded to ``width``, or cut to it with "…" as its last character."""
+    return f"{text:{width}}" if len(text) <= width else text[:width - 1] + "\u2026"
+
+
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser(
         "simulate", help="run a virtual EtherCAT segment on a network interface",
@@ -85,6 +96,7 @@ def run(args: argparse.Namespace) -> int:
     # Passive slaves (no ESC): listed, never emulated. (name, device, vendor, product,
     # revision, where the identity comes from)
     passive: list[tuple[str, str, int, int, int, str]] = []
+    notes: list[str] = []
     if args.topology:
         assert lib is not None
         # The compiler resolves the topology (its checks, the modules in the slots); the
@@ -93,11 +105,12 @@ def run(args: argparse.Namespace) -> int:
         from ecatcfg.compiler.passive import split
         from ecatcfg.compiler.resolve import plugged_devices
         from ecatcfg.runtime.wiring import Plug
-        loaded = topology.load(args.topology)
+        # Unknown keys are reported with the errors resolving the rest finds.
+        loaded = topology.load(args.topology, unknown_keys="defer")
         specs = [emulate.SlaveSpec(d.device, d.name, alias=d.alias, plug=None
                                    if d.parent is None or d.parent_port is None
                                    else Plug(d.parent, d.parent_port))
-                 for d in plugged_devices(loaded, lib)]
+                 for d in topology.checked(loaded, lambda: plugged_devices(loaded, lib))]
         passive = [(p.cfg.name, p.device.type_name, p.device.vendor.id or 0,
                     p.device.product_code or 0, p.device.revision or 0, "ESI")
                    for p in split(loaded, lib).passive]
@@ -106,10 +119,9 @@ def run(args: argparse.Namespace) -> int:
         from ecatcfg.eni.contents import line_of
         plan = eni_reader.read_file(args.eni)
         # Not the master: what apply would refuse asks nothing of the emulated slaves,
-        # but the user learns that it is there and not used.
-        for part in plan.unsupported:
-            print(f"note: ignored (apply would refuse it): {line_of(part, args.eni)}",
-                  file=sys.stderr)
+        # but the user learns that it is there and not used (once the interface is open).
+        notes += [f"note: ignored (apply would refuse it): {line_of(part, args.eni)}"
+                  for part in plan.unsupported]
         specs = emulate.specs_from_eni(plan, lib, args.eni)
         passive = [(p.name, "passive", p.vendor_id, p.product_code, p.revision, "ENI")
                    for p in plan.passive]
@@ -138,27 +150,37 @@ def run(args: argparse.Namespace) -> int:
         target = named[0] if named else next(s for s in seg.wired
                                              if s.position == int(which))
         cut.append(target)
+    removed = []
     for target in cut:
         try:
-            gone = seg.remove_cable(target)
+            removed.append((target.name, seg.remove_cable(target)))
         except ValueError as exc:
             raise UsageError(f"--cut {target.name}: {exc}") from None
-        print(f"cable into {target.name} removed: "
+    # The interface is opened before anything is printed: a missing one is the only
+    # thing the user reads, not a table of slaves that will never answer.
+    link = RawLink(args.iface)
+    for note in notes:
+        print(note, file=sys.stderr)
+    for name, gone in removed:
+        print(f"cable into {name} removed: "
               + ", ".join(s.name for s in gone) + " not on the frame", flush=True)
 
-    print(f"{'pos':>3}  {'name':16} {'device':14} {'vendor':>10} {'product':>10} "
-          f"{'revision':>10}  {'from':4} mailbox" + ("  timing" if timing else ""))
+    print(f"{'pos':>3}  {'name':{NAME_WIDTH}} {'device':{DEVICE_WIDTH}} {'vendor':>10} "
+          f"{'product':>10} {'revision':>10}  {'from':4} mailbox"
+          + ("  timing" if timing else ""))
     for s in seg.slaves:
         dev = s.device
         mbx = ",".join(dev.mailbox.protocols) if dev.mailbox else "-"
-        print(f"{s.position:>3}  {s.name[:16]:16} {dev.type_name[:14]:14} "
+        print(f"{s.position:>3}  {cut_to(s.name, NAME_WIDTH)} "
+              f"{cut_to(dev.type_name, DEVICE_WIDTH)} "
               f"0x{dev.vendor.id or 0:08x} 0x{dev.product_code or 0:08x} "
               f"0x{dev.revision or 0:08x}  {'ENI' if s.eni_only else 'ESI':4} {mbx}"
               + (f"  {s.timing.kind}" if s.timing else ""))
     for name, device, vendor, product, revision, origin in passive:
         # A slave without an ESC (ETG.2100: no PhysAddr/AutoIncAddr) answers no frame:
         # nothing to emulate.
-        print(f"  -  {name[:16]:16} {device[:14]:14} 0x{vendor:08x} 0x{product:08x} "
+        print(f"  -  {cut_to(name, NAME_WIDTH)} {cut_to(device, DEVICE_WIDTH)} "
+              f"0x{vendor:08x} 0x{product:08x} "
               f"0x{revision:08x}  {origin:4} passive: no ESC, not emulated")
     for s in seg.slaves:
         if s.eni_only is not None:
@@ -185,7 +207,7 @@ def run(args: argparse.Namespace) -> int:
 
     for number in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
         signal.signal(number, on_signal)
-    with RawLink(args.iface) as link:
+    with link:
         seg.serve(link, duration=args.duration, stop=stop,
                   on_ready=lambda: print(f"ready: {len(seg.slaves)} slaves on "
                                          f"{args.iface}" + (

@@ -9,13 +9,16 @@ Schema); unknown keys are errors (a typo must not be silently ignored).
 
 from __future__ import annotations
 
+import difflib
 import ipaddress
 import json
+import types
 import re
 import sys
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import (Annotated, Any, Callable, Literal, TypeVar, Union, get_args,
+                    get_origin)
 
 import yaml
 from pydantic import (AfterValidator, BaseModel, BeforeValidator, ConfigDict, Discriminator,
@@ -51,6 +54,10 @@ class TopologyError(EcatcfgError):
     """One or more errors in a topology file, each with its line."""
 
     def __init__(self, problems: list[EcatcfgError]) -> None:
+        # In line order, whichever check found them (the reader's keys, the compiler's
+        # devices, PDOs, DC, SDOs): the user reads the file from the top.  Stable: errors
+        # of one line keep the order they were found in.
+        problems = sorted(problems, key=lambda p: p.line or 0)
         first = problems[0]
         super().__init__(first.message, first.file, first.line, first.column)
         self.problems = problems
@@ -493,9 +500,14 @@ def json_schema() -> dict[str, Any]:
 
 @dataclass(slots=True)
 class LoadedTopology:
+    """A validated topology.  ``unknown``: the unknown keys left out of it, when it was
+    loaded with ``unknown_keys="defer"``; :func:`checked` reports them with whatever the
+    compiler finds in the rest."""
+
     topology: Topology
     file: str
     lines: dict[Path_, int]
+    unknown: list[EcatcfgError] = field(default_factory=list)
 
     def line(self, *path: str | int) -> int | None:
         """The line of the value at ``path``, or of its nearest parent that has one."""
@@ -575,16 +587,49 @@ class _Walker:
                             self.file, node.start_mark.line + 1, node.start_mark.column + 1)
 
 
-def load(path: str | Path, shown_as: str | None = None) -> LoadedTopology:
+def load(path: str | Path, shown_as: str | None = None,
+         unknown_keys: Literal["error", "defer"] = "error") -> LoadedTopology:
     shown = shown_as or str(path)
     try:
         text = Path(path).read_bytes()
     except OSError as exc:
         raise EcatcfgError(f"cannot read: {exc.strerror}", shown) from None
-    return loads(text, shown)
+    return loads(text, shown, unknown_keys)
 
 
-def loads(data: bytes | str, shown: str) -> LoadedTopology:
+_T = TypeVar("_T")
+
+
+def checked(loaded: LoadedTopology, check: Callable[[], _T]) -> _T:
+    """``check()`` (the compiler, on ``loaded``), raising its errors together with the
+    unknown keys ``loaded`` was read without, in line order.
+
+    An unknown key is never used: the rest of the topology means the same with or without
+    it, so what the compiler finds there is what the next run would find once the key is
+    gone, and the user sees every error at once instead of one kind per run.  A topology
+    that is not valid otherwise (a missing or mistyped value) is not compiled: a value the
+    model cannot hold has no meaning to resolve, and pydantic already lists all of those
+    together."""
+    try:
+        result = check()
+    except TopologyError as exc:
+        raise TopologyError(loaded.unknown + exc.problems) from None
+    except EcatcfgError as exc:
+        if loaded.unknown:
+            raise TopologyError(loaded.unknown + [exc]) from None
+        raise
+    if loaded.unknown:
+        raise TopologyError(loaded.unknown)
+    return result
+
+
+def loads(data: bytes | str, shown: str,
+          unknown_keys: Literal["error", "defer"] = "error") -> LoadedTopology:
+    """The topology in ``data``.  Errors of the reader and of the model are raised (a
+    :class:`TopologyError` lists every one); with ``unknown_keys="defer"``, unknown keys
+    alone are not raised but left out and listed in ``LoadedTopology.unknown`` (the caller
+    reports them through :func:`checked`)."""
+    _refuse_xml(data, shown)
     if isinstance(data, bytes):
         raw = data
         try:
@@ -625,9 +670,69 @@ def loads(data: bytes | str, shown: str) -> LoadedTopology:
     try:
         topology = Topology.model_validate(raw)
     except ValidationError as exc:
-        raise TopologyError([_problem(err, shown, walker.lines)
-                             for err in exc.errors()]) from None
+        errors = exc.errors()
+        problems = [_problem(err, shown, walker.lines) for err in errors]
+        if unknown_keys == "error" or any(e["type"] != "extra_forbidden" for e in errors):
+            raise TopologyError(problems) from None
+        try:
+            for err in errors:
+                _drop(raw, [p for p in err["loc"] if not _is_pydantic_tag(p)])
+            topology = Topology.model_validate(raw)
+        except ValidationError as again:
+            # A model's own check that did not run while it had an unknown key ('value'
+            # misspelt: then neither 'value' nor 'data' is given): reported with the keys.
+            raise TopologyError(problems + [_problem(err, shown, walker.lines)
+                                            for err in again.errors()]) from None
+        except (LookupError, TypeError):
+            # Not expected (the keys left out were extra); never compile a guess.
+            raise TopologyError(problems) from None
+        return LoadedTopology(topology, shown, walker.lines, problems)
     return LoadedTopology(topology, shown, walker.lines)
+
+
+def _drop(raw: Any, path: list[str | int]) -> None:
+    """Leave the key at ``path`` out of the document ``raw``."""
+    for part in path[:-1]:
+        raw = raw[part]
+    del raw[path[-1]]
+
+
+# How far into a file its root element is looked for (past the XML declaration and comments).
+XML_HEAD = 1 << 20
+# The root elements of the ETG's XML formats (ETG.2000 ESI, ETG.2100 ENI).
+_XML_ROOTS = {"EtherCATInfo": "an ESI (device description)",
+              "EtherCATConfig": "an ENI (network configuration)"}
+_XML_START = re.compile(r"<\?xml\b|<!--|<!DOCTYPE|<[A-Za-z_]")
+_XML_ROOT = re.compile(r"<([A-Za-z_][\w.:-]*)")
+_XML_PROLOG = re.compile(r"\s*(?:<\?.*?\?>|<!--.*?-->|<!DOCTYPE[^>]*>)", re.S)
+
+
+def _refuse_xml(data: bytes | str, shown: str) -> None:
+    """XML is not YAML: PyYAML would read an ENI as one long string and the model would say
+    "a topology is a mapping" (or, for an ISO-8859-1 export, "not UTF-8").  Say what the
+    file is, by its root element, and that ``compile`` wants a topology (an ENI goes to
+    ``apply``, an ESI to ``--esi``).  Looked for before the text is decoded: XML declares
+    its own encoding; the names of its markup are ASCII in every encoding but UTF-16."""
+    head = data[:XML_HEAD]
+    if isinstance(head, bytes):
+        utf16 = head.startswith((b"\xff\xfe", b"\xfe\xff"))
+        head = head.decode("utf-16" if utf16 else "latin-1", errors="replace") \
+            if not head.startswith(b"\xef\xbb\xbf") else head[3:].decode("latin-1")
+    text = head.lstrip("\ufeff")
+    if not _XML_START.match(text.lstrip()):
+        return
+    at = len(text) - len(text.lstrip())
+    while (prolog := _XML_PROLOG.match(text, at)) and prolog.end() > at:
+        at = prolog.end()
+    at += len(text[at:]) - len(text[at:].lstrip())
+    root = _XML_ROOT.match(text, at)
+    if root is None:
+        return
+    name = root.group(1)
+    what = _XML_ROOTS.get(name.rpartition(":")[2])
+    raise EcatcfgError(f"this is {what + ': ' if what else ''}XML with root element <{name}>, "
+                       "not a topology "
+                       "(YAML or JSON)", shown, text.count("\n", 0, at) + 1)
 
 
 def _prescan_any_library(data: str, shown: str) -> None:
@@ -691,7 +796,7 @@ def _problem(err: Any, shown: str, lines: dict[Path_, int]) -> EcatcfgError:
         p = p[:-1]
     msg = err["msg"]
     if err["type"] == "extra_forbidden":
-        msg = "unknown key"
+        msg = "unknown key" + _did_you_mean(path)
     elif err["type"] == "missing":
         msg = "required key is missing"
     value = err.get("input")
@@ -705,3 +810,52 @@ def _is_pydantic_tag(part: str | int) -> bool:
                                                "dict")
                                       or part.startswith("function-")
                                       or part.endswith("[...]") or "[" in part)
+
+
+def _did_you_mean(path: Path_) -> str:
+    """"; did you mean 'cycle_time_us'?" for a misspelt key: the closest of the keys allowed
+    where it is written (difflib's ratio, its default cut-off of 0.6)."""
+    if not path or not isinstance(path[-1], str):
+        return ""
+    model = _model_at(path[:-1])
+    if model is None:
+        return ""
+    close = difflib.get_close_matches(path[-1], list(model.model_fields), n=1)
+    return f"; did you mean {close[0]!r}?" if close else ""
+
+
+def _model_at(path: Path_) -> type[BaseModel] | None:
+    """The model whose keys the mapping at ``path`` (of a :class:`Topology`) takes."""
+    kind: Any = Topology
+    for part in path:
+        kind = _unwrap(kind)
+        if isinstance(kind, type) and issubclass(kind, BaseModel):
+            info = kind.model_fields.get(part) if isinstance(part, str) else None
+            if info is None:
+                return None
+            kind = info.annotation
+        elif get_origin(kind) is list and isinstance(part, int):
+            kind = get_args(kind)[0]
+        elif get_origin(kind) is dict:
+            kind = get_args(kind)[1]
+        else:
+            return None
+    kind = _unwrap(kind)
+    return kind if isinstance(kind, type) and issubclass(kind, BaseModel) else None
+
+
+def _unwrap(kind: Any) -> Any:
+    """``kind`` without Annotated metadata and None; of a union, its one model."""
+    while True:
+        origin = get_origin(kind)
+        if origin is Annotated:
+            kind = get_args(kind)[0]
+        elif origin is Union or origin is types.UnionType:
+            members = [_unwrap(a) for a in get_args(kind) if a is not type(None)]
+            models = [m for m in members if isinstance(m, type) and issubclass(m, BaseModel)]
+            if len(members) == 1:
+                kind = members[0]
+            else:
+                return models[0] if len(models) == 1 else kind
+        else:
+            return kind

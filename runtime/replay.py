@@ -104,11 +104,29 @@ def _matches(data: bytes | bytearray, want: bytes, mask: bytes | None) -> bool:
     return all(g & m == w & m for g, w, m in zip(got, want, mask[:n].ljust(n, b"\xff")))
 
 
+def init_cmd_name(cmd: InitCmd) -> str:
+    """How messages and the report name a register InitCmd: its ``Comment``, or, where the
+    ENI gives none (``Comment`` is optional in ETG.2100's ``ECatCmdType``), its command and
+    register (``APWR 0x0120``) or logical address, so a failure still says which one."""
+    if cmd.comment.strip():
+        return cmd.comment
+    try:
+        name = Cmd(cmd.cmd).name
+    except ValueError:
+        name = f"command {cmd.cmd}"
+    if cmd.ado is not None:
+        return f"{name} 0x{cmd.ado:04X}"
+    if cmd.addr is not None:
+        return f"{name} logical 0x{cmd.addr:08X}"
+    return name
+
+
 def init_cmd_job(cmd: InitCmd, who: str | None, data: bytes | None = None,
                  progress: SlaveProgress | None = None) -> Job:
     """Send one InitCmd until its working counter and Validate are satisfied."""
+    what = init_cmd_name(cmd)
     if progress is not None:
-        progress.last_command = cmd.comment
+        progress.last_command = what
     dg = datagram_for(cmd, data if data is not None else
                       cmd.data if cmd.data is not None else bytes(cmd.length))
     deadline = time.monotonic() + command_timeout(cmd)
@@ -127,12 +145,12 @@ def init_cmd_job(cmd: InitCmd, who: str | None, data: bytes | None = None,
                 # or alias, a logical window mapped twice): no resend can change that.
                 raise ApplyError(f"working counter {got.wkc}, expected {cmd.cnt}: more "
                                  "slaves answered than the ENI expects (two slaves with "
-                                 "one address?)", who, cmd.comment)
+                                 "one address?)", who, what)
             if cmd.cnt is not None and got.wkc != cmd.cnt:
                 wrong_wkc += 1
                 last = f"working counter {got.wkc}, expected {cmd.cnt}"
                 if wrong_wkc > retries:
-                    raise ApplyError(f"{last} ({wrong_wkc} attempts)", who, cmd.comment)
+                    raise ApplyError(f"{last} ({wrong_wkc} attempts)", who, what)
             elif cmd.validate is not None and not _matches(got.data, cmd.validate.data,
                                                            cmd.validate.mask):
                 last = f"read {got.data.hex()}, expected {cmd.validate.data.hex()}" + (
@@ -143,7 +161,7 @@ def init_cmd_job(cmd: InitCmd, who: str | None, data: bytes | None = None,
                     # The slave refused the state: an error flag that stays is final.
                     error_since = error_since or now
                     if now - error_since >= ERROR_GRACE:
-                        raise _refused(got.data, who, cmd.comment)
+                        raise _refused(got.data, who, what)
                 else:
                     error_since = None
                 polls += 1
@@ -153,8 +171,8 @@ def init_cmd_job(cmd: InitCmd, who: str | None, data: bytes | None = None,
                 return
         if now > deadline:
             if _is_state_check(cmd) and reply is not None and len(reply[0].data) >= 6:
-                raise _refused(reply[0].data, who, cmd.comment, timed_out=True)
-            raise ApplyError(f"{last} after {command_timeout(cmd):g} s", who, cmd.comment)
+                raise _refused(reply[0].data, who, what, timed_out=True)
+            raise ApplyError(f"{last} after {command_timeout(cmd):g} s", who, what)
 
 
 def _refused(status: bytes | bytearray, who: str | None, comment: str,
@@ -283,11 +301,11 @@ def coe_init_cmd_job(channel: MailboxChannel, cmd: CoeInitCmd, who: str | None,
                      progress: SlaveProgress | None = None) -> Job:
     from ecatcfg.runtime.sdo_client import SdoDownload, SdoUpload
 
+    what = cmd.comment.strip() and cmd.comment or f"SDO 0x{cmd.index:04X}:{cmd.subindex:02X}"
     if progress is not None:
-        progress.last_command = cmd.comment
+        progress.last_command = what
     size = channel.plan.send.length
     timeout = cmd.timeout / 1000 if cmd.timeout else TIMEOUT_MAILBOX
-    what = cmd.comment or f"SDO 0x{cmd.index:04X}:{cmd.subindex:02X}"
     t: SdoUpload | SdoDownload
     try:
         if cmd.ccs == 2:                          # upload (rare in ENIs: a read check)
@@ -312,9 +330,9 @@ def eoe_init_cmd_job(channel: MailboxChannel, cmd: EoeInitCmd, who: str | None,
     from ecatcfg.runtime.mailbox import (Emergency, MailboxError, MailboxProtocolError,
                                          MbxType, decode, encode_mailbox)
 
+    what = cmd.comment.strip() and cmd.comment or "EoE set IP parameter"
     if progress is not None:
-        progress.last_command = cmd.comment
-    what = cmd.comment or "EoE set IP parameter"
+        progress.last_command = what
     try:
         request = cmd.request
         payload = encode_set_ip_request(request.params, request.port)
@@ -425,7 +443,7 @@ def _dc_start_time(slave: SlavePlan, dc: DcPlan, cmd: InitCmd, length: int,
     shift (IgH, SOEM)."""
     read = Datagram.physical(Cmd.FPRD, slave.phys_addr, Reg.DC_SYSTEM_TIME, 8)
     [got] = yield from until_answered([read], time.monotonic() + TIMEOUT_COMMAND, ApplyError(
-        "cannot read the DC system time (0x0910)", who, cmd.comment))
+        "cannot read the DC system time (0x0910)", who, init_cmd_name(cmd)))
     now, = struct.unpack("<Q", got.data)
     cycle = dc.cycle_time0 or 1
     start = (now + DC_START_DELAY_NS) // cycle * cycle + cycle + dc.shift_time

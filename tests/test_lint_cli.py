@@ -4,6 +4,7 @@ configuration, hostile inputs."""
 from __future__ import annotations
 
 import json
+import re
 import os
 import subprocess
 import sys
@@ -321,3 +322,40 @@ def test_schema_note_said_once_for_many_files(mixed, tmp_path):
     out = lint(str(mixed), "--schema-dir", str(empty), "--jobs", "2", "--no-config")
     assert out.stderr.count("EtherCATInfo.xsd not found") == 1
     assert "3 file(s)" in out.stderr
+
+
+def _documented_text_format() -> re.Pattern[str]:
+    """The text format as docs/lint.md's Output table writes it, as a pattern: ``[...]`` is
+    optional, ``file``/``line``/``col``/``severity``/``ID``/``message`` are fields."""
+    row = next(r for r in (ROOT / "docs" / "lint.md").read_text().splitlines()
+               if r.startswith("| `text` (default) |"))
+    form = row.split("`")[3]
+    fields = {"file": r"(?P<file>.+?)", "line": r"(?P<line>[0-9]+)", "col": r"(?P<col>[0-9]+)",
+              "severity": r"(?P<severity>error|warning|info)", "ID": r"(?P<id>[A-Z]+[0-9]+)",
+              "message": r"(?P<message>.+)"}
+    pattern = re.sub(r"[a-zA-Z]+|\[|\]|[^a-zA-Z\[\]]+",
+                     lambda m: fields.get(m.group(), "(?:" if m.group() == "["
+                                          else ")?" if m.group() == "]"
+                                          else re.escape(m.group())), form)
+    return re.compile(pattern + "$")
+
+
+def test_text_lines_have_the_documented_form_with_a_column_only_where_known(mixed):
+    # A file that is not well-formed: the parser's column; a semantic finding: its line.
+    bad = write(mixed, "cut.xml", "<EtherCATInfo>\n  <Vendor>\n    <Id>1</Idd>\n")
+    from lxml import etree
+    try:
+        etree.fromstring(bad.read_bytes())
+    except etree.XMLSyntaxError as exc:
+        parser_line, parser_col = exc.position      # lxml's (libxml2's) own position
+    result = lint(str(mixed), "--no-config")
+    form = _documented_text_format()
+    findings = result.stdout.splitlines()[:-1]
+    matches = [form.match(line) for line in findings]
+    assert all(matches), (form.pattern, findings)
+    by_file = {Path(m["file"]).name: m for m in matches if m}
+    assert by_file["broken.xml"]["col"] is None
+    assert by_file["broken.xml"]["line"] == str(marked_line(BROKEN))
+    assert by_file["cut.xml"]["id"] == "ESI001"
+    assert (by_file["cut.xml"]["line"], by_file["cut.xml"]["col"]) == (
+        str(parser_line), str(parser_col))

@@ -1,4 +1,8 @@
-"""``file:line:col: severity ID message``, coloured on a terminal, and a summary line."""
+"""``file:line[:col]: severity ID message``, coloured on a terminal, and a summary line.
+
+The column is printed where the finding has one: the XML parser's (ESI001) and libxml2's
+schema errors (XSD001); lxml gives an element its line only (``sourceline``), so the rules
+that look at elements name the line of the start tag (docs/lint.md, "Output")."""
 
 from __future__ import annotations
 
