@@ -13,8 +13,7 @@ read (EEPROM, the XML schema: see docs/lint.md "Which lint errors stop compile")
 
 from __future__ import annotations
 
-import os
-from dataclasses import dataclass
+import hashlib
 from pathlib import Path
 
 from ecatcfg.esi.lint.finding import FileResult, Finding
@@ -54,25 +53,26 @@ DOES_NOT_STOP: dict[str, str] = {
 }
 
 
-@dataclass(frozen=True, slots=True)
-class _Key:
-    path: Path
-    mtime_ns: int
-    size: int
-
-
-_cache: dict[_Key, FileResult] = {}
+_cache: dict[tuple[Path, str, bytes], FileResult] = {}
+_CACHE_FILES = 64       # a long-running process (a fuzz campaign) must not grow without end
 
 
 def file_findings(path: Path, shown: str, others: list[Path]) -> FileResult:
     """The findings of the rules that stop compile in one ESI file, linted once per
-    process while the file is unchanged (a sweep compiles the devices of one file one
-    after another)."""
-    st = os.stat(path)
-    key = _Key(path, st.st_mtime_ns, st.st_size)
+    process while its content is unchanged (a sweep compiles the devices of one file one
+    after another).  Keyed by a digest of the content, not the modification time, whose
+    granularity (a clock tick) lets a file rewritten at once with the same size look
+    unchanged."""
+    try:
+        digest = hashlib.blake2b(path.read_bytes(), digest_size=16).digest()
+    except OSError:
+        digest = b""                        # lint reports the unreadable file (ESI001)
+    key = (path, shown, digest)
     found = _cache.get(key)
     if found is None:
         # Named directly, a file is never skipped (``None`` is for non-ESI files in folders).
+        if len(_cache) >= _CACHE_FILES:
+            del _cache[next(iter(_cache))]          # the oldest
         found = _cache[key] = lint_file(Target(path, shown, True),
                                         LintOptions(STOPS_COMPILE), others) or FileResult(shown)
     return found
