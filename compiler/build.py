@@ -61,7 +61,7 @@ def compile_topology(loaded: LoadedTopology, library: Library,
     errors = parts.errors + errors
     errors += _esi_value_errors(loaded, resolved)
     errors += _fmmu_errors(loaded, resolved)
-    defects = esi_errors.esi_errors(loaded, resolved, library)
+    defects = esi_errors.esi_errors(loaded, resolved, library, allow_esi_errors)
     if not allow_esi_errors:
         errors += defects
     if errors:

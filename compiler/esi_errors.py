@@ -38,18 +38,19 @@ def slave_findings(s: ResolvedSlave, library: Library) -> list[Finding]:
     return sorted(set(found), key=Finding.sort_key)
 
 
-def slave_errors(loaded: LoadedTopology, s: ResolvedSlave, library: Library
-                 ) -> list[EcatcfgError]:
+def slave_errors(loaded: LoadedTopology, s: ResolvedSlave, library: Library,
+                 allowed: bool = False) -> list[EcatcfgError]:
     """One error per finding of the slave, at its topology line, naming the ESI file:line
-    and the rule as lint would."""
+    and the rule as lint would (``allowed``: worded as the warning it then is)."""
+    why = ("taken as the ESI says it (--allow-esi-errors)" if allowed else
+           "an ESI error that changes what compile writes; `ecatcfg lint` explains it, "
+           "--allow-esi-errors compiles anyway")
     return [loaded.error(f"slave {s.name!r}: {f.file}:{f.line or '?'}: {f.rule} {f.message} "
-                         "(an ESI error that changes what compile writes; `ecatcfg lint` "
-                         "explains it, --allow-esi-errors compiles anyway)",
-                         "slaves", s.index)
+                         f"({why})", "slaves", s.index)
             for f in slave_findings(s, library)]
 
 
-def esi_errors(loaded: LoadedTopology, resolved: list[ResolvedSlave], library: Library
-               ) -> list[EcatcfgError]:
-    """The errors of every slave, in bus order."""
-    return [e for s in resolved for e in slave_errors(loaded, s, library)]
+def esi_errors(loaded: LoadedTopology, resolved: list[ResolvedSlave], library: Library,
+               allowed: bool = False) -> list[EcatcfgError]:
+    """The errors (``allowed``: warnings) of every slave, in bus order."""
+    return [e for s in resolved for e in slave_errors(loaded, s, library, allowed)]

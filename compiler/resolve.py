@@ -176,7 +176,7 @@ def plugged_devices(loaded: LoadedTopology, library: Library,
     parts = split(loaded, library)
     resolved, errors, _ = resolve_all(parts.active, library)
     errors = parts.errors + errors
-    defects = [slave_errors(parts.active, r, library) for r in resolved]
+    defects = [slave_errors(parts.active, r, library, allow_esi_errors) for r in resolved]
     if not allow_esi_errors:
         errors += [e for found in defects for e in found]
     if errors:

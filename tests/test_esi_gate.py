@@ -139,6 +139,7 @@ def test_allowed_esi_errors_compile_with_a_warning_per_finding(
     warnings = [w for w in err.splitlines() if w.startswith("warning:") and " ESI" in w]
     assert len(warnings) == 1, err
     assert f"dev.xml:{line}: {rule} " in warnings[0] and "slave 'dut'" in warnings[0]
+    assert "(taken as the ESI says it (--allow-esi-errors))" in warnings[0]
 
 
 def test_errors_of_other_devices_of_the_file_do_not_stop_compile(
