@@ -23,6 +23,10 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                    help="also write a C header of the process image")
     p.add_argument("--no-cache", action="store_true",
                    help="do not read or write the ESI index cache")
+    p.add_argument("--allow-esi-errors", action="store_true",
+                   help="compile although a used device's ESI has an error that changes what "
+                        "is written (lint's rules marked \"stops compile\"); a warning per "
+                        "finding instead")
     p.set_defaults(run=run)
 
 
@@ -54,7 +58,8 @@ def run(args: argparse.Namespace) -> int:
         for problem in lib.problems:
             print(f"error: {problem}", file=sys.stderr)
         raise EcatcfgError(f"{len(lib.problems)} ESI file problem(s); nothing written")
-    result = topology.checked(loaded, lambda: build.compile_topology(loaded, lib))
+    result = topology.checked(loaded, lambda: build.compile_topology(
+        loaded, lib, allow_esi_errors=args.allow_esi_errors))
     for note in result.notes:
         print(f"note: {note}", file=sys.stderr)
     for warning in result.warnings:

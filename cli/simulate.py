@@ -61,6 +61,9 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                         "position with every cable in place): it and the slaves behind it "
                         "are not on the frame, the port it was plugged into has no link; "
                         "repeatable")
+    p.add_argument("--allow-esi-errors", action="store_true",
+                   help="with --topology: emulate a device although its ESI has an error that "
+                        "stops compile (a warning per finding instead)")
     p.add_argument("--no-cache", action="store_true",
                    help="do not read or write the ESI index cache")
     p.set_defaults(run=run)
@@ -107,10 +110,15 @@ def run(args: argparse.Namespace) -> int:
         from ecatcfg.runtime.wiring import Plug
         # Unknown keys are reported with the errors resolving the rest finds.
         loaded = topology.load(args.topology, unknown_keys="defer")
+        devices = topology.checked(loaded, lambda: plugged_devices(
+            loaded, lib, allow_esi_errors=args.allow_esi_errors))
+        for d in devices:
+            for warning in d.esi_warnings:
+                print(f"warning: {warning}", file=sys.stderr)
         specs = [emulate.SlaveSpec(d.device, d.name, alias=d.alias, plug=None
                                    if d.parent is None or d.parent_port is None
                                    else Plug(d.parent, d.parent_port))
-                 for d in topology.checked(loaded, lambda: plugged_devices(loaded, lib))]
+                 for d in devices]
         passive = [(p.cfg.name, p.device.type_name, p.device.vendor.id or 0,
                     p.device.product_code or 0, p.device.revision or 0, "ESI")
                    for p in split(loaded, lib).passive]

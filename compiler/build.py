@@ -10,7 +10,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from ecatcfg.compiler import hotconnect, initcmds, layout as layout_mod, passive, pdocmds
+from ecatcfg.compiler import (esi_errors, hotconnect, initcmds, layout as layout_mod,
+                              passive, pdocmds)
 from ecatcfg.eni.plan import (Cyclic, DcPlan, MailboxArea, MailboxPlan, MasterPlan,
                                    NetworkPlan, PreviousPort, ProcessData, ProcessImage,
                                    SlavePlan, SmSettings, Variable)
@@ -38,7 +39,8 @@ class CompileResult:
     notes: list[str] = field(default_factory=list)
 
 
-def compile_topology(loaded: LoadedTopology, library: Library) -> CompileResult:
+def compile_topology(loaded: LoadedTopology, library: Library,
+                     allow_esi_errors: bool = False) -> CompileResult:
     """The :class:`NetworkPlan` of a loaded topology, its devices taken from ``library``.
 
     Every slave is resolved first (device, modules, PDO choice, DC mode, SDOs) and every
@@ -59,6 +61,9 @@ def compile_topology(loaded: LoadedTopology, library: Library) -> CompileResult:
     errors = parts.errors + errors
     errors += _esi_value_errors(loaded, resolved)
     errors += _fmmu_errors(loaded, resolved)
+    defects = esi_errors.esi_errors(loaded, resolved, library, allow_esi_errors)
+    if not allow_esi_errors:
+        errors += defects
     if errors:
         raise TopologyError(errors)
     groups, group_errors = hotconnect.groups(loaded, resolved)
@@ -114,7 +119,8 @@ def compile_topology(loaded: LoadedTopology, library: Library) -> CompileResult:
     notes = wiring_notes + _notes(resolved)
     line = passive.in_line([(s.name, s.device, parts.file_index[s.index]) for s in resolved],
                            parts.passive)
-    return CompileResult(plan, ebus_warnings(whole, line), notes)
+    warnings = (defects if allow_esi_errors else []) + ebus_warnings(whole, line)
+    return CompileResult(plan, warnings, notes)
 
 
 def _previous_port(s: ResolvedSlave, resolved: list[ResolvedSlave]) -> list[PreviousPort]:

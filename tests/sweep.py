@@ -16,7 +16,8 @@ For one device (one ``Descriptions/Devices/Device`` of an ESI file, every revisi
    completion, the request check, the unsupported-content skip), then back to INIT;
 4. classifies the result: ``op``; ``passive`` (a terminal without an ESC: nothing to
    configure, and compile rightly refuses a line of passive terminals alone); ``refused``
-   (compile said no: the message, grouped into a category); ``schema-invalid``; ``not-emulated`` (the segment fell back to the ENI alone:
+   (compile said no: the message, grouped into a category; an ESI error of a rule that
+   stops compile, ``esi/lint/gate.py``, is such a refusal); ``schema-invalid``; ``not-emulated`` (the segment fell back to the ENI alone:
    the ESI did not reach the emulator); ``apply-failed`` (an error naming the slave and
    command, or the state it was left in); ``crash`` (an exception that is no
    ``EcatcfgError``: a bug by definition).
@@ -72,6 +73,10 @@ class Case:
         return sel if self.revision is None else f"{sel}:0x{self.revision:x}"
 
 
+# compile's refusal for an ESI error (compiler/esi_errors.py): "FILE:LINE: RULE message".
+_ESI_GATE = re.compile(r"\.xml:\d+: (ESI\d{3}|XSD\d{3}) ")
+
+
 @dataclass(slots=True)
 class Result:
     key: str
@@ -87,8 +92,13 @@ class Result:
     @property
     def explained(self) -> bool:
         """A device that is not ``op`` (nor a passive terminal) is explained when lint
-        reports an error for it."""
-        return self.outcome in ("op", "passive") or bool(self.lint_errors)
+        reports an error for it; refused for an ESI error that stops compile, when lint
+        reports that very rule for it (compile and lint must agree on the finding)."""
+        if self.outcome in ("op", "passive"):
+            return True
+        gate = _ESI_GATE.findall(self.message) if self.outcome == "refused" else []
+        reported = {e.split()[0] for e in self.lint_errors}
+        return bool(self.lint_errors) and set(gate) <= reported
 
     def as_json(self) -> dict[str, Any]:
         data = asdict(self)

@@ -20,17 +20,20 @@ from ecatcfg.esi.library import Library
 ESI = EXAMPLES / "esi"
 
 
-def compile_text(tmp_path: Path, text: str, esi: list[Path] | None = None) -> build.CompileResult:
+def compile_text(tmp_path: Path, text: str, esi: list[Path] | None = None,
+                 allow_esi_errors: bool = False) -> build.CompileResult:
     path = write(tmp_path, "t.yaml", text)
-    return build.compile_topology(topology.load(path), Library(esi or [ESI], cache=False))
+    return build.compile_topology(topology.load(path), Library(esi or [ESI], cache=False),
+                                  allow_esi_errors)
 
 
 def run_bad(tmp_path: Path, capsys, text: str | bytes, esi: Path = ESI,
-            code: int = 1) -> str:
+            code: int = 1, options: tuple[str, ...] = ()) -> str:
     """Compile through the CLI, expect ``code``, no traceback and no output file."""
     topo = write(tmp_path, "bad.yaml", text)
     out = tmp_path / "out.xml"
-    assert main(["compile", str(topo), "--esi", str(esi), "-o", str(out), "--no-cache"]) == code
+    assert main(["compile", str(topo), "--esi", str(esi), "-o", str(out), "--no-cache",
+                 *options]) == code
     err = capsys.readouterr().err
     assert "Traceback" not in err
     assert not out.exists()
@@ -376,16 +379,20 @@ def test_esi_numbers_that_do_not_fit_their_register(tmp_path, capsys, fixture_es
 
 
 def test_too_much_process_data_points_at_the_slave(tmp_path, capsys, fixture_esi):
-    # Was: the line of 'slaves:' instead of the slave's.
-    err = run_bad(tmp_path, capsys, "slaves:\n  - {name: a, device: DO16}\n"
-                                    "  - {name: b, device: HUGEPD}\n", fixture_esi)
+    # Was: the line of 'slaves:' instead of the slave's.  A 60000-bit entry is lint ESI113,
+    # which stops compile on its own; allowed, the layout's own error is still located.
+    text = "slaves:\n  - {name: a, device: DO16}\n  - {name: b, device: HUGEPD}\n"
+    err = run_bad(tmp_path, capsys, text, fixture_esi)
+    assert "bad.yaml:3: slave 'b': " in err and "ESI113" in err
+    err = run_bad(tmp_path, capsys, text, fixture_esi, options=("--allow-esi-errors",))
     assert "bad.yaml:3: slave 'b' has more process data (7500 bytes) than one frame" in err
 
 
 def test_pdo_on_an_sm_of_the_other_direction(tmp_path, fixture_esi):
     # Was: the RxPdo's outputs laid out as inputs (FMMU type read, variable in Inputs).
+    # Lint ESI109 stops compile (test_esi_gate.py); allowed, the layout follows the PDO.
     plan = compile_text(tmp_path, "slaves:\n  - {name: a, device: WRONGSM}\n",
-                        [fixture_esi]).plan
+                        [fixture_esi], allow_esi_errors=True).plan
     assert [v.name for v in plan.process_image.outputs] == ["a.P#x1600.E"]
     assert plan.process_image.inputs == []
     [fmmu] = [FmmuConfig.from_bytes(c.payload) for c in plan.slaves[0].init_cmds

@@ -61,9 +61,10 @@ def coupler(tmp_path: Path, *, ask: bool, access: str = "rw",
     return path
 
 
-def compile_with(esi_path: Path, text: str = TOPOLOGY) -> NetworkPlan:
+def compile_with(esi_path: Path, text: str = TOPOLOGY, allow_esi_errors: bool = False
+                 ) -> NetworkPlan:
     plan = build.compile_topology(topology.loads(text, "t.yaml"),
-                                  Library([esi_path], cache=False)).plan
+                                  Library([esi_path], cache=False), allow_esi_errors).plan
     return eni_reader.read_bytes(eni_writer.to_bytes(plan), "t.eni.xml")
 
 
@@ -201,9 +202,17 @@ def test_lint_flags_a_module_init_cmd_whose_data_does_not_fit():
 
 
 def test_the_module_init_cmd_lint_flags_fails_apply(tmp_path):
-    """What ESI304 warns of: the station refuses the download at PREOP->SAFEOP."""
+    """What ESI304 warns of: the station refuses the download at PREOP->SAFEOP.  So compile
+    refuses the plugged module's InitCmd at its line (docs/lint.md "Which lint errors stop
+    compile"); let through, the station refuses it."""
     path = coupler(tmp_path, ask=True)
-    plan = compile_with(path, TOPOLOGY.replace("EXK-2AO", "EXK-2AO-BAD"))
+    text = TOPOLOGY.replace("EXK-2AO", "EXK-2AO-BAD")
+    with pytest.raises(TopologyError) as refused:
+        compile_with(path, text)
+    bad = etree.parse(str(path)).getroot().xpath(
+        "//Module[Type='EXK-2AO-BAD']/Mailbox/CoE/InitCmd")[0]
+    assert f"{path.name}:{bad.sourceline}: ESI304 " in str(refused.value)
+    plan = compile_with(path, text, allow_esi_errors=True)
     with Network.virtual(plan, esi=[path], esi_cache=False) as net:
         with pytest.raises(ApplyError) as err:
             net.up()

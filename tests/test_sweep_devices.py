@@ -128,3 +128,15 @@ def test_a_pdo_without_an_index_is_an_error_naming_its_esi_line(tmp_path: Path) 
     with pytest.raises(TopologyError) as exc:
         _compile(esi, "FXR")
     assert f"TxPdo at {esi}:{line} has no Index" in str(exc.value)
+
+
+def test_a_refusal_for_an_esi_error_is_explained_only_by_that_rule() -> None:
+    # compile's gate and lint must agree: a refusal naming ESI101 is not explained by an
+    # unrelated lint error of the device.
+    message = ("sweep(x).yaml:1: slave 'dut': /c/esi/a.xml:361: ESI101 RxPdo 0x1A00 is "
+               "outside 0x1600-0x17FF (an ESI error that changes what compile writes; ...)")
+    refused = sweep.Result("k", "T", "0x2:0x1", "refused", message)
+    refused.lint_errors = ["XSD001 element not expected"]
+    assert not refused.explained
+    refused.lint_errors.append("ESI101 RxPdo 0x1A00 is outside 0x1600-0x17FF")
+    assert refused.explained

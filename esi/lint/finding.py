@@ -54,6 +54,9 @@ class FileResult:
     file: str
     findings: list[Finding] = field(default_factory=list)
     devices: list[DeviceRef] = field(default_factory=list)
+    # (first line, first line after it) of each Module element, for findings about a module
+    # (compile asks which findings lie inside a module a slave plugs).
+    module_spans: list[tuple[int, int | None]] = field(default_factory=list)
     schema_checked: bool = False
     schema_missing: str | None = None    # the schema file that would have applied
     seconds: float = 0.0

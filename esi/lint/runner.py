@@ -109,7 +109,9 @@ def lint_file(target: Target, options: LintOptions, others: list[Path]) -> FileR
             result.schema_missing = str(schemas.path_for(root_name))
 
     xmlsafe.strip_namespaces(tree)
-    spans = _device_spans(tree)
+    spans = element_spans(tree, "Descriptions/Devices/Device")
+    result.module_spans = (element_spans(tree, "Descriptions/Modules/Module")
+                           + element_spans(tree, "Modules/Module"))
     esi = reader.read_tree(tree, target.shown)
     devices = [DeviceRef(d.vendor.id, d.product_code, d.revision, d.type_name, d.source.line)
                for d in esi.devices]
@@ -147,10 +149,11 @@ def _done(result: FileResult, out: _Emitter, start: float) -> FileResult:
     return result
 
 
-def _device_spans(tree: etree._ElementTree) -> list[tuple[int, int | None]]:
-    """(first line, first line after it) of each Device element, in document order."""
+def element_spans(tree: etree._ElementTree, path: str) -> list[tuple[int, int | None]]:
+    """(first line, first line after it) of each element at ``path`` below the root, in
+    document order (``None``: it runs to the end of the file)."""
     spans: list[tuple[int, int | None]] = []
-    for el in tree.getroot().iterfind("Descriptions/Devices/Device"):
+    for el in tree.getroot().iterfind(path):
         node: etree._Element | None = el
         end: int | None = None
         while node is not None and end is None:
