@@ -1,4 +1,4 @@
-"""Compile never builds on an ESI error (issue 28 §3): a lint error of a rule that changes
+"""Compile never builds on an ESI error: a lint error of a rule that changes
 what compile writes, inside a Device element the topology uses or a module it plugs, makes
 ``compile`` (and ``simulate --topology``) exit 1 naming the ESI file and line, the rule and
 the slave; ``--allow-esi-errors`` compiles with a warning per finding."""

@@ -1,6 +1,6 @@
 """A failing InitCmd is named in apply's error and report whether or not the ENI gives it a
 ``Comment`` (optional in ETG.2100's ``ECatCmdType``): by its comment, else by its command
-and register, with no empty brackets or stray spaces (issue 28 §4)."""
+and register, with no empty brackets or stray spaces."""
 
 from __future__ import annotations
 

@@ -1,5 +1,5 @@
 """The README's short tour writes its files into ``tour/``, which git ignores, never beside
-the checkout's own files (issue 28 §5)."""
+the checkout's own files."""
 
 from __future__ import annotations
 

@@ -1,6 +1,6 @@
 """``ecatcfg simulate``'s first words: a missing interface is refused before anything is
 printed, and the slave table keeps its columns with names longer than a column (cut with an
-ellipsis) (issue 28 §4)."""
+ellipsis)."""
 
 from __future__ import annotations
 

@@ -1,5 +1,5 @@
 """Every error of a topology at once, in line order; "did you mean" for a misspelt key; an
-XML file (an ENI, an ESI) given as a topology named for what it is (issue 28 §4)."""
+XML file (an ENI, an ESI) given as a topology named for what it is."""
 
 from __future__ import annotations
 
