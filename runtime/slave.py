@@ -398,6 +398,20 @@ class EmulatedSlave:
         self._after_register_write(ado, n)
         return True
 
+    def registers_mapped_written(self, ado: int, before: bytes) -> None:
+        """A logical datagram wrote ``len(before)`` register bytes from ``ado`` through an
+        FMMU (``before``: what they held).  An FMMU only turns a logical address into a
+        physical one (ESC datasheet Section I, "FMMU"); the access is then the physical
+        one, under the same ECAT access rights (Section II, register overview: AL status
+        0x0130 and the other status registers are read-only for ECAT).  So read-only
+        bytes keep their value and the writes act as a physical write does (AL control
+        starts a transition, an FMMU or SM register loads)."""
+        n = len(before)
+        for i in range(n):
+            if self._ro[ado + i] or _unwritable(ado + i, 1):
+                self.mem[ado + i] = before[i]
+        self._after_register_write(ado, n)
+
     def _after_register_write(self, ado: int, n: int) -> None:
         if self._eeprom_due is not None and _overlaps(ado, n, 0x0502, 0x0508):
             # Busy: the ESC ignores writes to the EEPROM interface until the read is done.
@@ -715,7 +729,12 @@ class EmulatedSlave:
             self._transition = None  # a new request replaces the one in progress
         ack = bool(control & AL_ERROR_ACK)
         current = self.state
-        assert current is not None          # firmware only ever sets states
+        if current is None:
+            # AL status is read-only from EtherCAT (any command, FMMUs included) and the
+            # firmware only ever sets states; should it hold none, the firmware starts
+            # over from INIT, as after a reset, and says the state is unknown.
+            self._set_state(AlState.INIT, AlStatusCode.UNKNOWN_STATE)
+            return
         if self.error:
             if not ack and requested != AlState.INIT:
                 return              # an error must be acknowledged first (SOES, KickCAT)
