@@ -487,7 +487,8 @@ class VirtualSegment:
                     write_ops.append(_op(slave, True, b0 - lo, phys0, b1 - b0))
                     first_reg, end_reg = phys0 // 8, min((phys0 + b1 - b0 + 7) // 8,
                                                          PROCESS_RAM)
-                    if first_reg < end_reg:
+                    if first_reg < end_reg and not slave.mapped_write_is_plain(first_reg,
+                                                                                end_reg):
                         registers = (first_reg, end_reg) if registers is None else (
                             min(registers[0], first_reg), max(registers[1], end_reg))
                 if reads and f.type & FmmuType.READ:
