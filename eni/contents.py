@@ -129,7 +129,11 @@ def _frame_size(el: Element) -> str:
         size = parse_int(_text(el))
     except ValueError:
         return f"<MaxFrameSize> {_text(el)!r}"
-    return "" if size >= 1514 else f"frames of at most {size} bytes (<MaxFrameSize>)"
+    if size >= 1514:
+        return ""
+    if size < 0:        # shown as written: thousands of digits cannot be str()-ed (4,300)
+        return f"<MaxFrameSize> {_text(el).strip()[:24]!r}: a negative frame size"
+    return f"frames of at most {size} bytes (<MaxFrameSize>)"
 
 
 # -- the list -----------------------------------------------------------------------------

@@ -105,6 +105,15 @@ def _parse_int(text: str) -> int | None:
         return None
 
 
+def _shown(value: int) -> str:
+    """``value`` for a message.  A number the file spells in thousands of hex digits
+    (``esi.values.parse_int`` takes up to 4,000) is past Python's 4,300-digit limit for
+    ``str()`` (a ``ValueError`` inside the error itself): shown by its size instead."""
+    if abs(value) < 1 << 64:
+        return str(value)
+    return f"{'-' if value < 0 else ''}(a number of {value.bit_length()} bits)"
+
+
 def _parse_bool(text: str) -> bool | None:
     try:
         return parse_bool(text)
@@ -181,7 +190,7 @@ class _Reader:
             raise self.error(f"<{parent.tag!s}> has no <{tag}>", parent)
         return el
 
-    def number(self, el: Element, bounds: Bounds | None = None) -> int:
+    def number(self, el: Element, bounds: Bounds) -> int:
         text = self.text(el)
         value = _parse_int(text)
         if value is None:
@@ -189,20 +198,21 @@ class _Reader:
         self.check(value, bounds, f"<{el.tag!s}>", el)
         return value
 
-    def check(self, value: int, bounds: Bounds | None, what: str, el: _Node) -> None:
+    def check(self, value: int, bounds: Bounds, what: str, el: _Node) -> None:
         """``value`` of ``what`` (``<Cmd>``, ``attribute Sm of <Pdo>:``) within ``bounds``."""
-        if bounds is not None and not bounds[0] <= value <= bounds[1]:
+        if not bounds[0] <= value <= bounds[1]:
             lo, hi, range_text = bounds
-            raise self.error(f"{what} {value} is out of range: {range_text} ({lo}..{hi})", el)
+            raise self.error(f"{what} {_shown(value)} is out of range: {range_text} "
+                             f"({lo}..{hi})", el)
 
-    def req_int(self, parent: _Node, tag: str, bounds: Bounds | None = None) -> int:
+    def req_int(self, parent: _Node, tag: str, bounds: Bounds) -> int:
         return self.number(self.child(parent, tag), bounds)
 
-    def opt_int(self, parent: _Node, tag: str, bounds: Bounds | None = None) -> int | None:
+    def opt_int(self, parent: _Node, tag: str, bounds: Bounds) -> int | None:
         el = parent.find(tag)
         return None if el is None else self.number(el, bounds)
 
-    def int_or(self, parent: _Node, tag: str, default: int, bounds: Bounds | None = None) -> int:
+    def int_or(self, parent: _Node, tag: str, default: int, bounds: Bounds) -> int:
         value = self.opt_int(parent, tag, bounds)
         return default if value is None else value
 
@@ -210,7 +220,7 @@ class _Reader:
         """A uint32 the schema types xs:int: negative values are its signed spelling."""
         return self.req_int(parent, tag, S32) & 0xFFFFFFFF
 
-    def attr_int(self, el: _Node, name: str, bounds: Bounds | None = None) -> int | None:
+    def attr_int(self, el: _Node, name: str, bounds: Bounds) -> int | None:
         text = el.get(name)
         if text is None:
             return None
@@ -507,9 +517,37 @@ class _Reader:
         return ProcessData(
             send=[self.bit_range(s) for s in el.iterchildren("Send")],
             recv=[self.bit_range(r) for r in el.iterchildren("Recv")],
-            sms=[self.sm(sm, n) for n in range(4) for sm in el.iterchildren(f"Sm{n}")],
-            pdos=[self.pdo(p) for p in el.iterchildren("RxPdo", "TxPdo")],
+            sms=self.sms(el),
+            pdos=self.pdos(el),
         )
+
+    def sms(self, pd: Element) -> list[SmSettings]:
+        """``Sm0``..``Sm3``, each at most once (ETG.2100 ``ProcessData``: a sequence of
+        optional elements): two settings for one SyncManager leave the master no
+        single size, start address or PDO list to write."""
+        result = []
+        for number in range(4):
+            els = list(pd.iterchildren(f"Sm{number}"))
+            if len(els) > 1:
+                raise self.error(f"<Sm{number}> given again (first at line {els[0].sourceline})"
+                                 ": a SyncManager has one setting", els[1])
+            result += [self.sm(el, number) for el in els]
+        return result
+
+    def pdos(self, pd: Element) -> list[PdoDesc]:
+        """``RxPdo``/``TxPdo``; one index described twice is an error: the PDO's entries
+        (the slave's mapping object, ETG.1000.6 0x1600/0x1A00) would be two different
+        lists, and which one the master writes would depend on their order."""
+        result: list[PdoDesc] = []
+        seen: dict[int, Element] = {}
+        for el in pd.iterchildren("RxPdo", "TxPdo"):
+            pdo = self.pdo(el)
+            first = seen.setdefault(pdo.index, el)
+            if first is not el:
+                raise self.error(f"PDO 0x{pdo.index:04X} described again (first at line "
+                                 f"{first.sourceline}): a PDO has one list of entries", el)
+            result.append(pdo)
+        return result
 
     def sm(self, el: Element, number: int) -> SmSettings:
         return SmSettings(
@@ -681,11 +719,30 @@ class _Reader:
         inputs, outputs = el.find("Inputs"), el.find("Outputs")
         if inputs is not None:
             image.inputs_size = self.req_int(inputs, "ByteSize", IMAGE)
+            # Not bounded by ByteSize: TwinCAT writes the status variables its master keeps
+            # on the host after the inputs image (InfoData.ChangeCount at bit 12288 of a
+            # 1536-byte image); nothing is written there, reading it is the API's business.
             image.inputs = [self.variable(v) for v in inputs.iterchildren("Variable")]
         if outputs is not None:
             image.outputs_size = self.req_int(outputs, "ByteSize", IMAGE)
-            image.outputs = [self.variable(v) for v in outputs.iterchildren("Variable")]
+            image.outputs = self.variables(outputs, image.outputs_size)
         return image
+
+    def variables(self, part: Element, byte_size: int) -> list[Variable]:
+        """The ``Variable`` list of ``Outputs``: each within its ``ByteSize`` (ETG.2100: the
+        size of the output image), the bytes the master sends and the Network API writes;
+        a variable past the end names no bits of the image the cyclic commands carry."""
+        result = []
+        for el in part.iterchildren("Variable"):
+            var = self.variable(el)
+            end = var.bit_offs + var.bit_size
+            if end > 8 * byte_size:
+                raise self.error(
+                    f"variable {var.name!r} (<BitOffs> {var.bit_offs}, <BitSize> "
+                    f"{var.bit_size}) ends at bit {end}, past the {part.tag!s} image of "
+                    f"<ByteSize> {byte_size} ({8 * byte_size} bits)", el)
+            result.append(var)
+        return result
 
     def variable(self, el: Element) -> Variable:
         return Variable(name=self.text(self.child(el, "Name")),

@@ -53,8 +53,9 @@ _BROADCAST = BROADCAST_CMDS
 # An FMMU access of a logical datagram (see _op): frame offset, physical address, byte length
 # or 0, masked bit groups (frame byte, memory byte, shift, mask), SM gate, completes the SM.
 _Op = tuple[int, int, int, tuple[tuple[int, int, int, int], ...], "SmState | None", bool]
-# A slave a logical datagram meets: the slave, its memory, its write ops, its read ops.
-_Hit = tuple[EmulatedSlave, bytearray, list[_Op], list[_Op]]
+# A slave a logical datagram meets: the slave, its memory, its write ops, its read ops, and
+# the register bytes (below PROCESS_RAM) its write ops reach, if any: (first, end).
+_Hit = tuple[EmulatedSlave, bytearray, list[_Op], list[_Op], "tuple[int, int] | None"]
 
 _LOGICAL: dict[int, tuple[bool, bool]] = {Cmd.LRD: (True, False), Cmd.LWR: (False, True),
                                           Cmd.LRW: (True, True)}        # (reads, writes)
@@ -414,7 +415,7 @@ class VirtualSegment:
         now = self.clock_ns() / 1e9
         added = 0
         # Plain tuples and locals: this loop runs for every slave of every cyclic frame.
-        for slave, mem, writes, reads in plan:
+        for slave, mem, writes, reads, registers in plan:
             # Firmware moves process data in SAFEOP and OP exactly (it enables the SMs on its
             # side then).  An ESC without firmware (device emulation, 0x0141 bit 0) serves
             # its FMMUs and SMs whatever AL status says: a real EL2828 and EL2889 in PREOP
@@ -422,6 +423,9 @@ class VirtualSegment:
             # 4); their output pins are driven in OP only (EmulatedSlave.outputs).
             running = mem[_ESC_CONFIG] & 0x01 or mem[_AL_STATUS] & 0x0F in RUNNING_STATES
             hit_write = hit_read = False
+            # An FMMU that write-maps registers: the ESC's register rules hold as for a
+            # physical write (only the mapping differs), checked after the bytes moved.
+            before = None if registers is None else bytes(mem[registers[0]:registers[1]])
             for offset, phys, length, bits, sm, completes in writes:   # outputs first (LRW)
                 if sm is not None and not (running and sm.enabled and sm.length):
                     continue
@@ -448,6 +452,8 @@ class VirtualSegment:
                         value = mem[pbyte] << shift if shift >= 0 else mem[pbyte] >> -shift
                         data[fbyte] = data[fbyte] & ~mask & 0xFF | value & mask
                 hit_read = True
+            if before is not None and registers is not None and hit_write:
+                slave.registers_mapped_written(registers[0], before)
             if lrw:
                 added += (1 if hit_read else 0) + (2 if hit_write else 0)
             elif hit_read or hit_write:
@@ -464,6 +470,7 @@ class VirtualSegment:
         for slave in self.slaves:
             read_ops: list[_Op] = []
             write_ops: list[_Op] = []
+            registers: tuple[int, int] | None = None
             for f in slave.fmmus:
                 first = f.logical_start * 8 + f.logical_start_bit
                 last = first + f.bit_length                 # exclusive
@@ -478,10 +485,16 @@ class VirtualSegment:
                     continue
                 if writes and f.type & FmmuType.WRITE:
                     write_ops.append(_op(slave, True, b0 - lo, phys0, b1 - b0))
+                    first_reg, end_reg = phys0 // 8, min((phys0 + b1 - b0 + 7) // 8,
+                                                         PROCESS_RAM)
+                    if first_reg < end_reg and not slave.mapped_write_is_plain(first_reg,
+                                                                                end_reg):
+                        registers = (first_reg, end_reg) if registers is None else (
+                            min(registers[0], first_reg), max(registers[1], end_reg))
                 if reads and f.type & FmmuType.READ:
                     read_ops.append(_op(slave, False, b0 - lo, phys0, b1 - b0))
             if read_ops or write_ops:
-                plan.append((slave, slave.mem, write_ops, read_ops))
+                plan.append((slave, slave.mem, write_ops, read_ops, registers))
         return plan
 
     # -- running on a link -------------------------------------------------------------------

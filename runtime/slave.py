@@ -117,6 +117,13 @@ def _absent_blocks(chip: EscChip) -> tuple[tuple[int, int], ...]:
 # difference) comes back with 0 from an EK1100, EL2828 and EL2889 while their other DC
 # registers count (ethercrab-rs/ethercrab tests/replay-dc.pcapng).
 _UNWRITABLE = ((Reg.DC_SYSTEM_TIME_DIFFERENCE, Reg.DC_SYSTEM_TIME_DIFFERENCE + 4),)
+# The registers whose write the ESC acts on (EmulatedSlave._after_register_write): AL
+# control, the watchdogs, the EEPROM interface, FMMUs, SMs, the DC unit.  A write that
+# meets none of them only stores its bytes.
+_ACTED_ON = ((Reg.AL_CONTROL, Reg.AL_CONTROL + 2), (Reg.WATCHDOG_DIVIDER, Reg.WATCHDOG_SM + 2),
+             (Reg.WATCHDOG_COUNTER_SM, Reg.WATCHDOG_COUNTER_SM + 2), (0x0502, 0x0508),
+             (Reg.FMMU0, Reg.FMMU0 + FMMU_SIZE * N_FMMU), (Reg.SM0, sm_register(N_SM)),
+             (_DC_LOOP, _DC_LOOP_END))
 
 
 def _unwritable(ado: int, n: int) -> bool:
@@ -398,7 +405,30 @@ class EmulatedSlave:
         self._after_register_write(ado, n)
         return True
 
+    def registers_mapped_written(self, ado: int, before: bytes) -> None:
+        """A logical datagram wrote ``len(before)`` register bytes from ``ado`` through an
+        FMMU (``before``: what they held).  An FMMU only turns a logical address into a
+        physical one (ESC datasheet Section I, "FMMU"); the access is then the physical
+        one, under the same ECAT access rights (Section II, register overview: AL status
+        0x0130 and the other status registers are read-only for ECAT).  So read-only
+        bytes keep their value and the writes act as a physical write does (AL control
+        starts a transition, an FMMU or SM register loads)."""
+        n = len(before)
+        for i in range(n):
+            if self._ro[ado + i] or _unwritable(ado + i, 1):
+                self.mem[ado + i] = before[i]
+        self._after_register_write(ado, n)
+
+    def mapped_write_is_plain(self, ado: int, end: int) -> bool:
+        """Whether register bytes ``ado``..``end`` written through an FMMU need nothing
+        but the bytes moved: none read-only, none the ESC acts on (the EL2008's output
+        pins at 0x0F00 are such bytes, written every cycle)."""
+        return not any(self._ro[ado:end]) and not any(
+            _overlaps(ado, end - ado, start, stop) for start, stop in _ACTED_ON + _UNWRITABLE)
+
     def _after_register_write(self, ado: int, n: int) -> None:
+        if not any(_overlaps(ado, n, start, end) for start, end in _ACTED_ON):
+            return
         if self._eeprom_due is not None and _overlaps(ado, n, 0x0502, 0x0508):
             # Busy: the ESC ignores writes to the EEPROM interface until the read is done.
             self.mem[0x0502:0x0508] = self._eeprom_regs
@@ -715,7 +745,12 @@ class EmulatedSlave:
             self._transition = None  # a new request replaces the one in progress
         ack = bool(control & AL_ERROR_ACK)
         current = self.state
-        assert current is not None          # firmware only ever sets states
+        if current is None:
+            # AL status is read-only from EtherCAT (any command, FMMUs included) and the
+            # firmware only ever sets states; should it hold none, the firmware starts
+            # over from INIT, as after a reset, and says the state is unknown.
+            self._set_state(AlState.INIT, AlStatusCode.UNKNOWN_STATE)
+            return
         if self.error:
             if not ack and requested != AlState.INIT:
                 return              # an error must be acknowledged first (SOES, KickCAT)

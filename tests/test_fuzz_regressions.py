@@ -250,3 +250,157 @@ def test_fmmu_mapping_past_the_end_of_memory(physical, bit):
     mask = (0xFF << bit) & 0xFF
     assert drive.mem[0xFFFF] & mask == (0xAA << bit) & mask
     assert bytes(drive.mem[0xFFF0:0xFFFF]) == before[:15]
+
+
+# -- 6. ENI cross-references later code cannot use, numbers past str() ------------------
+
+def _line(text: str, at: int) -> int:
+    return text.count("\n", 0, at) + 1
+
+
+def _nth(text: str, needle: str, n: int) -> int:
+    at = -1
+    for _ in range(n + 1):
+        at = text.index(needle, at + 1)
+    return at
+
+
+def _sm2_twice() -> tuple[bytes, int]:
+    """Seed 1 with the drive's ``<Sm2>`` block written twice in a row; the line of the
+    second one, found by text search."""
+    text = fuzzing.eni_seeds()[1].decode()
+    first, end = text.index("<Sm2>"), text.index("</Sm2>") + len("</Sm2>")
+    block = text[first:end]
+    text = text[:end] + "\n        " + block + text[end:]
+    return text.encode(), _line(text, _nth(text, "<Sm2>", 1))
+
+
+def _output_past_image() -> tuple[bytes, int]:
+    """Seed 1 with the last output variable (32 bits) moved to start at the last bit of the
+    20-byte output image; the line of its ``<Variable>``."""
+    text = fuzzing.eni_seeds()[1].decode()
+    outputs = text.index("<Outputs>")
+    assert "<ByteSize>20</ByteSize>" in text[outputs:outputs + 60]
+    var = text.rindex("<Variable>")
+    offs = text.index("<BitOffs>", var)
+    close = text.index("</BitOffs>", offs)
+    text = text[:offs] + "<BitOffs>159" + text[close:]
+    return text.encode(), _line(text, var)
+
+
+def test_sm_given_twice_is_an_error_at_the_second():
+    """Fuzz class 'what the reader accepts and later code cannot use': two ``Sm2`` in one
+    ``ProcessData`` were read, then the ENI writer refused them with a bare ValueError."""
+    data, line = _sm2_twice()
+    with pytest.raises(EniReadError) as err:
+        reader.read_bytes(data, "x.eni.xml")
+    assert (err.value.file, err.value.line) == ("x.eni.xml", line)
+    assert err.value.message.startswith("<Sm2> given again (first at line ")
+
+
+def test_pdo_described_twice_is_an_error_at_the_second():
+    text = fuzzing.eni_seeds()[1].decode()
+    first = text.index("<RxPdo")
+    end = text.index("</RxPdo>", first) + len("</RxPdo>")
+    text = text[:end] + "\n        " + text[first:end] + text[end:]
+    with pytest.raises(EniReadError) as err:
+        reader.read_bytes(text.encode(), "x.eni.xml")
+    assert err.value.line == _line(text, _nth(text, "<RxPdo", 1))
+    assert "described again (first at line " in err.value.message
+
+
+def test_output_variable_past_the_image_is_an_error_at_its_line():
+    """Was read, then ``net[var] = value`` raised BufferError in runtime/network.py."""
+    data, line = _output_past_image()
+    with pytest.raises(EniReadError) as err:
+        reader.read_bytes(data, "x.eni.xml")
+    assert err.value.line == line
+    assert "ends at bit 191, past the Outputs image of <ByteSize> 20 (160 bits)" \
+        in err.value.message
+    # The last bit of the image is still a place for a 1-bit variable.
+    text = data.decode().replace("<BitSize>32</BitSize>\n          <BitOffs>159",
+                                 "<BitSize>1</BitSize>\n          <BitOffs>159")
+    assert "<BitOffs>159" in text and text != data.decode()
+    assert reader.read_bytes(text.encode(), "x.eni.xml").process_image.outputs[-1].bit_offs \
+        == 159
+
+
+@pytest.mark.parametrize("digits", ["0x" + "f" * 4000, "-0x" + "1" * 4000],
+                         ids=["hex", "negative-hex"])
+def test_number_of_thousands_of_digits_is_an_error_at_its_line(digits):
+    """``<Ado>`` of 4,000 hex digits: the bounds check's own message raised Python's
+    4,300-digit ValueError."""
+    data = fuzzing.Mutant("eni", 0, (("value", "InitCmd/Ado", 3, digits),)).data()
+    with pytest.raises(EniReadError) as err:
+        reader.read_bytes(data, "x.eni.xml")
+    assert err.value.line == line_of(data, "InitCmd/Ado", 3)
+    assert err.value.message.startswith("<Ado> ")
+    assert "bits) is out of range: 16 bits (0..65535)" in err.value.message
+    assert len(err.value.message) < 200
+
+
+def test_huge_negative_max_frame_size_is_reported_not_a_crash():
+    text = fuzzing.eni_seeds()[0].decode()
+    text = text.replace("</Info>", "</Info>\n      <MaxFrameSize>-0x" + "1" * 4000
+                        + "</MaxFrameSize>", 1)
+    plan = reader.read_bytes(text.encode(), "x.eni.xml")
+    found = [u for u in plan.unsupported if "MaxFrameSize" in u.what]
+    assert found and "a negative frame size" in found[0].what, plan.unsupported
+
+
+@pytest.mark.parametrize("make, message", [
+    (_sm2_twice, "<Sm2> given again"),
+    (_output_past_image, "past the Outputs image"),
+    (lambda: (fuzzing.Mutant("eni", 1, (("value", "InitCmd/Ado", 0, "0x" + "f" * 4000),)
+                             ).data(), None), "is out of range: 16 bits"),
+], ids=["sm-twice", "output-past-image", "huge-ado"])
+def test_eni_cross_reference_errors_at_apply_are_exit_1(tmp_path, capsys, make, message):
+    data, line = make()
+    if line is None:
+        line = line_of(data, "InitCmd/Ado", 0)
+    path = tmp_path / "x.eni.xml"
+    path.write_bytes(data)
+    code = main(["apply", str(path), "--virtual", "--esi", str(fuzzing.ESI_DIR),
+                 "--no-cache", "--cycles", "3"])
+    err = capsys.readouterr().err
+    assert code == 1 and "Traceback" not in err
+    assert f"{path}:{line}: " in err and message in err
+
+
+def test_fmmu_cannot_write_al_status():
+    """Fuzz class 'assert as error handling': an FMMU write-mapping logical memory onto AL
+    status (0x0130), an LWR of 0 there, then an AL control write tripped ``assert`` in the
+    firmware's state machine.  AL status is read-only for EtherCAT whatever the command
+    (an FMMU only translates the address): it keeps OP, the LWR still counts (the ESC
+    answers a write to a read-only register), and the AL control request runs as usual."""
+    segment = fuzzing.line_in_op(fuzzing.eni_seeds()[1])
+    drive = segment.slaves[1]
+    fmmu = struct.pack("<IHBBHBBB3x", 0x200000, 2, 0, 7, 0x0130, 0, 2, 1)   # write, on
+    segment.process(frame(Datagram.physical(Cmd.FPWR, 1002, 0x0660, fmmu)))
+    back = wire.decode(segment.process(frame(Datagram.logical(Cmd.LWR, 0x200000,
+                                                              b"\x00\x00"))))
+    assert back.datagrams[0].wkc == 1
+    assert status(segment, 1) == (AlState.OP, 0)
+    segment.process(frame(Datagram.physical(Cmd.FPWR, 1002, 0x0120, b"\x02\x00")))
+    assert status(segment, 1) == (AlState.PREOP, 0)
+
+
+def test_fmmu_writing_al_control_requests_a_state():
+    """The other side of the same rule: a writable register written through an FMMU acts
+    as a physical write does; AL control 0x0120 mapped and written with PREOP."""
+    segment = fuzzing.line_in_op(fuzzing.eni_seeds()[1])
+    fmmu = struct.pack("<IHBBHBBB3x", 0x200000, 2, 0, 7, 0x0120, 0, 2, 1)
+    segment.process(frame(Datagram.physical(Cmd.FPWR, 1002, 0x0660, fmmu)))
+    segment.process(frame(Datagram.logical(Cmd.LWR, 0x200000, b"\x02\x00")))
+    assert status(segment, 1) == (AlState.PREOP, 0)
+    assert status(segment, 0) == (AlState.OP, 0)
+
+
+def test_al_status_holding_no_state_starts_over_from_init():
+    """Only reachable by tampering with the memory (AL status is read-only from the wire
+    and the firmware sets states only): an AL control request then makes the firmware
+    start over from INIT with 0x0012 instead of failing."""
+    segment = fuzzing.line_in_op(fuzzing.eni_seeds()[1])
+    segment.slaves[1].mem[0x0130] = 0
+    segment.process(frame(Datagram.physical(Cmd.FPWR, 1002, 0x0120, b"\x02\x00")))
+    assert status(segment, 1) == (AlState.INIT | 0x10, 0x0012)
