@@ -1,4 +1,4 @@
-"""Every example in README.md and docs/*.md is run (issue 28 §4): each fenced ``sh`` and
+"""Every example in README.md and docs/*.md is run: each fenced ``sh`` and
 ``python`` block, in a temporary folder laid out like the checkout (its ``examples/``).
 
 - Shell blocks run command by command (a line, or its ``&&`` parts), ``ecatcfg`` as
