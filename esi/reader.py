@@ -71,6 +71,7 @@ _SKIPPED: dict[str, frozenset[str]] = {
 # use (a negative length packed as unsigned, a 4000-digit number printed, a 2**48-bit object
 # allocated).  Fields not listed hold what 64 bits hold (esi/values.py).  The widths are the
 # ones the value ends up in on the wire or in the slave:
+MAX_SUBINDEX = 0xFF
 _U8, _U16, _U32 = (0, 0xFF), (0, 0xFFFF), (0, 0xFFFF_FFFF)
 # Identity numbers: 32-bit (SII words 0x08..0x0F, objects 0x1018:01..03, ETG.1000.6); some
 # tools write them as signed decimal, so the negative half is read as written too.
@@ -604,7 +605,28 @@ class _Reader:
                         self.unknown(ob, "Dictionary", ch)
             else:
                 self.unknown(ch, "Dictionary", el)
+        self.check_array_parts(dic)
         return dic
+
+    def check_array_parts(self, dic: Dictionary) -> None:
+        """A record's SubItem without SubIdx whose type is an array stands for one entry per
+        element (esi.coe.lookup, the emulated dictionary); more elements than subindices
+        1..255 (an UNSIGNED8, ETG.1000.6 5.6.2) cannot be entries of one object.  Such a
+        SubItem is an error at its line and left out of the record (its entries could
+        never be addressed)."""
+        for dt in dic.data_types.values():
+            kept = []
+            for item in dt.sub_items:
+                arr = dic.data_types.get(item.type) if item.subindex is None else None
+                n = arr.array_info[0].elements if arr is not None and arr.array_info else 0
+                if n > MAX_SUBINDEX:
+                    self.problems.append(ReadProblem(
+                        item.source, f"SubItem {item.name!r}: its type {item.type!r} has {n} "
+                        f"elements: they do not fit the subindices 1..{MAX_SUBINDEX} of a record",
+                        "error", kind="number"))
+                    continue
+                kept.append(item)
+            dt.sub_items = kept
 
     def data_type(self, el: etree._Element) -> DataType:
         dt = DataType("", None, _new_source(Source, (self.file, el.sourceline or 0)))
@@ -624,7 +646,15 @@ class _Reader:
                 lb = self.int_(ch.findtext("LBound"), ch, "ArrayInfo/LBound")
                 n = self.int_(ch.findtext("Elements"), ch, "ArrayInfo/Elements")
                 if lb is not None and n is not None:
-                    dt.array_info.append(ArrayInfo(lb, n))
+                    if lb >= 1 and lb + n - 1 > MAX_SUBINDEX:
+                        # LBound >= 1: a CoE array, one subindex per element (0 is the
+                        # count); subindices are UNSIGNED8 (ETG.1000.6 5.6.2).
+                        self.problems.append(ReadProblem(
+                            self.src(ch), f"ArrayInfo: elements {lb}..{lb + n - 1} of a CoE "
+                            f"array are subindices and do not fit 8 bits (1..{MAX_SUBINDEX})", "error",
+                            kind="number"))
+                    else:
+                        dt.array_info.append(ArrayInfo(lb, n))
             elif tag == "EnumInfo":
                 value = self.int_(ch.findtext("Enum"), ch, "EnumInfo/Enum")
                 if value is not None:

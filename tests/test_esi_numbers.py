@@ -89,6 +89,8 @@ DICTIONARY_CASES = [
     ("<SubIdx>1</SubIdx>", "<SubIdx>#x7FFFFFFF</SubIdx>", "SubItem/SubIdx"),
     ("<Elements>4</Elements>", "<Elements>#x7FFFFFFF</Elements>", "ArrayInfo/Elements"),
     ("<Elements>4</Elements>", "<Elements>-4</Elements>", "ArrayInfo/Elements"),
+    # Within 65535 bytes, but more elements than subindices (0x1600's array part, LBound 1).
+    ("<Elements>4</Elements>", "<Elements>54956</Elements>", "CoE array"),
 ]
 
 
@@ -101,11 +103,25 @@ def test_object_larger_than_an_sdo_carries_is_refused_where_read(tmp_path, old, 
     device = lib.device(entry)
     problems = [p for p in reader.read_bytes(text.encode(), "drive.xml").problems
                 if p.source.line == line and field in p.message]
-    assert problems and "does not fit" in problems[0].message
+    assert problems and "not fit" in problems[0].message
     start = time.monotonic()
     slave = emulated_slave(SlaveSpec(device))              # no MemoryError, no minutes
     assert time.monotonic() - start < 5
     assert slave.od is not None and 0x1018 in slave.od
+
+
+def test_record_array_part_with_more_elements_than_subindices(tmp_path):
+    # DT1C12ARR (LBound 1, the array part of 0x1C12) made a value array of 300 elements:
+    # the record's SubItem without SubIdx would stand for subindices 1..300.
+    text, _ = changed("<ArrayInfo><LBound>1</LBound><Elements>2</Elements>",
+                      "<ArrayInfo><LBound>0</LBound><Elements>300</Elements>")
+    line = text.count("\n", 0, text.index("<Type>DT1C12ARR</Type>")) + 1
+    problems = [p for p in reader.read_bytes(text.encode(), "drive.xml").problems
+                if p.source.line == line]
+    assert problems and "300 elements" in problems[0].message
+    lib = Library([str(esi_dir(tmp_path, text))], cache=False)
+    od = emulated_slave(SlaveSpec(lib.device(lib.entries[0]))).od
+    assert od is not None and max(od[0x1C12].entries) <= 255
 
 
 def test_object_size_bound_takes_the_largest_vendor_objects():
