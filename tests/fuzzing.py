@@ -1018,7 +1018,7 @@ TARGETS: dict[str, Target] = {t.name: t for t in (
            lambda: xml_inputs("esi"), _esi, _IN_FILE("fuzz.xml"), 200),
     Target("esi_device", "ESI files (numbers far out of range, negative sizes, huge counts) "
            "through Library, SII build, the emulated slave and compile",
-           lambda: mutants("esi", values=3, numeric=True), _esi_device, _in_fuzz_esi, 150),
+           lambda: mutants("esi", values=3, numeric=True), _esi_device, _in_fuzz_esi, 100),
     Target("lint", "ESI files through every lint rule", lambda: xml_inputs("esi"),
            _lint, _IN_FILE("fuzz.xml"), 120),
     Target("topology", "topology YAML/JSON (scalars, explicit tags, syntax mutated)",
