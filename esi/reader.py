@@ -97,9 +97,10 @@ _RANGES: dict[str, tuple[int, int]] = {
     "Fmmu/@Sm": (0, 15), "RxPdo/@Sm": (0, 15), "TxPdo/@Sm": (0, 15),
     "Fmmu/@Su": _U8, "RxPdo/@Su": _U8, "TxPdo/@Su": _U8,
     # A PDO mapping entry (objects 0x1600/0x1A00, ETG.1000.6 5.6.7.4.7) is index:16,
-    # subindex:8, bit length:8; a PDO is an object index.
+    # subindex:8, bit length:8; a PDO is an object index.  BitLen is read up to 16 bits:
+    # lint ESI113 says why 256..65535 cannot be mapped (and stops compile).
     "RxPdo/Index": _U16, "TxPdo/Index": _U16, "RxPdo/Exclude": _U16, "TxPdo/Exclude": _U16,
-    "Entry/Index": _U16, "Entry/SubIndex": _U8, "Entry/BitLen": _U8,
+    "Entry/Index": _U16, "Entry/SubIndex": _U8, "Entry/BitLen": _U16,
     "InitCmd/Index": _U16, "InitCmd/SubIndex": _U8,
     "OpMode/AssignActivate": _U16,                      # register 0x0980, 16 bits
     "Category/CatNo": _U16,                             # SII category type (ETG.2010)

@@ -44,7 +44,7 @@ CASES = [   # (what is changed, into what, the field as the message names it)
     ("<BitLen>16</BitLen>", "<BitLen>-1</BitLen>", "Entry/BitLen"),
     ("<BitLen>16</BitLen>", "<BitLen>-16</BitLen>", "Entry/BitLen"),
     ('DefaultSize="6"', 'DefaultSize="-6"', "Sm/@DefaultSize"),
-    ("<BitLen>16</BitLen>", "<BitLen>256</BitLen>", "Entry/BitLen"),   # mapping: 8 bits
+    ("<BitLen>16</BitLen>", "<BitLen>65536</BitLen>", "Entry/BitLen"),  # 256.. is ESI113
 ]
 
 

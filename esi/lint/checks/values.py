@@ -28,7 +28,7 @@ ESI001 = declare("ESI001", "error", "the file cannot be read as an ESI file", ""
            "field", """
     ETG.2000 numbers (HexDecValue) are decimal ("4096") or hex with the "#x" prefix
     ("#x1000"); ecatcfg also accepts "0x".  This value is neither, or it does not fit what
-    its field holds (a 16-bit SyncManager length, an 8-bit PDO entry BitLen or subindex, a
+    its field holds (a 16-bit SyncManager length, an 8-bit PDO entry subindex, a
     negative size, an object over 65535 bytes, more array elements than subindices 1..255;
     any number over 64 bits), so the reader left it unset: the device cannot be identified (Type/@ProductCode), a PDO entry cannot be placed,
     or a default is lost.  Typical causes: a stray "h" suffix ("1000h"), a digit group
