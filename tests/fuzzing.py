@@ -186,7 +186,7 @@ NUMBERS = ("0", "1", "-1", "2", "3", "7", "8", "15", "16", "127", "128", "255", 
            "4294967296", "18446744073709551616", "#x0", "#x1", "#xFF", "#x100", "#xFFFF",
            "#x10000", "#xFFFFFFFF", "#x100000000", "0x7FFFFFFF", "0xFFFFFFFFFFFFFFFFFF",
            "1" * 25, "9" * 4301,
-           # Far out of range (issue 28 §2): wider than 64 bits, sizes of 2**36..2**70 bits,
+           # Far out of range: wider than 64 bits, sizes of 2**36..2**70 bits,
            # a 32-bit subindex or count, negative sizes.
            "#x" + "F" * 4000, str(1 << 36), str(1 << 48), str(1 << 70), "#x7FFFFFFF", "-16",
            "-#x10", "#x10000000000000000")

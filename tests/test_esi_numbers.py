@@ -1,4 +1,4 @@
-"""ESI numbers a field cannot hold (issue 28 §2): a number wider than the field, a negative
+"""ESI numbers a field cannot hold: a number wider than the field, a negative
 size, an object larger than an SDO can carry.  Each is an error at its file and line where
 the ESI is read, never a traceback later (str() of a 4000-digit number, struct.error of a
 negative length, a dictionary of 2**40 bits).  The inputs are the example drive's ESI with
