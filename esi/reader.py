@@ -24,7 +24,7 @@ from ecatcfg.esi.model import (
     ObjectInfo, Pdo, PdoEntry, Profile, ProblemKind, ReadProblem, Severity, Slot, Slots, Source,
     STATES, SyncManager, Vendor,
 )
-from ecatcfg.esi.values import parse_bool, parse_hex_bytes, parse_int
+from ecatcfg.esi.values import INT64_MIN, UINT64_MAX, parse_bool, parse_hex_bytes, parse_int
 
 ROOTS = ("EtherCATInfo", "EtherCATModule")
 
@@ -66,6 +66,54 @@ _SKIPPED: dict[str, frozenset[str]] = {
                          "ImageData16x14", "VendorSpecific")),
 }
 
+# What each number field can hold, by the name the reader gives it: a number outside is a
+# ReadProblem at its line (the field then reads as absent), never a value later code cannot
+# use (a negative length packed as unsigned, a 4000-digit number printed, a 2**48-bit object
+# allocated).  Fields not listed hold what 64 bits hold (esi/values.py).  The widths are the
+# ones the value ends up in on the wire or in the slave:
+MAX_SUBINDEX = 0xFF
+_U8, _U16, _U32 = (0, 0xFF), (0, 0xFFFF), (0, 0xFFFF_FFFF)
+# Identity numbers: 32-bit (SII words 0x08..0x0F, objects 0x1018:01..03, ETG.1000.6); some
+# tools write them as signed decimal, so the negative half is read as written too.
+_IDENTITY = (-(1 << 31), 0xFFFF_FFFF)
+# An object's size: ETG.1000.6 sets no bound below segmented SDO's UNSIGNED32 byte count;
+# ours is 65535 bytes (524280 bits) per object, entry, type and offset, what a 16-bit byte
+# count holds, which the largest objects vendors describe stay under (Beckhoff EK10xx: an
+# ARRAY of 64008 bytes) and which keeps an emulated dictionary's memory bounded; an array
+# has no more elements than bits.  A subindex is an UNSIGNED8 (ETG.1000.6 5.6.2).
+_BITS = (0, 0xFFFF * 8)
+_RANGES: dict[str, tuple[int, int]] = {
+    "Vendor/Id": _IDENTITY, "Type/@ProductCode": _IDENTITY, "Type/@RevisionNo": _IDENTITY,
+    # AL status/mailbox timeouts in ms (ETG.2000 Info/StateMachine, Info/Mailbox; UDINT).
+    **{f"{kind}/Timeout/{name}": _U32 for kind in ("StateMachine", "Mailbox")
+       for name in ("PreopTimeout", "SafeopOpTimeout", "BackToInitTimeout",
+                    "BackToSafeopTimeout", "RequestTimeout", "ResponseTimeout")},
+    "Info/IdentificationAdo": _U16,                     # an ESC register address
+    # SyncManager registers 0x0800+8n (ETG.1000.4 6.7.2): start address and length are
+    # 16 bits, control and enable one byte each.
+    "Sm/@StartAddress": _U16, "Sm/@DefaultSize": _U16, "Sm/@MinSize": _U16,
+    "Sm/@MaxSize": _U16, "Sm/@ControlByte": _U8, "Sm/@Enable": _U8,
+    # An ESC has at most 16 SyncManagers and 16 FMMUs (ETG.1000.4 6.6, 6.7).
+    "Fmmu/@Sm": (0, 15), "RxPdo/@Sm": (0, 15), "TxPdo/@Sm": (0, 15),
+    "Fmmu/@Su": _U8, "RxPdo/@Su": _U8, "TxPdo/@Su": _U8,
+    # A PDO mapping entry (objects 0x1600/0x1A00, ETG.1000.6 5.6.7.4.7) is index:16,
+    # subindex:8, bit length:8; a PDO is an object index.  BitLen is read up to 16 bits:
+    # lint ESI113 says why 256..65535 cannot be mapped (and stops compile).
+    "RxPdo/Index": _U16, "TxPdo/Index": _U16, "RxPdo/Exclude": _U16, "TxPdo/Exclude": _U16,
+    "Entry/Index": _U16, "Entry/SubIndex": _U8, "Entry/BitLen": _U16,
+    "InitCmd/Index": _U16, "InitCmd/SubIndex": _U8,
+    "OpMode/AssignActivate": _U16,                      # register 0x0980, 16 bits
+    "Category/CatNo": _U16,                             # SII category type (ETG.2010)
+    # Object 0x1000 device type: profile number in the low word, additional info in the
+    # high word (ETG.1000.6 5.6.7.4.1).
+    "Profile/ProfileNo": _U16, "Profile/AddInfo": _U16,
+    "DataType/BitSize": _BITS, "SubItem/BitSize": _BITS, "Object/BitSize": _BITS,
+    "SubItem/BitOffs": _BITS, "DataType/Index": _U16, "Object/Index": _U16,
+    "SubItem/SubIdx": _U8, "ArrayInfo/LBound": _U8, "ArrayInfo/Elements": _BITS,
+    "Type/@ModuleIdent": _IDENTITY,
+}
+
+_ANY = (INT64_MIN, UINT64_MAX)
 _STATE_BY_LOWER = {s.lower(): s for s in STATES}
 _new_source = tuple.__new__     # Source(...) without NamedTuple's Python-level __new__
 
@@ -133,7 +181,7 @@ class _Reader:
         if raw is None:
             return None
         try:
-            return parse_int(raw)
+            return parse_int(raw, *_RANGES.get(what, _ANY))
         except ValueError as exc:
             self._problem(el, what, exc, severity)
             return None
@@ -558,7 +606,28 @@ class _Reader:
                         self.unknown(ob, "Dictionary", ch)
             else:
                 self.unknown(ch, "Dictionary", el)
+        self.check_array_parts(dic)
         return dic
+
+    def check_array_parts(self, dic: Dictionary) -> None:
+        """A record's SubItem without SubIdx whose type is an array stands for one entry per
+        element (esi.coe.lookup, the emulated dictionary); more elements than subindices
+        1..255 (an UNSIGNED8, ETG.1000.6 5.6.2) cannot be entries of one object.  Such a
+        SubItem is an error at its line and left out of the record (its entries could
+        never be addressed)."""
+        for dt in dic.data_types.values():
+            kept = []
+            for item in dt.sub_items:
+                arr = dic.data_types.get(item.type) if item.subindex is None else None
+                n = arr.array_info[0].elements if arr is not None and arr.array_info else 0
+                if n > MAX_SUBINDEX:
+                    self.problems.append(ReadProblem(
+                        item.source, f"SubItem {item.name!r}: its type {item.type!r} has {n} "
+                        f"elements: they do not fit the subindices 1..{MAX_SUBINDEX} of a record",
+                        "error", kind="number"))
+                    continue
+                kept.append(item)
+            dt.sub_items = kept
 
     def data_type(self, el: etree._Element) -> DataType:
         dt = DataType("", None, _new_source(Source, (self.file, el.sourceline or 0)))
@@ -578,7 +647,15 @@ class _Reader:
                 lb = self.int_(ch.findtext("LBound"), ch, "ArrayInfo/LBound")
                 n = self.int_(ch.findtext("Elements"), ch, "ArrayInfo/Elements")
                 if lb is not None and n is not None:
-                    dt.array_info.append(ArrayInfo(lb, n))
+                    if lb >= 1 and lb + n - 1 > MAX_SUBINDEX:
+                        # LBound >= 1: a CoE array, one subindex per element (0 is the
+                        # count); subindices are UNSIGNED8 (ETG.1000.6 5.6.2).
+                        self.problems.append(ReadProblem(
+                            self.src(ch), f"ArrayInfo: elements {lb}..{lb + n - 1} of a CoE "
+                            f"array are subindices and do not fit 8 bits (1..{MAX_SUBINDEX})", "error",
+                            kind="number"))
+                    else:
+                        dt.array_info.append(ArrayInfo(lb, n))
             elif tag == "EnumInfo":
                 value = self.int_(ch.findtext("Enum"), ch, "EnumInfo/Enum")
                 if value is not None:

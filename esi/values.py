@@ -13,26 +13,57 @@ import re
 # [0-9] and [0-9A-Fa-f] are ASCII-only in Python's re: no Arabic-Indic digits, no "1_000"
 # (both of which int() alone would accept).  Surrounding white space and a sign are tolerated
 # (ENI exporters write negative numbers in decimal; a sign before hex digits costs nothing).
-# The value is not range-checked here: each reader checks it against the field it fills
-# (an absurd ByteSize is a lint finding of its own).  Only the length is bounded, below the
-# 4300 digits beyond which int() refuses a string.
+# Only the length is bounded here, below the 4300 digits beyond which int() refuses a string;
+# the value is bounded by parse_int's ``lo``/``hi``: by default to what 64 bits hold (no
+# ETG.2000 or ETG.2100 number field is wider: ULINT/LINT are the widest CoE integers), and
+# by the readers to what their field holds (esi/reader.py).  A wider number left in the
+# model would make every later str(), f-string or json.dump of it raise (Python's
+# 4300-digit limit for int -> decimal str).
 _NUMBER = re.compile(
     r"\s*([+-]?)(?:([0-9]{1,4000})|(?:#x|#X|0x|0X)([0-9A-Fa-f]{1,4000}))\s*\Z")
+
+INT64_MIN = -(1 << 63)
+UINT64_MAX = (1 << 64) - 1
 
 _BOOLEANS = {"1": True, "true": True, "0": False, "false": False}
 
 
-def parse_int(text: str) -> int:
-    """A HexDecValue: ``#x1A00``, ``0x1A00`` or decimal (optionally signed).  The one number
-    syntax of the project: the ESI reader, the ENI reader and the topology file use it."""
-    if len(text) <= 20 and text.isascii() and text.isdigit():   # "8", "16", "1033": fast
-        return int(text)
-    m = _NUMBER.match(text)
-    if m is None:
-        raise ValueError(f"not a number: {text!r} (expected #x1A00, 0x1A00 or decimal)")
-    sign, dec, hexa = m.groups()
-    value = int(dec) if dec is not None else int(hexa, 16)
-    return -value if sign == "-" else value
+def parse_int(text: str, lo: int = INT64_MIN, hi: int = UINT64_MAX) -> int:
+    """A HexDecValue: ``#x1A00``, ``0x1A00`` or decimal (optionally signed), in ``lo..hi``
+    (by default what 64 bits hold, signed or not).  The one number syntax of the project:
+    the ESI reader, the ENI reader and the topology file use it."""
+    if len(text) <= 18 and text.isascii() and text.isdigit():   # "8", "16", "1033": fast
+        value = int(text)
+    else:
+        m = _NUMBER.match(text)
+        if m is None:
+            raise ValueError(f"not a number: {text[:40]!r} (expected #x1A00, 0x1A00 or "
+                             "decimal)")
+        sign, dec, hexa = m.groups()
+        value = int(dec) if dec is not None else int(hexa, 16)
+        if sign == "-":
+            value = -value
+    if lo <= value <= hi:
+        return value
+    raise ValueError(f"{shown_number(value)} does not fit {range_text(lo, hi)}")
+
+
+def shown_number(value: int) -> str:
+    """A number for a message, whatever its size: in hex (no digit limit, unlike decimal),
+    cut in the middle beyond 64 bits."""
+    digits = f"{abs(value):x}"
+    if len(digits) > 16:
+        digits = f"{digits[:8]}...{digits[-4:]} ({len(digits)} hex digits)"
+    return f"{'-' if value < 0 else ''}0x{digits}"
+
+
+def range_text(lo: int, hi: int) -> str:
+    """``0..65535 (16 bits)``: a range as messages name it."""
+    if lo == INT64_MIN and hi == UINT64_MAX:
+        return "64 bits"
+    if lo == 0 and hi & (hi + 1) == 0:
+        return f"{hi.bit_length()} bits (0..{hi})"
+    return f"{lo}..{hi}"
 
 
 def parse_bool(text: str) -> bool:

@@ -185,7 +185,11 @@ NUMBERS = ("0", "1", "-1", "2", "3", "7", "8", "15", "16", "127", "128", "255", 
            "2147483647", "2147483648", "-2147483648", "-2147483649", "4294967295",
            "4294967296", "18446744073709551616", "#x0", "#x1", "#xFF", "#x100", "#xFFFF",
            "#x10000", "#xFFFFFFFF", "#x100000000", "0x7FFFFFFF", "0xFFFFFFFFFFFFFFFFFF",
-           "1" * 25, "9" * 4301)
+           "1" * 25, "9" * 4301,
+           # Far out of range: wider than 64 bits, sizes of 2**36..2**70 bits,
+           # a 32-bit subindex or count, negative sizes.
+           "#x" + "F" * 4000, str(1 << 36), str(1 << 48), str(1 << 70), "#x7FFFFFFF", "-16",
+           "-#x10", "#x10000000000000000")
 TEXTS = ("", " ", "abc", "1.5", "1e3", "-0", "+1", "nan", "true", "false", "#x", "0x",
          "#xG", "\u00e9", "\U0001F600", "A" * 3000, "0 0", "\t1\n")
 _NUMBER = re.compile(rb"\s*[+-]?(?:[0-9]+|#x[0-9a-fA-F]+|0x[0-9a-fA-F]+)\s*")
@@ -917,6 +921,36 @@ def _esi(m: Mutant) -> None:
     reader.read_bytes(m.data(), "fuzz.xml")
 
 
+def _esi_device(m: Mutant) -> None:
+    # What `simulate`, `emulate` and `Network.virtual` make of an ESI the reader loads: each
+    # device through the Library, its SII image and its emulated slave (object dictionary,
+    # SDO server), and a compile of it.
+    from ecatcfg.compiler import topology
+    from ecatcfg.compiler.build import compile_topology
+    from ecatcfg.esi import sii
+    from ecatcfg.esi.library import Library
+    from ecatcfg.runtime.emulate import SlaveSpec, emulated_slave
+    with tempfile.TemporaryDirectory() as tmp:
+        (Path(tmp) / "fuzz.xml").write_bytes(m.data())
+        lib = Library([tmp], cache=False)
+        for entry in lib.entries:
+            device = lib.device(entry)
+            sii.build(device)
+            emulated_slave(SlaveSpec(device, name="fuzz"))
+            if device.product_code is not None and device.vendor.id is not None:
+                text = (f"master: {{name: m}}\nslaves:\n  - {{name: d, device: "
+                        f"'{device.vendor.id:#x}:{device.product_code:#x}'}}\n")
+                compile_topology(topology.loads(text, "fuzz.yaml"), lib)
+
+
+def _in_fuzz_esi(exc: EcatcfgError) -> bool:
+    # The ESI is read from a temporary folder: the file is named by its path there; compile
+    # names the topology's line (and the ESI's in its message).
+    errors = getattr(exc, "problems", None) or [exc]
+    return all(str(e.file).endswith(("fuzz.xml", "fuzz.yaml")) and (e.line or getattr(e, "offset", None)
+                                                      is not None) for e in errors)
+
+
 def _lint(m: Mutant) -> None:
     from ecatcfg.esi.lint.rules import RULES
     from ecatcfg.esi.lint.runner import LintOptions, Target as LintTarget, lint_file
@@ -982,6 +1016,9 @@ _IN_FILE = located_in_file
 TARGETS: dict[str, Target] = {t.name: t for t in (
     Target("esi_reader", "ESI files (example devices, values/elements/bytes mutated)",
            lambda: xml_inputs("esi"), _esi, _IN_FILE("fuzz.xml"), 200),
+    Target("esi_device", "ESI files (numbers far out of range, negative sizes, huge counts) "
+           "through Library, SII build, the emulated slave and compile",
+           lambda: mutants("esi", values=3, numeric=True), _esi_device, _in_fuzz_esi, 100),
     Target("lint", "ESI files through every lint rule", lambda: xml_inputs("esi"),
            _lint, _IN_FILE("fuzz.xml"), 120),
     Target("topology", "topology YAML/JSON (scalars, explicit tags, syntax mutated)",

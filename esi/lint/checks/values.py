@@ -24,10 +24,13 @@ ESI001 = declare("ESI001", "error", "the file cannot be read as an ESI file", ""
     The location is the parser's.  Nothing else is checked in such a file.""")
 
 
-@file_rule("ESI002", "error", "a number is not a hex or decimal value", """
+@file_rule("ESI002", "error", "a number is not a hex or decimal value, or does not fit its "
+           "field", """
     ETG.2000 numbers (HexDecValue) are decimal ("4096") or hex with the "#x" prefix
-    ("#x1000"); ecatcfg also accepts "0x".  This value is neither, so the reader left it
-    unset: the device cannot be identified (Type/@ProductCode), a PDO entry cannot be placed,
+    ("#x1000"); ecatcfg also accepts "0x".  This value is neither, or it does not fit what
+    its field holds (a 16-bit SyncManager length, an 8-bit PDO entry subindex, a
+    negative size, an object over 65535 bytes, more array elements than subindices 1..255;
+    any number over 64 bits), so the reader left it unset: the device cannot be identified (Type/@ProductCode), a PDO entry cannot be placed,
     or a default is lost.  Typical causes: a stray "h" suffix ("1000h"), a digit group
     separator, a missing "#".""")
 def unreadable_number(ctx: FileContext) -> Iterator[Hit]:
