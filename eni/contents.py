@@ -36,7 +36,7 @@ from lxml import etree
 from ecatcfg.eni.plan import NetworkPlan, Unsupported
 from ecatcfg.errors import EcatcfgError, location
 from ecatcfg.esc import LOGICAL_CMDS, TRANSITION_RULES, Transition
-from ecatcfg.esi.values import parse_bool, parse_int
+from ecatcfg.esi.values import SPELLABLE, parse_bool, parse_int
 from ecatcfg.record import record
 
 Element = etree._Element
@@ -126,9 +126,9 @@ def _master_time_as_ref(el: Element) -> str:
 
 def _frame_size(el: Element) -> str:
     try:
-        size = parse_int(_text(el))
+        size = parse_int(_text(el), -SPELLABLE, SPELLABLE)
     except ValueError:
-        return f"<MaxFrameSize> {_text(el)!r}"
+        return f"<MaxFrameSize> {_text(el).strip()[:24]!r}"
     if size >= 1514:
         return ""
     if size < 0:        # shown as written: thousands of digits cannot be str()-ed (4,300)

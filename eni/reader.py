@@ -49,7 +49,7 @@ from ecatcfg.eni.plan import (
 from ecatcfg.errors import EcatcfgError
 from ecatcfg.esc import FRAME_PAYLOAD, MAX_DATAGRAM_DATA, Transition, frame_bytes
 from ecatcfg.esi import xmlsafe
-from ecatcfg.esi.values import parse_bool, parse_hex_bytes, parse_int
+from ecatcfg.esi.values import SPELLABLE, parse_bool, parse_hex_bytes, parse_int
 
 Element = etree._Element
 
@@ -100,9 +100,12 @@ def _parse_int(text: str) -> int | None:
     """A number as ESI and ENI files write it (:func:`ecatcfg.esi.values.parse_int`: decimal,
     ``#x`` or ``0x`` hex); ``None`` if it is none of those."""
     try:
-        return parse_int(text)
+        # Every field's own bounds are checked by the reader (``_Reader.check``), which names
+        # the field's range; the syntax allows at most 4,000 hex digits (16,000 bits).
+        return parse_int(text, -SPELLABLE, SPELLABLE)
     except ValueError:
         return None
+
 
 
 def _shown(value: int) -> str:

@@ -24,6 +24,9 @@ _NUMBER = re.compile(
 
 INT64_MIN = -(1 << 63)
 UINT64_MAX = (1 << 64) - 1
+# Beyond every number the syntax can spell (4,000 hex digits): as ``lo``/``hi``, a reader
+# that checks the field's own range afterwards, with its own words, gets any number.
+SPELLABLE = 1 << 16000
 
 _BOOLEANS = {"1": True, "true": True, "0": False, "false": False}
 
