@@ -363,11 +363,15 @@ BROKEN_DEVICES = [
 
 
 @pytest.mark.parametrize("device, message", [
-    ("BIGSTART", "has Sm 0 StartAddress 0x12345, outside 0..0xffff"),
-    ("BIGCTRL", "has Sm 0 ControlByte 0x1ff, outside 0..0xff"),
-    ("NEGSTART", "has Sm 0 StartAddress -0x5, outside 0..0xffff"),
-    ("BIGAA", "has OpMode 'DC' AssignActivate 0x12345, outside 0..0xffff"),
-    ("BIGREV", "has RevisionNo 0x123456789, outside 0..0xffffffff"),
+    # The ESI reader bounds each field to its register: an ESI002 at the ESI's line, which
+    # stops compile for the slave that uses the device.
+    ("BIGSTART", "f.xml:9: ESI002 Sm/@StartAddress: 0x12345 does not fit 16 bits (0..65535)"),
+    ("BIGCTRL", "f.xml:10: ESI002 Sm/@ControlByte: 0x1ff does not fit 8 bits (0..255)"),
+    ("NEGSTART", "f.xml:11: ESI002 Sm/@StartAddress: -0x5 does not fit 16 bits (0..65535)"),
+    ("BIGAA", "f.xml:12: ESI002 OpMode/AssignActivate: 0x12345 does not fit 16 bits "
+              "(0..65535)"),
+    # An identity that does not fit is no identity: the device cannot be selected by it.
+    ("BIGREV", "f.xml:13 has no readable identity"),
 ])
 def test_esi_numbers_that_do_not_fit_their_register(tmp_path, capsys, fixture_esi, device,
                                                      message):
@@ -375,7 +379,8 @@ def test_esi_numbers_that_do_not_fit_their_register(tmp_path, capsys, fixture_es
     dc = ", dc: DC" if device == "BIGAA" else ""
     err = run_bad(tmp_path, capsys, f"slaves:\n  - {{name: a, device: {device}{dc}}}\n",
                   fixture_esi)
-    assert f"bad.yaml:2: slave 'a': the ESI of {device} (" in err and message in err, err
+    assert "bad.yaml:2: slave 'a': " in err and message in err, err
+    assert "Traceback" not in err
 
 
 def test_too_much_process_data_points_at_the_slave(tmp_path, capsys, fixture_esi):
