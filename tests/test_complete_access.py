@@ -118,12 +118,16 @@ def _apply(eni: Path, *args: str) -> tuple[int, dict, str]:
 def compiled(tmp_path) -> tuple[Path, Path]:
     esi = write(tmp_path, "ca.xml", esi_xml(device_xml("CA1", body=SETTINGS)))
     topo = write(tmp_path, "line.yaml", TOPOLOGY)
-    eni = tmp_path / "line.eni.xml"
+    return esi, _compile(topo, esi, tmp_path / "line.eni.xml")
+
+
+def _compile(topo: Path, esi: Path, eni: Path) -> Path:
+    """``ecatcfg compile`` of ``topo`` against ``esi`` into ``eni``, as a user runs it."""
     done = subprocess.run([sys.executable, "-m", "ecatcfg", "compile", str(topo), "--esi",
                            str(esi), "-o", str(eni), "--no-cache"], capture_output=True,
                           text=True, timeout=60)
     assert done.returncode == 0, done.stderr
-    return esi, eni
+    return eni
 
 
 def test_apply_writes_the_settings_from_subindex_1(compiled, tshark_path, tmp_path):
@@ -181,11 +185,7 @@ def test_a_device_whose_esi_has_no_dictionary_takes_it(tmp_path):
     esi = write(tmp_path, "bare.xml", esi_xml(device_xml("CA1", body=bare)))
     full = write(tmp_path, "ca.xml", esi_xml(device_xml("CA1", body=SETTINGS)))
     topo = write(tmp_path, "line.yaml", TOPOLOGY)
-    eni = tmp_path / "line.eni.xml"
-    done = subprocess.run([sys.executable, "-m", "ecatcfg", "compile", str(topo), "--esi",
-                           str(full), "-o", str(eni), "--no-cache"], capture_output=True,
-                          text=True, timeout=60)
-    assert done.returncode == 0, done.stderr
+    eni = _compile(topo, full, tmp_path / "line.eni.xml")
     rc, report, err = _apply(eni, "--esi", str(esi), "--no-cache")
     assert rc == 0 and report["slaves"][0]["highest_state"] == "OP", err
     plan = eni_reader.read_file(eni)
