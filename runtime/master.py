@@ -59,6 +59,10 @@ DRIFT_FRAMES = 2000
 DC_THRESHOLD_NS = 1000
 DC_TIMEOUT_S = 5.0
 DC_CHECK_FRAMES = 100          # drift frames between two reads of 0x092C
+# 0x092C is a mean over 2^(0x0934) samples (16 at the reset value, Beckhoff ESC Section II
+# 0x0934); after a reset of the loop (0x0930) it starts again from the first samples, so a
+# slave rejoining is not judged before four times that many drift frames.
+DC_SETTLE_SAMPLES = 4 << 4
 
 
 class VerifyError(ApplyError):
@@ -499,8 +503,9 @@ class Master:
         """A DC slave that was powered off and on lost its system time offset and delay:
         set them again from another DC slave's system time (the reference clock, or any
         other DC slave when the reference itself came back), read in the same frame as the
-        slave's local time, with the delays :meth:`setup_dc` measured; the cyclic drift
-        compensation then keeps it on time."""
+        slave's own, with the delay :meth:`setup_dc` measured; the cyclic drift
+        compensation then keeps it on time.  A slave that kept its power is set the same
+        way, from the offset and delay it still has."""
         dc, reference = self._dc_slaves()
         online = self.supervisor.health if self.supervisor is not None else {}
         sources = [s for s in ([reference] if reference is not None else []) + dc
@@ -510,41 +515,60 @@ class Master:
         source = sources[0]
         delay = self.dc_delays.get(slave.name, 0)
         failed = ApplyError("cannot read the DC system times", slave.name)
-        # The slave's system time 0x0910 and its offset 0x0920 (0 after a power cycle; a
-        # slave that kept power keeps its old one) in one read of 24 bytes.
+        # The slave's 0x0910, its offset 0x0920 and delay 0x0928 (0 after a power cycle; a
+        # slave that kept power keeps its old ones) in one read of 28 bytes.
         got = yield from until_answered(
             [Datagram.physical(Cmd.FPRD, source.phys_addr, Reg.DC_SYSTEM_TIME, 8),
-             Datagram.physical(Cmd.FPRD, slave.phys_addr, Reg.DC_SYSTEM_TIME, 24)],
+             Datagram.physical(Cmd.FPRD, slave.phys_addr, Reg.DC_SYSTEM_TIME, 28)],
             time.monotonic() + TIMEOUT_COMMAND, failed)
         theirs, = struct.unpack("<Q", got[0].data)
-        own, old_offset = struct.unpack_from("<Q8xq", got[1].data)
-        # One frame passes the source and the slave: their delays from the reference
-        # say how far apart the two reads were (negative: the slave came first).
-        offset = old_offset + theirs + delay - self.dc_delays.get(source.name, 0) - own
+        own, old_offset, old_delay = struct.unpack_from("<Q8xqI", got[1].data)
+        # A read of 0x0910 gives the local copy of system time less the delay, the time when
+        # the frame passed the reference clock (ESC Section I, Table 30): the source's read
+        # is the reference's time then, the slave's is its local time + old offset - old
+        # delay.  Its new system time must be the reference's, ``delay`` later.
+        offset = old_offset - old_delay + theirs + delay - own
+        if old_delay == delay and abs(offset - old_offset) < DC_THRESHOLD_NS:
+            # It kept power and time: leave it alone, since writing 0x0930 would make its loop
+            # learn its quartz's speed again (thousands of samples, microseconds off meanwhile).
+            return
         yield from _write_until_ok(slave, Reg.DC_SYSTEM_TIME + 0x10,
                                    struct.pack("<qI", offset, delay))
         yield from _write_until_ok(slave, Reg.DC_SPEED_COUNTER_START, struct.pack("<H", 0x1000))
 
     def dc_wait_job(self, slave: SlavePlan) -> Step[None]:
-        """Until the slave's system time difference (0x092C) is under the threshold (the
-        cyclic frames' drift compensation runs meanwhile), at most the DC timeout."""
+        """Until the slave's system time difference (0x092C) is under the threshold, at most
+        the DC timeout.  The job sends a drift frame every round of its own (the cyclic
+        frames may carry none), and trusts 0x092C only after ``DC_SETTLE_SAMPLES`` of them:
+        :meth:`dc_rejoin_job` reset the time control loop, whose mean starts again from the
+        first samples and would show a slave far off as close.  It also waits until the
+        difference no longer grows, as it does while the loop's learned speed is still off."""
         if not self.dc_threshold_ns:
             return
+        _, reference = self._dc_slaves()
         deadline = time.monotonic() + self.dc_timeout_s
         read = Datagram.physical(Cmd.FPRD, slave.phys_addr, Reg.DC_SYSTEM_TIME_DIFFERENCE, 4)
+        drift = [_drift_frame(reference)] if reference is not None else []
         last: int | None = None
+        samples = 0
         while True:
-            back = yield [read]
-            if back is not None and back[0].wkc == 1:
-                raw, = struct.unpack("<I", back[0].data)
-                last = raw & 0x7FFF_FFFF
-                if last < self.dc_threshold_ns:
-                    return
+            back = yield drift + [read]
+            if back is not None:
+                samples += len(drift)
+                if back[-1].wkc == 1:
+                    before = last
+                    raw, = struct.unpack("<I", back[-1].data)
+                    last = raw & 0x7FFF_FFFF
+                    # Under the threshold and no longer moving away: a loop whose learned
+                    # speed is still wrong shows a difference that grows through it.
+                    settled = not drift or (samples >= DC_SETTLE_SAMPLES and before is not None
+                                            and last <= before)
+                    if last < self.dc_threshold_ns and settled:
+                        return
             if time.monotonic() > deadline:
                 raise DcSyncError(f"DC did not converge: system time difference (0x092C) "
                                   f"{last} ns, threshold {self.dc_threshold_ns} ns, after "
                                   f"{self.dc_timeout_s:g} s", slave.name, {slave.name: last})
-            yield []
 
     def _broadcast_write(self, ado: int, data: bytes) -> None:
         deadline = time.monotonic() + TIMEOUT_COMMAND

@@ -5,8 +5,9 @@ re-verified, configured again from INIT and back in OP within the documented bou
 from __future__ import annotations
 
 import contextlib
+import struct
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
@@ -17,12 +18,14 @@ from ecatcfg.compiler import build, topology
 from ecatcfg.eni import reader as eni_reader
 from ecatcfg.eni import writer as eni_writer
 from ecatcfg.eni.plan import NetworkPlan
-from ecatcfg.esc import AlState
+from ecatcfg.esc import AlState, Cmd, Reg
 from ecatcfg.esi.library import Library
 from ecatcfg.runtime import Network, emulate, recovery
 from ecatcfg.runtime.cyclic import CyclicFrames
+from ecatcfg.runtime.lockstep import run_jobs
 from ecatcfg.runtime.master import Event
 from ecatcfg.runtime.timing import Timing
+from ecatcfg.runtime.wire import Datagram
 
 ESI = EXAMPLES / "esi"
 # docs/runtime.md "Slaves that drop out": the drive (firmware with the drive timing of
@@ -480,10 +483,6 @@ def test_a_dc_slave_powered_off_and_on_gets_its_system_time_back():
     (at the end of the coupler's Ethernet out) loses power: it comes back with its local
     clock from 0 and no offset; before OP its system time must again follow the
     reference's (0x092C under the threshold), and it does."""
-    import struct
-
-    from ecatcfg.esc import Cmd, Reg
-    from ecatcfg.runtime.wire import Datagram
     events: list[Event] = []
     with tree_network(events) as net:
         tree = net.plan
@@ -550,3 +549,82 @@ def test_a_group_head_identified_by_its_device_id_on_a_segment_from_the_eni(plan
         from ecatcfg.runtime.master import VerifyError
         with pytest.raises(VerifyError, match="extra slave"):
             net.up()
+
+
+def _dc_pair(net: Network) -> tuple[Callable[..., list[Datagram]], Callable[[], int]]:
+    """For the tree's axis1 (reference) and axis3: a read of registers in one frame, and
+    axis3's system time less axis1's read in one frame (a synchronised line answers one
+    value plus whatever the frame's travel between them adds)."""
+    reference = next(s for s in net.plan.slaves if s.name == "axis1")
+    mine = next(s for s in net.plan.slaves if s.name == "axis3")
+
+    def read(*regs: tuple[int, int, int]) -> list[Datagram]:
+        back = net.master.transport.exchange(
+            [Datagram.physical(Cmd.FPRD, addr, reg, size) for addr, reg, size in regs])
+        assert back is not None and all(dg.wkc == 1 for dg in back)
+        return back
+
+    def apart() -> int:
+        ref_dg, own_dg = read((reference.phys_addr, Reg.DC_SYSTEM_TIME, 8),
+                              (mine.phys_addr, Reg.DC_SYSTEM_TIME, 8))
+        own, = struct.unpack("<q", own_dg.data)
+        ref, = struct.unpack("<q", ref_dg.data)
+        return own - ref
+    return read, apart
+
+
+def _shift_offset(net: Network, ns: int, reset: bool) -> None:
+    """Move axis3's system time offset (0x0920) by ``ns``; with ``reset``, also reset its
+    time control loop (0x0930) as a master does after setting an offset."""
+    mine = next(s for s in net.plan.slaves if s.name == "axis3")
+    read, _ = _dc_pair(net)
+    offset, = struct.unpack("<q", read((mine.phys_addr, Reg.DC_SYSTEM_TIME + 0x10, 8))[0].data)
+    writes = [Datagram.physical(Cmd.FPWR, mine.phys_addr, Reg.DC_SYSTEM_TIME + 0x10,
+                                struct.pack("<q", offset + ns))]
+    if reset:
+        writes.append(Datagram.physical(Cmd.FPWR, mine.phys_addr, Reg.DC_SPEED_COUNTER_START,
+                                        struct.pack("<H", 0x1000)))
+    net.master.transport.exchange(writes)
+
+
+def test_the_convergence_wait_does_not_trust_a_freshly_reset_loop():
+    """A slave 5 us off the reference whose time control loop was just reset (as a rejoin
+    resets it) shows a small 0x092C at first: the mean starts again from its first samples.
+    The wait must not take that for convergence; when it returns, the system times agree."""
+    with tree_network([]) as net:
+        net.up()
+        _, apart = _dc_pair(net)
+        on_time = apart()
+        _shift_offset(net, 5000, reset=True)
+        assert apart() - on_time > 4000
+        mine = next(s for s in net.plan.slaves if s.name == "axis3")
+        run_jobs(net.master.transport, [net.master.dc_wait_job(mine)])
+        assert abs(apart() - on_time) < 2 * net.master.dc_threshold_ns
+
+
+def test_a_rejoining_slave_that_kept_power_is_set_from_its_own_offset_and_delay():
+    """axis3 kept power but its system time is 5 us off: the rejoin sets its offset from
+    the reference's time, its old offset and the delay it still holds, and it is on time
+    at once (before any drift frame)."""
+    with tree_network([]) as net:
+        net.up()
+        _, apart = _dc_pair(net)
+        on_time = apart()
+        _shift_offset(net, 5000, reset=False)
+        mine = next(s for s in net.plan.slaves if s.name == "axis3")
+        run_jobs(net.master.transport, [net.master.dc_rejoin_job(mine)])
+        assert abs(apart() - on_time) < 100
+
+
+def test_a_rejoining_slave_still_on_time_keeps_its_learned_clock_speed():
+    """axis3 kept power and time: the rejoin writes nothing, so its time control loop keeps
+    the quartz speed it learned (0x0932), rather than learning it again over thousands of
+    drift frames."""
+    with tree_network([]) as net:
+        net.up()
+        read, _ = _dc_pair(net)
+        mine = next(s for s in net.plan.slaves if s.name == "axis3")
+        speed = read((mine.phys_addr, Reg.DC_SPEED_COUNTER_START + 2, 2))[0].data
+        assert speed != bytes(2)
+        run_jobs(net.master.transport, [net.master.dc_rejoin_job(mine)])
+        assert read((mine.phys_addr, Reg.DC_SPEED_COUNTER_START + 2, 2))[0].data == speed
