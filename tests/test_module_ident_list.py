@@ -84,8 +84,24 @@ def f030(plan: NetworkPlan) -> list:
     return [c for c in plan.slaves[0].mailbox.coe_init_cmds if c.index == 0xF030]
 
 
+def two_single_slots(tmp_path: Path) -> Path:
+    """The fixture asking for the ident list, its one slot for a row of modules replaced by
+    two slots of one module each, both optional and without a default module (as a drive
+    with two axis slots, either of which may stay empty)."""
+    text = coupler(tmp_path, ask=True).read_text(encoding="utf-8")
+    start = text.index("<Slot ")
+    end = text.index("</Slot>", start) + len("</Slot>")
+    classes = "".join(re.findall(r"<ModuleClass>.*?</ModuleClass>", text[start:end]))
+    slots = "".join(f'<Slot MinInstances="0" MaxInstances="1"><Name LcId="1033">{name}'
+                    f"</Name>{classes}</Slot>" for name in ("Left", "Right"))
+    path = tmp_path / "coupler-two-slots.xml"
+    path.write_text(text[:start] + slots + text[end:], encoding="utf-8")
+    return path
+
+
 def test_fixture_is_valid_etg2000(esi_schema, tmp_path):
-    for path in (COUPLER, coupler(tmp_path, ask=True, access="ro", transition="IP")):
+    for path in (COUPLER, coupler(tmp_path, ask=True, access="ro", transition="IP"),
+                 two_single_slots(tmp_path)):
         assert esi_schema.validate(etree.parse(str(path))), esi_schema.error_log
 
 
@@ -183,6 +199,50 @@ def test_module_init_cmds_follow_the_devices_with_moved_indices(tmp_path):
         net.up()
         assert net.segment.slaves[0].od.int_value(want[0], want[1]) \
             == int.from_bytes(want[2], "little")
+
+
+def test_an_empty_single_slot_keeps_its_position(tmp_path):
+    """Slot 1 takes one module and is left empty (it has no default); slot 2 takes EXK-2AO.
+    An empty single slot is still a position (docs/compile.md: 0xF030 holds one UDINT per
+    position, 0 for an empty slot), so the module is at position 2: its PDO and object
+    indices move once by the Slots increments, and the ident list is [0, its ident].
+    Counted at position 1, its PDO, objects and InitCmd would be those of slot 1, and the
+    station would compare another list.  Expected values are read from the fixture."""
+    path = two_single_slots(tmp_path)
+    plan = compile_with(path, "slaves:\n  - name: io\n    device: EXK1100\n"
+                              "    modules: {2: [EXK-2AO]}\n")
+    root = etree.parse(str(path)).getroot()
+    slots = root.find(".//Slots")
+    pdo_step = int(slots.get("SlotPdoIncrement"))
+    index_step = int(slots.get("SlotIndexIncrement"))
+    module = next(m for m in root.iter("Module") if m.findtext("Type") == "EXK-2AO")
+    ident = int(module.find("Type").get("ModuleIdent")[2:], 16)
+    position = 2
+    rx = module.find("RxPdo")
+    want_pdo = int(rx.findtext("Index")[2:], 16) + (position - 1) * pdo_step
+    want_entries = [(int(e.findtext("Index")[2:], 16) + (position - 1) * index_step,
+                     int(e.findtext("SubIndex"))) for e in rx.iter("Entry")]
+    init = module.find("Mailbox/CoE/InitCmd")
+    want_init = (int(init.findtext("Index")[2:], 16) + (position - 1) * index_step,
+                 int(init.findtext("SubIndex")), bytes.fromhex(init.findtext("Data")))
+    slave = plan.slaves[0]
+    pdos = [p for p in slave.process_data.pdos if p.direction == "rx"]
+    assert [(p.index, [(e.index, e.subindex) for e in p.entries]) for p in pdos] == [
+        (want_pdo, want_entries)], pdos
+    assert pdos[0].name.startswith(f"Module {position} (")
+    assert f030(plan)[0].data == bytes([2, 0]) + bytes(4) + ident.to_bytes(4, "little")
+    coe = slave.mailbox.coe_init_cmds
+    assert [(c.index, c.subindex, c.data) for c in coe
+            if c.index & 0xF000 == 0x8000] == [want_init]
+    # The station emulated from the ENI has the module in slot 2: it takes the InitCmd,
+    # passes the 0xF050 check and exchanges the module's outputs.
+    with Network.virtual(plan, esi=[path], esi_cache=False) as net:
+        net.up()
+        assert net.state == AlState.OP
+        od = net.segment.slaves[0].od
+        assert [od.int_value(0xF050, n) for n in range(3)] == [2, 0, ident]
+        assert od.int_value(want_init[0], want_init[1]) \
+            == int.from_bytes(want_init[2], "little")
 
 
 def _lint(path: Path, rules: str) -> list:
