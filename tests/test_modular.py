@@ -19,6 +19,8 @@ import pytest
 from rig import serve_in_memory, start_simulate
 from lxml import etree
 
+from conftest import EXAMPLES
+
 from ecatcfg.compiler import build, topology
 from ecatcfg.compiler.resolve import plugged_devices
 from ecatcfg.compiler.topology import TopologyError
@@ -379,7 +381,6 @@ def test_a_slot_in_a_slot_group_is_refused_not_offset_wrongly(tmp_path):
 def test_example_station_is_the_worked_example_of_the_docs(esi_schema):
     """docs/compile.md's table for examples/station/station.yaml; its ESI and the fixture's
     are valid ETG.2000."""
-    from conftest import EXAMPLES
     esi = EXAMPLES / "station" / "esi"
     for f in (esi / "ecatcfg-EXM-station.xml", FIXTURE):
         assert esi_schema.validate(etree.parse(str(f))), (f, esi_schema.error_log)
@@ -404,5 +405,70 @@ def test_station_without_a_detected_list_is_not_checked(corpus, modular_lib):
     plan = compile_station(station("io", "UR20-FBC-EC", UR20[:3]), modular_lib)
     with Network.virtual(plan, esi=[corpus / "esi/modular"], esi_cache=False) as net:
         del net.segment.slaves[0].od.objects[0xF050]       # firmware without 0xF050
+        net.up()
+        assert net.state == AlState.OP
+
+
+# -- the 0xF050 check on the example station (self-written, no corpus) -----------------------
+
+STATION_ESI = EXAMPLES / "station" / "esi"
+CONFIGURED = ["EXM-4DI", "EXM-4DO"]
+
+
+def example_station(modules: list[str]) -> str:
+    return station("station", "EXM100", modules)
+
+
+def test_an_extra_module_after_the_configured_ones_fails_before_safeop():
+    """The ENI configures two modules; the station has a third plugged after them.  Its
+    0xF050 lists three positions: position 3 differs (nothing configured, the module's
+    ident found), so apply stops in PREOP with that row marked, as it would for a module
+    swapped (the station's process image no longer fits the ENI's)."""
+    lib = Library([STATION_ESI], cache=False)
+    plan = compile_station(example_station(CONFIGURED), lib)
+    plugged = CONFIGURED + ["EXM-2AI"]
+    loaded = topology.loads(example_station(plugged), "real.yaml")
+    seg = emulate.segment([emulate.SlaveSpec(d.device, d.name)
+                           for d in plugged_devices(loaded, lib)])
+    assert seg.slaves[0].od.int_value(0xF050, 0) == 3
+    link, close = serve_in_memory(seg)
+    with Network(plan, link, _closers=[close]) as net:
+        with pytest.raises(ApplyError) as exc:
+            net.up()
+        assert seg.slaves[0].state == AlState.PREOP
+    text = str(exc.value)
+    assert "slave 'station'" in text and "plugged modules differ" in text, text
+    vendor = vendor_modules(STATION_ESI / "ecatcfg-EXM-station.xml")
+    extra = _hex(vendor["EXM-2AI"].find("Type").get("ModuleIdent"))
+    marked = [line.split() for line in text.splitlines() if line.endswith("<<")]
+    assert marked == [["3", "(none)", f"0x{extra:08X}", "<<"]], text
+
+
+@pytest.mark.parametrize("code", [0x08000022, 0x06010001])
+def test_another_abort_of_the_0xf050_upload_is_an_error_naming_the_slave(code):
+    """Only "object does not exist" (0x06020000) says a station has no detected module
+    list and cannot be checked; any other abort of its upload (here: not in this state,
+    0x08000022; a write-only object, 0x06010001) is an error naming the slave and the
+    check, and the station stays in PREOP."""
+    lib = Library([STATION_ESI], cache=False)
+    plan = compile_station(example_station(CONFIGURED), lib)
+    with Network.virtual(plan, esi=[STATION_ESI], esi_cache=False) as net:
+        net.segment.slaves[0].od.inject_abort(0xF050, 0, code)
+        with pytest.raises(ApplyError) as exc:
+            net.up()
+        assert net.segment.slaves[0].state == AlState.PREOP
+    assert exc.value.abort_code == code
+    text = str(exc.value)
+    assert text.startswith("slave 'station' [check detected modules (0xF050)]: ") \
+        and f"0x{code:08X}" in text, text
+
+
+def test_a_station_without_0xf050_is_not_checked_by_its_abort_code():
+    """The same station answering the upload with 0x06020000 (object does not exist, as a
+    firmware without 0xF050 does) goes on to OP unchecked."""
+    lib = Library([STATION_ESI], cache=False)
+    plan = compile_station(example_station(CONFIGURED), lib)
+    with Network.virtual(plan, esi=[STATION_ESI], esi_cache=False) as net:
+        net.segment.slaves[0].od.inject_abort(0xF050, 0, 0x06020000)
         net.up()
         assert net.state == AlState.OP
