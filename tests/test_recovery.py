@@ -182,11 +182,11 @@ def test_attempts_are_bounded_and_backed_off_and_recover_tries_again(plan):
 
 
 # How late the next attempt may start after its wait: the probe that takes the slave on
-# goes in the first cycle after the wait and needs two rounds (two cycles, a few ms in
-# memory); the rest is room for a loaded 2-core CI machine.  A back-off one doubling too
-# long (0.2, 0.4, 0.8, 1.6 s) is over this from the second retry on.
-BACKOFF_SLACK = 0.1
-BACKOFF_SLACK_SHARE = 0.25
+# goes in the first cycle after the wait and needs two rounds (two cycles: 2 to 5 ms here,
+# 116 ms seen once with two busy loops beside the test on 2 cores); the rest is room for a
+# loaded CI machine.  A back-off one doubling too long (0.2, 0.4, 0.8, 1.6 s) is over this
+# from the third retry on.
+BACKOFF_SLACK = 0.2
 
 
 def test_the_back_off_doubles(plan):
@@ -218,8 +218,7 @@ def test_the_back_off_doubles(plan):
         delays = [start - retry for retry, start in zip(stamps, starts[1:])]
         for k, delay in enumerate(delays, start=1):
             wait = min(recovery.BACKOFF_FIRST * 2 ** (k - 1), recovery.BACKOFF_MAX)
-            assert wait * 0.9 <= delay <= wait * (1 + BACKOFF_SLACK_SHARE) + BACKOFF_SLACK, (
-                k, delays)
+            assert wait * 0.9 <= delay <= wait + BACKOFF_SLACK, (k, delays)
         print("waits after each retry (s):", [f"{d:.3f}" for d in delays])
 
 
