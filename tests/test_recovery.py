@@ -11,7 +11,7 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
-from rig import serving
+from rig import serving, tshark_fields
 
 from conftest import CORPUS, EXAMPLES
 from ecatcfg.compiler import build, topology
@@ -276,7 +276,9 @@ def grouped_segment(plan: NetworkPlan, head: str, leave_out: set[str] = frozense
 
 
 @contextlib.contextmanager
-def grouped_network(plan, segment, where: str, rig=None):
+def grouped_network(plan, segment, where: str, rig=None, pcap: Path | None = None):
+    """A network of ``plan`` on ``segment`` (in memory or over the veth rig), recording its
+    frames to ``pcap`` when given (written when the network closes)."""
     events: list[Event] = []
     if where == "memory":
         from rig import serve_in_memory
@@ -286,11 +288,29 @@ def grouped_network(plan, segment, where: str, rig=None):
         stack.enter_context(serving(rig, segment))
         link, close = rig.socket_in(rig.ns_a), stack.close
     try:
-        with Network(plan, link, on_event=events.append) as net:
+        with Network(plan, link, on_event=events.append, pcap=pcap) as net:
             net.segment = segment
             yield net, events
     finally:
         close()
+
+
+def armw_datagrams(pcap: Path) -> list[tuple[int, int, int]]:
+    """Every ARMW datagram of ``pcap`` as tshark decodes it: (pcapng direction, 2 sent by
+    the master and 1 received, ADP, working counter).  tshark's ``ecat.subN`` fields are
+    the Nth datagram of a frame (N up to 10), so commands and addresses stay paired."""
+    subs = range(1, 11)
+    fields = ["frame.packet_flags_direction", "ecat.cmd"] + [
+        f"ecat.sub{n}.{f}" for n in subs for f in ("cmd", "adp", "cnt")]
+    out = []
+    for row in tshark_fields(pcap, fields, display_filter="ecat.cmd == 0x0d"):
+        assert len(row["ecat.cmd"]) <= len(subs), row["ecat.cmd"]
+        direction = int(row["frame.packet_flags_direction"][0], 0)
+        for n in subs[:len(row["ecat.cmd"])]:
+            if int(row[f"ecat.sub{n}.cmd"][0], 0) == Cmd.ARMW:
+                out.append((direction, int(row[f"ecat.sub{n}.adp"][0], 0),
+                            int(row[f"ecat.sub{n}.cnt"][0], 0)))
+    return out
 
 
 @pytest.mark.parametrize("where", ["memory", "veth"])
@@ -322,18 +342,56 @@ def test_a_hot_connect_group_absent_at_start_joins_when_plugged_in(plan, where, 
             e.text for e in events]
 
 
-def test_a_group_absent_in_the_middle_moves_the_slaves_behind_it(plan):
+def test_a_group_absent_in_the_middle_moves_the_slaves_behind_it(plan, tmp_path,
+                                                                  tshark_path):
     """The ENI's sensors are a group of one; without them the lamps and the drive sit one
     position up: their auto-increment InitCmds and the drift compensation's ARMW to the
-    drive (the reference clock) follow them."""
+    drive (the reference clock) follow them.  On the wire (tshark): every ARMW the master
+    sends, the static drift frames and the cyclic one, goes to auto-increment address
+    -3 (the drive is the fourth slave found, not the fifth the ENI's 0xFFFC names: that
+    address would reach no slave), and comes back with working counter 4: the drive read
+    its system time into it and the three slaves before it wrote it (ETG.1000.4 ARMW;
+    their ESCs run a DC unit, ESC configuration 0x0E in the example ESIs)."""
     grouped = with_group(plan, "sensors", 1)
     seg = grouped_segment(grouped, "sensors", leave_out={"sensors"})
-    with grouped_network(grouped, seg, "memory") as (net, events):
+    pcap = tmp_path / "line.pcapng"
+    with grouped_network(grouped, seg, "memory", pcap=pcap) as (net, events):
         net.up()
         assert [s.state for s in seg.slaves] == [AlState.OP] * 4
         assert [s.station_address for s in seg.slaves] == [0x3E9, 0x3EA, 0x3EC, 0x3ED]
         assert all(net.cycle() for _ in range(20))
         assert net.master.read_dc_differences()["axis1"] is not None
+    assert [s.name for s in seg.slaves].index("axis1") == 3
+    armw = armw_datagrams(pcap)
+    sent = [(adp, wkc) for direction, adp, wkc in armw if direction == 2]
+    back = [wkc for direction, _, wkc in armw if direction == 1]
+    assert len(sent) > 20 and set(sent) == {(-3 & 0xFFFF, 0)}
+    assert len(back) == len(sent) and set(back) == {4}
+
+
+@pytest.mark.parametrize("previous_ports", [True, False], ids=["PreviousPort", "no-PreviousPort"])
+def test_an_absent_group_before_a_present_one_is_skipped_whole(plan, previous_ports):
+    """Two groups of two in a line: buttons with sensors, lamps with the drive.  The first
+    is not plugged in: the master must pass over both of its slaves and find the second
+    group's head right after the coupler (position 1), not where the absent group's second
+    slave would be.  The same with the ENI's PreviousPort (as compiled: each slave on port B
+    of the one before it) and without (a hand-written ENI: bus order only)."""
+    from ecatcfg.record import replace
+    grouped = with_group(with_group(plan, "buttons", 2), "lamps", 2)
+    if not previous_ports:
+        grouped = replace(grouped, slaves=[replace(s, previous_ports=[])
+                                           for s in grouped.slaves])
+    seg = grouped_segment(grouped, "lamps", leave_out={"buttons", "sensors"})
+    with grouped_network(grouped, seg, "memory") as (net, events):
+        net.up()
+        assert [e.text for e in events if e.kind == "hot-connect"] == [
+            "hot-connect group 'buttons' (2 slaves) is not on the line; the others go on"]
+        assert [(s.name, s.state, s.station_address) for s in seg.slaves] == [
+            ("coupler", AlState.OP, 0x3E9), ("lamps", AlState.OP, 0x3EC),
+            ("axis1", AlState.OP, 0x3ED)]
+        assert not net.online("buttons") and not net.online("sensors")
+        assert net.online("lamps") and net.online("axis1")
+        assert all(net.cycle() for _ in range(20))
 
 
 def test_a_head_that_is_not_identified_leaves_its_group_out_and_fails_the_line(plan):
