@@ -106,15 +106,23 @@ def present_groups(plan: NetworkPlan, found: list[FoundSlave],
     """The heads of the groups that are on the line.  In a line: walking the ENI's slaves
     and the slaves found side by side, a group is there when the next slave found is its
     head (identity and IdentifyCmds), and skipped otherwise.  With ``PreviousPort`` (a
-    tree): a group is there when its head pairs port by port with an identified slave."""
+    tree): a group is there when its head pairs port by port with an identified slave, in
+    the line without the groups before it in bus order that are not there (a head plugged
+    behind an absent group sits where that group was: :func:`as_found`)."""
     ordered = sorted(plan.slaves, key=lambda s: s.position)
     heads = groups(ordered)
     tree = any(s.previous_ports for s in ordered[1:]) and all(
         f.plug is not None for f in found[1:])
     if tree:
-        pairs = paired(plan, found)
-        return {h for h, members in heads.items()
-                if identified.get((h, pairs.get(members[0].position, -1)), False)}
+        # Heads in bus order: where a head is plugged depends only on the slaves before
+        # it, so the groups found absent so far are all that moves it.
+        on_line = {s.name for s in ordered}
+        for h, members in heads.items():
+            pairs = paired(as_found(plan, on_line), found)
+            at = pairs.get(positions(ordered, on_line)[h], -1)
+            if not identified.get((h, at), False):
+                on_line -= {m.name for m in members}
+        return {h for h in heads if h in on_line}
     present: set[str] = set()
     f = 0
     k = 0

@@ -11,7 +11,7 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
-from rig import serving
+from rig import serving, tshark_fields
 
 from conftest import CORPUS, EXAMPLES
 from ecatcfg.compiler import build, topology
@@ -20,7 +20,7 @@ from ecatcfg.eni import writer as eni_writer
 from ecatcfg.eni.plan import NetworkPlan
 from ecatcfg.esc import AlState, Cmd, Reg
 from ecatcfg.esi.library import Library
-from ecatcfg.runtime import Network, emulate, recovery
+from ecatcfg.runtime import Network, emulate, recovery, wire
 from ecatcfg.runtime.cyclic import CyclicFrames
 from ecatcfg.runtime.lockstep import run_jobs
 from ecatcfg.runtime.master import Event
@@ -267,6 +267,33 @@ def test_working_counter_shares_add_up_to_the_vendors_cnt(plan, corpus):
     assert checked >= 20
 
 
+def test_an_armw_counts_the_dc_slave_and_not_a_slave_without_a_dc_unit(plan, tmp_path):
+    """The drift compensation's ARMW of 0x0910 (ETG.1000.4: the slave at its address reads,
+    every other one writes, each adding 1 where it has the register): the drive, the ENI's
+    one DC slave, adds 1; the coupler and the I/O terminals add nothing when their ESC has
+    no DC unit.  Here their ESIs load ESC configuration 0x01 into 0x0141 (DC SYNC and latch
+    units off) as a real EL1004 and EL2828 do, which give no working counter for any
+    register from 0x0910 on; the emulated line, built from those ESIs, answers the ENI's
+    ARMW with working counter 1, the sum of the shares."""
+    esi = tmp_path / "esi"
+    esi.mkdir()
+    for path in ESI.glob("*.xml"):
+        text = path.read_text()
+        if "EXD402" not in path.name:
+            assert text.count("<ConfigData>080E") >= 1
+            text = text.replace("<ConfigData>080E", "<ConfigData>0801")
+        (esi / path.name).write_text(text)
+    cyclic = CyclicFrames(plan)
+    [armw] = [slot for frame in cyclic.frames for slot in frame if slot.cmd.cmd == Cmd.ARMW]
+    assert (armw.cmd.adp, armw.cmd.ado) == (-4 & 0xFFFF, Reg.DC_SYSTEM_TIME)
+    assert {s.name: recovery.wkc_share(s, armw) for s in plan.slaves} == {
+        "coupler": 0, "buttons": 0, "sensors": 0, "lamps": 0, "axis1": 1}
+    seg = emulate.segment(emulate.specs_from_eni(plan, Library([esi], cache=False), "x"))
+    [back] = wire.decode(seg.process(wire.encode([Datagram.physical(
+        armw.cmd.cmd, armw.cmd.adp, armw.cmd.ado, armw.cmd.length)]))).datagrams
+    assert back.wkc == 1 and back.data != bytes(armw.cmd.length)
+
+
 # -- hot-connect groups -------------------------------------------------------------------------
 
 ALIAS = 0x0BAD
@@ -304,7 +331,9 @@ def grouped_segment(plan: NetworkPlan, head: str, leave_out: set[str] = frozense
 
 
 @contextlib.contextmanager
-def grouped_network(plan, segment, where: str, rig=None):
+def grouped_network(plan, segment, where: str, rig=None, pcap: Path | None = None):
+    """A network of ``plan`` on ``segment`` (in memory or over the veth rig), recording its
+    frames to ``pcap`` when given (written when the network closes)."""
     events: list[Event] = []
     if where == "memory":
         from rig import serve_in_memory
@@ -314,11 +343,29 @@ def grouped_network(plan, segment, where: str, rig=None):
         stack.enter_context(serving(rig, segment))
         link, close = rig.socket_in(rig.ns_a), stack.close
     try:
-        with Network(plan, link, on_event=events.append) as net:
+        with Network(plan, link, on_event=events.append, pcap=pcap) as net:
             net.segment = segment
             yield net, events
     finally:
         close()
+
+
+def armw_datagrams(pcap: Path) -> list[tuple[int, int, int]]:
+    """Every ARMW datagram of ``pcap`` as tshark decodes it: (pcapng direction, 2 sent by
+    the master and 1 received, ADP, working counter).  tshark's ``ecat.subN`` fields are
+    the Nth datagram of a frame (N up to 10), so commands and addresses stay paired."""
+    subs = range(1, 11)
+    fields = ["frame.packet_flags_direction", "ecat.cmd"] + [
+        f"ecat.sub{n}.{f}" for n in subs for f in ("cmd", "adp", "cnt")]
+    out = []
+    for row in tshark_fields(pcap, fields, display_filter="ecat.cmd == 0x0d"):
+        assert len(row["ecat.cmd"]) <= len(subs), row["ecat.cmd"]
+        direction = int(row["frame.packet_flags_direction"][0], 0)
+        for n in subs[:len(row["ecat.cmd"])]:
+            if int(row[f"ecat.sub{n}.cmd"][0], 0) == Cmd.ARMW:
+                out.append((direction, int(row[f"ecat.sub{n}.adp"][0], 0),
+                            int(row[f"ecat.sub{n}.cnt"][0], 0)))
+    return out
 
 
 @pytest.mark.parametrize("where", ["memory", "veth"])
@@ -350,18 +397,56 @@ def test_a_hot_connect_group_absent_at_start_joins_when_plugged_in(plan, where, 
             e.text for e in events]
 
 
-def test_a_group_absent_in_the_middle_moves_the_slaves_behind_it(plan):
+def test_a_group_absent_in_the_middle_moves_the_slaves_behind_it(plan, tmp_path):
     """The ENI's sensors are a group of one; without them the lamps and the drive sit one
     position up: their auto-increment InitCmds and the drift compensation's ARMW to the
-    drive (the reference clock) follow them."""
+    drive (the reference clock) follow them.  On the wire (tshark): every ARMW the master
+    sends, the static drift frames and the cyclic one, goes to auto-increment address
+    -3 (the drive is the fourth slave found, not the fifth the ENI's 0xFFFC names: no
+    slave is there to read its time into the frame), and comes back with working counter
+    4: the drive read its system time into it and the three slaves before it wrote it
+    (ETG.1000.4 ARMW; their ESCs run a DC unit, ESC configuration 0x0E in the example
+    ESIs)."""
     grouped = with_group(plan, "sensors", 1)
     seg = grouped_segment(grouped, "sensors", leave_out={"sensors"})
-    with grouped_network(grouped, seg, "memory") as (net, events):
+    pcap = tmp_path / "line.pcapng"
+    with grouped_network(grouped, seg, "memory", pcap=pcap) as (net, events):
         net.up()
         assert [s.state for s in seg.slaves] == [AlState.OP] * 4
         assert [s.station_address for s in seg.slaves] == [0x3E9, 0x3EA, 0x3EC, 0x3ED]
         assert all(net.cycle() for _ in range(20))
         assert net.master.read_dc_differences()["axis1"] is not None
+    assert [s.name for s in seg.slaves].index("axis1") == 3
+    armw = armw_datagrams(pcap)
+    sent = [(adp, wkc) for direction, adp, wkc in armw if direction == 2]
+    back = [wkc for direction, _, wkc in armw if direction == 1]
+    assert len(sent) > 20 and set(sent) == {(-3 & 0xFFFF, 0)}
+    assert len(back) > 20 and set(back) == {4}
+
+
+@pytest.mark.parametrize("previous_ports", [True, False], ids=["PreviousPort", "no-PreviousPort"])
+def test_an_absent_group_before_a_present_one_is_skipped_whole(plan, previous_ports):
+    """Two groups of two in a line: buttons with sensors, lamps with the drive.  The first
+    is not plugged in: the master must pass over both of its slaves and find the second
+    group's head right after the coupler (position 1), not where the absent group's second
+    slave would be.  The same with the ENI's PreviousPort (as compiled: each slave on port B
+    of the one before it) and without (a hand-written ENI: bus order only)."""
+    from ecatcfg.record import replace
+    grouped = with_group(with_group(plan, "buttons", 2), "lamps", 2)
+    if not previous_ports:
+        grouped = replace(grouped, slaves=[replace(s, previous_ports=[])
+                                           for s in grouped.slaves])
+    seg = grouped_segment(grouped, "lamps", leave_out={"buttons", "sensors"})
+    with grouped_network(grouped, seg, "memory") as (net, events):
+        net.up()
+        assert [e.text for e in events if e.kind == "hot-connect"] == [
+            "hot-connect group 'buttons' (2 slaves) is not on the line; the others go on"]
+        assert [(s.name, s.state, s.station_address) for s in seg.slaves] == [
+            ("coupler", AlState.OP, 0x3E9), ("lamps", AlState.OP, 0x3EC),
+            ("axis1", AlState.OP, 0x3ED)]
+        assert not net.online("buttons") and not net.online("sensors")
+        assert net.online("lamps") and net.online("axis1")
+        assert all(net.cycle() for _ in range(20))
 
 
 def test_a_head_that_is_not_identified_leaves_its_group_out_and_fails_the_line(plan):
@@ -442,6 +527,101 @@ def test_the_compiled_tree_example_runs_without_its_groups_and_takes_them_in(tmp
             "hot-connect group 'junction' (3 slaves) left the line; the others go on",
             "hot-connect group 'outputs' (1 slave) left the line; the others go on"]
         seg.restore_cable("junction")
+
+
+# A junction that may be taken off the line, written by hand: coupler -B- inputs -B-
+# junction -D- axis1, and axis2 on the junction's port B.  The hot-connect group is the
+# junction and axis1 (GroupMemberCnt 2); axis2 is in no group, or heads a group of its own:
+# when the junction is off, axis2's cable goes into the coupler's port C.  Its ENI says so
+# as TwinCAT does: two PreviousPort entries, the selected one (the junction's B) and the
+# other (ETG.2100 "Possible previous port. The current previous port is set with the
+# Selected attribute").
+ALTERNATIVES = """master: {name: alternative-ports, cycle_time_us: 1000}
+slaves:
+  - {name: coupler, device: EXB1100}
+  - {name: inputs, device: EXB1018}
+  - {name: junction, device: EXB1122, hot_connect: true, alias: 10}
+  - {name: axis1, device: EXD-402}
+  - {name: axis2, device: EXD-402, parent: junction, port: B}
+"""
+TREE_ESI = [EXAMPLES / "tree" / "esi", ESI]
+
+
+def alternatives_eni(eni_schema, axis2_heads: bool) -> NetworkPlan:
+    """:data:`ALTERNATIVES` compiled, the junction's group cut to two slaves (or axis2
+    made a group's head, which leaves the junction's group two), axis2 given its second
+    PreviousPort, checked against the ETG.2100 schema and read back."""
+    from lxml import etree
+    text = ALTERNATIVES.replace("port: B}", "port: B, hot_connect: true, alias: 12}") \
+        if axis2_heads else ALTERNATIVES
+    built = build.compile_topology(topology.loads(text, "alternatives.yaml"),
+                                   Library(TREE_ESI, cache=False)).plan
+    root = etree.fromstring(eni_writer.to_bytes(built))
+    [count] = root.xpath("//Slave[Info/Name='junction']/HotConnect/GroupMemberCnt")
+    assert count.text == ("2" if axis2_heads else "3")
+    count.text = "2"
+    [selected] = root.xpath("//Slave[Info/Name='axis2']/PreviousPort")
+    assert (selected.get("Selected"), selected.findtext("Port"),
+            selected.findtext("PhysAddr")) == ("1", "B", "1003")
+    other = etree.Element("PreviousPort")
+    etree.SubElement(other, "Port").text = "C"
+    etree.SubElement(other, "PhysAddr").text = "1001"
+    selected.addnext(other)
+    assert eni_schema.validate(root), eni_schema.error_log
+    return eni_reader.read_bytes(etree.tostring(root), "alternatives.eni.xml")
+
+
+@pytest.mark.parametrize("axis2_heads", [False, True], ids=["no-group", "head"])
+def test_a_slave_behind_an_absent_group_takes_its_alternative_previous_port(eni_schema,
+                                                                            axis2_heads):
+    """With the junction and axis1 unplugged and axis2 in the coupler's port C, the line
+    runs: axis2 is checked (and, heading a group, looked for) on the port its other
+    PreviousPort names, not on the port the junction was plugged into (the inputs' B);
+    with the junction in place, on the selected one."""
+    plan = alternatives_eni(eni_schema, axis2_heads)
+    assert [(p.port, p.phys_addr, p.selected) for p in plan.slave("axis2").previous_ports] \
+        == [("B", 1003, True), ("C", 1001, None)]
+    specs = {s.name: s for s in emulate.specs_from_eni(plan, Library(TREE_ESI, cache=False),
+                                                       "alternatives.eni.xml")}
+    import dataclasses
+    from ecatcfg.runtime.wiring import Plug
+    seg = emulate.segment([specs["coupler"], specs["inputs"],
+                           dataclasses.replace(specs["axis2"], plug=Plug(0, 2))])
+    with grouped_network(plan, seg, "memory") as (net, events):
+        net.up()
+        assert [e.text for e in events if e.kind == "hot-connect"] == [
+            "hot-connect group 'junction' (2 slaves) is not on the line; the others go on"]
+        assert [(s.name, s.state, s.station_address) for s in seg.slaves] == [
+            ("coupler", AlState.OP, 1001), ("inputs", AlState.OP, 1002),
+            ("axis2", AlState.OP, 1005)]
+        assert net.online("axis2") and not net.online("junction")
+        assert all(net.cycle() for _ in range(20))
+    whole = emulate.segment(list(specs.values()))
+    with grouped_network(plan, whole, "memory") as (net, events):
+        net.up()
+        assert [e for e in events if e.kind == "hot-connect"] == []
+        assert [s.state for s in whole.slaves] == [AlState.OP] * 5
+
+
+def test_a_slave_behind_an_absent_slave_without_previous_port_follows_the_one_before(plan):
+    """An ENI that gives PreviousPort to some slaves only (written by hand): the sensors, a
+    group of one, have none (they follow the buttons on port B), the lamps name the
+    sensors.  Without the sensors, the lamps' PreviousPort names a slave that is not there
+    and leads nowhere further: it is dropped, and the lamps follow the slave before them
+    (the buttons, port B), where they are."""
+    from ecatcfg.record import replace
+    grouped = with_group(plan, "sensors", 1)
+    grouped = replace(grouped, slaves=[replace(s, previous_ports=[]) if s.name == "sensors"
+                                       else s for s in grouped.slaves])
+    assert [(p.port, p.phys_addr) for p in grouped.slave("lamps").previous_ports] == [
+        ("B", 0x3EB)]
+    seg = grouped_segment(grouped, "sensors", leave_out={"sensors"})
+    with grouped_network(grouped, seg, "memory") as (net, events):
+        net.up()
+        assert [(s.name, s.state) for s in seg.slaves] == [
+            ("coupler", AlState.OP), ("buttons", AlState.OP), ("lamps", AlState.OP),
+            ("axis1", AlState.OP)]
+        assert all(net.cycle() for _ in range(20))
 
 
 def test_the_inputs_of_a_slave_out_of_op_are_cleared_and_invalid(plan):
