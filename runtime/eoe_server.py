@@ -15,6 +15,9 @@ It answers as SOES ``esc_eoe.c`` (``ESC_eoeprocess``), the open slave stack, doe
   stored so far, only those (SOES ``EOE_get_ip``).
 - **fragments** (type 0) carry Ethernet frames: no tunnel is emulated, so they are dropped
   without an answer, as a slave answers no Ethernet frame it does not route anywhere.
+  Whatever frame info 2 holds (fragment, offset and frame numbers) a fragment is never a
+  request and never answered: SOES discards one out of sequence and hands a whole frame
+  to its IP stack.
 - **anything else**: a response of the request's own type with result 0x0002 (unsupported
   frame type), as SOES answers (the Beckhoff slave stack answers type 3 instead).
 - shorter than the 4-byte EoE header: mailbox error 6 (size too short).

@@ -9,6 +9,7 @@ slaves have an ESI in the corpus is taken from its MANIFEST.md.
 
 from __future__ import annotations
 
+import copy
 import gc
 import json
 import os
@@ -19,12 +20,12 @@ from pathlib import Path
 import pytest
 from rig import start_simulate
 from lxml import etree
-from conftest import corpus_eni, corpus_enis
+from conftest import EXAMPLES, corpus_eni, corpus_enis
 from test_soem import soem
 
 from ecatcfg.eni import reader as eni_reader
 from ecatcfg.eni.contents import UnsupportedEniError
-from ecatcfg.esc import AlState
+from ecatcfg.esc import AlState, Transition
 from ecatcfg.esi import sii
 from ecatcfg.esi.library import Library
 from ecatcfg.runtime import Network, emulate
@@ -338,3 +339,111 @@ def test_couplers_and_terminals_from_the_eni_are_esc_only_like_the_hardware(corp
     assert words["Term 1 (EK1100)"] & 0x01FF == 0x0100          # capture: 0x0D00 & 0x01FF
     assert words["Term 2 (EL2008)"] & 0x01FF == 0x0104          # capture: 0x0104
     assert not words["Term 3 (EL4002)"] & 0x0100                # a mailbox: firmware
+
+
+# -- the device an ENI describes, against our example's ESI ----------------------------------
+
+def _esi_device(lib: Library, slave):
+    return lib.device(lib.find(f"{slave.vendor_id:#x}:{slave.product_code:#x}:"
+                               f"{slave.revision:#x}").entry)
+
+
+def _syncms(device) -> list[tuple[int, int, int, int]]:
+    """Each SII SYNCM record but its length: start, control byte, enable byte (bit 3
+    OpOnly, ETG.2010), type."""
+    return [(s.start, s.control, s.enable, s.type)
+            for s in sii.decode(sii.build(device)).syncms]
+
+
+def test_example_sms_from_the_eni_carry_the_esis_flags(example_plan):
+    """Every SyncManager of the compiled example, from the ENI alone, as its ESI (the
+    example's own files) gives it: place, control byte, type, enable and OpOnly; the
+    lamps' output SM is OpOnly there, and the ENI shows it only by enabling it in
+    SAFEOP->OP."""
+    lib = Library([EXAMPLES / "esi"], cache=False)
+    for slave in example_plan.slaves:
+        assert _syncms(device_from_eni(slave, example_plan, "example.eni.xml")) == \
+            _syncms(_esi_device(lib, slave)), slave.name
+    lamps = device_from_eni(example_plan.slave("lamps"), example_plan, "example.eni.xml")
+    assert [sm.op_only for sm in lamps.sms] == [True]
+
+
+def test_an_sm_the_eni_enables_in_safeop_is_not_op_only(example_plan):
+    """The lamps' SM written in PREOP->SAFEOP as well: enabled for SAFEOP, so not OpOnly."""
+    plan = copy.deepcopy(example_plan)
+    [write] = [c for c in plan.slave("lamps").init_cmds if c.comment == "set sm 0 (outputs)"]
+    assert write.transitions == [Transition.SO]
+    write.transitions = [Transition.PS, Transition.SO]
+    lamps = device_from_eni(plan.slave("lamps"), plan, "example.eni.xml")
+    assert [sm.op_only for sm in lamps.sms] == [False]
+    assert [enable & 0x08 for _, _, enable, _ in _syncms(lamps)] == [0]
+
+
+def test_an_op_only_sm_of_a_slave_with_firmware_from_the_eni_alone(example_plan):
+    """No ESI at all: every slave from the ENI, and axis1's output SM written only in
+    SAFEOP->OP.  Its firmware checks the process-data SMs in PREOP->SAFEOP and refuses a
+    disabled one with 0x001D unless the SM is OpOnly (as the ESI device does,
+    tests/test_esc_emulation.py; the I/O terminals are ESCs in device emulation and check
+    nothing): the device from the ENI knows it is, the line reaches OP and the output
+    arrives."""
+    plan = copy.deepcopy(example_plan)
+    [write] = [c for c in plan.slave("axis1").init_cmds if c.comment == "set sm 2 (outputs)"]
+    write.transitions = [Transition.SO]
+    with Network.virtual(plan) as net:
+        assert all(s.eni_only for s in net.segment.slaves)
+        net.up()
+        assert net.state == AlState.OP
+        drive = net.segment.slaves[4]
+        assert [sm.op_only for sm in drive.device.sms] == [False, False, True, False]
+        net["axis1.RxPDO 2 (CSV).Target velocity"] = -7
+        net.cycle()
+        assert drive.outputs()[2:6] == (-7).to_bytes(4, "little", signed=True)
+
+
+def _sm_length(slave, comment: str) -> int:
+    """The length an SM register write of the ENI sets (bytes 2-3 of the 8-byte record,
+    ETG.1000.4 0x0800 + 8n)."""
+    [cmd] = [c for c in slave.init_cmds if c.comment == comment]
+    return int.from_bytes(cmd.data[2:4], "little")
+
+
+def test_an_sm_default_size_is_the_length_the_eni_writes(example_plan):
+    """axis1's SM3 carries 0x1A00 and the remapped 0x1A01 (16 bytes, written by the ENI in
+    PREOP->SAFEOP) while ``ProcessData/Sm3/DefaultSize`` keeps the ESI's 6: the device's
+    default size, and its SII SYNCM length, is what the master configures; the mailbox
+    SMs are the ENI's mailbox areas."""
+    slave = example_plan.slave("axis1")
+    [sm3] = [s for s in slave.process_data.sms if s.number == 3]
+    written = _sm_length(slave, "set sm 3 (inputs)")
+    assert (sm3.default_size, written) == (6, 16)
+    device = device_from_eni(slave, example_plan, "example.eni.xml")
+    mailbox = slave.mailbox
+    assert [sm.default_size for sm in device.sms] == [
+        mailbox.send.length, mailbox.recv.length, _sm_length(slave, "set sm 2 (outputs)"),
+        written]
+    assert sii.decode(sii.build(device)).syncms[3].length == written
+
+
+def _assign(plan, index: int, data: str) -> None:
+    """axis1's complete-access download of the assignment ``index`` given ``data``."""
+    [cmd] = [c for c in plan.slave("axis1").mailbox.coe_init_cmds
+             if c.index == index and c.complete_access]
+    cmd.data = bytes.fromhex(data)
+
+
+def test_zero_pdo_assignment_entries_assign_nothing(example_plan):
+    """A PDO assignment entry of 0 names no PDO (ETG.1000.6: an entry holds a mapping
+    object's index, 0x1600-0x17FF or 0x1A00-0x1BFF); an assignment left with 0 entries
+    assigns none, even where ``ProcessData/Sm`` lists the PDOs of the ESI's default."""
+    plan = copy.deepcopy(example_plan)
+    # 0x1C13: three entries, the second 0 (subindex 0 in a 16-bit slot, complete access).
+    _assign(plan, 0x1C13, "0300" "001a" "0000" "011a")
+    device = device_from_eni(plan.slave("axis1"), plan, "example.eni.xml")
+    assert sorted(p.index for p in device.tx_pdos if p.sm == 3) == [0x1A00, 0x1A01]
+    assert 0 not in [p.index for p in device.rx_pdos + device.tx_pdos]
+    # 0x1C12 cleared and left so: SM2 gets no PDO, not ProcessData/Sm2's 0x1601.
+    _assign(plan, 0x1C12, "0000")
+    assert [s.pdos for s in plan.slave("axis1").process_data.sms if s.number == 2] == [
+        [0x1601]]
+    device = device_from_eni(plan.slave("axis1"), plan, "example.eni.xml")
+    assert [p.index for p in device.rx_pdos if p.sm == 2] == []

@@ -114,6 +114,12 @@ def test_init_data_in_either_encoding():
         eoe.decode_init_data(b"\xde\xad\xbe\xef\x00")
     with pytest.raises(ValueError, match="EoE header of type 3"):
         eoe.decode_init_data(bytes.fromhex("03000000") + FIXED_BODY)
+    # Frame info 2 of a set IP parameter request holds nothing (fragment, offset and frame
+    # numbers belong to Ethernet fragments): the master sends it as 0, so a file's other
+    # value would be lost on the wire; refused, naming it, not read as the request.
+    for info2 in ("0100", "0102", "0010"):
+        with pytest.raises(ValueError, match=f"frame info 2 0x{info2[2:]}{info2[:2]}"):
+            eoe.decode_init_data(bytes.fromhex("0200" + info2) + FIXED_BODY)
     # 02000000 00000000 reads as a body (flags: IP, 0.0.0.0) and as an EoE header in front
     # of an empty body: refused rather than guessed.
     with pytest.raises(ValueError, match="reads both"):
@@ -306,6 +312,33 @@ def test_fragments_are_dropped_and_other_types_unsupported():
         assert reply.port == int(request[0], 16)
 
 
+# Frame info 2 of an Ethernet fragment (ETG.1000.6 EoE header; SOES ``esc_eoe.c``, Wireshark
+# ``packet-ecatmb.c``): fragment number in bits 0-5, in fragment 0 the frame's size in
+# 32-byte blocks (else the fragment's offset in blocks) in bits 6-11, frame number in 12-15.
+def fragment_header(fragment: int, blocks: int, frame: int, last: bool) -> bytes:
+    return bytes.fromhex("0001" if last else "0000") + \
+        (fragment | blocks << 6 | frame << 12).to_bytes(2, "little")
+
+
+def test_fragments_with_frame_info_2_are_dropped_without_an_answer():
+    """Fragments carry Ethernet frames, never a request: whatever frame info 2 holds, the
+    slave answers none of them (a receiver discards a fragment out of sequence, SOES
+    ``EOE_receive_fragment``, and delivers a whole frame to its IP stack, not to the
+    master), and none is read as a request; the mailbox serves the next request as ever."""
+    box = Mailbox("FX-EOE")
+    first = fragment_header(0, 2, 1, last=False)       # frame 1: 64 bytes, fragment 0
+    assert first == bytes.fromhex("00008010")
+    second = fragment_header(1, 1, 1, last=True)       # fragment 1 at 32 bytes, the last
+    stray = fragment_header(3, 4, 5, last=True)        # fragment 3 of a frame never begun
+    looks_like_a_result = bytes.fromhex("0001" "0102")  # frame info 2 = 0x0201
+    for message in (first + bytes(32), second + bytes(32), stray + bytes(16),
+                    looks_like_a_result + FIXED_BODY):
+        assert box.eoe(message) == []
+    assert box.slave.eoe_ip is None
+    reply = eoe_reply(box.eoe(FRAMED_BODY))
+    assert (reply.type, reply.info2) == (3, 0) and box.slave.eoe_ip == PARAMS
+
+
 def mailbox_error(replies: list) -> int:
     [(header, content)] = replies
     assert header.type == MbxType.ERROR and isinstance(content, MailboxError)
@@ -397,6 +430,11 @@ def test_the_master_sets_emergencies_and_fragments_aside():
     emergency = encode_emergency(0x8700, 0x01, counter=1)
     fragment = bytes.fromhex("0800 0000 00 32" "0001 0000" "ffffffff".replace(" ", ""))
     assert len(drive(eoe_job(), [emergency, fragment, SUCCESS])) == 1
+    # A fragment whose frame info 2 is not 0 (fragment 1, offset 1 block, frame 2; or bits
+    # that would read as result 0x0201) is still a fragment, not the response refusing.
+    for info2 in ("4120", "0102"):
+        fragment = bytes.fromhex("0800 0000 00 32 0001".replace(" ", "") + info2 + "ffffffff")
+        assert len(drive(eoe_job(), [fragment, SUCCESS])) == 1
 
 
 @pytest.mark.parametrize("answer, message", [

@@ -219,6 +219,32 @@ def test_a_lost_mailbox_answer_is_recovered_with_the_repeat_request(example_plan
     assert len(repeats) == 1
 
 
+@pytest.mark.parametrize("cut", [2, 7])
+def test_a_cyclic_reply_shorter_than_its_frame_is_a_lost_frame(example_plan, cut):
+    """A reply that comes back ``cut`` bytes short (here the last datagram's working counter,
+    or that and part of its data) is not the frame sent: a slave never shortens a datagram
+    (ETG.1000.4: it forwards every byte), so the frame is lost for this cycle.  Nothing of
+    it reaches the input image, though its first bytes carry a new button, and the rest is
+    not read from the last cycle's reply either; the next whole reply brings the button."""
+    with Network.virtual(example_plan, esi=[ESI]) as net:
+        net.up()
+        cyclic = net.master.cyclic
+        assert net.cycle() and net["buttons.Channel 1.Input"] is False
+        before, lost = bytes(cyclic.inputs), cyclic.stats.lost_frames
+        net.segment.slaves[1].set_inputs(b"\x01")                 # buttons: channel 1
+        process = net.segment.process
+        net.segment.process = lambda frame: process(frame)[:-cut]
+        try:
+            assert net.cycle() is False
+        finally:
+            net.segment.process = process
+        assert cyclic.stats.lost_frames == lost + 1
+        assert bytes(cyclic.inputs) == before
+        assert net["buttons.Channel 1.Input"] is False
+        assert [s.wkc for s in cyclic.frames[0]] == [-1] * len(cyclic.frames[0])
+        assert net.cycle() and net["buttons.Channel 1.Input"] is True
+
+
 def test_twincat_offsets_are_frame_shaped(corpus):
     """TwinCAT writes the datagram header's position in the frame; the data sits 10 bytes
     later, where its variables' bit offsets point (docs/eni-exports.md §4)."""

@@ -269,6 +269,36 @@ def test_overrides_merge_over_the_table(tmp_path):
     assert model.kinds["firmware"] == timing.TABLE["firmware"]
 
 
+def test_an_override_of_0_ms_means_at_once(lib, tmp_path):
+    """0 ms is a time like any other (at once), not "no override": every figure of the
+    drive set to 0 replaces the table's, and the drive answers, changes state and reads
+    its EEPROM without the clock moving."""
+    path = tmp_path / "zero.json"
+    path.write_text(json.dumps({"drive": {
+        "mailbox_reply_ms": 0, "eeprom_read_ms": 0, "eeprom_write_ms": 0.0,
+        "state_change_ms": {t: 0 for t in timing.TRANSITIONS}}}))
+    model = timing.load(path)
+    zero = model.kinds["drive"]
+    assert (zero.mailbox_reply_ns, zero.eeprom_read_ns, zero.eeprom_write_ns) == (0, 0, 0)
+    assert zero.state_change_ns == {t: 0 for t in timing.TRANSITIONS}
+    table = timing.TABLE["drive"]
+    assert table.mailbox_reply_ns and table.eeprom_read_ns and table.transition_ns("IP")
+    clock = Clock()
+    seg = line(lib, "EXD-402", clock=clock, model=model)
+    addressed(seg)
+    run(seg, fp(Cmd.FPWR, sm_register(0), SmConfig(0x1000, 128, 0x26, True).to_bytes()),
+        fp(Cmd.FPWR, sm_register(1), SmConfig(0x1080, 128, 0x22, True).to_bytes()),
+        fp(Cmd.FPWR, 0x0120, struct.pack("<H", AlState.PREOP)))
+    assert al_status(seg) == AlState.PREOP
+    run(seg, fp(Cmd.FPWR, 0x1000, SDO_UPLOAD_1018_01.ljust(128, b"\0")))
+    [status, reply] = run(seg, fp(Cmd.FPRD, 0x080D, 1), fp(Cmd.FPRD, 0x1080, 128))
+    assert status.data[0] & 0x08 and reply.wkc == 1 and reply.data[9:12] == b"\x18\x10\x01"
+    run(seg, fp(Cmd.FPWR, 0x0502, struct.pack("<HI", 0x0100, 8)))      # read word 8
+    [status, data] = run(seg, fp(Cmd.FPRD, 0x0502, 2), fp(Cmd.FPRD, 0x0508, 8))
+    assert status.data == struct.pack("<H", 0x0040)
+    assert data.data == bytes(seg.slaves[0].eeprom[16:24])
+
+
 @pytest.mark.parametrize("raw, message", [
     ({"servo": {}}, "'servo': no such device kind"),
     ({"drive": {"latency": 1}}, "unknown key 'latency'"),

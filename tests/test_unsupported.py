@@ -279,6 +279,53 @@ def test_cyclic_tasks_with_different_cycle_times(example_eni, tmp_path):
     assert part.element == "Cyclic" and "1000, 4000" in part.what
 
 
+# The example line's one process-data command is the LRW of logical 0x10000000, 18 bytes
+# (the compiled ENI's Cyclic/Frame/Cmd); the lamps' output FMMU 0 is moved over its edges.
+LRW_START, LRW_SIZE = 0x10000000, 18
+
+
+@pytest.mark.parametrize("start, length, covered", [
+    (LRW_START, LRW_SIZE, True),                       # the whole window, edge to edge
+    (LRW_START + LRW_SIZE - 1, 1, True),               # its last byte
+    (LRW_START + LRW_SIZE - 1, 2, False),              # one byte past its end
+    (LRW_START - 1, 2, False),                         # one byte before its start
+    (LRW_START - 1, LRW_SIZE + 2, False),              # all of it and a byte on each side
+    (LRW_START + LRW_SIZE, 1, False),                  # just after it
+], ids=["exact", "last-byte", "past-end", "before-start", "both-sides", "after"])
+def test_an_fmmu_only_partly_in_a_cyclic_window_is_refused(start, length, covered,
+                                                           example_eni):
+    """An FMMU maps its whole logical range (ETG.1000.4 FMMU: logical start address and
+    length); the bytes a cyclic command does not carry are exchanged with nobody, so a
+    setting that only partly overlaps the LRW is refused at its InitCmd's line, as one
+    that maps nothing the commands carry; one inside the window, to its edges, is read."""
+    tree = etree.fromstring(example_eni)
+    [cmd] = tree.xpath("//Cyclic/Frame/Cmd[Cmd='12']")
+    assert (int(cmd.findtext("Addr")), int(cmd.findtext("DataLength"))) == (LRW_START,
+                                                                           LRW_SIZE)
+    [init] = tree.xpath("//Slave[Info/Name='lamps']/InitCmds/InitCmd"
+                        "[Comment='set fmmu 0 (outputs)']")
+    # Logical start (32 bits) and length (16 bits) lead the FMMU record (ETG.1000.4
+    # 0x0600 + 16n); the rest (bits, physical address 0x0F00, write, active) stays.
+    record = bytearray.fromhex(init.findtext("Data"))
+    assert record[10:13] == b"\x00\x02\x01"
+    record[0:6] = struct.pack("<IH", start, length)
+    init.find("Data").text = record.hex()
+    data = etree.tostring(tree, xml_declaration=True, encoding="UTF-8", pretty_print=True)
+    line = etree.fromstring(data).xpath("//Slave[Info/Name='lamps']/InitCmds/InitCmd"
+                                        "[Comment='set fmmu 0 (outputs)']")[0].sourceline
+    plan = eni_reader.read_bytes(data, "line.xml")
+    kept = [c for c in plan.slave("lamps").init_cmds if c.comment == "set fmmu 0 (outputs)"]
+    if covered:
+        assert plan.unsupported == [] and len(kept) == 1
+        return
+    [part] = plan.unsupported
+    assert (part.slave, part.element, part.line, part.commands) == (
+        "lamps", "Slave/InitCmds/InitCmd", line, 1)
+    assert part.what == (f"FMMU 0 setting that maps logical 0x{start:08X}+{length}, which "
+                         "no cyclic command covers")
+    assert kept == []                   # left out of the plan: a skipping apply never writes it
+
+
 def test_refused_from_the_plan_cache_too(example_eni, tmp_path):
     """A cached plan keeps its unsupported parts: the second run is refused as well."""
     eni, line = _insert(example_eni, SLAVE_MAILBOX, _mailbox_cmds("VoE", 1), tmp_path)
