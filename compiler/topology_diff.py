@@ -1,0 +1,77 @@
+"""``ecatcfg diff`` of two topology files: the slaves and settings the user changed.
+
+Two topologies are compared as the validated model (``compiler/topology.py``) the compiler
+reads, not as YAML text: comments, key order, quoting and number spellings (``0x1600``,
+``"#x1600"``, ``5632``) are not differences.  Slaves are matched by name; a slave is
+added, removed or moved (its place in the file is its bus order on a line), and every
+other key that differs (device, PDOs, mapping, modules, SDOs, DC, EoE, watchdog, parent,
+port, ...) is one change naming the key, as are the master's keys (cycle time, layout).
+The changes are :class:`ecatcfg.eni.diff.Change` records, as for ENIs.
+"""
+
+from __future__ import annotations
+
+import json
+from typing import Any
+
+from ecatcfg.compiler.topology import LoadedTopology
+from ecatcfg.eni.diff import Change
+
+
+# Keys whose numbers are object or PDO indices: shown in hex, as topologies write them.
+_INDEX_KEYS = frozenset({"index", "rx_pdos", "tx_pdos", "pdo_mapping"})
+
+
+def _spell(value: Any, hex_numbers: bool = False) -> str:
+    """A key's value in YAML flow style (``[{index: 0x8000, value: 1}]``), indices in hex;
+    keys not set are left out of a mapping, and a key not set is ``none``."""
+    if value is None:
+        return "none"
+    if isinstance(value, bool) or not isinstance(value, (int, list, dict)):
+        return json.dumps(value) if not isinstance(value, str) else value
+    if isinstance(value, int):
+        return f"0x{value:04X}" if hex_numbers else str(value)
+    if isinstance(value, list):
+        return "[" + ", ".join(_spell(v, hex_numbers) for v in value) + "]"
+    return "{" + ", ".join(
+        f"{_spell_key(k, hex_numbers)}: {_spell(v, hex_numbers or k in _INDEX_KEYS)}"
+        for k, v in value.items() if v is not None) + "}"
+
+
+def _spell_key(key: str, hex_numbers: bool) -> str:
+    return f"0x{int(key):04X}" if hex_numbers and key.isdigit() else key
+
+
+def _keys(model: Any) -> dict[str, Any]:
+    """Every key with its value, defaults filled in (a default written out is no change)."""
+    return dict(model.model_dump(mode="json"))
+
+
+def diff(a: LoadedTopology, b: LoadedTopology) -> list[Change]:
+    out: list[Change] = []
+    ma, mb = _keys(a.topology.master), _keys(b.topology.master)
+    for key in sorted(set(ma) | set(mb)):
+        if ma.get(key) != mb.get(key):
+            out.append(Change("master-setting", None, key, _spell(ma.get(key)),
+                              _spell(mb.get(key))))
+    old = {s.name: (k, s) for k, s in enumerate(a.topology.slaves)}
+    new = {s.name: (k, s) for k, s in enumerate(b.topology.slaves)}
+    for name, (k, s) in old.items():
+        if name not in new:
+            out.append(Change("slave-removed", name, s.device, old=f"position {k}"))
+    for name, (k, s) in new.items():
+        if name not in old:
+            out.append(Change("slave-added", name, s.device, new=f"position {k}"))
+            continue
+        j, o = old[name]
+        if j != k:
+            out.append(Change("slave-moved", name, "place", f"position {j}",
+                              f"position {k}"))
+        ko, kn = _keys(o), _keys(s)
+        for key in sorted(set(ko) | set(kn)):
+            if key != "name" and ko.get(key) != kn.get(key):
+                kind = "identity" if key in ("device", "esi") else "slave-setting"
+                hex_numbers = key in _INDEX_KEYS
+                out.append(Change(kind, name, key, _spell(ko.get(key), hex_numbers),
+                                  _spell(kn.get(key), hex_numbers)))
+    return out
