@@ -113,18 +113,22 @@ class _Out:
         self.stream.write(text + "\n")
 
 
+def _hex(value: int | None, digits: int = 4) -> str:
+    return "-" if value is None else f"0x{value:0{digits}X}"
+
+
 def _flags(p: dict[str, Any]) -> str:
     names = [n for n in ("fixed", "mandatory", "virtual") if p[n]]
     if p["default"]:
         names.append(f"default sm {p['sm']}")
     if p["excludes"]:
-        names.append("excludes " + " ".join(p["excludes"]))
+        names.append("excludes " + " ".join(_hex(x) for x in p["excludes"]))
     return f" [{', '.join(names)}]" if names else ""
 
 
 def _pdo_lines(out: _Out, pdos: list[dict[str, Any]], indent: str = "  ") -> None:
     for p in pdos:
-        out.line(f"{indent}{p['index']} {p['name']!r} {p['bit_length']} bit{_flags(p)}")
+        out.line(f"{indent}{_hex(p['index'])} {p['name']!r} {p['bit_length']} bit{_flags(p)}")
         for e in p["entries"]:
             where = e["entry"] or "gap"
             out.line(f"{indent}  {where:<10} {e['bit_len'] or 0:>3} bit  "
@@ -140,30 +144,31 @@ def _esi_text(r: dict[str, Any], out: _Out) -> None:
         out.line("  CoE: " + ", ".join(k for k, v in mbx["coe"].items() if v))
     out.heading("SyncManagers")
     for sm in r["sms"]:
-        out.line(f"  sm {sm['number']} {sm['type'] or '-':<8} start {sm['start']} "
-                 f"size {sm['default_size']} ctrl {sm['control']} enable {sm['enable']}")
+        out.line(f"  sm {sm['number']} {sm['type'] or '-':<8} start {_hex(sm['start'])} "
+                 f"size {sm['default_size'] if sm['default_size'] is not None else '-'} ctrl {_hex(sm['control'], 2)} enable {sm['enable']}")
     for title, key in (("RxPDOs (outputs)", "rx_pdos"), ("TxPDOs (inputs)", "tx_pdos")):
         out.heading(title)
         _pdo_lines(out, r[key])
     if r["dc_opmodes"]:
         out.heading("DC OpModes")
         for m in r["dc_opmodes"]:
-            out.line(f"  {m['name']:<12} AssignActivate {m['assign_activate']}  "
+            out.line(f"  {m['name']:<12} AssignActivate {_hex(m['assign_activate'])}  "
                      f"{m['desc'] or ''}")
     if r["slots"]:
         out.heading("Slots")
         for s in r["slots"]:
             out.line(f"  {s['name']!r} {s['min']}..{s['max']}: "
-                     f"{' '.join(s['modules'])} (default {s['default']})")
+                     f"{' '.join(_hex(i, 8) for i in s['modules'])} "
+                     f"(default {_hex(s['default'], 8)})")
     if r.get("modules"):
         out.heading("Modules")
         for m in r["modules"]:
-            out.line(f"  {m['ident']} {m['type']} {m['name']!r}")
+            out.line(f"  {_hex(m['ident'], 8)} {m['type']} {m['name']!r}")
             _pdo_lines(out, m["rx_pdos"] + m["tx_pdos"], "    ")
     if "objects" in r:
         out.heading("Objects (access PreOp/SafeOp/Op, PDO mapping)")
         for o in r["objects"]:
-            out.line(f"  {o['index']} {o['name']!r} {o['type']}")
+            out.line(f"  {_hex(o['index'])} {o['name']!r} {o['type']}")
             for e in o["entries"]:
                 acc = "/".join(e["access"].values()) if e["access"] else "-"
                 out.line(f"    :{e['subindex'] or 0:02X} {e['name']!r} {e['type']} "
@@ -188,7 +193,9 @@ def _eni_text(view: EniView, out: _Out) -> None:
                                    else ""))
         for c in f.commands:
             wkc = "-" if c.wkc is None else str(c.wkc)
-            out.line(f"    {c.cmd:<4} {c.address:<12} len {c.length:<5} wkc {wkc:<3} "
+            address = f"0x{c.addr:08X}" if c.addr is not None else \
+                f"{c.adp or 0}:0x{c.ado or 0:04X}"
+            out.line(f"    {c.cmd:<4} {address:<12} len {c.length:<5} wkc {wkc:<3} "
                      f"{'/'.join(c.states)}")
     out.heading("InitCmds")
     for s in view.slaves:

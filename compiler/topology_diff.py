@@ -19,7 +19,7 @@ from ecatcfg.eni.diff import Change
 
 
 # Keys whose numbers are object or PDO indices: shown in hex, as topologies write them.
-_INDEX_KEYS = frozenset({"index", "rx_pdos", "tx_pdos", "pdo_mapping"})
+_INDEX_KEYS = frozenset({"index", "rx_pdos", "tx_pdos"})
 
 
 def _spell(value: Any, hex_numbers: bool = False) -> str:
@@ -36,6 +36,22 @@ def _spell(value: Any, hex_numbers: bool = False) -> str:
     return "{" + ", ".join(
         f"{_spell_key(k, hex_numbers)}: {_spell(v, hex_numbers or k in _INDEX_KEYS)}"
         for k, v in value.items() if v is not None) + "}"
+
+
+def _spell_mapping(value: Any) -> str:
+    """``pdo_mapping``: PDO index -> entries, each ``[index, subindex, bits]`` (or a mapping
+    with those keys); only the indices in hex."""
+    if not isinstance(value, dict):
+        return _spell(value)
+    def entry(e: Any) -> str:
+        if isinstance(e, list) and len(e) == 3 and all(isinstance(x, int) for x in e):
+            return f"[0x{e[0]:04X}, {e[1]}, {e[2]}]"
+        if isinstance(e, dict):
+            return "{" + ", ".join(f"{k}: " + (f"0x{v:04X}" if k == "index" else _spell(v))
+                                   for k, v in e.items() if v is not None) + "}"
+        return _spell(e)
+    return "{" + ", ".join(f"{_spell_key(k, True)}: [" + ", ".join(entry(e) for e in v) + "]"
+                           for k, v in value.items()) + "}"
 
 
 def _spell_key(key: str, hex_numbers: bool) -> str:
@@ -71,7 +87,7 @@ def diff(a: LoadedTopology, b: LoadedTopology) -> list[Change]:
         for key in sorted(set(ko) | set(kn)):
             if key != "name" and ko.get(key) != kn.get(key):
                 kind = "identity" if key in ("device", "esi") else "slave-setting"
-                hex_numbers = key in _INDEX_KEYS
-                out.append(Change(kind, name, key, _spell(ko.get(key), hex_numbers),
-                                  _spell(kn.get(key), hex_numbers)))
+                spell = _spell_mapping if key == "pdo_mapping" else (
+                    lambda v: _spell(v, key in _INDEX_KEYS))
+                out.append(Change(kind, name, key, spell(ko.get(key)), spell(kn.get(key))))
     return out

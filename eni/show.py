@@ -48,7 +48,9 @@ class VariableView:
 @record
 class CommandView:
     cmd: str
-    address: str
+    adp: int | None                          # physical: position or station address ...
+    ado: int | None                          # ... and register
+    addr: int | None                         # logical address
     length: int
     wkc: int | None                          # expected working counter (ENI Cnt)
     states: list[str]
@@ -121,10 +123,8 @@ def summary(plan: NetworkPlan, file: str) -> EniView:
     variables = [_variable(v, "in") for v in image.inputs] + \
         [_variable(v, "out") for v in image.outputs]
     frames = [FrameView(c.cycle_time, [
-        CommandView(command_name(cmd.cmd),
-                    f"0x{cmd.addr:08X}" if cmd.addr is not None else
-                    f"{cmd.adp or 0}:0x{cmd.ado or 0:04X}",
-                    cmd.length, cmd.cnt, list(cmd.states)) for cmd in f.cmds])
+        CommandView(command_name(cmd.cmd), cmd.adp, cmd.ado, cmd.addr, cmd.length, cmd.cnt,
+                    list(cmd.states)) for cmd in f.cmds])
         for c in plan.cyclic for f in c.frames]
     return EniView(file, slaves, image.inputs_size, image.outputs_size, variables, frames)
 
@@ -147,7 +147,8 @@ def as_json(view: EniView) -> dict[str, Any]:
                            "bit_offs": v.bit_offs, "bit_size": v.bit_size,
                            "type": v.data_type} for v in view.variables]},
         "frames": [{"cycle_time_us": f.cycle_time_us,
-                    "commands": [{"cmd": c.cmd, "address": c.address, "length": c.length,
+                    "commands": [{"cmd": c.cmd, "adp": c.adp, "ado": c.ado, "addr": c.addr,
+                                  "length": c.length,
                                   "wkc": c.wkc, "states": c.states} for c in f.commands]}
                    for f in view.frames],
     }

@@ -16,19 +16,14 @@ from ecatcfg.esi.coe import device_dictionary
 from ecatcfg.esi.model import STATES, Device, Dictionary, DictObject, Module, ObjectFlags, Pdo
 
 
-def _hex(value: int | None, digits: int = 4) -> str | None:
-    return None if value is None else f"0x{value:0{digits}X}"
-
-
-
 def pdo(p: Pdo) -> dict[str, Any]:
     return {
-        "direction": p.direction, "index": _hex(p.index), "name": p.name,
+        "direction": p.direction, "index": p.index, "name": p.name,
         "sm": p.sm, "default": p.sm is not None,
         "fixed": p.fixed, "mandatory": p.mandatory, "virtual": p.virtual,
-        "excludes": [_hex(x) for x in p.excludes],
+        "excludes": list(p.excludes),
         "bit_length": p.bit_length,
-        "entries": [{"index": _hex(e.index), "subindex": e.subindex,
+        "entries": [{"index": e.index, "subindex": e.subindex,
                      "entry": None if not e.index else
                      f"0x{e.index:04X}:{e.subindex or 0:02X}",
                      "bit_len": e.bit_len, "type": e.data_type, "name": e.name}
@@ -37,7 +32,7 @@ def pdo(p: Pdo) -> dict[str, Any]:
 
 
 def _module(m: Module) -> dict[str, Any]:
-    return {"ident": _hex(m.ident, 8), "type": m.type_name, "name": m.name,
+    return {"ident": m.ident, "type": m.type_name, "name": m.name,
             "rx_pdos": [pdo(p) for p in m.rx_pdos], "tx_pdos": [pdo(p) for p in m.tx_pdos]}
 
 
@@ -72,10 +67,21 @@ def objects(dic: Dictionary) -> list[dict[str, Any]]:
     out = []
     for index in sorted(i for i in dic.objects if i is not None):
         obj: DictObject = dic.objects[index]
-        subs = dic.sub_items(obj)
-        entries = [_entry(s.subindex, s.name, s.type, s.bit_size, s.flags or obj.flags)
-                   for s in subs] or [_entry(0, obj.name, obj.type, obj.bit_size, obj.flags)]
-        out.append({"index": _hex(index), "name": obj.name, "type": obj.type,
+        entries = []
+        for s in dic.sub_items(obj):
+            flags = s.flags or obj.flags
+            arr = dic.data_types.get(s.type) if s.subindex is None else None
+            if arr is not None and arr.array_info:
+                # A record's array part as one SubItem without SubIdx (ETG.2000): its
+                # elements are subindices LBound .. LBound + Elements - 1.
+                info = arr.array_info[0]
+                size = arr.bit_size // info.elements if arr.bit_size else None
+                entries += [_entry(k, f"{s.name} {k}", arr.base_type or "", size, flags)
+                            for k in range(info.lbound, info.lbound + info.elements)]
+            else:
+                entries.append(_entry(s.subindex, s.name, s.type, s.bit_size, flags))
+        entries = entries or [_entry(0, obj.name, obj.type, obj.bit_size, obj.flags)]
+        out.append({"index": index, "name": obj.name, "type": obj.type,
                     "entries": entries})
     return out
 
@@ -95,14 +101,14 @@ def summary(dev: Device, with_objects: bool = False) -> dict[str, Any]:
                 "sdo_info": coe.sdo_info, "pdo_assign": coe.pdo_assign,
                 "pdo_config": coe.pdo_config, "complete_access": coe.complete_access,
                 "segmented_sdo": coe.segmented_sdo}},
-        "sms": [{"number": sm.number, "type": sm.type, "start": _hex(sm.start_address),
-                 "default_size": sm.default_size, "control": _hex(sm.control_byte, 2),
+        "sms": [{"number": sm.number, "type": sm.type, "start": sm.start_address,
+                 "default_size": sm.default_size, "control": sm.control_byte,
                  "enable": sm.enable, "virtual": sm.virtual, "op_only": sm.op_only}
                 for sm in dev.sms],
         "rx_pdos": [pdo(p) for p in dev.rx_pdos],
         "tx_pdos": [pdo(p) for p in dev.tx_pdos],
         "dc_opmodes": [] if dev.dc is None else [
-            {"name": m.name, "desc": m.desc, "assign_activate": _hex(m.assign_activate),
+            {"name": m.name, "desc": m.desc, "assign_activate": m.assign_activate,
              "cycle_time_sync0": m.cycle_time_sync0,
              "cycle_time_sync0_factor": m.cycle_time_sync0_factor,
              "shift_time_sync0": m.shift_time_sync0,
@@ -111,8 +117,8 @@ def summary(dev: Device, with_objects: bool = False) -> dict[str, Any]:
             for m in dev.dc.opmodes],
         "slots": [] if dev.slots is None else [
             {"name": s.name, "min": s.min_instances, "max": s.max_instances,
-             "modules": [_hex(i, 8) for i in s.module_idents],
-             "default": _hex(s.default_ident, 8)} for s in dev.slots.slots],
+             "modules": list(s.module_idents),
+             "default": s.default_ident} for s in dev.slots.slots],
     }
     if with_objects:
         dic = device_dictionary(dev)

@@ -44,7 +44,7 @@ def test_show_esi_device_json(corpus, capsys):
     assert shown["mailbox"]["protocols"] == [
         c.tag for c in dev.find("Mailbox") if c.tag in ("AoE", "EoE", "CoE", "FoE", "SoE",
                                                         "VoE")]
-    assert [(s["type"], int(s["start"], 16), s["default_size"], int(s["control"], 16))
+    assert [(s["type"], s["start"], s["default_size"], s["control"])
             for s in shown["sms"]] == [
         (sm.text, _num(sm.get("StartAddress")),
          _num(sm.get("DefaultSize")) if sm.get("DefaultSize") else None,
@@ -53,19 +53,18 @@ def test_show_esi_device_json(corpus, capsys):
         pdos = dev.findall(tag)
         assert len(shown[key]) == len(pdos) > 20
         for p, el in zip(shown[key], pdos):
-            assert int(p["index"], 16) == _num(el.findtext("Index"))
+            assert p["index"] == _num(el.findtext("Index"))
             assert p["name"] == el.findtext("Name")
             assert p["fixed"] == (el.get("Fixed") in ("1", "true"))
             assert p["mandatory"] == (el.get("Mandatory") in ("1", "true"))
             assert p["default"] == (el.get("Sm") is not None)
-            assert [int(x, 16) for x in p["excludes"]] == [_num(x.text)
-                                                           for x in el.findall("Exclude")]
+            assert p["excludes"] == [_num(x.text) for x in el.findall("Exclude")]
             assert [(e["entry"], e["bit_len"], e["type"], e["name"]) for e in p["entries"]] \
                 == [(f"0x{_num(e.findtext('Index')):04X}:{_num(e.findtext('SubIndex')):02X}"
                      if _num(e.findtext("Index")) else None, _num(e.findtext("BitLen")),
                      e.findtext("DataType"), (e.findtext("Name") or "").strip())
                     for e in el.findall("Entry")]
-    assert [(m["name"], int(m["assign_activate"], 16)) for m in shown["dc_opmodes"]] == [
+    assert [(m["name"], m["assign_activate"]) for m in shown["dc_opmodes"]] == [
         (m.findtext("Name"), _num(m.findtext("AssignActivate")))
         for m in dev.findall("Dc/OpMode")]
     assert "objects" not in shown
@@ -75,7 +74,7 @@ def test_show_esi_objects_with_access_per_state(corpus, capsys):
     dev = _elmo(corpus)
     shown = _json(capsys, str(corpus / ELMO_ESI), "--device", "0x9a:0x30924:0x10420",
                   "--objects")
-    objects = {int(o["index"], 16): o for o in shown["objects"]}
+    objects = {o["index"]: o for o in shown["objects"]}
     xml = {_num(o.findtext("Index")): o for o in dev.iter("Object")}
     assert set(objects) == set(xml)
     # A simple object: its Flags/Access in every state, and its PdoMapping flag.
