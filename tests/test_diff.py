@@ -286,3 +286,40 @@ def test_inputs_of_different_kinds_are_a_usage_error(tmp_path, capsys, corpus):
     bad = write(tmp_path, "bad.xml", "<?xml version='1.0'?>\n<Other/>")
     assert main(["diff", str(bad), str(bad)]) == 1
     assert f"{bad}:1: root element <Other>" in capsys.readouterr().err
+
+
+def test_two_exports_of_one_drive_at_1_and_4_ms(capsys, corpus):
+    """Two exports of one Yaskawa drive from another tool, at 1 ms and 4 ms: the cycle time
+    in 0x09A0 and in DC/CycleTime0, the interpolation period 0x60C2:01, and one change the
+    corpus notes do not list: the 4 ms file also clears the DC activation (0x0980) in I->P.
+    The values are read here from both files."""
+    folder = corpus / "eni/acontis-ecmaster-demo-motion"
+    a, b = folder / "Yaskawa_SGDV_1ms.xml", folder / "Yaskawa_SGDV_4ms.xml"
+    code, changes = _diff(capsys, a, b)
+    assert code == 1
+
+    def read(path: Path) -> tuple[int, int, int, list[list[str]]]:
+        slave = _tree(path).find("Config/Slave")
+        sync0 = next(int.from_bytes(bytes.fromhex(ic.findtext("Data"))[:4], "little")
+                     for ic in slave.find("InitCmds") if ic.findtext("Ado") == str(0x09A0))
+        period = next(int(ic.findtext("Data"), 16) for ic in slave.iter("InitCmd")
+                      if (ic.findtext("Index"), ic.findtext("SubIndex")) == (str(0x60C2), "1"))
+        clears = [[t.text for t in ic.findall("Transition")] for ic in slave.find("InitCmds")
+                  if ic.findtext("Ado") == str(0x0980) and ic.findtext("Data") == "0000"]
+        return sync0, period, int(slave.findtext("DC/CycleTime0")), clears
+
+    (sync_a, period_a, dc_a, clears_a), (sync_b, period_b, dc_b, clears_b) = read(a), read(b)
+    assert (sync_a, sync_b, dc_a, dc_b) == (1_000_000, 4_000_000, 1_000_000, 4_000_000)
+    assert ["IP"] == [t for c in clears_b for t in c if t not in {x for c in clears_a
+                                                                  for x in c}]
+    drive = "Drive 1 (SGDV-E1 CoE Drive)"
+    assert sorted((c["kind"], c["transition"], c["what"], c["old"], c["new"])
+                  for c in changes) == sorted([
+        ("initcmd-added", "IP", "0x0980", None, "clear DC activation"),
+        ("initcmd-changed", "PS", "0x09A0", f"set SYNC0 cycle {sync_a} ns, SYNC1 cycle 0 ns",
+         f"set SYNC0 cycle {sync_b} ns, SYNC1 cycle 0 ns"),
+        ("initcmd-changed", "PS", "0x60C2:01", f"SDO 0x60C2:01 = {period_a}",
+         f"SDO 0x60C2:01 = {period_b}"),
+        ("dc", None, "DC", f"reference clock, cycle {dc_a} ns, shift 0 ns",
+         f"reference clock, cycle {dc_b} ns, shift 0 ns")])
+    assert {c["slave"] for c in changes} == {drive}

@@ -173,6 +173,31 @@ def test_show_eni_decodes_syncmanager_writes(corpus, capsys):
     assert "set sm 2 (outputs) 0x1100 len 14 ctrl 0x64" in shown["slaves"][0]["init_cmds"]["PS"]
 
 
+def test_show_eni_decodes_fmmu_writes(corpus, capsys):
+    """Each FMMU write in words, decoded here from the 16-byte layout (ESC: logical start
+    4 bytes, length 2, start bit, stop bit, physical start 2, physical bit, type)."""
+    eni = "eni/jn-ec-master/mega_master_eni.xml"
+    tree = etree.parse(str(corpus / eni))
+    shown = _json(capsys, str(corpus / eni))
+    found = 0
+    for s, el in zip(shown["slaves"], tree.findall("Config/Slave")):
+        for ic in el.findall("InitCmds/InitCmd"):
+            ado = _num(ic.findtext("Ado"))
+            data = bytes.fromhex(ic.findtext("Data") or "")
+            if not (0x0600 <= ado < 0x0700 and len(data) == 16 and any(data)):
+                continue
+            start = int.from_bytes(data[0:4], "little")
+            end = start + int.from_bytes(data[4:6], "little") - 1
+            kind = {1: "inputs", 2: "outputs"}[data[11]]
+            words = (f"set fmmu {(ado - 0x600) // 16} ({kind}) logical 0x{start:08X}.{data[6]}"
+                     f"-0x{end:08X}.{data[7]} -> 0x{int.from_bytes(data[8:10], 'little'):04X}"
+                     f".{data[10]}")
+            for t in ic.findall("Transition"):
+                assert words in s["init_cmds"][t.text], (words, s["init_cmds"][t.text])
+            found += 1
+    assert found >= 4
+
+
 def test_show_eni_text(corpus, capsys):
     eni = corpus / "eni/jn-ec-master/mega_master_eni.xml"
     assert main(["show", str(eni)]) == 0
