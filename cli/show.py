@@ -197,6 +197,10 @@ def _eni_text(view: EniView, out: _Out) -> None:
                 f"{c.adp or 0}:0x{c.ado or 0:04X}"
             out.line(f"    {c.cmd:<4} {address:<12} len {c.length:<5} wkc {wkc:<3} "
                      f"{'/'.join(c.states)}")
+    if view.unsupported:
+        out.heading("Not applied by ecatcfg (apply refuses them unless --skip-unsupported)")
+        for u in view.unsupported:
+            out.line(f"  {repr(u.slave) + ': ' if u.slave else ''}{u.element}: {u.describe()}")
     out.heading("InitCmds")
     for s in view.slaves:
         if not s.init_cmds:

@@ -47,7 +47,8 @@ class Change:
     """One difference.  ``kind`` (for JSON and tests): slave-added, slave-removed,
     slave-moved, identity, pdo-assignment, pdo-mapping, variable-moved, variable-changed,
     variable-added, variable-removed, initcmd-added, initcmd-removed, initcmd-changed, dc,
-    cycle-time, frames, and for topologies slave-setting and master-setting."""
+    cycle-time, frames, unsupported-added, unsupported-removed, and for topologies
+    slave-setting and master-setting."""
 
     kind: str
     slave: str | None
@@ -303,6 +304,20 @@ def _frames(a: NetworkPlan, b: NetworkPlan) -> list[Change]:
     return out
 
 
+def _unsupported(a: NetworkPlan, b: NetworkPlan) -> list[Change]:
+    """What the reader kept but apply does not do (``eni/contents.py``: SoE InitCmds,
+    encrypted FMMU settings, ...) is compared by what it is, so nothing in a file goes
+    uncompared without a word."""
+    def parts(plan: NetworkPlan) -> Counter[tuple[str | None, str, str, int]]:
+        return Counter((u.slave, u.element, u.what, u.commands) for u in plan.unsupported)
+    old, new = parts(a), parts(b)
+    return [Change("unsupported-removed", slave, f"{element}: {what}",
+                   old=f"{commands} command(s)") for slave, element, what, commands
+            in sorted((old - new).elements(), key=str)] + \
+        [Change("unsupported-added", slave, f"{element}: {what}", new=f"{commands} command(s)")
+         for slave, element, what, commands in sorted((new - old).elements(), key=str)]
+
+
 def diff(a: NetworkPlan, b: NetworkPlan) -> list[Change]:
     """Every difference between ``a`` (old) and ``b`` (new) the module docstring lists."""
     out = _slaves(a, b)
@@ -314,4 +329,4 @@ def diff(a: NetworkPlan, b: NetworkPlan) -> list[Change]:
         out += _process_data(s.name, o, s)
         out += _init_cmds(s.name, o, s)
         out += _dc(s.name, o, s)
-    return out + _variables(a, b) + _frames(a, b)
+    return out + _variables(a, b) + _frames(a, b) + _unsupported(a, b)

@@ -11,7 +11,8 @@ from __future__ import annotations
 
 from typing import Any
 
-from ecatcfg.eni.plan import NetworkPlan, PassiveSlave, PreviousPort, SlavePlan, Variable
+from ecatcfg.eni.plan import (NetworkPlan, PassiveSlave, PreviousPort, SlavePlan, Unsupported,
+                              Variable)
 from ecatcfg.eni.words import coe_words, command_name, eoe_words, init_cmd_words
 from ecatcfg.esc import Transition
 from ecatcfg.record import field, record
@@ -70,6 +71,9 @@ class EniView:
     outputs_size: int
     variables: list[VariableView]
     frames: list[FrameView]
+    # What the reader kept but apply does not do (``eni/contents.py``): named, never
+    # dropped from what is shown.
+    unsupported: list[Unsupported] = field(default_factory=list)
 
 
 def transition_words(slave: SlavePlan) -> dict[str, list[str]]:
@@ -126,7 +130,8 @@ def summary(plan: NetworkPlan, file: str) -> EniView:
         CommandView(command_name(cmd.cmd), cmd.adp, cmd.ado, cmd.addr, cmd.length, cmd.cnt,
                     list(cmd.states)) for cmd in f.cmds])
         for c in plan.cyclic for f in c.frames]
-    return EniView(file, slaves, image.inputs_size, image.outputs_size, variables, frames)
+    return EniView(file, slaves, image.inputs_size, image.outputs_size, variables, frames,
+                   list(plan.unsupported))
 
 
 def _variable(v: Variable, direction: str) -> VariableView:
@@ -151,4 +156,6 @@ def as_json(view: EniView) -> dict[str, Any]:
                                   "length": c.length,
                                   "wkc": c.wkc, "states": c.states} for c in f.commands]}
                    for f in view.frames],
+        "unsupported": [{"slave": u.slave, "element": u.element, "what": u.what,
+                         "line": u.line, "commands": u.commands} for u in view.unsupported],
     }
