@@ -202,6 +202,11 @@ def _eni_text(view: EniView, out: _Out) -> None:
         for u in view.unsupported:
             out.line(f"  {repr(u.slave) + ': ' if u.slave else ''}{u.element}: {u.describe()}")
     out.heading("InitCmds")
+    if view.master_init_cmds:
+        out.line("  master")
+        for t, words in view.master_init_cmds.items():
+            for w in words:
+                out.line(f"    {t}  {w}")
     for s in view.slaves:
         if not s.init_cmds:
             continue

@@ -33,7 +33,8 @@ from collections import Counter
 from collections.abc import Iterable
 from typing import Any
 
-from ecatcfg.eni.plan import CoeInitCmd, NetworkPlan, PassiveSlave, SlavePlan, Variable
+from ecatcfg.eni.plan import (CoeInitCmd, EoeInitCmd, InitCmd, NetworkPlan, PassiveSlave,
+                              SlavePlan, Variable)
 from ecatcfg.eni.words import (coe_words, command_name, eoe_words, init_cmd_words,
                                mapping_entry)
 from ecatcfg.esi.datatypes import canonical
@@ -179,41 +180,73 @@ def _entry(index: int, value: int) -> str:
 
 
 _RECORD = re.compile(r"^(?:set|clear) ((?:sm|fmmu) \d+)")
+_CLEARED = re.compile(r"^clear (sm|fmmu) (\d+)-(\d+)$")
 
 
-def _register_state(s: SlavePlan, t: Transition) -> dict[str, Counter[str]]:
-    """A transition's register commands in words, by the register they address."""
+def _record_words(words: str) -> list[str]:
+    """The words of each SyncManager or FMMU record a command writes (``clear fmmu 0-15``
+    is sixteen), or the command's words."""
+    out = []
+    for part in words.split("; "):
+        cleared = _CLEARED.match(part)
+        if cleared:
+            kind, first, last = cleared.group(1), int(cleared.group(2)), int(cleared.group(3))
+            out += [f"clear {kind} {n}" for n in range(first, last + 1)]
+        else:
+            out.append(part)
+    return out
+
+
+def _register_state(cmds: list[InitCmd], eoe: list[EoeInitCmd],
+                    t: Transition) -> dict[str, Counter[str]]:
+    """A transition's register (and EoE) commands in words, by the register they address."""
     out: dict[str, Counter[str]] = {}
-    for c in s.init_cmds:
+    for c in cmds:
         if t not in c.transitions:
             continue
         where = f"0x{c.ado:04X}" if c.ado is not None else \
             f"0x{c.addr:08X}" if c.addr is not None else command_name(c.cmd)
         # One write of several SyncManagers or FMMUs (TwinCAT's SM0+SM1 in 16 bytes) is
         # one change per record, as two writes of one record each are.
-        for part in init_cmd_words(c).split("; "):
+        for part in _record_words(init_cmd_words(c)):
             record = _RECORD.match(part)
             out.setdefault(record.group(1) if record else where, Counter())[part] += 1
-    if s.mailbox is not None:
-        for e in s.mailbox.eoe_init_cmds:
-            if t in e.transitions and not e.disabled:
-                out.setdefault("EoE", Counter())[eoe_words(e)] += 1
+    for e in eoe:
+        if t in e.transitions and not e.disabled:
+            out.setdefault("EoE", Counter())[eoe_words(e)] += 1
     return out
+
+
+def _register_changes(name: str | None, prefix: str, a: list[InitCmd], eoe_a: list[EoeInitCmd],
+                      b: list[InitCmd], eoe_b: list[EoeInitCmd], t: Transition) -> list[Change]:
+    out: list[Change] = []
+    ra, rb = _register_state(a, eoe_a, t), _register_state(b, eoe_b, t)
+    for where in sorted(set(ra) | set(rb)):
+        old, new = ra.get(where, Counter()), rb.get(where, Counter())
+        gone, came = sorted((old - new).elements()), sorted((new - old).elements())
+        what = prefix + where
+        for o, n in zip(gone, came):
+            out.append(Change("initcmd-changed", name, what, o, n, t.value))
+        for o in gone[len(came):]:
+            out.append(Change("initcmd-removed", name, what, old=o, transition=t.value))
+        for n in came[len(gone):]:
+            out.append(Change("initcmd-added", name, what, new=n, transition=t.value))
+    return out
+
+
+def _master_init_cmds(a: NetworkPlan, b: NetworkPlan) -> list[Change]:
+    """The master's own InitCmds (``Config/Master/InitCmds``: broadcasts before or after
+    the slaves' commands)."""
+    return [c for t in Transition for c in _register_changes(
+        None, "master ", a.master.init_cmds, [], b.master.init_cmds, [], t)]
 
 
 def _init_cmds(name: str, a: SlavePlan, b: SlavePlan) -> list[Change]:
     out: list[Change] = []
     for t in Transition:
-        ra, rb = _register_state(a, t), _register_state(b, t)
-        for where in sorted(set(ra) | set(rb)):
-            old, new = ra.get(where, Counter()), rb.get(where, Counter())
-            gone, came = sorted((old - new).elements()), sorted((new - old).elements())
-            for o, n in zip(gone, came):
-                out.append(Change("initcmd-changed", name, where, o, n, t.value))
-            for o in gone[len(came):]:
-                out.append(Change("initcmd-removed", name, where, old=o, transition=t.value))
-            for n in came[len(gone):]:
-                out.append(Change("initcmd-added", name, where, new=n, transition=t.value))
+        out += _register_changes(name, "", a.init_cmds,
+                                 a.mailbox.eoe_init_cmds if a.mailbox else [], b.init_cmds,
+                                 b.mailbox.eoe_init_cmds if b.mailbox else [], t)
         ca = _coe_state(c for c in (a.mailbox.coe_init_cmds if a.mailbox else [])
                         if t in c.transitions)
         cb = _coe_state(c for c in (b.mailbox.coe_init_cmds if b.mailbox else [])
@@ -320,7 +353,7 @@ def _unsupported(a: NetworkPlan, b: NetworkPlan) -> list[Change]:
 
 def diff(a: NetworkPlan, b: NetworkPlan) -> list[Change]:
     """Every difference between ``a`` (old) and ``b`` (new) the module docstring lists."""
-    out = _slaves(a, b)
+    out = _slaves(a, b) + _master_init_cmds(a, b)
     old = {s.name: s for s in a.slaves}
     for s in b.slaves:
         o = old.get(s.name)

@@ -74,6 +74,16 @@ class EniView:
     # What the reader kept but apply does not do (``eni/contents.py``): named, never
     # dropped from what is shown.
     unsupported: list[Unsupported] = field(default_factory=list)
+    master_init_cmds: dict[str, list[str]] = field(default_factory=dict)
+
+
+def master_words(plan: NetworkPlan) -> dict[str, list[str]]:
+    """The master's own InitCmds (``Config/Master/InitCmds``) per transition, in words."""
+    out: dict[str, list[str]] = {t.value: [] for t in Transition}
+    for cmd in plan.master.init_cmds:
+        for t in cmd.transitions:
+            out[t.value].append(init_cmd_words(cmd))
+    return {t: words for t, words in out.items() if words}
 
 
 def transition_words(slave: SlavePlan) -> dict[str, list[str]]:
@@ -131,7 +141,7 @@ def summary(plan: NetworkPlan, file: str) -> EniView:
                     list(cmd.states)) for cmd in f.cmds])
         for c in plan.cyclic for f in c.frames]
     return EniView(file, slaves, image.inputs_size, image.outputs_size, variables, frames,
-                   list(plan.unsupported))
+                   list(plan.unsupported), master_words(plan))
 
 
 def _variable(v: Variable, direction: str) -> VariableView:
@@ -142,6 +152,7 @@ def as_json(view: EniView) -> dict[str, Any]:
     """The ``show ENI --format json`` shape (docs/show-diff-check.md)."""
     return {
         "file": view.file,
+        "master_init_cmds": view.master_init_cmds,
         "slaves": [{"name": s.name, "position": s.position, "phys_addr": s.phys_addr,
                     "vendor_id": s.vendor_id, "product_code": s.product_code,
                     "revision": s.revision, "passive": s.passive, "parent": s.parent,

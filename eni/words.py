@@ -7,6 +7,7 @@ from the file's ``Comment`` (free text a tool may write in any language, or leav
 
 - ``set sm 2 (outputs) 0x1100 len 6 ctrl 0x64``: a SyncManager's 8-byte image
   (ESC Section II 0x0800 + 8n); its kind from the control byte's mode and direction bits.
+- ``clear sm 0; clear sm 1``, ``clear fmmu 0-15``: records written with zeros.
 - ``set fmmu 0 (outputs) logical 0x01000000.0-0x01000005.7 -> 0x1100.0``: an FMMU's 16-byte
   image (0x0600 + 16n).
 - ``request SAFEOP``, ``check state SAFEOP``: AL control 0x0120, AL status 0x0130.
@@ -82,6 +83,14 @@ def _records(ado: int, data: bytes, area: range, size: int) -> list[tuple[int, b
     return [(first + k, data[k * size:(k + 1) * size]) for k in range(len(data) // size)]
 
 
+def _cleared(kind: str, records: list[tuple[int, bytes]]) -> str | None:
+    """``clear fmmu 0-15``: a write of zeros to three records or more (the master's
+    broadcast clearing of all of them), else None."""
+    if len(records) < 3 or any(any(image) for _, image in records):
+        return None
+    return f"clear {kind} {records[0][0]}-{records[-1][0]}"
+
+
 def _sm_words(n: int, image: bytes) -> str:
     if not any(image):
         return f"clear sm {n}"
@@ -118,10 +127,11 @@ def _register_write(ado: int, data: bytes) -> str | None:
     """Words for a write of a register the configuration sets, or None."""
     sms = _records(ado, data, _SM_AREA, SM_SIZE)
     if sms is not None:
-        return "; ".join(_sm_words(n, image) for n, image in sms)
+        return _cleared("sm", sms) or "; ".join(_sm_words(n, image) for n, image in sms)
     fmmus = _records(ado, data, _FMMU_AREA, FMMU_SIZE)
     if fmmus is not None:
-        return "; ".join(_fmmu_words(n, image) for n, image in fmmus)
+        return _cleared("fmmu", fmmus) or "; ".join(_fmmu_words(n, image)
+                                                    for n, image in fmmus)
     if ado == Reg.AL_CONTROL and data:
         return _state_words(_int(data[:2]))
     if ado == Reg.STATION_ADDRESS and len(data) == 2:

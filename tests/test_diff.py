@@ -352,3 +352,17 @@ def test_parts_apply_does_not_do_are_compared_and_shown(tmp_path, capsys, corpus
          "line": line, "commands": 2}]
     assert main(["show", str(edited), "--no-cache"]) == 0
     assert f"SoE InitCmds (servo drive parameters) (2 commands) at line {line}" in capsys.readouterr().out
+
+
+def test_the_masters_own_init_cmds_are_compared(tmp_path, capsys, corpus):
+    tree = _tree(corpus / ELMO_ENI)
+    cmd = next(c for c in tree.find("Config/Master/InitCmds")
+               if c.findtext("Ado") == str(0x0200))
+    old = cmd.findtext("Data")
+    cmd.find("Data").text = "0000"
+    code, changes = _diff(capsys, corpus / ELMO_ENI, _save(tree, tmp_path / "master.xml"))
+    assert code == 1
+    value = int.from_bytes(bytes.fromhex(old), "little")
+    assert changes == [{"kind": "initcmd-changed", "slave": None, "transition": "IP",
+                        "what": "master 0x0200", "old": f"BWR 0x0200 = 0x{value:04X}",
+                        "new": "BWR 0x0200 = 0x0000"}]

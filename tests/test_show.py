@@ -129,6 +129,11 @@ def test_show_eni_json(corpus, capsys, eni):
         [(_num(c.findtext("DataLength")), _num(c.findtext("Cnt")) if c.find("Cnt")
           is not None else None) for c in f.findall("Cmd")]
         for f in tree.findall("Config/Cyclic/Frame")]
+    counted_master: dict[str, int] = {}
+    for ic in tree.findall("Config/Master/InitCmds/InitCmd"):
+        for t in ic.findall("Transition"):
+            counted_master[t.text] = counted_master.get(t.text, 0) + 1
+    assert {t: len(w) for t, w in shown["master_init_cmds"].items()} == counted_master
     # InitCmds per transition: one line per register command and transition, then the
     # CoE ones, each SDO download as "SDO 0xIIII:SS = value" from the file's bytes.
     for s, el in zip(shown["slaves"], slaves):
