@@ -21,6 +21,11 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                               "error or missing path.")
     p.add_argument("old", metavar="A", help="ENI or topology file (the old one)")
     p.add_argument("new", metavar="B", help="ENI or topology file of the same kind (the new one)")
+    p.add_argument("--esi", action="append", default=[], metavar="PATH",
+                   help="topologies: ESI files or folders to resolve each slave's device "
+                        "selector with, so two spellings of one device are no difference")
+    p.add_argument("--no-cache", action="store_true",
+                   help="do not read or write the ESI index cache")
     p.add_argument("--format", choices=("text", "json"), default="text")
     p.set_defaults(run=run)
 
@@ -42,7 +47,11 @@ def run(args: argparse.Namespace) -> int:
     else:
         from ecatcfg.compiler import topology
         from ecatcfg.compiler.topology_diff import diff as topology_diff
-        changes = topology_diff(topology.load(args.old), topology.load(args.new))
+        library = None
+        if args.esi:
+            from ecatcfg.esi.library import Library
+            library = Library(args.esi, cache=not args.no_cache)
+        changes = topology_diff(topology.load(args.old), topology.load(args.new), library)
     if args.format == "json":
         json.dump({"a": args.old, "b": args.new, "kind": ka, "equal": not changes,
                    "changes": [c.as_json() for c in changes]}, sys.stdout, indent=1)

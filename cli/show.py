@@ -158,7 +158,7 @@ def _esi_text(r: dict[str, Any], out: _Out) -> None:
         out.heading("Slots")
         for s in r["slots"]:
             out.line(f"  {s['name']!r} {s['min']}..{s['max']}: "
-                     f"{' '.join(_hex(i, 8) for i in s['modules'])} "
+                     f"{' '.join([_hex(i, 8) for i in s['modules']] + s['module_classes'])} "
                      f"(default {_hex(s['default'], 8)})")
     if r.get("modules"):
         out.heading("Modules")

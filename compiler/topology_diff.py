@@ -16,6 +16,19 @@ from typing import Any
 
 from ecatcfg.compiler.topology import LoadedTopology
 from ecatcfg.eni.diff import Change
+from ecatcfg.errors import EcatcfgError
+from ecatcfg.esi.library import Library, SelectorError
+from ecatcfg.esi.model import format_selector
+
+
+def _resolved(library: Library, loaded: LoadedTopology, k: int, selector: str) -> str:
+    """The exact selector of the device ``selector`` names, as the compiler resolves it."""
+    try:
+        e = library.find(selector).entry
+    except SelectorError as exc:
+        raise EcatcfgError(exc.message, loaded.file,
+                           loaded.line("slaves", k, "device")) from None
+    return format_selector(e.vendor_id, e.product_code, e.revision)
 
 
 # Keys whose numbers are object or PDO indices: shown in hex, as topologies write them.
@@ -63,7 +76,12 @@ def _keys(model: Any) -> dict[str, Any]:
     return dict(model.model_dump(mode="json"))
 
 
-def diff(a: LoadedTopology, b: LoadedTopology) -> list[Change]:
+def diff(a: LoadedTopology, b: LoadedTopology,
+         library: Library | None = None) -> list[Change]:
+    """The changes from ``a`` to ``b``.  With ``library``, each slave's ``device`` is
+    compared as the exact device it selects (``VENDOR:PRODUCT:REVISION``), so two spellings
+    of one device (``EXD-402``, ``0xE0000ECA:0x7201``) are no difference; a selector the
+    library cannot resolve is an error at its line."""
     out: list[Change] = []
     ma, mb = _keys(a.topology.master), _keys(b.topology.master)
     for key in sorted(set(ma) | set(mb)):
@@ -84,6 +102,13 @@ def diff(a: LoadedTopology, b: LoadedTopology) -> list[Change]:
             out.append(Change("slave-moved", name, "place", f"position {j}",
                               f"position {k}"))
         ko, kn = _keys(o), _keys(s)
+        if library is not None:
+            old_device = _resolved(library, a, j, o.device)
+            new_device = _resolved(library, b, k, s.device)
+            del ko["device"], kn["device"]
+            if old_device != new_device:
+                out.append(Change("identity", name, "device", f"{o.device} ({old_device})",
+                                  f"{s.device} ({new_device})"))
         for key in sorted(set(ko) | set(kn)):
             if key != "name" and ko.get(key) != kn.get(key):
                 kind = "identity" if key in ("device", "esi") else "slave-setting"

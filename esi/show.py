@@ -117,7 +117,7 @@ def summary(dev: Device, with_objects: bool = False) -> dict[str, Any]:
             for m in dev.dc.opmodes],
         "slots": [] if dev.slots is None else [
             {"name": s.name, "min": s.min_instances, "max": s.max_instances,
-             "modules": list(s.module_idents),
+             "modules": list(s.module_idents), "module_classes": list(s.module_classes),
              "default": s.default_ident} for s in dev.slots.slots],
     }
     if with_objects:

@@ -366,3 +366,25 @@ def test_the_masters_own_init_cmds_are_compared(tmp_path, capsys, corpus):
     assert changes == [{"kind": "initcmd-changed", "slave": None, "transition": "IP",
                         "what": "master 0x0200", "old": f"BWR 0x0200 = 0x{value:04X}",
                         "new": "BWR 0x0200 = 0x0000"}]
+
+
+def test_topologies_with_esi_compare_the_devices_selected(tmp_path, capsys):
+    """Two spellings of one device are a difference as written, none with --esi (the
+    selectors resolved as the compiler resolves them); an unknown one is an error at its
+    line."""
+    from conftest import EXAMPLES
+    a = write(tmp_path, "a.yaml", "slaves:\n  - {name: axis, device: EXD-402}\n")
+    b = write(tmp_path, "b.yaml", 'slaves:\n  - {name: axis, device: "0xE0000ECA:0x7201"}\n')
+    code, changes = _diff(capsys, a, b)
+    assert (code, [(c["kind"], c["what"]) for c in changes]) == (1, [("identity", "device")])
+    esi = ["--esi", str(EXAMPLES / "esi")]
+    assert main(["diff", str(a), str(b), *esi]) == 0
+    assert capsys.readouterr().out == "no differences\n"
+    c = write(tmp_path, "c.yaml", "slaves:\n  - {name: axis, device: EX1004}\n")
+    assert main(["diff", str(a), str(c), *esi, "--format", "json"]) == 1
+    assert [(ch["old"], ch["new"]) for ch in json.loads(capsys.readouterr().out)["changes"]] \
+        == [("EXD-402 (0xe0000eca:0x7201:0x20000)", "EX1004 (0xe0000eca:0x2004:0x10000)")]
+    bad = write(tmp_path, "bad.yaml", "slaves:\n  - name: axis\n    device: NOPE\n")
+    assert main(["diff", str(a), str(bad), *esi]) == 1
+    err = capsys.readouterr().err
+    assert f"{bad}:3: " in err and "NOPE" in err and "Traceback" not in err
