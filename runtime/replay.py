@@ -21,6 +21,7 @@ import time
 from typing import TYPE_CHECKING, TypeVar
 
 from ecatcfg.eni.plan import CoeInitCmd, DcPlan, EoeInitCmd, InitCmd, MailboxPlan, SlavePlan
+from ecatcfg.eni.words import init_cmd_name
 from ecatcfg.errors import EcatcfgError
 from ecatcfg.esc import (AL_STATUS_ERROR, SM1_STATUS, SM_ACTIVATE_REPEAT, SM_PDI_REPEAT_ACK, Cmd,
                          Reg, Transition, al_state_name, al_status_name)
@@ -102,23 +103,6 @@ def _matches(data: bytes | bytearray, want: bytes, mask: bytes | None) -> bool:
     if mask is None:
         return got == want
     return all(g & m == w & m for g, w, m in zip(got, want, mask[:n].ljust(n, b"\xff")))
-
-
-def init_cmd_name(cmd: InitCmd) -> str:
-    """How messages and the report name a register InitCmd: its ``Comment``, or, where the
-    ENI gives none (``Comment`` is optional in ETG.2100's ``ECatCmdType``), its command and
-    register (``APWR 0x0120``) or logical address, so a failure still says which one."""
-    if cmd.comment.strip():
-        return cmd.comment
-    try:
-        name = Cmd(cmd.cmd).name
-    except ValueError:
-        name = f"command {cmd.cmd}"
-    if cmd.ado is not None:
-        return f"{name} 0x{cmd.ado:04X}"
-    if cmd.addr is not None:
-        return f"{name} logical 0x{cmd.addr:08X}"
-    return name
 
 
 def init_cmd_job(cmd: InitCmd, who: str | None, data: bytes | None = None,

@@ -13,7 +13,8 @@ from conftest import EXAMPLES
 from ecatcfg.cli import main
 from ecatcfg.eni.plan import InitCmd
 from ecatcfg.esc import Cmd, Transition
-from ecatcfg.runtime.replay import ApplyError, init_cmd_name
+from ecatcfg.eni.words import init_cmd_name
+from ecatcfg.runtime.replay import ApplyError
 
 ESI = EXAMPLES / "esi"
 
