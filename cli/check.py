@@ -103,9 +103,12 @@ def _check(args: argparse.Namespace, active: frozenset[str]) -> int:
         to_terminal = args.output is None and sys.stdout.isatty()
         text.write(results, in_effect, buffer,
                    colour=to_terminal and "NO_COLOR" not in os.environ)
+    elif args.format == "json":
+        json_format.write(results, in_effect, buffer)
+    elif args.format == "junit":
+        junit.write(results, in_effect, buffer, tool="ecatcfg check")
     else:
-        {"json": json_format, "junit": junit, "sarif": sarif}[args.format].write(
-            results, in_effect, buffer)
+        sarif.write(results, in_effect, buffer, tool="ecatcfg check", tag="eni")
     if args.output:
         try:
             write_atomic(Path(args.output), buffer.getvalue().encode())
