@@ -69,7 +69,8 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError("give at least one ENI file (or --explain ID)")
     for eni in args.enis:
         if not Path(eni).is_file():
-            raise UsageError(f"{eni}: no such file")
+            raise UsageError(f"{eni}: no such file" + (" (a folder: give ENI files)"
+                                                        if Path(eni).is_dir() else ""))
     try:
         active = select_rules([i for v in args.select or [] for i in split_ids(v)],
                               [i for v in args.ignore or [] for i in split_ids(v)], rules)

@@ -83,6 +83,13 @@ def _sm2_length_8(root: Root) -> None:
     cmd.find("Data").text = "0011080064000100"
 
 
+def _sm3_never_set(root: Root) -> None:
+    # axis1 inputs: 0x1A00 (6 bytes) and 0x1A01 remapped to 2 + 4 + 4 bytes.
+    axis = _slave(root, "axis1")
+    cmd = _init_cmd(axis, "set sm 3 (inputs)")
+    cmd.getparent().remove(cmd)
+
+
 def _lamps_fmmu_inactive(root: Root) -> None:
     cmd = _init_cmd(_slave(root, "lamps"), "set fmmu 0 (outputs)")
     data = bytearray.fromhex(cmd.find("Data").text)
@@ -174,6 +181,7 @@ DEFECTS: list[tuple[str, Callable[[Root], None], list[str]]] = [
     ("ENI001", _revision_9, ["lamps", "revision 0x9", "available"]),
     ("ENI003", _unreadable_fmmu, ["FMMU 0", "0xEB030B5F", "no cyclic command"]),
     ("ENI101", _sm2_length_8, ["SM2 (Outputs) is set to 8 byte(s)", "0x1601", "take 6"]),
+    ("ENI101", _sm3_never_set, ["SM3 (Inputs) has PDOs of 16 byte(s)", "no InitCmd"]),
     ("ENI102", _lamps_fmmu_inactive, ["lamps", "SM0 (Outputs, 0x0F00", "no write FMMU"]),
     ("ENI103", _sensors_over_buttons, ["sensors", "Recv (inputs)", "buttons"]),
     ("ENI004", _big_frame, ["<Frame> of 5 commands", "1500"]),

@@ -109,6 +109,11 @@ def _sm_lengths(ctx: CheckContext, slave: SlavePlan) -> None:
         want = (bits + 7) // 8
         line = ctx.lines.child(slave, f"ProcessData/Sm{sm.number}")
         images = written.get(sm.number, [])
+        if want and not images and written:
+            # InitCmds that set SyncManagers but never this one (a partial ENI without
+            # register InitCmds is completed by the standard set-up: eni/derive.py).
+            ctx.add(SM_LENGTH, line, f"SM{sm.number} ({sm.type}) has PDOs of {want} byte(s) "
+                    "but no InitCmd enables it with a length", slave)
         for image, _ in images:
             if image.length != want:
                 listed = ", ".join(f"0x{p.index:04X}" for p in pdos) or "none"
