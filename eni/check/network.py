@@ -18,7 +18,9 @@ SM_LENGTH = declare("ENI101", "error", "a SyncManager's length is not its PDOs' 
     the sum of their entries' BitLen, rounded up to bytes).  A slave checks the length
     against its own PDO configuration before SAFEOP and refuses the transition (AL status
     code 0x001D/0x001E, invalid output/input configuration); a longer SyncManager moves the
-    data of every later variable.""")
+    data of every later variable.  InitCmds that set a slave's SyncManagers but never
+    enable one that has PDOs leave its data unexchanged (a partial ENI without register
+    InitCmds is completed by the standard set-up and not judged here).""")
 FMMU_COVER = declare("ENI102", "error", "a process-data SyncManager no FMMU maps", """
     Each byte of a process-data SyncManager must be mapped into the logical process image
     by an FMMU of its direction (write FMMU for Outputs, read FMMU for Inputs; registers
