@@ -250,6 +250,16 @@ def _drive_copy(folder: Path, old: str, new: str) -> None:
     drive.write_text(text.replace(old, new))
 
 
+def test_an_exclude_given_on_one_pdo_only_is_enough(tmp_path: Path,
+                                                     example_eni: Path) -> None:
+    # 0x1601 excludes 0x1600; 0x1600 no longer says so.
+    _drive_copy(tmp_path / "esi", "<Exclude>#x1601</Exclude>", "")
+    bad = _defective(tmp_path, example_eni, _excluded_pair)
+    found = _rules(check_eni(bad, Library([tmp_path / "esi"], cache=False), use_cache=False))
+    assert [m for m in found["ENI202"] if "0x1600 and 0x1601" in m and
+            "(PDO 0x1601) excludes 0x1600" in m]
+
+
 def test_a_fixed_sync0_cycle_other_than_the_enis_warns(tmp_path: Path,
                                                        example_eni: Path) -> None:
     _drive_copy(tmp_path / "esi", '<CycleTimeSync0 Factor="1">0</CycleTimeSync0>',

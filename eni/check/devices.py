@@ -117,24 +117,29 @@ def _pdos(ctx: CheckContext, slave: SlavePlan, device: Device) -> None:
             ctx.add(MANDATORY, line, f"{'Rx' if own.direction == 'rx' else 'Tx'}Pdo "
                     f"0x{own.index:04X} ({own.name}) is Mandatory in {own.source.file}:"
                     f"{own.source.line} but not assigned", slave)
+    excluded: set[tuple[str, int, int]] = set()
     for pdo in assigned:
         esi = _esi_pdo(device, pdo)
         if esi is None:
             continue
         for other in assigned:
+            # One Exclude element is enough: a vendor may list it on one PDO only.
             if other is not pdo and other.direction == pdo.direction \
-                    and other.index in esi.excludes and pdo.index < other.index:
-                ctx.add(EXCLUDED, line, f"PDOs 0x{pdo.index:04X} and 0x{other.index:04X} "
-                        f"are both assigned; {esi.source.file}:{esi.source.line} excludes "
-                        "one by the other", slave)
+                    and other.index in esi.excludes:
+                pair = (pdo.direction, min(pdo.index, other.index), max(pdo.index, other.index))
+                if pair not in excluded:
+                    excluded.add(pair)
+                    ctx.add(EXCLUDED, line, f"PDOs 0x{pair[1]:04X} and 0x{pair[2]:04X} are "
+                            f"both assigned; {esi.source.file}:{esi.source.line} (PDO "
+                            f"0x{pdo.index:04X}) excludes 0x{other.index:04X}", slave)
         if esi.fixed:
             mine = [(e.index, e.subindex if e.index else 0, e.bit_len) for e in pdo.entries]
             theirs = [(e.index or 0, (e.subindex or 0) if e.index else 0, e.bit_len or 0)
                       for e in esi.entries]
             if mine != theirs:
                 ctx.add(FIXED, line, f"PDO 0x{pdo.index:04X} is Fixed in {esi.source.file}:"
-                        f"{esi.source.line} with {len(theirs)} entries; the ENI maps "
-                        f"{len(mine)} other ones", slave)
+                        f"{esi.source.line} with {len(theirs)} entries; the ENI maps other "
+                        f"ones ({len(mine)} entries)", slave)
     _mappable(ctx, slave, device, assigned, line)
 
 
