@@ -17,7 +17,7 @@ from ecatcfg import __version__
 from ecatcfg.errors import EcatcfgError
 
 # Subcommands in the order --help lists them (module names in ecatcfg.cli).
-SUBCOMMANDS = ("devices", "lint", "schema", "compile", "show", "diff", "demo", "apply",
+SUBCOMMANDS = ("devices", "lint", "check", "schema", "compile", "show", "diff", "demo", "apply",
                "simulate", "sii", "scan", "sdo", "alias")
 
 EXIT_OK, EXIT_INPUT, EXIT_USAGE = 0, 1, 2
