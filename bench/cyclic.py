@@ -378,7 +378,8 @@ def python_floor(eni: Path, esi: str, cycles: int = 100_000) -> dict:
     in), so only the master's Python runs; with and without the recovery supervisor."""
     from ecatcfg.eni import reader
     from ecatcfg.esi.library import Library
-    from ecatcfg.runtime import emulate, wire
+    from ecatcfg.runtime import wire
+    from ecatcfg.runtime.segment import emulate
     from ecatcfg.runtime.network import Network
 
     plan = reader.read_file(eni)

@@ -6,7 +6,7 @@ Run from the checkout, as root:
                              [--breakdown N] [--bytecode cache|env] [--profile SIZE] [--keep]
                              [--realistic]
 
-``--realistic``: slaves that take time (``simulate --realistic``, runtime/timing.py: the
+``--realistic``: slaves that take time (``simulate --realistic``, runtime/segment/timing.py: the
 drives' mailbox replies 1.749 ms, PS and SO 100 ms each ...) on lines of CiA 402 drives
 only, 8 and 64 (``402x8``, ``402x64``), each with its PDO assignment over CoE.  apply runs
 ``--cycles 1``; the SOEM script writes the same PDO assignment SDOs as the ENI's PS

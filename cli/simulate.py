@@ -7,7 +7,7 @@ import sys
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from ecatcfg.runtime.slave import StateChange
+    from ecatcfg.runtime.segment.slave import StateChange
 
 
 # Columns of the slave table: a longer name or device is cut with an ellipsis, so the
@@ -76,9 +76,9 @@ def run(args: argparse.Namespace) -> int:
 
     from ecatcfg.errors import EcatcfgError, UsageError
     from ecatcfg.esi.library import Library
-    from ecatcfg.runtime import emulate
+    from ecatcfg.runtime.segment import emulate
     from ecatcfg.runtime.link import RawLink
-    from ecatcfg.runtime.segment import Faults
+    from ecatcfg.runtime.segment.virtual import Faults
 
     if not 0.0 <= args.drop <= 1.0:
         raise UsageError(f"--drop {args.drop}: a share between 0 and 1")
@@ -139,10 +139,10 @@ def run(args: argparse.Namespace) -> int:
     if args.timing:
         if not Path(args.timing).exists():
             raise UsageError(f"--timing {args.timing}: no such file")
-        from ecatcfg.runtime import timing as timing_model
+        from ecatcfg.runtime.segment import timing as timing_model
         timing = timing_model.load(args.timing)
     elif args.realistic:
-        from ecatcfg.runtime.timing import Timing
+        from ecatcfg.runtime.segment.timing import Timing
         timing = Timing()
     try:
         seg = emulate.segment(specs, Faults(drop=args.drop, seed=args.seed), timing)

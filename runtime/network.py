@@ -40,13 +40,13 @@ from ecatcfg.runtime.replay import ApplyError
 if TYPE_CHECKING:                   # imported where used: `import ecatcfg.runtime` stays light
     from ecatcfg.esi.library import Library
     from ecatcfg.runtime.cyclic import CycleStats
-    from ecatcfg.runtime.dc_clock import DcModel
+    from ecatcfg.runtime.segment.dc_clock import DcModel
     from ecatcfg.runtime.link import Link
     from ecatcfg.runtime.pcap import PcapRecorder
     from ecatcfg.runtime.realtime import RealtimeOptions
     from ecatcfg.runtime.recovery import SlaveHealth
-    from ecatcfg.runtime.segment import Faults, VirtualSegment
-    from ecatcfg.runtime.timing import Timing
+    from ecatcfg.runtime.segment.virtual import Faults, VirtualSegment
+    from ecatcfg.runtime.segment.timing import Timing
 
 _FLOATS = {"REAL": "<f", "LREAL": "<d"}
 _SIGNED = {"SINT", "INT", "DINT", "LINT", "INT24", "INT40", "INT48", "INT56"}
@@ -134,19 +134,19 @@ class Network:
         (``esi_cache``: through the ESI index cache), or from a :class:`Library` already
         built (a caller that brings up many ENIs from one library reads its files once).  A slave whose device the files do not
         hold, and every slave without ``esi``, is emulated from the ENI alone
-        (``runtime/eni_device.py``); each such slave is an ``Event("emulated", ...)`` to
+        (``runtime/segment/eni_device.py``); each such slave is an ``Event("emulated", ...)`` to
         ``on_event`` and has ``eni_only`` set in ``net.segment.slaves``.
         ``skip_unsupported``, ``eni_name``, the DC wait and ``recovery`` as for the
         constructor.
-        ``timing``: slaves that take the time real ones do (``runtime/timing.py``, e.g.
+        ``timing``: slaves that take the time real ones do (``runtime/segment/timing.py``, e.g.
         ``Timing()`` for the table); instantaneous slaves by default.  ``dc``: the emulated
-        clocks and line timing (``runtime/dc_clock.py``; seeded ±100 ppm drift by
+        clocks and line timing (``runtime/segment/dc_clock.py``; seeded ±100 ppm drift by
         default).  ``esi_prefer``: the ESI files or folders whose description wins where
         several describe one device differently (``Library``'s ``prefer``); without it such
         a device is an error naming the files."""
         from ecatcfg.eni import reader as eni_reader
         from ecatcfg.esi.library import Library
-        from ecatcfg.runtime import emulate
+        from ecatcfg.runtime.segment import emulate
         from ecatcfg.runtime.link import MemoryLink
 
         shown = eni_name or (str(eni) if not isinstance(eni, NetworkPlan) else "the ENI")

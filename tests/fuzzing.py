@@ -698,7 +698,7 @@ def _cap_timeouts(plan) -> None:
 
 def line_for(plan, shown: str = "fuzz.eni.xml"):
     """A fresh virtual segment emulating the ENI's slaves from the example ESI files."""
-    from ecatcfg.runtime import emulate
+    from ecatcfg.runtime.segment import emulate
     return emulate.segment(emulate.specs_from_eni(plan, library(), shown))
 
 
@@ -758,7 +758,7 @@ def line_in_op(eni: bytes):
 def feed_segment(value: tuple[int, list[bytes]]) -> None:
     """Frames from the wire into a line in OP: the segment answers every frame (returns it,
     same length), and each emulated ESC keeps its 64 KiB and a valid AL state."""
-    from ecatcfg.runtime.slave import MEMORY_SIZE
+    from ecatcfg.runtime.segment.slave import MEMORY_SIZE
     seed, sequence = value
     segment = line_in_op(eni_seeds()[seed])
     for f in sequence:
@@ -929,7 +929,7 @@ def _esi_device(m: Mutant) -> None:
     from ecatcfg.compiler.build import compile_topology
     from ecatcfg.esi import sii
     from ecatcfg.esi.library import Library
-    from ecatcfg.runtime.emulate import SlaveSpec, emulated_slave
+    from ecatcfg.runtime.segment.emulate import SlaveSpec, emulated_slave
     with tempfile.TemporaryDirectory() as tmp:
         (Path(tmp) / "fuzz.xml").write_bytes(m.data())
         lib = Library([tmp], cache=False)

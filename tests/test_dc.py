@@ -1,7 +1,7 @@
 """Distributed clocks on the virtual segment: the numbers the master writes, checked against
 what the line's model implies, not against the master's own arithmetic.
 
-The emulated line (``runtime/dc_clock.py``) delays a frame by P (``PROCESSING_DELAY_NS``,
+The emulated line (``runtime/segment/dc_clock.py``) delays a frame by P (``PROCESSING_DELAY_NS``,
 port 0 -> processing unit -> port 1) in each slave on the way out, F
 (``FORWARDING_DELAY_NS``, port 1 -> port 0) on the way back and C (``CABLE_DELAY_NS``) on
 every cable; the last slave turns the frame round in its processing unit (P).  The
@@ -43,9 +43,10 @@ from ecatcfg.eni import reader as eni_reader
 from ecatcfg.eni import writer as eni_writer
 from ecatcfg.esc import AlState, Cmd
 from ecatcfg.esi.library import Library
-from ecatcfg.runtime import Network, emulate, wire
+from ecatcfg.runtime import Network, wire
+from ecatcfg.runtime.segment import emulate
 from ecatcfg.runtime import master as master_module
-from ecatcfg.runtime.dc_clock import (CABLE_DELAY_NS, FORWARDING_DELAY_NS, PROCESSING_DELAY_NS,
+from ecatcfg.runtime.segment.dc_clock import (CABLE_DELAY_NS, FORWARDING_DELAY_NS, PROCESSING_DELAY_NS,
                                       DcModel)
 from ecatcfg.runtime.master import DC_THRESHOLD_NS, DcSyncError
 

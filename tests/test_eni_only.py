@@ -27,8 +27,9 @@ from ecatcfg.eni.contents import UnsupportedEniError
 from ecatcfg.esc import AlState
 from ecatcfg.esi import sii
 from ecatcfg.esi.library import Library
-from ecatcfg.runtime import Network, emulate
-from ecatcfg.runtime.eni_device import device_from_eni, type_name
+from ecatcfg.runtime import Network
+from ecatcfg.runtime.segment import emulate
+from ecatcfg.runtime.segment.eni_device import device_from_eni, type_name
 from ecatcfg.runtime.replay import ApplyError
 
 # The ENIs that do not reach OP, and why; each test asserts the exact failure (file, line,

@@ -30,7 +30,8 @@ from ecatcfg.eni.plan import EoeInitCmd, MailboxArea, MailboxPlan, NetworkPlan
 from ecatcfg.esc import AlState, Cmd, Transition
 from ecatcfg.esi.library import Library
 from ecatcfg.esi.reader import read_bytes
-from ecatcfg.runtime import Network, emulate
+from ecatcfg.runtime import Network
+from ecatcfg.runtime.segment import emulate
 from ecatcfg.runtime.mailbox import (MailboxError, MbxErrorDetail, MbxType, decode,
                                      encode_emergency, encode_mailbox, encode_upload_request,
                                      pad_to)

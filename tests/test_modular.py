@@ -27,7 +27,7 @@ from ecatcfg.eni import writer as eni_writer
 from ecatcfg.eni.plan import NetworkPlan
 from ecatcfg.esc import AlState
 from ecatcfg.esi.library import Library
-from ecatcfg.runtime import emulate
+from ecatcfg.runtime.segment import emulate
 from ecatcfg.runtime.network import Network
 from ecatcfg.runtime.replay import ApplyError
 

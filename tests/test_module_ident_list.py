@@ -334,7 +334,7 @@ def test_what_a_download_writes(tmp_path, index, data, complete, rule):
 def test_the_emulated_slave_takes_what_lint_lets_through(tmp_path):
     """The same length rule answers on the wire: a shorter string is taken (the rest NULs),
     a longer one refused with 0x06070012, a number of the wrong size with 0x06070010."""
-    from ecatcfg.runtime import emulate
+    from ecatcfg.runtime.segment import emulate
     from ecatcfg.runtime.mailbox import SdoAbort
     path = tmp_path / "d.xml"
     path.write_text(esi(drive(profile=_string_and_record_profile())))

@@ -332,7 +332,7 @@ class _TamperingLink:
 def test_late_and_reshaped_replies_are_never_taken(example_plan, circulate):
     """... and a reply whose datagrams carry the circulating bit (ETG.1000.4: set by a
     slave, not a change of shape) is taken, as Transport.exchange takes it."""
-    from ecatcfg.runtime import emulate
+    from ecatcfg.runtime.segment import emulate
     seg = emulate.segment(emulate.specs_from_eni(example_plan, Library([ESI], cache=False),
                                                  "x"))
     link = _TamperingLink(seg, circulate)

@@ -20,16 +20,17 @@ from ecatcfg.eni import writer as eni_writer
 from ecatcfg.eni.plan import NetworkPlan
 from ecatcfg.esc import AlState, Cmd, Reg
 from ecatcfg.esi.library import Library
-from ecatcfg.runtime import Network, emulate, recovery
+from ecatcfg.runtime import Network, recovery
+from ecatcfg.runtime.segment import emulate
 from ecatcfg.runtime.cyclic import CyclicFrames
 from ecatcfg.runtime.lockstep import run_jobs
 from ecatcfg.runtime.master import Event
-from ecatcfg.runtime.timing import Timing
+from ecatcfg.runtime.segment.timing import Timing
 from ecatcfg.runtime.wire import Datagram
 
 ESI = EXAMPLES / "esi"
 # docs/runtime.md "Slaves that drop out": the drive (firmware with the drive timing of
-# runtime/timing.py: mailbox, IP, PS and SO as a Kollmorgen AKD takes them) is back in OP
+# runtime/segment/timing.py: mailbox, IP, PS and SO as a Kollmorgen AKD takes them) is back in OP
 # within 2 s of coming back on the wire; the test allows the loaded CI machine 3 s.
 BOUND_S = 3.0
 LAMPS = [f"lamps.Channel 1-8.Output {k}" for k in range(1, 9)]

@@ -25,9 +25,9 @@ from ecatcfg.esi import datatypes
 from ecatcfg.compiler import topology
 from ecatcfg.esi.library import Library
 from ecatcfg.runtime import sdo_tool
-from ecatcfg.runtime.emulate import SlaveSpec, segment
+from ecatcfg.runtime.segment.emulate import SlaveSpec, segment
 from ecatcfg.runtime.link import MemoryLink
-from ecatcfg.runtime.segment import Faults, VirtualSegment
+from ecatcfg.runtime.segment.virtual import Faults, VirtualSegment
 from ecatcfg.runtime.transport import Transport
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -3,7 +3,7 @@ the tree, DC propagation delays over it.
 
 Expectations are worked out by hand from the wiring rule (a frame enters port 0 and each
 ESC takes its open ports in the order 0 -> 3 -> 1 -> 2, ETG.1000.4; SOEM ``ethercatdc.c``,
-IgH ``slave.c``) and from the delay model of ``runtime/dc_clock.py``: P on the way from
+IgH ``slave.c``) and from the delay model of ``runtime/segment/dc_clock.py``: P on the way from
 port 0 through the processing unit to the first open port, F from a port the frame comes
 back on to the next one (or out of port 0), C per cable, P to turn round in a slave with
 no open downstream port.
@@ -29,8 +29,9 @@ from conftest import EXAMPLES
 from ecatcfg.compiler import build, topology
 from ecatcfg.esc import Cmd
 from ecatcfg.esi.library import Library
-from ecatcfg.runtime import emulate, wire
-from ecatcfg.runtime.dc_clock import (CABLE_DELAY_NS, FORWARDING_DELAY_NS, PROCESSING_DELAY_NS,
+from ecatcfg.runtime import wire
+from ecatcfg.runtime.segment import emulate
+from ecatcfg.runtime.segment.dc_clock import (CABLE_DELAY_NS, FORWARDING_DELAY_NS, PROCESSING_DELAY_NS,
                                       DcModel)
 from ecatcfg.runtime.wiring import Plug
 

@@ -2,16 +2,16 @@
 
 Built from the device's ESI: the SII EEPROM image (``esi/sii.py``) backs the SII interface
 (0x0500-0x050F) and loads the configured alias and PDI control at power-on; the object
-dictionary (``runtime/objects.py``) backs the CoE SDO server and decides which
+dictionary (``runtime/segment/objects.py``) backs the CoE SDO server and decides which
 SyncManager lengths the slave accepts in SAFEOP; the mailbox
-(``runtime/mailbox_server.py``) hands each message the master writes to the protocol's
+(``runtime/segment/mailbox_server.py``) hands each message the master writes to the protocol's
 server (CoE, EoE).  Register addresses and the rules the firmware applies are those of
 ``docs/protocol-notes.md`` §2-§4 (ETG.1000.4/.6, SOES, KickCAT).
 
 The ESC's 64 KiB address space is one ``bytearray``: registers below 0x1000, process memory
 above.  Reads and writes from the wire go through :meth:`EmulatedSlave.read` and
 :meth:`EmulatedSlave.write`, which refuse what a real ESC refuses (no working counter) and
-run the side effects of the registers written.  The segment (``runtime/segment.py``) does
+run the side effects of the registers written.  The segment (``runtime/segment/virtual.py``) does
 the addressing and logical (FMMU) accesses.
 """
 
@@ -34,16 +34,16 @@ from ecatcfg.esc import (AL_ERROR_ACK, AL_ID_REQUEST, AL_STATE_MASK, AL_STATUS_E
                          sm_register)
 from ecatcfg.esc import WATCHDOG_DIVIDER_DEFAULT, WATCHDOG_TIME_DEFAULT, watchdog_base_ns
 from ecatcfg.esi.model import Device
-from ecatcfg.runtime.dc_clock import (SPEED_COUNTER_START, SPEED_FILTER_DEPTH,
+from ecatcfg.runtime.segment.dc_clock import (SPEED_COUNTER_START, SPEED_FILTER_DEPTH,
                                       TIME_FILTER_DEPTH, DcClock)
-from ecatcfg.runtime.esc_chips import GENERIC, EscChip
-from ecatcfg.runtime.syncman import SmKind, SmState
+from ecatcfg.runtime.segment.esc_chips import GENERIC, EscChip
+from ecatcfg.runtime.segment.syncman import SmKind, SmState
 
 if TYPE_CHECKING:                   # only slaves with a mailbox bring these
     from ecatcfg.eoe import IpParameters
-    from ecatcfg.runtime.mailbox_server import MailboxServer
-    from ecatcfg.runtime.objects import ObjectDictionary
-    from ecatcfg.runtime.timing import SlaveTiming
+    from ecatcfg.runtime.segment.mailbox_server import MailboxServer
+    from ecatcfg.runtime.segment.objects import ObjectDictionary
+    from ecatcfg.runtime.segment.timing import SlaveTiming
 
 MEMORY_SIZE = 0x10000
 PROCESS_RAM = 0x1000
@@ -101,7 +101,7 @@ def _overlaps(a: int, n: int, start: int, end: int) -> bool:
 # count (the address map has room for 16 of each), the DC system-time unit.  An access that
 # lies wholly inside one gets no working counter, as a real ET1100 (8 of each) answers a BWR
 # to FMMU 8-15 or SM 8-15 and an ET1200 (3 FMMUs, 4 SMs) one to FMMU 3-7 or SM 4-7
-# (ethercrab-rs/ethercrab tests/replay-ek1100-el2828-el2889.pcapng; runtime/esc_chips.py).
+# (ethercrab-rs/ethercrab tests/replay-ek1100-el2828-el2889.pcapng; runtime/segment/esc_chips.py).
 _DC_UNIT = (Reg.DC_SYSTEM_TIME, 0x0A00)
 
 
@@ -145,12 +145,12 @@ class EmulatedSlave:
         self.chip = chip
         self._absent_blocks = _absent_blocks(chip)
         self.name = name or device.type_name
-        # Why the device comes from the ENI alone (runtime/eni_device.py), else None.
+        # Why the device comes from the ENI alone (runtime/segment/eni_device.py), else None.
         self.eni_only: str | None = None
         # The time every behaviour of this slave reads (ns, monotonic): the segment's clock
         # (VirtualSegment(clock_ns=...)), wall time unless a test simulates time.
         self.clock_ns: Callable[[], int] = time.monotonic_ns
-        # How long the firmware and the EEPROM take (runtime/timing.py); None: no time.
+        # How long the firmware and the EEPROM take (runtime/segment/timing.py); None: no time.
         self.timing: SlaveTiming | None = None
         # Work in progress under the timing model, each with the clock_ns it is done at:
         # an EEPROM read, a state change, mailbox replies (settle() makes them visible).
@@ -180,7 +180,7 @@ class EmulatedSlave:
         self._watchdog_limit: float | None = None
         self._watchdog_expired = False
         # The ESC's local clock and time control loop; the segment gives each slave its
-        # drift and place on the line (runtime/dc_clock.py).
+        # drift and place on the line (runtime/segment/dc_clock.py).
         self.dc = DcClock()
         # SYNC0 start time (0x0990) minus the system time when it was written (ns).
         self.sync0_start_lead_ns: int | None = None
@@ -499,7 +499,7 @@ class EmulatedSlave:
         data = bytes(self.eeprom[2 * address:2 * address + 8])
         self.mem[Reg.EEPROM_DATA:Reg.EEPROM_DATA + 8] = data + b"\xff" * (8 - len(data))
 
-    # -- work that takes time (runtime/timing.py) --------------------------------------------
+    # -- work that takes time (runtime/segment/timing.py) --------------------------------------------
 
     @property
     def busy(self) -> bool:
@@ -618,7 +618,7 @@ class EmulatedSlave:
             return
         replies = self.mailbox.handle(message, state)
         if replies and self.timing and self.timing.mailbox_reply_ns:
-            # The firmware answers after its reply latency (runtime/timing.py).
+            # The firmware answers after its reply latency (runtime/segment/timing.py).
             self._replies.append((self.clock_ns() + self.timing.mailbox_reply_ns, replies))
             return
         self.mailbox_queue.extend(replies)
@@ -777,7 +777,7 @@ class EmulatedSlave:
             return
         delay = self.timing.transition_ns(transition) if self.timing else 0
         if delay:
-            # AL status keeps the old state until the firmware is done (runtime/timing.py).
+            # AL status keeps the old state until the firmware is done (runtime/segment/timing.py).
             self._transition = (self.clock_ns() + delay, target)
             return
         self._enter(target)

@@ -29,7 +29,7 @@ from typing import TYPE_CHECKING
 from ecatcfg.errors import EcatcfgError
 
 if TYPE_CHECKING:
-    from ecatcfg.runtime.slave import EmulatedSlave
+    from ecatcfg.runtime.segment.slave import EmulatedSlave
 
 KINDS = ("esc", "firmware", "drive")
 TRANSITIONS = ("IP", "PS", "SO", "OS", "SP", "SI", "OP", "OI", "PI")
