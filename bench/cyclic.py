@@ -105,7 +105,7 @@ def worker_ecatcfg(args: argparse.Namespace) -> dict:
             pstats.Stats(prof, stream=text).sort_stats("tottime").print_stats(25)
             out["profile"] = text.getvalue()
         else:                                               # jitter
-            from ecatcfg.runtime import realtime
+            from ecatcfg.runtime.master import realtime
             opts = realtime.options(priority=args.priority, lock_memory=True,
                                     cpus=[args.cpu], busy_wait_us=args.busy_wait)
             n = int(args.seconds * 1000)
@@ -222,7 +222,7 @@ def pcts(values: list[float], absolute: bool = False) -> dict[str, float]:
 
 def deviation(periods: list[float]) -> dict[str, float]:
     """The same figure as CycleStats.jitter: |period - median period|, p50/p99/max."""
-    from ecatcfg.runtime.cyclic import CycleStats
+    from ecatcfg.runtime.master.cyclic import CycleStats
     st = CycleStats()
     for p in periods:
         st.add_period(p)

@@ -268,7 +268,7 @@ def sdo_round_trips(cmd, mbx_out: int) -> int:
 def packed_frames(sizes: list[int]) -> int:
     """Frames for datagrams of these sizes (header + data + WKC) packed in order, as
     ``runtime.transport.pack`` does."""
-    from ecatcfg.runtime.transport import FRAME_DATA_LIMIT
+    from ecatcfg.runtime.master.transport import FRAME_DATA_LIMIT
     frames, used = 0, FRAME_DATA_LIMIT + 1
     for size in sizes:
         if used + size > FRAME_DATA_LIMIT:

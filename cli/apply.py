@@ -8,9 +8,9 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:
     from ecatcfg.cli.report import ApplyReport
     from ecatcfg.eni.plan import NetworkPlan
-    from ecatcfg.runtime.master import Event
+    from ecatcfg.runtime.master.bringup import Event
     from ecatcfg.runtime.network import Network
-    from ecatcfg.runtime.realtime import RealtimeOptions
+    from ecatcfg.runtime.master.realtime import RealtimeOptions
     from ecatcfg.runtime.service import Notifier
 
 STATES = {"init": 1, "preop": 2, "safeop": 4, "op": 8}
@@ -114,7 +114,7 @@ def _run(args: argparse.Namespace, ctx: _Run) -> int:
     from ecatcfg.eni import cache as eni_cache
     from ecatcfg.errors import EcatcfgError, UsageError
     from ecatcfg.esc import AlState
-    from ecatcfg.runtime.master import Event, check_requests
+    from ecatcfg.runtime.master.bringup import Event, check_requests
     from ecatcfg.runtime.network import Network
     from ecatcfg.runtime.service import Notifier
 
@@ -126,7 +126,7 @@ def _run(args: argparse.Namespace, ctx: _Run) -> int:
         raise UsageError("--prefer ranks files of --esi: give them with --esi")
     if args.cycles is not None and args.cycles < 0:
         raise UsageError(f"--cycles {args.cycles}: must be 0 or more")
-    from ecatcfg.runtime.master import DC_THRESHOLD_NS, DC_TIMEOUT_S, check_dc_wait
+    from ecatcfg.runtime.master.bringup import DC_THRESHOLD_NS, DC_TIMEOUT_S, check_dc_wait
     dc_threshold: int = DC_THRESHOLD_NS if args.dc_threshold is None else args.dc_threshold
     dc_timeout: float = DC_TIMEOUT_S if args.dc_timeout is None else args.dc_timeout
     try:
@@ -138,7 +138,7 @@ def _run(args: argparse.Namespace, ctx: _Run) -> int:
     if realtime is not None:
         # Try them once here, undone at once: a refusal is reported before a frame is sent
         # (the cycling thread applies them again for the run).
-        from ecatcfg.runtime.realtime import apply as apply_realtime
+        from ecatcfg.runtime.master.realtime import apply as apply_realtime
         apply_realtime(realtime)()
     if args.pcap:
         output_file(args.pcap)
@@ -235,7 +235,7 @@ def _realtime_options(args: argparse.Namespace) -> RealtimeOptions | None:
             and not args.busy_wait:
         return None
     from ecatcfg.errors import UsageError
-    from ecatcfg.runtime import realtime
+    from ecatcfg.runtime.master import realtime
     try:
         cpus = realtime.parse_cpus(args.cpu) if args.cpu is not None else None
         return realtime.options(args.rt_priority, args.lock_memory, cpus, args.busy_wait)

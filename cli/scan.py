@@ -87,8 +87,8 @@ def run(args: argparse.Namespace) -> int:
             print(f"warning: {problem}", file=sys.stderr)
 
     from ecatcfg.runtime.link import RawLink
-    from ecatcfg.runtime.scan import scan
-    from ecatcfg.runtime.transport import Transport
+    from ecatcfg.runtime.master.scan import scan
+    from ecatcfg.runtime.master.transport import Transport
     from ecatcfg.esc import PORT_LETTERS
 
     with RawLink(args.iface) as link:

@@ -52,7 +52,7 @@ def run(args: argparse.Namespace) -> int:
 
     from ecatcfg.errors import UsageError
 
-    from ecatcfg.runtime import sdo_tool
+    from ecatcfg.runtime.master import sdo_tool
 
     try:
         index, sub = sdo_tool.parse_address(args.address)
@@ -93,7 +93,7 @@ def run(args: argparse.Namespace) -> int:
             raise UsageError("nothing to write: VALUE encodes to 0 bytes")
 
     from ecatcfg.runtime.link import RawLink
-    from ecatcfg.runtime.transport import Transport
+    from ecatcfg.runtime.master.transport import Transport
 
     info = sdo_tool.SlaveMailbox(args.slave)
     with RawLink(args.iface) as link:

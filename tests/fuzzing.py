@@ -97,7 +97,7 @@ def located_on_line(exc: EcatcfgError) -> bool:
     """An error of the master or the emulation names a slave or a command, or is about
     the whole line (nothing answered, the line does not match the ENI); an error about the
     ENI names its file and line."""
-    from ecatcfg.runtime.replay import ApplyError
+    from ecatcfg.runtime.master.replay import ApplyError
     if isinstance(exc, ApplyError):
         return True
     return bool(exc.file and exc.line) or "slave" in exc.message
@@ -667,7 +667,7 @@ class LoopLink:
 def short_waits() -> Iterator[None]:
     """Every wait of the master fires after at most :data:`SHORT_WAIT_S`: a timeout that
     fires is an allowed outcome, and waiting it out in full would only slow the campaign."""
-    from ecatcfg.runtime import master, replay, scan
+    from ecatcfg.runtime.master import bringup as master, replay, scan
     saved = [(m, n, getattr(m, n)) for m, n in (
         (replay, "TIMEOUT_COMMAND"), (replay, "TIMEOUT_STATE"), (replay, "TIMEOUT_VALIDATE"),
         (replay, "TIMEOUT_MAILBOX"), (master, "TIMEOUT_COMMAND"), (scan, "EEPROM_TIMEOUT"))]

@@ -13,7 +13,7 @@ from conftest import EXAMPLES
 from ecatcfg.cli import main
 from ecatcfg.eni.plan import InitCmd
 from ecatcfg.esc import Cmd, Transition
-from ecatcfg.runtime.replay import ApplyError, init_cmd_name
+from ecatcfg.runtime.master.replay import ApplyError, init_cmd_name
 
 ESI = EXAMPLES / "esi"
 

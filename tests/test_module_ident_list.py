@@ -31,7 +31,7 @@ from ecatcfg.esc import AlState
 from ecatcfg.esi.library import Library
 from ecatcfg.esi.lint import LintOptions, Target, lint_file, select_rules
 from ecatcfg.runtime.network import Network
-from ecatcfg.runtime.replay import ApplyError
+from ecatcfg.runtime.master.replay import ApplyError
 from lint_fixtures import drive, esi, init_cmd, marked_line
 
 COUPLER = FIXTURES / "ecatcfg-EXK-coupler.xml"

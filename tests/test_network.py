@@ -22,13 +22,13 @@ from ecatcfg.errors import EcatcfgError
 from ecatcfg.esc import AlState, Cmd, Transition
 from ecatcfg.esi.library import Library
 from ecatcfg.runtime import Network, wire
-from ecatcfg.runtime.cyclic import CyclicFrames
+from ecatcfg.runtime.master.cyclic import CyclicFrames
 from ecatcfg.runtime.link import MemoryLink
-from ecatcfg.runtime.lockstep import run_jobs
-from ecatcfg.runtime.master import Master, VerifyError
-from ecatcfg.runtime.replay import ApplyError, init_cmd_job
+from ecatcfg.runtime.master.lockstep import run_jobs
+from ecatcfg.runtime.master.bringup import Master, VerifyError
+from ecatcfg.runtime.master.replay import ApplyError, init_cmd_job
 from ecatcfg.runtime.segment.virtual import Faults
-from ecatcfg.runtime.transport import Transport
+from ecatcfg.runtime.master.transport import Transport
 
 ESI = EXAMPLES / "esi"
 

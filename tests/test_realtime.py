@@ -1,5 +1,5 @@
-"""The real-time options of the cycling thread (runtime/realtime.py, docs/runtime.md
-"Real-time options") and the cyclic hot path they run (runtime/cyclic.py):
+"""The real-time options of the cycling thread (runtime/master/realtime.py, docs/runtime.md
+"Real-time options") and the cyclic hot path they run (runtime/master/cyclic.py):
 
 - the options reach the cycling thread (read back with os.sched_getscheduler /
   sched_getaffinity / /proc VmLck from inside it) and are undone after the run;
@@ -31,7 +31,8 @@ from ecatcfg.eni import writer as eni_writer
 from ecatcfg.errors import UsageError
 from ecatcfg.esc import AlState, Cmd
 from ecatcfg.esi.library import Library
-from ecatcfg.runtime import Network, realtime, wire
+from ecatcfg.runtime import Network, wire
+from ecatcfg.runtime.master import realtime
 
 ESI = EXAMPLES / "esi"
 CYCLE_US = 1000

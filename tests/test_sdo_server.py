@@ -20,7 +20,7 @@ from ecatcfg.runtime.mailbox import (
     pad_to,
 )
 from ecatcfg.runtime.segment.objects import ObjectDictionary, OdEntry, OdObject
-from ecatcfg.runtime.sdo_client import SdoDownload, SdoUpload
+from ecatcfg.runtime.master.sdo_client import SdoDownload, SdoUpload
 from ecatcfg.runtime.segment.mailbox_server import MailboxServer
 from ecatcfg.runtime.segment.sdo_server import SdoServer
 from conftest import device_xml, esi_xml

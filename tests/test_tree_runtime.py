@@ -230,7 +230,7 @@ class SimLink:
 def on_segment(drives, plan, plugs=None, cut=(), dc=None):
     """A Master for ``plan`` on a segment of its slaves plugged as the ENI says, or as
     ``plugs`` (name -> (parent name, letter)) says, with the cables into ``cut`` removed."""
-    from ecatcfg.runtime.master import Master
+    from ecatcfg.runtime.master.bringup import Master
     _, library = drives
     specs = emulate.specs_from_eni(plan, library, "tree")
     if plugs is not None:
@@ -272,7 +272,7 @@ def test_a_tree_eni_reaches_op_on_the_virtual_segment(drives):
 
 
 def _verify_error(master, link):
-    from ecatcfg.runtime.master import VerifyError
+    from ecatcfg.runtime.master.bringup import VerifyError
     with pytest.raises(VerifyError) as err:
         master.scan_and_verify()
     written = {d.ado for f in link.sent for d in wire.decode(f).datagrams

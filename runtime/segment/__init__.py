@@ -10,6 +10,6 @@ devices, or from an ENI alone (``eni_device.py``).
 
 This side follows the hardware, not our master: it imports the shared codec
 (``runtime/wire.py``, ``mailbox.py``, ``link.py``, ``wiring.py``) and never
-:mod:`ecatcfg.runtime.master` (import-linter contract in ``pyproject.toml``,
+:mod:`ecatcfg.runtime.master.bringup` (import-linter contract in ``pyproject.toml``,
 ``docs/architecture.md``).
 """

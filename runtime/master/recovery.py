@@ -37,16 +37,16 @@ from ecatcfg.esc import (AL_ERROR_ACK, AL_STATE_MASK, AL_STATUS_ERROR, AUTO_INCR
                          REGISTER_READS, REGISTER_WRITES, AlState, Cmd, FmmuConfig, FmmuType,
                          Reg, Transition, al_state_name, al_status_name, wkc_increment)
 from ecatcfg.record import field, record
-from ecatcfg.runtime import hotconnect
-from ecatcfg.runtime.hotconnect import at_position
-from ecatcfg.runtime.lockstep import Job, Pending, Step, one_round, start, until_answered
-from ecatcfg.runtime.replay import (TIMEOUT_COMMAND, TIMEOUT_STATE, ApplyError,
+from ecatcfg.runtime.master import hotconnect
+from ecatcfg.runtime.master.hotconnect import at_position
+from ecatcfg.runtime.master.lockstep import Job, Pending, Step, one_round, start, until_answered
+from ecatcfg.runtime.master.replay import (TIMEOUT_COMMAND, TIMEOUT_STATE, ApplyError,
                                     MailboxChannel, slave_transition_job)
 from ecatcfg.runtime.wire import Datagram
 
 if TYPE_CHECKING:
-    from ecatcfg.runtime.cyclic import CyclicFrames, _Slot
-    from ecatcfg.runtime.master import Master
+    from ecatcfg.runtime.master.cyclic import CyclicFrames, _Slot
+    from ecatcfg.runtime.master.bringup import Master
 
 PROBE_INTERVAL = 0.1           # s between looks for the slaves that are offline
 DIAGNOSE_INTERVAL = 0.02       # s at least between two AL status reads of every slave
@@ -145,7 +145,7 @@ class Supervisor:
 
     def __init__(self, master: Master, absent_groups: set[str] | None = None) -> None:
         """``absent_groups``: the heads of the hot-connect groups that were not on the line
-        at start-up (``runtime/hotconnect.py``); their slaves start offline."""
+        at start-up (``runtime/master/hotconnect.py``); their slaves start offline."""
         self.master = master
         self.groups = hotconnect.groups(master.plan.slaves)
         self.absent_groups = set(absent_groups or ())
@@ -456,7 +456,7 @@ class Supervisor:
         slave = at_position(plan, position)
         master = self.master
         try:
-            from ecatcfg.runtime.scan import FoundSlave, compare, identity_job
+            from ecatcfg.runtime.master.scan import FoundSlave, compare, identity_job
             found: dict[int, FoundSlave] = {}
             yield from identity_job(position, found)
             got = found[position]

@@ -27,7 +27,7 @@ from ecatcfg.esc import AL_STATE_MASK, AlState, Cmd, Reg, Transition
 
 if TYPE_CHECKING:
     from ecatcfg.eni.plan import InitCmd, NetworkPlan, SlavePlan
-    from ecatcfg.runtime.master import SlaveState
+    from ecatcfg.runtime.master.bringup import SlaveState
 
 # Writes that reach a slave's register: addressed to it (auto-increment or configured
 # address), or to every slave (broadcast; the master's InitCmds).

@@ -25,11 +25,11 @@ from ecatcfg.errors import EcatcfgError
 from ecatcfg.esc import (AL_STATUS_ERROR, SM1_STATUS, SM_ACTIVATE_REPEAT, SM_PDI_REPEAT_ACK, Cmd,
                          Reg, Transition, al_state_name, al_status_name)
 from ecatcfg.record import record
-from ecatcfg.runtime.lockstep import Job, Step, until_answered
+from ecatcfg.runtime.master.lockstep import Job, Step, until_answered
 from ecatcfg.runtime.wire import Datagram, datagram_for
 
 if TYPE_CHECKING:     # imported where used: only ENIs with CoE InitCmds need the SDO client
-    from ecatcfg.runtime.sdo_client import SdoDownload, SdoUpload
+    from ecatcfg.runtime.master.sdo_client import SdoDownload, SdoUpload
 
 Transaction = TypeVar("Transaction", bound="SdoDownload | SdoUpload")
 
@@ -278,7 +278,7 @@ class MailboxChannel:
 
 def sdo_job(channel: MailboxChannel, transaction: Transaction, who: str | None,
             what: str | None, timeout: float = TIMEOUT_MAILBOX) -> Step[Transaction]:
-    """One SDO transfer (``runtime/sdo_client.py`` transaction) through the mailbox."""
+    """One SDO transfer (``runtime/master/sdo_client.py`` transaction) through the mailbox."""
     from ecatcfg.runtime.mailbox import MailboxProtocolError, SdoAbort
 
     deadline = time.monotonic() + timeout
@@ -299,7 +299,7 @@ def sdo_job(channel: MailboxChannel, transaction: Transaction, who: str | None,
 
 def coe_init_cmd_job(channel: MailboxChannel, cmd: CoeInitCmd, who: str | None,
                      progress: SlaveProgress | None = None) -> Job:
-    from ecatcfg.runtime.sdo_client import SdoDownload, SdoUpload
+    from ecatcfg.runtime.master.sdo_client import SdoDownload, SdoUpload
 
     what = cmd.comment.strip() and cmd.comment or f"SDO 0x{cmd.index:04X}:{cmd.subindex:02X}"
     if progress is not None:
@@ -408,7 +408,7 @@ def slave_transition_job(slave: SlavePlan, transition: Transition,
     if mailbox is not None and (coe or eoe):
         channel = channel or MailboxChannel(slave.phys_addr, mailbox)
         if coe:                     # a station's plugged modules, before they are configured
-            from ecatcfg.runtime.modules import check_modules
+            from ecatcfg.runtime.master.modules import check_modules
             yield from check_modules(channel, slave, transition, who)
         for c in coe:
             yield from _failing(c, coe_init_cmd_job(channel, c, who, progress))
