@@ -657,7 +657,7 @@ def run(args: argparse.Namespace, tmp: Path) -> None:
 
     # In process: the same line configured by replaying SOEM's frames, process() alone.
     from ecatcfg.compiler import topology
-    from ecatcfg.compiler.resolve import plugged_devices
+    from ecatcfg.compiler.plugged import plugged_devices
     from ecatcfg.esi.library import Library
     from ecatcfg.runtime.segment import emulate
     lib = Library([str(ESI_DIR)], cache=False)

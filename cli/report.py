@@ -20,7 +20,8 @@ if TYPE_CHECKING:                   # rich and the runtime are imported where th
 
     from ecatcfg.eni.derive import Derived
 
-    from ecatcfg.runtime.master.bringup import Event, SlaveState
+    from ecatcfg.runtime.master.bringup import Event
+    from ecatcfg.runtime.master.reached import SlaveState
     from ecatcfg.runtime.network import Network
     from ecatcfg.runtime.master.replay import SlaveProgress
     from ecatcfg.runtime.master.scan import FoundSlave

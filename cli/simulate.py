@@ -106,7 +106,7 @@ def run(args: argparse.Namespace) -> int:
         # segment emulates the devices it resolved.
         from ecatcfg.compiler import topology
         from ecatcfg.compiler.passive import split
-        from ecatcfg.compiler.resolve import plugged_devices
+        from ecatcfg.compiler.plugged import plugged_devices
         from ecatcfg.runtime.wiring import Plug
         # Unknown keys are reported with the errors resolving the rest finds.
         loaded = topology.load(args.topology, unknown_keys="defer")

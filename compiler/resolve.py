@@ -17,7 +17,7 @@ from ecatcfg.eni.plan import CoeInitCmd, EoeInitCmd, PdoDesc, PdoEntryDesc
 from ecatcfg.eni.standard import Watchdogs
 from ecatcfg.compiler import eoe_params, watchdogs, wiring
 from ecatcfg.compiler.topology import (LoadedTopology, MappingEntry, MappingVariable, Sdo,
-                                       Slave, TopologyError)
+                                       Slave)
 from ecatcfg.errors import EcatcfgError
 from ecatcfg.esc import MAX_PDO_ENTRIES, MODULE_IDENT_LIST, SM_PDO_ASSIGN, Transition
 from ecatcfg.esi import datatypes
@@ -29,7 +29,7 @@ from ecatcfg.esi.model import CoeInitCmd as EsiCoeInitCmd
 from ecatcfg.esi.model import DcOpMode, Device, Dictionary, Module, Pdo
 from ecatcfg.esi.physics import DEFAULT_PHYSICS
 from ecatcfg.esi.slots import (PluggedModule, fits, ident_list, ident_list_data,
-                               module_dictionaries, plug, with_modules)
+                               module_dictionaries, plug)
 from ecatcfg.record import replace
 
 
@@ -144,47 +144,6 @@ def resolve_all(loaded: LoadedTopology, library: Library
     errors.items += wiring_errors
     resolved.sort(key=lambda r: r.position)
     return resolved, errors.items, tree.notes
-
-
-@dataclass(frozen=True, slots=True)
-class PluggedDevice:
-    """A topology slave's device as it sits in the network: with the PDOs and dictionaries
-    of the modules the topology plugs into its slots (what a virtual segment emulates), and
-    where it is plugged: the bus position of its parent and the parent's ESC port (0-3;
-    ``None`` for the first slave, which the master is plugged into, through its port 0)."""
-
-    name: str
-    device: Device
-    alias: int = 0
-    parent: int | None = None
-    parent_port: int | None = None
-    # ESI errors that change what compile writes, let through by ``allow_esi_errors``.
-    esi_warnings: tuple[EcatcfgError, ...] = ()
-
-
-def plugged_devices(loaded: LoadedTopology, library: Library,
-                    allow_esi_errors: bool = False) -> list[PluggedDevice]:
-    """The devices of a topology's slaves in bus order (auto-increment positions 0, 1, ...:
-    the frame's path through the tree), after the same checks as a compile (an unknown
-    device, a module that does not fit its slot, a port that cannot be plugged is an error at
-    its line).  A slave's ``parent`` is an index into this list, always a smaller one.
-    Passive terminals (no ESC, ``compiler/passive.py``) are not in it: nothing to emulate.
-    An ESI error that would stop a compile (``compiler/esi_errors.py``) stops this too,
-    or with ``allow_esi_errors`` is in the device's ``esi_warnings``."""
-    from ecatcfg.compiler.esi_errors import slave_errors
-    from ecatcfg.compiler.passive import split
-    parts = split(loaded, library)
-    resolved, errors, _ = resolve_all(parts.active, library)
-    errors = parts.errors + errors
-    defects = [slave_errors(parts.active, r, library, allow_esi_errors) for r in resolved]
-    if not allow_esi_errors:
-        errors += [e for found in defects for e in found]
-    if errors:
-        raise TopologyError(errors)
-    return [PluggedDevice(r.name, with_modules(r.device, r.modules), r.cfg.alias or 0,
-                          r.parent, r.parent_port,
-                          tuple(found) if allow_esi_errors else ())
-            for r, found in zip(resolved, defects)]
 
 
 def _find_device(cfg: Slave, index: int, library: Library, errors: _Errors

@@ -20,7 +20,7 @@ from rig import serve_in_memory, start_simulate
 from lxml import etree
 
 from ecatcfg.compiler import build, topology
-from ecatcfg.compiler.resolve import plugged_devices
+from ecatcfg.compiler.plugged import plugged_devices
 from ecatcfg.compiler.topology import TopologyError
 from ecatcfg.eni import reader as eni_reader
 from ecatcfg.eni import writer as eni_writer

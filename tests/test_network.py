@@ -252,7 +252,7 @@ def test_modular_devices_are_emulated_with_their_modules(corpus, slave, source):
     """simulate --topology plugs the topology's modules; simulate --eni takes the modules
     from the ENI (its 0xF030 list, else accepting what its startup SDOs write) and the PDOs
     it lists.  Either way the compiled ENI brings the slave to OP."""
-    from ecatcfg.compiler.resolve import plugged_devices
+    from ecatcfg.compiler.plugged import plugged_devices
     from ecatcfg.runtime.segment import emulate
     lib = Library([corpus / "esi"], cache=False)
     loaded = topology.loads(f"slaves:\n  - {slave}\n", "t.yaml")

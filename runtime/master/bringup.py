@@ -23,17 +23,18 @@ from typing import TYPE_CHECKING
 
 from ecatcfg.eni.plan import NetworkPlan, SlavePlan
 from ecatcfg.esc import (AL_ERROR_ACK, AL_STATE_MASK, AL_STATUS_ERROR, ESC_FEATURE_DC,
-                         AlState, Cmd, Reg, Transition, al_state_name)
+                         AlState, Cmd, Reg, Transition)
 from ecatcfg.record import record
 from ecatcfg.runtime.master import hotconnect
 from ecatcfg.runtime.master.cyclic import CyclicFrames
 from ecatcfg.runtime.master.lockstep import Job, Step, run_jobs, until_answered
-from ecatcfg.runtime.master.reached import (EXPLAIN, describe_missing, missing_requests,
-                                     not_reached)
+from ecatcfg.runtime.master.reached import (EXPLAIN, SlaveState, describe_missing,
+                                            missing_requests, not_reached)
 from ecatcfg.runtime.master.replay import (TIMEOUT_COMMAND, ApplyError, MailboxChannel,
-                                    SlaveProgress, mailbox_init_cmds, master_job,
-                                    slave_transition_job)
+                                           SlaveProgress)
 from ecatcfg.runtime.master.scan import FoundSlave, Mismatch, scan, verify
+from ecatcfg.runtime.master.transition import (mailbox_init_cmds, master_job,
+                                               slave_transition_job)
 from ecatcfg.runtime.master.transport import Transport, pack
 from ecatcfg.runtime.wire import Datagram
 from ecatcfg.runtime.wiring import CHILD_PORTS, active_ports
@@ -75,17 +76,6 @@ class VerifyError(ApplyError):
                          "configured\n  pos  expected (ENI)" + " " * 35 + "found" + " " * 28
                          + "problem\n" + "\n".join(lines))
         self.mismatches = mismatches
-
-
-@record(frozen=True)
-class SlaveState:
-    state: int                 # AL status bits 0-3
-    error: bool
-    code: int                  # AL status code (0x0134)
-
-    @property
-    def name(self) -> str:
-        return al_state_name(self.state | (AL_STATUS_ERROR if self.error else 0))
 
 
 @record
