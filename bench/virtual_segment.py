@@ -10,8 +10,8 @@ Method (target: median round trip within 3x of the bare echo):
      / ``vb`` (B), IPv6 off.  Both are deleted at the end, also on errors and Ctrl-C.
   2. In B, ``python -m ecatcfg simulate`` serves a 64-slave line of the example devices
      (coupler + EX1004 / EX2008 / EX1008 repeating; EXD-402 CiA 402 drives too when the CoE
-     runtime, ``runtime/segment/objects.py`` + ``runtime/segment/sdo_server.py``, exists).  A recorder in B
-     keeps a copy of every frame the master sends while it configures the line.
+     runtime, ``runtime/segment/objects.py`` + ``runtime/segment/sdo_server.py``, exists).
+     A recorder in B keeps a copy of every frame the master sends while it configures the line.
   3. In A, SOEM (pysoem) configures the line: config_init, config_map, SAFEOP, process
      data, OP; it reports the IOmap size and its expected WKC and leaves (no INIT request).
      The LRW frame SOEM sends for that IOmap (LRW, logical address 0, IOmap-size bytes) is

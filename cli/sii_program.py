@@ -80,7 +80,7 @@ def program(iface: str, position: int, image: bytes, *, backup: str | None, forc
     With ``alias``, ``image`` is ignored: the current image with SII word 4 = ``alias``."""
     from ecatcfg.fileio import write_atomic
     from ecatcfg.runtime.master.eeprom import (InterruptedWrite, alias_image, fix_checksum,
-                                        identity)
+                                               identity)
 
     where = f"position {position}"
     saved = backup_path(backup, position)

@@ -34,7 +34,7 @@ from ecatcfg.errors import EcatcfgError
 from ecatcfg.esc import AlState
 from ecatcfg.record import record
 from ecatcfg.runtime.master.bringup import (DC_THRESHOLD_NS, DC_TIMEOUT_S, Event, Master,
-                                    check_requests)
+                                            check_requests)
 from ecatcfg.runtime.master.replay import ApplyError
 
 if TYPE_CHECKING:                   # imported where used: `import ecatcfg.runtime` stays light

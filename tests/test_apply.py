@@ -48,7 +48,7 @@ from ecatcfg.runtime.segment import emulate
 from ecatcfg.runtime.link import MemoryLink
 from ecatcfg.runtime.network import Network
 from ecatcfg.runtime.master.replay import (TIMEOUT_COMMAND, TIMEOUT_MAILBOX, ApplyError,
-                                    command_timeout)
+                                           command_timeout)
 from ecatcfg.runtime.master.scan import EEPROM_TIMEOUT
 from ecatcfg.runtime.segment.virtual import Faults
 

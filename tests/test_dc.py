@@ -46,8 +46,8 @@ from ecatcfg.esi.library import Library
 from ecatcfg.runtime import Network, wire
 from ecatcfg.runtime.segment import emulate
 from ecatcfg.runtime.master import bringup as master_module
-from ecatcfg.runtime.segment.dc_clock import (CABLE_DELAY_NS, FORWARDING_DELAY_NS, PROCESSING_DELAY_NS,
-                                      DcModel)
+from ecatcfg.runtime.segment.dc_clock import (CABLE_DELAY_NS, FORWARDING_DELAY_NS,
+                                              PROCESSING_DELAY_NS, DcModel)
 from ecatcfg.runtime.master.bringup import DC_THRESHOLD_NS, DcSyncError
 
 ESI = EXAMPLES / "esi"

@@ -1,6 +1,6 @@
-"""Slaves that take time (runtime/segment/timing.py): mailbox replies, state changes and EEPROM reads
-become visible only after the table's times, on a simulated clock in memory; our master and
-SOEM still bring a realistic line to OP.
+"""Slaves that take time (runtime/segment/timing.py): mailbox replies, state changes and
+EEPROM reads become visible only after the table's times, on a simulated clock in memory;
+our master and SOEM still bring a realistic line to OP.
 
 The expected figures are the table's (docs/timing.md: measured in captures of real slaves by
 bench/capture_timing.py), the register values those of the captures: a busy EEPROM reads

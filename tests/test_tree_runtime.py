@@ -31,8 +31,8 @@ from ecatcfg.esc import Cmd
 from ecatcfg.esi.library import Library
 from ecatcfg.runtime import wire
 from ecatcfg.runtime.segment import emulate
-from ecatcfg.runtime.segment.dc_clock import (CABLE_DELAY_NS, FORWARDING_DELAY_NS, PROCESSING_DELAY_NS,
-                                      DcModel)
+from ecatcfg.runtime.segment.dc_clock import (CABLE_DELAY_NS, FORWARDING_DELAY_NS,
+                                              PROCESSING_DELAY_NS, DcModel)
 from ecatcfg.runtime.wiring import Plug
 
 ESI = EXAMPLES / "esi"

@@ -33,8 +33,7 @@ from ecatcfg.runtime.master.reached import (EXPLAIN, SlaveState, describe_missin
 from ecatcfg.runtime.master.replay import (TIMEOUT_COMMAND, ApplyError, MailboxChannel,
                                            SlaveProgress)
 from ecatcfg.runtime.master.scan import FoundSlave, Mismatch, scan, verify
-from ecatcfg.runtime.master.transition import (mailbox_init_cmds, master_job,
-                                               slave_transition_job)
+from ecatcfg.runtime.master.transition import mailbox_init_cmds, master_job, slave_transition_job
 from ecatcfg.runtime.master.transport import Transport, pack
 from ecatcfg.runtime.wire import Datagram
 from ecatcfg.runtime.wiring import CHILD_PORTS, active_ports

@@ -38,10 +38,8 @@ from ecatcfg.esc import (AL_ERROR_ACK, AL_STATE_MASK, AL_STATUS_ERROR, MAILBOX_P
                          SmConfig, al_state_name, al_status_name, mailbox_protocol_names)
 from ecatcfg.runtime.master.lockstep import Job, Step, run_jobs
 from ecatcfg.runtime.mailbox import NORMAL_OVERHEAD, abort_name
-from ecatcfg.runtime.master.replay import (
-    ERROR_GRACE, TIMEOUT_COMMAND, TIMEOUT_MAILBOX, TIMEOUT_STATE, ApplyError, MailboxChannel,
-    sdo_job,
-)
+from ecatcfg.runtime.master.replay import (ERROR_GRACE, TIMEOUT_COMMAND, TIMEOUT_MAILBOX,
+                                           TIMEOUT_STATE, ApplyError, MailboxChannel, sdo_job)
 from ecatcfg.runtime.master.scan import count_slaves, sii_words
 from ecatcfg.runtime.master.transport import Transport
 from ecatcfg.runtime.wire import Datagram

@@ -35,7 +35,7 @@ from ecatcfg.esc import (AL_ERROR_ACK, AL_ID_REQUEST, AL_STATE_MASK, AL_STATUS_E
 from ecatcfg.esc import WATCHDOG_DIVIDER_DEFAULT, WATCHDOG_TIME_DEFAULT, watchdog_base_ns
 from ecatcfg.esi.model import Device
 from ecatcfg.runtime.segment.dc_clock import (SPEED_COUNTER_START, SPEED_FILTER_DEPTH,
-                                      TIME_FILTER_DEPTH, DcClock)
+                                              TIME_FILTER_DEPTH, DcClock)
 from ecatcfg.runtime.segment.esc_chips import GENERIC, EscChip
 from ecatcfg.runtime.segment.syncman import SmKind, SmState
 
@@ -499,7 +499,7 @@ class EmulatedSlave:
         data = bytes(self.eeprom[2 * address:2 * address + 8])
         self.mem[Reg.EEPROM_DATA:Reg.EEPROM_DATA + 8] = data + b"\xff" * (8 - len(data))
 
-    # -- work that takes time (runtime/segment/timing.py) --------------------------------------------
+    # -- work that takes time (runtime/segment/timing.py) ------------------------------------
 
     @property
     def busy(self) -> bool:

@@ -36,7 +36,7 @@ from ecatcfg.esc import (AUTO_INCREMENT_CMDS, BROADCAST_CMDS, CONFIGURED_ADDRESS
                          FmmuType, Reg)
 from ecatcfg.runtime.segment.dc_clock import DcModel
 from ecatcfg.runtime.segment.slave import (MEMORY_SIZE, PROCESS_RAM, RUNNING_STATES, EmulatedSlave,
-                                   StateChange)
+                                           StateChange)
 from ecatcfg.runtime.segment.syncman import SmKind, SmState
 from ecatcfg.runtime.wiring import Wiring
 from ecatcfg.runtime.wire import DG_HEADER_LEN, FrameError, datagram_offsets
