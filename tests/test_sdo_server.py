@@ -19,7 +19,8 @@ from ecatcfg.runtime.mailbox import (
     MbxErrorDetail, MbxType, SdoAbort, SdoInfo, UploadResponse, UploadSegment, decode,
     pad_to,
 )
-from ecatcfg.runtime.segment.objects import ObjectDictionary, OdEntry, OdObject
+from ecatcfg.runtime.segment.od_entries import OdEntry, OdObject
+from ecatcfg.runtime.segment.objects import ObjectDictionary
 from ecatcfg.runtime.master.sdo_client import SdoDownload, SdoUpload
 from ecatcfg.runtime.segment.mailbox_server import MailboxServer
 from ecatcfg.runtime.segment.sdo_server import SdoServer

@@ -113,7 +113,7 @@ def _add_written_objects(od: ObjectDictionary, writes: list[Write]) -> None:
     carries no count, so its data becomes one octet-string entry, subindex 1, that a
     complete access from subindex 1 writes and reads back whole (our choice: nothing says
     how the bytes split into entries)."""
-    from ecatcfg.runtime.segment.objects import OdEntry, OdObject
+    from ecatcfg.runtime.segment.od_entries import OdEntry, OdObject
 
     sizes: dict[tuple[int, int], set[int]] = {}
     for w in writes:
@@ -155,7 +155,7 @@ def _detected_modules(od: ObjectDictionary, idents: list[int]) -> None:
     """The station's detected module ident list (0xF050; ETG.5001): the idents of the
     modules plugged, by position, read-only; and room in the configured list (0xF030) the
     master downloads.  Objects the ESI dictionary declares keep their size."""
-    from ecatcfg.runtime.segment.objects import OdEntry, OdObject
+    from ecatcfg.runtime.segment.od_entries import OdEntry, OdObject
 
     for index, name, access in ((MODULE_IDENT_LIST, "Configured module ident list", "rw"),
                                 (DETECTED_MODULE_IDENT_LIST, "Detected module ident list",
