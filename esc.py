@@ -53,8 +53,8 @@ def wkc_increment(cmd: int, read: bool, written: bool) -> int:
     counter"): a read or a write adds 1; a read-write command (APRW, FPRW, BRW, LRW) adds 1
     for the read and 2 for the write; ARMW/FRMW add 1 in every slave (the reader and
     the writers alike, so pass ``read``).  The master's expectations (compiler/layout.py,
-    runtime/recovery.py) follow this; the emulated ESCs (runtime/segment.py) count the
-    same inline, in their per-frame loop."""
+    runtime/master/recovery.py) follow this; the emulated ESCs (runtime/segment/virtual.py)
+    count the same inline, in their per-frame loop."""
     if cmd in READ_WRITE_CMDS:
         return int(read) + 2 * int(written)
     return int(read or written)

@@ -1,5 +1,5 @@
 """Slave timing measured in wire captures of real hardware: the figures behind the timing
-model's table (``runtime/timing.py``, ``docs/timing.md``) and its fit per device kind.
+model's table (``runtime/segment/timing.py``, ``docs/timing.md``) and its fit per device kind.
 
 Run: ``python3 bench/capture_timing.py [CAPTURE.pcapng ...] [--events]``; without captures,
 every capture of both test corpora (the ``pcap/`` folders of the corpus folders named by
@@ -25,7 +25,7 @@ old value) - R(command), R(first poll that saw the new value) - Q(command)], pri
 limits the precision: a master that polls every 3 ms (TwinCAT here) gives windows of about
 3 ms.
 
-**Device kind** (``runtime/timing.py`` ``kind_of``): from the device's ESI in the corpora
+**Device kind** (``runtime/segment/timing.py`` ``kind_of``): from the device's ESI in the corpora
 (the exact revision, else the nearest of the same product), emulated and classified as the
 timing model classifies it.  A device no ESI of the corpora describes is classified by the
 same rule read from its SII (a real EEPROM dump of the corpus with its vendor and product,
@@ -69,7 +69,7 @@ READS = {FPRD, APRD}
 WRITES = {FPWR, APWR}
 MBX_TYPES = {1: "AoE", 2: "EoE", 3: "CoE", 4: "FoE", 5: "SoE", 15: "VoE"}
 STATES = {1: "INIT", 2: "PREOP", 3: "BOOT", 4: "SAFEOP", 8: "OP"}
-# The timing model's transition names (runtime/timing.py TRANSITIONS) by (from, to) state.
+# The timing model's transition names (runtime/segment/timing.py TRANSITIONS) by (from, to) state.
 TRANSITIONS = {(1, 2): "IP", (2, 4): "PS", (4, 8): "SO", (8, 4): "OS", (4, 2): "SP",
                (4, 1): "SI", (8, 2): "OP", (8, 1): "OI", (2, 1): "PI"}
 MAILBOX, EEPROM = "mailbox", "eeprom"
@@ -292,8 +292,8 @@ def classify(slave: Slave, library: Library, dumps: dict[str, bytes]) -> Device:
     same = [e for e in library.entries
             if (e.vendor_id, e.product_code) == (vendor, product)]
     if same:
-        from ecatcfg.runtime.emulate import SlaveSpec, emulated_slave
-        from ecatcfg.runtime.timing import kind_of
+        from ecatcfg.runtime.segment.emulate import SlaveSpec, emulated_slave
+        from ecatcfg.runtime.segment.timing import kind_of
         entry = (min(same, key=lambda e: (abs((e.revision or 0) - revision), e.file))
                  if revision is not None else max(same, key=lambda e: e.revision or 0))
         note = "" if entry.revision == revision else \
@@ -334,7 +334,7 @@ def sii_kind(image: SiiImage) -> str:
     bit 0 device emulation -> esc; CiA 402 channels (GENERAL category byte 0x0C, ETG.1000.6
     SII) or the control/status words in a PDO category -> drive; otherwise firmware."""
     from ecatcfg.esc import ESC_DEVICE_EMULATION
-    from ecatcfg.runtime.timing import CIA402_WORDS
+    from ecatcfg.runtime.segment.timing import CIA402_WORDS
     if image.pdi_control >> 8 & ESC_DEVICE_EMULATION:
         return "esc"
     if image.general is not None and image.general.ds402_channels:

@@ -105,7 +105,7 @@ def worker_ecatcfg(args: argparse.Namespace) -> dict:
             pstats.Stats(prof, stream=text).sort_stats("tottime").print_stats(25)
             out["profile"] = text.getvalue()
         else:                                               # jitter
-            from ecatcfg.runtime import realtime
+            from ecatcfg.runtime.master import realtime
             opts = realtime.options(priority=args.priority, lock_memory=True,
                                     cpus=[args.cpu], busy_wait_us=args.busy_wait)
             n = int(args.seconds * 1000)
@@ -222,7 +222,7 @@ def pcts(values: list[float], absolute: bool = False) -> dict[str, float]:
 
 def deviation(periods: list[float]) -> dict[str, float]:
     """The same figure as CycleStats.jitter: |period - median period|, p50/p99/max."""
-    from ecatcfg.runtime.cyclic import CycleStats
+    from ecatcfg.runtime.master.cyclic import CycleStats
     st = CycleStats()
     for p in periods:
         st.add_period(p)
@@ -378,7 +378,8 @@ def python_floor(eni: Path, esi: str, cycles: int = 100_000) -> dict:
     in), so only the master's Python runs; with and without the recovery supervisor."""
     from ecatcfg.eni import reader
     from ecatcfg.esi.library import Library
-    from ecatcfg.runtime import emulate, wire
+    from ecatcfg.runtime import wire
+    from ecatcfg.runtime.segment import emulate
     from ecatcfg.runtime.network import Network
 
     plan = reader.read_file(eni)

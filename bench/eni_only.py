@@ -8,7 +8,7 @@ drive with CoE InitCmds), read once into a plan.  Three timings, interleaved wit
 baseline (bare ``lxml.etree.fromstring`` of the ENI bytes) so machine noise hits all:
 building the segment from the ESI devices (library loaded once, as ``Network.virtual``
 does per run, without its cache: the ESI parse is included), and from the ENI alone
-(``runtime/eni_device.py``, SII images and dictionaries included).  min / median of R.
+(``runtime/segment/eni_device.py``, SII images and dictionaries included).  min / median of R.
 """
 
 from __future__ import annotations
@@ -34,8 +34,8 @@ def main() -> None:
 
     from ecatcfg.eni import reader
     from ecatcfg.esi.library import Library
-    from ecatcfg.runtime import emulate
-    from ecatcfg.runtime.segment import VirtualSegment
+    from ecatcfg.runtime.segment import emulate
+    from ecatcfg.runtime.segment.virtual import VirtualSegment
 
     data = line_eni(args.slaves)
     plan = reader.read_bytes(data, "line.xml")

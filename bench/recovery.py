@@ -2,7 +2,7 @@
 
     python3 bench/recovery.py [--repeat N]
 
-In memory (``Network.virtual``) with the timing model (``runtime/timing.py``: slaves that
+In memory (``Network.virtual``) with the timing model (``runtime/segment/timing.py``: slaves that
 take as long as real ones), each repetition on a fresh network:
 
 - baseline: ``net.up()`` of the example line (examples/topology.yaml: coupler, three I/O
@@ -28,7 +28,7 @@ from pathlib import Path
 from ecatcfg.compiler import build, topology
 from ecatcfg.esi.library import Library
 from ecatcfg.runtime import Network
-from ecatcfg.runtime.timing import Timing
+from ecatcfg.runtime.segment.timing import Timing
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 

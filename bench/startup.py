@@ -6,7 +6,7 @@ Run from the checkout, as root:
                              [--breakdown N] [--bytecode cache|env] [--profile SIZE] [--keep]
                              [--realistic]
 
-``--realistic``: slaves that take time (``simulate --realistic``, runtime/timing.py: the
+``--realistic``: slaves that take time (``simulate --realistic``, runtime/segment/timing.py: the
 drives' mailbox replies 1.749 ms, PS and SO 100 ms each ...) on lines of CiA 402 drives
 only, 8 and 64 (``402x8``, ``402x64``), each with its PDO assignment over CoE.  apply runs
 ``--cycles 1``; the SOEM script writes the same PDO assignment SDOs as the ENI's PS
@@ -268,7 +268,7 @@ def sdo_round_trips(cmd, mbx_out: int) -> int:
 def packed_frames(sizes: list[int]) -> int:
     """Frames for datagrams of these sizes (header + data + WKC) packed in order, as
     ``runtime.transport.pack`` does."""
-    from ecatcfg.runtime.transport import FRAME_DATA_LIMIT
+    from ecatcfg.runtime.master.transport import FRAME_DATA_LIMIT
     frames, used = 0, FRAME_DATA_LIMIT + 1
     for size in sizes:
         if used + size > FRAME_DATA_LIMIT:

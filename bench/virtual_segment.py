@@ -10,8 +10,8 @@ Method (target: median round trip within 3x of the bare echo):
      / ``vb`` (B), IPv6 off.  Both are deleted at the end, also on errors and Ctrl-C.
   2. In B, ``python -m ecatcfg simulate`` serves a 64-slave line of the example devices
      (coupler + EX1004 / EX2008 / EX1008 repeating; EXD-402 CiA 402 drives too when the CoE
-     runtime, ``runtime/objects.py`` + ``runtime/sdo_server.py``, exists).  A recorder in B
-     keeps a copy of every frame the master sends while it configures the line.
+     runtime, ``runtime/segment/objects.py`` + ``runtime/segment/sdo_server.py``, exists).
+     A recorder in B keeps a copy of every frame the master sends while it configures the line.
   3. In A, SOEM (pysoem) configures the line: config_init, config_map, SAFEOP, process
      data, OP; it reports the IOmap size and its expected WKC and leaves (no INIT request).
      The LRW frame SOEM sends for that IOmap (LRW, logical address 0, IOmap-size bytes) is
@@ -550,7 +550,7 @@ def run(args: argparse.Namespace, tmp: Path) -> None:
                                           for n, d in slaves))
     mix = {d: sum(1 for _, x in slaves if x == d) for d in dict.fromkeys(d for _, d in slaves)}
     print(f"# {len(slaves)} slaves ({', '.join(f'{k} x{v}' for k, v in mix.items())})"
-          + ("" if drives else "; no CoE drives (runtime/objects.py + sdo_server.py "
+          + ("" if drives else "; no CoE drives (runtime/segment/objects.py + sdo_server.py "
              "missing)" if not coe_runtime() else "; --no-drives"))
     print(f"# {platform.machine()}, {os.cpu_count()} CPUs, {platform.platform()}, "
           f"Python {platform.python_version()}, pysoem {pysoem.__version__}, "
@@ -657,9 +657,9 @@ def run(args: argparse.Namespace, tmp: Path) -> None:
 
     # In process: the same line configured by replaying SOEM's frames, process() alone.
     from ecatcfg.compiler import topology
-    from ecatcfg.compiler.resolve import plugged_devices
+    from ecatcfg.compiler.plugged import plugged_devices
     from ecatcfg.esi.library import Library
-    from ecatcfg.runtime import emulate
+    from ecatcfg.runtime.segment import emulate
     lib = Library([str(ESI_DIR)], cache=False)
     seg = emulate.segment([emulate.SlaveSpec(d.device, d.name, alias=d.alias)
                            for d in plugged_devices(topology.load(topo), lib)])

@@ -6,11 +6,16 @@ import argparse
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
+    from collections.abc import Callable
+
     from ecatcfg.cli.report import ApplyReport
+    from ecatcfg.eni.derive import Derived
     from ecatcfg.eni.plan import NetworkPlan
-    from ecatcfg.runtime.master import Event
+    from ecatcfg.errors import EcatcfgError
+    from ecatcfg.esc import AlState
+    from ecatcfg.runtime.master.bringup import Event
     from ecatcfg.runtime.network import Network
-    from ecatcfg.runtime.realtime import RealtimeOptions
+    from ecatcfg.runtime.master.realtime import RealtimeOptions
     from ecatcfg.runtime.service import Notifier
 
 STATES = {"init": 1, "preop": 2, "safeop": 4, "op": 8}
@@ -107,16 +112,58 @@ class _Run:
 
 def _run(args: argparse.Namespace, ctx: _Run) -> int:
     import json
+
+    from ecatcfg.cli.report import ApplyReport
+    from ecatcfg.errors import EcatcfgError
+    from ecatcfg.runtime.service import Notifier
+
+    dc_threshold, dc_timeout, realtime = _checked_options(args)
+    plan, derived, target = _plan(args, ctx)
+    report = ApplyReport(plan, args.eni, json_output=args.format == "json")
+    report.derived(derived)
+    report.skipped(plan.unsupported)
+    notify = Notifier.from_env()
+
+    def on_event(event: Event) -> None:
+        notify.watchdog()               # a step that reports progress is alive
+        report.event(event)
+    net = _network(args, plan, on_event, dc_threshold, dc_timeout)
+    guard = _SignalGuard(net, report, notify)
+    failure: EcatcfgError | None = None
+    with guard:                         # also while the summary is printed
+        try:
+            try:
+                try:
+                    _up_and_cycle(net, plan, target, args, report, notify, realtime)
+                finally:
+                    # No bytecode here checks for signals: from this store on, a signal
+                    # can no longer interrupt, whatever ends the run.
+                    guard.down = True
+            except EcatcfgError as exc:
+                failure = exc
+            except KeyboardInterrupt as exc:   # Ctrl-C, or SIGTERM/SIGHUP (_SignalGuard)
+                report.note(f"stopped by {exc.args[0]}" if exc.args else "interrupted")
+            down_failure = _down(net, plan, args, report, notify)
+            failure = failure or down_failure     # the first error is the run's
+        finally:
+            net.close()
+            notify.close()
+        report.finish(net, failure, target)
+        if args.format == "json":
+            print(json.dumps(report.as_json(), indent=2), flush=True)
+            ctx.printed = True
+    return 1 if failure else 0
+
+
+def _checked_options(args: argparse.Namespace
+                     ) -> tuple[int, float, RealtimeOptions | None]:
+    """The options checked before anything is read or sent (exit 2): the DC wait's
+    threshold and timeout, the real-time options (tried once and undone), the pcap file."""
     from pathlib import Path
 
     from ecatcfg.cli.paths import output_file
-    from ecatcfg.cli.report import ApplyReport
-    from ecatcfg.eni import cache as eni_cache
-    from ecatcfg.errors import EcatcfgError, UsageError
-    from ecatcfg.esc import AlState
-    from ecatcfg.runtime.master import Event, check_requests
-    from ecatcfg.runtime.network import Network
-    from ecatcfg.runtime.service import Notifier
+    from ecatcfg.errors import UsageError
+    from ecatcfg.runtime.master.bringup import DC_THRESHOLD_NS, DC_TIMEOUT_S, check_dc_wait
 
     if not Path(args.eni).exists():
         raise UsageError(f"{args.eni}: no such file")
@@ -126,7 +173,6 @@ def _run(args: argparse.Namespace, ctx: _Run) -> int:
         raise UsageError("--prefer ranks files of --esi: give them with --esi")
     if args.cycles is not None and args.cycles < 0:
         raise UsageError(f"--cycles {args.cycles}: must be 0 or more")
-    from ecatcfg.runtime.master import DC_THRESHOLD_NS, DC_TIMEOUT_S, check_dc_wait
     dc_threshold: int = DC_THRESHOLD_NS if args.dc_threshold is None else args.dc_threshold
     dc_timeout: float = DC_TIMEOUT_S if args.dc_timeout is None else args.dc_timeout
     try:
@@ -138,10 +184,22 @@ def _run(args: argparse.Namespace, ctx: _Run) -> int:
     if realtime is not None:
         # Try them once here, undone at once: a refusal is reported before a frame is sent
         # (the cycling thread applies them again for the run).
-        from ecatcfg.runtime.realtime import apply as apply_realtime
+        from ecatcfg.runtime.master.realtime import apply as apply_realtime
         apply_realtime(realtime)()
     if args.pcap:
         output_file(args.pcap)
+    return dc_threshold, dc_timeout, realtime
+
+
+def _plan(args: argparse.Namespace, ctx: _Run) -> tuple[NetworkPlan, list[Derived], AlState]:
+    """The ENI's plan (through the plan cache unless --no-cache), refused if it holds what
+    apply does not do (unless --skip-unsupported), completed where it is partial, and
+    checked to request every state up to the target, all before a link is opened."""
+    from ecatcfg.eni import cache as eni_cache
+    from ecatcfg.eni.derive import complete
+    from ecatcfg.esc import AlState
+    from ecatcfg.runtime.master.bringup import check_requests
+
     if args.no_cache:
         from ecatcfg.eni import reader as eni_reader
         plan = eni_reader.read_file(args.eni)
@@ -153,79 +211,74 @@ def _run(args: argparse.Namespace, ctx: _Run) -> int:
         from ecatcfg.eni.contents import refuse
         refuse(plan, args.eni)              # before a link is opened or a frame sent
     # A partial ENI: the standard set-up of slaves without register InitCmds.
-    from ecatcfg.eni.derive import complete
     plan, derived = complete(plan, args.eni)
     check_requests(plan, target, args.eni)
-    report = ApplyReport(plan, args.eni, json_output=args.format == "json")
-    report.derived(derived)
-    report.skipped(plan.unsupported)
-    notify = Notifier.from_env()
+    return plan, derived, target
 
-    def on_event(event: Event) -> None:
-        notify.watchdog()               # a step that reports progress is alive
-        report.event(event)
+
+def _network(args: argparse.Namespace, plan: NetworkPlan, on_event: Callable[[Event], None],
+             dc_threshold: int, dc_timeout: float) -> Network:
+    """The network on --iface, or on a virtual segment with --virtual."""
+    from ecatcfg.runtime.network import Network
+
     if args.virtual:
-        net = Network.virtual(plan, args.esi, esi_prefer=args.prefer, pcap=args.pcap,
-                              on_event=on_event,
-                              esi_cache=not args.no_cache, skip_unsupported=True,
-                              eni_name=args.eni,
-                              dc_threshold_ns=dc_threshold, dc_timeout_s=dc_timeout)
+        return Network.virtual(plan, args.esi, esi_prefer=args.prefer, pcap=args.pcap,
+                               on_event=on_event,
+                               esi_cache=not args.no_cache, skip_unsupported=True,
+                               eni_name=args.eni,
+                               dc_threshold_ns=dc_threshold, dc_timeout_s=dc_timeout)
+    from ecatcfg.runtime.link import RawLink
+    return Network(plan, RawLink(args.iface), pcap=args.pcap, on_event=on_event,
+                   skip_unsupported=True, eni_name=args.eni,
+                   dc_threshold_ns=dc_threshold, dc_timeout_s=dc_timeout)
+
+
+def _up_and_cycle(net: Network, plan: NetworkPlan, target: AlState,
+                  args: argparse.Namespace, report: ApplyReport, notify: Notifier,
+                  realtime: RealtimeOptions | None) -> None:
+    """Bring the line up to ``target`` and, in SAFEOP or OP, cycle it (--cycles)."""
+    from ecatcfg.esc import AlState
+
+    net.up(target, accept_newer_revision=args.accept_newer_revision)
+    # The stop timeout a service manager needs (docs/runtime.md).
+    up = len(net.master.slaves)
+    status = (f"{up} slaves in {target.name}" + (
+        f" ({len(plan.slaves) - up} in hot-connect groups not on the line)"
+        if up < len(plan.slaves) else "")
+        + (f", {len(plan.passive)} passive" if plan.passive else "")
+        + f"; way down at most {net.master.down_bound():.0f} s")
+    if target >= AlState.SAFEOP and args.cycles != 0:
+        report.cycling(args.cycles)
+        notify.ready(status.replace(";", ", cycling;", 1))
+        net.run(args.cycles, report.cycle_callback(net, notify.watchdog),
+                realtime=realtime)
     else:
-        from ecatcfg.runtime.link import RawLink
-        net = Network(plan, RawLink(args.iface), pcap=args.pcap, on_event=on_event,
-                      skip_unsupported=True, eni_name=args.eni,
-                      dc_threshold_ns=dc_threshold, dc_timeout_s=dc_timeout)
-    guard = _SignalGuard(net, report, notify)
+        notify.ready(status)
+
+
+def _down(net: Network, plan: NetworkPlan, args: argparse.Namespace, report: ApplyReport,
+          notify: Notifier) -> EcatcfgError | None:
+    """Back to INIT unless --stay, and the slaves' final states in the report; the error
+    of the way down, if any."""
+    from ecatcfg.errors import EcatcfgError
+    from ecatcfg.esc import AlState
+
     failure: EcatcfgError | None = None
-    with guard:                         # also while the summary is printed
+    highest = net.master.read_states()
+    if not args.stay and net.state > AlState.INIT:
+        notify.stopping(f"bringing {len(plan.slaves)} slaves down to INIT")
         try:
-            try:
-                try:
-                    net.up(target, accept_newer_revision=args.accept_newer_revision)
-                    # The stop timeout a service manager needs (docs/runtime.md).
-                    up = len(net.master.slaves)
-                    status = (f"{up} slaves in {target.name}" + (
-                        f" ({len(plan.slaves) - up} in hot-connect groups not on the line)"
-                        if up < len(plan.slaves) else "")
-                        + (f", {len(plan.passive)} passive" if plan.passive else "")
-                        + f"; way down at most {net.master.down_bound():.0f} s")
-                    if target >= AlState.SAFEOP and args.cycles != 0:
-                        report.cycling(args.cycles)
-                        notify.ready(status.replace(";", ", cycling;", 1))
-                        net.run(args.cycles, report.cycle_callback(net, notify.watchdog),
-                                realtime=realtime)
-                    else:
-                        notify.ready(status)
-                finally:
-                    # No bytecode here checks for signals: from this store on, a signal
-                    # can no longer interrupt, whatever ends the run.
-                    guard.down = True
-            except EcatcfgError as exc:
-                failure = exc
-            except KeyboardInterrupt as exc:   # Ctrl-C, or SIGTERM/SIGHUP (_SignalGuard)
-                report.note(f"stopped by {exc.args[0]}" if exc.args else "interrupted")
-            highest = net.master.read_states()
-            if not args.stay and net.state > AlState.INIT:
-                notify.stopping(f"bringing {len(plan.slaves)} slaves down to INIT")
-                try:
-                    net.down()
-                except EcatcfgError as exc:
-                    failure = failure or exc
-                report.final_states(net.master.read_states(), net.master.progress,
-                                    highest=highest, scanned=net.master.scanned,
-                                    line=net.master.line)
-            else:
-                notify.stopping("leaving the slaves as they are")
-                report.final_states(highest, net.master.progress, highest=highest,
-                                    scanned=net.master.scanned, line=net.master.line)
-        finally:
-            net.close()
-            notify.close()
-        report.finish(net, failure, target)
-        if args.format == "json":
-            print(json.dumps(report.as_json(), indent=2), flush=True)
-            ctx.printed = True
-    return 1 if failure else 0
+            net.down()
+        except EcatcfgError as exc:
+            failure = exc
+        report.final_states(net.master.read_states(), net.master.progress,
+                            highest=highest, scanned=net.master.scanned,
+                            line=net.master.line)
+    else:
+        notify.stopping("leaving the slaves as they are")
+        report.final_states(highest, net.master.progress, highest=highest,
+                            scanned=net.master.scanned, line=net.master.line)
+    return failure
 
 
 def _realtime_options(args: argparse.Namespace) -> RealtimeOptions | None:
@@ -235,7 +288,7 @@ def _realtime_options(args: argparse.Namespace) -> RealtimeOptions | None:
             and not args.busy_wait:
         return None
     from ecatcfg.errors import UsageError
-    from ecatcfg.runtime import realtime
+    from ecatcfg.runtime.master import realtime
     try:
         cpus = realtime.parse_cpus(args.cpu) if args.cpu is not None else None
         return realtime.options(args.rt_priority, args.lock_memory, cpus, args.busy_wait)

@@ -20,10 +20,11 @@ if TYPE_CHECKING:                   # rich and the runtime are imported where th
 
     from ecatcfg.eni.derive import Derived
 
-    from ecatcfg.runtime.master import Event, SlaveState
+    from ecatcfg.runtime.master.bringup import Event
+    from ecatcfg.runtime.master.reached import SlaveState
     from ecatcfg.runtime.network import Network
-    from ecatcfg.runtime.replay import SlaveProgress
-    from ecatcfg.runtime.scan import FoundSlave
+    from ecatcfg.runtime.master.replay import SlaveProgress
+    from ecatcfg.runtime.master.scan import FoundSlave
 
 _LOG_WIDTH = 1000          # columns for a pipe or a file: wide enough that nothing wraps
 _TRANSITION_TEXT = {"II": "INIT -> INIT", "IP": "INIT -> PREOP", "PS": "PREOP -> SAFEOP",
@@ -127,7 +128,7 @@ class ApplyReport:
         it (paired as verify pairs them) only if it passed verification; "not found" for a
         missing slave, "not verified" for one that differs from the ENI, "absent
         (hot-connect group)" for a slave of a group that was not there."""
-        from ecatcfg.runtime.scan import paired, verify
+        from ecatcfg.runtime.master.scan import paired, verify
         self.rows = []
         line = line or self.plan
         slaves = sorted(self.plan.slaves, key=lambda s: s.position)
@@ -179,7 +180,7 @@ class ApplyReport:
     def finish(self, net: Network, failure: EcatcfgError | None, target: AlState) -> None:
         # The cycles that ran (net.run, or net.cycle() after reset_stats()), not the ones
         # run while the slaves changed state.
-        from ecatcfg.runtime.cyclic import CycleStats
+        from ecatcfg.runtime.master.cyclic import CycleStats
         stats = net.run_stats or CycleStats()
         counters = net.master.transport.counters
         jitter = stats.jitter()
@@ -253,7 +254,7 @@ def refusal_json(eni: str, target: int, error: EcatcfgError,
     (``[]`` when the error is not about parts of the ENI)."""
     from ecatcfg.eni.contents import UnsupportedEniError
     from ecatcfg.eni.derive import DeriveError
-    from ecatcfg.runtime.master import IncompleteEniError
+    from ecatcfg.runtime.master.bringup import IncompleteEniError
     refused: list[dict[str, Any]] = []
     if isinstance(error, UnsupportedEniError):
         refused = [{"slave": p.slave, "element": p.element, "what": p.what, "line": p.line,

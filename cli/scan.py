@@ -7,6 +7,9 @@ import re
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
+    from ecatcfg.esi.index import DeviceEntry
+    from ecatcfg.esi.library import Library
+    from ecatcfg.runtime.master.scan import FoundSlave
     from ecatcfg.runtime.wiring import Plug
 
 
@@ -87,8 +90,8 @@ def run(args: argparse.Namespace) -> int:
             print(f"warning: {problem}", file=sys.stderr)
 
     from ecatcfg.runtime.link import RawLink
-    from ecatcfg.runtime.scan import scan
-    from ecatcfg.runtime.transport import Transport
+    from ecatcfg.runtime.master.scan import scan
+    from ecatcfg.runtime.master.transport import Transport
     from ecatcfg.esc import PORT_LETTERS
 
     with RawLink(args.iface) as link:
@@ -98,21 +101,8 @@ def run(args: argparse.Namespace) -> int:
     rows: list[dict[str, Any]] = []          # the JSON output's slaves
     physics: list[str | None] = []
     for s in found:
-        exact = other = None
-        if lib is not None:
-            same = [e for e in lib.entries
-                    if (e.vendor_id, e.product_code) == (s.vendor_id, s.product_code)]
-            exact = next((e for e in same if e.revision == s.revision), None)
-            if exact is None and same:
-                other = max(same, key=lambda e: e.revision if e.revision is not None else -1)
+        exact, other, note = _esi_entry(lib, s) if lib is not None else (None, None, None)
         entry = exact or other
-        note = None
-        if lib is not None and other is not None:
-            note = (f"revision 0x{s.revision:x} is not in the ESI files; they have "
-                    + ", ".join(sorted({f"0x{e.revision:x}" for e in lib.entries
-                                        if (e.vendor_id, e.product_code) ==
-                                        (s.vendor_id, s.product_code)
-                                        and e.revision is not None})))
         physics.append(lib.device(entry).physics if lib is not None and entry else None)
         parent = rows[s.plug.parent] if s.plug is not None else None
         rows.append({
@@ -144,7 +134,34 @@ def run(args: argparse.Namespace) -> int:
         print(json.dumps({"slaves": rows, "count": len(rows),
                           "topology": args.topology_out}, indent=2))
         return 0
-    print(f"{len(rows)} slave{'s' if len(rows) != 1 else ''} on {args.iface}")
+    _print_table(rows, args.iface)
+    if args.topology_out:
+        print(f"topology written to {args.topology_out}")
+    return 0
+
+
+def _esi_entry(lib: Library, s: FoundSlave
+               ) -> tuple[DeviceEntry | None, DeviceEntry | None, str | None]:
+    """The library's entry of a found slave: the exact revision, else (``other``) the
+    highest revision of the same product, with a note saying which revisions there are."""
+    same = [e for e in lib.entries
+            if (e.vendor_id, e.product_code) == (s.vendor_id, s.product_code)]
+    exact = next((e for e in same if e.revision == s.revision), None)
+    other = None
+    if exact is None and same:
+        other = max(same, key=lambda e: e.revision if e.revision is not None else -1)
+    note = None
+    if other is not None:
+        note = (f"revision 0x{s.revision:x} is not in the ESI files; they have "
+                + ", ".join(sorted({f"0x{e.revision:x}" for e in lib.entries
+                                    if (e.vendor_id, e.product_code) ==
+                                    (s.vendor_id, s.product_code)
+                                    and e.revision is not None})))
+    return exact, other, note
+
+
+def _print_table(rows: list[dict[str, Any]], iface: str) -> None:
+    print(f"{len(rows)} slave{'s' if len(rows) != 1 else ''} on {iface}")
     if rows:
         print(f"{'pos':>3}  {'vendor':10} {'product':10} {'revision':10} {'serial':10}  "
               f"{'behind':8} {'type':14} name")
@@ -154,6 +171,3 @@ def run(args: argparse.Namespace) -> int:
                   f"0x{r['revision']:08x} 0x{r['serial_no']:08x}  {behind:8} "
                   f"{(r['type'] or '-')[:14]:14} {r['name'] or '-'}"
                   + (f"  ({r['note']})" if r["note"] else ""))
-    if args.topology_out:
-        print(f"topology written to {args.topology_out}")
-    return 0

@@ -47,12 +47,53 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
 
 def run(args: argparse.Namespace) -> int:
     import json
-    import re
     import sys
 
-    from ecatcfg.errors import UsageError
+    from ecatcfg.runtime.link import RawLink
+    from ecatcfg.runtime.master import sdo_tool
+    from ecatcfg.runtime.master.transport import Transport
 
-    from ecatcfg.runtime import sdo_tool
+    index, sub, type_name = _checked(args)
+    data = _write_data(args.value, type_name) if args.action == "write" else None
+    info = sdo_tool.SlaveMailbox(args.slave)
+    with RawLink(args.iface) as link:
+        result = sdo_tool.sdo_transfer(Transport(link), args.slave, index, sub, data,
+                                       args.complete_access, timeout=args.timeout,
+                                       info=info)
+    where = f"0x{index:04X}:{sub:02X}"
+    out: dict[str, Any] = {"slave": args.slave, "station_address": info.station_address,
+                 "index": index, "subindex": sub, "complete_access": args.complete_access,
+                 "action": args.action, "al_status_before": info.state_before,
+                 "mailbox_configured": info.configured}
+    decoded_error = None
+    if data is None:                                    # a read
+        out.update(size=len(result), hex=result.hex())
+        if type_name:
+            from ecatcfg.esi import datatypes
+            out["type"] = type_name
+            try:
+                out["value"] = datatypes.decode(result, type_name)
+            except ValueError as exc:
+                decoded_error = f"{where}: cannot decode as {type_name}: {exc}"
+    else:
+        out.update(size=len(data), hex=data.hex())
+    if args.format == "json":
+        if decoded_error:
+            out["error"] = decoded_error
+        print(json.dumps(out, indent=2))
+    else:
+        _print_text(where, data, result, out, type_name)
+    if decoded_error:
+        print(f"ecatcfg sdo: {decoded_error}", file=sys.stderr)
+        return 1
+    return 0
+
+
+def _checked(args: argparse.Namespace) -> tuple[int, int, str | None]:
+    """The object address, subindex and base type of the command line, checked (exit 2)
+    before a link is opened."""
+    from ecatcfg.errors import UsageError
+    from ecatcfg.runtime.master import sdo_tool
 
     try:
         index, sub = sdo_tool.parse_address(args.address)
@@ -72,55 +113,38 @@ def run(args: argparse.Namespace) -> int:
         if type_name is None:
             raise UsageError(f"--type {args.type}: not a base data type (USINT, UINT, UDINT, "
                              "SINT, INT, DINT, REAL, STRING, ...)")
-    data = None
-    if args.action == "write":
-        value = args.value
-        if value.lower().startswith("hex:"):
-            digits = re.sub(r"[\s_]", "", value[4:])
-            if not digits or not re.fullmatch(r"(?:[0-9A-Fa-f]{2})+", digits):
-                raise UsageError(f"{value!r}: hex: takes whole bytes, e.g. hex:0a00")
-            data = bytes.fromhex(digits)
-        else:
-            if type_name is None:
-                raise UsageError("write needs --type to encode VALUE (or give the bytes as "
-                                 "hex:0a00)")
-            from ecatcfg.esi.datatypes import ValueTypeError, encode
-            try:
-                data = encode(value, type_name)
-            except ValueTypeError as exc:
-                raise UsageError(f"VALUE {value!r}: {exc}") from None
-        if not data:
-            raise UsageError("nothing to write: VALUE encodes to 0 bytes")
+    return index, sub, type_name
 
-    from ecatcfg.runtime.link import RawLink
-    from ecatcfg.runtime.transport import Transport
 
-    info = sdo_tool.SlaveMailbox(args.slave)
-    with RawLink(args.iface) as link:
-        result = sdo_tool.sdo_transfer(Transport(link), args.slave, index, sub, data,
-                                       args.complete_access, timeout=args.timeout,
-                                       info=info)
-    where = f"0x{index:04X}:{sub:02X}"
-    out: dict[str, Any] = {"slave": args.slave, "station_address": info.station_address,
-                 "index": index, "subindex": sub, "complete_access": args.complete_access,
-                 "action": args.action, "al_status_before": info.state_before,
-                 "mailbox_configured": info.configured}
-    decoded_error = None
-    if data is None:                                    # a read
-        out.update(size=len(result), hex=result.hex())
-        if type_name:
-            out["type"] = type_name
-            try:
-                out["value"] = datatypes.decode(result, type_name)
-            except ValueError as exc:
-                decoded_error = f"{where}: cannot decode as {type_name}: {exc}"
+def _write_data(value: str, type_name: str | None) -> bytes:
+    """The bytes a write sends: ``hex:`` bytes as given, else VALUE encoded as
+    ``--type``."""
+    import re
+
+    from ecatcfg.errors import UsageError
+
+    if value.lower().startswith("hex:"):
+        digits = re.sub(r"[\s_]", "", value[4:])
+        if not digits or not re.fullmatch(r"(?:[0-9A-Fa-f]{2})+", digits):
+            raise UsageError(f"{value!r}: hex: takes whole bytes, e.g. hex:0a00")
+        data = bytes.fromhex(digits)
     else:
-        out.update(size=len(data), hex=data.hex())
-    if args.format == "json":
-        if decoded_error:
-            out["error"] = decoded_error
-        print(json.dumps(out, indent=2))
-    elif data is None:
+        if type_name is None:
+            raise UsageError("write needs --type to encode VALUE (or give the bytes as "
+                             "hex:0a00)")
+        from ecatcfg.esi.datatypes import ValueTypeError, encode
+        try:
+            data = encode(value, type_name)
+        except ValueTypeError as exc:
+            raise UsageError(f"VALUE {value!r}: {exc}") from None
+    if not data:
+        raise UsageError("nothing to write: VALUE encodes to 0 bytes")
+    return data
+
+
+def _print_text(where: str, data: bytes | None, result: bytes, out: dict[str, Any],
+                type_name: str | None) -> None:
+    if data is None:
         shown = " ".join(f"{b:02x}" for b in result) or "(no data)"
         print(f"{where} = {shown}  ({len(result)} byte{'s' if len(result) != 1 else ''})")
         if "value" in out:
@@ -132,7 +156,3 @@ def run(args: argparse.Namespace) -> int:
     else:
         print(f"{where} <- {' '.join(f'{b:02x}' for b in data)}  ({len(data)} "
               f"byte{'s' if len(data) != 1 else ''}): done")
-    if decoded_error:
-        print(f"ecatcfg sdo: {decoded_error}", file=sys.stderr)
-        return 1
-    return 0

@@ -1,7 +1,7 @@
 """Programming a slave's SII EEPROM from the command line, shared by ``ecatcfg sii write``
 and ``ecatcfg alias set``: back up, check the identity, fix the checksum, write, read back.
 
-The protocol itself is ``runtime/eeprom.py``; this module decides what is safe to write and
+The protocol itself is ``runtime/master/eeprom.py``; this module decides what is safe to write and
 says what happened, with the backup to restore when a write stops part-way.
 """
 
@@ -18,16 +18,16 @@ from ecatcfg.cli.paths import output_file
 from ecatcfg.errors import EcatcfgError, UsageError
 
 if TYPE_CHECKING:   # the runtime is imported when a command runs
-    from ecatcfg.runtime.eeprom import Eeprom
+    from ecatcfg.runtime.master.eeprom import Eeprom
 
 
 @contextlib.contextmanager
 def open_eeprom(iface: str, position: int) -> Iterator[Eeprom]:
     """The EEPROM of the slave at ``position`` on ``iface`` (checked to be on the line)."""
-    from ecatcfg.runtime.eeprom import Eeprom
+    from ecatcfg.runtime.master.eeprom import Eeprom
     from ecatcfg.runtime.link import RawLink
-    from ecatcfg.runtime.scan import count_slaves
-    from ecatcfg.runtime.transport import Transport
+    from ecatcfg.runtime.master.scan import count_slaves
+    from ecatcfg.runtime.master.transport import Transport
 
     with RawLink(iface) as link:
         transport = Transport(link)
@@ -41,7 +41,7 @@ def open_eeprom(iface: str, position: int) -> Iterator[Eeprom]:
 def describe(image: bytes) -> str:
     """Identity, alias and checksum state of an image, for the output."""
     from ecatcfg.esi.sii import CONFIG_AREA, crc8
-    from ecatcfg.runtime.eeprom import identity
+    from ecatcfg.runtime.master.eeprom import identity
 
     vendor, product, revision = identity(image)
     alias = int.from_bytes(image[8:10], "little")
@@ -79,8 +79,8 @@ def program(iface: str, position: int, image: bytes, *, backup: str | None, forc
     """Write ``image`` to the slave's EEPROM with a backup first and a read-back after.
     With ``alias``, ``image`` is ignored: the current image with SII word 4 = ``alias``."""
     from ecatcfg.fileio import write_atomic
-    from ecatcfg.runtime.eeprom import (InterruptedWrite, alias_image, fix_checksum,
-                                        identity)
+    from ecatcfg.runtime.master.eeprom import (InterruptedWrite, alias_image, fix_checksum,
+                                               identity)
 
     where = f"position {position}"
     saved = backup_path(backup, position)

@@ -7,7 +7,12 @@ import sys
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from ecatcfg.runtime.slave import StateChange
+    from ecatcfg.esi.library import Library
+    from ecatcfg.runtime.link import RawLink
+    from ecatcfg.runtime.segment.emulate import SlaveSpec
+    from ecatcfg.runtime.segment.slave import EmulatedSlave, StateChange
+    from ecatcfg.runtime.segment.timing import Timing
+    from ecatcfg.runtime.segment.virtual import VirtualSegment
 
 
 # Columns of the slave table: a longer name or device is cut with an ellipsis, so the
@@ -69,16 +74,51 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
     p.set_defaults(run=run)
 
 
+# A passive slave (no ESC) of the line: listed, never emulated.  (name, device, vendor,
+# product, revision, where the identity comes from)
+Passive = tuple[str, str, int, int, int, str]
+
+
 def run(args: argparse.Namespace) -> int:
-    import signal
-    import threading
+    from ecatcfg.errors import EcatcfgError
+    from ecatcfg.runtime.link import RawLink
+    from ecatcfg.runtime.segment import emulate
+    from ecatcfg.runtime.segment.virtual import Faults
+
+    _check_args(args)
+    lib = _library(args)
+    source = args.topology or args.eni
+    notes: list[str] = []
+    if args.topology:
+        assert lib is not None
+        specs, passive = _from_topology(args, lib)
+    else:
+        specs, passive, notes = _from_eni(args, lib)
+    if not specs:
+        raise EcatcfgError(f"{source}: no slaves to emulate")
+    timing = _timing(args)
+    try:
+        seg = emulate.segment(specs, Faults(drop=args.drop, seed=args.seed), timing)
+    except ValueError as exc:
+        raise EcatcfgError(f"{source}: {exc}") from None
+    removed = _cut_cables(seg, args.cut)
+    # The interface is opened before anything is printed: a missing one is the only
+    # thing the user reads, not a table of slaves that will never answer.
+    link = RawLink(args.iface)
+    for note in notes:
+        print(note, file=sys.stderr)
+    for name, gone in removed:
+        print(f"cable into {name} removed: "
+              + ", ".join(s.name for s in gone) + " not on the frame", flush=True)
+    _print_slaves(seg, passive, timing is not None)
+    _serve(seg, link, args, passive)
+    return 0
+
+
+def _check_args(args: argparse.Namespace) -> None:
     from pathlib import Path
 
-    from ecatcfg.errors import EcatcfgError, UsageError
-    from ecatcfg.esi.library import Library
-    from ecatcfg.runtime import emulate
-    from ecatcfg.runtime.link import RawLink
-    from ecatcfg.runtime.segment import Faults
+    from ecatcfg.errors import UsageError
 
     if not 0.0 <= args.drop <= 1.0:
         raise UsageError(f"--drop {args.drop}: a share between 0 and 1")
@@ -91,72 +131,100 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError("--topology needs --esi (the ESI files of the slaves to emulate)")
     if args.prefer and not args.esi:
         raise UsageError("--prefer ranks files of --esi: give them with --esi")
+
+
+def _library(args: argparse.Namespace) -> Library | None:
+    """The ESI library of ``--esi``, if given; its file problems are errors."""
+    from ecatcfg.errors import EcatcfgError
+    from ecatcfg.esi.library import Library
+
     lib = Library(args.esi, cache=not args.no_cache, prefer=args.prefer) if args.esi else None
     if lib is not None and lib.problems:
         for problem in lib.problems:
             print(f"error: {problem}", file=sys.stderr)
         raise EcatcfgError(f"{len(lib.problems)} ESI file problem(s)")
-    # Passive slaves (no ESC): listed, never emulated. (name, device, vendor, product,
-    # revision, where the identity comes from)
-    passive: list[tuple[str, str, int, int, int, str]] = []
-    notes: list[str] = []
-    if args.topology:
-        assert lib is not None
-        # The compiler resolves the topology (its checks, the modules in the slots); the
-        # segment emulates the devices it resolved.
-        from ecatcfg.compiler import topology
-        from ecatcfg.compiler.passive import split
-        from ecatcfg.compiler.resolve import plugged_devices
-        from ecatcfg.runtime.wiring import Plug
-        # Unknown keys are reported with the errors resolving the rest finds.
-        loaded = topology.load(args.topology, unknown_keys="defer")
-        devices = topology.checked(loaded, lambda: plugged_devices(
-            loaded, lib, allow_esi_errors=args.allow_esi_errors))
-        for d in devices:
-            for warning in d.esi_warnings:
-                print(f"warning: {warning}", file=sys.stderr)
-        specs = [emulate.SlaveSpec(d.device, d.name, alias=d.alias, plug=None
-                                   if d.parent is None or d.parent_port is None
-                                   else Plug(d.parent, d.parent_port))
-                 for d in devices]
-        passive = [(p.cfg.name, p.device.type_name, p.device.vendor.id or 0,
-                    p.device.product_code or 0, p.device.revision or 0, "ESI")
-                   for p in split(loaded, lib).passive]
-    else:
-        from ecatcfg.eni import reader as eni_reader
-        from ecatcfg.eni.contents import line_of
-        plan = eni_reader.read_file(args.eni)
-        # Not the master: what apply would refuse asks nothing of the emulated slaves,
-        # but the user learns that it is there and not used (once the interface is open).
-        notes += [f"note: ignored (apply would refuse it): {line_of(part, args.eni)}"
-                  for part in plan.unsupported]
-        specs = emulate.specs_from_eni(plan, lib, args.eni)
-        passive = [(p.name, "passive", p.vendor_id, p.product_code, p.revision, "ENI")
-                   for p in plan.passive]
-    if not specs:
-        raise EcatcfgError(f"{source}: no slaves to emulate")
-    timing = None
+    return lib
+
+
+def _from_topology(args: argparse.Namespace, lib: Library
+                   ) -> tuple[list[SlaveSpec], list[Passive]]:
+    """The slaves of ``--topology``: the compiler resolves the topology (its checks, the
+    modules in the slots); the segment emulates the devices it resolved."""
+    from ecatcfg.compiler import topology
+    from ecatcfg.compiler.passive import split
+    from ecatcfg.compiler.plugged import plugged_devices
+    from ecatcfg.runtime.segment import emulate
+    from ecatcfg.runtime.wiring import Plug
+
+    # Unknown keys are reported with the errors resolving the rest finds.
+    loaded = topology.load(args.topology, unknown_keys="defer")
+    devices = topology.checked(loaded, lambda: plugged_devices(
+        loaded, lib, allow_esi_errors=args.allow_esi_errors))
+    for d in devices:
+        for warning in d.esi_warnings:
+            print(f"warning: {warning}", file=sys.stderr)
+    specs = [emulate.SlaveSpec(d.device, d.name, alias=d.alias, plug=None
+                               if d.parent is None or d.parent_port is None
+                               else Plug(d.parent, d.parent_port))
+             for d in devices]
+    passive = [(p.cfg.name, p.device.type_name, p.device.vendor.id or 0,
+                p.device.product_code or 0, p.device.revision or 0, "ESI")
+               for p in split(loaded, lib).passive]
+    return specs, passive
+
+
+def _from_eni(args: argparse.Namespace, lib: Library | None
+              ) -> tuple[list[SlaveSpec], list[Passive], list[str]]:
+    """The slaves of ``--eni`` (from the ESI where ``--esi`` has it, else from the ENI
+    alone), and notes on what the ENI holds that apply would refuse."""
+    from ecatcfg.eni import reader as eni_reader
+    from ecatcfg.eni.contents import line_of
+    from ecatcfg.runtime.segment import emulate
+
+    plan = eni_reader.read_file(args.eni)
+    # Not the master: what apply would refuse asks nothing of the emulated slaves,
+    # but the user learns that it is there and not used (once the interface is open).
+    notes = [f"note: ignored (apply would refuse it): {line_of(part, args.eni)}"
+             for part in plan.unsupported]
+    specs = emulate.specs_from_eni(plan, lib, args.eni)
+    passive = [(p.name, "passive", p.vendor_id, p.product_code, p.revision, "ENI")
+               for p in plan.passive]
+    return specs, passive, notes
+
+
+def _timing(args: argparse.Namespace) -> Timing | None:
+    """How long the slaves take: ``--timing FILE``, the table with ``--realistic``, else
+    no time at all."""
+    from pathlib import Path
+
+    from ecatcfg.errors import UsageError
+
     if args.timing:
         if not Path(args.timing).exists():
             raise UsageError(f"--timing {args.timing}: no such file")
-        from ecatcfg.runtime import timing as timing_model
-        timing = timing_model.load(args.timing)
-    elif args.realistic:
-        from ecatcfg.runtime.timing import Timing
-        timing = Timing()
-    try:
-        seg = emulate.segment(specs, Faults(drop=args.drop, seed=args.seed), timing)
-    except ValueError as exc:
-        raise EcatcfgError(f"{source}: {exc}") from None
+        from ecatcfg.runtime.segment import timing as timing_model
+        return timing_model.load(args.timing)
+    if args.realistic:
+        from ecatcfg.runtime.segment.timing import Timing
+        return Timing()
+    return None
+
+
+def _cut_cables(seg: VirtualSegment, which: list[str]
+                ) -> list[tuple[str, list[EmulatedSlave]]]:
+    """Remove the cables of ``--cut`` (slave names, or bus positions with every cable in
+    place): each slave's name and the slaves no longer on the frame."""
+    from ecatcfg.errors import UsageError
+
     cut = []
-    for which in args.cut:
-        by_position = which.isdigit() and int(which) < len(seg.wired)
-        named = [s for s in seg.wired if s.name == which]
+    for name in which:
+        by_position = name.isdigit() and int(name) < len(seg.wired)
+        named = [s for s in seg.wired if s.name == name]
         if not named and not by_position:
-            raise UsageError(f"--cut {which}: no slave of that name or position (the "
+            raise UsageError(f"--cut {name}: no slave of that name or position (the "
                              f"slaves are {', '.join(s.name for s in seg.wired)})")
         target = named[0] if named else next(s for s in seg.wired
-                                             if s.position == int(which))
+                                             if s.position == int(name))
         cut.append(target)
     removed = []
     for target in cut:
@@ -164,15 +232,10 @@ def run(args: argparse.Namespace) -> int:
             removed.append((target.name, seg.remove_cable(target)))
         except ValueError as exc:
             raise UsageError(f"--cut {target.name}: {exc}") from None
-    # The interface is opened before anything is printed: a missing one is the only
-    # thing the user reads, not a table of slaves that will never answer.
-    link = RawLink(args.iface)
-    for note in notes:
-        print(note, file=sys.stderr)
-    for name, gone in removed:
-        print(f"cable into {name} removed: "
-              + ", ".join(s.name for s in gone) + " not on the frame", flush=True)
+    return removed
 
+
+def _print_slaves(seg: VirtualSegment, passive: list[Passive], timing: bool) -> None:
     print(f"{'pos':>3}  {'name':{NAME_WIDTH}} {'device':{DEVICE_WIDTH}} {'vendor':>10} "
           f"{'product':>10} {'revision':>10}  {'from':4} mailbox"
           + ("  timing" if timing else ""))
@@ -194,6 +257,14 @@ def run(args: argparse.Namespace) -> int:
         if s.eni_only is not None:
             print(f"note: slave {s.position} ({s.name}) emulated from the ENI alone: "
                   f"{s.eni_only}")
+
+
+def _serve(seg: VirtualSegment, link: RawLink, args: argparse.Namespace,
+           passive: list[Passive]) -> None:
+    """Answer frames on ``link`` until ``--duration`` ends or a signal stops the run,
+    printing each slave's state changes."""
+    import signal
+    import threading
 
     def report(change: StateChange) -> None:
         flag = f" ERR 0x{change.code:04X}" if change.error else ""
@@ -223,4 +294,3 @@ def run(args: argparse.Namespace) -> int:
                                              if passive else ""), flush=True))
     by = f" ({stopped_by[0]})" if stopped_by else ""
     print(f"stopped after {seg.frames} frames{by}", flush=True)
-    return 0

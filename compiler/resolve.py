@@ -17,7 +17,7 @@ from ecatcfg.eni.plan import CoeInitCmd, EoeInitCmd, PdoDesc, PdoEntryDesc
 from ecatcfg.eni.standard import Watchdogs
 from ecatcfg.compiler import eoe_params, watchdogs, wiring
 from ecatcfg.compiler.topology import (LoadedTopology, MappingEntry, MappingVariable, Sdo,
-                                       Slave, TopologyError)
+                                       Slave)
 from ecatcfg.errors import EcatcfgError
 from ecatcfg.esc import MAX_PDO_ENTRIES, MODULE_IDENT_LIST, SM_PDO_ASSIGN, Transition
 from ecatcfg.esi import datatypes
@@ -26,10 +26,10 @@ from ecatcfg.esi.coe import (TRANSITION_STATE, DictEntry, device_dictionary, has
 from ecatcfg.esi.index import DeviceEntry
 from ecatcfg.esi.library import EsiChoiceError, Library, SelectorError, Selection
 from ecatcfg.esi.model import CoeInitCmd as EsiCoeInitCmd
-from ecatcfg.esi.model import DcOpMode, Device, Dictionary, Module, Pdo
+from ecatcfg.esi.model import DcOpMode, Device, Dictionary, Module, Pdo, SyncManager
 from ecatcfg.esi.physics import DEFAULT_PHYSICS
 from ecatcfg.esi.slots import (PluggedModule, fits, ident_list, ident_list_data,
-                               module_dictionaries, plug, with_modules)
+                               module_dictionaries, plug)
 from ecatcfg.record import replace
 
 
@@ -144,47 +144,6 @@ def resolve_all(loaded: LoadedTopology, library: Library
     errors.items += wiring_errors
     resolved.sort(key=lambda r: r.position)
     return resolved, errors.items, tree.notes
-
-
-@dataclass(frozen=True, slots=True)
-class PluggedDevice:
-    """A topology slave's device as it sits in the network: with the PDOs and dictionaries
-    of the modules the topology plugs into its slots (what a virtual segment emulates), and
-    where it is plugged: the bus position of its parent and the parent's ESC port (0-3;
-    ``None`` for the first slave, which the master is plugged into, through its port 0)."""
-
-    name: str
-    device: Device
-    alias: int = 0
-    parent: int | None = None
-    parent_port: int | None = None
-    # ESI errors that change what compile writes, let through by ``allow_esi_errors``.
-    esi_warnings: tuple[EcatcfgError, ...] = ()
-
-
-def plugged_devices(loaded: LoadedTopology, library: Library,
-                    allow_esi_errors: bool = False) -> list[PluggedDevice]:
-    """The devices of a topology's slaves in bus order (auto-increment positions 0, 1, ...:
-    the frame's path through the tree), after the same checks as a compile (an unknown
-    device, a module that does not fit its slot, a port that cannot be plugged is an error at
-    its line).  A slave's ``parent`` is an index into this list, always a smaller one.
-    Passive terminals (no ESC, ``compiler/passive.py``) are not in it: nothing to emulate.
-    An ESI error that would stop a compile (``compiler/esi_errors.py``) stops this too,
-    or with ``allow_esi_errors`` is in the device's ``esi_warnings``."""
-    from ecatcfg.compiler.esi_errors import slave_errors
-    from ecatcfg.compiler.passive import split
-    parts = split(loaded, library)
-    resolved, errors, _ = resolve_all(parts.active, library)
-    errors = parts.errors + errors
-    defects = [slave_errors(parts.active, r, library, allow_esi_errors) for r in resolved]
-    if not allow_esi_errors:
-        errors += [e for found in defects for e in found]
-    if errors:
-        raise TopologyError(errors)
-    return [PluggedDevice(r.name, with_modules(r.device, r.modules), r.cfg.alias or 0,
-                          r.parent, r.parent_port,
-                          tuple(found) if allow_esi_errors else ())
-            for r, found in zip(resolved, defects)]
 
 
 def _find_device(cfg: Slave, index: int, library: Library, errors: _Errors
@@ -417,6 +376,29 @@ def _desc(pdo: Pdo, pdo_offset: int = 0, index_offset: int = 0) -> PdoDesc:
 
 
 def _choose_pdos(slave: ResolvedSlave, modules: list[PluggedModule], errors: _Errors) -> None:
+    """The slave's PDOs (its own and its modules'), each on its SyncManager, and the
+    assignment the topology chooses (``rx_pdos``, ``tx_pdos``) checked and applied."""
+    dev, cfg = slave.device, slave.cfg
+    pdos = _device_pdos(slave, modules, errors)
+    slave.pdos = pdos
+    coe = dev.mailbox.coe if dev.mailbox else None
+    can_assign = bool(coe and coe.pdo_assign)
+    for direction, chosen, key in (("rx", cfg.rx_pdos, "rx_pdos"), ("tx", cfg.tx_pdos, "tx_pdos")):
+        mine = [p for p in pdos if p.direction == direction]
+        sm = dev.default_sm(direction)
+        _place_on_sms(slave, mine, direction, sm)
+        if chosen is None:
+            continue
+        where = ("slaves", slave.index, key)
+        by_index = {p.index: p for p in mine}
+        if _chosen_ok(slave, direction, chosen, by_index, mine, where, errors):
+            _assign(slave, direction, chosen, by_index, mine, sm, can_assign, where, errors)
+
+
+def _device_pdos(slave: ResolvedSlave, modules: list[PluggedModule],
+                 errors: _Errors) -> list[PdoDesc]:
+    """The device's PDOs and its plugged modules' (named after their slot), in ESI order
+    within each ModulePdoGroup; a PDO without an Index, or defined twice, is an error."""
     dev, cfg = slave.device, slave.cfg
     # ESI document order (the ENI lists PDOs, and EC-Engineer clears them, in that order).
     # A device PDO marked OverwrittenByModule gives way to the plugged modules' PDOs (the
@@ -451,85 +433,99 @@ def _choose_pdos(slave: ResolvedSlave, modules: list[PluggedModule], errors: _Er
                        "(by the device and a module, or by two modules)",
                        "slaves", slave.index, "modules")
         seen_index.setdefault(d.index, d)
-    slave.pdos = pdos
-    coe = dev.mailbox.coe if dev.mailbox else None
-    can_assign = bool(coe and coe.pdo_assign)
-    for direction, chosen, key in (("rx", cfg.rx_pdos, "rx_pdos"), ("tx", cfg.tx_pdos, "tx_pdos")):
-        mine = [p for p in pdos if p.direction == direction]
-        sm = dev.default_sm(direction)
-        # SMs of this direction: a PDO the ESI puts on a missing SM, a mailbox SM or one of
-        # the other direction goes to the direction's first SM instead.
-        wanted = "Outputs" if direction == "rx" else "Inputs"
-        fitting = {s.number for s in dev.sms if s.type == wanted}
-        for p in mine:
-            if p.virtual and p.sm is not None and p.index not in cfg.pdo_mapping:
-                # ETG.2100 Pdo@Virtual: the PDO is configured from the variables mapped
-                # into it.  Without a user mapping it stays out of the process image; with
-                # one it goes to the SM its Sm names (a bridge terminal's "IO Outputs").
-                p.sm = None
-            elif p.sm is not None and p.sm not in fitting:
-                p.sm = sm.number if sm else None
-        if chosen is None:
-            continue
-        where = ("slaves", slave.index, key)
-        by_index = {p.index: p for p in mine}
-        seen: set[int] = set()
-        ok = True
-        for i, index in enumerate(chosen):
-            pick = by_index.get(index)
-            if pick is None:
-                listed = ", ".join(f"0x{x:04X}" for x in sorted(by_index)[:16])
-                errors.add(f"slave {cfg.name!r}: {dev.type_name} has no "
-                           f"{'RxPdo' if direction == 'rx' else 'TxPdo'} 0x{index:04X}"
-                           f"{'; it has ' + listed if listed else ''}", *where, i)
-                ok = False
-            elif index in seen:
-                errors.add(f"slave {cfg.name!r}: PDO 0x{index:04X} is listed twice", *where, i)
-                ok = False
-            elif pick.virtual and not pick.entries and index not in cfg.pdo_mapping:
-                # Entries the ESI gives a virtual PDO are its default mapping; without
-                # them there is nothing to assign until the user maps its variables.
-                errors.add(f"slave {cfg.name!r}: PDO 0x{index:04X} ({pick.name}) is virtual "
-                           "and its ESI gives it no entries: give its variables in "
-                           "pdo_mapping", *where, i)
-                ok = False
-            seen.add(index)
-        if not ok:
-            continue
-        for i, index in enumerate(chosen):
-            for other in by_index[index].excludes:
-                if other in seen and other != index:
-                    errors.add(f"slave {cfg.name!r}: PDO 0x{index:04X} excludes 0x{other:04X}, "
-                               "which is also chosen", *where, i)
-        for p in mine:
-            if p.mandatory and p.index not in seen:
-                errors.add(f"slave {cfg.name!r}: mandatory PDO 0x{p.index:04X} "
-                           f"({p.name}) is left out", *where)
-        default = [p.index for p in mine if p.sm is not None]
-        kept = kept_by_dictionary(slave, SM_PDO_ASSIGN + sm.number) if sm else None
-        if list(chosen) != default and (not can_assign or kept):
-            why = (f"its dictionary declares 0x{SM_PDO_ASSIGN + sm.number:04X} not "
-                   f"writable in PreOp: {kept}" if can_assign and sm else
-                   "no CoE PdoAssign in its ESI")
-            errors.add(f"slave {cfg.name!r}: {dev.type_name} does not support PDO assignment "
-                       f"({why}); its fixed assignment is "
-                       + (", ".join(f"0x{x:04X}" for x in default) or "empty"), *where)
-            continue
-        if sm is None and chosen:
-            errors.add(f"slave {cfg.name!r}: {dev.type_name} has no "
-                       f"{'Outputs' if direction == 'rx' else 'Inputs'} SyncManager", *where)
-            continue
-        for p in mine:
+    return pdos
+
+
+def _place_on_sms(slave: ResolvedSlave, mine: list[PdoDesc], direction: str,
+                  sm: SyncManager | None) -> None:
+    """Each PDO of ``direction`` on a SyncManager of that direction: one the ESI puts on a
+    missing SM, a mailbox SM or one of the other direction goes to the direction's first
+    SM (``sm``); a virtual PDO without a user mapping stays out of the process image."""
+    wanted = "Outputs" if direction == "rx" else "Inputs"
+    fitting = {s.number for s in slave.device.sms if s.type == wanted}
+    for p in mine:
+        if p.virtual and p.sm is not None and p.index not in slave.cfg.pdo_mapping:
+            # ETG.2100 Pdo@Virtual: the PDO is configured from the variables mapped
+            # into it.  Without a user mapping it stays out of the process image; with
+            # one it goes to the SM its Sm names (a bridge terminal's "IO Outputs").
             p.sm = None
-        for index in chosen:      # the order the user gave is the assignment order
-            p = by_index[index]
+        elif p.sm is not None and p.sm not in fitting:
             p.sm = sm.number if sm else None
-        # keep assignment order = list order: move chosen PDOs to the end in that order
-        order = {index: n for n, index in enumerate(chosen)}
-        others = [p for p in slave.pdos if p.direction != direction or p.index not in order]
-        picked = sorted((p for p in slave.pdos if p.direction == direction
-                         and p.index in order), key=lambda p: order[p.index])
-        slave.pdos = others + picked
+
+
+def _chosen_ok(slave: ResolvedSlave, direction: str, chosen: list[int],
+               by_index: dict[int, PdoDesc], mine: list[PdoDesc],
+               where: tuple[str, int, str], errors: _Errors) -> bool:
+    """Whether the topology's list of PDOs of ``direction`` names each PDO of the device
+    once (virtual ones only with entries or a mapping); if so, its exclusions and the
+    mandatory PDOs it leaves out are errors too."""
+    dev, cfg = slave.device, slave.cfg
+    seen: set[int] = set()
+    ok = True
+    for i, index in enumerate(chosen):
+        pick = by_index.get(index)
+        if pick is None:
+            listed = ", ".join(f"0x{x:04X}" for x in sorted(by_index)[:16])
+            errors.add(f"slave {cfg.name!r}: {dev.type_name} has no "
+                       f"{'RxPdo' if direction == 'rx' else 'TxPdo'} 0x{index:04X}"
+                       f"{'; it has ' + listed if listed else ''}", *where, i)
+            ok = False
+        elif index in seen:
+            errors.add(f"slave {cfg.name!r}: PDO 0x{index:04X} is listed twice", *where, i)
+            ok = False
+        elif pick.virtual and not pick.entries and index not in cfg.pdo_mapping:
+            # Entries the ESI gives a virtual PDO are its default mapping; without
+            # them there is nothing to assign until the user maps its variables.
+            errors.add(f"slave {cfg.name!r}: PDO 0x{index:04X} ({pick.name}) is virtual "
+                       "and its ESI gives it no entries: give its variables in "
+                       "pdo_mapping", *where, i)
+            ok = False
+        seen.add(index)
+    if not ok:
+        return False
+    for i, index in enumerate(chosen):
+        for other in by_index[index].excludes:
+            if other in seen and other != index:
+                errors.add(f"slave {cfg.name!r}: PDO 0x{index:04X} excludes 0x{other:04X}, "
+                           "which is also chosen", *where, i)
+    for p in mine:
+        if p.mandatory and p.index not in seen:
+            errors.add(f"slave {cfg.name!r}: mandatory PDO 0x{p.index:04X} "
+                       f"({p.name}) is left out", *where)
+    return True
+
+
+def _assign(slave: ResolvedSlave, direction: str, chosen: list[int],
+            by_index: dict[int, PdoDesc], mine: list[PdoDesc], sm: SyncManager | None,
+            can_assign: bool, where: tuple[str, int, str], errors: _Errors) -> None:
+    """Put the chosen PDOs on ``sm`` in the order given, the others off it; an error where
+    the device cannot change its assignment (no CoE PdoAssign, or 0x1C1n not writable)."""
+    dev, cfg = slave.device, slave.cfg
+    default = [p.index for p in mine if p.sm is not None]
+    kept = kept_by_dictionary(slave, SM_PDO_ASSIGN + sm.number) if sm else None
+    if list(chosen) != default and (not can_assign or kept):
+        why = (f"its dictionary declares 0x{SM_PDO_ASSIGN + sm.number:04X} not "
+               f"writable in PreOp: {kept}" if can_assign and sm else
+               "no CoE PdoAssign in its ESI")
+        errors.add(f"slave {cfg.name!r}: {dev.type_name} does not support PDO assignment "
+                   f"({why}); its fixed assignment is "
+                   + (", ".join(f"0x{x:04X}" for x in default) or "empty"), *where)
+        return
+    if sm is None and chosen:
+        errors.add(f"slave {cfg.name!r}: {dev.type_name} has no "
+                   f"{'Outputs' if direction == 'rx' else 'Inputs'} SyncManager", *where)
+        return
+    for p in mine:
+        p.sm = None
+    for index in chosen:      # the order the user gave is the assignment order
+        p = by_index[index]
+        p.sm = sm.number if sm else None
+    # keep assignment order = list order: move chosen PDOs to the end in that order
+    order = {index: n for n, index in enumerate(chosen)}
+    others = [p for p in slave.pdos if p.direction != direction or p.index not in order]
+    picked = sorted((p for p in slave.pdos if p.direction == direction
+                     and p.index in order), key=lambda p: order[p.index])
+    slave.pdos = others + picked
 
 
 def _check_sm_sizes(slave: ResolvedSlave, errors: _Errors) -> None:

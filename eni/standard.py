@@ -142,12 +142,33 @@ def master_init_cmds() -> list[InitCmd]:
 
 
 class _SlaveCmds:
-    """Collects one slave's commands; ``ap``/``fp`` pick the addressing."""
+    """Collects one slave's commands; ``ap``/``fp`` pick the addressing.  Also what the
+    parts of :func:`slave_init_cmds` share: the slave's timeouts, its process-data
+    SyncManagers and FMMUs, and whether its state requests acknowledge errors."""
 
     def __init__(self, slave: SlaveSetup) -> None:
+        self.slave = slave
         self.auto = (-slave.position) & 0xFFFF
         self.phys = slave.phys_addr
         self.cmds: list[InitCmd] = []
+        self.preop_to = slave.preop_timeout or PREOP_TIMEOUT
+        self.safeop_to = slave.safeop_op_timeout or SAFEOP_OP_TIMEOUT
+        self.init_to = slave.back_to_init_timeout or BACK_TO_INIT_TIMEOUT
+        self.back_safeop_to = slave.back_to_safeop_timeout or BACK_TO_SAFEOP_TIMEOUT
+        # State requests acknowledge errors where firmware answers them: a slave with a
+        # mailbox (TwinCAT and EC-Engineer write 0x0012 to those, 0x0002 to the others;
+        # eni-exports §3), unless its ESC mirrors AL control, which shows the acknowledge
+        # bit as an error.
+        self.ack = slave.mailbox is not None and not slave.device_emulation
+        self.boot = [T.IB] if slave.bootstrap else []      # INIT->BOOT shares I->P's start
+        self.to_init_boot = [T.BI] if slave.bootstrap else []
+        self.pd = {sm.number: sm for sm in slave.pd_sms}
+        self.pd_numbers = sorted(self.pd)
+        self.op_only = {n for n, sm in self.pd.items() if sm.op_only}
+        self.pd_fmmus = [(i, f, label) for i, (f, label) in enumerate(slave.fmmus)
+                         if label != "mailbox state"]
+        self.mbx_fmmus = [(i, f) for i, (f, label) in enumerate(slave.fmmus)
+                          if label == "mailbox state"]
 
     def ap(self, transitions: list[T], comment: str, cmd: Cmd, ado: int, data: bytes, *,
            cnt: int | None = None, validate: Validate | None = None,
@@ -177,44 +198,44 @@ def _status(state: AlState, mask: int, timeout: int) -> Validate:
 
 
 def slave_init_cmds(slave: SlaveSetup) -> list[InitCmd]:
-    """The slave's register InitCmds for every transition (eni-exports §3)."""
-    preop_to = slave.preop_timeout or PREOP_TIMEOUT
-    safeop_to = slave.safeop_op_timeout or SAFEOP_OP_TIMEOUT
-    init_to = slave.back_to_init_timeout or BACK_TO_INIT_TIMEOUT
-    back_safeop_to = slave.back_to_safeop_timeout or BACK_TO_SAFEOP_TIMEOUT
-    bootstrap, dc = slave.bootstrap, slave.dc
-    # State requests acknowledge errors where firmware answers them: a slave with a mailbox
-    # (TwinCAT and EC-Engineer write 0x0012 to those, 0x0002 to the others; eni-exports §3),
-    # unless its ESC mirrors AL control, which shows the acknowledge bit as an error.
-    ack = slave.mailbox is not None and not slave.device_emulation
-    boot = [T.IB] if bootstrap else []
+    """The slave's register InitCmds for every transition (eni-exports §3).  A runtime runs
+    each transition's commands in list order, so the parts below interleave: each part adds
+    the commands of several transitions at the place each transition needs them."""
     c = _SlaveCmds(slave)
+    _back_to_init(c)
+    _identity_and_address(c)
+    _mailbox_and_cleared_sms(c)
+    _op_only_sms(c)
+    _process_data(c)
+    _going_down(c)
+    _preop_and_boot_requests(c)
+    _safeop_and_op_requests(c)
+    return c.cmds
 
-    pd = {sm.number: sm for sm in slave.pd_sms}
-    pd_numbers = sorted(pd)
-    op_only = {n for n, sm in pd.items() if sm.op_only}
-    pd_fmmus = [(i, f, label) for i, (f, label) in enumerate(slave.fmmus)
-                if label != "mailbox state"]
-    mbx_fmmu = [(i, f) for i, (f, label) in enumerate(slave.fmmus)
-                if label == "mailbox state"]
 
-    # Back to INIT from any state (eni-exports §3 PI/BI/SI/OI).
-    c.ap([T.PI, *([T.BI] if bootstrap else []), T.SI, T.OI], "set device state to INIT",
-         Cmd.APWR, Reg.AL_CONTROL, _al(AlState.INIT, ack), requires="cycle")
-    if dc:
+def _back_to_init(c: _SlaveCmds) -> None:
+    """Back to INIT from any state (eni-exports §3 PI/BI/SI/OI)."""
+    c.ap([T.PI, *c.to_init_boot, T.SI, T.OI], "set device state to INIT",
+         Cmd.APWR, Reg.AL_CONTROL, _al(AlState.INIT, c.ack), requires="cycle")
+    if c.slave.dc:
         c.ap([T.SI, T.OI], "clear DC activation", Cmd.APWR, Reg.DC_CYCLIC_UNIT_CONTROL,
              bytes(2), requires="cycle")
     c.ap([T.PI, T.SI, T.OI], "check device state for INIT", Cmd.APRD, Reg.AL_STATUS, bytes(2),
-         validate=Validate(b"\x01\x00", b"\x0f\x00", init_to), requires="cycle")
-    if bootstrap:
+         validate=Validate(b"\x01\x00", b"\x0f\x00", c.init_to), requires="cycle")
+    if c.slave.bootstrap:
         c.ap([T.BI], "check device state for INIT", Cmd.APRD, Reg.AL_STATUS, bytes(2),
-             validate=Validate(b"\x01\x00", b"\x0f\x00", 2 * init_to), requires="cycle")
+             validate=Validate(b"\x01\x00", b"\x0f\x00", 2 * c.init_to), requires="cycle")
 
-    # INIT -> PREOP: identity, address, mailbox (eni-exports §3 I→P).
-    c.ap([T.IP, *boot], "set device state to INIT", Cmd.APWR, Reg.AL_CONTROL,
-         _al(AlState.INIT, ack), cnt=1, requires="cycle")
-    c.ap([T.IP, *boot], "check device state for INIT", Cmd.APRD, Reg.AL_STATUS, bytes(2), cnt=1,
-         validate=Validate(b"\x01\x00", b"\x0f\x00", preop_to), requires="cycle")
+
+def _identity_and_address(c: _SlaveCmds) -> None:
+    """INIT -> PREOP: INIT and its check, the identity in the EEPROM, the alias, the
+    station address and the watchdogs (eni-exports §3 I→P); the PREOP request of S→P and
+    O→P."""
+    slave = c.slave
+    c.ap([T.IP, *c.boot], "set device state to INIT", Cmd.APWR, Reg.AL_CONTROL,
+         _al(AlState.INIT, c.ack), cnt=1, requires="cycle")
+    c.ap([T.IP, *c.boot], "check device state for INIT", Cmd.APRD, Reg.AL_STATUS, bytes(2),
+         cnt=1, validate=Validate(b"\x01\x00", b"\x0f\x00", c.preop_to), requires="cycle")
     c.ap([T.IP], "assign EEPROM to ECAT", Cmd.APWR, Reg.EEPROM_CONFIG, b"\x00", cnt=1,
          requires="cycle")
     for comment, word, value in (("check vendor id", SII_VENDOR_ID, slave.vendor_id),
@@ -226,7 +247,7 @@ def slave_init_cmds(slave: SlaveSetup) -> list[InitCmd]:
         c.ap([T.IP], "check station alias", Cmd.APRD, Reg.STATION_ALIAS, bytes(2), cnt=1,
              requires="cycle",
              validate=Validate(struct.pack("<H", slave.alias), None, EEPROM_TIMEOUT))
-    c.ap([T.IP, *boot], "set physical address", Cmd.APWR, Reg.STATION_ADDRESS,
+    c.ap([T.IP, *c.boot], "set physical address", Cmd.APWR, Reg.STATION_ADDRESS,
          struct.pack("<H", slave.phys_addr), cnt=1, requires="cycle")
     if slave.watchdog is not None:
         # Right after the address, FPWR, no Requires (EC-Engineer's Elmo and TwinCAT's
@@ -237,11 +258,17 @@ def slave_init_cmds(slave: SlaveSetup) -> list[InitCmd]:
                 ("set SM watchdog", Reg.WATCHDOG_SM, slave.watchdog.sm)):
             c.fp([T.IP], comment, Cmd.FPWR, ado, struct.pack("<H", value), cnt=1)
     c.fp([T.SP, T.OP], "set device state to PREOP", Cmd.FPWR, Reg.AL_CONTROL,
-         _al(AlState.PREOP, ack), requires="cycle")
+         _al(AlState.PREOP, c.ack), requires="cycle")
     c.cmds[-1].retries = PREOP_RETRIES
+
+
+def _mailbox_and_cleared_sms(c: _SlaveCmds) -> None:
+    """INIT -> PREOP (and BOOT): the mailbox SyncManagers, cleared on the way down; DC
+    switched off; the process-data SyncManagers cleared until P→S sets them."""
+    slave, bootstrap = c.slave, c.slave.bootstrap
     if slave.mailbox is not None:
-        c.fp([T.IP, *boot, T.PI, T.SI, T.OI], "clear sm 0/1 (mailbox out/in)", Cmd.FPWR, Reg.SM0,
-             bytes(16))
+        c.fp([T.IP, *c.boot, T.PI, T.SI, T.OI], "clear sm 0/1 (mailbox out/in)", Cmd.FPWR,
+             Reg.SM0, bytes(16))
         if bootstrap:
             c.ap([T.BI], "clear sm 0/1 (mailbox out/in)", Cmd.APWR, Reg.SM0, bytes(16))
         for (n, cfg), label in zip(slave.mailbox, ("mailbox out", "mailbox in")):
@@ -251,24 +278,31 @@ def slave_init_cmds(slave: SlaveSetup) -> list[InitCmd]:
             for n, (cfg, label) in enumerate(zip(bootstrap, ("bootstrap out", "bootstrap in"))):
                 c.fp([T.IB], f"set sm {n} ({label})", Cmd.FPWR, sm_register(n), cfg.to_bytes(),
                      cnt=1)
-    if dc:
+    if slave.dc:
         c.fp([T.IP, T.PP], "clear DC activation", Cmd.FPWR, Reg.DC_CYCLIC_UNIT_CONTROL,
              bytes(2), requires="cycle")
-    if pd_numbers:
-        first, last = pd_numbers[0], pd_numbers[-1]
+    if c.pd_numbers:
+        first, last = c.pd_numbers[0], c.pd_numbers[-1]
         c.fp([T.IP, T.SP, T.SI, T.OP, T.OI], "clear sms", Cmd.FPWR, sm_register(first),
              bytes(8 * (last - first + 1)))
 
-    # SAFEOP <-> OP for SMs the ESI marks OpOnly (outputs enabled only in OP, e.g. EL2008).
-    for n in pd_numbers:
-        if n in op_only:
-            c.fp([T.OS], f"clear {_kind(pd[n])} sm", Cmd.FPWR, sm_register(n), bytes(8))
-    for n in pd_numbers:
-        if n in op_only:
-            c.fp([T.SO], f"set sm {n} ({_kind(pd[n])}s)", Cmd.FPWR, sm_register(n),
-                 pd[n].config.to_bytes(), cnt=1)
 
-    # PREOP -> SAFEOP: DC, process-data SMs, FMMUs (eni-exports §3 P→S, §6).
+def _op_only_sms(c: _SlaveCmds) -> None:
+    """SAFEOP <-> OP for SMs the ESI marks OpOnly (outputs enabled only in OP, e.g.
+    EL2008)."""
+    for n in c.pd_numbers:
+        if n in c.op_only:
+            c.fp([T.OS], f"clear {_kind(c.pd[n])} sm", Cmd.FPWR, sm_register(n), bytes(8))
+    for n in c.pd_numbers:
+        if n in c.op_only:
+            c.fp([T.SO], f"set sm {n} ({_kind(c.pd[n])}s)", Cmd.FPWR, sm_register(n),
+                 c.pd[n].config.to_bytes(), cnt=1)
+
+
+def _process_data(c: _SlaveCmds) -> None:
+    """PREOP -> SAFEOP: DC, process-data SMs, FMMUs (eni-exports §3 P→S, §6); the
+    mailbox-state FMMU in I→P."""
+    dc = c.slave.dc
     if dc:
         c.fp([T.PS], "set DC cycle time", Cmd.FPWR, Reg.DC_SYNC0_CYCLE_TIME,
              struct.pack("<II", dc.cycle_time0, dc.cycle_time1), cnt=1, requires="cycle")
@@ -276,64 +310,71 @@ def slave_init_cmds(slave: SlaveSetup) -> list[InitCmd]:
         c.fp([T.PS], "set DC start time", Cmd.FPWR, Reg.DC_START_TIME_CYCLIC, bytes(8), cnt=1,
              requires="cycle")
         c.fp([T.PS], "set DC activation", Cmd.FPWR, Reg.DC_CYCLIC_UNIT_CONTROL,
-             struct.pack("<H", slave.assign_activate), cnt=1, requires="cycle")
+             struct.pack("<H", c.slave.assign_activate), cnt=1, requires="cycle")
         c.fp([T.PS], "set DC latch cfg", Cmd.FPWR, Reg.DC_LATCH0_CONTROL, bytes(2),
              requires="cycle")
-    for n in pd_numbers:
-        if n not in op_only:
-            c.fp([T.PS], f"set sm {n} ({_kind(pd[n])}s)", Cmd.FPWR, sm_register(n),
-                 pd[n].config.to_bytes(), cnt=1)
-    for i, f, label in pd_fmmus:
+    for n in c.pd_numbers:
+        if n not in c.op_only:
+            c.fp([T.PS], f"set sm {n} ({_kind(c.pd[n])}s)", Cmd.FPWR, sm_register(n),
+                 c.pd[n].config.to_bytes(), cnt=1)
+    for i, f, label in c.pd_fmmus:
         c.fp([T.PS], f"set fmmu {i} ({label})", Cmd.FPWR, fmmu_register(i), f.to_bytes(), cnt=1)
-    for i, f in mbx_fmmu:
-        c.fp([T.IP, *boot], f"set fmmu {i} (mailbox state)", Cmd.FPWR, fmmu_register(i),
+    for i, f in c.mbx_fmmus:
+        c.fp([T.IP, *c.boot], f"set fmmu {i} (mailbox state)", Cmd.FPWR, fmmu_register(i),
              f.to_bytes(), cnt=1)
 
-    # Going down (eni-exports §3 OS, SP/OP, SI/OI, PI).
+
+def _going_down(c: _SlaveCmds) -> None:
+    """Going down (eni-exports §3 OS, SP/OP, SI/OI, PI): SAFEOP requested from OP, FMMUs
+    and DC cleared, PREOP checked."""
     c.fp([T.OS], "set device state to SAFEOP", Cmd.FPWR, Reg.AL_CONTROL,
          _al(AlState.SAFEOP, False), requires="cycle")
-    for i, _, _ in pd_fmmus:
+    for i, _, _ in c.pd_fmmus:
         c.fp([T.SP, T.SI, T.OP, T.OI], f"clear fmmu {i}", Cmd.FPWR, fmmu_register(i),
              bytes(16))
-    for i, _ in mbx_fmmu:
-        c.fp([T.PI, *([T.BI] if bootstrap else []), T.SI, T.OI], f"clear fmmu {i}", Cmd.FPWR,
+    for i, _ in c.mbx_fmmus:
+        c.fp([T.PI, *c.to_init_boot, T.SI, T.OI], f"clear fmmu {i}", Cmd.FPWR,
              fmmu_register(i), bytes(16))
-    if dc:
+    if c.slave.dc:
         c.fp([T.SP, T.OP], "clear DC activation", Cmd.FPWR, Reg.DC_CYCLIC_UNIT_CONTROL,
              bytes(2), requires="cycle")
     c.fp([T.SP, T.OP], "check device state for PREOP", Cmd.FPRD, Reg.AL_STATUS, bytes(6),
-         validate=_status(AlState.PREOP, 0x0F, init_to), requires="cycle")
+         validate=_status(AlState.PREOP, 0x0F, c.init_to), requires="cycle")
 
-    # End of INIT -> PREOP: EEPROM to the slave's controller, request PREOP.
-    c.fp([T.IP, *boot], "assign EEPROM to PDI", Cmd.FPWR, Reg.EEPROM_CONFIG, b"\x01", cnt=1,
+
+def _preop_and_boot_requests(c: _SlaveCmds) -> None:
+    """End of INIT -> PREOP: EEPROM to the slave's controller, PREOP requested and checked;
+    BOOT likewise."""
+    c.fp([T.IP, *c.boot], "assign EEPROM to PDI", Cmd.FPWR, Reg.EEPROM_CONFIG, b"\x01", cnt=1,
          requires="cycle")
     c.ap([T.II], "assign EEPROM back to ECAT", Cmd.APWR, Reg.EEPROM_CONFIG, b"\x00",
          requires="cycle")
     c.fp([T.IP], "set device state to PREOP", Cmd.FPWR, Reg.AL_CONTROL,
-         _al(AlState.PREOP, ack), cnt=1, requires="cycle")
+         _al(AlState.PREOP, c.ack), cnt=1, requires="cycle")
     c.cmds[-1].retries = PREOP_RETRIES
     c.fp([T.IP], "check device state for PREOP", Cmd.FPRD, Reg.AL_STATUS, bytes(6), cnt=1,
-         validate=_status(AlState.PREOP, 0x1F, preop_to), requires="cycle")
-    c.ap([T.IP, *([T.BI] if bootstrap else [])], "assign EEPROM back to ECAT", Cmd.APWR,
+         validate=_status(AlState.PREOP, 0x1F, c.preop_to), requires="cycle")
+    c.ap([T.IP, *c.to_init_boot], "assign EEPROM back to ECAT", Cmd.APWR,
          Reg.EEPROM_CONFIG, b"\x00", requires="cycle")
-    if bootstrap:
+    if c.slave.bootstrap:
         c.fp([T.IB], "set device state to BOOT", Cmd.FPWR, Reg.AL_CONTROL,
              _al(AlState.BOOT, True), cnt=1, requires="cycle")
         c.fp([T.IB], "check device state for BOOT", Cmd.FPRD, Reg.AL_STATUS, bytes(6), cnt=1,
-             validate=_status(AlState.BOOT, 0x1F, preop_to), requires="cycle")
+             validate=_status(AlState.BOOT, 0x1F, c.preop_to), requires="cycle")
 
-    # PREOP -> SAFEOP -> OP state requests.
+
+def _safeop_and_op_requests(c: _SlaveCmds) -> None:
+    """PREOP -> SAFEOP -> OP state requests, and the SAFEOP check of O→S."""
     c.fp([T.PS], "set device state to SAFEOP", Cmd.FPWR, Reg.AL_CONTROL,
          _al(AlState.SAFEOP, False), cnt=1, requires="cycle")
     c.fp([T.PS], "check device state for SAFEOP", Cmd.FPRD, Reg.AL_STATUS, bytes(6), cnt=1,
-         validate=_status(AlState.SAFEOP, 0x1F, safeop_to), requires="cycle")
+         validate=_status(AlState.SAFEOP, 0x1F, c.safeop_to), requires="cycle")
     c.fp([T.OS], "check device state for SAFEOP", Cmd.FPRD, Reg.AL_STATUS, bytes(6),
-         validate=_status(AlState.SAFEOP, 0x0F, back_safeop_to), requires="cycle")
+         validate=_status(AlState.SAFEOP, 0x0F, c.back_safeop_to), requires="cycle")
     c.fp([T.SO], "set device state to OP", Cmd.FPWR, Reg.AL_CONTROL, _al(AlState.OP, False),
          cnt=1, requires="cycle")
     c.fp([T.SO], "check device state for OP", Cmd.FPRD, Reg.AL_STATUS, bytes(6), cnt=1,
-         validate=_status(AlState.OP, 0x1F, safeop_to), requires="cycle")
-    return c.cmds
+         validate=_status(AlState.OP, 0x1F, c.safeop_to), requires="cycle")
 
 
 def _kind(sm: PdSm) -> str:

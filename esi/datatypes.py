@@ -93,7 +93,7 @@ def download_fits(type_name: str, size: int, length: int) -> bool:
     length with abort 0x06070010); a visible, unicode or octet string also takes a shorter
     non-empty value, the rest reading as NULs (CANopen strings are as long as written).
     Lint judges ESI InitCmds by it and the emulated slave answers by it
-    (runtime/objects.py)."""
+    (runtime/segment/objects.py)."""
     base = canonical(type_name) or type_name.strip().upper()
     if base.startswith(("STRING", "WSTRING", "OCTET_STRING", "UNICODE_STRING")):
         return 0 < length <= size

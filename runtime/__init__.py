@@ -1,11 +1,11 @@
 """The runtime: wire codec, links, the master that applies an ENI, the virtual segment.
 
-Masters: ``master.py`` (verify, replay, DC, cyclic) under ``network.py`` (the application's
-:class:`Network`); slaves: ``segment.py`` with ``slave.py`` (an emulated ESC), built from
-ESI files by ``emulate.py``, whose mailbox (``mailbox_server.py``) hands messages to
-``sdo_server.py`` (CoE) and ``eoe_server.py`` (EoE).  Both sides share ``wire.py`` (frames
-and datagrams), ``mailbox.py`` (mailbox, CoE, SDO), ``ecatcfg/eoe.py`` (EoE) and
-``link.py``.
+The master: :mod:`ecatcfg.runtime.master` (verify, replay, DC, cyclic) under ``network.py``
+(the application's :class:`Network`); the slaves: :mod:`ecatcfg.runtime.segment` (emulated
+ESCs on a line, built from ESI files or an ENI).  The two never import each other; only
+``network.py`` (``Network.virtual``), the command line, tests and benches put them on one
+link.  Both sides share ``wire.py`` (frames and datagrams), ``mailbox.py`` (mailbox, CoE,
+SDO), ``ecatcfg/eoe.py`` (EoE), ``link.py``, ``wiring.py`` and ``pcap.py``.
 
 The runtime consumes ENIs (:mod:`ecatcfg.eni`), never the compiler's objects, and never
 imports :mod:`ecatcfg.compiler` (``docs/architecture.md``).  Nothing here is imported by

@@ -33,20 +33,20 @@ from ecatcfg.eni.plan import NetworkPlan, Variable
 from ecatcfg.errors import EcatcfgError
 from ecatcfg.esc import AlState
 from ecatcfg.record import record
-from ecatcfg.runtime.master import (DC_THRESHOLD_NS, DC_TIMEOUT_S, Event, Master,
-                                    check_requests)
-from ecatcfg.runtime.replay import ApplyError
+from ecatcfg.runtime.master.bringup import (DC_THRESHOLD_NS, DC_TIMEOUT_S, Event, Master,
+                                            check_requests)
+from ecatcfg.runtime.master.replay import ApplyError
 
 if TYPE_CHECKING:                   # imported where used: `import ecatcfg.runtime` stays light
     from ecatcfg.esi.library import Library
-    from ecatcfg.runtime.cyclic import CycleStats
-    from ecatcfg.runtime.dc_clock import DcModel
+    from ecatcfg.runtime.master.cyclic import CycleStats
+    from ecatcfg.runtime.segment.dc_clock import DcModel
     from ecatcfg.runtime.link import Link
     from ecatcfg.runtime.pcap import PcapRecorder
-    from ecatcfg.runtime.realtime import RealtimeOptions
-    from ecatcfg.runtime.recovery import SlaveHealth
-    from ecatcfg.runtime.segment import Faults, VirtualSegment
-    from ecatcfg.runtime.timing import Timing
+    from ecatcfg.runtime.master.realtime import RealtimeOptions
+    from ecatcfg.runtime.master.recovery import SlaveHealth
+    from ecatcfg.runtime.segment.virtual import Faults, VirtualSegment
+    from ecatcfg.runtime.segment.timing import Timing
 
 _FLOATS = {"REAL": "<f", "LREAL": "<d"}
 _SIGNED = {"SINT", "INT", "DINT", "LINT", "INT24", "INT40", "INT48", "INT56"}
@@ -82,9 +82,9 @@ class Network:
         ``eni_name`` names the file in those messages (default: the path given).
         ``dc_threshold_ns``, ``dc_timeout_s``: before SAFEOP->OP, :meth:`up` sends drift
         compensation until every DC slave's system time difference (0x092C) is under the
-        threshold (0: no wait), and raises :class:`~ecatcfg.runtime.master.DcSyncError`
+        threshold (0: no wait), and raises :class:`~ecatcfg.runtime.master.bringup.DcSyncError`
         naming the slave furthest off after the timeout.  ``recovery``: while cycling,
-        bring back slaves that drop out (``runtime/recovery.py``, :attr:`health`); when
+        bring back slaves that drop out (``runtime/master/recovery.py``, :attr:`health`); when
         false, a slave that drops out only makes :meth:`cycle` return ``False``."""
         try:
             if not isinstance(eni, NetworkPlan):
@@ -134,19 +134,19 @@ class Network:
         (``esi_cache``: through the ESI index cache), or from a :class:`Library` already
         built (a caller that brings up many ENIs from one library reads its files once).  A slave whose device the files do not
         hold, and every slave without ``esi``, is emulated from the ENI alone
-        (``runtime/eni_device.py``); each such slave is an ``Event("emulated", ...)`` to
+        (``runtime/segment/eni_device.py``); each such slave is an ``Event("emulated", ...)`` to
         ``on_event`` and has ``eni_only`` set in ``net.segment.slaves``.
         ``skip_unsupported``, ``eni_name``, the DC wait and ``recovery`` as for the
         constructor.
-        ``timing``: slaves that take the time real ones do (``runtime/timing.py``, e.g.
+        ``timing``: slaves that take the time real ones do (``runtime/segment/timing.py``, e.g.
         ``Timing()`` for the table); instantaneous slaves by default.  ``dc``: the emulated
-        clocks and line timing (``runtime/dc_clock.py``; seeded ±100 ppm drift by
+        clocks and line timing (``runtime/segment/dc_clock.py``; seeded ±100 ppm drift by
         default).  ``esi_prefer``: the ESI files or folders whose description wins where
         several describe one device differently (``Library``'s ``prefer``); without it such
         a device is an error naming the files."""
         from ecatcfg.eni import reader as eni_reader
         from ecatcfg.esi.library import Library
-        from ecatcfg.runtime import emulate
+        from ecatcfg.runtime.segment import emulate
         from ecatcfg.runtime.link import MemoryLink
 
         shown = eni_name or (str(eni) if not isinstance(eni, NetworkPlan) else "the ENI")
@@ -195,9 +195,9 @@ class Network:
     def up(self, state: AlState = AlState.OP, *, accept_newer_revision: bool = False) -> None:
         """Scan and verify the line, then bring it to ``state`` (default OP).  An ENI that
         has no command requesting a state on the way is refused before anything is sent
-        (:class:`~ecatcfg.runtime.master.IncompleteEniError`); a slave not read back in a
-        transition's target state is a :class:`~ecatcfg.runtime.master.NotReachedError`
-        (``runtime/reached.py``); an InitCmd a slave refuses is an :class:`ApplyError`
+        (:class:`~ecatcfg.runtime.master.bringup.IncompleteEniError`); a slave not read back in a
+        transition's target state is a :class:`~ecatcfg.runtime.master.bringup.NotReachedError`
+        (``runtime/master/reached.py``); an InitCmd a slave refuses is an :class:`ApplyError`
         naming the ENI file and the command's line."""
         check_requests(self.plan, state, self.eni_name)
         try:
@@ -239,13 +239,13 @@ class Network:
     @property
     def health(self) -> dict[str, SlaveHealth]:
         """Each slave's health while the network cycles in SAFEOP or OP (``online``, why
-        not, attempts to bring it back: ``runtime/recovery.py``); every slave online
+        not, attempts to bring it back: ``runtime/master/recovery.py``); every slave online
         before that.  Changes are also events (``offline``, ``online``, ``retry``,
         ``refused``) to ``on_event``."""
         supervisor = self.master.supervisor
         if supervisor is not None:
             return dict(supervisor.health)
-        from ecatcfg.runtime.recovery import SlaveHealth
+        from ecatcfg.runtime.master.recovery import SlaveHealth
         present = {s.name: s.position for s in self.master.slaves}
         return {s.name: SlaveHealth(s.name, present.get(s.name, s.position),
                                     online=s.name in present,
@@ -317,9 +317,9 @@ class Network:
         not used; an exception it raises ends the run).  ``background``: cycle on a thread
         of its own and return a :class:`BackgroundRun` at once (``join``, ``stop``,
         ``done``, ``error``); otherwise return when the run ends.  ``realtime``: the
-        options of ``runtime/realtime.py`` (SCHED_FIFO, mlockall, CPU affinity,
+        options of ``runtime/master/realtime.py`` (SCHED_FIFO, mlockall, CPU affinity,
         busy-wait), applied to the cycling thread for the run and undone after it; a
-        refusal raises :class:`~ecatcfg.runtime.realtime.RealtimeError` here, before the
+        refusal raises :class:`~ecatcfg.runtime.master.realtime.RealtimeError` here, before the
         first cycle."""
         if self._run is not None and not self._run.done:
             raise EcatcfgError("the network is already cycling on its own thread: "
@@ -350,7 +350,7 @@ class Network:
     def reset_stats(self) -> CycleStats:
         """Count cycles from here on in :attr:`run_stats` (apart from the cycles run while
         the slaves change state); :meth:`run` does this itself."""
-        from ecatcfg.runtime.cyclic import CycleStats
+        from ecatcfg.runtime.master.cyclic import CycleStats
         self.run_stats = self.master.cyclic.stats = CycleStats()
         self.master.cyclic.restart_periods()
         return self.run_stats
@@ -358,11 +358,11 @@ class Network:
     def _loop(self, cycles: int | None, callback: Callable[[Network], None] | None,
               realtime: RealtimeOptions | None = None, started: threading.Event | None = None,
               refused: list[BaseException] | None = None) -> None:
-        from ecatcfg.runtime.cyclic import CycleStats
+        from ecatcfg.runtime.master.cyclic import CycleStats
         restore: Callable[[], None] | None = None
         try:
             if realtime is not None:
-                from ecatcfg.runtime import realtime as rt
+                from ecatcfg.runtime.master import realtime as rt
                 restore = rt.apply(realtime)
         except BaseException as exc:
             if refused is None:

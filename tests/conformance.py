@@ -9,7 +9,7 @@ the source MAC; ETG.1000.4).  For each capture this module
 2. identifies the slaves from the capture's own SII reads (vendor, product and revision,
    words 0x08-0x0D read through 0x0502-0x050F), position by position; a capture whose
    slaves cannot all be identified, or are not all in the ESI library, is not usable;
-3. builds the same line on a :class:`~ecatcfg.runtime.segment.VirtualSegment` from the ESI
+3. builds the same line on a :class:`~ecatcfg.runtime.segment.virtual.VirtualSegment` from the ESI
    files, on a clock that follows the capture's timestamps;
 4. sends every master frame through ``VirtualSegment.process`` in capture order and compares
    each reply with the real one, datagram by datagram: header, data and working counter.
@@ -35,10 +35,10 @@ from scapy.utils import RawPcapNgReader
 from ecatcfg.esc import Cmd
 from ecatcfg.esi.library import Library, SelectorError
 from ecatcfg.runtime import wire
-from ecatcfg.runtime.dc_clock import DcModel
-from ecatcfg.runtime.emulate import SlaveSpec, emulated_slave
-from ecatcfg.runtime.segment import VirtualSegment
-from ecatcfg.runtime.timing import Timing
+from ecatcfg.runtime.segment.dc_clock import DcModel
+from ecatcfg.runtime.segment.emulate import SlaveSpec, emulated_slave
+from ecatcfg.runtime.segment.virtual import VirtualSegment
+from ecatcfg.runtime.segment.timing import Timing
 from ecatcfg.runtime.wire import Datagram
 
 ETHERTYPE = b"\x88\xa4"
@@ -364,7 +364,7 @@ def replay(path: Path, library: Library, name: str | None = None,
             specs.append(spec)
     if reasons:
         return Report(name, labels, False, "; ".join(reasons))
-    # The slaves take their time as real ones do (runtime/timing.py): the clock follows
+    # The slaves take their time as real ones do (runtime/segment/timing.py): the clock follows
     # the capture's timestamps, so an EEPROM read is busy when the hardware's was.  Their
     # quartzes are ideal: how far a real one is off is no ESI's fact (the clocks start
     # where the hardware's were, _start_clock_where_the_hardware_was).
@@ -447,7 +447,7 @@ def _register_rule(rp: Replay, sent: Datagram, real: Datagram, mine: Datagram, r
             return limit if chip else (BY_RULE, "EEPROM busy while a read is in flight")
         if emu & 0x8000 and (hw & ~0x8700) == (emu & ~0x8700) and not hw & 0x8700:
             # The emulated read takes the median time of the captured ones (0.72 ms of
-            # 0.49-0.96 ms, runtime/timing.py): a faster real read is done already.
+            # 0.49-0.96 ms, runtime/segment/timing.py): a faster real read is done already.
             return limit if chip else (BY_RULE, "EEPROM read time varies (0.49-0.96 ms)")
         return DIFFERENT, ""
     if EEPROM_DATA <= reg < EEPROM_DATA + 8 and pos is not None:

@@ -97,7 +97,7 @@ def located_on_line(exc: EcatcfgError) -> bool:
     """An error of the master or the emulation names a slave or a command, or is about
     the whole line (nothing answered, the line does not match the ENI); an error about the
     ENI names its file and line."""
-    from ecatcfg.runtime.replay import ApplyError
+    from ecatcfg.runtime.master.replay import ApplyError
     if isinstance(exc, ApplyError):
         return True
     return bool(exc.file and exc.line) or "slave" in exc.message
@@ -667,7 +667,7 @@ class LoopLink:
 def short_waits() -> Iterator[None]:
     """Every wait of the master fires after at most :data:`SHORT_WAIT_S`: a timeout that
     fires is an allowed outcome, and waiting it out in full would only slow the campaign."""
-    from ecatcfg.runtime import master, replay, scan
+    from ecatcfg.runtime.master import bringup as master, replay, scan
     saved = [(m, n, getattr(m, n)) for m, n in (
         (replay, "TIMEOUT_COMMAND"), (replay, "TIMEOUT_STATE"), (replay, "TIMEOUT_VALIDATE"),
         (replay, "TIMEOUT_MAILBOX"), (master, "TIMEOUT_COMMAND"), (scan, "EEPROM_TIMEOUT"))]
@@ -698,7 +698,7 @@ def _cap_timeouts(plan) -> None:
 
 def line_for(plan, shown: str = "fuzz.eni.xml"):
     """A fresh virtual segment emulating the ENI's slaves from the example ESI files."""
-    from ecatcfg.runtime import emulate
+    from ecatcfg.runtime.segment import emulate
     return emulate.segment(emulate.specs_from_eni(plan, library(), shown))
 
 
@@ -758,7 +758,7 @@ def line_in_op(eni: bytes):
 def feed_segment(value: tuple[int, list[bytes]]) -> None:
     """Frames from the wire into a line in OP: the segment answers every frame (returns it,
     same length), and each emulated ESC keeps its 64 KiB and a valid AL state."""
-    from ecatcfg.runtime.slave import MEMORY_SIZE
+    from ecatcfg.runtime.segment.slave import MEMORY_SIZE
     seed, sequence = value
     segment = line_in_op(eni_seeds()[seed])
     for f in sequence:
@@ -929,7 +929,7 @@ def _esi_device(m: Mutant) -> None:
     from ecatcfg.compiler.build import compile_topology
     from ecatcfg.esi import sii
     from ecatcfg.esi.library import Library
-    from ecatcfg.runtime.emulate import SlaveSpec, emulated_slave
+    from ecatcfg.runtime.segment.emulate import SlaveSpec, emulated_slave
     with tempfile.TemporaryDirectory() as tmp:
         (Path(tmp) / "fuzz.xml").write_bytes(m.data())
         lib = Library([tmp], cache=False)

@@ -222,7 +222,7 @@ class Worker:
         from ecatcfg.eni import writer as eni_writer
         from ecatcfg.eni.derive import complete
         from ecatcfg.esc import AlState
-        from ecatcfg.runtime.master import check_requests
+        from ecatcfg.runtime.master.bringup import check_requests
         from ecatcfg.runtime.network import Network
 
         t = time.perf_counter()

@@ -44,13 +44,13 @@ from ecatcfg.eni import writer as eni_writer
 from ecatcfg.eni.plan import NetworkPlan
 from ecatcfg.esc import AlState, Cmd, Transition
 from ecatcfg.esi.library import Library
-from ecatcfg.runtime import emulate
+from ecatcfg.runtime.segment import emulate
 from ecatcfg.runtime.link import MemoryLink
 from ecatcfg.runtime.network import Network
-from ecatcfg.runtime.replay import (TIMEOUT_COMMAND, TIMEOUT_MAILBOX, ApplyError,
-                                    command_timeout)
-from ecatcfg.runtime.scan import EEPROM_TIMEOUT
-from ecatcfg.runtime.segment import Faults
+from ecatcfg.runtime.master.replay import (TIMEOUT_COMMAND, TIMEOUT_MAILBOX, ApplyError,
+                                           command_timeout)
+from ecatcfg.runtime.master.scan import EEPROM_TIMEOUT
+from ecatcfg.runtime.segment.virtual import Faults
 
 EK1100 = "0x2:0x44c2c52:0x120000"
 EL2008 = "0x2:0x7d83052:0x120000"

@@ -30,9 +30,9 @@ from test_soem import soem
 
 from ecatcfg.eni import reader as eni_reader
 from ecatcfg.esi.reader import read_bytes
-from ecatcfg.runtime import emulate
+from ecatcfg.runtime.segment import emulate
 from ecatcfg.runtime.mailbox import SdoAbort
-from ecatcfg.runtime.objects import ObjectDictionary
+from ecatcfg.runtime.segment.objects import ObjectDictionary
 
 SETTINGS = f"""
 <Profile><ProfileNo>5001</ProfileNo><Dictionary>

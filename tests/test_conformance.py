@@ -19,7 +19,7 @@ import pytest
 from conformance import BY_RULE, DIFFERENT, EQUAL, KNOWN_LIMIT, captures, replay, sii_dumps
 
 from ecatcfg.esi.library import Library
-from ecatcfg.runtime.slave import EmulatedSlave
+from ecatcfg.runtime.segment.slave import EmulatedSlave
 
 EXTRA = "corpus-extra/"          # captures of ../shared/corpus-extra/pcap
 
@@ -113,10 +113,10 @@ def test_a_broken_register_shows_as_a_difference(corpus, library, monkeypatch):
 
 def test_the_chip_the_captures_show_decides_working_counters(corpus, library, monkeypatch):
     """Break the ESC model on purpose: every slave the most capable ESC (8 FMMUs, 8 SMs,
-    a DC unit), as before runtime/esc_chips.py knew the EL2828's ET1200 without DC.  The
+    a DC unit), as before runtime/segment/esc_chips.py knew the EL2828's ET1200 without DC.  The
     EtherCrab replay then differs in working counters of FMMU/SM and DC registers."""
-    import ecatcfg.runtime.emulate as emulate
-    from ecatcfg.runtime.esc_chips import GENERIC
+    import ecatcfg.runtime.segment.emulate as emulate
+    from ecatcfg.runtime.segment.esc_chips import GENERIC
     name = "ethercrab/replay-ek1100-el2828-el2889.pcapng"
     monkeypatch.setattr(emulate, "chip_for", lambda vendor, product: GENERIC)
     r = _report(corpus, library, name)
@@ -160,8 +160,8 @@ def test_the_el2004s_three_fmmus_decide_a_working_counter(corpus_extra, library,
                                                           monkeypatch):
     """Break the ESC model on purpose: the EL2004 the most capable ESC again.  The BWR
     clearing FMMU 3 then counts on all three slaves; the hardware counted only the EK1100."""
-    import ecatcfg.runtime.emulate as emulate
-    from ecatcfg.runtime.esc_chips import GENERIC, chip_for
+    import ecatcfg.runtime.segment.emulate as emulate
+    from ecatcfg.runtime.segment.esc_chips import GENERIC, chip_for
     name = EXTRA + "ethercrab/rs-example-sii-el2004.pcapng"
     monkeypatch.setattr(emulate, "chip_for", lambda vendor, product: GENERIC
                         if (vendor, product) == (0x2, 0x07D43052) else chip_for(vendor, product))

@@ -1,7 +1,7 @@
 """Distributed clocks on the virtual segment: the numbers the master writes, checked against
 what the line's model implies, not against the master's own arithmetic.
 
-The emulated line (``runtime/dc_clock.py``) delays a frame by P (``PROCESSING_DELAY_NS``,
+The emulated line (``runtime/segment/dc_clock.py``) delays a frame by P (``PROCESSING_DELAY_NS``,
 port 0 -> processing unit -> port 1) in each slave on the way out, F
 (``FORWARDING_DELAY_NS``, port 1 -> port 0) on the way back and C (``CABLE_DELAY_NS``) on
 every cable; the last slave turns the frame round in its processing unit (P).  The
@@ -43,11 +43,13 @@ from ecatcfg.eni import reader as eni_reader
 from ecatcfg.eni import writer as eni_writer
 from ecatcfg.esc import AlState, Cmd
 from ecatcfg.esi.library import Library
-from ecatcfg.runtime import Network, emulate, wire
-from ecatcfg.runtime import master as master_module
-from ecatcfg.runtime.dc_clock import (CABLE_DELAY_NS, FORWARDING_DELAY_NS, PROCESSING_DELAY_NS,
-                                      DcModel)
-from ecatcfg.runtime.master import DC_THRESHOLD_NS, DcSyncError
+from ecatcfg.runtime import Network, wire
+from ecatcfg.runtime.segment import emulate
+from ecatcfg.runtime.master import bringup as master_module
+from ecatcfg.runtime.segment.dc_clock import (CABLE_DELAY_NS, FORWARDING_DELAY_NS,
+                                              PROCESSING_DELAY_NS, DcModel)
+from ecatcfg.runtime.master.bringup import DC_THRESHOLD_NS, DcSyncError
+from ecatcfg.runtime.master.replay import ApplyError
 
 ESI = EXAMPLES / "esi"
 DRIVE = '"0xE0000ECA:0x7201"'
@@ -393,3 +395,20 @@ def test_receive_times_follow_the_line():
     assert b0 == 5_000 + P + C
     assert b1 == 0                                   # port 1 of the last slave: closed
     assert [struct.unpack_from("<Q", s.mem, 0x0918)[0] for s in segment.slaves] == [a0, b0]
+
+
+def test_sync0_without_a_cycle_time_is_refused_in_preop_to_safeop():
+    """An ENI that activates SYNC0 (0x0981 = 0x03, the drive's AssignActivate 0x0300) but
+    never writes its cycle time (0x09A0) asks for a SYNC signal without a period: the
+    drive's firmware refuses SAFEOP with AL status code 0x0035, "DC invalid sync cycle
+    time" (ETG.1000.6 AL status codes; the slave stays in PREOP with the error flag)."""
+    plan, library = drive_line(1)
+    [slave] = plan.slaves
+    slave.init_cmds = [c for c in slave.init_cmds if c.comment != "set DC cycle time"]
+    clock = SimClock()
+    segment = emulate.segment(emulate.specs_from_eni(plan, library, "line"), clock_ns=clock)
+    net = Network(plan, SimLink(segment, clock))
+    with pytest.raises(ApplyError) as err:
+        net.up(AlState.SAFEOP)
+    assert err.value.al_code == 0x0035
+    assert (segment.slaves[0].state, segment.slaves[0].error) == (AlState.PREOP, True)

@@ -1,4 +1,4 @@
-"""Which emulated ESC has a DC unit (``runtime/esc_chips.py`` ``has_dc_unit``): the rule
+"""Which emulated ESC has a DC unit (``runtime/segment/esc_chips.py`` ``has_dc_unit``): the rule
 against every real slave of every capture, the emulated registers of a DC-less ESC, and a
 master that brings up a line with one in front of a DC drive.
 
@@ -24,8 +24,8 @@ from ecatcfg.esc import ESC_FEATURE_DC, Cmd, Reg
 from ecatcfg.esi.library import Library
 from ecatcfg.esi.reader import read_bytes
 from ecatcfg.runtime import wire
-from ecatcfg.runtime.emulate import SlaveSpec, emulated_slave, segment
-from ecatcfg.runtime.esc_chips import chip_for, chip_of, has_dc_unit
+from ecatcfg.runtime.segment.emulate import SlaveSpec, emulated_slave, segment
+from ecatcfg.runtime.segment.esc_chips import chip_for, chip_of, has_dc_unit
 from ecatcfg.runtime.wire import Datagram
 
 DC_UNIT = range(Reg.DC_SYSTEM_TIME, 0x0A00)

@@ -23,9 +23,9 @@ from test_esc_emulation import SDO_UPLOAD_1018_01, address_all, fp, request, run
 from ecatcfg.esc import AlState, Cmd, FmmuConfig, FmmuType, SmConfig, fmmu_register, sm_register
 from ecatcfg.esi.library import Library
 from ecatcfg.runtime import wire
-from ecatcfg.runtime.emulate import SlaveSpec, segment
-from ecatcfg.runtime.segment import VirtualSegment
-from ecatcfg.runtime.slave import StateChange
+from ecatcfg.runtime.segment.emulate import SlaveSpec, segment
+from ecatcfg.runtime.segment.virtual import VirtualSegment
+from ecatcfg.runtime.segment.slave import StateChange
 from ecatcfg.runtime.wire import Datagram
 
 

@@ -19,8 +19,8 @@ from conftest import EXAMPLES
 from ecatcfg.esc import Cmd
 from ecatcfg.esi.library import Library
 from ecatcfg.runtime import wire
-from ecatcfg.runtime.emulate import SlaveSpec, segment
-from ecatcfg.runtime.segment import VirtualSegment
+from ecatcfg.runtime.segment.emulate import SlaveSpec, segment
+from ecatcfg.runtime.segment.virtual import VirtualSegment
 
 
 @pytest.fixture(scope="module")

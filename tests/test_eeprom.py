@@ -23,9 +23,9 @@ from rig import serving
 from ecatcfg.esc import Cmd
 from ecatcfg.esi.library import Library
 from ecatcfg.runtime import wire
-from ecatcfg.runtime.emulate import SlaveSpec, segment
-from ecatcfg.runtime.segment import VirtualSegment
-from ecatcfg.runtime.timing import Timing
+from ecatcfg.runtime.segment.emulate import SlaveSpec, segment
+from ecatcfg.runtime.segment.virtual import VirtualSegment
+from ecatcfg.runtime.segment.timing import Timing
 
 ROOT = Path(__file__).resolve().parent.parent
 ESI = ROOT / "examples" / "esi"

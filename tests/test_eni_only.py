@@ -28,9 +28,10 @@ from ecatcfg.eni.contents import UnsupportedEniError
 from ecatcfg.esc import AlState, Transition
 from ecatcfg.esi import sii
 from ecatcfg.esi.library import Library
-from ecatcfg.runtime import Network, emulate
-from ecatcfg.runtime.eni_device import device_from_eni, type_name
-from ecatcfg.runtime.replay import ApplyError
+from ecatcfg.runtime import Network
+from ecatcfg.runtime.segment import emulate
+from ecatcfg.runtime.segment.eni_device import device_from_eni, type_name
+from ecatcfg.runtime.master.replay import ApplyError
 
 # The ENIs that do not reach OP, and why; each test asserts the exact failure (file, line,
 # cause).  A refusal belongs here only if a real device would refuse the file too, or the

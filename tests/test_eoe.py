@@ -30,11 +30,12 @@ from ecatcfg.eni.plan import EoeInitCmd, MailboxArea, MailboxPlan, NetworkPlan
 from ecatcfg.esc import AlState, Cmd, Transition
 from ecatcfg.esi.library import Library
 from ecatcfg.esi.reader import read_bytes
-from ecatcfg.runtime import Network, emulate
+from ecatcfg.runtime import Network
+from ecatcfg.runtime.segment import emulate
 from ecatcfg.runtime.mailbox import (MailboxError, MbxErrorDetail, MbxType, decode,
                                      encode_emergency, encode_mailbox, encode_upload_request,
                                      pad_to)
-from ecatcfg.runtime.replay import ApplyError, MailboxChannel, eoe_init_cmd_job
+from ecatcfg.runtime.master.replay import ApplyError, MailboxChannel, eoe_init_cmd_job
 from ecatcfg.runtime.wire import Datagram
 
 # ip 10.0.0.7, mask 255.255.0.0, gateway 10.0.0.1, mac 02:00:00:00:00:07: flags 0x0F, then

@@ -18,9 +18,9 @@ from conftest import EXAMPLES
 from ecatcfg.esc import AlState, Cmd, FmmuConfig, FmmuType, SmConfig, fmmu_register, sm_register
 from ecatcfg.esi.library import Library
 from ecatcfg.runtime import wire
-from ecatcfg.runtime.emulate import SlaveSpec, segment
+from ecatcfg.runtime.segment.emulate import SlaveSpec, segment
 from ecatcfg.runtime.link import MemoryLink
-from ecatcfg.runtime.segment import Faults, VirtualSegment
+from ecatcfg.runtime.segment.virtual import Faults, VirtualSegment
 from ecatcfg.runtime.wire import Datagram
 
 

@@ -12,7 +12,7 @@ import pytest
 
 from ecatcfg.cli import main
 from ecatcfg.compiler import topology
-from ecatcfg.compiler.resolve import plugged_devices
+from ecatcfg.compiler.plugged import plugged_devices
 from ecatcfg.compiler.topology import TopologyError
 from ecatcfg.esi.library import Library
 from ecatcfg.esi.lint import RULES, all_rules

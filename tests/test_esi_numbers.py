@@ -16,7 +16,7 @@ import fuzzing
 from ecatcfg.cli import main
 from ecatcfg.esi import reader
 from ecatcfg.esi.library import Library
-from ecatcfg.runtime.emulate import SlaveSpec, emulated_slave
+from ecatcfg.runtime.segment.emulate import SlaveSpec, emulated_slave
 
 DRIVE = fuzzing.ESI_DIR / "ecatcfg-EXD402-drive.xml"
 TOPOLOGY = 'master: {name: m}\nslaves:\n  - {name: d, device: "0xE0000ECA:0x7201"}\n'

@@ -20,8 +20,8 @@ from ecatcfg.eni.reader import EniReadError
 from ecatcfg.errors import EcatcfgError
 from ecatcfg.esc import AlState, Cmd
 from ecatcfg.runtime import wire
-from ecatcfg.runtime.replay import ApplyError
-from ecatcfg.runtime.slave import MEMORY_SIZE
+from ecatcfg.runtime.master.replay import ApplyError
+from ecatcfg.runtime.segment.slave import MEMORY_SIZE
 from ecatcfg.runtime.wire import Datagram
 
 TOPOLOGY = "master: {name: m}\nslaves:\n  - {name: a, device: EX1004}\n"

@@ -25,7 +25,7 @@ from ecatcfg.eni import writer as eni_writer
 from ecatcfg.esc import Cmd
 from ecatcfg.esi.library import Library
 from ecatcfg.runtime import wire
-from ecatcfg.runtime.emulate import SlaveSpec, segment
+from ecatcfg.runtime.segment.emulate import SlaveSpec, segment
 
 TREE_ESI = [EXAMPLES / "tree" / "esi", EXAMPLES / "esi"]
 HOT_TREE = EXAMPLES / "tree" / "hotconnect.yaml"

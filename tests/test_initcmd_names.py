@@ -14,7 +14,7 @@ from ecatcfg.cli import main
 from ecatcfg.eni.plan import InitCmd
 from ecatcfg.esc import Cmd, Transition
 from ecatcfg.eni.words import init_cmd_name
-from ecatcfg.runtime.replay import ApplyError
+from ecatcfg.runtime.master.replay import ApplyError
 
 ESI = EXAMPLES / "esi"
 

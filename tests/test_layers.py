@@ -1,9 +1,12 @@
 """The layers of the package (docs/architecture.md): esi at the bottom, eni above it, the
-compiler and the runtime above those and never importing each other, cli on top.
+compiler and the runtime above those and never importing each other, cli on top; inside the
+runtime, the master and the virtual segment never import each other and the shared codec
+imports neither.
 
-import-linter checks the contract in pyproject.toml over every import statement, relative
-and inside functions included.  The second test shows the check can fail: the same contract
-over a copy of the package in which the runtime imports the compiler is broken.
+import-linter checks the contracts in pyproject.toml over every import statement, relative
+and inside functions included.  The other tests show the check can fail: the same contracts
+over a copy of the package in which the runtime imports the compiler, the master the
+segment, the segment the master or the codec the master are broken.
 """
 
 from __future__ import annotations
@@ -13,6 +16,8 @@ import shutil
 import subprocess
 import sys
 from pathlib import Path
+
+import pytest
 
 from conftest import ROOT
 
@@ -30,43 +35,59 @@ def lint_imports(package_parent: Path | None = None) -> subprocess.CompletedProc
 def test_layers_are_kept():
     out = lint_imports()
     assert out.returncode == 0, out.stdout + out.stderr
-    assert "1 kept, 0 broken" in out.stdout, out.stdout
+    assert "2 kept, 0 broken" in out.stdout, out.stdout
 
 
-def test_a_runtime_module_importing_the_compiler_breaks_the_contract(tmp_path):
+def _copy_with(tmp_path: Path, module: str, sneak: str) -> Path:
+    """A copy of the package in which ``module`` (a path below the checkout) gains a
+    function with the import statement ``sneak``; the folder to import it from."""
     copy = tmp_path / "ecatcfg"
     # symlinks=True: .mypy_path/ecatcfg links to the checkout itself (pyproject.toml, mypy)
     shutil.copytree(ROOT, copy, symlinks=True, ignore=shutil.ignore_patterns(
         ".git", "tests", "bench", "docs", "__pycache__", "*_cache", "*.egg-info"))
-    scan = copy / "runtime" / "scan.py"
-    # a relative import inside a function, the kind a grep for "ecatcfg.compiler" misses
-    scan.write_text(scan.read_text() + "\n\ndef _sneak():\n    from ..compiler import build\n"
-                    "    return build\n")
-    out = lint_imports(tmp_path)
+    path = copy / module
+    path.write_text(path.read_text() + f"\n\ndef _sneak():\n    {sneak}\n    return None\n")
+    return tmp_path
+
+
+# Relative imports inside a function: the kind a grep for "ecatcfg.compiler" misses.
+@pytest.mark.parametrize("module, sneak, contract, line", [
+    ("runtime/master/scan.py", "from ...compiler import build",
+     "esi < eni < compiler | runtime < examples < cli BROKEN",
+     "ecatcfg.runtime.master.scan -> ecatcfg.compiler.build"),
+    ("runtime/master/sdo_client.py", "from ..segment import sdo_server",
+     "runtime: codec < master | segment < network BROKEN",
+     "ecatcfg.runtime.master.sdo_client -> ecatcfg.runtime.segment.sdo_server"),
+    ("runtime/segment/slave.py", "from ecatcfg.runtime.master.replay import ApplyError",
+     "runtime: codec < master | segment < network BROKEN",
+     "ecatcfg.runtime.segment.slave -> ecatcfg.runtime.master.replay"),
+    ("runtime/mailbox.py", "from .master import sdo_client",
+     "runtime: codec < master | segment < network BROKEN",
+     "ecatcfg.runtime.mailbox -> ecatcfg.runtime.master.sdo_client"),
+], ids=["runtime-to-compiler", "master-to-segment", "segment-to-master", "codec-to-master"])
+def test_an_import_across_the_layers_breaks_a_contract(tmp_path, module, sneak, contract,
+                                                        line):
+    out = lint_imports(_copy_with(tmp_path, module, sneak))
     assert out.returncode == 1, out.stdout + out.stderr
-    assert "ecatcfg.runtime.scan -> ecatcfg.compiler.build" in out.stdout, out.stdout
+    assert contract in out.stdout and "1 kept, 1 broken" in out.stdout, out.stdout
+    assert line in out.stdout, out.stdout
 
 
-def test_public_names_import_from_their_old_paths():
-    """The plan model, the ENI reader/writer/cache and the SDO value codec moved; code that
-    imports them from where they were keeps working, and gets the same objects."""
+def test_public_names_import_from_their_homes():
+    """The plan model, the ENI reader/writer/cache and the SDO value codec live in ``eni/``
+    and ``esi/datatypes.py``; the compiler's old re-export modules are gone (README, "What
+    moved"), so nothing imports a second path to them."""
+    import importlib
+
     from ecatcfg.compiler import compile_topology
     from ecatcfg.compiler.build import compile_topology as build_compile
-    from ecatcfg.compiler.eni_cache import read_file as cached_read
-    from ecatcfg.compiler.eni_reader import EniReadError, read_bytes, read_file
-    from ecatcfg.compiler.eni_writer import to_bytes, write
-    from ecatcfg.compiler.plan import NetworkPlan, SlavePlan
-    from ecatcfg.compiler.sdo import SdoValueError, encode
-    from ecatcfg.eni import cache, plan, reader, writer
-    from ecatcfg.esi import Library, datatypes, library
+    from ecatcfg.esi import Library, library
     from ecatcfg.runtime import Network
     from ecatcfg.runtime.link import RawLink
     from ecatcfg.runtime.network import Network as network_class
 
-    assert (NetworkPlan, SlavePlan) == (plan.NetworkPlan, plan.SlavePlan)
-    assert (read_file, read_bytes, EniReadError) == (reader.read_file, reader.read_bytes,
-                                                      reader.EniReadError)
-    assert (to_bytes, write, cached_read) == (writer.to_bytes, writer.write, cache.read_file)
-    assert (encode, SdoValueError) == (datatypes.encode, datatypes.ValueTypeError)
     assert compile_topology is build_compile and Library is library.Library
     assert Network is network_class and RawLink.__module__ == "ecatcfg.runtime.link"
+    for gone in ("plan", "eni_reader", "eni_writer", "eni_cache", "sdo"):
+        with pytest.raises(ModuleNotFoundError):
+            importlib.import_module(f"ecatcfg.compiler.{gone}")

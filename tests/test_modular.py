@@ -22,16 +22,16 @@ from lxml import etree
 from conftest import EXAMPLES
 
 from ecatcfg.compiler import build, topology
-from ecatcfg.compiler.resolve import plugged_devices
+from ecatcfg.compiler.plugged import plugged_devices
 from ecatcfg.compiler.topology import TopologyError
 from ecatcfg.eni import reader as eni_reader
 from ecatcfg.eni import writer as eni_writer
 from ecatcfg.eni.plan import NetworkPlan
 from ecatcfg.esc import AlState
 from ecatcfg.esi.library import Library
-from ecatcfg.runtime import emulate
+from ecatcfg.runtime.segment import emulate
 from ecatcfg.runtime.network import Network
-from ecatcfg.runtime.replay import ApplyError
+from ecatcfg.runtime.master.replay import ApplyError
 
 # 12 modules of 9 kinds (digital in/out, relay, analog in/out, counter, RTD).
 UR20 = ["UR20-4DI-P", "UR20-8DI-P-3W", "UR20-16DI-P", "UR20-4DO-P", "UR20-8DO-P",

@@ -31,7 +31,7 @@ from ecatcfg.esc import AlState
 from ecatcfg.esi.library import Library
 from ecatcfg.esi.lint import LintOptions, Target, lint_file, select_rules
 from ecatcfg.runtime.network import Network
-from ecatcfg.runtime.replay import ApplyError
+from ecatcfg.runtime.master.replay import ApplyError
 from lint_fixtures import drive, esi, init_cmd, marked_line
 
 COUPLER = FIXTURES / "ecatcfg-EXK-coupler.xml"
@@ -394,7 +394,7 @@ def test_what_a_download_writes(tmp_path, index, data, complete, rule):
 def test_the_emulated_slave_takes_what_lint_lets_through(tmp_path):
     """The same length rule answers on the wire: a shorter string is taken (the rest NULs),
     a longer one refused with 0x06070012, a number of the wrong size with 0x06070010."""
-    from ecatcfg.runtime import emulate
+    from ecatcfg.runtime.segment import emulate
     from ecatcfg.runtime.mailbox import SdoAbort
     path = tmp_path / "d.xml"
     path.write_text(esi(drive(profile=_string_and_record_profile())))

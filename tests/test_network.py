@@ -22,13 +22,13 @@ from ecatcfg.errors import EcatcfgError
 from ecatcfg.esc import AlState, Cmd, Transition
 from ecatcfg.esi.library import Library
 from ecatcfg.runtime import Network, wire
-from ecatcfg.runtime.cyclic import CyclicFrames
+from ecatcfg.runtime.master.cyclic import CyclicFrames
 from ecatcfg.runtime.link import MemoryLink
-from ecatcfg.runtime.lockstep import run_jobs
-from ecatcfg.runtime.master import Master, VerifyError
-from ecatcfg.runtime.replay import ApplyError, init_cmd_job
-from ecatcfg.runtime.segment import Faults
-from ecatcfg.runtime.transport import Transport
+from ecatcfg.runtime.master.lockstep import run_jobs
+from ecatcfg.runtime.master.bringup import Master, VerifyError
+from ecatcfg.runtime.master.replay import ApplyError, init_cmd_job
+from ecatcfg.runtime.segment.virtual import Faults
+from ecatcfg.runtime.master.transport import Transport
 
 ESI = EXAMPLES / "esi"
 
@@ -143,7 +143,7 @@ def test_a_failed_init_cmd_is_named_with_its_file_and_line(example_plan, tmp_pat
 def test_swapped_slaves_stop_before_any_configuration():
     plan = line_plan(["EX1100", "EX1004", "EX2008"])
     swapped = line_plan(["EX1100", "EX2008", "EX1004"])
-    from ecatcfg.runtime import emulate
+    from ecatcfg.runtime.segment import emulate
     lib = Library([ESI], cache=False)
     seg = emulate.segment(emulate.specs_from_eni(swapped, lib, "x"))
     a, b = MemoryLink.pair()
@@ -278,8 +278,8 @@ def test_modular_devices_are_emulated_with_their_modules(corpus, slave, source):
     """simulate --topology plugs the topology's modules; simulate --eni takes the modules
     from the ENI (its 0xF030 list, else accepting what its startup SDOs write) and the PDOs
     it lists.  Either way the compiled ENI brings the slave to OP."""
-    from ecatcfg.compiler.resolve import plugged_devices
-    from ecatcfg.runtime import emulate
+    from ecatcfg.compiler.plugged import plugged_devices
+    from ecatcfg.runtime.segment import emulate
     lib = Library([corpus / "esi"], cache=False)
     loaded = topology.loads(f"slaves:\n  - {slave}\n", "t.yaml")
     plan = eni_reader.read_bytes(eni_writer.to_bytes(
@@ -336,7 +336,7 @@ def test_going_down_acknowledges_errors(example_plan):
 def test_close_closes_the_link_it_was_given(example_plan):
     """The Network owns its link: closing it releases the socket (RawLink) or the
     in-memory end, also when the caller handed the link in."""
-    from ecatcfg.runtime import emulate
+    from ecatcfg.runtime.segment import emulate
     from ecatcfg.runtime.link import LinkError
     lib = Library([ESI], cache=False)
     link, close = serve_in_memory(emulate.segment(emulate.specs_from_eni(example_plan, lib, "x")))
@@ -355,7 +355,7 @@ def test_two_slaves_answering_one_address_fail_the_command_at_once():
     Two slaves with one station address (an ENI that gives two slaves the same address)
     answer an FPRD together: working counter 2 where the file says 1.  Resending cannot
     change that; it is an error naming the slave and the command, never a success."""
-    from ecatcfg.runtime import emulate
+    from ecatcfg.runtime.segment import emulate
     plan = line_plan(["EX1100", "EX1004", "EX2008"])
     link, close = serve_in_memory(emulate.segment(emulate.specs_from_eni(plan, Library([ESI],
                                                                               cache=False), "x")))
@@ -406,7 +406,7 @@ def _verify_on(eni_plan, line, accept_newer_revision: bool = False
                ) -> tuple[VerifyError, list[bytes]]:
     """Scan and verify ``eni_plan`` against a virtual line of ``line``'s slaves; the
     VerifyError it must raise and the frames the master sent."""
-    from ecatcfg.runtime import emulate
+    from ecatcfg.runtime.segment import emulate
     seg = emulate.segment(emulate.specs_from_eni(line, Library([ESI], cache=False), "x")
                           if line is not None else [])
     link, close = serve_in_memory(seg)
@@ -473,7 +473,7 @@ def test_another_revision_is_reported_and_a_newer_one_taken_only_on_request():
     err, _ = _verify_on(older, line)
     assert [(m.position, m.problem) for m in err.mismatches] == [
         (1, "other revision (newer: --accept-newer-revision takes it)")]
-    from ecatcfg.runtime import emulate
+    from ecatcfg.runtime.segment import emulate
     link, close = serve_in_memory(emulate.segment(emulate.specs_from_eni(
         line, Library([ESI], cache=False), "x")))
     try:

@@ -1,4 +1,4 @@
-"""Results that are true (``runtime/reached.py``, ``eni/derive.py``): apply and the Network
+"""Results that are true (``runtime/master/reached.py``, ``eni/derive.py``): apply and the Network
 report a state only when every slave reads back in it; a partial ENI (no register InitCmds)
 is completed with the standard set-up, or refused before anything is sent when that cannot
 be derived, as is an ENI that requests no state on the way; ``apply --format json`` prints
@@ -26,7 +26,7 @@ from ecatcfg.eni import reader as eni_reader
 from ecatcfg.eni.derive import complete
 from ecatcfg.eni.plan import SlavePlan
 from ecatcfg.esc import AlState, Cmd, Reg, Transition
-from ecatcfg.runtime.master import Event, NotReachedError
+from ecatcfg.runtime.master.bringup import Event, NotReachedError
 from ecatcfg.runtime.network import Network
 
 TIMEOUT = 90

@@ -1,5 +1,5 @@
-"""The real-time options of the cycling thread (runtime/realtime.py, docs/runtime.md
-"Real-time options") and the cyclic hot path they run (runtime/cyclic.py):
+"""The real-time options of the cycling thread (runtime/master/realtime.py, docs/runtime.md
+"Real-time options") and the cyclic hot path they run (runtime/master/cyclic.py):
 
 - the options reach the cycling thread (read back with os.sched_getscheduler /
   sched_getaffinity / /proc VmLck from inside it) and are undone after the run;
@@ -31,7 +31,8 @@ from ecatcfg.eni import writer as eni_writer
 from ecatcfg.errors import UsageError
 from ecatcfg.esc import AlState, Cmd
 from ecatcfg.esi.library import Library
-from ecatcfg.runtime import Network, realtime, wire
+from ecatcfg.runtime import Network, wire
+from ecatcfg.runtime.master import realtime
 
 ESI = EXAMPLES / "esi"
 CYCLE_US = 1000
@@ -332,7 +333,7 @@ class _TamperingLink:
 def test_late_and_reshaped_replies_are_never_taken(example_plan, circulate):
     """... and a reply whose datagrams carry the circulating bit (ETG.1000.4: set by a
     slave, not a change of shape) is taken, as Transport.exchange takes it."""
-    from ecatcfg.runtime import emulate
+    from ecatcfg.runtime.segment import emulate
     seg = emulate.segment(emulate.specs_from_eni(example_plan, Library([ESI], cache=False),
                                                  "x"))
     link = _TamperingLink(seg, circulate)

@@ -144,7 +144,8 @@ def test_the_apply_path_imports_no_dataclasses():
     import sys
     probe = ("import sys\n"
              "import ecatcfg.cli.apply, ecatcfg.cli.report, ecatcfg.eni.cache\n"
-             "import ecatcfg.runtime.network, ecatcfg.runtime.link, ecatcfg.runtime.sdo_client\n"
+             "import ecatcfg.runtime.network, ecatcfg.runtime.link\n"
+             "import ecatcfg.runtime.master.sdo_client\n"
              "print(sorted(m for m in ('dataclasses', 'inspect', 'lxml', 'hashlib',\n"
              "                         'statistics', 'rich') if m in sys.modules))\n")
     out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True,

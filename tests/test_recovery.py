@@ -1,4 +1,4 @@
-"""Slaves that drop out while the network cycles and come back (runtime/recovery.py), in
+"""Slaves that drop out while the network cycles and come back (runtime/master/recovery.py), in
 memory and over a veth pair: the others' data never stops, the slave is reported once,
 re-verified, configured again from INIT and back in OP within the documented bound."""
 
@@ -20,16 +20,18 @@ from ecatcfg.eni import writer as eni_writer
 from ecatcfg.eni.plan import NetworkPlan
 from ecatcfg.esc import AlState, Cmd, Reg
 from ecatcfg.esi.library import Library
-from ecatcfg.runtime import Network, emulate, recovery, wire
-from ecatcfg.runtime.cyclic import CyclicFrames
-from ecatcfg.runtime.lockstep import run_jobs
-from ecatcfg.runtime.master import Event
-from ecatcfg.runtime.timing import Timing
+from ecatcfg.runtime import Network, wire
+from ecatcfg.runtime.master import recovery
+from ecatcfg.runtime.segment import emulate
+from ecatcfg.runtime.master.cyclic import CyclicFrames
+from ecatcfg.runtime.master.lockstep import run_jobs
+from ecatcfg.runtime.master.bringup import Event
+from ecatcfg.runtime.segment.timing import Timing
 from ecatcfg.runtime.wire import Datagram
 
 ESI = EXAMPLES / "esi"
 # docs/runtime.md "Slaves that drop out": the drive (firmware with the drive timing of
-# runtime/timing.py: mailbox, IP, PS and SO as a Kollmorgen AKD takes them) is back in OP
+# runtime/segment/timing.py: mailbox, IP, PS and SO as a Kollmorgen AKD takes them) is back in OP
 # within 2 s of coming back on the wire; the test allows the loaded CI machine 3 s.
 BOUND_S = 3.0
 LAMPS = [f"lamps.Channel 1-8.Output {k}" for k in range(1, 9)]
@@ -452,7 +454,7 @@ def test_an_absent_group_before_a_present_one_is_skipped_whole(plan, previous_po
 def test_a_head_that_is_not_identified_leaves_its_group_out_and_fails_the_line(plan):
     """The slave where the group's head should be has another alias: the group counts as
     absent, so that slave is one the ENI does not expect and nothing is configured."""
-    from ecatcfg.runtime.master import VerifyError
+    from ecatcfg.runtime.master.bringup import VerifyError
     grouped = with_group(plan, "lamps", 2)
     seg = grouped_segment(grouped, "lamps", alias=ALIAS + 1)
     with grouped_network(grouped, seg, "memory") as (net, events):
@@ -754,7 +756,7 @@ def test_a_group_head_identified_by_its_device_id_on_a_segment_from_the_eni(plan
         assert net.online("lamps") and all(s.state == AlState.OP for s in net.segment.slaves)
     with Network.virtual(by_id, esi=[ESI]) as net:
         next(s for s in net.segment.slaves if s.name == "lamps").device_id = 43
-        from ecatcfg.runtime.master import VerifyError
+        from ecatcfg.runtime.master.bringup import VerifyError
         with pytest.raises(VerifyError, match="extra slave"):
             net.up()
 

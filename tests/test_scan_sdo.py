@@ -4,7 +4,7 @@ Runtime cases build a veth pair between two private network namespaces: the virt
 answers on one end (in this process, or ``ecatcfg simulate`` in a process of its own), the
 command under test runs in the other namespace as a process of its own, as a user would run
 it.  What the commands report is compared with the ESI files they were emulated from.
-In-memory cases (no namespaces needed) drive ``runtime/sdo_tool.py`` over a lossy
+In-memory cases (no namespaces needed) drive ``runtime/master/sdo_tool.py`` over a lossy
 :class:`MemoryLink` and check the parts that need no wire (INDEX:SUB, values, usage errors).
 """
 
@@ -24,11 +24,11 @@ from rig import serving
 from ecatcfg.esi import datatypes
 from ecatcfg.compiler import topology
 from ecatcfg.esi.library import Library
-from ecatcfg.runtime import sdo_tool
-from ecatcfg.runtime.emulate import SlaveSpec, segment
+from ecatcfg.runtime.master import sdo_tool
+from ecatcfg.runtime.segment.emulate import SlaveSpec, segment
 from ecatcfg.runtime.link import MemoryLink
-from ecatcfg.runtime.segment import Faults, VirtualSegment
-from ecatcfg.runtime.transport import Transport
+from ecatcfg.runtime.segment.virtual import Faults, VirtualSegment
+from ecatcfg.runtime.master.transport import Transport
 
 ROOT = Path(__file__).resolve().parent.parent
 ESI = ROOT / "examples" / "esi"
@@ -264,8 +264,8 @@ def test_transfers_survive_lost_frames_and_stale_mailbox_messages(lib):
 
 def test_a_message_left_in_sm1_is_taken_out_first(lib):
     from ecatcfg.runtime.mailbox import encode_upload_request, pad_to
-    from ecatcfg.runtime.replay import MailboxChannel
-    from ecatcfg.runtime.lockstep import run_jobs
+    from ecatcfg.runtime.master.replay import MailboxChannel
+    from ecatcfg.runtime.master.lockstep import run_jobs
     from ecatcfg.eni.plan import MailboxArea, MailboxPlan
 
     seg = build(lib, ["EXD-402"])

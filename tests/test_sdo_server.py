@@ -19,10 +19,11 @@ from ecatcfg.runtime.mailbox import (
     MbxErrorDetail, MbxType, SdoAbort, SdoInfo, UploadResponse, UploadSegment, decode,
     pad_to,
 )
-from ecatcfg.runtime.objects import ObjectDictionary, OdEntry, OdObject
-from ecatcfg.runtime.sdo_client import SdoDownload, SdoUpload
-from ecatcfg.runtime.mailbox_server import MailboxServer
-from ecatcfg.runtime.sdo_server import SdoServer
+from ecatcfg.runtime.segment.od_entries import OdEntry, OdObject
+from ecatcfg.runtime.segment.objects import ObjectDictionary
+from ecatcfg.runtime.master.sdo_client import SdoDownload, SdoUpload
+from ecatcfg.runtime.segment.mailbox_server import MailboxServer
+from ecatcfg.runtime.segment.sdo_server import SdoServer
 from conftest import device_xml, esi_xml
 
 PREOP, SAFEOP, OP = AlState.PREOP, AlState.SAFEOP, AlState.OP

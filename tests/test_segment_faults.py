@@ -21,9 +21,9 @@ from ecatcfg.eni import writer as eni_writer
 from ecatcfg.esc import SII_PRODUCT_CODE, SII_SERIAL, AlState, Cmd, eeprom_read_request
 from ecatcfg.esi.library import Library
 from ecatcfg.runtime import Network, wire
-from ecatcfg.runtime.emulate import SlaveSpec, emulated_slave, segment
-from ecatcfg.runtime.segment import VirtualSegment
-from ecatcfg.runtime.timing import Timing
+from ecatcfg.runtime.segment.emulate import SlaveSpec, emulated_slave, segment
+from ecatcfg.runtime.segment.virtual import VirtualSegment
+from ecatcfg.runtime.segment.timing import Timing
 
 ESI = EXAMPLES / "esi"
 

@@ -16,8 +16,8 @@ import pytest
 from rig import serving, start_simulate
 
 from ecatcfg.esi.library import Library
-from ecatcfg.runtime.emulate import SlaveSpec, segment
-from ecatcfg.runtime.segment import VirtualSegment
+from ecatcfg.runtime.segment.emulate import SlaveSpec, segment
+from ecatcfg.runtime.segment.virtual import VirtualSegment
 
 PROBE = Path(__file__).with_name("soem_probe.py")
 ROOT = Path(__file__).resolve().parent.parent

@@ -1,6 +1,6 @@
-"""Slaves that take time (runtime/timing.py): mailbox replies, state changes and EEPROM reads
-become visible only after the table's times, on a simulated clock in memory; our master and
-SOEM still bring a realistic line to OP.
+"""Slaves that take time (runtime/segment/timing.py): mailbox replies, state changes and
+EEPROM reads become visible only after the table's times, on a simulated clock in memory;
+our master and SOEM still bring a realistic line to OP.
 
 The expected figures are the table's (docs/timing.md: measured in captures of real slaves by
 bench/capture_timing.py), the register values those of the captures: a busy EEPROM reads
@@ -23,10 +23,11 @@ from conftest import EXAMPLES
 from ecatcfg.errors import EcatcfgError
 from ecatcfg.esc import AlState, Cmd, SmConfig, sm_register
 from ecatcfg.esi.library import Library
-from ecatcfg.runtime import Network, timing, wire
-from ecatcfg.runtime.emulate import SlaveSpec, segment
-from ecatcfg.runtime.segment import VirtualSegment
-from ecatcfg.runtime.timing import Timing
+from ecatcfg.runtime import Network, wire
+from ecatcfg.runtime.segment import timing
+from ecatcfg.runtime.segment.emulate import SlaveSpec, segment
+from ecatcfg.runtime.segment.virtual import VirtualSegment
+from ecatcfg.runtime.segment.timing import Timing
 from ecatcfg.runtime.wire import Datagram
 
 ESI = EXAMPLES / "esi"

@@ -1,4 +1,4 @@
-"""The timing model's table (runtime/timing.py) against every capture of both corpora.
+"""The timing model's table (runtime/segment/timing.py) against every capture of both corpora.
 
 ``bench/capture_timing.py`` measures the captures: for each timed event of each real slave
 (mailbox reply, state change per transition, EEPROM read) the window its duration lies in,
@@ -28,7 +28,7 @@ import pytest
 
 from conftest import ROOT
 from ecatcfg.esi.library import Library
-from ecatcfg.runtime.timing import KINDS, TABLE
+from ecatcfg.runtime.segment.timing import KINDS, TABLE
 
 EXTRA = "corpus-extra/"
 

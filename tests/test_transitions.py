@@ -28,7 +28,8 @@ from ecatcfg.eni import reader as eni_reader
 from ecatcfg.eni import writer as eni_writer
 from ecatcfg.esc import TRANSITION_RULES, AlState, Transition
 from ecatcfg.esi.library import Library
-from ecatcfg.runtime import Network, master
+from ecatcfg.runtime import Network
+from ecatcfg.runtime.master import bringup as master
 
 ESI = esi_xml(device_xml("FX-EOE", "#x20",
                          body=MAILBOX_PD_SMS + "<Mailbox><EoE/><CoE/></Mailbox>"))
@@ -245,7 +246,7 @@ def test_a_disabled_mailbox_command_in_ii_is_no_loss(line):
 
 
 def test_the_masters_steps_are_the_rules_steps():
-    """``runtime/master.py`` walks UP and DOWN; the rules name exactly those (and II) as
+    """``runtime/master/bringup.py`` walks UP and DOWN; the rules name exactly those (and II) as
     sent, and every transition has a rule."""
     assert set(TRANSITION_RULES) == set(Transition)
     walked = set(master.UP) | {t for steps in master.DOWN.values() for t in steps}

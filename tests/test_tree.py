@@ -19,7 +19,7 @@ from lxml import etree
 
 from ecatcfg.cli import main
 from ecatcfg.compiler import build, topology
-from ecatcfg.compiler.resolve import plugged_devices
+from ecatcfg.compiler.plugged import plugged_devices
 from ecatcfg.compiler.topology import TopologyError
 from ecatcfg.eni import reader as eni_reader
 from ecatcfg.eni import writer as eni_writer

@@ -3,7 +3,7 @@ the tree, DC propagation delays over it.
 
 Expectations are worked out by hand from the wiring rule (a frame enters port 0 and each
 ESC takes its open ports in the order 0 -> 3 -> 1 -> 2, ETG.1000.4; SOEM ``ethercatdc.c``,
-IgH ``slave.c``) and from the delay model of ``runtime/dc_clock.py``: P on the way from
+IgH ``slave.c``) and from the delay model of ``runtime/segment/dc_clock.py``: P on the way from
 port 0 through the processing unit to the first open port, F from a port the frame comes
 back on to the next one (or out of port 0), C per cable, P to turn round in a slave with
 no open downstream port.
@@ -29,9 +29,10 @@ from conftest import EXAMPLES
 from ecatcfg.compiler import build, topology
 from ecatcfg.esc import Cmd
 from ecatcfg.esi.library import Library
-from ecatcfg.runtime import emulate, wire
-from ecatcfg.runtime.dc_clock import (CABLE_DELAY_NS, FORWARDING_DELAY_NS, PROCESSING_DELAY_NS,
-                                      DcModel)
+from ecatcfg.runtime import wire
+from ecatcfg.runtime.segment import emulate
+from ecatcfg.runtime.segment.dc_clock import (CABLE_DELAY_NS, FORWARDING_DELAY_NS,
+                                              PROCESSING_DELAY_NS, DcModel)
 from ecatcfg.runtime.wiring import Plug
 
 ESI = EXAMPLES / "esi"
@@ -229,7 +230,7 @@ class SimLink:
 def on_segment(drives, plan, plugs=None, cut=(), dc=None):
     """A Master for ``plan`` on a segment of its slaves plugged as the ENI says, or as
     ``plugs`` (name -> (parent name, letter)) says, with the cables into ``cut`` removed."""
-    from ecatcfg.runtime.master import Master
+    from ecatcfg.runtime.master.bringup import Master
     _, library = drives
     specs = emulate.specs_from_eni(plan, library, "tree")
     if plugs is not None:
@@ -271,7 +272,7 @@ def test_a_tree_eni_reaches_op_on_the_virtual_segment(drives):
 
 
 def _verify_error(master, link):
-    from ecatcfg.runtime.master import VerifyError
+    from ecatcfg.runtime.master.bringup import VerifyError
     with pytest.raises(VerifyError) as err:
         master.scan_and_verify()
     written = {d.ado for f in link.sent for d in wire.decode(f).datagrams

@@ -38,7 +38,7 @@ def test_the_package_has_no_type_errors():
 MISUSE = '''
 from ecatcfg.esc import SmConfig
 from ecatcfg.eni.plan import InitCmd
-from ecatcfg.runtime.lockstep import Job, until_answered
+from ecatcfg.runtime.master.lockstep import Job, until_answered
 from ecatcfg.runtime.wire import Datagram
 
 Datagram(7, 0, 0)                                        # E: Missing positional argument "data"

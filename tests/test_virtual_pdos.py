@@ -32,8 +32,8 @@ from ecatcfg.esi.library import Library
 from ecatcfg.esi.reader import read_bytes, read_file
 from ecatcfg.runtime.mailbox import SdoAbort
 from ecatcfg.runtime.network import Network
-from ecatcfg.runtime.objects import ObjectDictionary
-from ecatcfg.runtime.syncman import SmKind
+from ecatcfg.runtime.segment.objects import ObjectDictionary
+from ecatcfg.runtime.segment.syncman import SmKind
 
 FIXTURE = Path(__file__).with_name("fixtures") / "ecatcfg-EXB6695-bridge.xml"
 
@@ -240,7 +240,7 @@ def test_bridge_reaches_op_virtually_and_moves_its_variables(tmp_path, complete_
 
 
 def test_bridge_reaches_op_from_the_eni_alone():
-    """Without the ESI the emulated slave comes from the ENI (runtime/eni_device.py): its
+    """Without the ESI the emulated slave comes from the ENI (runtime/segment/eni_device.py): its
     virtual PDOs get mapping objects that take the ENI's downloads too."""
     plan = _compile(MAPPING, FIXTURE)
     with Network.virtual(plan, esi=None) as net:

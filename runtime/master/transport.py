@@ -119,7 +119,7 @@ class Transport:
 
 class Prepared(Protocol):
     """A frame built once whose replies :meth:`Transport.exchange_prepared` matches without
-    decoding it (``runtime/cyclic.py``)."""
+    decoding it (``runtime/master/cyclic.py``)."""
 
     frame: bytearray            # the Ethernet frame as sent, datagram indices aside
     index_at: tuple[int, ...]   # offset of each datagram's index byte

@@ -18,8 +18,8 @@ import re
 from ecatcfg.eni.plan import SlavePlan
 from ecatcfg.esc import DETECTED_MODULE_IDENT_LIST, MODULE_IDENT_LIST, Transition
 from ecatcfg.esi.slots import ident_list_from_writes
-from ecatcfg.runtime.lockstep import Job
-from ecatcfg.runtime.replay import ApplyError, MailboxChannel, sdo_job
+from ecatcfg.runtime.master.lockstep import Job
+from ecatcfg.runtime.master.replay import ApplyError, MailboxChannel, sdo_job
 
 # A module PDO's name as the ENI gives it: "Module 3 (UR20-4DI-P / 1315170000).Input".
 _MODULE_PDO = re.compile(r"^Module (\d+) \((.*)\)\.[^.]*$")
@@ -48,7 +48,7 @@ def check_modules(channel: MailboxChannel, slave: SlavePlan, transition: Transit
     """Upload 0xF050 and compare it with the ENI's 0xF030 of ``transition``; nothing to do
     for a slave whose ENI downloads no module ident list then."""
     from ecatcfg.runtime.mailbox import ABORT_NO_OBJECT
-    from ecatcfg.runtime.sdo_client import SdoUpload
+    from ecatcfg.runtime.master.sdo_client import SdoUpload
 
     expected = configured_modules(slave, transition)
     if not expected:

@@ -36,14 +36,12 @@ from ecatcfg.esc import (AL_ERROR_ACK, AL_STATE_MASK, AL_STATUS_ERROR, MAILBOX_P
                          SM_CONTROL_MBOX_OUT, SM_DIR_ECAT_READS, SM_DIR_ECAT_WRITES, SM_DIR_MASK,
                          SM_MODE_MAILBOX, SM_MODE_MASK, SM_STATUS_MAILBOX_FULL, AlState, Cmd, Reg,
                          SmConfig, al_state_name, al_status_name, mailbox_protocol_names)
-from ecatcfg.runtime.lockstep import Job, Step, run_jobs
+from ecatcfg.runtime.master.lockstep import Job, Step, run_jobs
 from ecatcfg.runtime.mailbox import NORMAL_OVERHEAD, abort_name
-from ecatcfg.runtime.replay import (
-    ERROR_GRACE, TIMEOUT_COMMAND, TIMEOUT_MAILBOX, TIMEOUT_STATE, ApplyError, MailboxChannel,
-    sdo_job,
-)
-from ecatcfg.runtime.scan import count_slaves, sii_words
-from ecatcfg.runtime.transport import Transport
+from ecatcfg.runtime.master.replay import (ERROR_GRACE, TIMEOUT_COMMAND, TIMEOUT_MAILBOX,
+                                           TIMEOUT_STATE, ApplyError, MailboxChannel, sdo_job)
+from ecatcfg.runtime.master.scan import count_slaves, sii_words
+from ecatcfg.runtime.master.transport import Transport
 from ecatcfg.runtime.wire import Datagram
 
 FIRST_STATION_ADDRESS = 0x1000  # + position + 1, as SOEM and ENIs number them
@@ -106,7 +104,7 @@ def sdo_transfer(transport: Transport, position: int, index: int, sub: int,
     ``position``; returns the uploaded bytes (``b""`` for a download).
 
     Raises :class:`SdoToolError` (an abort carries ``abort_code``), or
-    :class:`~ecatcfg.runtime.replay.ApplyError` when no frame comes back at all.
+    :class:`~ecatcfg.runtime.master.replay.ApplyError` when no frame comes back at all.
     ``info`` (optional) is filled with what the preparation found.
     """
     if complete_access and sub > 1:
@@ -126,7 +124,7 @@ def sdo_transfer(transport: Transport, position: int, index: int, sub: int,
 
 def _job(info: SlaveMailbox, index: int, sub: int, data: bytes | None,
          complete_access: bool, timeout: float, result: list[bytes]) -> Job:
-    from ecatcfg.runtime.sdo_client import SdoDownload, SdoUpload
+    from ecatcfg.runtime.master.sdo_client import SdoDownload, SdoUpload
 
     yield from _prepare(info)
     send, recv = info.send, info.recv

@@ -2,16 +2,16 @@
 
 Built from the device's ESI: the SII EEPROM image (``esi/sii.py``) backs the SII interface
 (0x0500-0x050F) and loads the configured alias and PDI control at power-on; the object
-dictionary (``runtime/objects.py``) backs the CoE SDO server and decides which
+dictionary (``runtime/segment/objects.py``) backs the CoE SDO server and decides which
 SyncManager lengths the slave accepts in SAFEOP; the mailbox
-(``runtime/mailbox_server.py``) hands each message the master writes to the protocol's
+(``runtime/segment/mailbox_server.py``) hands each message the master writes to the protocol's
 server (CoE, EoE).  Register addresses and the rules the firmware applies are those of
 ``docs/protocol-notes.md`` §2-§4 (ETG.1000.4/.6, SOES, KickCAT).
 
 The ESC's 64 KiB address space is one ``bytearray``: registers below 0x1000, process memory
 above.  Reads and writes from the wire go through :meth:`EmulatedSlave.read` and
 :meth:`EmulatedSlave.write`, which refuse what a real ESC refuses (no working counter) and
-run the side effects of the registers written.  The segment (``runtime/segment.py``) does
+run the side effects of the registers written.  The segment (``runtime/segment/virtual.py``) does
 the addressing and logical (FMMU) accesses.
 """
 
@@ -29,21 +29,22 @@ from ecatcfg.esc import (AL_ERROR_ACK, AL_ID_REQUEST, AL_STATE_MASK, AL_STATUS_E
                          EEPROM_CMD_MASK, EEPROM_CMD_READ, EEPROM_CMD_RELOAD, EEPROM_CMD_WRITE,
                          EEPROM_ERROR_ACKNOWLEDGE, EEPROM_ERROR_WRITE_ENABLE, EEPROM_R64,
                          EEPROM_WRITE_ENABLE, ESC_DEVICE_EMULATION, FMMU_SIZE, PDI_DIGITAL_IO,
-                         SM_ACTIVATE_REPEAT, SM_DIR_MASK, SM_MODE_MASK, SM_WATCHDOG_ENABLE,
+                         SM_ACTIVATE_REPEAT, SM_WATCHDOG_ENABLE,
                          AlState, AlStatusCode, FmmuConfig, FmmuType, Reg, fmmu_register,
                          sm_register)
 from ecatcfg.esc import WATCHDOG_DIVIDER_DEFAULT, WATCHDOG_TIME_DEFAULT, watchdog_base_ns
 from ecatcfg.esi.model import Device
-from ecatcfg.runtime.dc_clock import (SPEED_COUNTER_START, SPEED_FILTER_DEPTH,
-                                      TIME_FILTER_DEPTH, DcClock)
-from ecatcfg.runtime.esc_chips import GENERIC, EscChip
-from ecatcfg.runtime.syncman import SmKind, SmState
+from ecatcfg.runtime.segment import al_checks
+from ecatcfg.runtime.segment.dc_clock import (SPEED_COUNTER_START, SPEED_FILTER_DEPTH,
+                                              TIME_FILTER_DEPTH, DcClock)
+from ecatcfg.runtime.segment.esc_chips import GENERIC, EscChip
+from ecatcfg.runtime.segment.syncman import SmKind, SmState
 
 if TYPE_CHECKING:                   # only slaves with a mailbox bring these
     from ecatcfg.eoe import IpParameters
-    from ecatcfg.runtime.mailbox_server import MailboxServer
-    from ecatcfg.runtime.objects import ObjectDictionary
-    from ecatcfg.runtime.timing import SlaveTiming
+    from ecatcfg.runtime.segment.mailbox_server import MailboxServer
+    from ecatcfg.runtime.segment.objects import ObjectDictionary
+    from ecatcfg.runtime.segment.timing import SlaveTiming
 
 MEMORY_SIZE = 0x10000
 PROCESS_RAM = 0x1000
@@ -52,8 +53,6 @@ N_SM = 8
 
 DEFAULT_WD_DIVIDER = WATCHDOG_DIVIDER_DEFAULT     # (0x09C2 + 2) x 40 ns = 100 us time base
 DEFAULT_WD_TIME = WATCHDOG_TIME_DEFAULT           # x 100 us = 100 ms
-# SM control bits a slave checks against its own SM configuration: mode and direction.
-SM_MODE_AND_DIRECTION = SM_MODE_MASK | SM_DIR_MASK
 
 # Transitions the state machine allows (SOES ESC_state, KickCAT ESMStates); any -> INIT too.
 _ALLOWED = {(AlState.INIT, AlState.PREOP), (AlState.PREOP, AlState.SAFEOP),
@@ -101,7 +100,7 @@ def _overlaps(a: int, n: int, start: int, end: int) -> bool:
 # count (the address map has room for 16 of each), the DC system-time unit.  An access that
 # lies wholly inside one gets no working counter, as a real ET1100 (8 of each) answers a BWR
 # to FMMU 8-15 or SM 8-15 and an ET1200 (3 FMMUs, 4 SMs) one to FMMU 3-7 or SM 4-7
-# (ethercrab-rs/ethercrab tests/replay-ek1100-el2828-el2889.pcapng; runtime/esc_chips.py).
+# (ethercrab-rs/ethercrab tests/replay-ek1100-el2828-el2889.pcapng; runtime/segment/esc_chips.py).
 _DC_UNIT = (Reg.DC_SYSTEM_TIME, 0x0A00)
 
 
@@ -145,12 +144,12 @@ class EmulatedSlave:
         self.chip = chip
         self._absent_blocks = _absent_blocks(chip)
         self.name = name or device.type_name
-        # Why the device comes from the ENI alone (runtime/eni_device.py), else None.
+        # Why the device comes from the ENI alone (runtime/segment/eni_device.py), else None.
         self.eni_only: str | None = None
         # The time every behaviour of this slave reads (ns, monotonic): the segment's clock
         # (VirtualSegment(clock_ns=...)), wall time unless a test simulates time.
         self.clock_ns: Callable[[], int] = time.monotonic_ns
-        # How long the firmware and the EEPROM take (runtime/timing.py); None: no time.
+        # How long the firmware and the EEPROM take (runtime/segment/timing.py); None: no time.
         self.timing: SlaveTiming | None = None
         # Work in progress under the timing model, each with the clock_ns it is done at:
         # an EEPROM read, a state change, mailbox replies (settle() makes them visible).
@@ -180,15 +179,15 @@ class EmulatedSlave:
         self._watchdog_limit: float | None = None
         self._watchdog_expired = False
         # The ESC's local clock and time control loop; the segment gives each slave its
-        # drift and place on the line (runtime/dc_clock.py).
+        # drift and place on the line (runtime/segment/dc_clock.py).
         self.dc = DcClock()
         # SYNC0 start time (0x0990) minus the system time when it was written (ns).
         self.sync0_start_lead_ns: int | None = None
         self._ro = bytearray(PROCESS_RAM)
         for start, end in _READ_ONLY:
             self._ro[start:end] = b"\x01" * (end - start)
-        self._expected_pd = self._default_pd_bits()
-        self._internal_sms = self._internally_mapped_sms()
+        self._expected_pd = al_checks.default_pd_bits(self.device)
+        self._internal_sms = al_checks.internally_mapped_sms(self.device, self._expected_pd)
         # The firmware's own mailbox: the SMs the ESI names MBoxOut/MBoxIn (SOES keeps
         # them in its configuration, ESCvar.mb[0..1], and writes replies to its own SM1).
         self._mbx_in = next((sm.number for sm in device.sms if sm.type == "MBoxIn"), None)
@@ -499,7 +498,7 @@ class EmulatedSlave:
         data = bytes(self.eeprom[2 * address:2 * address + 8])
         self.mem[Reg.EEPROM_DATA:Reg.EEPROM_DATA + 8] = data + b"\xff" * (8 - len(data))
 
-    # -- work that takes time (runtime/timing.py) --------------------------------------------
+    # -- work that takes time (runtime/segment/timing.py) ------------------------------------
 
     @property
     def busy(self) -> bool:
@@ -618,7 +617,7 @@ class EmulatedSlave:
             return
         replies = self.mailbox.handle(message, state)
         if replies and self.timing and self.timing.mailbox_reply_ns:
-            # The firmware answers after its reply latency (runtime/timing.py).
+            # The firmware answers after its reply latency (runtime/segment/timing.py).
             self._replies.append((self.clock_ns() + self.timing.mailbox_reply_ns, replies))
             return
         self.mailbox_queue.extend(replies)
@@ -777,7 +776,7 @@ class EmulatedSlave:
             return
         delay = self.timing.transition_ns(transition) if self.timing else 0
         if delay:
-            # AL status keeps the old state until the firmware is done (runtime/timing.py).
+            # AL status keeps the old state until the firmware is done (runtime/segment/timing.py).
             self._transition = (self.clock_ns() + delay, target)
             return
         self._enter(target)
@@ -793,18 +792,7 @@ class EmulatedSlave:
         return 0
 
     def _check_mailbox(self) -> int:
-        """INIT->PREOP: SM0/SM1 as the slave's own mailbox (start, length, mode and
-        direction), enabled (SOES ESC_checkmbx: otherwise 0x0016)."""
-        for esi_sm in self.device.sms:
-            if esi_sm.type not in ("MBoxOut", "MBoxIn"):
-                continue
-            sm = self.sms[esi_sm.number]
-            want = (esi_sm.start_address, esi_sm.mailbox_size,
-                    esi_sm.mailbox_control & SM_MODE_AND_DIRECTION)
-            got = (sm.start, sm.length, sm.control & SM_MODE_AND_DIRECTION)
-            if not sm.enabled or got != want:
-                return AlStatusCode.INVALID_MAILBOX
-        return 0
+        return al_checks.mailbox_refusal(self.device, self.sms)
 
     def _pd_bits(self) -> dict[int, int | None]:
         """Process-data bits per SM that the slave's current PDO assignment needs."""
@@ -812,83 +800,12 @@ class EmulatedSlave:
             return dict(self._expected_pd)
         return {n: self.od.sm_bits(n) for n in self._expected_pd}
 
-    def _default_pd_bits(self) -> dict[int, int]:
-        bits: dict[int, int] = {sm.number: 0 for sm in self.device.sms
-                                if sm.type in ("Outputs", "Inputs") and not sm.virtual}
-        for pdo in self.device.rx_pdos + self.device.tx_pdos:
-            if pdo.sm in bits and not pdo.virtual:
-                bits[pdo.sm] += sum(e.bit_len or 0 for e in pdo.entries)
-        return bits
-
-    def _internally_mapped_sms(self) -> frozenset[int]:
-        """The process-data SMs whose length the master decides: those of a virtual PDO on
-        a device the master cannot map over CoE (no PdoConfig).  ETG.2100 Pdo@Virtual: "pdo
-        will be configured internally (based on the configured variables)"; a bridge such
-        as the EL6690 or a PC's EtherCAT slave (CX, FC11xx) takes the length its SM is given
-        for the variables its user configured on both sides."""
-        coe = self.device.mailbox.coe if self.device.mailbox is not None else None
-        if coe is not None and coe.pdo_config:
-            return frozenset()
-        numbers: set[int] = set()
-        for pdo in self.device.rx_pdos + self.device.tx_pdos:
-            if not pdo.virtual:
-                continue
-            sm = self.device.default_sm(pdo.direction)
-            number = pdo.sm if pdo.sm in self._expected_pd else sm.number if sm else None
-            if number is not None:
-                numbers.add(number)
-        return frozenset(numbers)
-
     def _check_process_data(self, op: bool) -> int:
-        """PREOP->SAFEOP (and SAFEOP->OP for OpOnly SMs): each process-data SM as the ESI
-        places it, with the length the assigned PDOs need, enabled exactly when there is
-        data, and an FMMU of the right direction over it (SOES ESC_checkSM23: 0x001D for
-        outputs, 0x001E for inputs).  Control bytes are compared on mode and direction."""
-        needed = self._pd_bits()
-        for esi_sm in self.device.sms:
-            if esi_sm.number not in needed:
-                continue
-            code = (AlStatusCode.INVALID_OUTPUTS if esi_sm.type == "Outputs"
-                    else AlStatusCode.INVALID_INPUTS)
-            bits = needed[esi_sm.number]
-            if bits is None:
-                return code
-            length = (bits + 7) // 8
-            sm = self.sms[esi_sm.number]
-            if esi_sm.op_only and not op and not sm.enabled:
-                continue               # enabled only in SAFEOP->OP (ESI OpOnly)
-            # An internally mapped SM takes any length from the fixed PDOs' bits on.
-            free = esi_sm.number in self._internal_sms
-            if not length and not (free and sm.active):
-                if sm.active:
-                    return code
-                continue
-            if (not sm.enabled or sm.start != esi_sm.start_address
-                    or (sm.length < length if free else sm.length != length)
-                    or sm.control & SM_MODE_AND_DIRECTION
-                    != (esi_sm.control_byte or 0) & SM_MODE_AND_DIRECTION):
-                return code
-            kind = FmmuType.WRITE if esi_sm.type == "Outputs" else FmmuType.READ
-            if not self._fmmus_cover(sm.start, sm.length, kind):
-                return code
-        return 0
-
-    def _fmmus_cover(self, start: int, length: int, kind: FmmuType) -> bool:
-        covered: set[int] = set()
-        for f in self.fmmus:
-            if f.type & kind:
-                first = f.physical_start
-                covered.update(range(first, first + (f.bit_length + f.physical_start_bit
-                                                     + 7) // 8))
-        return all(a in covered for a in range(start, start + length))
+        return al_checks.process_data_refusal(self.device, self.sms, self.fmmus,
+                                              self._pd_bits(), self._internal_sms, op)
 
     def _check_dc(self) -> int:
-        activation = self.mem[0x0981]
-        if activation & 0x03 == 0x03:       # cyclic operation with SYNC0
-            cycle, = struct.unpack_from("<I", self.mem, Reg.DC_SYNC0_CYCLE_TIME)
-            if not cycle:
-                return AlStatusCode.DC_INVALID_SYNC_CYCLE
-        return 0
+        return al_checks.dc_refusal(self.mem)
 
     def _mirror_al_control(self, control: int) -> None:
         """Device emulation: the ESC copies the AL control word into AL status, every bit
@@ -918,15 +835,7 @@ class EmulatedSlave:
                                              self.status_code, note))
 
     def _sm_length_note(self) -> str:
-        """The process-data SMs whose length differs from what the ESI's default PDOs
-        need (legal with device emulation: the slave then moves that many bytes)."""
-        diffs = []
-        for number, bits in self._expected_pd.items():
-            sm = self.sms[number]
-            got, want = (sm.length if sm.active else 0), (bits + 7) // 8
-            if got != want:
-                diffs.append(f"SM{number} {got} (ESI {want})")
-        return "SM lengths in bytes differ from the ESI: " + ", ".join(diffs) if diffs else ""
+        return al_checks.sm_length_note(self.sms, self._expected_pd)
 
     def _state_effects(self, old: int, new: int) -> None:
         """What follows a state (``old`` -> ``new``, raw AL status state bits): outputs

@@ -29,24 +29,25 @@ from __future__ import annotations
 
 import struct
 import time
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
-from ecatcfg.eni.plan import SlavePlan, register_writes
+from ecatcfg.eni.plan import NetworkPlan, SlavePlan, register_writes
 from ecatcfg.esc import (AL_ERROR_ACK, AL_STATE_MASK, AL_STATUS_ERROR, AUTO_INCREMENT_CMDS,
                          BROADCAST_CMDS, CONFIGURED_ADDRESS_CMDS, FMMU_SIZE, LOGICAL_CMDS,
                          REGISTER_READS, REGISTER_WRITES, AlState, Cmd, FmmuConfig, FmmuType,
                          Reg, Transition, al_state_name, al_status_name, wkc_increment)
 from ecatcfg.record import field, record
-from ecatcfg.runtime import hotconnect
-from ecatcfg.runtime.hotconnect import at_position
-from ecatcfg.runtime.lockstep import Job, Pending, Step, one_round, start, until_answered
-from ecatcfg.runtime.replay import (TIMEOUT_COMMAND, TIMEOUT_STATE, ApplyError,
-                                    MailboxChannel, slave_transition_job)
+from ecatcfg.runtime.master import hotconnect
+from ecatcfg.runtime.master.hotconnect import at_position
+from ecatcfg.runtime.master.lockstep import Job, Pending, Step, one_round, start, until_answered
+from ecatcfg.runtime.master.replay import (TIMEOUT_COMMAND, TIMEOUT_STATE, ApplyError,
+                                           MailboxChannel, SlaveProgress)
+from ecatcfg.runtime.master.transition import slave_transition_job
 from ecatcfg.runtime.wire import Datagram
 
 if TYPE_CHECKING:
-    from ecatcfg.runtime.cyclic import CyclicFrames, _Slot
-    from ecatcfg.runtime.master import Master
+    from ecatcfg.runtime.master.cyclic import CyclicFrames, _Slot
+    from ecatcfg.runtime.master.transport import Transport
 
 PROBE_INTERVAL = 0.1           # s between looks for the slaves that are offline
 DIAGNOSE_INTERVAL = 0.02       # s at least between two AL status reads of every slave
@@ -140,12 +141,40 @@ def input_bits(slave: SlavePlan, cyclic: CyclicFrames) -> list[tuple[int, int]]:
 
 # -- the supervisor ------------------------------------------------------------------------------
 
+class SupervisedMaster(Protocol):
+    """What the supervisor uses of the master that cycles
+    (:class:`~ecatcfg.runtime.master.bringup.Master`): the master creates its supervisor,
+    so this module names the master's parts it needs instead of importing it."""
+
+    @property
+    def plan(self) -> NetworkPlan: ...
+    @property
+    def slaves(self) -> list[SlavePlan]: ...
+    @property
+    def state(self) -> AlState: ...
+    @property
+    def cyclic(self) -> CyclicFrames: ...
+    @property
+    def transport(self) -> Transport: ...
+    @property
+    def accept_newer_revision(self) -> bool: ...
+    @property
+    def progress(self) -> dict[str, SlaveProgress]: ...
+    @property
+    def mailboxes(self) -> dict[str, MailboxChannel]: ...
+
+    def layout(self, present: set[str]) -> None: ...
+    def dc_rejoin_job(self, slave: SlavePlan) -> Step[None]: ...
+    def dc_wait_job(self, slave: SlavePlan) -> Step[None]: ...
+    def _event(self, kind: str, text: str, slave: str | None = None) -> None: ...
+
+
 class Supervisor:
     """Watches a cycling network and brings back its slaves (see the module docstring)."""
 
-    def __init__(self, master: Master, absent_groups: set[str] | None = None) -> None:
+    def __init__(self, master: SupervisedMaster, absent_groups: set[str] | None = None) -> None:
         """``absent_groups``: the heads of the hot-connect groups that were not on the line
-        at start-up (``runtime/hotconnect.py``); their slaves start offline."""
+        at start-up (``runtime/master/hotconnect.py``); their slaves start offline."""
         self.master = master
         self.groups = hotconnect.groups(master.plan.slaves)
         self.absent_groups = set(absent_groups or ())
@@ -456,7 +485,7 @@ class Supervisor:
         slave = at_position(plan, position)
         master = self.master
         try:
-            from ecatcfg.runtime.scan import FoundSlave, compare, identity_job
+            from ecatcfg.runtime.master.scan import FoundSlave, compare, identity_job
             found: dict[int, FoundSlave] = {}
             yield from identity_job(position, found)
             got = found[position]

@@ -31,9 +31,9 @@ from ecatcfg.runtime.mailbox import (
     MbxType, encode_mailbox_error, pad_to,
 )
 
-if TYPE_CHECKING:                 # built by runtime/emulate.py for the slaves that speak them
-    from ecatcfg.runtime.eoe_server import EoeServer
-    from ecatcfg.runtime.sdo_server import SdoServer
+if TYPE_CHECKING:     # built by runtime/segment/emulate.py for the slaves that speak them
+    from ecatcfg.runtime.segment.eoe_server import EoeServer
+    from ecatcfg.runtime.segment.sdo_server import SdoServer
 
 
 class MailboxServer:

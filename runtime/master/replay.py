@@ -1,4 +1,4 @@
-"""Replaying an ENI's InitCmds: one job per command, chained per slave and transition.
+"""Replaying an ENI's InitCmds: one job per command (register, CoE, EoE).
 
 The ENI says what to send (Cmd, Adp/Ado or Addr, Data or DataLength) and what must come
 back: ``Cnt`` (the working counter; resent up to ``Retries`` times otherwise) and
@@ -7,11 +7,7 @@ the file gives no timeout (ours carry them only in Validate), the defaults below
 A frame that is lost is sent again until the command's timeout; register writes are
 idempotent and mailbox messages carry a counter, so resending is safe.
 
-Within a transition each slave runs its register commands in file order; its mailbox
-InitCmds for that transition run after the SyncManager/FMMU writes and before the
-AL-control request (ETG.2100; PDO assignment needs the mailbox up and must precede SAFEOP),
-in INIT->PREOP once the slave is in PREOP: first the CoE ones, then the EoE ones, as IgH
-``fsm_slave_config.c`` sets the IP parameters after the SDO configuration.
+How a slave's commands of one transition are chained is ``transition.py``.
 """
 
 from __future__ import annotations
@@ -20,17 +16,17 @@ import struct
 import time
 from typing import TYPE_CHECKING, TypeVar
 
-from ecatcfg.eni.plan import CoeInitCmd, DcPlan, EoeInitCmd, InitCmd, MailboxPlan, SlavePlan
+from ecatcfg.eni.plan import CoeInitCmd, EoeInitCmd, InitCmd, MailboxPlan
 from ecatcfg.eni.words import init_cmd_name
 from ecatcfg.errors import EcatcfgError
 from ecatcfg.esc import (AL_STATUS_ERROR, SM1_STATUS, SM_ACTIVATE_REPEAT, SM_PDI_REPEAT_ACK, Cmd,
-                         Reg, Transition, al_state_name, al_status_name)
+                         Reg, al_state_name, al_status_name)
 from ecatcfg.record import record
-from ecatcfg.runtime.lockstep import Job, Step, until_answered
+from ecatcfg.runtime.master.lockstep import Job, Step, until_answered
 from ecatcfg.runtime.wire import Datagram, datagram_for
 
 if TYPE_CHECKING:     # imported where used: only ENIs with CoE InitCmds need the SDO client
-    from ecatcfg.runtime.sdo_client import SdoDownload, SdoUpload
+    from ecatcfg.runtime.master.sdo_client import SdoDownload, SdoUpload
 
 Transaction = TypeVar("Transaction", bound="SdoDownload | SdoUpload")
 
@@ -45,7 +41,6 @@ ERROR_GRACE = 0.02             # s an AL error flag must persist before we give 
 # within microseconds), then every POLL_INTERVAL, so a slow slave is not flooded.
 FAST_POLLS = 3
 POLL_INTERVAL = 0.001
-DC_START_DELAY_NS = 100_000_000    # SYNC start this far ahead of the reference (IgH, SOEM)
 
 REPEAT_AFTER = 0.05            # s SM1 must stay empty after a lost read before a repeat
 
@@ -262,7 +257,7 @@ class MailboxChannel:
 
 def sdo_job(channel: MailboxChannel, transaction: Transaction, who: str | None,
             what: str | None, timeout: float = TIMEOUT_MAILBOX) -> Step[Transaction]:
-    """One SDO transfer (``runtime/sdo_client.py`` transaction) through the mailbox."""
+    """One SDO transfer (``runtime/master/sdo_client.py`` transaction) through the mailbox."""
     from ecatcfg.runtime.mailbox import MailboxProtocolError, SdoAbort
 
     deadline = time.monotonic() + timeout
@@ -283,7 +278,7 @@ def sdo_job(channel: MailboxChannel, transaction: Transaction, who: str | None,
 
 def coe_init_cmd_job(channel: MailboxChannel, cmd: CoeInitCmd, who: str | None,
                      progress: SlaveProgress | None = None) -> Job:
-    from ecatcfg.runtime.sdo_client import SdoDownload, SdoUpload
+    from ecatcfg.runtime.master.sdo_client import SdoDownload, SdoUpload
 
     what = cmd.comment.strip() and cmd.comment or f"SDO 0x{cmd.index:04X}:{cmd.subindex:02X}"
     if progress is not None:
@@ -357,84 +352,3 @@ def eoe_init_cmd_job(channel: MailboxChannel, cmd: EoeInitCmd, who: str | None,
             raise ApplyError(f"EoE set IP parameter refused: result 0x{frame.info2:04X} "
                              f"({result_name(frame.info2)})", who, what)
         return
-
-
-# -- one slave, one transition ---------------------------------------------------------------
-
-def mailbox_init_cmds(slave: SlavePlan, transition: Transition
-                      ) -> tuple[list[CoeInitCmd], list[EoeInitCmd]]:
-    """The slave's enabled CoE and EoE InitCmds of ``transition``, in file order."""
-    mailbox = slave.mailbox
-    if mailbox is None:
-        return [], []
-    return ([c for c in mailbox.coe_init_cmds if transition in c.transitions and not c.disabled],
-            [c for c in mailbox.eoe_init_cmds if transition in c.transitions and not c.disabled])
-
-
-def _writes_al_control(cmd: InitCmd) -> bool:
-    return cmd.cmd in (Cmd.APWR, Cmd.FPWR, Cmd.BWR) and cmd.ado == Reg.AL_CONTROL
-
-
-def slave_transition_job(slave: SlavePlan, transition: Transition,
-                         progress: SlaveProgress | None = None,
-                         channel: MailboxChannel | None = None) -> Job:
-    """``channel``: the slave's mailbox, kept from one transition to the next so message
-    counters go on 1..7 (a slave drops a message whose counter equals the previous one)."""
-    who = slave.name
-    cmds = [c for c in slave.init_cmds if transition in c.transitions]
-    mailbox = slave.mailbox
-    coe, eoe = mailbox_init_cmds(slave, transition)
-    split = len(cmds)
-    if (coe or eoe) and transition != Transition.IP:
-        split = next((i for i, c in enumerate(cmds) if _writes_al_control(c)), len(cmds))
-    for cmd in cmds[:split]:
-        yield from _failing(cmd, _register_cmd(slave, cmd, who, progress))
-    if mailbox is not None and (coe or eoe):
-        channel = channel or MailboxChannel(slave.phys_addr, mailbox)
-        if coe:                     # a station's plugged modules, before they are configured
-            from ecatcfg.runtime.modules import check_modules
-            yield from check_modules(channel, slave, transition, who)
-        for c in coe:
-            yield from _failing(c, coe_init_cmd_job(channel, c, who, progress))
-        for e in eoe:
-            yield from _failing(e, eoe_init_cmd_job(channel, e, who, progress))
-    for cmd in cmds[split:]:
-        yield from _failing(cmd, _register_cmd(slave, cmd, who, progress))
-
-
-def _failing(cmd: InitCmd | CoeInitCmd | EoeInitCmd, job: Job) -> Job:
-    """``job``, whose ApplyError names ``cmd`` as the InitCmd that failed."""
-    try:
-        yield from job
-    except ApplyError as exc:
-        exc.init_cmd = exc.init_cmd or cmd
-        raise
-
-
-def _register_cmd(slave: SlavePlan, cmd: InitCmd, who: str,
-                  progress: SlaveProgress | None) -> Job:
-    data = None
-    if (cmd.cmd == Cmd.FPWR and cmd.ado == Reg.DC_START_TIME_CYCLIC and cmd.data is not None
-            and not any(cmd.data) and slave.dc is not None):
-        data = yield from _dc_start_time(slave, slave.dc, cmd, len(cmd.data), who)
-    yield from init_cmd_job(cmd, who, data, progress)
-
-
-def _dc_start_time(slave: SlavePlan, dc: DcPlan, cmd: InitCmd, length: int,
-                   who: str) -> Step[bytes]:
-    """The ENI's start time is a zero placeholder (``length`` bytes): start SYNC0 100 ms
-    after the slave's (reference-synchronised) system time, on a cycle boundary plus the
-    shift (IgH, SOEM)."""
-    read = Datagram.physical(Cmd.FPRD, slave.phys_addr, Reg.DC_SYSTEM_TIME, 8)
-    [got] = yield from until_answered([read], time.monotonic() + TIMEOUT_COMMAND, ApplyError(
-        "cannot read the DC system time (0x0910)", who, init_cmd_name(cmd)))
-    now, = struct.unpack("<Q", got.data)
-    cycle = dc.cycle_time0 or 1
-    start = (now + DC_START_DELAY_NS) // cycle * cycle + cycle + dc.shift_time
-    return struct.pack("<Q", start & 0xFFFF_FFFF_FFFF_FFFF)[:length]
-
-
-def master_job(cmds: list[InitCmd], transition: Transition, before_slave: bool) -> Job:
-    for cmd in cmds:
-        if transition in cmd.transitions and bool(cmd.before_slave) == before_slave:
-            yield from init_cmd_job(cmd, None)

@@ -8,7 +8,7 @@ write stores one word and needs write enable (bit 0) in the same access.  After 
 written the EEPROM chip runs its own write cycle (a few ms) and does not acknowledge a new
 command meanwhile: the ESC reports that as bit 13, and the command is simply sent again.
 
-Reading reuses the scan's SII reader (``runtime/scan.py``); nothing here knows the image's
+Reading reuses the scan's SII reader (``runtime/master/scan.py``); nothing here knows the image's
 layout beyond the identity and the configuration-area checksum (``esi/sii.py``).
 """
 
@@ -22,10 +22,10 @@ from ecatcfg.esc import (EEPROM_BUSY, EEPROM_ERROR_ACKNOWLEDGE, EEPROM_ERRORS, S
                          SII_CHECKSUM, SII_SIZE, SII_VENDOR_ID, Cmd, Reg,
                          eeprom_write_request)
 from ecatcfg.esi.sii import CONFIG_AREA, SIZE_STEP, crc8
-from ecatcfg.runtime.lockstep import Step, run_jobs, until_answered
-from ecatcfg.runtime.replay import ApplyError
-from ecatcfg.runtime.scan import sii_words
-from ecatcfg.runtime.transport import Transport
+from ecatcfg.runtime.master.lockstep import Step, run_jobs, until_answered
+from ecatcfg.runtime.master.replay import ApplyError
+from ecatcfg.runtime.master.scan import sii_words
+from ecatcfg.runtime.master.transport import Transport
 from ecatcfg.runtime.wire import Datagram
 
 READ_TIMEOUT = 0.5         # s per 4-word read (as the scan: IgH allows 500 ms for loading)

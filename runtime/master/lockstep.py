@@ -19,7 +19,7 @@ import time
 from collections.abc import Callable, Generator
 from typing import TypeVar
 
-from ecatcfg.runtime.transport import Transport, pack
+from ecatcfg.runtime.master.transport import Transport, pack
 from ecatcfg.runtime.wire import Datagram
 
 R = TypeVar("R")

@@ -1,10 +1,10 @@
 """Emulated slaves from ESI devices: what ``ecatcfg simulate`` and the tests put on a line.
 
 Each device gets its SII image (``esi/sii.py``) and, when it has a mailbox, a mailbox server
-(``runtime/mailbox_server.py``) with a server for each protocol the ESI declares that the
+(``runtime/segment/mailbox_server.py``) with a server for each protocol the ESI declares that the
 emulation speaks: CoE, a runtime object dictionary with an SDO server
-(``runtime/objects.py``, ``runtime/sdo_server.py``); EoE, the IP parameter services
-(``runtime/eoe_server.py``).  Other protocols get the mailbox error "unsupported protocol".
+(``runtime/segment/objects.py``, ``runtime/segment/sdo_server.py``); EoE, the IP parameter services
+(``runtime/segment/eoe_server.py``).  Other protocols get the mailbox error "unsupported protocol".
 """
 
 from __future__ import annotations
@@ -19,18 +19,18 @@ from ecatcfg.esi.coe import dictionary_with_objects, has_coe
 from ecatcfg.eni.plan import NetworkPlan, PdoDesc, SlavePlan
 from ecatcfg.esi.model import Device, Module, Pdo, PdoEntry, Slots
 from ecatcfg.esi.slots import ident_list_from_writes, plug_positions, with_modules
-from ecatcfg.runtime.esc_chips import chip_for, chip_of
-from ecatcfg.runtime.segment import Faults, VirtualSegment
-from ecatcfg.runtime.slave import EmulatedSlave
+from ecatcfg.runtime.segment.esc_chips import chip_for, chip_of
+from ecatcfg.runtime.segment.virtual import Faults, VirtualSegment
+from ecatcfg.runtime.segment.slave import EmulatedSlave
 from ecatcfg.runtime.wiring import Plug, Wiring, eni_plugs
 
 if TYPE_CHECKING:
     from collections.abc import Callable
 
     from ecatcfg.esi.library import Library
-    from ecatcfg.runtime.dc_clock import DcModel
-    from ecatcfg.runtime.objects import ObjectDictionary
-    from ecatcfg.runtime.timing import Timing
+    from ecatcfg.runtime.segment.dc_clock import DcModel
+    from ecatcfg.runtime.segment.objects import ObjectDictionary
+    from ecatcfg.runtime.segment.timing import Timing
 
 
 @dataclass(frozen=True, slots=True)
@@ -71,7 +71,7 @@ def emulated_slave(spec: SlaveSpec) -> EmulatedSlave:
     # The slave's mailbox is the size its SMs get (the rule the ENI and the SII follow).
     sizes = (out.mailbox_size if out else 0, inp.mailbox_size if inp else 0)
     if has_coe(dev):
-        from ecatcfg.runtime.objects import ObjectDictionary
+        from ecatcfg.runtime.segment.objects import ObjectDictionary
         od = ObjectDictionary.from_device(dev)
         esi_cmds = dev.mailbox.coe.init_cmds if dev.mailbox and dev.mailbox.coe else []
         _add_written_objects(od, [Write(c.index, c.subindex or 0, c.data, c.complete_access)
@@ -83,13 +83,13 @@ def emulated_slave(spec: SlaveSpec) -> EmulatedSlave:
     # One too small for an SDO (lint ESI204, ESI213): no mailbox server, as such firmware
     # could not answer one either.
     if dev.mailbox is not None and min(sizes) >= MIN_MAILBOX_SIZE:
-        from ecatcfg.runtime.mailbox_server import MailboxServer
+        from ecatcfg.runtime.segment.mailbox_server import MailboxServer
         mailbox = MailboxServer(*sizes)
         if od is not None:
-            from ecatcfg.runtime.sdo_server import SdoServer
+            from ecatcfg.runtime.segment.sdo_server import SdoServer
             mailbox.coe = SdoServer(od, *sizes)
         if "EoE" in dev.mailbox.protocols:
-            from ecatcfg.runtime.eoe_server import EoeServer
+            from ecatcfg.runtime.segment.eoe_server import EoeServer
             mailbox.eoe = EoeServer(dev.mailbox.eoe, sizes[1])
     image = sii.build(dev, serial=spec.serial, alias=spec.alias)
     slave = EmulatedSlave(dev, image, name=spec.name, od=od, mailbox=mailbox,
@@ -113,7 +113,7 @@ def _add_written_objects(od: ObjectDictionary, writes: list[Write]) -> None:
     carries no count, so its data becomes one octet-string entry, subindex 1, that a
     complete access from subindex 1 writes and reads back whole (our choice: nothing says
     how the bytes split into entries)."""
-    from ecatcfg.runtime.objects import OdEntry, OdObject
+    from ecatcfg.runtime.segment.od_entries import OdEntry, OdObject
 
     sizes: dict[tuple[int, int], set[int]] = {}
     for w in writes:
@@ -155,7 +155,7 @@ def _detected_modules(od: ObjectDictionary, idents: list[int]) -> None:
     """The station's detected module ident list (0xF050; ETG.5001): the idents of the
     modules plugged, by position, read-only; and room in the configured list (0xF030) the
     master downloads.  Objects the ESI dictionary declares keep their size."""
-    from ecatcfg.runtime.objects import OdEntry, OdObject
+    from ecatcfg.runtime.segment.od_entries import OdEntry, OdObject
 
     for index, name, access in ((MODULE_IDENT_LIST, "Configured module ident list", "rw"),
                                 (DETECTED_MODULE_IDENT_LIST, "Detected module ident list",
@@ -187,7 +187,7 @@ def segment(specs: list[SlaveSpec], faults: Faults | None = None,
             timing: Timing | None = None, *, clock_ns: Callable[[], int] | None = None,
             dc: DcModel | None = None) -> VirtualSegment:
     """The emulated slaves, plugged as their specs say (a line in the order given by
-    default); ``timing``: how long they take (``runtime/timing.py``, ``simulate
+    default); ``timing``: how long they take (``runtime/segment/timing.py``, ``simulate
     --realistic``), none by default; ``clock_ns`` and ``dc`` as for
     :class:`VirtualSegment`."""
     return VirtualSegment([emulated_slave(s) for s in specs], faults, timing=timing,
@@ -212,12 +212,12 @@ def specs_from_eni(plan: NetworkPlan, library: Library | None, shown: str) -> li
     PDOs the ENI lists for it; when the ENI names no modules (UR20 keeps its idents in
     vendor objects), the objects its startup SDOs write are accepted as they are.  Any
     other slave (and every slave without a library) is emulated from the ENI alone
-    (``runtime/eni_device.py``), with the objects its CoE InitCmds write; its spec says why
+    (``runtime/segment/eni_device.py``), with the objects its CoE InitCmds write; its spec says why
     (``eni_only``).  ``shown`` names the ENI in the model's sources.  The plan's passive
     slaves (``NetworkPlan.passive``: no ESC) are not among ``plan.slaves``: nothing answers
     for them on the wire, so nothing emulates them."""
     from ecatcfg.esi.library import DuplicateError, SelectorError
-    from ecatcfg.runtime.eni_device import device_from_eni
+    from ecatcfg.runtime.segment.eni_device import device_from_eni
 
     specs: list[SlaveSpec] = []
     ordered = sorted(plan.slaves, key=lambda s: s.position)

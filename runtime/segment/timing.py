@@ -24,12 +24,12 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 from ecatcfg.errors import EcatcfgError
 
 if TYPE_CHECKING:
-    from ecatcfg.runtime.slave import EmulatedSlave
+    from ecatcfg.esi.model import Device
 
 KINDS = ("esc", "firmware", "drive")
 TRANSITIONS = ("IP", "PS", "SO", "OS", "SP", "SI", "OP", "OI", "PI")
@@ -96,17 +96,29 @@ TABLE: dict[str, SlaveTiming] = {
 }
 
 
+class EmulatedDevice(Protocol):
+    """What the kind of a slave depends on; an emulated slave
+    (:class:`~ecatcfg.runtime.segment.slave.EmulatedSlave`) has it.  The slave holds its
+    :class:`SlaveTiming`, so this module does not import the slave's."""
+
+    @property
+    def device(self) -> Device: ...
+
+    @property
+    def device_emulation(self) -> bool: ...
+
+
 @dataclass(frozen=True, slots=True)
 class Timing:
     """The kinds' times a segment gives its slaves."""
 
     kinds: dict[str, SlaveTiming] = field(default_factory=lambda: dict(TABLE))
 
-    def for_slave(self, slave: EmulatedSlave) -> SlaveTiming:
+    def for_slave(self, slave: EmulatedDevice) -> SlaveTiming:
         return self.kinds[kind_of(slave)]
 
 
-def kind_of(slave: EmulatedSlave) -> str:
+def kind_of(slave: EmulatedDevice) -> str:
     """The device kind of an emulated slave (module docstring)."""
     if slave.device_emulation:
         return "esc"

@@ -29,7 +29,7 @@ from ecatcfg.runtime.mailbox import (
     encode_download_response, encode_download_segment_response, encode_sdo_info_error,
     encode_upload_expedited, encode_upload_normal, encode_upload_segment,
 )
-from ecatcfg.runtime.objects import ObjectDictionary
+from ecatcfg.runtime.segment.objects import ObjectDictionary
 
 
 @dataclass(slots=True)

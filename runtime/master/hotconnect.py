@@ -10,7 +10,7 @@ register 0x0134 with a ``Validate``) must succeed at that position.  A group tha
 there is left out: the other slaves move up in the auto-increment order, so their plans are
 moved with them (:func:`at_position`, :func:`as_found`), and the rest is verified
 and brought up as usual.  While the network cycles, the supervisor
-(``runtime/recovery.py``) looks for the absent groups where they would be, identifies the
+(``runtime/master/recovery.py``) looks for the absent groups where they would be, identifies the
 head and brings the group up.
 
 The ENI's slave order is the bus order of the complete line (auto-increment addresses), so
@@ -25,9 +25,9 @@ from collections.abc import Iterable
 from ecatcfg.eni.plan import CyclicCmd, InitCmd, NetworkPlan, SlavePlan
 from ecatcfg.esc import AUTO_INCREMENT_CMDS
 from ecatcfg.record import replace
-from ecatcfg.runtime.lockstep import Job
-from ecatcfg.runtime.replay import ApplyError, init_cmd_job
-from ecatcfg.runtime.scan import FoundSlave, paired
+from ecatcfg.runtime.master.lockstep import Job
+from ecatcfg.runtime.master.replay import ApplyError, init_cmd_job
+from ecatcfg.runtime.master.scan import FoundSlave, paired
 
 
 

@@ -23,24 +23,24 @@ from typing import TYPE_CHECKING
 
 from ecatcfg.eni.plan import NetworkPlan, SlavePlan
 from ecatcfg.esc import (AL_ERROR_ACK, AL_STATE_MASK, AL_STATUS_ERROR, ESC_FEATURE_DC,
-                         AlState, Cmd, Reg, Transition, al_state_name)
+                         AlState, Cmd, Reg, Transition)
 from ecatcfg.record import record
-from ecatcfg.runtime import hotconnect
-from ecatcfg.runtime.cyclic import CyclicFrames
-from ecatcfg.runtime.lockstep import Job, Step, run_jobs, until_answered
-from ecatcfg.runtime.reached import (EXPLAIN, describe_missing, missing_requests,
-                                     not_reached)
-from ecatcfg.runtime.replay import (TIMEOUT_COMMAND, ApplyError, MailboxChannel,
-                                    SlaveProgress, mailbox_init_cmds, master_job,
-                                    slave_transition_job)
-from ecatcfg.runtime.scan import FoundSlave, Mismatch, scan, verify
-from ecatcfg.runtime.transport import Transport, pack
+from ecatcfg.runtime.master import hotconnect
+from ecatcfg.runtime.master.cyclic import CyclicFrames
+from ecatcfg.runtime.master.lockstep import Job, Step, run_jobs, until_answered
+from ecatcfg.runtime.master.reached import (EXPLAIN, SlaveState, describe_missing,
+                                            missing_requests, not_reached)
+from ecatcfg.runtime.master.replay import (TIMEOUT_COMMAND, ApplyError, MailboxChannel,
+                                           SlaveProgress)
+from ecatcfg.runtime.master.scan import FoundSlave, Mismatch, scan, verify
+from ecatcfg.runtime.master.transition import mailbox_init_cmds, master_job, slave_transition_job
+from ecatcfg.runtime.master.transport import Transport, pack
 from ecatcfg.runtime.wire import Datagram
 from ecatcfg.runtime.wiring import CHILD_PORTS, active_ports
 
 if TYPE_CHECKING:
     from ecatcfg.runtime.link import Link
-    from ecatcfg.runtime.recovery import Supervisor
+    from ecatcfg.runtime.master.recovery import Supervisor
 
 UP = [Transition.IP, Transition.PS, Transition.SO]
 DOWN = {AlState.OP: [Transition.OS, Transition.SP, Transition.PI],
@@ -77,24 +77,13 @@ class VerifyError(ApplyError):
         self.mismatches = mismatches
 
 
-@record(frozen=True)
-class SlaveState:
-    state: int                 # AL status bits 0-3
-    error: bool
-    code: int                  # AL status code (0x0134)
-
-    @property
-    def name(self) -> str:
-        return al_state_name(self.state | (AL_STATUS_ERROR if self.error else 0))
-
-
 @record
 class Event:
     """Progress for the reporter: a step that starts or ends."""
 
     kind: str                  # "scan", "transition", "dc", "eoe", "done"; from the
                                # Network: "skipped", "emulated"; while cycling
-                               # (runtime/recovery.py): "offline", "online", "retry",
+                               # (runtime/master/recovery.py): "offline", "online", "retry",
                                # "refused"
     text: str
     slave: str | None = None   # the slave it is about, when it is about one
@@ -113,7 +102,7 @@ class NotReachedError(ApplyError):
 
 class IncompleteEniError(ApplyError):
     """An ENI whose InitCmds do not request every state on the way to the target
-    (``runtime/reached.py``); raised before any frame is sent.  ``missing``: per slave,
+    (``runtime/master/reached.py``); raised before any frame is sent.  ``missing``: per slave,
     the transitions whose state nothing requests."""
 
     def __init__(self, plan: NetworkPlan, target: AlState,
@@ -182,7 +171,7 @@ class Master:
         self.scanned: list[FoundSlave] | None = None   # the last scan, also when it failed
         self.accept_newer_revision = False
         self.dc_delays: dict[str, int] = {}            # propagation delays set (ns)
-        # Watches the slaves once the network cycles in SAFEOP or OP (runtime/recovery.py).
+        # Watches the slaves once the network cycles in SAFEOP or OP (runtime/master/recovery.py).
         self.supervisor: Supervisor | None = None
 
     def _event(self, kind: str, text: str, slave: str | None = None) -> None:
@@ -198,7 +187,7 @@ class Master:
         present = {s.name for s in self.plan.slaves}
         absent_heads: set[str] = set()
         if any(s.hot_connect is not None for s in self.plan.slaves):
-            # Which hot-connect groups are there (runtime/hotconnect.py); the line is
+            # Which hot-connect groups are there (runtime/master/hotconnect.py); the line is
             # verified without the others.
             identified: dict[tuple[str, int], bool] = {}
             run_jobs(self.transport, [hotconnect.identify_job(head, position, identified)
@@ -226,7 +215,7 @@ class Master:
                                 f"({hotconnect.slaves(len(members))}) is not on the line; "
                                 f"the others go on", head)
             if self.recovery:
-                from ecatcfg.runtime.recovery import Supervisor
+                from ecatcfg.runtime.master.recovery import Supervisor
                 self.supervisor = Supervisor(self, absent_heads)
         return found
 
@@ -250,7 +239,7 @@ class Master:
     def bring_up(self, target: AlState = AlState.OP) -> None:
         """Up to ``target`` transition by transition; after each one every slave's AL
         status is read back, and a slave that is not in the transition's target state is
-        an :class:`ApplyError` (``runtime/reached.py``): the state is reached when the
+        an :class:`ApplyError` (``runtime/master/reached.py``): the state is reached when the
         slaves say so, not when the ENI's commands have been sent."""
         # INIT->INIT first, where ETG.2100 puts it (esc.TRANSITION_RULES): only when the
         # ENI has such commands, so the wire of an ENI without them stays the same.
@@ -312,7 +301,7 @@ class Master:
         frames included: the slaves run in parallel), its mailbox InitCmds, and the AL error
         acknowledgements (a state read and a write) before and after each step.  A service
         manager's stop timeout must be above this (docs/runtime.md)."""
-        from ecatcfg.runtime.replay import TIMEOUT_MAILBOX, command_timeout
+        from ecatcfg.runtime.master.replay import TIMEOUT_MAILBOX, command_timeout
         ack = 2 * TIMEOUT_COMMAND
         total = ack
         for transition in DOWN.get(self.state, []):
@@ -387,14 +376,14 @@ class Master:
 
     def cycle(self) -> bool:
         """One cycle of the ENI's cyclic frames in the current state; in SAFEOP and OP the
-        supervisor then looks after slaves that drop out (``runtime/recovery.py``), and the
+        supervisor then looks after slaves that drop out (``runtime/master/recovery.py``), and the
         result says whether every online slave's data came back as expected."""
         ok = self.cyclic.exchange(self.transport, self.state)
         supervisor = self.supervisor
         if supervisor is None:
             if self.state < AlState.SAFEOP or not self.recovery:
                 return ok
-            from ecatcfg.runtime.recovery import Supervisor
+            from ecatcfg.runtime.master.recovery import Supervisor
             supervisor = self.supervisor = Supervisor(self)
         return supervisor.after_cycle(ok)
 

@@ -5,7 +5,7 @@ A frame passes every slave in bus order and returns to the master.  In a tree
 ESC's open ports in the processing order 0 -> 3 -> 1 -> 2, reaches the slaves; each one
 processes it once, so the datagram rules below are the same as on a line.  The cabling
 shows in each slave's DL status (0x0110) and in the receive times its ports latch
-(``runtime/dc_clock.py``); a cable removed (:meth:`VirtualSegment.remove_cable`) takes
+(``runtime/segment/dc_clock.py``); a cable removed (:meth:`VirtualSegment.remove_cable`) takes
 the slaves behind it out of the frame and closes the port it was plugged into.
 
 Each datagram is processed in place in the frame's buffer with the addressing and
@@ -34,16 +34,16 @@ from typing import TYPE_CHECKING
 
 from ecatcfg.esc import (AUTO_INCREMENT_CMDS, BROADCAST_CMDS, CONFIGURED_ADDRESS_CMDS, Cmd,
                          FmmuType, Reg)
-from ecatcfg.runtime.dc_clock import DcModel
-from ecatcfg.runtime.slave import (MEMORY_SIZE, PROCESS_RAM, RUNNING_STATES, EmulatedSlave,
-                                   StateChange)
-from ecatcfg.runtime.syncman import SmKind, SmState
+from ecatcfg.runtime.segment.dc_clock import DcModel
+from ecatcfg.runtime.segment.slave import (MEMORY_SIZE, PROCESS_RAM, RUNNING_STATES, EmulatedSlave,
+                                           StateChange)
+from ecatcfg.runtime.segment.syncman import SmKind, SmState
 from ecatcfg.runtime.wiring import Wiring
 from ecatcfg.runtime.wire import DG_HEADER_LEN, FrameError, datagram_offsets
 
 if TYPE_CHECKING:
     from ecatcfg.runtime.link import Link
-    from ecatcfg.runtime.timing import Timing
+    from ecatcfg.runtime.segment.timing import Timing
 
 _READS = {Cmd.APRD, Cmd.FPRD, Cmd.BRD, Cmd.LRD}
 _WRITES = {Cmd.APWR, Cmd.FPWR, Cmd.BWR, Cmd.LWR}
@@ -89,7 +89,7 @@ class VirtualSegment:
                  wiring: Wiring | None = None) -> None:
         """``clock_ns``: the time (ns, monotonic) the slaves live in; wall time by default,
         a simulated clock for deterministic tests of time-dependent behaviour.
-        ``timing``: how long the slaves take (``runtime/timing.py``); None: no time.
+        ``timing``: how long the slaves take (``runtime/segment/timing.py``); None: no time.
         ``dc``: the slaves' clocks (drift, start) and the segment's timing; ``DcModel()``
         by default (seeded drift within ±100 ppm).  ``wiring``: where each of ``slaves``
         is plugged (indices into ``slaves``); a line in the order given by default.
@@ -106,7 +106,7 @@ class VirtualSegment:
         self.clock_ns: Callable[[], int] = clock_ns or time.monotonic_ns
         self.dc_model = dc or DcModel()
         # While a frame passes, the slaves see the time it was sent (plus their place on
-        # the line, runtime/dc_clock.py): one frame, one instant.
+        # the line, runtime/segment/dc_clock.py): one frame, one instant.
         self._frame_ns: int | None = None
         self.faults = faults or Faults()
         self._rng = random.Random(self.faults.seed)
@@ -220,7 +220,7 @@ class VirtualSegment:
         return old
 
     def set_timing(self, timing: Timing | None) -> None:
-        """Give every slave its kind's times (``runtime/timing.py``), or none."""
+        """Give every slave its kind's times (``runtime/segment/timing.py``), or none."""
         self.timing = timing
         for slave in self.wired:
             self._set_slave_timing(slave)

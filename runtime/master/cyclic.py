@@ -23,7 +23,7 @@ from ecatcfg.eni.plan import CyclicCmd, NetworkPlan
 from ecatcfg.esc import AlState, Cmd, Reg
 from ecatcfg.record import record
 from ecatcfg.runtime import wire
-from ecatcfg.runtime.transport import Transport
+from ecatcfg.runtime.master.transport import Transport
 
 _READS = {Cmd.LRD, Cmd.LRW, Cmd.APRD, Cmd.FPRD, Cmd.BRD, Cmd.ARMW, Cmd.FRMW}
 _FLAG_SHAPE = wire.LEN_MASK | wire.MORE          # what a slave never changes in len|flags
@@ -37,7 +37,7 @@ class _Slot:
     in_at: int                  # data offset in the input image
     out_at: int                 # ... and in the output image
     # The working counter this cycle must bring back: the ENI's Cnt, lowered by what the
-    # slaves that are offline would add (runtime/recovery.py); None: not checked.
+    # slaves that are offline would add (runtime/master/recovery.py); None: not checked.
     expected: int | None = None
     wkc: int = -1               # what the last cycle brought back; -1: its frame was lost
 

@@ -23,16 +23,30 @@ from __future__ import annotations
 import struct
 from typing import TYPE_CHECKING
 
-from ecatcfg.esc import AL_STATE_MASK, AlState, Cmd, Reg, Transition
+from ecatcfg.esc import (AL_STATE_MASK, AL_STATUS_ERROR, AlState, Cmd, Reg, Transition,
+                         al_state_name)
+from ecatcfg.record import record
 
 if TYPE_CHECKING:
     from ecatcfg.eni.plan import InitCmd, NetworkPlan, SlavePlan
-    from ecatcfg.runtime.master import SlaveState
 
 # Writes that reach a slave's register: addressed to it (auto-increment or configured
 # address), or to every slave (broadcast; the master's InitCmds).
 _OWN_WRITES = (Cmd.APWR, Cmd.FPWR, Cmd.APRW, Cmd.FPRW)
 _BROADCAST_WRITES = (Cmd.BWR, Cmd.BRW)
+
+
+@record(frozen=True)
+class SlaveState:
+    """A slave's AL status as read back (0x0130, 0x0134)."""
+
+    state: int                 # AL status bits 0-3
+    error: bool
+    code: int                  # AL status code (0x0134)
+
+    @property
+    def name(self) -> str:
+        return al_state_name(self.state | (AL_STATUS_ERROR if self.error else 0))
 
 
 def _requested_state(cmd: InitCmd, transition: Transition) -> int | None:

@@ -17,9 +17,9 @@ from ecatcfg.esc import (EEPROM_BUSY, EEPROM_ERROR_ACKNOWLEDGE, EEPROM_ERRORS, E
                          PORT_LETTERS, SII_REVISION, SII_VENDOR_ID, Cmd, Reg,
                          eeprom_read_request)
 from ecatcfg.record import record
-from ecatcfg.runtime.lockstep import Job, Step, run_jobs, until_answered
-from ecatcfg.runtime.replay import ApplyError
-from ecatcfg.runtime.transport import Transport
+from ecatcfg.runtime.master.lockstep import Job, Step, run_jobs, until_answered
+from ecatcfg.runtime.master.replay import ApplyError
+from ecatcfg.runtime.master.transport import Transport
 from ecatcfg.runtime.wire import Datagram
 from ecatcfg.runtime.wiring import Plug, eni_plugs, plugs_from_dl_status
 

@@ -27,7 +27,7 @@ emulated ESC are built exactly as for a device read from an ESI file:
   mailbox has firmware.
 
 What an ENI cannot say (object names and types beyond the written data, ESC type and build,
-vendor names) takes neutral values; ``runtime/emulate.py`` adds the objects the CoE InitCmds
+vendor names) takes neutral values; ``runtime/segment/emulate.py`` adds the objects the CoE InitCmds
 write, typed by their size.
 """
 
@@ -106,7 +106,7 @@ def device_from_eni(slave: SlavePlan, plan: NetworkPlan, file: str) -> Device:
                   else CONFIG_NO_PDI)
         if dc is not None:
             # The ENI runs the slave's DC unit: its ESC configuration enables it (the rule
-            # runtime/esc_chips.py reads back).
+            # runtime/segment/esc_chips.py reads back).
             config |= CONFIG_DC_UNITS
     profiles = [Profile(source, profile_no=no) for no, _ in
                 (slave.mailbox.coe_profiles if slave.mailbox else [])[:1]]

@@ -1,0 +1,107 @@
+"""A slave's InitCmds of one transition, chained into one job; the master's own.
+
+Within a transition each slave runs its register commands in file order; its mailbox
+InitCmds for that transition run after the SyncManager/FMMU writes and before the
+AL-control request (ETG.2100; PDO assignment needs the mailbox up and must precede SAFEOP),
+in INIT->PREOP once the slave is in PREOP: first the CoE ones, then the EoE ones, as IgH
+``fsm_slave_config.c`` sets the IP parameters after the SDO configuration.  A station's
+plugged modules are checked before its CoE InitCmds configure them (``modules.py``).
+One command's job is ``replay.py``.
+"""
+
+from __future__ import annotations
+
+import struct
+import time
+
+from ecatcfg.eni.plan import CoeInitCmd, DcPlan, EoeInitCmd, InitCmd, SlavePlan
+from ecatcfg.eni.words import init_cmd_name
+from ecatcfg.esc import Cmd, Reg, Transition
+from ecatcfg.runtime.master.lockstep import Job, Step, until_answered
+from ecatcfg.runtime.master.replay import (TIMEOUT_COMMAND, ApplyError, MailboxChannel,
+                                           SlaveProgress, coe_init_cmd_job, eoe_init_cmd_job,
+                                           init_cmd_job)
+from ecatcfg.runtime.wire import Datagram
+
+DC_START_DELAY_NS = 100_000_000    # SYNC start this far ahead of the reference (IgH, SOEM)
+
+
+def mailbox_init_cmds(slave: SlavePlan, transition: Transition
+                      ) -> tuple[list[CoeInitCmd], list[EoeInitCmd]]:
+    """The slave's enabled CoE and EoE InitCmds of ``transition``, in file order."""
+    mailbox = slave.mailbox
+    if mailbox is None:
+        return [], []
+    return ([c for c in mailbox.coe_init_cmds if transition in c.transitions and not c.disabled],
+            [c for c in mailbox.eoe_init_cmds if transition in c.transitions and not c.disabled])
+
+
+def _writes_al_control(cmd: InitCmd) -> bool:
+    return cmd.cmd in (Cmd.APWR, Cmd.FPWR, Cmd.BWR) and cmd.ado == Reg.AL_CONTROL
+
+
+def slave_transition_job(slave: SlavePlan, transition: Transition,
+                         progress: SlaveProgress | None = None,
+                         channel: MailboxChannel | None = None) -> Job:
+    """``channel``: the slave's mailbox, kept from one transition to the next so message
+    counters go on 1..7 (a slave drops a message whose counter equals the previous one)."""
+    who = slave.name
+    cmds = [c for c in slave.init_cmds if transition in c.transitions]
+    mailbox = slave.mailbox
+    coe, eoe = mailbox_init_cmds(slave, transition)
+    split = len(cmds)
+    if (coe or eoe) and transition != Transition.IP:
+        split = next((i for i, c in enumerate(cmds) if _writes_al_control(c)), len(cmds))
+    for cmd in cmds[:split]:
+        yield from _failing(cmd, _register_cmd(slave, cmd, who, progress))
+    if mailbox is not None and (coe or eoe):
+        channel = channel or MailboxChannel(slave.phys_addr, mailbox)
+        if coe:                     # a station's plugged modules, before they are configured
+            # Imported here: modules.py needs the ESI model (esi/slots.py), which apply
+            # loads only for an ENI with CoE InitCmds (tests/test_record.py).
+            from ecatcfg.runtime.master.modules import check_modules
+            yield from check_modules(channel, slave, transition, who)
+        for c in coe:
+            yield from _failing(c, coe_init_cmd_job(channel, c, who, progress))
+        for e in eoe:
+            yield from _failing(e, eoe_init_cmd_job(channel, e, who, progress))
+    for cmd in cmds[split:]:
+        yield from _failing(cmd, _register_cmd(slave, cmd, who, progress))
+
+
+def _failing(cmd: InitCmd | CoeInitCmd | EoeInitCmd, job: Job) -> Job:
+    """``job``, whose ApplyError names ``cmd`` as the InitCmd that failed."""
+    try:
+        yield from job
+    except ApplyError as exc:
+        exc.init_cmd = exc.init_cmd or cmd
+        raise
+
+
+def _register_cmd(slave: SlavePlan, cmd: InitCmd, who: str,
+                  progress: SlaveProgress | None) -> Job:
+    data = None
+    if (cmd.cmd == Cmd.FPWR and cmd.ado == Reg.DC_START_TIME_CYCLIC and cmd.data is not None
+            and not any(cmd.data) and slave.dc is not None):
+        data = yield from _dc_start_time(slave, slave.dc, cmd, len(cmd.data), who)
+    yield from init_cmd_job(cmd, who, data, progress)
+
+
+def _dc_start_time(slave: SlavePlan, dc: DcPlan, cmd: InitCmd, length: int,
+                   who: str) -> Step[bytes]:
+    """The ENI's start time is a zero placeholder (``length`` bytes): start SYNC0 100 ms
+    after the slave's (reference-synchronised) system time, on a cycle boundary plus the
+    shift (IgH, SOEM)."""
+    read = Datagram.physical(Cmd.FPRD, slave.phys_addr, Reg.DC_SYSTEM_TIME, 8)
+    [got] = yield from until_answered([read], time.monotonic() + TIMEOUT_COMMAND, ApplyError(
+        "cannot read the DC system time (0x0910)", who, init_cmd_name(cmd)))
+    now, = struct.unpack("<Q", got.data)
+    cycle = dc.cycle_time0 or 1
+    start = (now + DC_START_DELAY_NS) // cycle * cycle + cycle + dc.shift_time
+    return struct.pack("<Q", start & 0xFFFF_FFFF_FFFF_FFFF)[:length]
+
+
+def master_job(cmds: list[InitCmd], transition: Transition, before_slave: bool) -> Job:
+    for cmd in cmds:
+        if transition in cmd.transitions and bool(cmd.before_slave) == before_slave:
+            yield from init_cmd_job(cmd, None)

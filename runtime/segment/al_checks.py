@@ -1,0 +1,142 @@
+"""The checks emulated firmware makes before it enters PREOP, SAFEOP and OP: what a slave's
+AL state machine (``slave.py``) refuses, and with which AL status code.
+
+- INIT->PREOP: the mailbox SyncManagers as the slave's ESI places them (SOES
+  ``ESC_checkmbx``: otherwise 0x0016, invalid mailbox configuration);
+- PREOP->SAFEOP (and SAFEOP->OP for SyncManagers the ESI marks OpOnly): each process-data
+  SyncManager with the length the assigned PDOs need and an FMMU over it (SOES
+  ``ESC_checkSM23``: 0x001D for outputs, 0x001E for inputs); with SYNC0 on, a cycle time
+  (0x0030, invalid sync cycle time).
+
+Each check reads what the ESC holds (its SyncManagers, FMMUs, registers) and the device's
+ESI; none changes anything.
+"""
+
+from __future__ import annotations
+
+import struct
+from collections.abc import Sequence
+
+from ecatcfg.esc import SM_DIR_MASK, SM_MODE_MASK, AlStatusCode, FmmuConfig, FmmuType, Reg
+from ecatcfg.esi.model import Device
+from ecatcfg.runtime.segment.syncman import SmState
+
+# SM control bits a slave checks against its own SM configuration: mode and direction.
+SM_MODE_AND_DIRECTION = SM_MODE_MASK | SM_DIR_MASK
+
+
+def mailbox_refusal(device: Device, sms: Sequence[SmState]) -> int:
+    """INIT->PREOP: SM0/SM1 as the slave's own mailbox (start, length, mode and
+    direction), enabled (SOES ESC_checkmbx: otherwise 0x0016); 0 when they are."""
+    for esi_sm in device.sms:
+        if esi_sm.type not in ("MBoxOut", "MBoxIn"):
+            continue
+        sm = sms[esi_sm.number]
+        want = (esi_sm.start_address, esi_sm.mailbox_size,
+                esi_sm.mailbox_control & SM_MODE_AND_DIRECTION)
+        got = (sm.start, sm.length, sm.control & SM_MODE_AND_DIRECTION)
+        if not sm.enabled or got != want:
+            return AlStatusCode.INVALID_MAILBOX
+    return 0
+
+
+def default_pd_bits(device: Device) -> dict[int, int]:
+    """Process-data bits per SyncManager that the ESI's default PDOs need."""
+    bits: dict[int, int] = {sm.number: 0 for sm in device.sms
+                            if sm.type in ("Outputs", "Inputs") and not sm.virtual}
+    for pdo in device.rx_pdos + device.tx_pdos:
+        if pdo.sm in bits and not pdo.virtual:
+            bits[pdo.sm] += sum(e.bit_len or 0 for e in pdo.entries)
+    return bits
+
+
+def internally_mapped_sms(device: Device, expected_pd: dict[int, int]) -> frozenset[int]:
+    """The process-data SMs whose length the master decides: those of a virtual PDO on
+    a device the master cannot map over CoE (no PdoConfig).  ETG.2100 Pdo@Virtual: "pdo
+    will be configured internally (based on the configured variables)"; a bridge such
+    as the EL6690 or a PC's EtherCAT slave (CX, FC11xx) takes the length its SM is given
+    for the variables its user configured on both sides."""
+    coe = device.mailbox.coe if device.mailbox is not None else None
+    if coe is not None and coe.pdo_config:
+        return frozenset()
+    numbers: set[int] = set()
+    for pdo in device.rx_pdos + device.tx_pdos:
+        if not pdo.virtual:
+            continue
+        sm = device.default_sm(pdo.direction)
+        number = pdo.sm if pdo.sm in expected_pd else sm.number if sm else None
+        if number is not None:
+            numbers.add(number)
+    return frozenset(numbers)
+
+
+def process_data_refusal(device: Device, sms: Sequence[SmState],
+                         fmmus: Sequence[FmmuConfig], needed: dict[int, int | None],
+                         internal: frozenset[int], op: bool) -> int:
+    """PREOP->SAFEOP (and SAFEOP->OP for OpOnly SMs): each process-data SM as the ESI
+    places it, with the length the assigned PDOs need (``needed``: bits per SM, None
+    where the assignment cannot be used), enabled exactly when there is data, and an FMMU
+    of the right direction over it (SOES ESC_checkSM23: 0x001D for outputs, 0x001E for
+    inputs); 0 when all are.  Control bytes are compared on mode and direction."""
+    for esi_sm in device.sms:
+        if esi_sm.number not in needed:
+            continue
+        code = (AlStatusCode.INVALID_OUTPUTS if esi_sm.type == "Outputs"
+                else AlStatusCode.INVALID_INPUTS)
+        bits = needed[esi_sm.number]
+        if bits is None:
+            return code
+        length = (bits + 7) // 8
+        sm = sms[esi_sm.number]
+        if esi_sm.op_only and not op and not sm.enabled:
+            continue               # enabled only in SAFEOP->OP (ESI OpOnly)
+        # An internally mapped SM takes any length from the fixed PDOs' bits on.
+        free = esi_sm.number in internal
+        if not length and not (free and sm.active):
+            if sm.active:
+                return code
+            continue
+        if (not sm.enabled or sm.start != esi_sm.start_address
+                or (sm.length < length if free else sm.length != length)
+                or sm.control & SM_MODE_AND_DIRECTION
+                != (esi_sm.control_byte or 0) & SM_MODE_AND_DIRECTION):
+            return code
+        kind = FmmuType.WRITE if esi_sm.type == "Outputs" else FmmuType.READ
+        if not fmmus_cover(fmmus, sm.start, sm.length, kind):
+            return code
+    return 0
+
+
+def fmmus_cover(fmmus: Sequence[FmmuConfig], start: int, length: int,
+                kind: FmmuType) -> bool:
+    """Whether FMMUs of direction ``kind`` map every byte of ``start``..``start+length``."""
+    covered: set[int] = set()
+    for f in fmmus:
+        if f.type & kind:
+            first = f.physical_start
+            covered.update(range(first, first + (f.bit_length + f.physical_start_bit
+                                                 + 7) // 8))
+    return all(a in covered for a in range(start, start + length))
+
+
+def dc_refusal(mem: bytearray) -> int:
+    """PREOP->SAFEOP with SYNC0 in cyclic operation (0x0981 bits 0-1): a cycle time
+    (0x09A0) is needed, else 0x0030; 0 otherwise."""
+    activation = mem[Reg.DC_CYCLIC_UNIT_CONTROL + 1]
+    if activation & 0x03 == 0x03:       # cyclic operation with SYNC0
+        cycle, = struct.unpack_from("<I", mem, Reg.DC_SYNC0_CYCLE_TIME)
+        if not cycle:
+            return AlStatusCode.DC_INVALID_SYNC_CYCLE
+    return 0
+
+
+def sm_length_note(sms: Sequence[SmState], expected_pd: dict[int, int]) -> str:
+    """The process-data SMs whose length differs from what the ESI's default PDOs
+    need (legal with device emulation: the slave then moves that many bytes)."""
+    diffs = []
+    for number, bits in expected_pd.items():
+        sm = sms[number]
+        got, want = (sm.length if sm.active else 0), (bits + 7) // 8
+        if got != want:
+            diffs.append(f"SM{number} {got} (ESI {want})")
+    return "SM lengths in bytes differ from the ESI: " + ", ".join(diffs) if diffs else ""
