@@ -5,7 +5,6 @@ command writes it with lint's output formats; the rules are in :mod:`.rules`."""
 
 from __future__ import annotations
 
-from ecatcfg.eni.check.rules import all_rules
-from ecatcfg.eni.check.run import check_eni
+from ecatcfg.eni.check.run import all_rules, check_eni
 
 __all__ = ["all_rules", "check_eni"]

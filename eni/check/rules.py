@@ -31,9 +31,3 @@ UNREADABLE = declare("ENI004", "error", "the ENI cannot be read", """
     that is not a number, a command without its address, a cyclic frame whose datagrams
     take more than the 1500 bytes of an Ethernet payload (at most 1486 data bytes in one
     datagram; ETG.1000.4), ...  The message names the line; nothing else is checked.""")
-
-
-def all_rules() -> dict[str, Rule]:
-    """Every check rule, loading the check modules on first use."""
-    from ecatcfg.eni.check import devices, network  # noqa: F401  (they declare the rules)
-    return RULES
