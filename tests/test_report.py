@@ -164,6 +164,40 @@ def check_drawing(opened: Opened, names: list[str]) -> None:
             assert a[2] <= b[0] or b[2] <= a[0] or a[3] <= b[1] or b[3] <= a[1], (a, b)
 
 
+# Each bit cell of the process-image map: direction, byte, bit, the slave it is coloured
+# for (its name, from that slave's table) and whether its colour is that slave's swatch.
+_CELLS_JS = """tables => tables.flatMap(t => Array.from(t.querySelectorAll('tr[data-byte]'))
+  .flatMap(tr => Array.from(tr.querySelectorAll('td.bit')).map((td, bit) => {
+    const id = td.dataset.slave;
+    const card = id === undefined ? null : document.getElementById('slave-' + id);
+    const swatch = card && getComputedStyle(card.querySelector('.swatch')).backgroundColor;
+    return [t.dataset.direction, +tr.dataset.byte, bit,
+            card && card.querySelector('.slave-name').textContent,
+            card ? getComputedStyle(td).backgroundColor === swatch : null];
+  })))"""
+
+
+def xml_owners(eni: Path) -> dict[tuple[str, int], str]:
+    """(direction, bit) -> slave name, from each slave's ProcessData Send (outputs) and
+    Recv (inputs) BitStart/BitLength, by lxml; the first slave listed wins an overlap."""
+    owners: dict[tuple[str, int], str] = {}
+    for slave in etree.parse(str(eni)).getroot().findall("Config/Slave"):
+        for tag, direction in (("Send", "out"), ("Recv", "in")):
+            for r in slave.findall(f"ProcessData/{tag}"):
+                start, length = int(r.findtext("BitStart")), int(r.findtext("BitLength"))
+                for bit in range(start, start + length):
+                    owners.setdefault((direction, bit), slave.findtext("Info/Name"))
+    return owners
+
+
+def check_image_map(opened: Opened, eni: Path) -> None:
+    cells = opened.page.eval_on_selector_all("table.map", _CELLS_JS)
+    owners = xml_owners(eni)
+    shown = {(d, byte * 8 + bit): name for d, byte, bit, name, _ in cells}
+    assert all(same for *_, same in cells if same is not None)   # coloured as its slave
+    assert {k: v for k, v in shown.items() if v is not None} == owners
+
+
 @pytest.mark.parametrize("name", CORPUS_ENIS)
 def test_corpus_eni_in_chromium(corpus, browser, tmp_path, name):
     eni = corpus / "eni" / name
@@ -185,6 +219,7 @@ def test_corpus_eni_in_chromium(corpus, browser, tmp_path, name):
     root = etree.parse(str(eni)).getroot()
     cnts = [c.findtext("Cnt") or "-" for c in root.findall("Config/Cyclic/Frame/Cmd")]
     assert opened.texts("table.frame td.wkc") == cnts
+    check_image_map(opened, eni)
     opened.page.close()
 
 
@@ -198,6 +233,7 @@ def test_tree_with_a_junction_shows_its_branches(browser, tmp_path):
     assert opened.texts("section.slave .slave-name") == slaves
     assert opened.texts("table.variables .variable-name") == variables
     check_drawing(opened, slaves)
+    check_image_map(opened, eni)
     links = drawn_links(opened)
     drawn = {(x["parent"], x["child"], x["port"]) for x in links}
     expected = expected_links(eni)
