@@ -2,9 +2,9 @@
 ``python`` block, in a temporary folder laid out like the checkout (its ``examples/``).
 
 - Shell blocks run command by command (a line, or its ``&&`` parts), ``ecatcfg`` as
-  ``python -m ecatcfg``, ``> FILE`` as a redirection; each must exit 0 (``lint``: 0 or 1,
-  "exit 1 on errors" as the docs say; ``diff``: 0 or 1, "1 when they differ") without a
-  traceback.
+  ``python -m ecatcfg``, ``> FILE`` as a redirection; each must exit 0 (``lint`` and
+  ``check``: 0 or 1, "exit 1 on errors" as the docs say; ``diff``: 0 or 1, "1 when they
+  differ") without a traceback.
 - A command with ``--iface`` needs a bus: it runs in a network namespace whose veth end is
   served by ``ecatcfg simulate`` of the example line (tests/rig.py); ``simulate`` itself
   runs in a namespace pair of its own until it is ready, then is stopped with SIGINT.
@@ -153,7 +153,9 @@ class Bench:
         else:
             done = subprocess.run(argv, cwd=self.folder, capture_output=True, timeout=120)
         err = done.stderr.decode(errors="replace")
-        allowed = (0, 1) if words[:2] in (["ecatcfg", "lint"], ["ecatcfg", "diff"]) else (0,)
+        # lint and check exit 1 on an error finding, diff when the files differ, as the docs say.
+        allowed = (0, 1) if words[:2] in (["ecatcfg", "lint"], ["ecatcfg", "check"],
+                                          ["ecatcfg", "diff"]) else (0,)
         assert done.returncode in allowed and "Traceback" not in err, (
             f"{where}: {shlex.join(words)} exited {done.returncode}:\n{err[-3000:]}")
         if out_file is not None:

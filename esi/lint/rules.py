@@ -91,12 +91,14 @@ def all_rules() -> dict[str, Rule]:
     return RULES
 
 
-def select_rules(select: list[str] | None, ignore: list[str] | None) -> frozenset[str]:
+def select_rules(select: list[str] | None, ignore: list[str] | None,
+                 registry: dict[str, Rule] | None = None) -> frozenset[str]:
     """The rule ids in effect.  Entries are ids or prefixes (``ESI1`` = every ESI1xx rule).
+    ``registry``: the rules to choose from (default lint's; ``check`` has its own).
 
     Raises ``ValueError`` naming an entry that matches no rule.
     """
-    rules = all_rules()
+    rules = all_rules() if registry is None else registry
 
     def expand(entries: list[str]) -> set[str]:
         chosen: set[str] = set()

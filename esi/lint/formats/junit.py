@@ -29,8 +29,9 @@ def test_cases(result: FileResult) -> list[tuple[str, list[Finding]]]:
     return cases
 
 
-def write(results: list[FileResult], rules: dict[str, Rule], out: TextIO) -> None:
-    suites = etree.Element("testsuites", name="ecatcfg lint")
+def write(results: list[FileResult], rules: dict[str, Rule], out: TextIO,
+          tool: str = "ecatcfg lint") -> None:
+    suites = etree.Element("testsuites", name=tool)
     total = failed = 0
     for result in results:
         cases = test_cases(result)

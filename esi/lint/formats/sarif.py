@@ -17,7 +17,9 @@ SCHEMA = "https://json.schemastore.org/sarif-2.1.0.json"
 _LEVEL = {"error": "error", "warning": "warning", "info": "note"}
 
 
-def write(results: list[FileResult], rules: dict[str, Rule], out: TextIO) -> None:
+def write(results: list[FileResult], rules: dict[str, Rule], out: TextIO,
+          tool: str = "ecatcfg lint", tag: str = "esi") -> None:
+    """``tool`` and ``tag`` name the command and what it reads (``ecatcfg check``: eni)."""
     ids = sorted(rules)
     index = {rid: i for i, rid in enumerate(ids)}
     descriptors = [{
@@ -27,7 +29,7 @@ def write(results: list[FileResult], rules: dict[str, Rule], out: TextIO) -> Non
         "fullDescription": {"text": rules[rid].explanation},
         "help": {"text": rules[rid].explanation},
         "defaultConfiguration": {"level": _LEVEL[rules[rid].severity]},
-        "properties": {"tags": ["ethercat", "esi"]},
+        "properties": {"tags": ["ethercat", tag]},
     } for rid in ids]
     sarif_results = []
     for result in results:
@@ -55,7 +57,7 @@ def write(results: list[FileResult], rules: dict[str, Rule], out: TextIO) -> Non
         "version": "2.1.0",
         "runs": [{
             "tool": {"driver": {
-                "name": "ecatcfg lint",
+                "name": tool,
                 "semanticVersion": __version__,
                 "rules": descriptors,
             }},

@@ -1,0 +1,481 @@
+"""``ecatcfg check``: an ENI against itself and the ESI files of its devices.
+
+Each rule fires on a self-written defective ENI: the example line compiled by ``ecatcfg
+compile`` (clean: no finding at all), with one defect put in by lxml, the expected message
+written out here by hand.  The real ENIs of both corpora and the ENIs the compiler writes
+from them have no error finding except the defects named here, and the EC-Engineer ENI
+that writes the read-only 0x1C12:00 is judged against its device's exact-revision ESI,
+whose access rights the test reads itself.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+from collections.abc import Callable
+from pathlib import Path
+
+import pytest
+from lxml import etree
+
+from conftest import EXAMPLES, ROOT, compile_example, corpus_eni, corpus_enis
+
+from ecatcfg.eni.check import all_rules, check_eni
+from ecatcfg.esi.lint.finding import FileResult
+from ecatcfg.esi.library import Library
+
+Root = etree._Element
+
+
+def check(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", "ecatcfg", "check", *args], cwd=ROOT,
+                          capture_output=True, text=True, timeout=120)
+
+
+@pytest.fixture(scope="module")
+def example_eni(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return compile_example(tmp_path_factory.mktemp("check") / "line.xml")
+
+
+@pytest.fixture(scope="module")
+def examples() -> Library:
+    return Library([EXAMPLES / "esi"], cache=False)
+
+
+def _slave(root: Root, name: str) -> Root:
+    found: Root = root.xpath(f"Config/Slave[normalize-space(Info/Name)='{name}']")[0]
+    return found
+
+
+def _init_cmd(slave: Root, comment: str) -> Root:
+    found: Root = slave.xpath(f"InitCmds/InitCmd[Comment='{comment}']")[0]
+    return found
+
+
+def _defective(tmp_path: Path, eni: Path, defect: Callable[[Root], None]) -> Path:
+    tree = etree.parse(str(eni))
+    defect(tree.getroot())
+    out = tmp_path / "defective.xml"
+    tree.write(str(out), xml_declaration=True, encoding="UTF-8")
+    return out
+
+
+def _rules(result: FileResult) -> dict[str, list[str]]:
+    found: dict[str, list[str]] = {}
+    for f in result.findings:
+        found.setdefault(f.rule, []).append(f.message)
+    return found
+
+
+def test_the_compiled_example_is_clean(example_eni: Path, examples: Library) -> None:
+    result = check_eni(example_eni, examples)
+    assert result.findings == []
+    assert [d.type for d in result.devices] == ["coupler", "buttons", "sensors", "lamps",
+                                                "axis1"]
+
+
+def _sm2_length_8(root: Root) -> None:
+    # axis1's outputs: 0x1601 = controlword + target velocity, 6 bytes; set 8.
+    cmd = _init_cmd(_slave(root, "axis1"), "set sm 2 (outputs)")
+    cmd.find("Data").text = "0011080064000100"
+
+
+def _sm3_never_set(root: Root) -> None:
+    # axis1 inputs: 0x1A00 (6 bytes) and 0x1A01 remapped to 2 + 4 + 4 bytes.
+    axis = _slave(root, "axis1")
+    cmd = _init_cmd(axis, "set sm 3 (inputs)")
+    cmd.getparent().remove(cmd)
+
+
+def _lamps_fmmu_inactive(root: Root) -> None:
+    cmd = _init_cmd(_slave(root, "lamps"), "set fmmu 0 (outputs)")
+    data = bytearray.fromhex(cmd.find("Data").text)
+    data[12] = 0                                       # FMMU +0x0C: activate
+    cmd.find("Data").text = data.hex()
+
+
+def _sensors_over_buttons(root: Root) -> None:
+    buttons = _slave(root, "buttons").find("ProcessData/Recv/BitStart").text
+    _slave(root, "sensors").find("ProcessData/Recv/BitStart").text = buttons
+
+
+def _big_frame(root: Root) -> None:
+    frame = root.find("Config/Cyclic/Frame")
+    cmd = etree.SubElement(frame, "Cmd")
+    for tag, text in (("State", "OP"), ("Cmd", "10"), ("Addr", "536870912"),
+                      ("DataLength", "1480"), ("InputOffs", "100"), ("OutputOffs", "100")):
+        etree.SubElement(cmd, tag).text = text
+
+
+def _lrw_cnt_plus_one(root: Root) -> None:
+    cnt = root.xpath("Config/Cyclic/Frame/Cmd[Cmd='12']/Cnt")[0]
+    cnt.text = str(int(cnt.text) + 1)
+
+
+def _mailbox_send_64(root: Root) -> None:
+    _slave(root, "axis1").find("Mailbox/Send/Length").text = "64"
+
+
+def _mandatory_1a00_unassigned(root: Root) -> None:
+    sm3 = _slave(root, "axis1").find("ProcessData/Sm3")
+    sm3.remove(sm3.xpath("Pdo[text()='#x1a00' or text()='6656']")[0])
+
+
+def _excluded_pair(root: Root) -> None:
+    etree.SubElement(_slave(root, "axis1").find("ProcessData/Sm2"), "Pdo").text = "#x1600"
+
+
+def _fixed_remapped(root: Root) -> None:
+    pdo = _slave(root, "buttons").xpath("ProcessData/TxPdo[Index='#x1a00']")[0]
+    pdo.find("Entry/Index").text = "#x6001"
+
+
+def _rx_object_in_txpdo(root: Root) -> None:
+    pdo = _slave(root, "axis1").xpath("ProcessData/TxPdo[Index='#x1a01']")[0]
+    entry = pdo.find("Entry[Index='#x606c']")
+    entry.find("Index").text = "#x60ff"               # PdoMapping R: target velocity
+
+
+def _coe_cmd(index: int, subindex: int, data: str, transition: str = "PS"
+             ) -> Callable[[Root], None]:
+    def add(root: Root) -> None:
+        cmds = _slave(root, "axis1").find("Mailbox/CoE/InitCmds")
+        cmd = etree.SubElement(cmds, "InitCmd")
+        for tag, text in (("Transition", transition), ("Comment", "test"), ("Timeout", "0"),
+                          ("Ccs", "1"), ("Index", str(index)), ("SubIndex", str(subindex)),
+                          ("Data", data)):
+            etree.SubElement(cmd, tag).text = text
+    return add
+
+
+def _assign_activate_0700(root: Root) -> None:
+    _init_cmd(_slave(root, "axis1"), "set DC activation").find("Data").text = "0007"
+
+
+def _mailbox_512(root: Root) -> None:
+    axis = _slave(root, "axis1")
+    axis.find("Mailbox/Send/Length").text = "512"
+    cmd = _init_cmd(axis, "set sm 0 (mailbox out)")
+    data = bytearray.fromhex(cmd.find("Data").text)
+    data[2:4] = (512).to_bytes(2, "little")
+    cmd.find("Data").text = data.hex()
+
+
+def _unreadable_fmmu(root: Root) -> None:
+    # A logical address no cyclic command covers, as EC-Engineer's encrypted settings read.
+    cmd = _init_cmd(_slave(root, "lamps"), "set fmmu 0 (outputs)")
+    data = bytearray.fromhex(cmd.find("Data").text)
+    data[0:4] = (0xEB030B5F).to_bytes(4, "little")
+    cmd.find("Data").text = data.hex()
+
+
+def _revision_9(root: Root) -> None:
+    _slave(root, "lamps").find("Info/RevisionNo").text = "9"
+
+
+# rule, defect, words the message must hold (written here, not taken from the code)
+DEFECTS: list[tuple[str, Callable[[Root], None], list[str]]] = [
+    ("ENI001", _revision_9, ["lamps", "revision 0x9", "available"]),
+    ("ENI003", _unreadable_fmmu, ["FMMU 0", "0xEB030B5F", "no cyclic command"]),
+    ("ENI101", _sm2_length_8, ["SM2 (Outputs) is set to 8 byte(s)", "0x1601", "take 6"]),
+    ("ENI101", _sm3_never_set, ["SM3 (Inputs) has PDOs of 16 byte(s)", "no InitCmd"]),
+    ("ENI102", _lamps_fmmu_inactive, ["lamps", "SM0 (Outputs, 0x0F00", "no write FMMU"]),
+    ("ENI103", _sensors_over_buttons, ["sensors", "Recv (inputs)", "buttons"]),
+    ("ENI004", _big_frame, ["<Frame> of 5 commands", "1500"]),
+    ("ENI104", _lrw_cnt_plus_one, ["LRW 0x10000000", "expects working counter 8", "give 7"]),
+    ("ENI105", _mailbox_send_64, ["Mailbox/Send is 0x1000, 64 byte(s)", "SM0", "128"]),
+    ("ENI201", _mandatory_1a00_unassigned, ["TxPdo 0x1A00", "Mandatory", "not assigned"]),
+    ("ENI202", _excluded_pair, ["0x1600 and 0x1601", "excludes"]),
+    ("ENI203", _fixed_remapped, ["buttons", "PDO 0x1A00 is Fixed"]),
+    ("ENI204", _rx_object_in_txpdo, ["0x60FF:00", "TxPDO", "'R'"]),
+    ("ENI301", _coe_cmd(0x2000, 0, "01"), ["0x2000:00", "no such object"]),
+    ("ENI302", _coe_cmd(0x1018, 1, "01000000"), ["0x1018:01", "read-only", "'ro'"]),
+    ("ENI302", _coe_cmd(0x1C12, 0, "00", "SO"), ["0x1C12:00", "SO, runs in SafeOp",
+                                                 "not writable then", "PreOp"]),
+    ("ENI303", _coe_cmd(0x6060, 0, "0900"), ["2 byte(s) to 0x6060:00", "SINT of 1"]),
+    ("ENI401", _assign_activate_0700, ["AssignActivate 0x0700", "DC 0x0300"]),
+    ("ENI501", _mailbox_512, ["Mailbox/Send", "length 512", "34..256"]),
+]
+
+
+@pytest.mark.parametrize("rule, defect, words", DEFECTS,
+                         ids=[f"{r}-{d.__name__.strip('_') if d.__name__ != 'add' else i}"
+                              for i, (r, d, _) in enumerate(DEFECTS)])
+def test_a_defect_fires_its_rule(tmp_path: Path, example_eni: Path, examples: Library,
+                                 rule: str, defect: Callable[[Root], None],
+                                 words: list[str]) -> None:
+    result = check_eni(_defective(tmp_path, example_eni, defect), examples, use_cache=False)
+    found = _rules(result)
+    assert rule in found, found
+    assert any(all(w in m for w in words) for m in found[rule]), found[rule]
+    severity = all_rules()[rule].severity
+    assert any(f.severity == severity for f in result.findings if f.rule == rule)
+
+
+@pytest.mark.parametrize("cmd, cnt", [(11, 2), (10, 3)])
+def test_working_counters_of_lwr_and_lrd(tmp_path: Path, example_eni: Path,
+                                         examples: Library, cmd: int, cnt: int) -> None:
+    """The example's LRW (Cnt 7: lamps write 2, axis1 write and read 3, buttons and sensors
+    read 1 each) as an LWR counts the two writers once each, as an LRD the three readers
+    (ETG.1000.4); the other count is an ENI104 finding."""
+    def as_cmd(expected: int) -> Callable[[Root], None]:
+        def change(root: Root) -> None:
+            lrw = root.xpath("Config/Cyclic/Frame/Cmd[Cmd='12']")[0]
+            lrw.find("Cmd").text = str(cmd)
+            lrw.find("Cnt").text = str(expected)
+        return change
+
+    right = check_eni(_defective(tmp_path, example_eni, as_cmd(cnt)), examples,
+                      use_cache=False)
+    assert right.findings == []
+    wrong = check_eni(_defective(tmp_path, example_eni, as_cmd(7)), examples,
+                      use_cache=False)
+    assert [(f.rule, f"give {cnt}" in f.message) for f in wrong.findings] == [("ENI104", True)]
+
+
+def test_every_rule_has_a_defect() -> None:
+    covered = {r for r, _, _ in DEFECTS} | {"ENI002", "ENI402"}   # tested below
+    assert covered == set(all_rules())
+
+
+def _drive_copy(folder: Path, old: str, new: str) -> None:
+    """The example ESI files in ``folder``, the drive's with ``old`` replaced by ``new``."""
+    shutil.copytree(EXAMPLES / "esi", folder)
+    drive = folder / "ecatcfg-EXD402-drive.xml"
+    text = drive.read_text()
+    assert old in text
+    drive.write_text(text.replace(old, new))
+
+
+def test_an_exclude_given_on_one_pdo_only_is_enough(tmp_path: Path,
+                                                     example_eni: Path) -> None:
+    # 0x1601 excludes 0x1600; 0x1600 no longer says so.
+    _drive_copy(tmp_path / "esi", "<Exclude>#x1601</Exclude>", "")
+    bad = _defective(tmp_path, example_eni, _excluded_pair)
+    found = _rules(check_eni(bad, Library([tmp_path / "esi"], cache=False), use_cache=False))
+    assert [m for m in found["ENI202"] if "0x1600 and 0x1601" in m and
+            "(PDO 0x1601) excludes 0x1600" in m]
+
+
+def test_a_fixed_sync0_cycle_other_than_the_enis_warns(tmp_path: Path,
+                                                       example_eni: Path) -> None:
+    _drive_copy(tmp_path / "esi", '<CycleTimeSync0 Factor="1">0</CycleTimeSync0>',
+                "<CycleTimeSync0>500000</CycleTimeSync0>")
+    result = check_eni(example_eni, Library([tmp_path / "esi"], cache=False))
+    found = _rules(result)
+    assert list(found) == ["ENI402"]
+    assert "CycleTime0 is 1000000 ns" in found["ENI402"][0]
+    assert "gives 500000 ns" in found["ENI402"][0]
+
+
+def test_differing_descriptions_of_a_slave_are_named(tmp_path: Path,
+                                                     example_eni: Path) -> None:
+    other = tmp_path / "other"
+    other.mkdir()
+    text = (EXAMPLES / "esi" / "ecatcfg-EXD402-drive.xml").read_text()
+    (other / "drive-v2.xml").write_text(text.replace("<Exclude>#x1601</Exclude>", "", 1))
+    result = check_eni(example_eni, Library([EXAMPLES / "esi", other], cache=False))
+    found = _rules(result)
+    assert list(found) == ["ENI002"]
+    assert "ecatcfg-EXD402-drive.xml" in found["ENI002"][0]
+    assert "drive-v2.xml" in found["ENI002"][0]
+    # --prefer settles it: the slave is checked against the preferred file.
+    chosen = Library([EXAMPLES / "esi", other], cache=False, prefer=[other])
+    assert check_eni(example_eni, chosen).findings == []
+
+
+# -- the command line -----------------------------------------------------------------------
+
+def test_cli_formats_and_exit_codes(tmp_path: Path, example_eni: Path) -> None:
+    bad = _defective(tmp_path, example_eni, _sm2_length_8)
+    done = check(str(bad), "--esi", str(EXAMPLES / "esi"), "--format", "json")
+    assert done.returncode == 1, done.stderr
+    doc = json.loads(done.stdout)
+    # The longer SM2 is ENI101; its last 2 bytes lie past the FMMU's 6: ENI102.
+    assert [f["rule"] for f in doc["findings"]] == ["ENI101", "ENI102"]
+    finding = doc["findings"][0]
+    assert finding["severity"] == "error"
+    assert finding["file"] == str(bad)
+    # The line is the Sm2 element of axis1, found here with lxml.
+    tree = etree.parse(str(bad))
+    assert finding["line"] == _slave(tree.getroot(), "axis1").find("ProcessData/Sm2").sourceline
+    assert finding["device"] == {"vendor_id": 0xE0000ECA, "product_code": 0x7201,
+                                 "revision": 0x20000, "type": "axis1"}
+    assert doc["summary"]["errors"] == 2
+
+    ok = check(str(example_eni), "--esi", str(EXAMPLES / "esi"))
+    assert ok.returncode == 0, ok.stderr
+    assert ok.stdout.strip() == "1 file checked: 0 errors, 0 warnings, 0 infos"
+
+    junit = check(str(bad), "--esi", str(EXAMPLES / "esi"), "--format", "junit")
+    suites = etree.fromstring(junit.stdout.encode())
+    failed = [c.get("name") for c in suites.iter("testcase") if c.find("failure") is not None]
+    assert len(failed) == 1 and failed[0].startswith("axis1 ")
+
+    sarif = json.loads(check(str(bad), "--esi", str(EXAMPLES / "esi"), "--format",
+                             "sarif").stdout)
+    assert sarif["runs"][0]["tool"]["driver"]["name"] == "ecatcfg check"
+    assert [(r["ruleId"], r["level"]) for r in sarif["runs"][0]["results"]] == [
+        ("ENI101", "error"), ("ENI102", "error")]
+
+    ignored = check(str(bad), "--esi", str(EXAMPLES / "esi"), "--ignore", "ENI1")
+    assert ignored.returncode == 0, ignored.stdout
+
+
+def test_cli_explain_list_and_usage_errors(tmp_path: Path) -> None:
+    explained = check("--explain", "eni302")
+    assert explained.returncode == 0
+    assert explained.stdout.startswith("ENI302 (error): ")
+    assert "0x06010002" in explained.stdout
+    listed = check("--list-rules").stdout.splitlines()
+    assert [line.split()[0] for line in listed] == sorted(all_rules())
+    assert check("--explain", "ESI101").returncode == 2
+    assert check(str(tmp_path / "missing.xml")).returncode == 2
+    assert check().returncode == 2
+    broken = tmp_path / "broken.xml"
+    broken.write_text("<EtherCATConfig>\n<Config><Slave>")
+    done = check(str(broken))
+    assert done.returncode == 1
+    assert "Traceback" not in done.stderr
+    assert done.stdout.startswith(f"{broken}:2") and " error ENI004 " in done.stdout
+
+
+# -- real files -----------------------------------------------------------------------------
+
+# The real defects the sweep finds, by ENI: (rule, words of the message) each.  The
+# EC-Engineer export for a Synapticon SOMANET (0x22D2:0x201 revision 0x0A000002) remaps
+# PDOs and the PDO assignment that the exact-revision ESI (corpus esi/drives) marks
+# read-only and Fixed: the slave answers those downloads with abort 0x06010002.
+REAL_DEFECTS: dict[str, set[tuple[str, str]]] = {
+    "corpus-extra/rocos-ecm-history/eni_sea.xml": {
+        ("ENI302", "0x1C12:00, read-only"), ("ENI302", "0x1C12:01, read-only"),
+        ("ENI302", "0x1C13:00, read-only"), ("ENI302", "0x1C13:01, read-only"),
+        *{("ENI302", f"0x1600:{s:02X}, read-only") for s in range(8)},
+        *{("ENI302", f"0x1A00:{s:02X}, read-only") for s in range(8)},
+        ("ENI203", "PDO 0x1600 is Fixed"), ("ENI203", "PDO 0x1A00 is Fixed"),
+    },
+}
+
+
+@pytest.fixture(scope="module")
+def corpora_library(corpus: Path, corpus_extra: Path) -> Library:
+    # The vendor's download before the open-stack copy of the SOMANET file (a trimmed
+    # description of the same identity, corpus esi/open-stacks/siitool).
+    return Library([corpus / "esi", corpus_extra / "esi"], cache=False,
+                   prefer=[corpus / "esi" / "drives"])
+
+
+@pytest.mark.parametrize("eni", corpus_enis())
+def test_corpus_enis_have_no_error_but_the_named_defects(
+        request: pytest.FixtureRequest, eni: str, corpora_library: Library) -> None:
+    result = check_eni(corpus_eni(request, eni), corpora_library, use_cache=False)
+    errors = [f for f in result.findings if f.severity == "error"]
+    expected = REAL_DEFECTS.get(eni, set())
+    for f in errors:
+        assert any(rule == f.rule and words in f.message for rule, words in expected), \
+            f"{f.rule} {f.message}"
+    for rule, words in expected:
+        assert any(rule == f.rule and words in f.message for f in errors), (rule, words)
+
+
+def test_the_read_only_1c12_write_is_what_the_esi_says(corpus: Path,
+                                                        corpus_extra: Path) -> None:
+    esi = corpus / "esi" / "drives" / "SOMANET_CiA_402.xml"
+    eni = corpus_extra / "eni" / "rocos-ecm-history" / "eni_sea.xml"
+    # Independently: the ENI writes 0x1C12:00 in PS, and the device of its identity in the
+    # ESI gives 0x1C12's type a subindex 0 with Access ro.
+    eni_root = etree.parse(str(eni)).getroot()
+    info = eni_root.find("Config/Slave/Info")
+    identity = (int(info.findtext("VendorId")), int(info.findtext("ProductCode")),
+                int(info.findtext("RevisionNo")))
+    writes = [c for c in eni_root.iterfind("Config/Slave/Mailbox/CoE/InitCmds/InitCmd")
+              if c.findtext("Index") == str(0x1C12) and c.findtext("SubIndex") == "0"]
+    assert writes and {c.findtext("Transition") for c in writes} == {"PS"}
+    esi_root = etree.parse(str(esi)).getroot()
+    [device] = [d for d in esi_root.iter("Device")
+                if int(d.find("Type").get("ProductCode").replace("#x", ""), 16) == identity[1]
+                and int(d.find("Type").get("RevisionNo").replace("#x", ""), 16) == identity[2]]
+    [obj] = [o for o in device.iter("Object") if o.findtext("Index").lower() == "#x1c12"]
+    [dtype] = [t for t in device.iter("DataType") if t.findtext("Name") == obj.findtext("Type")]
+    [sub0] = [s for s in dtype.iter("SubItem") if s.findtext("SubIdx") == "0"]
+    assert sub0.findtext("Flags/Access") == "ro"
+
+    done = check(str(eni), "--esi", str(esi), "--format", "json", "--select", "ENI302")
+    assert done.returncode == 1
+    messages = [f["message"] for f in json.loads(done.stdout)["findings"]]
+    assert any("0x1C12:00" in m and "read-only" in m for m in messages)
+
+
+# -- what the compiler writes from the corpus -------------------------------------------------
+
+# Every 6th device of both corpora (sorted, tests/sweep.py), and the devices named below;
+# ECATCFG_CHECK_EVERY=1 compiles and checks every device (about 1,500: a few minutes).
+EVERY = int(os.environ.get("ECATCFG_CHECK_EVERY", "6"))
+
+# The real defects of ENIs compiled from corpus devices, by device key: (rule, words).
+COMPILED_DEFECTS: dict[str, set[tuple[str, str]]] = {
+    # IgH's ``ethercat xml`` dump gives the SyncManagers no type (no Outputs/Inputs text):
+    # the compiler assigns none of the PDOs the file marks Mandatory for Sm 2 and 3.
+    "corpus-extra/ethercat-esi/Weidmueller_UR20_FBC_from_IgH.xml#0": {
+        *{("ENI201", f"RxPdo 0x{i:04X} () is Mandatory") for i in
+          (0x1600, 0x1601, 0x1602, 0x1603, 0x16FF)},
+        *{("ENI201", f"TxPdo 0x{i:04X} () is Mandatory") for i in
+          (0x1A00, 0x1A01, 0x1A02, 0x1A03, 0x1AFF)},
+    },
+    # The compiler writes PDO 0x1602 twice into this device's ProcessData; the reader
+    # refuses the file (the compiler's fault: one PDO, one list of entries).
+    "corpus/beckhoff/Beckhoff EL2xxx.xml#55": {("ENI004", "PDO 0x1602 described again")},
+}
+
+
+def test_enis_compiled_from_the_corpus_have_no_error_but_the_named_defects(
+        tmp_path: Path, corpus: Path, corpus_extra: Path) -> None:
+    import sweep
+
+    from ecatcfg.compiler import build, topology
+    from ecatcfg.eni import writer
+    from ecatcfg.errors import EcatcfgError
+
+    corpora = {"corpus": corpus, "corpus-extra": corpus_extra}
+    every = sweep.cases(corpora)
+    chosen = sweep.sample(every, EVERY) + [c for c in every if c.key in COMPILED_DEFECTS
+                                           and c not in every[::EVERY]]
+    worker = sweep.Worker(corpora)
+    checked, unexpected, seen = 0, [], set()
+    for case in chosen:
+        lib = worker.library(case)
+        if lib.problems:
+            continue
+        [entry] = [e for e in lib.entries if e.ordinal == case.ordinal
+                   and e.file == lib.files[0].shown]
+        device = lib.device(entry)
+        if device.passive:
+            continue
+        slave: dict[str, object] = {"name": "dut", "device": case.selector}
+        needed = sweep._required_modules(device, lib.modules_for(entry))
+        if needed:
+            slave["modules"] = needed
+        try:
+            if lib.find(case.selector).entry.ordinal != case.ordinal:
+                continue                      # another Device element has this identity
+            plan = build.compile_topology(topology.loads(
+                json.dumps({"master": {"name": "m"}, "slaves": [slave]}), "t.yaml"), lib).plan
+        except EcatcfgError:
+            continue                          # compile refuses it (test_sweep_devices)
+        eni = tmp_path / "compiled.xml"
+        eni.write_bytes(writer.to_bytes(plan))
+        checked += 1
+        expected = COMPILED_DEFECTS.get(case.key, set())
+        for f in check_eni(eni, lib, use_cache=False).findings:
+            if f.severity != "error":
+                continue
+            named = {(r, w) for r, w in expected if r == f.rule and w in f.message}
+            seen |= named
+            if not named:
+                unexpected.append(f"{case.key}: {f.rule} {f.message}")
+    assert checked >= 1400 // EVERY
+    assert unexpected == []
+    assert seen == set().union(*COMPILED_DEFECTS.values())
