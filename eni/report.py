@@ -59,8 +59,9 @@ class VariableRow:
 
 
 def colour(index: int) -> str:
-    """A slave's colour: hues a golden angle apart, so neighbours never look alike."""
-    return f"hsl({index * 137.508 % 360:.1f}, 65%, 72%)"
+    """A slave's colour: hues a golden angle apart, so neighbours never look alike, and
+    three lightnesses in turn, so that hues that come round close again still differ."""
+    return f"hsl({index * 137.508 % 360:.1f}, 65%, {(72, 60, 84)[index % 3]}%)"
 
 
 def transition_title(code: str) -> str:
@@ -93,8 +94,9 @@ def _slave_rows(s: SlavePlan | PassiveSlave, behind: str) -> list[tuple[str, str
                                 f"in {_hex(mbx.recv.start, 4)} len {mbx.recv.length}"))
     pd = s.process_data
     if pd is not None:
-        names = {(p.direction, p.index): p.name for p in pd.pdos}
+        names: dict[tuple[str, int], str] = {(p.direction, p.index): p.name for p in pd.pdos}
         for sm in pd.sms:
+            # Outputs SyncManagers hold RxPDOs, Inputs ones TxPDOs (ETG.2100 ``SmN/Type``).
             kind = "rx" if sm.type.lower().startswith("out") else "tx"
             pdos = ", ".join(f"{_hex(i, 4)} {names.get((kind, i), '')}".rstrip()
                              for i in sm.pdos) or "no PDO"

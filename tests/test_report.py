@@ -325,8 +325,8 @@ def test_findings_have_their_own_section(tmp_path):
     findings = [_finding("ENI301", "error", "slave 'axis1': writes 0x1C12:00, read-only", 40),
                 _finding("ENI102", "warning", "frame 0: 1500 bytes", 7)]
     page = html.fromstring(report.render(plan, "tree.eni.xml", findings))
-    rows = page.xpath("//section[@id='findings']//tr[@class='finding'] | "
-                      "//h2[@id='findings']/following-sibling::table[1]//tr[@class='finding']")
+    rows = page.xpath("//h2[@id='findings']/following-sibling::table[1]"
+                      "//tr[@class='finding']")
     assert [[td.text_content() for td in r.findall("td")] for r in rows] == [
         ["warning", "ENI102", "7", "frame 0: 1500 bytes"],
         ["error", "ENI301", "40", "slave 'axis1': writes 0x1C12:00, read-only"]]
@@ -335,6 +335,24 @@ def test_findings_have_their_own_section(tmp_path):
     assert not none.xpath("//tr[@class='finding']")
     clean = html.fromstring(report.render(plan, "tree.eni.xml", []))
     assert "found nothing" in clean.get_element_by_id("no-findings").text_content()
+
+
+def test_findings_of_check_are_shown_as_check_gives_them(tmp_path):
+    """The page takes ``check``'s own findings (``eni/check``): an expected working counter
+    made wrong in the compiled tree is ENI104, and the page lists what check says."""
+    from ecatcfg.eni.check import check_eni
+    tree = etree.parse(str(compiled_tree(tmp_path)))
+    lrw = next(c for c in tree.getroot().findall("Config/Cyclic/Frame/Cmd")
+               if c.findtext("Cmd") == "12")
+    lrw.find("Cnt").text = str(int(lrw.findtext("Cnt")) + 1)
+    eni = tmp_path / "wkc.eni.xml"
+    tree.write(str(eni), xml_declaration=True, encoding="UTF-8")
+    findings = check_eni(eni, None, use_cache=False).findings
+    assert [f.rule for f in findings] == ["ENI104"]
+    page = html.fromstring(report.render(read_file(eni), str(eni), findings))
+    rows = page.xpath("//tr[@class='finding']")
+    assert [[td.text_content() for td in r.findall("td")] for r in rows] == [
+        [f.severity, f.rule, str(f.line), f.message] for f in findings]
 
 
 def test_a_bad_eni_names_file_and_line_and_writes_nothing(tmp_path):
