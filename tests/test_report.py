@@ -21,7 +21,7 @@ from typing import Any
 
 import prereq
 import pytest
-from conftest import EXAMPLES, ROOT
+from conftest import EXAMPLES, ROOT, corpus_eni
 from lxml import etree, html
 
 from ecatcfg.eni import report
@@ -32,9 +32,10 @@ from ecatcfg.esi.lint.finding import DeviceRef, Finding
 CHROMIUM_ARGS = ["--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
                  "--disable-background-networking", "--disable-component-update",
                  "--disable-sync"]
-CORPUS_ENIS = ["jn-ec-master/mega_master_eni.xml",            # TwinCAT-style, frame image
-               "acontis-doc/acontis-TrainingSlaves-ENI.xml",   # EC-Engineer
-               "rocos-ethercat/eni_tech6.xml"]                 # 6 drives
+CORPUS_ENIS = ["corpus/jn-ec-master/mega_master_eni.xml",     # TwinCAT-style, frame image
+               "corpus/acontis-doc/acontis-TrainingSlaves-ENI.xml",   # EC-Engineer
+               "corpus/rocos-ethercat/eni_tech6.xml",                 # 6 drives
+               "corpus-extra/hydra/hydra_wholebody_20160108_DC.xml"]  # 16 slaves, 2 MB page
 
 
 def chromium_path() -> str:
@@ -199,8 +200,8 @@ def check_image_map(opened: Opened, eni: Path) -> None:
 
 
 @pytest.mark.parametrize("name", CORPUS_ENIS)
-def test_corpus_eni_in_chromium(corpus, browser, tmp_path, name):
-    eni = corpus / "eni" / name
+def test_corpus_eni_in_chromium(request, browser, tmp_path, name):
+    eni = corpus_eni(request, name)
     out = tmp_path / "network.html"
     done = write_report(eni, out)
     assert done.returncode == 0, done.stderr
@@ -246,6 +247,13 @@ def test_tree_with_a_junction_shows_its_branches(browser, tmp_path):
     assert all(x["childBox"][0] > junction_left for x in from_junction)
     # The port letters are drawn as text in the SVG.
     assert sorted(opened.texts("#topology-svg text.port")) == sorted(p for *_, p in expected)
+    # Hovering a slave's box marks its bits in the map (the page's script), and only its.
+    axis2 = slaves.index("axis2")
+    opened.page.hover(f'#topology-svg g.node[data-slave="{axis2}"] rect')
+    marked = opened.page.eval_on_selector_all(
+        "td.bit.hl", "tds => tds.map(td => td.dataset.slave)")
+    assert marked and set(marked) == {str(axis2)}
+    assert len(marked) == len(opened.page.query_selector_all(f'td.bit[data-slave="{axis2}"]'))
     opened.page.close()
 
 
