@@ -16,9 +16,12 @@ from typing import NoReturn
 from ecatcfg import __version__
 from ecatcfg.errors import EcatcfgError
 
-# Subcommands in the order --help lists them (module names in ecatcfg.cli).
-SUBCOMMANDS = ("devices", "lint", "check", "schema", "compile", "show", "diff", "demo", "apply",
-               "simulate", "sii", "scan", "sdo", "alias")
+# Subcommands in the order --help lists them (module names in ecatcfg.cli, but see MODULES).
+SUBCOMMANDS = ("devices", "lint", "check", "schema", "compile", "show", "diff", "report",
+               "demo", "apply", "simulate", "sii", "scan", "sdo", "alias")
+# A subcommand whose module is not named after it: cli/report.py is apply's progress and
+# tables, older than the `report` command.
+MODULES = {"report": "network_report"}
 
 EXIT_OK, EXIT_INPUT, EXIT_USAGE = 0, 1, 2
 
@@ -43,7 +46,7 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"ecatcfg {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     for name in (only,) if only else SUBCOMMANDS:
-        module = importlib.import_module(f"ecatcfg.cli.{name}")
+        module = importlib.import_module(f"ecatcfg.cli.{MODULES.get(name, name)}")
         module.add_parser(sub)
     return parser
 

@@ -11,8 +11,8 @@ from __future__ import annotations
 
 from typing import Any
 
-from ecatcfg.eni.plan import (NetworkPlan, PassiveSlave, PreviousPort, SlavePlan, Unsupported,
-                              Variable)
+from ecatcfg.eni.network_tree import previous_port
+from ecatcfg.eni.plan import NetworkPlan, PassiveSlave, SlavePlan, Unsupported, Variable
 from ecatcfg.eni.words import coe_words, command_name, eoe_words, init_cmd_words
 from ecatcfg.esc import Transition
 from ecatcfg.record import field, record
@@ -105,16 +105,10 @@ def transition_words(slave: SlavePlan) -> dict[str, list[str]]:
     return {t: words for t, words in out.items() if words}
 
 
-def _previous(ports: list[PreviousPort]) -> PreviousPort | None:
-    """The PreviousPort the slave is behind: the selected one of several (ETG.2100
-    ``PreviousPort/@Selected``), else the first."""
-    return next((p for p in ports if p.selected), ports[0] if ports else None)
-
-
 def _parent(plan: NetworkPlan, index: int, slave: SlavePlan | PassiveSlave,
             order: list[SlavePlan | PassiveSlave]) -> tuple[str | None, str | None]:
     by_addr = {s.phys_addr: s.name for s in plan.slaves}
-    prev = _previous(slave.previous_ports)
+    prev = previous_port(slave.previous_ports)
     if prev is not None and prev.phys_addr is not None:
         return by_addr.get(prev.phys_addr), prev.port
     # Without PreviousPort an ENI describes a line: behind the slave before it.

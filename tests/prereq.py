@@ -10,7 +10,8 @@ sets all three):
   (``ECATCFG_CORPUS_EXTRA``, by default ``../shared/corpus-extra``);
 - ``ECATCFG_REQUIRE_RUNTIME``: root with network namespaces, veth pairs and raw sockets,
   tshark, pysoem (``rig.py``);
-- ``ECATCFG_REQUIRE_TOOLS``: a C compiler (the generated headers are compiled).
+- ``ECATCFG_REQUIRE_TOOLS``: a C compiler (the generated headers are compiled) and Debian's
+  ``chromium`` (``ecatcfg report``'s page is opened in it, ``test_report.py``).
 
 Python packages of the ``test`` extra are imported plainly: without them a test errors.
 """

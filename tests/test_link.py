@@ -55,6 +55,7 @@ def readme_test_command() -> str:
 def test_ci_runs_the_readme_test_command_verbatim():
     command = readme_test_command()
     assert "apt-get install -y tshark" in command and '".[test]"' in command
+    assert "chromium" in command          # the report tests' browser (tests/test_report.py)
     assert command.endswith("python3 -m pytest")
     ci = (ROOT / ".ci" / "run").read_text().splitlines()
     assert command in ci, ".ci/run must run exactly the README's second set-up command"
@@ -89,7 +90,7 @@ def test_ci_runs_the_newest_allowed_versions_after_the_locked_run(tmp_path):
     (tmp_path / ".ci" / "newest").write_text(f"#!/bin/sh\ntouch {tmp_path}/ran-newest\n")
     bin_dir = tmp_path / "bin"
     bin_dir.mkdir()
-    for tool in ("python3", "tshark"):
+    for tool in ("python3", "tshark", "chromium"):
         (bin_dir / tool).write_text("#!/bin/sh\nexit 3\n" if tool == "python3" else
                                     "#!/bin/sh\nexit 0\n")
         (bin_dir / tool).chmod(0o755)

@@ -1,0 +1,57 @@
+"""``ecatcfg report ENI -o network.html``: an ENI's network as one self-contained HTML page
+(``eni/report.py``): topology, slaves, process image, cyclic frames, InitCmds, and the
+findings of ``check``.
+
+The page is written atomically, and nothing is written when the ENI has errors (the
+reader's message names the file and line; exit 1).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+
+def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    p = sub.add_parser("report", help="an ENI's network as one self-contained HTML page",
+                       description="Write an HTML page of an ENI (ours or any tool's): the "
+                                   "topology drawn as SVG, a table per slave, the process "
+                                   "image as a map of bytes and bits coloured by slave, the "
+                                   "cyclic frames with their expected working counters, the "
+                                   "InitCmds per transition and the check findings.  The page "
+                                   "loads nothing from anywhere: attach it to a ticket, open "
+                                   "it offline.")
+    p.add_argument("eni", metavar="ENI", help="ENI file")
+    p.add_argument("-o", "--output", required=True, metavar="HTML",
+                   help="the page to write (atomically)")
+    p.add_argument("--no-cache", action="store_true",
+                   help="do not read or write the ENI plan cache")
+    p.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from ecatcfg.cli.inputs import kind
+    from ecatcfg.cli.paths import output_file
+    from ecatcfg.eni import report
+    from ecatcfg.eni.cache import PlanCache, read_file
+    from ecatcfg.eni.reader import read_file as read_uncached
+    from ecatcfg.errors import UsageError
+
+    found = kind(args.eni)
+    if found != "eni":
+        raise UsageError(f"{args.eni} is not an ENI ({found})")
+    out = output_file(args.output)
+    if out.resolve() == Path(args.eni).resolve():
+        raise UsageError(f"-o {args.output}: would replace the ENI it reports on")
+    plan = read_uncached(args.eni) if args.no_cache else \
+        read_file(args.eni, cache=PlanCache())
+    try:
+        report.write(plan, out, args.eni, findings=None)
+    except OSError as exc:
+        raise UsageError(f"-o {args.output}: cannot write: {exc.strerror}") from None
+    print(f"wrote {args.output}: {len(plan.slaves) + len(plan.passive)} slaves, "
+          f"{len(plan.process_image.inputs) + len(plan.process_image.outputs)} variables",
+          file=sys.stderr)
+    return 0

@@ -1,0 +1,381 @@
+"""``ecatcfg report``: the HTML page of an ENI, opened in a real browser.
+
+Debian's Chromium renders the page headless (``--screenshot``: a PNG), and, driven through
+the DevTools protocol by playwright (with that same Chromium, no browser download), the
+tests read the DOM it built: no console errors, no request but the file itself, every slave
+and every variable of the ENI present, and the topology's links drawn from the parent's box
+to the child's.  What is expected is read from the ENI with plain lxml (the ENI reader is
+code under test).  Chromium missing: skipped locally, a failure in CI
+(``ECATCFG_REQUIRE_TOOLS``, ``prereq.py``).
+"""
+
+from __future__ import annotations
+
+import shutil
+import struct
+import subprocess
+import sys
+import zlib
+from pathlib import Path
+from typing import Any
+
+import prereq
+import pytest
+from conftest import EXAMPLES, ROOT, corpus_eni
+from lxml import etree, html
+
+from ecatcfg.eni import report
+from ecatcfg.eni.reader import read_file
+from ecatcfg.esi.lint.finding import DeviceRef, Finding
+
+# Chromium as root needs --no-sandbox; the rest keeps it from talking to anything.
+CHROMIUM_ARGS = ["--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+                 "--disable-background-networking", "--disable-component-update",
+                 "--disable-sync"]
+CORPUS_ENIS = ["corpus/jn-ec-master/mega_master_eni.xml",     # TwinCAT-style, frame image
+               "corpus/acontis-doc/acontis-TrainingSlaves-ENI.xml",   # EC-Engineer
+               "corpus/rocos-ethercat/eni_tech6.xml",                 # 6 drives
+               "corpus-extra/hydra/hydra_wholebody_20160108_DC.xml"]  # 16 slaves, 2 MB page
+
+
+def chromium_path() -> str:
+    path = shutil.which("chromium") or shutil.which("chromium-browser")
+    if path is None:
+        prereq.missing("chromium", "no chromium on PATH (Debian: apt-get install chromium)",
+                       prereq.TOOLS)
+    return path
+
+
+@pytest.fixture(scope="module")
+def browser() -> Any:
+    from playwright.sync_api import sync_playwright
+    path = chromium_path()
+    with sync_playwright() as pw:
+        chromium = pw.chromium.launch(executable_path=path, args=CHROMIUM_ARGS)
+        yield chromium
+        chromium.close()
+
+
+class Opened:
+    """A page loaded in Chromium with what it logged and requested."""
+
+    def __init__(self, browser: Any, page_file: Path) -> None:
+        self.page = browser.new_page()
+        self.console: list[tuple[str, str]] = []
+        self.errors: list[str] = []
+        self.requests: list[str] = []
+        self.page.on("console", lambda m: self.console.append((m.type, m.text)))
+        self.page.on("pageerror", lambda e: self.errors.append(str(e)))
+        self.page.on("request", lambda r: self.requests.append(r.url))
+        self.url = page_file.resolve().as_uri()
+        self.page.goto(self.url, wait_until="load")
+
+    def texts(self, selector: str) -> list[str]:
+        return self.page.eval_on_selector_all(selector, "els => els.map(e => e.textContent)")
+
+    def clean(self) -> None:
+        assert [m for m in self.console if m[0] in ("error", "warning")] == []
+        assert self.errors == []
+        assert self.requests == [self.url]          # nothing fetched: self-contained
+
+
+def write_report(eni: Path, out: Path) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", "ecatcfg", "report", str(eni), "-o",
+                           str(out), "--no-cache"], capture_output=True, text=True,
+                          timeout=120, cwd=ROOT)
+
+
+def xml_names(eni: Path) -> tuple[list[str], list[str]]:
+    """(slave names in file order, variable names: inputs then outputs), by lxml."""
+    root = etree.parse(str(eni)).getroot()
+    slaves = [s.findtext("Info/Name") for s in root.findall("Config/Slave")]
+    variables = [v.findtext("Name") for part in ("Inputs", "Outputs")
+                 for v in root.findall(f"Config/ProcessImage/{part}/Variable")]
+    return slaves, variables
+
+
+def compiled_tree(tmp_path: Path) -> Path:
+    eni = tmp_path / "tree.eni.xml"
+    done = subprocess.run([sys.executable, "-m", "ecatcfg", "compile",
+                           str(EXAMPLES / "tree" / "tree.yaml"), "--esi",
+                           str(EXAMPLES / "tree" / "esi"), "--esi", str(EXAMPLES / "esi"),
+                           "-o", str(eni), "--no-cache"], capture_output=True, text=True,
+                          timeout=120, cwd=ROOT)
+    assert done.returncode == 0, done.stderr
+    return eni
+
+
+def expected_links(eni: Path) -> set[tuple[str, str, str]]:
+    """(parent, child, port) from each slave's PreviousPort (the Selected one, else the
+    first), read with lxml; the first slave is behind the master."""
+    slaves = etree.parse(str(eni)).getroot().findall("Config/Slave")
+    by_addr = {s.findtext("Info/PhysAddr"): s.findtext("Info/Name") for s in slaves}
+    links = set()
+    for s in slaves:
+        ports = s.findall("PreviousPort")
+        chosen = next((p for p in ports if p.get("Selected") in ("1", "true")),
+                      ports[0] if ports else None)
+        if chosen is not None:
+            links.add((by_addr[chosen.findtext("PhysAddr")], s.findtext("Info/Name"),
+                       chosen.findtext("Port")))
+    return links
+
+
+# Each link in the SVG, with the parent's and child's names and boxes and the path's two
+# ends, all in screen coordinates as Chromium laid them out.
+_LINKS_JS = """svg => Array.from(svg.querySelectorAll('g.link-group')).map(g => {
+  const node = i => i === '-1' ? svg.querySelector('g[data-node="master"]')
+                               : svg.querySelector(`g.node[data-slave="${i}"]`);
+  const box = n => { const r = n.querySelector('rect').getBoundingClientRect();
+                     return [r.left, r.top, r.right, r.bottom]; };
+  const path = g.querySelector('path'), m = path.getScreenCTM();
+  const at = l => { const p = path.getPointAtLength(l).matrixTransform(m); return [p.x, p.y]; };
+  const parent = node(g.dataset.parent), child = node(g.dataset.child);
+  return {parent: parent.querySelector('text.name').textContent,
+          child: child.querySelector('text.name').textContent,
+          port: g.dataset.port, parentBox: box(parent), childBox: box(child),
+          start: at(0), end: at(path.getTotalLength())};
+})"""
+
+
+def _on_edge(point: list[float], box: list[float]) -> bool:
+    """On the box's outline (1.5 px of anti-aliasing slack)."""
+    x, y = point
+    left, top, right, bottom = box
+    inside = left - 1.5 <= x <= right + 1.5 and top - 1.5 <= y <= bottom + 1.5
+    edge = min(abs(x - left), abs(x - right), abs(y - top), abs(y - bottom)) <= 1.5
+    return inside and edge
+
+
+def drawn_links(opened: Opened) -> list[dict[str, Any]]:
+    return opened.page.eval_on_selector("#topology-svg", _LINKS_JS)
+
+
+def check_drawing(opened: Opened, names: list[str]) -> None:
+    links = drawn_links(opened)
+    for link in links:
+        assert _on_edge(link["start"], link["parentBox"]), link
+        assert _on_edge(link["end"], link["childBox"]), link
+    boxes = opened.page.eval_on_selector_all(
+        "#topology-svg rect", "rs => rs.map(r => { const b = r.getBoundingClientRect(); "
+        "return [b.left, b.top, b.right, b.bottom]; })")
+    assert len(boxes) == len(names) + 1                        # and the master's
+    for i, a in enumerate(boxes):                               # no two boxes overlap
+        for b in boxes[i + 1:]:
+            assert a[2] <= b[0] or b[2] <= a[0] or a[3] <= b[1] or b[3] <= a[1], (a, b)
+
+
+# Each bit cell of the process-image map: direction, byte, bit, the slave it is coloured
+# for (its name, from that slave's table) and whether its colour is that slave's swatch.
+_CELLS_JS = """tables => tables.flatMap(t => Array.from(t.querySelectorAll('tr[data-byte]'))
+  .flatMap(tr => Array.from(tr.querySelectorAll('td.bit')).map((td, bit) => {
+    const id = td.dataset.slave;
+    const card = id === undefined ? null : document.getElementById('slave-' + id);
+    const swatch = card && getComputedStyle(card.querySelector('.swatch')).backgroundColor;
+    return [t.dataset.direction, +tr.dataset.byte, bit,
+            card && card.querySelector('.slave-name').textContent,
+            card ? getComputedStyle(td).backgroundColor === swatch : null];
+  })))"""
+
+
+def xml_owners(eni: Path) -> dict[tuple[str, int], str]:
+    """(direction, bit) -> slave name, from each slave's ProcessData Send (outputs) and
+    Recv (inputs) BitStart/BitLength, by lxml; the first slave listed wins an overlap."""
+    owners: dict[tuple[str, int], str] = {}
+    for slave in etree.parse(str(eni)).getroot().findall("Config/Slave"):
+        for tag, direction in (("Send", "out"), ("Recv", "in")):
+            for r in slave.findall(f"ProcessData/{tag}"):
+                start, length = int(r.findtext("BitStart")), int(r.findtext("BitLength"))
+                for bit in range(start, start + length):
+                    owners.setdefault((direction, bit), slave.findtext("Info/Name"))
+    return owners
+
+
+def check_image_map(opened: Opened, eni: Path) -> None:
+    cells = opened.page.eval_on_selector_all("table.map", _CELLS_JS)
+    owners = xml_owners(eni)
+    shown = {(d, byte * 8 + bit): name for d, byte, bit, name, _ in cells}
+    assert all(same for *_, same in cells if same is not None)   # coloured as its slave
+    assert {k: v for k, v in shown.items() if v is not None} == owners
+
+
+@pytest.mark.parametrize("name", CORPUS_ENIS)
+def test_corpus_eni_in_chromium(request, browser, tmp_path, name):
+    eni = corpus_eni(request, name)
+    out = tmp_path / "network.html"
+    done = write_report(eni, out)
+    assert done.returncode == 0, done.stderr
+    slaves, variables = xml_names(eni)
+    assert slaves and variables
+    opened = Opened(browser, out)
+    opened.clean()
+    assert opened.texts("section.slave .slave-name") == slaves
+    assert sorted(opened.texts("#topology-svg g.node[data-slave] text.name")) == sorted(slaves)
+    assert opened.texts("table.variables .variable-name") == variables
+    assert sorted(opened.texts("table.map .var")) == sorted(variables)
+    check_drawing(opened, slaves)
+    drawn = {(x["parent"], x["child"], x["port"]) for x in drawn_links(opened)}
+    assert expected_links(eni) <= drawn
+    # Expected working counters of the cyclic commands, as the file gives them.
+    root = etree.parse(str(eni)).getroot()
+    cnts = [c.findtext("Cnt") or "-" for c in root.findall("Config/Cyclic/Frame/Cmd")]
+    assert opened.texts("table.frame td.wkc") == cnts
+    check_image_map(opened, eni)
+    opened.page.close()
+
+
+def test_tree_with_a_junction_shows_its_branches(browser, tmp_path):
+    eni = compiled_tree(tmp_path)
+    out = tmp_path / "tree.html"
+    assert write_report(eni, out).returncode == 0
+    slaves, variables = xml_names(eni)
+    opened = Opened(browser, out)
+    opened.clean()
+    assert opened.texts("section.slave .slave-name") == slaves
+    assert opened.texts("table.variables .variable-name") == variables
+    check_drawing(opened, slaves)
+    check_image_map(opened, eni)
+    links = drawn_links(opened)
+    drawn = {(x["parent"], x["child"], x["port"]) for x in links}
+    expected = expected_links(eni)
+    assert drawn == expected | {("example-tree", slaves[0], "")}
+    # The junction's three ports each lead to a branch, drawn beside the line it leaves.
+    from_junction = [x for x in links if x["parent"] == "junction"]
+    assert sorted(x["port"] for x in from_junction) == sorted(
+        p for parent, _, p in expected if parent == "junction") == ["B", "C", "D"]
+    junction_left = from_junction[0]["parentBox"][0]
+    assert all(x["childBox"][0] > junction_left for x in from_junction)
+    # The port letters are drawn as text in the SVG.
+    assert sorted(opened.texts("#topology-svg text.port")) == sorted(p for *_, p in expected)
+    # Hovering a slave's box marks its bits in the map (the page's script), and only its.
+    axis2 = slaves.index("axis2")
+    opened.page.hover(f'#topology-svg g.node[data-slave="{axis2}"] rect')
+    marked = opened.page.eval_on_selector_all(
+        "td.bit.hl", "tds => tds.map(td => td.dataset.slave)")
+    assert marked and set(marked) == {str(axis2)}
+    assert len(marked) == len(opened.page.query_selector_all(f'td.bit[data-slave="{axis2}"]'))
+    opened.page.close()
+
+
+def _passive_terminal(name: str, previous: str) -> etree._Element:
+    """A passive terminal as TwinCAT writes one: no PhysAddr, empty ProcessData."""
+    slave = etree.fromstring(
+        "<Slave><Info><Name/><VendorId>2</VendorId><ProductCode>0</ProductCode>"
+        f"<RevisionNo>0</RevisionNo><SerialNo>0</SerialNo></Info><ProcessData/>"
+        f'<PreviousPort Selected="true"><Port>B</Port><PhysAddr>{previous}</PhysAddr>'
+        "</PreviousPort></Slave>")
+    slave.find("Info/Name").text = name               # escaped by lxml as it is written
+    return slave
+
+
+def test_passive_terminal_is_marked_and_passes_the_line_on(browser, tmp_path):
+    """A passive terminal after 'inputs' (on its port B, where the junction is too): drawn
+    dashed, and the junction behind it; a name with markup stays text."""
+    tree = etree.parse(str(compiled_tree(tmp_path)))
+    inputs = next(s for s in tree.getroot().findall("Config/Slave")
+                  if s.findtext("Info/Name") == "inputs")
+    odd = 'feed <b>&"amp"</b><script>alert(1)</script>'
+    inputs.addnext(_passive_terminal(odd, inputs.findtext("Info/PhysAddr")))
+    eni = tmp_path / "passive.eni.xml"
+    tree.write(str(eni), xml_declaration=True, encoding="UTF-8")
+    out = tmp_path / "passive.html"
+    assert write_report(eni, out).returncode == 0
+    opened = Opened(browser, out)
+    opened.clean()                                  # the script in the name did not run
+    assert odd in opened.texts("section.slave .slave-name")
+    dashed = opened.page.eval_on_selector_all(
+        "#topology-svg g.node[data-passive] rect",
+        "rs => rs.map(r => getComputedStyle(r).strokeDasharray)")
+    assert len(dashed) == 1 and dashed[0] not in ("none", "")
+    links = {(x["parent"], x["child"], x["port"]) for x in drawn_links(opened)}
+    assert ("inputs", odd, "B") in links and (odd, "junction", "") in links
+    check_drawing(opened, xml_names(eni)[0])
+    opened.page.close()
+
+
+def _png_size_and_colours(data: bytes) -> tuple[tuple[int, int], int]:
+    """(width, height) from IHDR and the number of distinct byte values of the pixel data
+    (a blank page has one or two)."""
+    assert data[:8] == b"\x89PNG\r\n\x1a\n"
+    size = struct.unpack(">II", data[16:24])
+    idat, pos = b"", 8
+    while pos < len(data):
+        length, kind = struct.unpack(">I4s", data[pos:pos + 8])
+        if kind == b"IDAT":
+            idat += data[pos + 8:pos + 8 + length]
+        pos += 12 + length
+    return size, len(set(zlib.decompress(idat)))
+
+
+def test_chromium_renders_the_page_to_png(tmp_path):
+    chromium = chromium_path()
+    eni = compiled_tree(tmp_path)
+    out = tmp_path / "tree.html"
+    assert write_report(eni, out).returncode == 0
+    png = tmp_path / "tree.png"
+    done = subprocess.run([chromium, "--headless", *CHROMIUM_ARGS, "--window-size=900,1200",
+                           f"--screenshot={png}", out.resolve().as_uri()],
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    size, colours = _png_size_and_colours(png.read_bytes())
+    assert size == (900, 1200) and colours > 50
+
+
+# ----------------------------------------------------------------- findings, errors, output
+
+def _finding(rule: str, severity: str, message: str, line: int) -> Finding:
+    return Finding("x.eni.xml", line, None, rule, severity,  # type: ignore[arg-type]
+                   message, DeviceRef(2, 3, 4, "axis1", 10))
+
+
+def test_findings_have_their_own_section(tmp_path):
+    plan = read_file(compiled_tree(tmp_path))
+    findings = [_finding("ENI301", "error", "slave 'axis1': writes 0x1C12:00, read-only", 40),
+                _finding("ENI102", "warning", "frame 0: 1500 bytes", 7)]
+    page = html.fromstring(report.render(plan, "tree.eni.xml", findings))
+    rows = page.xpath("//h2[@id='findings']/following-sibling::table[1]"
+                      "//tr[@class='finding']")
+    assert [[td.text_content() for td in r.findall("td")] for r in rows] == [
+        ["warning", "ENI102", "7", "frame 0: 1500 bytes"],
+        ["error", "ENI301", "40", "slave 'axis1': writes 0x1C12:00, read-only"]]
+    none = html.fromstring(report.render(plan, "tree.eni.xml", None))
+    assert none.get_element_by_id("not-checked") is not None
+    assert not none.xpath("//tr[@class='finding']")
+    clean = html.fromstring(report.render(plan, "tree.eni.xml", []))
+    assert "found nothing" in clean.get_element_by_id("no-findings").text_content()
+
+
+def test_findings_of_check_are_shown_as_check_gives_them(tmp_path):
+    """The page takes ``check``'s own findings (``eni/check``): an expected working counter
+    made wrong in the compiled tree is ENI104, and the page lists what check says."""
+    from ecatcfg.eni.check import check_eni
+    tree = etree.parse(str(compiled_tree(tmp_path)))
+    lrw = next(c for c in tree.getroot().findall("Config/Cyclic/Frame/Cmd")
+               if c.findtext("Cmd") == "12")
+    lrw.find("Cnt").text = str(int(lrw.findtext("Cnt")) + 1)
+    eni = tmp_path / "wkc.eni.xml"
+    tree.write(str(eni), xml_declaration=True, encoding="UTF-8")
+    findings = check_eni(eni, None, use_cache=False).findings
+    assert [f.rule for f in findings] == ["ENI104"]
+    page = html.fromstring(report.render(read_file(eni), str(eni), findings))
+    rows = page.xpath("//tr[@class='finding']")
+    assert [[td.text_content() for td in r.findall("td")] for r in rows] == [
+        [f.severity, f.rule, str(f.line), f.message] for f in findings]
+
+
+def test_a_bad_eni_names_file_and_line_and_writes_nothing(tmp_path):
+    eni = compiled_tree(tmp_path)
+    text = eni.read_text().splitlines()
+    line = next(k for k, t in enumerate(text) if "<PhysAddr>" in t)
+    text[line] = text[line].replace("<PhysAddr>", "<PhysAddr>x")
+    bad = tmp_path / "bad.eni.xml"
+    bad.write_text("\n".join(text) + "\n")
+    out = tmp_path / "bad.html"
+    done = write_report(bad, out)
+    assert done.returncode == 1 and f"{bad}:{line + 1}" in done.stderr
+    assert "Traceback" not in done.stderr and not out.exists()
+    # Not an ENI, or the ENI itself as output: usage errors, nothing written.
+    esi = EXAMPLES / "esi" / "ecatcfg-EXD402-drive.xml"
+    assert write_report(esi, out).returncode == 2 and not out.exists()
+    same = write_report(eni, eni)
+    assert same.returncode == 2 and "would replace the ENI" in same.stderr
