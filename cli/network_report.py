@@ -24,8 +24,17 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
     p.add_argument("eni", metavar="ENI", help="ENI file")
     p.add_argument("-o", "--output", required=True, metavar="HTML",
                    help="the page to write (atomically)")
+    p.add_argument("--esi", action="append", default=[], metavar="PATH",
+                   help="ESI file or folder (repeatable) for the check findings: each slave "
+                        "against its device, as `ecatcfg check --esi` does; without it the "
+                        "ENI is checked against itself")
+    p.add_argument("--prefer", action="append", default=[], metavar="PATH",
+                   help="where several ESI files describe one identity differently, take "
+                        "the description from this file or folder (repeatable, first first)")
+    p.add_argument("--no-check", action="store_true",
+                   help="leave the check findings out (the page says check was not run)")
     p.add_argument("--no-cache", action="store_true",
-                   help="do not read or write the ENI plan cache")
+                   help="do not use the ESI index cache and the ENI plan cache")
     p.set_defaults(run=run)
 
 
@@ -36,6 +45,7 @@ def run(args: argparse.Namespace) -> int:
     from ecatcfg.cli.paths import output_file
     from ecatcfg.eni import report
     from ecatcfg.eni.cache import PlanCache, read_file
+    from ecatcfg.eni.check import check_eni
     from ecatcfg.eni.reader import read_file as read_uncached
     from ecatcfg.errors import UsageError
 
@@ -47,11 +57,22 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"-o {args.output}: would replace the ENI it reports on")
     plan = read_uncached(args.eni) if args.no_cache else \
         read_file(args.eni, cache=PlanCache())
+    findings = None
+    if not args.no_check:
+        library = None
+        if args.esi:
+            from ecatcfg.esi.library import Library
+            library = Library(args.esi, cache=not args.no_cache, prefer=args.prefer)
+            for problem in library.problems:
+                print(f"ecatcfg report: note: {problem} (its devices are not in the library)",
+                      file=sys.stderr)
+        findings = check_eni(args.eni, library, use_cache=not args.no_cache).findings
     try:
-        report.write(plan, out, args.eni, findings=None)
+        report.write(plan, out, args.eni, findings=findings)
     except OSError as exc:
         raise UsageError(f"-o {args.output}: cannot write: {exc.strerror}") from None
+    checked = "" if findings is None else f", {len(findings)} check findings"
     print(f"wrote {args.output}: {len(plan.slaves) + len(plan.passive)} slaves, "
-          f"{len(plan.process_image.inputs) + len(plan.process_image.outputs)} variables",
-          file=sys.stderr)
+          f"{len(plan.process_image.inputs) + len(plan.process_image.outputs)} variables"
+          f"{checked}", file=sys.stderr)
     return 0

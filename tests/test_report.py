@@ -379,3 +379,34 @@ def test_a_bad_eni_names_file_and_line_and_writes_nothing(tmp_path):
     assert write_report(esi, out).returncode == 2 and not out.exists()
     same = write_report(eni, eni)
     assert same.returncode == 2 and "would replace the ENI" in same.stderr
+
+
+def test_the_command_shows_what_check_finds(tmp_path):
+    """``ecatcfg report`` runs ``check`` (with ``--esi``, against the slaves' devices too):
+    a wrong expected working counter is on the page as ENI104 at the Cnt's line, and
+    ``--no-check`` says check was not run."""
+    tree = etree.parse(str(compiled_tree(tmp_path)))
+    lrw = next(c for c in tree.getroot().findall("Config/Cyclic/Frame/Cmd")
+               if c.findtext("Cmd") == "12")
+    lrw.find("Cnt").text = str(int(lrw.findtext("Cnt")) + 1)
+    eni = tmp_path / "wkc.eni.xml"
+    tree.write(str(eni), xml_declaration=True, encoding="UTF-8")
+    cmd_line = etree.parse(str(eni)).getroot()
+    cmd_line = next(c for c in cmd_line.findall("Config/Cyclic/Frame/Cmd")
+                    if c.findtext("Cmd") == "12").sourceline
+    out = tmp_path / "page.html"
+    done = subprocess.run([sys.executable, "-m", "ecatcfg", "report", str(eni), "-o", str(out),
+                           "--no-cache", "--esi", str(EXAMPLES / "tree" / "esi"),
+                           "--esi", str(EXAMPLES / "esi")],
+                          capture_output=True, text=True, timeout=120, cwd=ROOT)
+    assert done.returncode == 0, done.stderr
+    rows = html.fromstring(out.read_text()).xpath("//tr[@class='finding']")
+    cells = [[td.text_content() for td in r.findall("td")] for r in rows]
+    assert [c[1] for c in cells] == ["ENI104"]
+    assert cmd_line <= int(cells[0][2]) <= cmd_line + 20
+    done = subprocess.run([sys.executable, "-m", "ecatcfg", "report", str(eni), "-o", str(out),
+                           "--no-cache", "--no-check"],
+                          capture_output=True, text=True, timeout=120, cwd=ROOT)
+    assert done.returncode == 0, done.stderr
+    page = html.fromstring(out.read_text())
+    assert page.get_element_by_id("not-checked") is not None
