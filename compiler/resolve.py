@@ -379,8 +379,12 @@ def _choose_pdos(slave: ResolvedSlave, modules: list[PluggedModule], errors: _Er
     """The slave's PDOs (its own and its modules'), each on its SyncManager, and the
     assignment the topology chooses (``rx_pdos``, ``tx_pdos``) checked and applied."""
     dev, cfg = slave.device, slave.cfg
-    pdos = _device_pdos(slave, modules, errors)
+    described = _device_pdos(slave, modules, errors)
+    pdos = [d for d, _ in described]
     slave.pdos = pdos
+    # What the ESI says, before the PDOs are placed: the Sm each names, where each is.
+    esi_sm = {d.index: d.sm for d in pdos if d.sm is not None}
+    sources = {d.index: raw.source for d, raw in described}
     coe = dev.mailbox.coe if dev.mailbox else None
     can_assign = bool(coe and coe.pdo_assign)
     for direction, chosen, key in (("rx", cfg.rx_pdos, "rx_pdos"), ("tx", cfg.tx_pdos, "tx_pdos")):
@@ -388,6 +392,18 @@ def _choose_pdos(slave: ResolvedSlave, modules: list[PluggedModule], errors: _Er
         sm = dev.default_sm(direction)
         _place_on_sms(slave, mine, direction, sm)
         if chosen is None:
+            for p in mine:
+                if p.sm is None and not p.virtual and (p.mandatory or p.index in esi_sm):
+                    # ETG.2000 Pdo@Sm: "if set, this PDO will be included in the process
+                    # image"; Pdo@Mandatory: it must be.  Left out, the device's process
+                    # data would be lost without a word.
+                    wanted = "Outputs" if direction == "rx" else "Inputs"
+                    errors.add(f"slave {cfg.name!r}: {dev.type_name} has no {wanted} "
+                               f"SyncManager for the {'Mandatory ' if p.mandatory else ''}"
+                               f"{'RxPdo' if direction == 'rx' else 'TxPdo'} 0x{p.index:04X} "
+                               f"({p.name}) at {sources[p.index]}"
+                               f"{_sm_named(dev, esi_sm.get(p.index))}",
+                               "slaves", slave.index, "device")
             continue
         where = ("slaves", slave.index, key)
         by_index = {p.index: p for p in mine}
@@ -396,9 +412,10 @@ def _choose_pdos(slave: ResolvedSlave, modules: list[PluggedModule], errors: _Er
 
 
 def _device_pdos(slave: ResolvedSlave, modules: list[PluggedModule],
-                 errors: _Errors) -> list[PdoDesc]:
+                 errors: _Errors) -> list[tuple[PdoDesc, Pdo]]:
     """The device's PDOs and its plugged modules' (named after their slot), in ESI order
-    within each ModulePdoGroup; a PDO without an Index, or defined twice, is an error."""
+    within each ModulePdoGroup, each with its ESI description; a PDO without an Index, or
+    described twice, is an error."""
     dev, cfg = slave.device, slave.cfg
     # ESI document order (the ENI lists PDOs, and EC-Engineer clears them, in that order).
     # A device PDO marked OverwrittenByModule gives way to the plugged modules' PDOs (the
@@ -412,8 +429,8 @@ def _device_pdos(slave: ResolvedSlave, modules: list[PluggedModule],
             errors.add(f"slave {cfg.name!r}: the "
                        f"{'RxPdo' if raw.direction == 'rx' else 'TxPdo'} at {raw.source} has "
                        "no Index; it cannot be assigned", "slaves", slave.index, "device")
-    grouped: list[tuple[int, PdoDesc]] = [(dev.module_pdo_group or 0, _desc(p))
-                                          for p in sorted(own, key=lambda p: p.source.line)]
+    grouped: list[tuple[int, PdoDesc, Pdo]] = [
+        (dev.module_pdo_group or 0, _desc(p), p) for p in sorted(own, key=lambda p: p.source.line)]
     for plug in modules:
         for esi_pdo in plug.module.rx_pdos + plug.module.tx_pdos:
             d = _desc(esi_pdo, plug.pdo_offset, plug.index_offset)
@@ -421,19 +438,13 @@ def _device_pdos(slave: ResolvedSlave, modules: list[PluggedModule],
             # "Module 3 (UR20-4DI-P / 1315170000).Input"; the variables carry it on.
             d.name = f"{plug.label}.{d.name}"
             slave.pdo_prefix[d.index] = plug.label
-            grouped.append((plug.module.pdo_group or 0, d))
+            grouped.append((plug.module.pdo_group or 0, d, esi_pdo))
     # ETG.2000 ModulePdoGroup: the PDOs of each group follow those of the groups before it
     # (the UR20's own 0x16FF/0x1AFF, group 0, before its modules', group 1).
-    pdos = [d for _, d in sorted(grouped, key=lambda g: g[0])]
-    seen_index: dict[int, PdoDesc] = {}
-    module_pdos = set(slave.pdo_prefix)
-    for d in pdos:
-        if d.index in seen_index and d.index in module_pdos:
-            errors.add(f"slave {cfg.name!r}: PDO 0x{d.index:04X} ({d.name}) is defined twice "
-                       "(by the device and a module, or by two modules)",
-                       "slaves", slave.index, "modules")
-        seen_index.setdefault(d.index, d)
-    return pdos
+    grouped.sort(key=lambda g: g[0])
+    described = [(d, raw) for _, d, raw in grouped]
+    _one_pdo_per_index(slave, described, errors)
+    return described
 
 
 def _place_on_sms(slave: ResolvedSlave, mine: list[PdoDesc], direction: str,
@@ -450,6 +461,10 @@ def _place_on_sms(slave: ResolvedSlave, mine: list[PdoDesc], direction: str,
             # one it goes to the SM its Sm names (a bridge terminal's "IO Outputs").
             p.sm = None
         elif p.sm is not None and p.sm not in fitting:
+            p.sm = sm.number if sm else None
+        elif p.sm is None and p.mandatory and not p.virtual:
+            # ETG.2000 Pdo@Mandatory: "pdo must be configured in a sync manager"; one
+            # whose ESI names no Sm goes where a PDO without Sm goes when chosen.
             p.sm = sm.number if sm else None
 
 
@@ -526,6 +541,49 @@ def _assign(slave: ResolvedSlave, direction: str, chosen: list[int],
     picked = sorted((p for p in slave.pdos if p.direction == direction
                      and p.index in order), key=lambda p: order[p.index])
     slave.pdos = others + picked
+
+
+def _sm_named(dev: Device, number: int | None) -> str:
+    """What the SyncManager a PDO's ESI ``Sm`` names is, for a message: why the PDO cannot
+    go there (empty when the PDO names none)."""
+    if number is None:
+        return ""
+    if not 0 <= number < len(dev.sms):
+        return f", which names Sm {number}; the device has {len(dev.sms)} SyncManager(s)"
+    sm = dev.sms[number]
+    if sm.type is None:
+        why = (f"its ControlByte 0x{sm.control_byte:02X} gives none (reserved bits)"
+               if sm.control_byte is not None else "nor a ControlByte")
+        return f", which names Sm {number} at {sm.source}: it has no type, and {why}"
+    return f", which names Sm {number} at {sm.source}, whose type is {sm.type}"
+
+
+def _one_pdo_per_index(slave: ResolvedSlave, pdos: list[tuple[PdoDesc, Pdo]],
+                       errors: _Errors) -> None:
+    """A PDO index names one PDO of a slave, virtual or not, of either direction, the
+    device's own or a module's: an ENI's SyncManager lists it by index (ETG.2100
+    ``ProcessData/SmN/Pdo``; a second description of one index is refused, ENI004), and
+    so do 0x1C12/0x1C13 and a topology's ``rx_pdos``, ``tx_pdos`` and ``pdo_mapping``.  Two
+    descriptions of one index are a contradiction of the ESI (lint ESI102), not a choice
+    compile can make for the user: an error naming both, ``--allow-esi-errors`` or not."""
+    first: dict[int, tuple[PdoDesc, Pdo]] = {}
+    for d, raw in pdos:
+        seen = first.setdefault(d.index, (d, raw))
+        if seen[0] is d:
+            continue
+        other, other_raw = seen
+        modules = d.index in slave.pdo_prefix
+        errors.add(f"slave {slave.cfg.name!r}: {slave.device.type_name} describes PDO "
+                   f"0x{d.index:04X} twice"
+                   f"{' (by the device and a module, or by two modules)' if modules else ''}: "
+                   f"{_pdo_text(other, other_raw)} and {_pdo_text(d, raw)}; an ENI names a "
+                   "PDO by its index, so one of them could not be told from the other",
+                   "slaves", slave.index, "modules" if modules else "device")
+
+
+def _pdo_text(d: PdoDesc, raw: Pdo) -> str:
+    kind = "RxPdo" if d.direction == "rx" else "TxPdo"
+    return f"{kind} {d.name!r}{' (virtual)' if d.virtual else ''} at {raw.source}"
 
 
 def _check_sm_sizes(slave: ResolvedSlave, errors: _Errors) -> None:

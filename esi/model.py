@@ -15,7 +15,9 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Literal, NamedTuple
 
-from ecatcfg.esc import ESC_DEVICE_EMULATION, SM_CONTROL_MBOX_IN, SM_CONTROL_MBOX_OUT
+from ecatcfg.esc import (ESC_DEVICE_EMULATION, SM_CONTROL_MBOX_IN, SM_CONTROL_MBOX_OUT,
+                         SM_DIR_ECAT_READS, SM_DIR_ECAT_WRITES, SM_DIR_MASK, SM_MODE_BUFFERED,
+                         SM_MODE_MAILBOX, SM_MODE_MASK)
 
 # LcId 1033 is English (US); ETG.2000 makes it the default language of a NameType.
 ENGLISH = 1033
@@ -271,6 +273,25 @@ class Pdo:
 SmType = Literal["MBoxOut", "MBoxIn", "Outputs", "Inputs"]
 
 
+def sm_type_from_control(control: int, carries_pdos: bool) -> SmType | None:
+    """The type of a SyncManager whose ESI ``Sm`` gives none (no text: IgH's ``ethercat
+    xml`` writes its dumps so), from what its control byte sets the ESC up for (register
+    0x0804): bits 3:2 the direction (01 the master writes: MBoxOut or Outputs; 00 the master
+    reads: MBoxIn or Inputs; IgH's ``ec_sync_default_direction`` reads the same bits), bits
+    1:0 the mode (10 one buffer: a mailbox; 00 three buffers: process data).  A one-buffer
+    SM that the device's PDOs name (``Pdo@Sm``) is process data in mailbox mode, as the
+    EL1252 has (lint ESI206), not a mailbox: SOEM too types an SM from the PDOs its SII
+    assigns to it.  ``None`` when a reserved bit pattern leaves the type open."""
+    mode, direction = control & SM_MODE_MASK, control & SM_DIR_MASK
+    if direction not in (SM_DIR_ECAT_WRITES, SM_DIR_ECAT_READS) \
+            or mode not in (SM_MODE_BUFFERED, SM_MODE_MAILBOX):
+        return None
+    writes = direction == SM_DIR_ECAT_WRITES
+    if mode == SM_MODE_MAILBOX and not carries_pdos:
+        return "MBoxOut" if writes else "MBoxIn"
+    return "Outputs" if writes else "Inputs"
+
+
 @dataclass(slots=True)
 class SyncManager:
     """Device/Sm, numbered by its position in the file (SM0, SM1, ...)."""
@@ -289,6 +310,9 @@ class SyncManager:
     watchdog: bool | None = None
     one_byte_mode: bool = False
     fixed_assignment: bool = False
+    # The Sm element has no type text: ``type`` is what its ControlByte gives
+    # (``sm_type_from_control``; lint ESI215 says so), or None when the byte gives none.
+    type_from_control: bool = False
 
     @property
     def is_mailbox(self) -> bool:

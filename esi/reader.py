@@ -22,7 +22,7 @@ from ecatcfg.esi.model import (
     Device, DeviceInfo, DictObject, Dictionary, Eeprom, EoeSettings, EsiFile, Fmmu, Group,
     IgnoredElement, Mailbox, MAILBOX_PROTOCOLS, Module, ModulePdoGroup, ObjectFlags,
     ObjectInfo, Pdo, PdoEntry, Profile, ProblemKind, ReadProblem, Severity, Slot, Slots, Source,
-    STATES, SyncManager, Vendor,
+    STATES, SyncManager, Vendor, sm_type_from_control,
 )
 from ecatcfg.esi.values import INT64_MIN, UINT64_MAX, parse_bool, parse_hex_bytes, parse_int
 
@@ -329,6 +329,12 @@ class _Reader:
                 dev.slots = self.slots(ch)
             else:
                 self.unknown(ch, "Device", el)
+        for sm in dev.sms:
+            if sm.type is None and sm.control_byte is not None:
+                # An Sm without type text: its control byte says what the ESC does with it.
+                named = any(p.sm == sm.number for p in dev.rx_pdos + dev.tx_pdos)
+                sm.type = sm_type_from_control(sm.control_byte, named)
+                sm.type_from_control = True
         return dev
 
     def info(self, el: etree._Element) -> DeviceInfo:

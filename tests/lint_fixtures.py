@@ -212,6 +212,8 @@ CASES: list[Case] = [
                      "<Data>0300000002000000000701000000</Data></InitCmd>\n</EoE>"))),
          esi(drive(mailbox=MAILBOX.replace("<Mailbox>", "<Mailbox><EoE IP=\"1\"/>")))),
 
+    Case("ESI215", esi(drive(sm3=M + SM3.replace(">Inputs<", "><"))), esi()),
+
     Case("ESI301", esi(drive(mailbox=init_cmd("#x8001", "0100", mark=True))), esi()),
     Case("ESI302", esi(drive(mailbox=init_cmd("#x8000", "0100", "SO", mark=True))),
          esi(drive(mailbox=init_cmd("#x8000", "0100", "IP")))),

@@ -416,19 +416,11 @@ def test_the_read_only_1c12_write_is_what_the_esi_says(corpus: Path,
 EVERY = int(os.environ.get("ECATCFG_CHECK_EVERY", "6"))
 
 # The real defects of ENIs compiled from corpus devices, by device key: (rule, words).
-COMPILED_DEFECTS: dict[str, set[tuple[str, str]]] = {
-    # IgH's ``ethercat xml`` dump gives the SyncManagers no type (no Outputs/Inputs text):
-    # the compiler assigns none of the PDOs the file marks Mandatory for Sm 2 and 3.
-    "corpus-extra/ethercat-esi/Weidmueller_UR20_FBC_from_IgH.xml#0": {
-        *{("ENI201", f"RxPdo 0x{i:04X} () is Mandatory") for i in
-          (0x1600, 0x1601, 0x1602, 0x1603, 0x16FF)},
-        *{("ENI201", f"TxPdo 0x{i:04X} () is Mandatory") for i in
-          (0x1A00, 0x1A01, 0x1A02, 0x1A03, 0x1AFF)},
-    },
-    # The compiler writes PDO 0x1602 twice into this device's ProcessData; the reader
-    # refuses the file (the compiler's fault: one PDO, one list of entries).
-    "corpus/beckhoff/Beckhoff EL2xxx.xml#55": {("ENI004", "PDO 0x1602 described again")},
-}
+# None at present: the two this sweep found (an EL2252 revision whose ESI describes PDO
+# 0x1602 twice, written twice into the ENI; IgH's dump of a UR20 coupler whose untyped
+# SyncManagers got none of its Mandatory PDOs) are compile's refusal and a compiled ENI
+# now, each checked below.
+COMPILED_DEFECTS: dict[str, set[tuple[str, str]]] = {}
 
 
 def test_enis_compiled_from_the_corpus_have_no_error_but_the_named_defects(
@@ -479,3 +471,63 @@ def test_enis_compiled_from_the_corpus_have_no_error_but_the_named_defects(
     assert checked >= 1400 // EVERY
     assert unexpected == []
     assert seen == set().union(*COMPILED_DEFECTS.values())
+
+
+def test_the_el2252_revision_describing_0x1602_twice_is_refused_at_both_lines(
+        corpus: Path, tmp_path: Path) -> None:
+    from ecatcfg.compiler import build, topology
+    from ecatcfg.compiler.topology import TopologyError
+    from ecatcfg.eni import writer
+    from ecatcfg.esi.library import Library as Lib
+
+    esi = corpus / "esi" / "beckhoff" / "Beckhoff EL2xxx.xml"
+    # Independently: the device's RxPdo elements of index 0x1602, by lxml.
+    root = etree.parse(str(esi)).getroot()
+    [device] = [d for d in root.iter("Device") if d.findtext("Type") == "EL2252"
+                and d.find("Type").get("RevisionNo") == "#x00110000"]
+    twice = [p for p in device.iterfind("RxPdo") if p.findtext("Index").lower() == "#x1602"]
+    assert [p.get("Virtual") for p in twice] == ["true", None]
+    lib = Lib([esi], cache=False)
+    text = json.dumps({"master": {"name": "m"},
+                       "slaves": [{"name": "dut", "device": "0x2:0x8cc3052:0x110000"}]})
+    with pytest.raises(TopologyError) as exc:
+        build.compile_topology(topology.loads(text, "t.json"), lib, allow_esi_errors=True)
+    message = str(exc.value)
+    assert "EL2252 describes PDO 0x1602 twice" in message
+    assert all(f"{esi}:{p.sourceline}" in message for p in twice)
+    # The next revision gives the real PDO its own index: compiled, the check finds nothing.
+    text = text.replace("0x110000", "0x120000")
+    eni = tmp_path / "el2252.xml"
+    eni.write_bytes(writer.to_bytes(
+        build.compile_topology(topology.loads(text, "t.json"), lib).plan))
+    assert [f for f in check_eni(eni, lib, use_cache=False).findings
+            if f.severity == "error"] == []
+
+
+def test_the_igh_dump_of_a_ur20_gets_its_mandatory_pdos(corpus_extra: Path,
+                                                         tmp_path: Path) -> None:
+    from ecatcfg.compiler import build, topology
+    from ecatcfg.eni import writer
+    from ecatcfg.esi.library import Library as Lib
+
+    esi = corpus_extra / "esi" / "ethercat-esi" / "Weidmueller_UR20_FBC_from_IgH.xml"
+    # Independently: the Sm elements have no text, and the Mandatory PDOs name SM 2 and 3.
+    root = etree.parse(str(esi)).getroot()
+    assert [(sm.text or "").strip() for sm in root.iter("Sm")] == ["", "", "", ""]
+    wanted = {sm: [int(p.findtext("Index").replace("#x", ""), 16) for p in root.iter(tag)
+                   if p.get("Mandatory") == "1" and p.get("Sm") == str(sm)]
+              for sm, tag in ((2, "RxPdo"), (3, "TxPdo"))}
+    assert len(wanted[2]) == len(wanted[3]) == 5
+    lib = Lib([esi], cache=False)
+    text = json.dumps({"master": {"name": "m"},
+                       "slaves": [{"name": "dut", "device": "UR20-FBC-EC"}]})
+    eni = tmp_path / "ur20.xml"
+    eni.write_bytes(writer.to_bytes(
+        build.compile_topology(topology.loads(text, "t.json"), lib).plan))
+    pd = etree.parse(str(eni)).getroot().find("Config/Slave/ProcessData")
+    for sm, kind in ((2, "Outputs"), (3, "Inputs")):
+        el = pd.find(f"Sm{sm}")
+        assert el.findtext("Type") == kind
+        assert sorted(int(x.text) for x in el.iterfind("Pdo")) == sorted(wanted[sm])
+    assert [f for f in check_eni(eni, lib, use_cache=False).findings
+            if f.severity == "error"] == []

@@ -118,14 +118,16 @@ def test_every_corpus_device_compiles_or_fails_with_a_line(tmp_path, corpus, eni
         except EcatcfgError as exc:
             assert str(exc).startswith("t.yaml:"), exc
             # A station whose slot needs modules and names no default (UR20-FBC-EC:
-            # MinInstances 1) cannot be configured empty.
-            if "needs at least 1 module; the topology plugs none" not in str(exc):
+            # MinInstances 1) cannot be configured empty; the EL2252 revision 0x00110000
+            # describes PDO 0x1602 twice (a virtual and a real one), which no ENI can hold.
+            if "needs at least 1 module; the topology plugs none" not in str(exc) \
+                    and "EL2252 describes PDO 0x1602 twice" not in str(exc):
                 failed.append(str(exc))
             continue
         doc = etree.fromstring(eni_writer.to_bytes(plan))
         assert eni_schema.validate(etree.ElementTree(doc)), (e, eni_schema.error_log)
         ok += 1
-    assert ok >= 361 and not failed, failed
+    assert ok >= 360 and not failed, failed
 
 
 # -- topology files that used to crash --------------------------------------------------------

@@ -26,6 +26,9 @@ TRUSTED = ("beckhoff", "drives/Elmo", "drives/IS620N", "drives/SV660", "drives/S
 KNOWN_DEFECTS = {
     # Profile/Dictionary without Objects (the schema requires them) in four CU2508 revisions.
     ("beckhoff/Beckhoff CUxxxx.xml", "XSD001"): [488, 522, 738, 957],
+    # EL2252 revision 0x00110000 describes RxPdo 0x1602 twice: a virtual "DC Sync Activate"
+    # on a virtual SM and a real "Reserved" on SM 2 (the next revision moves it to 0x1604).
+    ("beckhoff/Beckhoff EL2xxx.xml", "ESI102"): [52909],
     # One identity (0x22D2:0x201:0x0A000002), two descriptions: siitool's test copy of the
     # SOMANET drive has another dictionary (61 objects fewer; 0x1000's DefaultData among the
     # 15 objects that differ) and another SM 0 than Synapticon's file.

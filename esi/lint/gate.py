@@ -21,7 +21,7 @@ from ecatcfg.esi.lint.runner import LintOptions, Target, lint_file
 
 STOPS_COMPILE: frozenset[str] = frozenset({
     "ESI002",                   # a number left unset: the compiler writes a default instead
-    "ESI101", "ESI102", "ESI105", "ESI108", "ESI109", "ESI111", "ESI112", "ESI113",
+    "ESI101", "ESI105", "ESI108", "ESI109", "ESI111", "ESI112", "ESI113",
     "ESI114",                   # the PDOs written are not what the device can take
     "ESI201", "ESI203", "ESI204", "ESI205", "ESI207", "ESI208", "ESI209", "ESI211",
     "ESI213",                   # the SM/FMMU/mailbox registers written are refused or wrong
@@ -38,6 +38,8 @@ DOES_NOT_STOP: dict[str, str] = {
     "ESI008": "files that differ for one identity: the library refuses or --prefer chooses",
     "ESI302": "an InitCmd of a read-only object: the resolver refuses it with its own "
               "message",
+    "ESI102": "two PDOs with one index: the resolver refuses them with its own message, "
+              "--allow-esi-errors or not (an ENI names a PDO by its index)",
     "ESI214": "an EoE InitCmd: the resolver refuses the device with its own message",
     "ESI301": "an object the ESI's dictionary does not list: ESI dictionaries are often "
               "partial, and the real slave's dictionary decides",

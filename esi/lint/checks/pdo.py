@@ -56,9 +56,12 @@ def pdo_index_range(dev: Device, ctx: FileContext) -> Iterator[Hit]:
 
 @device_rule("ESI102", "error", "two PDOs of a device have the same index", """
     A PDO is assigned, excluded and (re)mapped by its index; two PDOs with one index make
-    0x1C12/0x1C13 ambiguous and one of them unreachable.  Virtual PDOs are not compared.""")
+    0x1C12/0x1C13 ambiguous and one of them unreachable.  A virtual PDO too: an ENI lists
+    the PDOs of each SyncManager by index (ETG.2100 ``ProcessData/SmN/Pdo``), so a virtual
+    0x1602 on a virtual SM and a real 0x1602 cannot both be configured; compile refuses
+    the device.""")
 def duplicate_pdo_index(dev: Device, ctx: FileContext) -> Iterator[Hit]:
-    for pdo, first in repeats(dev.pdos, lambda p: None if p.virtual else p.index):
+    for pdo, first in repeats(dev.pdos, lambda p: p.index):
         yield Hit(pdo.source, f"{_tag(pdo)} repeats the index of the PDO at line "
                   f"{first.source.line}")
 

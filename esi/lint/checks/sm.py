@@ -263,3 +263,24 @@ def eoe_init_cmds(dev: Device, ctx: FileContext) -> Iterator[Hit]:
     for source in eoe.init_cmds if eoe else []:
         yield Hit(source, "an EoE InitCmd: ecatcfg does not implement them; compile refuses "
                   "the device (set IP parameters with the topology's 'eoe:')")
+
+
+@device_rule("ESI215", "warning", "a SyncManager has no type", """
+    ETG.2000 gives each Sm its type as text: MBoxOut, MBoxIn, Outputs or Inputs (IgH's
+    ``ethercat xml`` dumps leave it out).  ecatcfg then takes the type from the SM's
+    ControlByte (ESC register 0x0804), as the ESC itself does: bits 3:2 the direction, bits
+    1:0 mailbox (one buffer) or process data (three buffers), a one-buffer SM that PDOs name
+    being process data; IgH's master derives the direction from the same bits.  Without a
+    ControlByte, or with reserved bits in it, the SM has no type, and compile refuses a
+    Mandatory or default-assigned PDO that names it rather than leave it out.  Write the
+    type.""")
+def sm_without_type(dev: Device, ctx: FileContext) -> Iterator[Hit]:
+    for sm in dev.sms:
+        if sm.type is not None and sm.type_from_control:
+            yield Hit(sm.source, f"Sm {sm.number} has no type; its ControlByte "
+                      f"0x{sm.control_byte or 0:02X} makes it {sm.type}")
+        elif sm.type is None:
+            why = (f"its ControlByte 0x{sm.control_byte:02X} has reserved bits"
+                   if sm.control_byte is not None else "nor a ControlByte to take one from")
+            yield Hit(sm.source, f"Sm {sm.number} has no type, and {why}: a PDO that names "
+                      "it cannot be placed")
