@@ -83,6 +83,8 @@ def signature(exc: BaseException) -> tuple[str, str]:
     package = ROOT.resolve()
     where = ""
     for frame in traceback.extract_tb(exc.__traceback__):
+        if frame.filename.startswith("<"):      # code made at run time (record.py's __init__)
+            continue
         path = Path(frame.filename).resolve()
         if path.is_relative_to(package) and not any(
                 path.is_relative_to(package / d) for d in ("tests", "bench")):

@@ -459,8 +459,10 @@ def _register_blocks() -> dict[str, tuple[int, int, int, Any]]:
 
 @functools.cache
 def register_places(data: bytes) -> tuple[tuple[int, str, int], ...]:
-    """InitCmds that write whole FMMU or SyncManager register images: (index of their
-    ``InitCmd/Data`` value, ``fmmu`` or ``sm``, how many images the data holds)."""
+    """InitCmds that set up FMMU or SyncManager register images: (index of their
+    ``InitCmd/Data`` value, ``fmmu`` or ``sm``, how many images the data holds).  The
+    clears (all zero) are left out: one field changed there is mostly still a disabled
+    image."""
     places = dict(xml_spans(data).groups).get("InitCmd/Data", ())
     where = {span: i for i, span in enumerate(places)}
     out = []
@@ -475,7 +477,7 @@ def register_places(data: bytes) -> tuple[tuple[int, str, int], ...]:
         for kind, (base, size, entry, _) in _register_blocks().items():
             n = len(value.group(1)) // 2 // entry
             if base <= address < base + size and (address - base) % entry == 0 and n \
-                    and span in where:
+                    and span in where and value.group(1).strip(b"0"):
                 out.append((where[span], kind, n))
     return tuple(out)
 
@@ -617,8 +619,12 @@ def _kind_edits(draw, data: bytes, family: str, kinds: frozenset[str], most: int
             size, config = _register_blocks()[kind][2:]
             image = config.from_bytes(bytes.fromhex(data[a:b].decode())[entry * size:])
             now = int(getattr(image, name))          # a new value, not the one it has
+            # The field's values of note three times in four, anything else the fourth.
+            seen, bits = values
+            value = st.one_of(st.sampled_from(seen), st.sampled_from(seen),
+                              st.sampled_from(seen), st.integers(0, (1 << bits) - 1))
             edits.append(("register", index, entry, name,
-                          draw(_field(*values).filter(lambda v: v != now))))
+                          draw(value.filter(lambda v: v != now))))
     return edits
 
 
@@ -1015,6 +1021,70 @@ def feed_segment(value: tuple[int, list[bytes]]) -> None:
             s.state       # raises if AL status holds no state
 
 
+def _init_cmd_frames(plan, transition: str) -> list[bytes]:
+    """The ENI's register InitCmds of one transition as frames, one datagram each, in the
+    order a master sends them: the master's before the slaves, each slave's, the master's
+    after (CoE InitCmds are mailbox traffic, left out)."""
+    from ecatcfg.esc import LOGICAL_CMDS
+    from ecatcfg.runtime import wire
+    from ecatcfg.runtime.wire import Datagram
+    master = [c for c in plan.master.init_cmds if transition in c.transitions]
+    cmds = [c for c in master if c.before_slave] + [
+        c for s in plan.slaves for c in s.init_cmds if transition in c.transitions] + [
+        c for c in master if not c.before_slave]
+    frames = []
+    for c in cmds:
+        data = c.data if c.data is not None else bytes(c.length)
+        if c.cmd in LOGICAL_CMDS:
+            dg = Datagram.logical(c.cmd, c.addr or 0, data)
+        else:
+            dg = Datagram.physical(c.cmd, c.adp or 0, c.ado or 0, data)
+        frames.append(wire.encode([dg]))
+    return frames
+
+
+def _cyclic_frames(plan, state: str) -> list[bytes]:
+    """The ENI's cyclic frames of a state, outputs all zero (as before an application
+    writes any)."""
+    from ecatcfg.esc import LOGICAL_CMDS
+    from ecatcfg.runtime import wire
+    from ecatcfg.runtime.wire import Datagram
+    frames = []
+    for cyclic in plan.cyclic:
+        for f in cyclic.frames:
+            dgs = [Datagram.logical(c.cmd, c.addr or 0, bytes(c.length)) if c.cmd in LOGICAL_CMDS
+                   else Datagram.physical(c.cmd, c.adp or 0, c.ado or 0, bytes(c.length))
+                   for c in f.cmds if state in c.states]
+            if dgs:
+                frames.append(wire.encode(dgs))
+    return frames
+
+
+def eni_on_segment(m: Mutant) -> None:
+    """An ENI the reader accepts, sent straight to a virtual segment of its slaves: the
+    register InitCmds of INIT to PREOP to SAFEOP, its cyclic frames in SAFEOP (the LRW or
+    LWR of the outputs), SAFEOP to OP (the AL control write), cyclic frames in OP.  No
+    master: no waits, no checks of the replies, so what an InitCmd sets up reaches the
+    emulated ESC even where a master would stop at the next check (an FMMU that maps the
+    outputs onto AL status, then an AL control write).  The segment must answer every
+    frame and each ESC keep its invariants, as in :func:`feed_segment`."""
+    from ecatcfg.eni import reader
+    from ecatcfg.runtime.slave import MEMORY_SIZE
+    plan = reader.read_bytes(m.data(), "fuzz.eni.xml")
+    segment = line_for(plan)
+    frames = (_init_cmd_frames(plan, "IP") + _init_cmd_frames(plan, "PS")
+              + _cyclic_frames(plan, "SAFEOP") * 2 + _init_cmd_frames(plan, "SO")
+              + _cyclic_frames(plan, "OP") * 2)
+    for f in frames:
+        reply = segment.process(f)
+        if len(reply) != len(f):
+            raise Defect(f"the segment returned {len(reply)} bytes for a {len(f)}-byte frame")
+        for s in segment.slaves:
+            if len(s.mem) != MEMORY_SIZE:
+                raise Defect(f"slave {s.name!r}: ESC memory is now {len(s.mem)} bytes")
+            s.state       # raises if AL status holds no state
+
+
 # -- replies at the master --------------------------------------------------------------------
 
 REPLY_DAMAGE = ("truncate", "ecat_length", "dg_length", "wkc", "index", "cmd", "data",
@@ -1288,6 +1358,11 @@ TARGETS: dict[str, Target] = {t.name: t for t in (
     Target("eni_apply", "ENIs the reader accepts, applied on the virtual segment (every "
            "process variable read, every output written)",
            _eni_apply_inputs, _eni_apply, located_on_line, 400, MUTATION_KINDS),
+    Target("eni_segment", "ENIs the reader accepts (register images, numbers), their "
+           "InitCmds and cyclic frames sent straight to a virtual segment (no master)",
+           lambda k: mutants("eni", values=3, kinds=k or frozenset({"registers",
+                                                                    "boundaries"})),
+           eni_on_segment, located_on_line, 100, MUTATION_KINDS),
     Target("sii_decoder", "SII images built from the example devices, mutated",
            lambda k: sii_inputs(), _sii, _IN_FILE("fuzz.bin"), 400),
     Target("frame_decoder", "Ethernet frames into the datagram decoder",
