@@ -220,8 +220,9 @@ def main() -> int:
                                f.chunk_seed, only, shrink=True)
                 f.shrunk = "(not met again)"
             except Exception as exc:
-                notes = [n for n in getattr(exc, "__notes__", []) if "Falsifying" not in n]
-                f.shrunk = " ".join(notes)[:600] or "?"
+                # hypothesis's note: "Falsifying example: check(value=Mutant(...))".
+                notes = " ".join(" ".join(getattr(exc, "__notes__", [])).split())
+                f.shrunk = notes.removeprefix("Falsifying example: ")[:600] or "?"
 
     when = datetime.date.today().isoformat()
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
