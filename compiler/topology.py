@@ -571,13 +571,21 @@ class _Walker:
         if digits > sys.get_int_max_str_digits():
             raise self._not_valid(node, f"{digits} digits, more than Python converts")
         try:
-            return self.loader.construct_object(node, deep=True)
+            value = self.loader.construct_object(node, deep=True)
         except yaml.YAMLError as exc:        # a tag SafeLoader does not know (!foo, !!python/..)
             problem = getattr(exc, "problem", None) or str(exc)
             raise EcatcfgError(f"not valid here: {problem}", self.file,
                                node.start_mark.line + 1) from None
         except ValueError as exc:            # a date outside the calendar (2001-13-45)
             raise self._not_valid(node, str(exc)) from None
+        # A hex int has few decimal digits in its text and many in its value (0x and 3 600
+        # letters: 4 335 digits): any message or JSON that shows it would fail with Python's
+        # digit limit, so it is refused here, as the decimal ones are above.
+        limit = sys.get_int_max_str_digits()
+        if isinstance(value, int) and limit and value.bit_length() * _LOG10_2 > limit:
+            raise self._not_valid(node, f"about {int(value.bit_length() * _LOG10_2)} "
+                                        "digits, more than Python converts")
+        return value
 
     def _not_valid(self, node: yaml.Node, reason: str = "") -> EcatcfgError:
         kind = node.tag.rpartition(":")[2] or node.tag
@@ -585,6 +593,9 @@ class _Walker:
         return EcatcfgError(f"{text!r} is not a valid {kind}" + (f": {reason}" if reason
                                                                  else ""),
                             self.file, node.start_mark.line + 1, node.start_mark.column + 1)
+
+
+_LOG10_2 = 0.30103     # decimal digits per bit
 
 
 def load(path: str | Path, shown_as: str | None = None,
