@@ -74,13 +74,23 @@ class Result:
         return (self.killed + self.timeout) / self.tested if self.tested else 0.0
 
 
-def load_config(path: Path = CONFIG) -> dict[str, list[str]]:
-    """Module -> its focused test files, from bench/mutation.toml."""
+@dataclass
+class Focus:
+    """A module's focused tests (bench/mutation.toml): files, and pytest arguments that
+    leave out what a loaded machine would fail on the unmutated code."""
+
+    tests: list[str]
+    pytest_args: list[str] = field(default_factory=list)
+
+
+def load_config(path: Path = CONFIG) -> dict[str, Focus]:
+    """Module -> its focused tests, from bench/mutation.toml."""
     raw = tomllib.loads(path.read_text(encoding="utf-8"))
-    return {module: list(entry["tests"]) for module, entry in raw["modules"].items()}
+    return {module: Focus(list(entry["tests"]), list(entry.get("pytest_args", [])))
+            for module, entry in raw["modules"].items()}
 
 
-def select(config: dict[str, list[str]], wanted: list[str]) -> list[str]:
+def select(config: dict[str, Focus], wanted: list[str]) -> list[str]:
     if not wanted:
         return list(config)
     chosen = []
@@ -111,7 +121,7 @@ def _toml_list(items: list[str]) -> str:
     return "[" + ", ".join(json.dumps(i) for i in items) + "]"
 
 
-def write_mutmut_config(work: Path, module: str, tests: list[str]) -> None:
+def write_mutmut_config(work: Path, module: str, focus: Focus) -> None:
     # mutmut reads [tool.mutmut] of the pyproject.toml in its working folder; the package's
     # own pyproject.toml (pytest's settings) stays in the package folder.
     (work / "pyproject.toml").write_text(
@@ -119,8 +129,9 @@ def write_mutmut_config(work: Path, module: str, tests: list[str]) -> None:
         f"source_paths = {_toml_list([PACKAGE])}\n"
         f"only_mutate = {_toml_list([f'{PACKAGE}/{module}'])}\n"
         f"also_copy = {_toml_list([PACKAGE])}\n"
-        f"pytest_add_cli_args_test_selection = {_toml_list([f'{PACKAGE}/{t}' for t in tests])}\n"
-        f"pytest_add_cli_args = {_toml_list(['-p', 'no:cacheprovider'])}\n"
+        "pytest_add_cli_args_test_selection = "
+        f"{_toml_list([f'{PACKAGE}/{t}' for t in focus.tests])}\n"
+        f"pytest_add_cli_args = {_toml_list(['-p', 'no:cacheprovider', *focus.pytest_args])}\n"
         f"timeout_constant = {TIMEOUT_CONSTANT}\n"
         f"timeout_multiplier = {TIMEOUT_MULTIPLIER}\n",
         encoding="utf-8")
@@ -155,24 +166,28 @@ def _exit_codes(work: Path, module: str) -> dict[str, int | None]:
     return codes
 
 
-def run_module(module: str, tests: list[str], work: Path, sample: int | None,
+class Failed(Exception):
+    """mutmut could not test the module (its log says why)."""
+
+
+def run_module(module: str, focus: Focus, work: Path, sample: int | None,
                seed: int) -> Result:
     from mutmut.stats import status_by_exit_code  # the tool's own reading of its exit codes
 
     started = time.monotonic()
     copy_checkout(work / PACKAGE)
-    write_mutmut_config(work, module, tests)
+    write_mutmut_config(work, module, focus)
     log = work / "mutmut.log"
     _mutmut(work, ["run", "--max-children", "1", NO_MUTANT], log)
     names = sorted(_exit_codes(work, module))
     if not names:
-        raise SystemExit(f"mutation.py: mutmut made no mutants of {module}; see {log}")
+        raise Failed(f"mutmut made no mutants (the clean run of its tests failed?); see {log}")
     chosen = names
     if sample is not None and sample < len(names):
         chosen = sorted(random.Random(seed).sample(names, sample))
     code = _mutmut(work, ["run", "--max-children", "1", *chosen], log)
     if code != 0:
-        raise SystemExit(f"mutation.py: mutmut failed on {module} (exit {code}); see {log}")
+        raise Failed(f"mutmut failed (exit {code}); see {log}")
     codes = _exit_codes(work, module)
     result = Result(module, mutants=len(names), tested=len(chosen),
                     sample_seed=seed if chosen is not names else None)
@@ -212,6 +227,7 @@ def main(argv: list[str] | None = None) -> int:
     results: list[Result] = []
     print(f"{'module':24} {'mutants':>7} {'tested':>6} {'killed':>6} {'survived':>8} "
           f"{'timeout':>7} {'no tests':>8} {'other':>5} {'score':>6} {'s':>6}")
+    failed: dict[str, str] = {}
     for module in modules:
         with tempfile.TemporaryDirectory(prefix="ecatcfg-mutation-") as tmp:
             work = Path(tmp)
@@ -220,19 +236,32 @@ def main(argv: list[str] | None = None) -> int:
                 if work.exists():
                     shutil.rmtree(work)
                 work.mkdir(parents=True)
-            r = run_module(module, config[module], work, args.sample, args.seed)
+            try:
+                r = run_module(module, config[module], work, args.sample, args.seed)
+            except Failed as exc:
+                failed[module] = str(exc)
+                print(f"{module:24} not tested: {exc}", flush=True)
+                continue
         results.append(r)
         sampled = f" (sample, seed {r.sample_seed})" if r.sample_seed is not None else ""
         print(f"{module:24} {r.mutants:7} {r.tested:6} {r.killed:6} {r.survived:8} "
               f"{r.timeout:7} {r.no_tests:8} {r.other:5} {r.score:6.1%} {r.seconds:6.0f}{sampled}",
               flush=True)
+        if args.json is not None:                 # after each module: a long run may be cut
+            _write_json(args.json, results, failed)
     if args.json is not None:
-        args.json.write_text(json.dumps({
-            "machine": f"{platform.machine()}, {os.cpu_count()} CPUs, Python {platform.python_version()}",
-            "date": time.strftime("%Y-%m-%d"),
-            "modules": [asdict(r) | {"score": round(r.score, 4)} for r in results],
-        }, indent=2) + "\n", encoding="utf-8")
-    return 0
+        _write_json(args.json, results, failed)
+    return 1 if failed else 0
+
+
+def _write_json(path: Path, results: list[Result], failed: dict[str, str]) -> None:
+    path.write_text(json.dumps({
+        "machine": f"{platform.machine()}, {os.cpu_count()} CPUs, "
+                   f"Python {platform.python_version()}",
+        "date": time.strftime("%Y-%m-%d"),
+        "modules": [asdict(r) | {"score": round(r.score, 4)} for r in results],
+        "not_tested": failed,
+    }, indent=2) + "\n", encoding="utf-8")
 
 
 if __name__ == "__main__":

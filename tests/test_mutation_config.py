@@ -31,10 +31,10 @@ def mutation(monkeypatch: pytest.MonkeyPatch) -> ModuleType:
 def test_every_scored_module_has_focused_tests_that_exist(mutation):
     config = mutation.load_config()
     assert SCORED <= set(config)
-    for module, tests in config.items():
+    for module, focus in config.items():
         assert (ROOT / module).is_file(), module
-        assert tests, module
-        for test in tests:
+        assert focus.tests, module
+        for test in focus.tests:
             assert (ROOT / test).is_file() and Path(test).name.startswith("test_"), test
 
 
@@ -60,9 +60,11 @@ def test_the_copy_has_the_checkout_files_and_no_symlink(mutation, tmp_path):
 
 
 def test_mutmut_is_told_the_one_module_and_its_tests(mutation, tmp_path):
-    mutation.write_mutmut_config(tmp_path, "runtime/timing.py", ["tests/test_timing.py"])
+    focus = mutation.Focus(["tests/test_timing.py"], ["-k", "not fit"])
+    mutation.write_mutmut_config(tmp_path, "runtime/timing.py", focus)
     settings = tomllib.loads((tmp_path / "pyproject.toml").read_text())["tool"]["mutmut"]
     assert settings["source_paths"] == ["ecatcfg"]
     assert settings["only_mutate"] == ["ecatcfg/runtime/timing.py"]
     assert settings["also_copy"] == ["ecatcfg"]
     assert settings["pytest_add_cli_args_test_selection"] == ["ecatcfg/tests/test_timing.py"]
+    assert settings["pytest_add_cli_args"][-2:] == ["-k", "not fit"]
