@@ -31,7 +31,7 @@ class StatesError(EcatcfgError):
 
 
 @record(frozen=True)
-class SlaveState:
+class SlaveAlStatus:
     """One slave's AL status as read (``al_status``: 0x0130, ``code``: 0x0134); after a
     request, ``requested`` and whether the slave is in it (``reached``)."""
 
@@ -81,13 +81,13 @@ def _status(position: int) -> Datagram:
 
 
 def _decode(position: int, data: bytes | bytearray, requested: AlState | None = None,
-            timed_out: bool = False) -> SlaveState:
+            timed_out: bool = False) -> SlaveAlStatus:
     al_status, = struct.unpack_from("<H", data)
     code, = struct.unpack_from("<H", data, 4)
-    return SlaveState(position, al_status, code, requested, timed_out)
+    return SlaveAlStatus(position, al_status, code, requested, timed_out)
 
 
-def _read_job(position: int, out: dict[int, SlaveState]) -> Job:
+def _read_job(position: int, out: dict[int, SlaveAlStatus]) -> Job:
     deadline = time.monotonic() + TIMEOUT_COMMAND
     while True:
         reply = yield [_status(position)]
@@ -98,15 +98,15 @@ def _read_job(position: int, out: dict[int, SlaveState]) -> Job:
             raise StatesError(f"slave {position}: no answer to the AL status read (0x0130)")
 
 
-def read_states(transport: Transport, positions: list[int]) -> list[SlaveState]:
+def read_states(transport: Transport, positions: list[int]) -> list[SlaveAlStatus]:
     """The AL status and status code of each slave in ``positions``."""
-    out: dict[int, SlaveState] = {}
+    out: dict[int, SlaveAlStatus] = {}
     run_jobs(transport, [_read_job(p, out) for p in positions])
     return [out[p] for p in positions]
 
 
-def _request_job(before: SlaveState, target: AlState, timeout: float,
-                 out: dict[int, SlaveState]) -> Job:
+def _request_job(before: SlaveAlStatus, target: AlState, timeout: float,
+                 out: dict[int, SlaveAlStatus]) -> Job:
     position = before.position
     adp = -position & 0xFFFF
     control = int(target) | (AL_ERROR_ACK if before.error else 0)
@@ -138,19 +138,19 @@ def _request_job(before: SlaveState, target: AlState, timeout: float,
             else:
                 error_since = None
         if now > deadline:
-            out[position] = SlaveState(position, last.al_status, last.code, target, True)
+            out[position] = SlaveAlStatus(position, last.al_status, last.code, target, True)
             return
 
 
 def request_state(transport: Transport, positions: list[int], target: AlState,
-                  timeout: float = TIMEOUT_STATE) -> list[SlaveState]:
+                  timeout: float = TIMEOUT_STATE) -> list[SlaveAlStatus]:
     """Request ``target`` of each slave in ``positions`` (all at once) and wait for each
     to reach it or refuse it; returns what each shows at the end (``reached`` or not)."""
     before = read_states(transport, positions)
-    out: dict[int, SlaveState] = {}
+    out: dict[int, SlaveAlStatus] = {}
     run_jobs(transport, [_request_job(s, target, timeout, out) for s in before])
     return [out[p] for p in positions]
 
 
-__all__ = ["SlaveState", "StatesError", "positions_on_line", "read_states",
+__all__ = ["SlaveAlStatus", "StatesError", "positions_on_line", "read_states",
            "request_state"]
