@@ -8,6 +8,7 @@ emulated ESCs' own registers and AL state machine, read in this process.
 from __future__ import annotations
 
 import json
+import signal
 import struct
 import subprocess
 import sys
@@ -157,3 +158,67 @@ def test_reg_usage_errors():
                               text=True, cwd=ROOT)
         assert done.returncode == 2, (argv, done.stderr)
         assert message in done.stderr and "Traceback" not in done.stderr
+
+
+def test_reg_decodes_fmmu_sm_and_dc_registers_apply_wrote(veth_netns, tmp_path):
+    """After ``apply`` to SAFEOP the drive holds the FMMUs, SyncManagers and DC settings of
+    its ENI; ``reg`` shows them field by field, compared with the ENI read with lxml."""
+    from lxml import etree
+
+    from rig import start_simulate
+
+    eni = tmp_path / "line.eni.xml"
+    done = subprocess.run([sys.executable, "-m", "ecatcfg", "compile", "examples/topology.yaml",
+                           "--esi", "examples/esi", "-o", str(eni)], capture_output=True,
+                          text=True, cwd=ROOT, timeout=120)
+    assert done.returncode == 0, done.stderr
+    axis = etree.parse(str(eni)).getroot().findall("Config/Slave")[4]
+    written: dict[int, bytes] = {}
+    for cmd in axis.findall("InitCmds/InitCmd"):          # the register commands
+        transitions = [t.text for t in cmd.findall("Transition")]
+        if "PS" in transitions or "IP" in transitions:
+            data = cmd.findtext("Data")
+            if data and int(cmd.findtext("Ado", "0")) in range(0x0600, 0x0A00):
+                written[int(cmd.findtext("Ado"))] = bytes.fromhex(data)
+    cycle0 = int(axis.findtext("DC/CycleTime0"))
+
+    sim, lines = start_simulate(veth_netns, "--esi", str(ESI), "--topology",
+                                str(ROOT / "examples" / "topology.yaml"))
+    try:
+        assert lines and lines[-1].startswith("ready:"), lines
+        up = ecatcfg_in(veth_netns, "apply", str(eni), "--state", "safeop", "--cycles", "0",
+                        "--stay")
+        assert up.returncode == 0, up.stdout + up.stderr
+        fmmus = named(reg(veth_netns, "read", 4, "0x0600:32"))
+        sms = named(reg(veth_netns, "read", 4, "0x0800:32"))
+        dc = named(reg(veth_netns, "read", 4, "0x0980:2")) | named(
+            reg(veth_netns, "read", 4, "0x09A0:8"))
+        al = named(reg(veth_netns, "read", 4, "0x0130"))
+    finally:
+        sim.send_signal(signal.SIGINT)
+        sim.wait(10)
+    assert al["AL status"]["fields"]["state"] == "SAFEOP"
+    for n in range(2):
+        image = written[0x0600 + 16 * n]
+        start, length, sbit, ebit, phys, pbit, kind, active = struct.unpack_from(
+            "<IHBBHBBB", image)
+        f = fmmus[f"FMMU{n}"]["fields"]
+        assert (f["logical_start"], f["length"], f["logical_start_bit"],
+                f["logical_stop_bit"], f["physical_start"], f["physical_start_bit"],
+                f["active"]) == (start, length, sbit, ebit, phys, pbit, bool(active))
+        assert f["type"] == {1: "READ", 2: "WRITE", 3: "READ_WRITE"}[kind]
+    for n in range(4):
+        image = written.get(0x0800 + 8 * n)
+        if image is None:
+            continue
+        start, length, control = struct.unpack_from("<HHB", image)
+        f = sms[f"SM{n}"]["fields"]
+        assert (f["start"], f["length"], f["control"], f["enable"]) == \
+            (start, length, control, bool(image[6] & 1))
+        assert f["mode"] == ("mailbox" if control & 3 == 2 else "buffered")
+    activation = written[0x0980][1]
+    assert dc["DC activation"]["fields"] == {"cyclic_operation": bool(activation & 1),
+                                              "sync0": bool(activation & 2),
+                                              "sync1": bool(activation & 4)}
+    assert dc["DC activation"]["fields"]["sync0"]
+    assert dc["DC SYNC0 cycle time"]["value"] == cycle0
