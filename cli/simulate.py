@@ -12,6 +12,7 @@ if TYPE_CHECKING:
     from ecatcfg.runtime.segment.emulate import SlaveSpec
     from ecatcfg.runtime.segment.slave import EmulatedSlave, StateChange
     from ecatcfg.runtime.segment.timing import Timing
+    from ecatcfg.runtime.segment.virtual import LossyPort
     from ecatcfg.runtime.segment.virtual import VirtualSegment
 
 
@@ -54,6 +55,11 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
     p.add_argument("--drop", type=float, default=0.0, metavar="P",
                    help="lose this share of frames (0..1), half before and half after "
                         "the slaves processed them")
+    p.add_argument("--faults", action="append", default=[], metavar="SLAVE:PORT:P",
+                   help="a lossy port: frames received on PORT (A-D or 0-3) of SLAVE (its "
+                        "name, or its bus position with every cable in place) get a CRC "
+                        "error with probability P; the ESCs count them in their error "
+                        "counters (0x0300-0x030B) and the frame is lost; repeatable")
     p.add_argument("--seed", type=int, default=0, metavar="N",
                    help="seed of the fault injection (same seed, same faults)")
     p.add_argument("--realistic", action="store_true",
@@ -98,7 +104,8 @@ def run(args: argparse.Namespace) -> int:
         raise EcatcfgError(f"{source}: no slaves to emulate")
     timing = _timing(args)
     try:
-        seg = emulate.segment(specs, Faults(drop=args.drop, seed=args.seed), timing)
+        seg = emulate.segment(specs, Faults(drop=args.drop, seed=args.seed,
+                                            lossy=_lossy_ports(args.faults)), timing)
     except ValueError as exc:
         raise EcatcfgError(f"{source}: {exc}") from None
     removed = _cut_cables(seg, args.cut)
@@ -113,6 +120,30 @@ def run(args: argparse.Namespace) -> int:
     _print_slaves(seg, passive, timing is not None)
     _serve(seg, link, args, passive)
     return 0
+
+
+def _lossy_ports(specs: list[str]) -> tuple[LossyPort, ...]:
+    """``--faults SLAVE:PORT:P`` as lossy ports (a usage error for a malformed one)."""
+    from ecatcfg.errors import UsageError
+    from ecatcfg.esc import PORT_LETTERS
+    from ecatcfg.runtime.segment.virtual import LossyPort
+
+    out: list[LossyPort] = []
+    for spec in specs:
+        parts = spec.rsplit(":", 2)
+        port_text = parts[1].strip().upper() if len(parts) == 3 else ""
+        port = (PORT_LETTERS.index(port_text) if port_text and port_text in PORT_LETTERS
+                else int(port_text) if port_text.isdigit() else -1)
+        try:
+            share = float(parts[2]) if len(parts) == 3 else -1.0
+        except ValueError:
+            share = -1.0
+        if len(parts) != 3 or not parts[0] or not 0 <= port <= 3 or not 0.0 <= share <= 1.0:
+            raise UsageError(f"--faults {spec}: SLAVE:PORT:P, e.g. lamps:A:0.2 (PORT A-D or "
+                             "0-3, P between 0 and 1)")
+        slave: str | int = int(parts[0]) if parts[0].isdigit() else parts[0]
+        out.append(LossyPort(slave, port, share))
+    return tuple(out)
 
 
 def _check_args(args: argparse.Namespace) -> None:

@@ -91,6 +91,28 @@ class Wiring:
             stack.extend(ports[p] for p in reversed(CHILD_PORTS) if p in ports)
         return out
 
+    def receptions(self, cut: Iterable[int]) -> list[tuple[int, int]]:
+        """Every (slave, port) a frame is received on, in the order it happens: port 0 on
+        its way out (where the slave processes it), then each port with a slave behind it
+        as the frame comes back from that subtree (ports in the processing order 0, 3, 1,
+        2).  A port without a cable in place closes its loop: nothing is received there."""
+        if self.root < 0:
+            return []
+        gone = set(cut)
+        out: list[tuple[int, int]] = []
+
+        def visit(k: int) -> None:
+            out.append((k, 0))
+            for port in CHILD_PORTS:
+                child = self.children[k].get(port)
+                if child is not None and child not in gone:
+                    visit(child)
+                    out.append((k, port))
+
+        if self.root not in gone:
+            visit(self.root)
+        return out
+
     def links(self, k: int, cut: Iterable[int]) -> tuple[bool, bool, bool, bool]:
         """Which of slave k's ports have a link partner: port 0 unless its own cable is
         removed, another port when a slave is plugged into it through a cable in place."""

@@ -116,13 +116,25 @@ def _absent_blocks(chip: EscChip) -> tuple[tuple[int, int], ...]:
 # difference) comes back with 0 from an EK1100, EL2828 and EL2889 while their other DC
 # registers count (ethercrab-rs/ethercrab tests/replay-dc.pcapng).
 _UNWRITABLE = ((Reg.DC_SYSTEM_TIME_DIFFERENCE, Reg.DC_SYSTEM_TIME_DIFFERENCE + 4),)
+# The error counters (ESC Section II 0x0300-0x0313; Section I "Errors and forwarded
+# errors"): per port n an invalid frame counter (0x0300 + 2n) and a physical-layer RX error
+# counter (0x0301 + 2n), forwarded RX error counters 0x0308 + n, the ECAT processing unit
+# error counter 0x030C, lost link counters 0x0310 + n.  Each stops at 0xFF; a write to
+# any of 0x0300-0x030C clears those, a write to any of 0x0310-0x0313 clears the lost link
+# counters.
+_RX_ERRORS_END = 0x030D
+_FORWARDED = 0x0308
+_LOST_LINK = 0x0310
+_LOST_LINK_END = 0x0314
+
+
 # The registers whose write the ESC acts on (EmulatedSlave._after_register_write): AL
 # control, the watchdogs, the EEPROM interface, FMMUs, SMs, the DC unit.  A write that
 # meets none of them only stores its bytes.
 _ACTED_ON = ((Reg.AL_CONTROL, Reg.AL_CONTROL + 2), (Reg.WATCHDOG_DIVIDER, Reg.WATCHDOG_SM + 2),
              (Reg.WATCHDOG_COUNTER_SM, Reg.WATCHDOG_COUNTER_SM + 2), (0x0502, 0x0508),
              (Reg.FMMU0, Reg.FMMU0 + FMMU_SIZE * N_FMMU), (Reg.SM0, sm_register(N_SM)),
-             (_DC_LOOP, _DC_LOOP_END))
+             (_DC_LOOP, _DC_LOOP_END), (Reg.RX_ERROR_COUNTER, _LOST_LINK_END))
 
 
 def _unwritable(ado: int, n: int) -> bool:
@@ -299,7 +311,10 @@ class EmulatedSlave:
         reloads it: an ESC whose PDI is off (0x0140 = 0, an EK1100) reads 0x5A31 where an
         EL2828 reads 0x5A33 (ethercrab-rs/ethercrab tests/replay-dc.pcapng)."""
         status = 0x01 | (0x02 if self.mem[Reg.PDI_CONTROL] else 0)
+        had = struct.unpack_from("<H", self.mem, Reg.DL_STATUS)[0]
         for port, link in enumerate(links):
+            if had & 0x0010 << port and not link:
+                self._count(_LOST_LINK + port)      # a link that was up went down
             status |= (0x0010 << port | 0x0200 << 2 * port) if link else 0x0100 << 2 * port
         if status != struct.unpack_from("<H", self.mem, Reg.DL_STATUS)[0]:
             # A change of DL status (the links coming up at power-on) raises the ECAT
@@ -308,6 +323,16 @@ class EmulatedSlave:
             # dumps/soem-sdinfo-ek1100-el1004.pcapng, dumps/twincat-scan-boxes.pcapng).
             self.mem[Reg.ECAT_EVENT_REQUEST] |= DL_STATUS_EVENT
         struct.pack_into("<H", self.mem, Reg.DL_STATUS, status)
+
+    def _count(self, address: int) -> None:
+        if self.mem[address] < 0xFF:
+            self.mem[address] += 1
+
+    def frame_error(self, port: int, forwarded: bool) -> None:
+        """A frame with an error was received on ``port``: the first ESC to see it counts
+        it as invalid (0x0300 + 2n) and marks it, each one after counts a forwarded error
+        (0x0308 + n) instead (ESC Section I, "Errors and forwarded errors")."""
+        self._count(_FORWARDED + port if forwarded else Reg.RX_ERROR_COUNTER + 2 * port)
 
     # -- state ------------------------------------------------------------------------------
 
@@ -436,6 +461,11 @@ class EmulatedSlave:
         if _overlaps(ado, n, Reg.WATCHDOG_COUNTER_SM, Reg.WATCHDOG_COUNTER_SM + 2):
             # Writing either watchdog counter clears both (ESC Section II, 0x0442-0x0443).
             self.mem[Reg.WATCHDOG_COUNTER_SM:Reg.WATCHDOG_COUNTER_SM + 2] = b"\x00\x00"
+        if _overlaps(ado, n, Reg.RX_ERROR_COUNTER, _RX_ERRORS_END):
+            self.mem[Reg.RX_ERROR_COUNTER:_RX_ERRORS_END] = bytes(
+                _RX_ERRORS_END - Reg.RX_ERROR_COUNTER)
+        if _overlaps(ado, n, _LOST_LINK, _LOST_LINK_END):
+            self.mem[_LOST_LINK:_LOST_LINK_END] = bytes(_LOST_LINK_END - _LOST_LINK)
         if _overlaps(ado, n, Reg.FMMU0, Reg.FMMU0 + FMMU_SIZE * N_FMMU):
             self._load_fmmus()
         if _overlaps(ado, n, Reg.SM0, sm_register(N_SM)):

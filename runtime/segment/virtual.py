@@ -68,16 +68,29 @@ _EVENTS_END = int(Reg.ECAT_EVENT_REQUEST) + 2
 
 
 @dataclass(frozen=True, slots=True)
+class LossyPort:
+    """A bad cable or connector at ``port`` (0-3) of ``slave`` (its name, or its bus
+    position with every cable in place): a frame received there has a CRC error with
+    probability ``share``."""
+
+    slave: str | int
+    port: int
+    share: float
+
+
+@dataclass(frozen=True, slots=True)
 class Faults:
     """Seeded fault injection on the wire: a share of frames is lost (half of them on the
     way to the slaves, half on the way back, after processing), corrupted (one bit of
-    the returned EtherCAT data flipped) or delayed by ``delay_s``."""
+    the returned EtherCAT data flipped) or delayed by ``delay_s``; ``lossy`` ports receive
+    frames with CRC errors, which the ESCs count (``VirtualSegment.process_lossy``)."""
 
     drop: float = 0.0
     corrupt: float = 0.0
     delay: float = 0.0
     delay_s: float = 0.005
     seed: int = 0
+    lossy: tuple[LossyPort, ...] = ()
 
 
 class VirtualSegment:
@@ -123,6 +136,13 @@ class VirtualSegment:
         self._timed: list[EmulatedSlave] = []
         self.timing: Timing | None = None
         self.set_timing(timing)
+        # Lossy ports by (index into wired, port); a name or position is resolved once.
+        self._lossy: dict[tuple[int, int], float] = {}
+        for lossy in self.faults.lossy:
+            if not 0 <= lossy.port <= 3 or not 0.0 <= lossy.share <= 1.0:
+                raise ValueError(f"lossy port {lossy.port} share {lossy.share}: ports are "
+                                 "0-3 and a share is between 0 and 1")
+            self._lossy[(self._wired_index(lossy.slave), lossy.port)] = lossy.share
 
     def _attach(self, slave: EmulatedSlave) -> None:
         """The segment's time and callbacks for ``slave``."""
@@ -266,6 +286,38 @@ class VirtualSegment:
         if self.slaves:
             buf[6] |= 0x02              # the first ESC sets the U/L bit of the source MAC
         return buf
+
+    def process_lossy(self, frame: bytes | bytearray) -> bytearray | None:
+        """The frame as it comes back, or ``None`` when a lossy port gave it a CRC error
+        (the master drops it).  The frame's receptions are walked in the order they happen
+        (``Wiring.receptions``); the ESC whose port received the error counts an invalid
+        frame there, every later reception counts a forwarded error, and only the slaves
+        that processed the frame before the error commit it: the first ESC to see an error
+        and all after it discard their register operations (ESC Section I, "Errors and
+        forwarded errors")."""
+        if not self._lossy:
+            return self.process(frame)
+        walk = self.wiring.receptions(self.cut)
+        hit = next((i for i, at in enumerate(walk)
+                    if at in self._lossy and self._rng.random() < self._lossy[at]), None)
+        if hit is None:
+            return self.process(frame)
+        for i, (k, port) in enumerate(walk[hit:]):
+            self.wired[k].frame_error(port, forwarded=i > 0)
+        reached = sum(1 for k, port in walk[:hit] if port == 0)
+        if reached:
+            # The slaves before the error, in bus order, process the frame; it is lost.
+            slaves, mems = self.slaves, self._mems
+            self.slaves, self._mems = slaves[:reached], mems[:reached]
+            self._irq = self._by_address = None
+            self._plans.clear()
+            try:
+                self.process(frame)
+            finally:
+                self.slaves, self._mems = slaves, mems
+                self._irq = self._by_address = None
+                self._plans.clear()
+        return None
 
     def _datagram(self, buf: bytearray, view: memoryview, pos: int, n: int) -> None:
         # IRQ: every slave ORs its unmasked ECAT event requests (0x0210 & 0x0200) into the
@@ -530,7 +582,10 @@ class VirtualSegment:
                 continue
             if faults.drop and self._rng.random() < faults.drop / 2:
                 continue                                   # lost on the way out
-            reply = self.process(frame)
+            lossy = self.process_lossy(frame)
+            if lossy is None:
+                continue                                   # a CRC error: dropped
+            reply = lossy
             if faults.drop and self._rng.random() < faults.drop / 2:
                 continue                                   # lost on the way back
             if faults.corrupt and self._rng.random() < faults.corrupt and len(reply) > 16:

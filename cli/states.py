@@ -1,0 +1,69 @@
+"""``ecatcfg states``: show or request the AL states of the slaves on a line."""
+
+from __future__ import annotations
+
+import argparse
+from typing import Any
+
+STATES = ("init", "preop", "boot", "safeop", "op")
+
+
+def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    p = sub.add_parser(
+        "states", help="show or request the AL states of the slaves on a line",
+        description="Without STATE: each slave's AL status (0x0130) and AL status code "
+                    "(0x0134).  With STATE: write it to AL control (0x0120) of every slave "
+                    "(or the one at --slave), acknowledging an error indication, and wait "
+                    "until each is in it or refuses it.  Slaves are addressed by position; "
+                    "no ENI is needed.",
+        epilog="Exit 1 when a slave refuses the state (its AL status code is shown) or "
+               "does not reach it within --timeout, or no frame comes back.")
+    p.add_argument("--iface", required=True, metavar="IF",
+                   help="network interface of the EtherCAT line")
+    p.add_argument("--slave", type=int, metavar="POS",
+                   help="only the slave at this position (0 = first); default all")
+    p.add_argument("state", nargs="?", type=str.lower, choices=STATES, metavar="STATE",
+                   help="request this state: init, preop, boot, safeop or op")
+    p.add_argument("--timeout", type=float, default=5.0, metavar="S",
+                   help="seconds each slave may take to reach STATE (default 5)")
+    p.add_argument("--format", choices=["text", "json"], default="text")
+    p.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    import json
+
+    from ecatcfg.errors import UsageError
+    from ecatcfg.esc import AlState, al_state_name, al_status_name
+    from ecatcfg.runtime.link import RawLink
+    from ecatcfg.runtime.master import al_tool
+    from ecatcfg.runtime.master.transport import Transport
+
+    if args.slave is not None and args.slave < 0:
+        raise UsageError(f"--slave {args.slave}: positions count from 0")
+    if args.timeout <= 0:
+        raise UsageError(f"--timeout {args.timeout}: must be positive")
+    target = AlState[args.state.upper()] if args.state else None
+    with RawLink(args.iface) as link:
+        transport = Transport(link)
+        positions = al_tool.positions_on_line(transport, args.slave)
+        if target is None:
+            found = al_tool.read_states(transport, positions)
+        else:
+            found = al_tool.request_state(transport, positions, target, args.timeout)
+    rows: list[dict[str, Any]] = [{
+        "position": s.position, "al_status": s.al_status, "state": al_state_name(s.state),
+        "error": s.error, "al_status_code": s.code, "al_status_text": al_status_name(s.code),
+        "requested": s.requested.name if s.requested is not None else None,
+        "reached": s.reached if s.requested is not None else None,
+        "timed_out": s.timed_out} for s in found]
+    if args.format == "json":
+        print(json.dumps({"slaves": rows, "count": len(rows)}, indent=2))
+    else:
+        for s in found:
+            line = f"{s.position:>3}  {s.text()}"
+            if s.requested is not None and not s.reached:
+                line += (f"  (requested {s.requested.name}: "
+                         + ("not reached in time" if s.timed_out else "refused") + ")")
+            print(line)
+    return 0 if target is None or all(s.reached for s in found) else 1
