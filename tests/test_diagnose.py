@@ -77,6 +77,22 @@ def test_0x001e_names_the_input_sm_and_its_assignment(plan):
     assert "0x1C13 = 0x1A00, 0x1A01" in line and "gives 16 bytes" in line
 
 
+def test_a_slave_read_back_in_error_gets_its_cause_too(plan):
+    """An ENI without the drive's own state check for SAFEOP: the refusal is found when
+    every slave's AL status is read back after the transition (NotReachedError), and
+    the cause is read the same way."""
+    from ecatcfg.runtime.master.bringup import NotReachedError
+    patched(plan, "axis1", "set sm 2 (outputs)", 2, 5)
+    axis = plan.slave("axis1")
+    axis.init_cmds = [c for c in axis.init_cmds
+                      if c.comment != "check device state for SAFEOP"]
+    exc = refusal(plan)
+    assert isinstance(exc, NotReachedError)
+    [cause] = exc.causes
+    assert cause["slave"] == "axis1" and cause["al_status_code"] == 0x001D
+    assert "SM2 length 5 bytes (0x0812)" in cause["cause"][0]
+
+
 # The diagnosis history object (ETG.1020) added to the example drive's dictionary, with one
 # message in subindex 6: DiagCode 0x00011234, flags 0x0002, text ID 0x8002, time stamp 1,
 # four bytes of parameters.
