@@ -11,7 +11,7 @@ project (SOEM, IgH, SOES, KickCAT, Wireshark) where a layout can be checked.
 from __future__ import annotations
 
 import struct
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from enum import Enum, IntEnum
 
 from ecatcfg.record import record
@@ -66,6 +66,8 @@ ESC_FEATURE_DC = 0x0004           # 0x0008 bit 2: the ESC has a DC unit (SOEM ha
 class Reg(IntEnum):
     """ESC registers the configuration touches."""
 
+    FMMUS_SUPPORTED = 0x0004      # how many FMMUs the ESC has; 0x0005: how many SMs
+    SMS_SUPPORTED = 0x0005
     PORT_DESCRIPTOR = 0x0007      # 2 bits per port: 0 none, 2 E-bus, 3 MII (Section II)
     ESC_FEATURES = 0x0008         # bit 2: DC available (ESC Section II 0x0008)
     STATION_ADDRESS = 0x0010
@@ -354,6 +356,20 @@ class FmmuConfig:
         return (self.length - 1) * 8 + self.logical_stop_bit - self.logical_start_bit + 1
 
 
+def fmmus_cover(fmmus: Sequence[FmmuConfig], start: int, length: int,
+                kind: FmmuType) -> bool:
+    """Whether FMMUs of direction ``kind`` map every byte of ``start``..``start+length``
+    (what a slave checks of its process-data SMs before SAFEOP, SOES ``ESC_checkSM23``; the
+    emulated firmware and the master's diagnosis both ask it)."""
+    covered: set[int] = set()
+    for f in fmmus:
+        if f.type & kind:
+            first = f.physical_start
+            covered.update(range(first, first + (f.bit_length + f.physical_start_bit
+                                                 + 7) // 8))
+    return all(a in covered for a in range(start, start + length))
+
+
 @record(frozen=True)
 class SmConfig:
     """One SyncManager's 8-byte register image (0x0800 + 8·n)."""
@@ -547,7 +563,8 @@ AL_STATUS_CODES: dict[int, str] = {
 
 
 class AlStatusCode(IntEnum):
-    """The AL status codes (0x0134) the emulated firmware gives; their texts are above."""
+    """The AL status codes (0x0134) the emulated firmware gives, or whose cause the master
+    reads from a slave (``runtime/master/diagnose.py``); their texts are above."""
 
     NO_ERROR = 0x0000
     INVALID_STATE_CHANGE = 0x0011
@@ -557,7 +574,10 @@ class AlStatusCode(IntEnum):
     SM_WATCHDOG = 0x001B
     INVALID_OUTPUTS = 0x001D
     INVALID_INPUTS = 0x001E
+    DC_INVALID_SYNC = 0x0030                # invalid DC SYNC configuration
     DC_INVALID_SYNC_CYCLE = 0x0035
+    DC_INVALID_SYNC0_CYCLE = 0x0036
+    DC_INVALID_SYNC1_CYCLE = 0x0037
 
 
 def al_status_name(code: int) -> str:

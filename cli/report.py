@@ -196,9 +196,14 @@ class ApplyReport:
                        "jitter_us": {k: round(v, 1) for k, v in jitter.items()}},
             "frames": {"sent": counters.frames_sent, "lost": counters.frames_lost},
             "refused": [],
+            # Why slaves refused, as read from them (runtime/master/diagnose.py).
+            "causes": list(getattr(failure, "causes", [])),
             "derived": self.derived_parts,
             "skipped": self.skipped_parts,
         }
+        by_slave = {c["slave"]: c["cause"] for c in self.summary["causes"]}
+        for row in self.rows:
+            row["cause"] = by_slave.get(row["name"])
         segment = getattr(net, "segment", None)         # set by Network.virtual only
         if segment is not None:
             # Which device each virtual slave behaves as: its ESI, or the ENI alone.
@@ -267,14 +272,14 @@ def refusal_json(eni: str, target: int, error: EcatcfgError,
                     "commands": 0} for name, text in error.problems.items()]
     slaves = [{"position": s.position, "name": s.name, "passive": False,
                "address": s.phys_addr, "state": "not started", "highest_state": "not started",
-               "al_status_code": None, "al_status": None, "last_command": ""}
+               "al_status_code": None, "al_status": None, "last_command": "", "cause": None}
               if isinstance(s, SlavePlan) else
               {"position": None, "name": s.name, "passive": True, "address": None,
                "state": "passive", "highest_state": "passive", "al_status_code": None,
-               "al_status": None, "last_command": ""}
+               "al_status": None, "last_command": "", "cause": None}
               for s in plan.in_file_order()] if plan else []
     return {"eni": eni, "target": AlState(target).name, "ok": False, "error": str(error),
-            "refused": refused, "slaves": slaves,
+            "refused": refused, "causes": [], "slaves": slaves,
             "slave_count": {"active": len(plan.slaves) if plan else 0,
                             "passive": len(plan.passive) if plan else 0},
             "cycles": {"count": 0, "lost_frames": 0, "wkc_errors": 0,

@@ -205,6 +205,7 @@ class Network:
             self.master.bring_up(state)
         except ApplyError as exc:
             self._locate(exc)
+            self._explain(exc)
             raise
 
     def down(self, state: AlState = AlState.INIT) -> None:
@@ -214,6 +215,50 @@ class Network:
         except ApplyError as exc:
             self._locate(exc)
             raise
+
+    def _explain(self, exc: ApplyError) -> None:
+        """Read from the slaves why they refused (``runtime/master/diagnose.py``) and add
+        the cause to the error: a slave whose identity is not the ENI's, a slave that
+        refused a state with an AL status code."""
+        from ecatcfg.runtime.master.bringup import NotReachedError, VerifyError
+        from ecatcfg.runtime.master.diagnose import explain, identity_cause
+        master = self.master
+        transport = master.transport
+        if isinstance(exc, VerifyError):
+            from ecatcfg.runtime.master.scan import paired
+            scanned = master.scanned or []
+            pairs = paired(master.line, scanned)
+            for m in exc.mismatches:
+                at = pairs.get(m.position)
+                if not m.problem.startswith(("other device", "other revision")) or at is None:
+                    continue
+                found = scanned[at]
+                lines = identity_cause(m, found.identity)
+                name = next((s.name for s in master.line.slaves if s.position == m.position),
+                            None)
+                exc.add_cause(name, {"position": found.position, "al_status_code": None,
+                                     "cause": lines, "vendor_id": found.vendor_id,
+                                     "product_code": found.product_code,
+                                     "revision": found.revision}, "; ".join(lines))
+            return
+        if isinstance(exc, NotReachedError):
+            states = master.read_states()
+            refused = [(s, st.code) for s, st in zip(master.slaves, states)
+                       if st is not None and st.error]
+        elif exc.al_code and exc.slave is not None:
+            refused = [(s, exc.al_code) for s in master.slaves if s.name == exc.slave]
+        else:
+            return
+        for slave, code in refused:
+            try:
+                cause = explain(transport, slave.position, code, slave)
+            except ApplyError as failed:        # the line itself stopped answering
+                exc.add_cause(slave.name, {"position": slave.position,
+                                           "al_status_code": code,
+                                           "cause": [f"not read: {failed.message}"]},
+                              f"not read: {failed.message}")
+                continue
+            exc.add_cause(slave.name, cause.as_json(), cause.text())
 
     def _locate(self, exc: ApplyError) -> None:
         """Name the file and line of the InitCmd that failed (``eni/source.py``)."""

@@ -596,8 +596,12 @@ def test_swapped_slaves_exit_1_before_any_configuration(veth_netns, corpus_lib, 
     error = report["error"]
     assert "do not match the ENI; nothing was configured" in error, error
     assert "expected (ENI)" in error and "found" in error
-    rows = {int(line.split()[0]): line for line in error.splitlines()[2:]}
+    rows = {int(line.split()[0]): line for line in error.splitlines()[2:]
+            if not line.lstrip().startswith("cause")}
     assert sorted(rows) == [1, 2], error
+    # Under the table, where each slave holds the identity read (its SII words).
+    assert [c["slave"] for c in report["causes"]] == ["out", "in"]
+    assert "product code 0x07113052 (word 0x000A)" in report["causes"][0]["cause"][0]
     assert "out (0x2:0x7d83052:0x120000)" in rows[1] and "0x2:0x7113052:0x120000" in rows[1]
     assert "in (0x2:0x7113052:0x120000)" in rows[2] and "0x2:0x7d83052:0x120000" in rows[2]
     assert "swapped" in rows[1] and "swapped" in rows[2]

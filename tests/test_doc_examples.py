@@ -4,7 +4,8 @@
 - Shell blocks run command by command (a line, or its ``&&`` parts), ``ecatcfg`` as
   ``python -m ecatcfg``, ``> FILE`` as a redirection; each must exit 0 (``lint`` and
   ``check``: 0 or 1, "exit 1 on errors" as the docs say; ``diff``: 0 or 1, "1 when they
-  differ") without a traceback.
+  differ"; ``doctor``: 0 or 1, "1 when a slave is not in the target state", which depends
+  on what the examples before it left the simulated line in) without a traceback.
 - A command with ``--iface`` needs a bus: it runs in a network namespace whose veth end is
   served by ``ecatcfg simulate`` of the example line (tests/rig.py); ``simulate`` itself
   runs in a namespace pair of its own until it is ready, then is stopped with SIGINT.
@@ -155,7 +156,8 @@ class Bench:
         err = done.stderr.decode(errors="replace")
         # lint and check exit 1 on an error finding, diff when the files differ, as the docs say.
         allowed = (0, 1) if words[:2] in (["ecatcfg", "lint"], ["ecatcfg", "check"],
-                                          ["ecatcfg", "diff"]) else (0,)
+                                          ["ecatcfg", "diff"], ["ecatcfg", "doctor"]) \
+            else (0,)
         assert done.returncode in allowed and "Traceback" not in err, (
             f"{where}: {shlex.join(words)} exited {done.returncode}:\n{err[-3000:]}")
         if out_file is not None:

@@ -7,7 +7,8 @@ replies matched), ``lockstep.py`` (slaves' command chains sharing frames), ``rep
 state is reached), ``modules.py`` (a station's plugged modules), ``hotconnect.py`` and
 ``recovery.py`` (slaves that drop out and come back), ``realtime.py`` (the cycling thread's
 scheduling).  The tools: ``sdo_client.py`` / ``sdo_tool.py`` (``ecatcfg sdo``) and
-``eeprom.py`` (SII read and write).
+``eeprom.py`` (SII read and write), ``diagnose.py`` (why a slave refuses a state:
+``ecatcfg doctor`` and the cause lines of apply's errors).
 
 This side drives the wire: it imports the shared codec (``runtime/wire.py``,
 ``mailbox.py``, ``link.py``, ``wiring.py``) and never :mod:`ecatcfg.runtime.segment`

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import struct
 import time
-from typing import TYPE_CHECKING, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
 from ecatcfg.eni.plan import CoeInitCmd, EoeInitCmd, InitCmd, MailboxPlan
 from ecatcfg.eni.words import init_cmd_name
@@ -61,6 +61,15 @@ class ApplyError(EcatcfgError):
         self.al_code = al_code
         self.abort_code = abort_code
         self.init_cmd: InitCmd | CoeInitCmd | EoeInitCmd | None = None
+        # Why, as read from the slaves afterwards (runtime/master/diagnose.py): one JSON
+        # object per slave ("slave", "al_status_code", "cause": lines, and the values read).
+        self.causes: list[dict[str, Any]] = []
+
+    def add_cause(self, slave: str | None, cause: dict[str, Any], text: str) -> None:
+        """Say the cause of ``slave``'s refusal under the message (and in JSON)."""
+        self.causes.append({"slave": slave, **cause})
+        self.message += f"\n  cause{f' ({slave})' if slave else ''}: {text}"
+        self.args = (self.message,)
 
 
 @record

@@ -17,7 +17,8 @@ from __future__ import annotations
 import struct
 from collections.abc import Sequence
 
-from ecatcfg.esc import SM_DIR_MASK, SM_MODE_MASK, AlStatusCode, FmmuConfig, FmmuType, Reg
+from ecatcfg.esc import (SM_DIR_MASK, SM_MODE_MASK, AlStatusCode, FmmuConfig, FmmuType, Reg,
+                         fmmus_cover)
 from ecatcfg.esi.model import Device
 from ecatcfg.runtime.segment.syncman import SmState
 
@@ -105,18 +106,6 @@ def process_data_refusal(device: Device, sms: Sequence[SmState],
         if not fmmus_cover(fmmus, sm.start, sm.length, kind):
             return code
     return 0
-
-
-def fmmus_cover(fmmus: Sequence[FmmuConfig], start: int, length: int,
-                kind: FmmuType) -> bool:
-    """Whether FMMUs of direction ``kind`` map every byte of ``start``..``start+length``."""
-    covered: set[int] = set()
-    for f in fmmus:
-        if f.type & kind:
-            first = f.physical_start
-            covered.update(range(first, first + (f.bit_length + f.physical_start_bit
-                                                 + 7) // 8))
-    return all(a in covered for a in range(start, start + length))
 
 
 def dc_refusal(mem: bytearray) -> int:

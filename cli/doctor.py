@@ -1,0 +1,73 @@
+"""``ecatcfg doctor``: every slave on a line that is not in its target state, and why."""
+
+from __future__ import annotations
+
+import argparse
+from typing import Any
+
+STATES = {"init": 1, "preop": 2, "safeop": 4, "op": 8}
+
+
+def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    p = sub.add_parser(
+        "doctor", help="why slaves on a line are not in their target state",
+        description="Read every slave's AL status on the line (by position) and, for each "
+                    "one not in the target state or with the error flag, the cause of its "
+                    "AL status code as the slave holds it: SyncManager and FMMU registers "
+                    "and the PDO assignment over CoE for 0x001D/0x001E, the watchdog "
+                    "registers for 0x001B, the DC registers for 0x0035, the newest 0x10F3 "
+                    "diagnosis message where the slave has one.  With an ENI, slaves "
+                    "whose SII identity is not the ENI's are reported too, and the DC "
+                    "cycle time the ENI asks for is shown.  Nothing is configured; a "
+                    "mailbox is set up from the SII only for a slave below PREOP whose "
+                    "CoE objects are read (as 'ecatcfg sdo' does).",
+        epilog="Exit 0 when every slave is in the target state, 1 otherwise.")
+    p.add_argument("eni", nargs="?", metavar="ENI", help="the ENI the line should match")
+    p.add_argument("--iface", required=True, metavar="IF",
+                   help="network interface of the EtherCAT line")
+    p.add_argument("--state", choices=list(STATES), default="op",
+                   help="the target state of every slave (default op)")
+    p.add_argument("--format", choices=["text", "json"], default="text")
+    p.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    import json
+
+    from ecatcfg.esc import AlState
+    from ecatcfg.runtime.link import RawLink
+    from ecatcfg.runtime.master.diagnose import doctor
+    from ecatcfg.runtime.master.transport import Transport
+
+    target = AlState(STATES[args.state])
+    plan = None
+    if args.eni:
+        from pathlib import Path
+
+        from ecatcfg.eni import reader as eni_reader
+        from ecatcfg.errors import UsageError
+        if not Path(args.eni).is_file():
+            raise UsageError(f"{args.eni}: no such file")
+        plan = eni_reader.read_file(args.eni)
+    with RawLink(args.iface) as link:
+        count, findings = doctor(Transport(link), target, plan)
+    out: dict[str, Any] = {"iface": args.iface, "eni": args.eni, "target": target.name,
+                           "slaves": count, "ok": not findings,
+                           "findings": [f.as_json() for f in findings]}
+    if args.format == "json":
+        print(json.dumps(out, indent=2))
+    else:
+        if not findings:
+            print(f"all {count} slaves in {target.name}")
+        for f in findings:
+            who = f"slave {f.position}" + (f" ({f.name})" if f.name else "")
+            print(f"{who}: {f.state}, not {target.name}" if f.state != target.name
+                  else f"{who}: {f.state}")
+            for line in f.identity:
+                print(f"  identity: {line}")
+            if f.cause is not None:
+                print(f"  {f.cause.text()}")
+            elif f.state != "no answer" and not f.identity:
+                print(f"  no error flag (AL status code 0x0000): nothing refused "
+                      f"{target.name}; no request for it reached the slave")
+    return 0 if not findings else 1
