@@ -181,13 +181,14 @@ def run_module(module: str, focus: Focus, work: Path, sample: int | None,
     _mutmut(work, ["run", "--max-children", "1", NO_MUTANT], log)
     names = sorted(_exit_codes(work, module))
     if not names:
-        raise Failed(f"mutmut made no mutants (the clean run of its tests failed?); see {log}")
+        raise Failed("mutmut made no mutants (the clean run of its tests failed?); the end of "
+                     f"its log:\n{_tail(log)}")
     chosen = names
     if sample is not None and sample < len(names):
         chosen = sorted(random.Random(seed).sample(names, sample))
     code = _mutmut(work, ["run", "--max-children", "1", *chosen], log)
     if code != 0:
-        raise Failed(f"mutmut failed (exit {code}); see {log}")
+        raise Failed(f"mutmut failed (exit {code}); the end of its log:\n{_tail(log)}")
     codes = _exit_codes(work, module)
     result = Result(module, mutants=len(names), tested=len(chosen),
                     sample_seed=seed if chosen is not names else None)
@@ -207,6 +208,12 @@ def run_module(module: str, focus: Focus, work: Path, sample: int | None,
             result.other += 1
     result.seconds = round(time.monotonic() - started, 1)
     return result
+
+
+def _tail(log: Path, lines: int = 25) -> str:
+    """The last lines of mutmut's log: the folder it is in goes when the run ends."""
+    text = log.read_text(errors="replace") if log.exists() else "(no log)"
+    return "\n".join("    " + line for line in text.splitlines()[-lines:])
 
 
 def _slug(module: str) -> str:
