@@ -75,7 +75,7 @@ def test_forced_outputs_reach_the_emulated_slaves(veth_netns, eni):
         thread = threading.Thread(target=lambda: result.append(veth_netns.run_in(
             veth_netns.ns_a, [sys.executable, "-m", "ecatcfg", "watch", str(eni), "--iface",
                               veth_netns.if_a, "--force", f"{LAMP}=1", "--force",
-                              f"{VELOCITY}=-1234", "--cycles", "3000", "--format", "json"],
+                              f"{VELOCITY}=-1234", "--cycles", "2000", "--format", "json"],
             timeout=120, cwd=ROOT)))
         thread.start()
         deadline = time.monotonic() + 100
