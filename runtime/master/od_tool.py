@@ -14,7 +14,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 from ecatcfg.esi.coe import DictEntry, device_dictionary, lookup
-from ecatcfg.esi.datatypes import canonical, coe_type_code, coe_type_name
+from ecatcfg.esi.datatypes import canonical, coe_type, coe_type_name
 from ecatcfg.esi.model import Device, pick_name
 from ecatcfg.runtime.mailbox import (
     ACCESS_READ_SHIFT, ACCESS_WRITE_SHIFT, OBJECT_CODE_NAMES, EntryDescription,
@@ -157,7 +157,7 @@ def compare_with_esi(objects: list[DescribedObject],
 def _entry_differences(index: int, entry: EntryDescription, esi: DictEntry) -> list[str]:
     where = f"0x{index:04X}:{entry.subindex:02X} {entry.name}"
     out: list[str] = []
-    esi_code = coe_type_code(esi.type)
+    esi_code = coe_type(esi.type)
     if canonical(esi.type) is not None and esi_code and esi_code != entry.data_type:
         out.append(f"{where}: type {coe_type_name(entry.data_type)} on the slave, "
                    f"{esi.type} in the ESI")

@@ -11,9 +11,12 @@ message of those opcodes for a whole description).
 
 Choices where the sources are silent:
 
-- the data type of a RECORD object is given as 0: the emulation keeps no record type
-  index (a real device names one, e.g. 0x0023 for the identity); an ARRAY gives its
-  elements' type and a VAR its own, as CiA 301 describes objects;
+- the data type of a RECORD object is given as 0, as SOES gives it (the emulation keeps no
+  record type index; a device may name one, e.g. 0x0023 for the identity); a VAR gives its
+  own type, an ARRAY its elements' (SOES gives subindex 0's; CiA 301 describes an array
+  by the type of its elements);
+- the max subindex is the highest subindex the object has (SOES gives an array's or
+  record's subindex 0 value, the entries in use), so a client describes every entry;
 - an entry description carries none of the optional values (unit, default, minimum,
   maximum): the response's value info says so, whatever the request asked for;
 - the backup and settings lists are empty (an ESI's Backup/Setting flags are not kept);
@@ -26,7 +29,7 @@ from __future__ import annotations
 import struct
 
 from ecatcfg.esc import AlState
-from ecatcfg.esi.datatypes import coe_type_code
+from ecatcfg.esi.datatypes import coe_type
 from ecatcfg.runtime.mailbox import (
     ABORT_NO_OBJECT, ABORT_NO_SUBINDEX, ABORT_UNSUPPORTED_ACCESS, ACCESS_READ_SHIFT,
     ACCESS_RXPDO, ACCESS_TXPDO, ACCESS_WRITE_SHIFT, OBJECT_CODE_ARRAY, OBJECT_CODE_RECORD,
@@ -60,18 +63,17 @@ def access_word(entry: OdEntry) -> int:
 
 def object_description(obj: OdObject) -> ObjectDescription:
     if obj.variable:
-        code, dtype = OBJECT_CODE_VAR, coe_type_code(obj.entries[0].type) if 0 in obj.entries \
-            else 0
+        code, described = OBJECT_CODE_VAR, obj.entries.get(0)
     elif obj.array:
-        first = obj.entries.get(1)
-        code, dtype = OBJECT_CODE_ARRAY, coe_type_code(first.type) if first else 0
+        code, described = OBJECT_CODE_ARRAY, obj.entries.get(1)
     else:
-        code, dtype = OBJECT_CODE_RECORD, 0
+        code, described = OBJECT_CODE_RECORD, None
+    dtype = coe_type(described.type) if described is not None else 0
     return ObjectDescription(obj.index, dtype, obj.max_subindex, code, obj.name)
 
 
 def entry_description(index: int, entry: OdEntry) -> EntryDescription:
-    return EntryDescription(index, entry.subindex, 0, coe_type_code(entry.type),
+    return EntryDescription(index, entry.subindex, 0, coe_type(entry.type),
                             entry.bit_size, access_word(entry), entry.name)
 
 
