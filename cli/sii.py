@@ -224,6 +224,7 @@ def _show(args: argparse.Namespace) -> int:
 def render(img: SiiImage, name: str, out: TextIO) -> None:
     """The text form of a decoded image."""
     from ecatcfg.esi import sii
+    from ecatcfg.esi.datatypes import COE_TYPE_NAMES
 
     w = out.write
     w(f"{name}: {img.data_size} bytes\n")
@@ -269,7 +270,7 @@ def render(img: SiiImage, name: str, out: TextIO) -> None:
               f"{_s(pdo.name, pdo.name_index)}" + (f"  [{flags}]" if pdo.flags else "")
               + (f"  DC sync {pdo.dc_sync}" if pdo.dc_sync else "") + "\n")
             for e in pdo.entries:
-                dtype = sii.COE_TYPE_NAMES.get(e.data_type, f"0x{e.data_type:02X}")
+                dtype = COE_TYPE_NAMES.get(e.data_type, f"0x{e.data_type:02X}")
                 entry = "gap" if e.index == 0 else f"0x{e.index:04X}:{e.subindex:02X}"
                 w(f"    {entry:12} {e.bit_len:3} bits  {dtype:8} {_s(e.name, e.name_index)}\n")
     if img.dc:

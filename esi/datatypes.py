@@ -100,6 +100,48 @@ def download_fits(type_name: str, size: int, length: int) -> bool:
     return length == size
 
 
+
+# CoE data type codes (protocol-notes §6, SOEM ec_datatype; GUID and BITARR8/16/32 from the CoE
+# DEFTYPE tables of slave stacks) and the base type names (canonical spelling) written with
+# them: the SII PDO entries (esi/sii.py) and SDO Information entry descriptions give them.
+COE_TYPE_NAMES: dict[int, str] = {
+    0x01: "BOOL", 0x02: "SINT", 0x03: "INT", 0x04: "DINT", 0x05: "USINT", 0x06: "UINT",
+    0x07: "UDINT", 0x08: "REAL", 0x09: "STRING", 0x0A: "OCTET_STRING",
+    0x0B: "UNICODE_STRING", 0x0C: "TIME_OF_DAY", 0x0D: "TIME_DIFFERENCE", 0x0F: "DOMAIN",
+    0x10: "INT24", 0x11: "LREAL", 0x12: "INT40", 0x13: "INT48", 0x14: "INT56", 0x15: "LINT",
+    0x16: "UINT24", 0x18: "UINT40", 0x19: "UINT48", 0x1A: "UINT56", 0x1B: "ULINT",
+    0x1D: "GUID", 0x2D: "BITARR8", 0x2E: "BITARR16", 0x2F: "BITARR32",
+    **{0x2F + n: f"BIT{n}" for n in range(1, 9)},
+}
+COE_TYPES: dict[str, int] = {
+    **{name: code for code, name in COE_TYPE_NAMES.items()},
+    "BIT": 0x30, "WSTRING": 0x0B,
+    # CoE has BYTE 0x1E, WORD 0x1F and DWORD 0x20, but real images write the unsigned type
+    # of the same size (WORD -> 0x06 in the NI 9144 image, BYTE -> 0x05 in the EL2262 one)
+    # and SOEM knows only those.
+    "BYTE": 0x05, "WORD": 0x06, "DWORD": 0x07,
+}
+
+
+def coe_type(name: str | None) -> int:
+    """The CoE data type code of an ESI DataType name; 0 when it has none (records, ...)."""
+    if not name:
+        return 0
+    key = canonical(name)
+    if key is None:
+        return 0
+    if key.startswith("STRING("):
+        return COE_TYPES["STRING"]
+    if key.startswith("WSTRING("):
+        return COE_TYPES["WSTRING"]
+    return COE_TYPES.get(key, 0)
+
+
+def coe_type_name(code: int) -> str:
+    """The base type name of a CoE data type code (``0x0007`` -> ``UDINT``), or the code in
+    hex for one the table does not name."""
+    return COE_TYPE_NAMES.get(code, f"0x{code:04X}")
+
 # -- values on the wire ----------------------------------------------------------------------
 
 _SIGNED = {"SINT", "INT", "INT24", "DINT", "INT40", "INT48", "INT56", "LINT"}

@@ -106,27 +106,6 @@ PDO_MANDATORY, PDO_FIXED, PDO_VIRTUAL = 0x0001, 0x0010, 0x0020
 PDO_FLAG_NAMES = {PDO_MANDATORY: "mandatory", PDO_FIXED: "fixed", PDO_VIRTUAL: "virtual"}
 SM_UNASSIGNED = 0xFF
 
-# CoE data type codes (protocol-notes §6, SOEM ec_datatype; GUID and BITARR8/16/32 from the CoE
-# DEFTYPE tables of slave stacks) and the ESI base type names (canonical spelling,
-# esi.datatypes) written with them.
-COE_TYPE_NAMES: dict[int, str] = {
-    0x01: "BOOL", 0x02: "SINT", 0x03: "INT", 0x04: "DINT", 0x05: "USINT", 0x06: "UINT",
-    0x07: "UDINT", 0x08: "REAL", 0x09: "STRING", 0x0A: "OCTET_STRING",
-    0x0B: "UNICODE_STRING", 0x0C: "TIME_OF_DAY", 0x0D: "TIME_DIFFERENCE", 0x0F: "DOMAIN",
-    0x10: "INT24", 0x11: "LREAL", 0x12: "INT40", 0x13: "INT48", 0x14: "INT56", 0x15: "LINT",
-    0x16: "UINT24", 0x18: "UINT40", 0x19: "UINT48", 0x1A: "UINT56", 0x1B: "ULINT",
-    0x1D: "GUID", 0x2D: "BITARR8", 0x2E: "BITARR16", 0x2F: "BITARR32",
-    **{0x2F + n: f"BIT{n}" for n in range(1, 9)},
-}
-COE_TYPES: dict[str, int] = {
-    **{name: code for code, name in COE_TYPE_NAMES.items()},
-    "BIT": 0x30, "WSTRING": 0x0B,
-    # CoE has BYTE 0x1E, WORD 0x1F and DWORD 0x20, but real images write the unsigned type
-    # of the same size (WORD -> 0x06 in the NI 9144 image, BYTE -> 0x05 in the EL2262 one)
-    # and SOEM knows only those.
-    "BYTE": 0x05, "WORD": 0x06, "DWORD": 0x07,
-}
-
 DEFAULT_SIZE = 2048          # bytes, when the ESI gives no Eeprom/ByteSize
 SIZE_STEP = 128              # word 0x3E counts 128-byte (1 kbit) steps
 MAX_SIZE = 0x10000 * SIZE_STEP
@@ -710,20 +689,6 @@ def assigned_pdos(pdos: list[Pdo]) -> list[Pdo]:
     return [p for p in pdos if p.sm is not None and not p.virtual and p.index is not None]
 
 
-def coe_type(name: str | None) -> int:
-    """The CoE data type code of an ESI DataType name; 0 when it has none (records, ...)."""
-    if not name:
-        return 0
-    key = datatypes.canonical(name)
-    if key is None:
-        return 0
-    if key.startswith("STRING("):
-        return COE_TYPES["STRING"]
-    if key.startswith("WSTRING("):
-        return COE_TYPES["WSTRING"]
-    return COE_TYPES.get(key, 0)
-
-
 def _pdo_category(pdos: list[Pdo], strings: _Strings, device: Device, names: int) -> bytes:
     out = bytearray()
     for pdo in assigned_pdos(pdos):
@@ -747,7 +712,7 @@ def _pdo_category(pdos: list[Pdo], strings: _Strings, device: Device, names: int
             out += PDO_ENTRY.pack((e.index or 0) & 0xFFFF, (e.subindex or 0) & 0xFF,
                                   strings.add(e.name) if names == NAMES_ALL and not padding
                                   else 0,
-                                  0 if padding else coe_type(e.data_type), bits, 0)
+                                  0 if padding else datatypes.coe_type(e.data_type), bits, 0)
     return bytes(out)
 
 

@@ -556,6 +556,175 @@ def encode_sdo_info_error(code: int, counter: int = 0, *, address: int = 0) -> b
     body = struct.pack("<BBHI", SDO_INFO_ERROR, 0, 0, code)
     return _coe(CoeService.SDO_INFO, body, counter, address)
 
+# -- SDO information (ETG.1000.6 §5.6.3) ---------------------------------------------------
+# Header after the CoE header: opcode (bits 0-6) with the incomplete flag (bit 7), a
+# reserved byte, fragments left (u16).  The service data of a response that does not fit
+# SM1 goes in fragments, each with this header; "fragments left" counts down to 0 and all
+# but the last carry the incomplete flag (SOEM ``ecx_readODlist``, Wireshark's EtherCAT
+# mailbox dissector).
+
+class SdoInfoOpcode(IntEnum):
+    OD_LIST_REQUEST = 1
+    OD_LIST_RESPONSE = 2
+    OBJECT_DESCRIPTION_REQUEST = 3
+    OBJECT_DESCRIPTION_RESPONSE = 4
+    ENTRY_DESCRIPTION_REQUEST = 5
+    ENTRY_DESCRIPTION_RESPONSE = 6
+    ERROR = SDO_INFO_ERROR
+
+
+SDO_INFO_HEADER = struct.Struct("<BBH")
+SDO_INFO_INCOMPLETE = 0x80
+# Bytes of mailbox in front of the service data of each fragment (6 + 2 + 4).
+SDO_INFO_OVERHEAD = MBX_HEADER_SIZE + COE_HEADER_SIZE + SDO_INFO_HEADER.size
+
+# Get OD List: list types (u16 in front of the list).  Type 0 answers the five counts.
+OD_LIST_LENGTHS = 0
+OD_LIST_ALL = 1
+OD_LIST_RXPDO_MAPPABLE = 2
+OD_LIST_TXPDO_MAPPABLE = 3
+OD_LIST_BACKUP = 4
+OD_LIST_SETTINGS = 5
+
+# Object codes of an object description (CiA 301 as ETG.1000.6 takes them).
+OBJECT_CODE_VAR = 7
+OBJECT_CODE_ARRAY = 8
+OBJECT_CODE_RECORD = 9
+OBJECT_CODE_NAMES = {OBJECT_CODE_VAR: "VAR", OBJECT_CODE_ARRAY: "ARRAY",
+                     OBJECT_CODE_RECORD: "RECORD"}
+
+# Object access word of an entry description: read in PREOP/SAFEOP/OP (bits 0-2), write in
+# PREOP/SAFEOP/OP (bits 3-5), RxPDO and TxPDO mappable (bits 6, 7), backup, setting.
+ACCESS_READ_SHIFT = 0
+ACCESS_WRITE_SHIFT = 3
+ACCESS_RXPDO = 0x0040
+ACCESS_TXPDO = 0x0080
+# Value info byte of an entry description request/response: which optional fields follow
+# the access word (unit type u16, default, minimum, maximum value, each of the entry's size).
+VALUE_INFO_UNIT = 0x08
+VALUE_INFO_DEFAULT = 0x10
+VALUE_INFO_MINIMUM = 0x20
+VALUE_INFO_MAXIMUM = 0x40
+
+
+@record(frozen=True)
+class ObjectDescription:
+    """Get Object Description response data: index, data type, max subindex, object code,
+    name (the rest, no terminator)."""
+
+    index: int
+    data_type: int
+    max_subindex: int
+    object_code: int
+    name: str
+
+    _LAYOUT = struct.Struct("<HHBB")
+
+    def pack(self) -> bytes:
+        return (self._LAYOUT.pack(self.index, self.data_type, self.max_subindex,
+                                  self.object_code) + self.name.encode("utf-8"))
+
+    @classmethod
+    def unpack(cls, data: bytes) -> ObjectDescription:
+        if len(data) < cls._LAYOUT.size:
+            raise MailboxProtocolError(f"object description of {len(data)} bytes; at "
+                                       f"least {cls._LAYOUT.size} expected")
+        index, dtype, max_sub, code = cls._LAYOUT.unpack_from(data)
+        return cls(index, dtype, max_sub, code,
+                   data[cls._LAYOUT.size:].decode("utf-8", "replace").rstrip("\0"))
+
+
+@record(frozen=True)
+class EntryDescription:
+    """Get Entry Description response data: index, subindex, value info, data type, bit
+    length, object access, the optional values the value info names (raw), name."""
+
+    index: int
+    subindex: int
+    value_info: int
+    data_type: int
+    bit_length: int
+    access: int
+    name: str
+    values: bytes = b""
+
+    _LAYOUT = struct.Struct("<HBBHHH")
+
+    def pack(self) -> bytes:
+        return (self._LAYOUT.pack(self.index, self.subindex, self.value_info,
+                                  self.data_type, self.bit_length, self.access)
+                + self.values + self.name.encode("utf-8"))
+
+    @classmethod
+    def unpack(cls, data: bytes) -> EntryDescription:
+        if len(data) < cls._LAYOUT.size:
+            raise MailboxProtocolError(f"entry description of {len(data)} bytes; at "
+                                       f"least {cls._LAYOUT.size} expected")
+        index, sub, info, dtype, bits, access = cls._LAYOUT.unpack_from(data)
+        nbytes = (bits + 7) // 8
+        skip = ((2 if info & VALUE_INFO_UNIT else 0)
+                + nbytes * sum(1 for flag in (VALUE_INFO_DEFAULT, VALUE_INFO_MINIMUM,
+                                              VALUE_INFO_MAXIMUM) if info & flag))
+        rest = data[cls._LAYOUT.size:]
+        return cls(index, sub, info, dtype, bits, access,
+                   rest[skip:].decode("utf-8", "replace").rstrip("\0"), rest[:skip])
+
+
+def encode_sdo_info(opcode: int, data: bytes, counter: int = 0, *, incomplete: bool = False,
+                    fragments_left: int = 0, address: int = 0) -> bytes:
+    """One SDO information message: header and (a fragment of) the service data."""
+    body = SDO_INFO_HEADER.pack((opcode & 0x7F) | (SDO_INFO_INCOMPLETE if incomplete else 0),
+                                0, fragments_left) + data
+    return _coe(CoeService.SDO_INFO, body, counter, address)
+
+
+def encode_sdo_info_fragments(opcode: int, data: bytes, mbx_size: int) -> list[bytes]:
+    """The messages of one SDO information response in a ``mbx_size``-byte SM1: the service
+    data cut into fragments of ``mbx_size - 12`` bytes (rounded down to even)."""
+    # An even fragment size keeps each index of an OD list in one fragment, as SOEM's
+    # client reads them (whole u16 per fragment).
+    chunk = (mbx_size - SDO_INFO_OVERHEAD) & ~1
+    if chunk < 2:
+        raise ValueError(f"a {mbx_size}-byte mailbox cannot carry SDO information")
+    parts = [data[i:i + chunk] for i in range(0, len(data), chunk)] or [b""]
+    return [encode_sdo_info(opcode, part, incomplete=k < len(parts) - 1,
+                            fragments_left=len(parts) - 1 - k)
+            for k, part in enumerate(parts)]
+
+
+def encode_od_list_request(list_type: int = OD_LIST_ALL, counter: int = 0, *,
+                           address: int = 0) -> bytes:
+    return encode_sdo_info(SdoInfoOpcode.OD_LIST_REQUEST, struct.pack("<H", list_type),
+                           counter, address=address)
+
+
+def encode_object_description_request(index: int, counter: int = 0, *,
+                                      address: int = 0) -> bytes:
+    return encode_sdo_info(SdoInfoOpcode.OBJECT_DESCRIPTION_REQUEST,
+                           struct.pack("<H", index), counter, address=address)
+
+
+def encode_entry_description_request(index: int, subindex: int, value_info: int = 0,
+                                     counter: int = 0, *, address: int = 0) -> bytes:
+    return encode_sdo_info(SdoInfoOpcode.ENTRY_DESCRIPTION_REQUEST,
+                           struct.pack("<HBB", index, subindex, value_info), counter,
+                           address=address)
+
+
+def od_list_data(list_type: int, indices: list[int]) -> bytes:
+    """The service data of a Get OD List response: list type, then the indices (u16)."""
+    return struct.pack(f"<H{len(indices)}H", list_type, *indices)
+
+
+def decode_od_list(data: bytes) -> tuple[int, list[int]]:
+    """(list type, indices) of a reassembled Get OD List response."""
+    if len(data) < 2 or len(data) % 2:
+        raise MailboxProtocolError(f"OD list of {len(data)} bytes (a list type and u16 "
+                                   "indices expected)")
+    words = struct.unpack(f"<{len(data) // 2}H", data)
+    return words[0], list(words[1:])
+
+
 
 def decode_coe(data: bytes) -> CoeMessage:
     """One CoE message from the mailbox data (what follows the mailbox header).

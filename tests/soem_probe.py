@@ -51,6 +51,20 @@ def main() -> None:
             result["alias"] = [struct.unpack("<H", s._fprd(0x0012, 2))[0]
                                for s in master.slaves]
             return
+        if "od" in options:
+            # SOEM's SDO Information client (ecx_readODlist, ecx_readODdescription,
+            # ecx_readOE) over the dictionary of slave ``od``; nothing else.
+            result["od"] = [{"index": o.index, "data_type": o.data_type,
+                             "object_code": o.object_code, "name": o.name.decode(),
+                             # a VAR: its one entry's bit length and access (pysoem gives
+                             # a VAR no entry list)
+                             "bit_length": o.bit_length, "access": o.obj_access,
+                             "entries": [{"data_type": e.data_type,
+                                          "bit_length": e.bit_length,
+                                          "access": e.obj_access, "name": e.name.decode()}
+                                         for e in o.entries]}
+                            for o in master.slaves[options["od"]].od]
+            return
         if options.get("writes"):
             # config_init leaves the slaves in PREOP: the mailbox works, PDOs are writable.
             done = []

@@ -512,9 +512,16 @@ def test_mailbox_error_replies(slave):
     assert mbx_error(slave, pad_to(channel, 128)) == MbxErrorDetail.INVALID_CHANNEL
 
 
-def test_sdo_information_gets_an_information_error(slave):
-    # OD-list request (opcode 1, list type 1 = all objects).
+def test_sdo_information_is_answered_when_the_device_has_it(slave):
+    # The device says CoE@SdoInfo: an OD-list request (opcode 1, list type 1 = all objects)
+    # gets the list (opcode 2), in index order; an unknown opcode (9) an information error.
+    # (A device without SdoInfo: tests/test_od.py.)
     request = mbx.encode_mailbox(MbxType.COE, struct.pack("<HBBHH", 8 << 12, 1, 0, 0, 1), 1)
+    (header, info), = slave.raw(request)
+    assert isinstance(info, SdoInfo) and info.opcode == 2 and not info.incomplete
+    list_type, indices = mbx.decode_od_list(info.body)
+    assert list_type == 1 and indices == sorted(indices) and {0x1000, 0x1018} <= set(indices)
+    request = mbx.encode_mailbox(MbxType.COE, struct.pack("<HBBHH", 8 << 12, 9, 0, 0, 1), 2)
     (header, info), = slave.raw(request)
     assert isinstance(info, SdoInfo) and info.opcode == 7 and info.abort_code == 0x06010000
 

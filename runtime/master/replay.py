@@ -27,8 +27,9 @@ from ecatcfg.runtime.wire import Datagram, datagram_for
 
 if TYPE_CHECKING:     # imported where used: only ENIs with CoE InitCmds need the SDO client
     from ecatcfg.runtime.master.sdo_client import SdoDownload, SdoUpload
+    from ecatcfg.runtime.master.sdo_info import SdoInfoRequest
 
-Transaction = TypeVar("Transaction", bound="SdoDownload | SdoUpload")
+Transaction = TypeVar("Transaction", bound="SdoDownload | SdoUpload | SdoInfoRequest")
 
 # Defaults where the ENI gives no timeout (seconds).
 TIMEOUT_COMMAND = 1.0          # a plain register command, lost frames included

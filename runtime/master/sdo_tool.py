@@ -27,6 +27,7 @@ from __future__ import annotations
 import re
 import struct
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 from ecatcfg.eni.plan import MailboxArea, MailboxPlan
@@ -110,6 +111,23 @@ def sdo_transfer(transport: Transport, position: int, index: int, sub: int,
     if complete_access and sub > 1:
         raise SdoToolError("complete access starts at subindex 0 or 1, not "
                            f"{sub} (ETG.1000.6)")
+    result: list[bytes] = []
+    info = info if info is not None else SlaveMailbox(position)
+
+    def work(channel: MailboxChannel, size: int, counter: Callable[[], int]) -> Job:
+        yield from _transfer(info, channel, size, counter, index, sub, data,
+                             complete_access, timeout, result)
+
+    mailbox_session(transport, position, work, info)
+    return result[0]
+
+
+def mailbox_session(transport: Transport, position: int,
+                    work: Callable[[MailboxChannel, int, Callable[[], int]], Job],
+                    info: SlaveMailbox | None = None) -> SlaveMailbox:
+    """Prepare the slave at ``position`` as for an SDO transfer (steps 1-5 above), then run
+    ``work(channel, SM0 length, counter)`` over its mailbox; returns what the preparation
+    found.  Raises :class:`SdoToolError` as :func:`sdo_transfer` does."""
     n = count_slaves(transport)
     if not 0 <= position < n:
         raise SdoToolError(f"no slave at position {position}: the line has {n} "
@@ -117,15 +135,12 @@ def sdo_transfer(transport: Transport, position: int, index: int, sub: int,
                            + (f" (positions 0..{n - 1})" if n > 1 else ""))
     info = info if info is not None else SlaveMailbox(position)
     info.position = position
-    result: list[bytes] = []
-    run_jobs(transport, [_job(info, index, sub, data, complete_access, timeout, result)])
-    return result[0]
+    run_jobs(transport, [_session(info, work)])
+    return info
 
 
-def _job(info: SlaveMailbox, index: int, sub: int, data: bytes | None,
-         complete_access: bool, timeout: float, result: list[bytes]) -> Job:
-    from ecatcfg.runtime.master.sdo_client import SdoDownload, SdoUpload
-
+def _session(info: SlaveMailbox,
+             work: Callable[[MailboxChannel, int, Callable[[], int]], Job]) -> Job:
     yield from _prepare(info)
     send, recv = info.send, info.recv
     assert send is not None and recv is not None
@@ -133,14 +148,21 @@ def _job(info: SlaveMailbox, index: int, sub: int, data: bytes | None,
                        MailboxArea(recv.start, recv.length), protocols=["CoE"])
     channel = MailboxChannel(info.station_address, plan)
     yield from _empty_sm1(info, channel)
-    counter = _Counter()
+    yield from work(channel, send.length, _Counter())
+
+
+def _transfer(info: SlaveMailbox, channel: MailboxChannel, size: int,
+              counter: Callable[[], int], index: int, sub: int, data: bytes | None,
+              complete_access: bool, timeout: float, result: list[bytes]) -> Job:
+    from ecatcfg.runtime.master.sdo_client import SdoDownload, SdoUpload
+
     what = f"SDO {'upload' if data is None else 'download'} 0x{index:04X}:{sub:02X}"
     t: SdoUpload | SdoDownload
     try:
         if data is None:
-            t = SdoUpload(index, sub, complete_access, send.length, counter)
+            t = SdoUpload(index, sub, complete_access, size, counter)
         else:
-            t = SdoDownload(index, sub, data, complete_access, send.length, counter)
+            t = SdoDownload(index, sub, data, complete_access, size, counter)
     except ValueError as exc:                # an SM0 too small for any SDO
         raise SdoToolError(f"slave {info.position}: {exc}") from None
     try:

@@ -87,7 +87,9 @@ def emulated_slave(spec: SlaveSpec) -> EmulatedSlave:
         mailbox = MailboxServer(*sizes)
         if od is not None:
             from ecatcfg.runtime.segment.sdo_server import SdoServer
-            mailbox.coe = SdoServer(od, *sizes)
+            coe = dev.mailbox.coe
+            # SDO Information only where the ESI says the device has it (CoE@SdoInfo).
+            mailbox.coe = SdoServer(od, *sizes, sdo_info=coe is not None and coe.sdo_info)
         if "EoE" in dev.mailbox.protocols:
             from ecatcfg.runtime.segment.eoe_server import EoeServer
             mailbox.eoe = EoeServer(dev.mailbox.eoe, sizes[1])

@@ -83,6 +83,10 @@ class OdObject:
     name: str
     entries: dict[int, OdEntry] = field(default_factory=dict)
     variable: bool = False
+    # An ARRAY (entries 1..n of one type; ETG.2000 an array DataType, or the PDO mapping and
+    # assignment objects built without one) rather than a RECORD: the object code SDO
+    # Information describes the object with.
+    array: bool = False
     # The mapping object of a virtual PDO (ETG.2000 Pdo@Virtual): the device configures its
     # variables from the mapping the master writes, so an entry may name an object the
     # dictionary does not have.

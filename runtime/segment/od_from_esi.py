@@ -134,6 +134,21 @@ def _object_layout(dic: Dictionary, obj: DictObject) -> tuple[bool, list[_EntryS
     return True, [_EntrySpec(0, pick_name(obj.names), vtype, vsize, obj.flags)]
 
 
+def _is_array(dic: Dictionary, obj: DictObject) -> bool:
+    """Whether the ESI describes ``obj`` as an array: its type has an ArrayInfo, or its
+    SubItems are subindex 0 and one array-typed SubItem (ETG.2000 "Elements")."""
+    dt = dic.data_types.get(obj.type)
+    if dt is None:
+        return False
+    if not dt.sub_items:
+        return bool(dt.array_info) and dt.array_info[0].lbound >= 1
+    rest = [item for item in dt.sub_items if item.subindex != 0]
+    if len(rest) != 1 or rest[0].subindex is not None:
+        return False
+    element = dic.data_types.get(rest[0].type)
+    return element is not None and bool(element.array_info) and not element.sub_items
+
+
 def _access(flags: ObjectFlags | None) -> tuple[str, frozenset[AlState], frozenset[AlState]]:
     # No Flags/Access at all: our choice is read/write in every mailbox state, so that a
     # master's InitCmd for such an object is not refused by the emulation.
@@ -259,7 +274,8 @@ class _Builder:
 
     def from_dictionary(self, dic: Dictionary, index: int, obj: DictObject) -> OdObject:
         variable, specs = _object_layout(dic, obj)
-        od_obj = OdObject(index, pick_name(obj.names), variable=variable)
+        od_obj = OdObject(index, pick_name(obj.names), variable=variable,
+                          array=not variable and _is_array(dic, obj))
         if variable:
             infos = {0: obj.info} if obj.info is not None else {}
         else:
@@ -403,6 +419,8 @@ class _Builder:
         """A PDO mapping or assignment: subindex 0 = ``len(values)``, subindexes 1..capacity
         of ``data_type`` holding ``values`` and zeros after them, writable in ``writes``."""
         self._si0(obj, len(values), writes)
+        if self.dic is None or obj.index not in self.dic.objects:
+            obj.array = True                  # the ESI's own description wins
         for sub in range(1, capacity + 1):
             entry = obj.entries.get(sub)
             if entry is None:

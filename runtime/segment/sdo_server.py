@@ -9,9 +9,10 @@ SOES ``MBX_error`` would send.
 
 Choices where those sources are silent:
 
-- SDO information requests (service 8) are answered with an SDO information error
-  (opcode 7) carrying abort 0x06010000, as SOES answers opcodes it does not implement; the
-  emulation has no OD list / object descriptions.
+- SDO information requests (service 8) go to ``sdo_info_server.py`` when the device has
+  SDO Information (ESI ``CoE@SdoInfo``); without it they are answered with an SDO
+  information error (opcode 7) carrying abort 0x06010000, as SOES answers opcodes it does
+  not implement.
 - Other CoE services (emergency, PDO over mailbox, an SDO *response* sent to the slave) get a
   mailbox error reply with detail 4 (service not supported).
 """
@@ -25,11 +26,12 @@ from ecatcfg.runtime.mailbox import (
     ABORT_TOGGLE, ABORT_TYPE_MISMATCH, ABORT_UNKNOWN_COMMAND, ABORT_UNSUPPORTED_ACCESS,
     COE_HEADER, NORMAL_OVERHEAD, SEGMENT_OVERHEAD, Abort, CoeMessage, CoeService,
     DownloadSegment, InitiateDownload, InitiateUpload, MailboxProtocolError, MbxErrorDetail,
-    SdoAbort, UnknownSdo, UploadSegmentRequest, decode_coe, encode_abort,
+    SdoAbort, SdoInfo, UnknownSdo, UploadSegmentRequest, decode_coe, encode_abort,
     encode_download_response, encode_download_segment_response, encode_sdo_info_error,
     encode_upload_expedited, encode_upload_normal, encode_upload_segment,
 )
 from ecatcfg.runtime.segment.objects import ObjectDictionary
+from ecatcfg.runtime.segment.sdo_info_server import SdoInfoServer
 
 
 @dataclass(slots=True)
@@ -63,7 +65,8 @@ class SdoServer:
     initiate upload response, SM1 size - 9 per segment).
     """
 
-    def __init__(self, od: ObjectDictionary, mbx_out_size: int, mbx_in_size: int) -> None:
+    def __init__(self, od: ObjectDictionary, mbx_out_size: int, mbx_in_size: int, *,
+                 sdo_info: bool = True) -> None:
         if min(mbx_out_size, mbx_in_size) < NORMAL_OVERHEAD:
             raise ValueError(f"mailbox too small for CoE: SM0 {mbx_out_size}, SM1 "
                              f"{mbx_in_size} bytes")
@@ -71,6 +74,7 @@ class SdoServer:
         self.mbx_out_size = mbx_out_size
         self.mbx_in_size = mbx_in_size
         self._transfer: _Download | _Upload | None = None
+        self.info = SdoInfoServer(od, mbx_in_size) if sdo_info else None
 
     def reset(self) -> None:
         """The mailbox starts afresh (INIT -> PREOP): forget any transfer in progress, as
@@ -84,8 +88,10 @@ class SdoServer:
         :class:`MailboxProtocolError` for a message the mailbox refuses."""
         msg = decode_coe(data)
         service = COE_HEADER.unpack_from(data)[0] >> 12
-        if service == CoeService.SDO_INFO:
-            return [encode_sdo_info_error(ABORT_UNSUPPORTED_ACCESS)]
+        if isinstance(msg, SdoInfo):
+            if self.info is None:
+                return [encode_sdo_info_error(ABORT_UNSUPPORTED_ACCESS)]
+            return self.info.handle(msg)
         if service != CoeService.SDO_REQUEST:
             raise MailboxProtocolError(f"CoE service {service} is not served",
                                        detail=MbxErrorDetail.SERVICE_NOT_SUPPORTED)

@@ -1,0 +1,141 @@
+"""``ecatcfg od``: a slave's object dictionary as the slave describes it (SDO Information),
+optionally compared with its ESI dictionary."""
+
+from __future__ import annotations
+
+import argparse
+from typing import Any
+
+EPILOG = ("Use it on a line no other master is driving: the slave is brought to PREOP "
+          "(mailbox from its SII) if it is below PREOP, and stays there.  With --esi the "
+          "device is found by the identity in the slave's SII, and every object missing on "
+          "the slave or differing in data type, bit length or access is listed (objects "
+          "only the slave has are listed apart and do not fail).  Exit 1 on "
+          "an SDO information error of the list or an object, no answer, or (with --esi) a "
+          "difference.")
+
+
+def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    p = sub.add_parser(
+        "od", help="upload a slave's object dictionary (SDO Information), compare with "
+                   "its ESI",
+        description="The object dictionary of the slave at position --slave (0 = the "
+                    "first after the master), uploaded with SDO Information (ETG.1000.6): "
+                    "the list of all objects, each object's description (object code, "
+                    "data type, max subindex, name) and each entry's (data type, bit "
+                    "length, access per state, PDO mapping, name).",
+        epilog=EPILOG)
+    p.add_argument("--iface", required=True, metavar="IF",
+                   help="network interface of the EtherCAT line")
+    p.add_argument("--slave", required=True, type=int, metavar="POS",
+                   help="position of the slave on the line (0 = first)")
+    p.add_argument("--esi", action="append", default=[], metavar="PATH",
+                   help="ESI file or folder (searched recursively) to compare with; "
+                        "repeatable")
+    p.add_argument("--timeout", type=float, default=3.0, metavar="S",
+                   help="seconds the slave may take to answer each request (default 3)")
+    p.add_argument("--pcap", metavar="FILE",
+                   help="record every frame sent and received as pcapng (Wireshark)")
+    p.add_argument("--format", choices=["text", "json"], default="text")
+    p.add_argument("--no-cache", action="store_true",
+                   help="do not read or write the ESI index cache")
+    p.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    import json
+    import sys
+
+    from ecatcfg.errors import UsageError
+    from ecatcfg.runtime.link import RawLink
+    from ecatcfg.runtime.master import od_tool
+    from ecatcfg.runtime.master.transport import Transport
+
+    if args.slave < 0:
+        raise UsageError(f"--slave {args.slave}: positions count from 0")
+    if args.timeout <= 0:
+        raise UsageError(f"--timeout {args.timeout}: must be positive")
+    lib = None
+    if args.esi:
+        from ecatcfg.esi.library import Library
+        lib = Library(args.esi, cache=not args.no_cache)
+        for problem in lib.problems:
+            print(f"warning: {problem}", file=sys.stderr)
+    recorder = None
+    if args.pcap:
+        from ecatcfg.cli.paths import output_file
+        from ecatcfg.runtime.pcap import PcapRecorder
+        output_file(args.pcap)
+        recorder = PcapRecorder(args.pcap)
+    device = None
+    esi_where = None
+    try:
+        with RawLink(args.iface) as link:
+            transport = Transport(link, recorder=recorder)
+            if lib is not None:
+                device, esi_where = _esi_device(lib, transport, args.slave)
+            objects = od_tool.upload_dictionary(transport, args.slave, timeout=args.timeout)
+    finally:
+        if recorder is not None:
+            recorder.close()
+    differences: list[str] | None = None
+    extras: list[str] = []
+    if device is not None:
+        differences, extras = od_tool.compare_with_esi(objects, device)
+    if args.format == "json":
+        out: dict[str, Any] = {"slave": args.slave, "objects": od_tool.as_json(objects)}
+        if differences is not None:
+            out.update(esi=esi_where, differences=differences, extras=extras)
+        print(json.dumps(out, indent=2))
+    else:
+        _print_text(objects)
+        if differences is not None:
+            print(f"compared with {esi_where}: "
+                  + ("no differences" if not differences
+                     else f"{len(differences)} difference"
+                          f"{'s' if len(differences) != 1 else ''}"))
+            for line in differences:
+                print(f"  {line}")
+            for line in extras:
+                print(f"  (more) {line}")
+    return 1 if differences else 0
+
+
+def _esi_device(lib: Any, transport: Any, position: int) -> tuple[Any, str]:
+    """The ESI device of the slave at ``position``, by the identity in its SII."""
+    from ecatcfg.cli.scan import _esi_entry
+    from ecatcfg.errors import EcatcfgError
+    from ecatcfg.runtime.master.scan import scan
+
+    found = [s for s in scan(transport) if s.position == position]
+    if not found:
+        raise EcatcfgError(f"no slave at position {position}")
+    s = found[0]
+    exact, other, note = _esi_entry(lib, s)
+    entry = exact or other
+    if entry is None:
+        raise EcatcfgError(f"slave {position} (vendor 0x{s.vendor_id:08x}, product "
+                           f"0x{s.product_code:08x}, revision 0x{s.revision:08x}): no "
+                           "device of that identity in the ESI files given")
+    where = f"{entry.file}:{entry.line} ({entry.type.strip()})"
+    if note:
+        where += f"; {note}"
+    return lib.device(entry), where
+
+
+def _print_text(objects: Any) -> None:
+    from ecatcfg.esi.datatypes import coe_type_name
+    from ecatcfg.runtime.mailbox import OBJECT_CODE_NAMES
+    from ecatcfg.runtime.master.od_tool import access_short
+
+    print(f"{len(objects)} object{'s' if len(objects) != 1 else ''}")
+    for obj in objects:
+        d = obj.description
+        kind = OBJECT_CODE_NAMES.get(d.object_code, str(d.object_code))
+        print(f"0x{d.index:04X}  {kind:6} {d.name}")
+        for e in obj.entries.values():
+            pdo = "".join(c for c, bit in (("R", 0x40), ("T", 0x80)) if e.access & bit)
+            print(f"  :{e.subindex:02X}  {coe_type_name(e.data_type):12} "
+                  f"{e.bit_length:>4} bit  {access_short(e.access):12} {pdo:2} {e.name}")
+        for sub, code in obj.missing.items():
+            print(f"  :{sub:02X}  (SDO information error 0x{code:08X})")

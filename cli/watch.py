@@ -1,0 +1,173 @@
+"""``ecatcfg watch``: live process data by variable name, outputs forced by name."""
+
+from __future__ import annotations
+
+import argparse
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from ecatcfg.runtime.watch import Value, Watch
+
+
+def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    p = sub.add_parser(
+        "watch", help="live process data by variable name, forcing outputs",
+        description="Bring the network of an ENI up to OP and show its process data by "
+                    "variable name while it cycles: on a terminal a table refreshed in "
+                    "place, in a pipe one line per variable that changed (all of them "
+                    "first).  --force writes an output variable every cycle.",
+        epilog="Variable names are the ENI's (ecatcfg show ENI lists them).  Ctrl-C stops "
+               "and brings the line back to INIT.  Exit 1 when a slave refuses a state or "
+               "the ENI is wrong; 2 for usage errors (an unknown variable, a value out of "
+               "range).")
+    p.add_argument("eni", metavar="ENI", help="ENI file (ETG.2100 XML)")
+    target = p.add_mutually_exclusive_group(required=True)
+    target.add_argument("--iface", metavar="IF", help="network interface of the EtherCAT line")
+    target.add_argument("--virtual", action="store_true",
+                        help="on a virtual segment emulating the ENI's slaves")
+    p.add_argument("--esi", action="append", metavar="PATH",
+                   help="with --virtual: ESI files or folders the slaves are emulated from")
+    p.add_argument("--force", action="append", default=[], metavar="NAME=VALUE",
+                   help="write output NAME every cycle (1/0/true/false, integers, 0x hex, "
+                        "numbers for REAL); repeatable")
+    p.add_argument("--match", action="append", default=[], metavar="PATTERN",
+                   help="show only the variables matching this shell pattern (e.g. "
+                        "'axis1.*'); repeatable")
+    p.add_argument("--interval", type=float, default=0.2, metavar="S",
+                   help="seconds between refreshes (default 0.2)")
+    p.add_argument("--cycles", type=int, metavar="N",
+                   help="run N bus cycles, then stop (default: until Ctrl-C)")
+    p.add_argument("--format", choices=["text", "json"], default="text",
+                   help="json: one JSON object per change, {t, name, value, output}")
+    p.add_argument("--no-cache", action="store_true",
+                   help="do not read or write the ESI index cache and the ENI plan cache")
+    p.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    import sys
+    import time
+
+    from ecatcfg.eni import cache as eni_cache
+    from ecatcfg.errors import EcatcfgError, UsageError
+    from ecatcfg.runtime.network import Network
+    from ecatcfg.runtime.watch import Watch, parse_force
+
+    if args.interval <= 0:
+        raise UsageError(f"--interval {args.interval}: must be positive")
+    if args.cycles is not None and args.cycles < 1:
+        raise UsageError(f"--cycles {args.cycles}: must be 1 or more")
+    if args.esi and not args.virtual:
+        raise UsageError("--esi goes with --virtual (the devices to emulate)")
+    if args.no_cache:
+        from ecatcfg.eni import reader as eni_reader
+        plan = eni_reader.read_file(args.eni)
+    else:
+        plan = eni_cache.read_file(args.eni)
+    forced: dict[str, Value] = {}
+    for text in args.force:
+        try:
+            name, value = parse_force(plan, text)
+        except EcatcfgError as exc:
+            raise UsageError(str(exc)) from None
+        forced[name] = value
+
+    if args.virtual:
+        net = Network.virtual(plan, args.esi, esi_cache=not args.no_cache,
+                              eni_name=args.eni)
+    else:
+        from ecatcfg.runtime.link import RawLink
+        net = Network(plan, RawLink(args.iface), eni_name=args.eni)
+    live = args.format == "text" and sys.stdout.isatty()
+    with net:
+        try:
+            watch = Watch(net, args.match or None, forced)
+        except EcatcfgError as exc:
+            raise UsageError(str(exc)) from None
+        net.up()
+        start = time.monotonic()
+        show = _Live(watch) if live else _Lines(watch, args.format == "json", start)
+        due = [0.0]
+
+        def each_cycle(_net: Network) -> None:
+            watch.force()
+            now = time.monotonic()
+            if now >= due[0]:
+                due[0] = now + args.interval
+                show.refresh()
+
+        try:
+            with show:
+                net.run(args.cycles, each_cycle)
+                show.refresh()
+        except KeyboardInterrupt:
+            pass
+    return 0
+
+
+class _Lines:
+    """Plain lines (or JSON lines): each variable that changed since the last refresh."""
+
+    def __init__(self, watch: Watch, as_json: bool, start: float) -> None:
+        self.watch = watch
+        self.as_json = as_json
+        self.start = start
+
+    def __enter__(self) -> _Lines:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        return None
+
+    def refresh(self) -> None:
+        import json
+        import time
+
+        t = round(time.monotonic() - self.start, 3)
+        for name, value in self.watch.changes().items():
+            output = name in self.watch.outputs
+            if self.as_json:
+                print(json.dumps({"t": t, "name": name, "value": value, "output": output}),
+                      flush=True)
+            else:
+                forced = " (forced)" if name in self.watch.forced else ""
+                print(f"{t:9.3f}  {'out' if output else 'in '}  {name} = {_text(value)}"
+                      f"{forced}", flush=True)
+
+
+class _Live:
+    """A table refreshed in place on the terminal (rich)."""
+
+    def __init__(self, watch: Watch) -> None:
+        from rich.live import Live
+
+        self.watch = watch
+        self.live = Live(self._table(), auto_refresh=False)
+
+    def __enter__(self) -> _Live:
+        self.live.__enter__()
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.live.__exit__(*exc)
+
+    def refresh(self) -> None:
+        self.live.update(self._table(), refresh=True)
+
+    def _table(self) -> Any:
+        from rich.table import Table
+
+        table = Table("variable", "dir", "value")
+        for name, value in self.watch.values().items():
+            direction = "out" if name in self.watch.outputs else "in"
+            shown = _text(value) + (" (forced)" if name in self.watch.forced else "")
+            table.add_row(name, direction, shown)
+        return table
+
+
+def _text(value: Value) -> str:
+    if isinstance(value, bool):
+        return "1" if value else "0"
+    if isinstance(value, float):
+        return f"{value:g}"
+    return str(value)
