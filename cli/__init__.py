@@ -18,6 +18,7 @@ from ecatcfg.errors import EcatcfgError
 
 # Subcommands in the order --help lists them (module names in ecatcfg.cli, but see MODULES).
 SUBCOMMANDS = ("devices", "lint", "check", "schema", "compile", "show", "diff", "report",
+               "export",
                "demo", "apply", "simulate", "sii", "scan", "sdo", "alias")
 # A subcommand whose module is not named after it: cli/report.py is apply's progress and
 # tables, older than the `report` command.
