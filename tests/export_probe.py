@@ -4,8 +4,9 @@ one JSON object.
 
 The user's sequence from the module's docstring: config_init, the module's setup, then
 config_map; then SAFEOP, OP, ``cycles`` process data cycles (the working counters seen
-in ``wkcs``), and SDO uploads of ``read``
-([[slave, index, subindex], ...]) as hex.  ``setup_error`` holds the module's SetupError.
+in ``wkcs``), SDO uploads of ``read``
+([[slave, index, subindex], ...]) as hex, and each slave's DC activation and SYNC0
+cycle registers in ``dc``.  ``setup_error`` holds the module's SetupError.
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ import time
 
 import pysoem
 
-STATE_TIMEOUT_US = 2_000_000
+STATE_TIMEOUT_US = 10_000_000      # a loaded 2-core machine: margin over the ~0.1 s needed
 
 
 def main() -> None:
@@ -63,6 +64,9 @@ def main() -> None:
         result["wkcs"] = sorted(set(wkcs))
         result["read"] = [master.slaves[n].sdo_read(index, sub).hex()
                           for n, index, sub in options.get("read", [])]
+        # Each slave's DC activation (0x0981) and SYNC0 cycle time (0x09A0) in OP.
+        result["dc"] = [(s._fprd(0x0981, 1).hex(), s._fprd(0x09A0, 4)[::-1].hex())
+                        for s in master.slaves]
         master.state = pysoem.INIT_STATE
         master.write_state()
     finally:

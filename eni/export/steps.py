@@ -118,14 +118,16 @@ def _refuse(file: str, plan: NetworkPlan, slave: SlavePlan,
 
 
 def _sync_activation(slave: SlavePlan) -> int:
-    """The DC activation byte (0x0981, ESC Section II) the slave's PREOP hook transitions
-    write, which ``dc_sync`` programs through SOEM instead; 0 when they write none."""
+    """The DC activation byte (0x0981, ESC Section II) the slave has when it enters SAFEOP,
+    which ``dc_sync`` programs through SOEM instead: the last write of INIT->PREOP, then of
+    PREOP->SAFEOP (an ENI clears it in IP and sets it in PS); 0 when they write none."""
     value = 0
-    for cmd in slave.init_cmds:
-        if cmd.cmd in REGISTER_WRITES and cmd.ado is not None and \
-                set(cmd.transitions) & HOOK_TRANSITIONS and \
-                cmd.ado <= DC_ACTIVATION < cmd.ado + len(cmd.payload):
-            value = cmd.payload[DC_ACTIVATION - cmd.ado]
+    for transition in (Transition.IP, Transition.PS):
+        for cmd in slave.init_cmds:
+            if cmd.cmd in REGISTER_WRITES and cmd.ado is not None and \
+                    transition in cmd.transitions and \
+                    cmd.ado <= DC_ACTIVATION < cmd.ado + len(cmd.payload):
+                value = cmd.payload[DC_ACTIVATION - cmd.ado]
     return value
 
 
