@@ -1,5 +1,6 @@
-"""``ecatcfg export ENI --format pysoem -o FILE``: an ENI (any tool's) as code for the
-master a user already runs (``eni/export/``).
+"""``ecatcfg export ENI --format pysoem|soem-c -o FILE``: an ENI (any tool's) as code for
+the master a user already runs (``eni/export/``); ``soem-c`` writes ``FILE`` (C) and the
+header beside it (``FILE`` with ``.h``).
 
 The file is written atomically, and nothing is written when the ENI has errors or asks for
 something the exported hooks cannot carry (the message names the file, line and slave;
@@ -11,22 +12,26 @@ from __future__ import annotations
 import argparse
 import sys
 
-FORMATS = ("pysoem",)
+FORMATS = ("pysoem", "soem-c")
 
 
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    p = sub.add_parser("export", help="an ENI as set-up code for pysoem",
+    p = sub.add_parser("export", help="an ENI as set-up code for pysoem or SOEM (C)",
                        description="Write an ENI's configuration (ours or any tool's) in the "
                                    "form another master takes.  pysoem: a Python module "
                                    "whose setup(master), called after config_init(), checks "
                                    "each slave's identity and installs a config_func per "
                                    "slave that writes the ENI's PDO assignment, mapping and "
                                    "start-up SDOs and programs DC; the process image is "
-                                   "listed by variable name.")
+                                   "listed by variable name.  soem-c: a C source and header "
+                                   "with the same hooks for SOEM (PO2SOconfigx), the process "
+                                   "data as packed structs with compile-time offset checks, "
+                                   "and a minimal main (-DECATCFG_MAIN).")
     p.add_argument("eni", metavar="ENI", help="ENI file")
     p.add_argument("--format", required=True, choices=FORMATS, help="what to write")
     p.add_argument("-o", "--output", required=True, metavar="FILE",
-                   help="the file to write (atomically)")
+                   help="the file to write (atomically); soem-c: the C source, its header "
+                        "beside it with the suffix .h")
     p.add_argument("--no-cache", action="store_true", help="do not use the ENI plan cache")
     p.set_defaults(run=run)
 
@@ -39,7 +44,7 @@ def run(args: argparse.Namespace) -> int:
     from ecatcfg.cli.inputs import kind
     from ecatcfg.cli.paths import output_file
     from ecatcfg.eni.cache import PlanCache, read_file
-    from ecatcfg.eni.export import pysoem_module
+    from ecatcfg.eni.export import pysoem_module, soem_c
     from ecatcfg.eni.export.steps import slave_setups
     from ecatcfg.eni.reader import read_file as read_uncached
     from ecatcfg.errors import UsageError
@@ -55,11 +60,22 @@ def run(args: argparse.Namespace) -> int:
         read_file(args.eni, cache=PlanCache())
     setups = slave_setups(plan, args.eni)
     digest = hashlib.sha256(Path(args.eni).read_bytes()).hexdigest()
-    text = pysoem_module.render(setups, Path(args.eni).name, digest, __version__)
-    try:
-        write_atomic(out, text)
-    except OSError as exc:
-        raise UsageError(f"-o {args.output}: cannot write: {exc.strerror}") from None
-    print(f"wrote {args.output}: {len(setups)} slaves, "
+    outputs: list[tuple[Path, bytes]]
+    if args.format == "pysoem":
+        outputs = [(out, pysoem_module.render(setups, Path(args.eni).name, digest,
+                                              __version__))]
+    else:
+        header = out.with_suffix(".h")
+        if header == out:
+            raise UsageError(f"-o {args.output}: the C source needs another suffix than .h")
+        source, text = soem_c.render(setups, header.name, Path(args.eni).name, digest,
+                                     __version__)
+        outputs = [(out, source), (header, text)]
+    for path, data in outputs:
+        try:
+            write_atomic(path, data)
+        except OSError as exc:
+            raise UsageError(f"{path}: cannot write: {exc.strerror}") from None
+    print(f"wrote {', '.join(str(p) for p, _ in outputs)}: {len(setups)} slaves, "
           f"{sum(len(s.sdos) for s in setups)} SDO downloads", file=sys.stderr)
     return 0
