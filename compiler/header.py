@@ -16,7 +16,7 @@ import jinja2
 
 from ecatcfg.eni.plan import NetworkPlan, Variable
 from ecatcfg.esi import datatypes
-from ecatcfg.esi.c_names import C_TYPES, comment, identifier, identifiers
+from ecatcfg.esi.c_names import C_TYPES, comment, identifiers
 from ecatcfg.fileio import write_atomic
 
 TEMPLATE = "process_image.h.j2"

@@ -42,8 +42,9 @@ from ecatcfg.record import field, record
 # and alias 0x0010-0x0013, DL control and port 0x0100-0x0103, AL control and status
 # 0x0120-0x0135, PDI control 0x0140 (ESC type, read by the master's checks only), IRQ mask
 # 0x0200, error counters 0x0300-0x0313, SII interface 0x0500-0x050F, the FMMUs
-# 0x0600-0x06FF, the SyncManagers 0x0800-0x08FF (an ENI clears all 32), DC time, delay, filter, activation, start
-# and cycle times 0x0900-0x09A7 (ESC datasheet Section II register map).
+# 0x0600-0x06FF, the SyncManagers 0x0800-0x08FF (an ENI clears all 32), DC time, delay,
+# filter, activation, start and cycle times 0x0900-0x09A7 (ESC datasheet Section II
+# register map).
 SOEM_REGISTERS: tuple[range, ...] = (
     range(0x0010, 0x0014), range(0x0100, 0x0104), range(0x0120, 0x0136),
     range(0x0140, 0x0142), range(0x0200, 0x0202), range(0x0300, 0x0314),
@@ -216,7 +217,8 @@ def slave_setups(plan: NetworkPlan, file: str | Path) -> list[SlaveSetup]:
         recv = pd.recv if pd else []
         out.append(SlaveSetup(
             slave.position, slave.name, slave.vendor_id, slave.product_code, slave.revision,
-            _register_steps(name, plan, slave), _sdo_steps(name, plan, slave), slave.dc, _sync_activation(slave),
+            _register_steps(name, plan, slave), _sdo_steps(name, plan, slave), slave.dc,
+            _sync_activation(slave),
             sum(r.bit_length for r in send), sum(r.bit_length for r in recv),
             _entries(plan.process_image.outputs, send),
             _entries(plan.process_image.inputs, recv)))
