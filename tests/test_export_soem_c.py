@@ -154,3 +154,32 @@ def test_ec_engineer_elmo_eni_gives_soem_what_our_eni_gives(veth_netns, soem_sou
         assert re.search(r"^cycles 1000 wkc_errors 0 ", run.stdout, re.M), run.stdout
         results.append(bits)
     assert results[0] == results[1]
+
+
+def test_the_c_export_of_every_corpus_eni_compiles(soem_sources, corpus, corpus_extra,
+                                                   tmp_path):
+    """Every real ENI the export accepts gives C that gcc takes with -Wall -Wextra -Werror,
+    its struct offsets asserted (names with line breaks, odd types and bit entries of
+    real files included)."""
+    from ecatcfg.eni.export.steps import ExportError, slave_setups
+    from ecatcfg.eni.reader import read_file
+    from ecatcfg.errors import EcatcfgError
+    built = 0
+    for eni in sorted([*corpus.glob("eni/**/*.xml"), *corpus_extra.glob("eni/**/*.xml")]):
+        try:
+            setups = slave_setups(read_file(eni), eni)
+        except (ExportError, EcatcfgError):
+            continue                          # refused by name: test_export_corpus.py
+        source = tmp_path / f"eni{built}.c"
+        done = export_c(eni, source)
+        assert done.returncode == 0, done.stderr
+        assert len(setups) > 0
+        includes = [f"-I{soem_sources / d}" for d in ("soem", "osal", "osal/linux",
+                                                       "oshw/linux")]
+        done = subprocess.run(["gcc", "-fsyntax-only", "-std=c11", "-Wall", "-Wextra",
+                               "-Werror", "-D_GNU_SOURCE", "-DEC_VER2", "-DECATCFG_MAIN",
+                               f"-I{tmp_path}", *includes, str(source)],
+                              capture_output=True, text=True, timeout=120)
+        assert done.returncode == 0, f"{eni}: {done.stderr}"
+        built += 1
+    assert built >= 10

@@ -20,6 +20,11 @@ if TYPE_CHECKING:
 TEMPLATE = "pysoem_setup.py.j2"
 
 
+def _one_line(text: str) -> str:
+    """Text for a ``#`` comment: one line (a name from a file may hold line breaks)."""
+    return " ".join(text.split())
+
+
 def _sync1(activation: int) -> bool:
     return bool(activation & DC_ACTIVATE_SYNC1)
 
@@ -33,6 +38,7 @@ def _template() -> jinja2.Template:
         autoescape=False, keep_trailing_newline=True, trim_blocks=True, lstrip_blocks=True,
         undefined=jinja2.StrictUndefined)
     env.filters["py"] = repr
+    env.filters["line"] = _one_line
     env.tests["sync1"] = _sync1
     return env.get_template(TEMPLATE)
 
