@@ -207,6 +207,10 @@ ESC_DEVICE_EMULATION = 0x01
 # are enabled (Beckhoff ESC Section II, ESC Configuration 0x0141: "0: disabled (power
 # saving)").  Loaded from SII word 0 like bit 0.
 ESC_DC_SYNC_UNIT = 0x04
+# DC activation 0x0981 (the high byte of AssignActivate): bit 0 cyclic operation, bit 1
+# SYNC0, bit 2 SYNC1 (ESC Section II, Activation register 0x0981).
+DC_ACTIVATION = 0x0981
+DC_ACTIVATE_SYNC1 = 0x04
 ESC_DC_LATCH_UNIT = 0x08
 # PDI control 0x0140: the process data interface.  0x04 = digital I/O, the PDI of simple
 # terminals (EL1xxx, EL2xxx): the ESC drives the I/O pins from process memory itself

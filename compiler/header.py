@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import functools
 import re
-import unicodedata
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
@@ -17,23 +16,11 @@ import jinja2
 
 from ecatcfg.eni.plan import NetworkPlan, Variable
 from ecatcfg.esi import datatypes
+from ecatcfg.esi.c_names import C_TYPES, comment, identifiers
 from ecatcfg.fileio import write_atomic
 
 TEMPLATE = "process_image.h.j2"
 
-# IEC type -> (C type of the value, whatever the alignment; what it is).
-_C_TYPES: dict[str, tuple[str, str]] = {
-    "BOOL": ("uint8_t", "bit"), "BIT": ("uint8_t", "bit"),
-    **{f"BIT{n}": ("uint8_t", "bits") for n in range(2, 9)},
-    "SINT": ("int8_t", "signed"), "INT": ("int16_t", "signed"),
-    **dict.fromkeys(["INT24", "DINT"], ("int32_t", "signed")),
-    **dict.fromkeys(["INT40", "INT48", "INT56", "LINT"], ("int64_t", "signed")),
-    **dict.fromkeys(["USINT", "BYTE", "BITARR8"], ("uint8_t", "unsigned")),
-    **dict.fromkeys(["UINT", "WORD", "BITARR16"], ("uint16_t", "unsigned")),
-    **dict.fromkeys(["UINT24", "UDINT", "DWORD", "BITARR32"], ("uint32_t", "unsigned")),
-    **dict.fromkeys(["UINT40", "UINT48", "UINT56", "ULINT", "LWORD"], ("uint64_t", "unsigned")),
-    "REAL": ("float", "float"), "LREAL": ("double", "double"),
-}
 _GETTER = {"bit": "get_bit", "bits": "get_bits", "unsigned": "get_bits", "signed": "get_sbits",
            "float": "get_real", "double": "get_lreal"}
 
@@ -53,51 +40,17 @@ class Row:
     comment: str | None
 
 
-def identifier(name: str) -> str:
-    """``Term 1 (EL1008).Channel 1`` -> ``TERM_1_EL1008_CHANNEL_1``; accents dropped (NFKD),
-    other non-alphanumeric runs become ``_``, a leading digit gets ``V_``."""
-    chars = ("" if unicodedata.combining(c) else c if c.isascii() and c.isalnum() else "_"
-             for c in unicodedata.normalize("NFKD", name))
-    ident = re.sub(r"_+", "_", "".join(chars)).strip("_").upper()
-    return ident if ident[:1].isalpha() else f"V_{ident}".rstrip("_")
-
-
-def identifiers(names: list[str]) -> list[str]:
-    """Unique identifiers in order: a repeat gets ``_2``, ``_3``... never one another name
-    produces by itself."""
-    bases = [identifier(n) for n in names]
-    reserved, taken, out = set(bases), set[str](), []
-    for base in bases:
-        ident, n = base, 1
-        while ident in taken or (ident != base and ident in reserved):
-            n += 1
-            ident = f"{base}_{n}"
-        taken.add(ident)
-        out.append(ident)
-    return out
-
-
 def guard_for(filename: str, prefix: str = "ECAT") -> str:
     """Include guard from the header's file name: ``io-map.h`` -> ``IO_MAP_H``."""
     ident = re.sub(r"[^A-Za-z0-9]+", "_", filename).strip("_").upper()
     return ident if ident[:1].isalpha() else f"{prefix}_{ident}".rstrip("_")
 
 
-def comment(text: object) -> str:
-    """Text safe inside ``/* ... */`` on one line: printable ASCII only (others as
-    ``<U+00E4>``), no ``*/`` or ``/*``, no trigraphs, no backslash (line splices)."""
-    s = "".join(" " if c in "\t\r\n" else "/" if c == "\\" else c if " " <= c <= "~"
-                else f"<U+{ord(c):04X}>" for c in str(text))
-    while "*/" in s or "/*" in s or "??" in s:
-        s = s.replace("*/", "* /").replace("/*", "/ *").replace("??", "? ?")
-    return s
-
-
 def _c_type(var: Variable, fn: str) -> tuple[str, str, str]:
     """(IEC type shown, C type, how to read it)."""
     iec = datatypes.canonical(var.data_type) if var.data_type else None
-    if iec in _C_TYPES and datatypes.bit_size(iec) == var.bit_size:
-        ctype, what = _C_TYPES[iec]
+    if iec in C_TYPES and datatypes.bit_size(iec) == var.bit_size:
+        ctype, what = C_TYPES[iec]
         return iec, ctype, f"{what}: {fn}{_GETTER[what]}()"
     shown = iec or var.data_type or "no type"
     if var.bit_size < 8 and not var.data_type:

@@ -13,6 +13,7 @@ import prereq
 import pytest
 
 from ecatcfg.compiler import header
+from ecatcfg.esi import c_names
 from ecatcfg.eni.plan import Cyclic, MasterPlan, NetworkPlan, ProcessImage, Variable
 
 V = Variable
@@ -48,12 +49,12 @@ def make_plan(inputs: list[Variable] = INPUTS, outputs: list[Variable] = OUTPUTS
 
 
 def test_identifiers():
-    assert header.identifier("Term 1 (EL1008).Channel 1.Input") == "TERM_1_EL1008_CHANNEL_1_INPUT"
-    assert header.identifier("Température.Wert µ") == "TEMPERATURE_WERT"
-    assert header.identifier("1st.Value") == "V_1ST_VALUE"
-    assert header.identifier("__") == "V"
-    assert header.identifiers(["a", "A", "a_2", "a"]) == ["A", "A_3", "A_2", "A_4"]
-    ids = header.identifiers([v.name for v in INPUTS])
+    assert c_names.identifier("Term 1 (EL1008).Channel 1.Input") == "TERM_1_EL1008_CHANNEL_1_INPUT"
+    assert c_names.identifier("Température.Wert µ") == "TEMPERATURE_WERT"
+    assert c_names.identifier("1st.Value") == "V_1ST_VALUE"
+    assert c_names.identifier("__") == "V"
+    assert c_names.identifiers(["a", "A", "a_2", "a"]) == ["A", "A_3", "A_2", "A_4"]
+    ids = c_names.identifiers([v.name for v in INPUTS])
     assert len(set(ids)) == len(ids)
     assert ids[9:11] == ["DRIVE_1_STATUS", "DRIVE_1_STATUS_2"]
     assert all(re.fullmatch(r"[A-Z][A-Z0-9_]*", i) and "__" not in i for i in ids)
@@ -61,10 +62,10 @@ def test_identifiers():
 
 def test_comment_text_is_safe():
     for text in ["a */ b", "a*/*b", "/*", "x ??/", "ä\n\\", "**//**"]:
-        out = header.comment(text)
+        out = c_names.comment(text)
         assert out.isascii() and out.isprintable()
         assert not any(s in out for s in ("*/", "/*", "??", "\\"))
-    assert header.comment("Température") == "Temp<U+00E9>rature"
+    assert c_names.comment("Température") == "Temp<U+00E9>rature"
 
 
 def test_deterministic_ascii_and_order_independent():
@@ -140,8 +141,8 @@ def test_headers_compile_together(tmp_path):
 def test_compiled_macros_and_helpers_match_plan(tmp_path):
     cc = _c_compiler()
     plan = make_plan()
-    ids = header.identifiers([v.name for v in INPUTS])
-    out_ids = header.identifiers([v.name for v in OUTPUTS])
+    ids = c_names.identifiers([v.name for v in INPUTS])
+    out_ids = c_names.identifiers([v.name for v in OUTPUTS])
     rng = random.Random(7)
     in_image = rng.getrandbits(8 * 50)
     # REAL input with a known value, so the float helper is checked too

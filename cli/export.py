@@ -1,0 +1,81 @@
+"""``ecatcfg export ENI --format pysoem|soem-c -o FILE``: an ENI (any tool's) as code for
+the master a user already runs (``eni/export/``); ``soem-c`` writes ``FILE`` (C) and the
+header beside it (``FILE`` with ``.h``).
+
+The file is written atomically, and nothing is written when the ENI has errors or asks for
+something the exported hooks cannot carry (the message names the file, line and slave;
+exit 1).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+FORMATS = ("pysoem", "soem-c")
+
+
+def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    p = sub.add_parser("export", help="an ENI as set-up code for pysoem or SOEM (C)",
+                       description="Write an ENI's configuration (ours or any tool's) in the "
+                                   "form another master takes.  pysoem: a Python module "
+                                   "whose setup(master), called after config_init(), checks "
+                                   "each slave's identity and installs a config_func per "
+                                   "slave that writes the ENI's PDO assignment, mapping and "
+                                   "start-up SDOs and programs DC; the process image is "
+                                   "listed by variable name.  soem-c: a C source and header "
+                                   "with the same hooks for SOEM (PO2SOconfigx), the process "
+                                   "data as packed structs with compile-time offset checks, "
+                                   "and a minimal main (-DECATCFG_MAIN).")
+    p.add_argument("eni", metavar="ENI", help="ENI file")
+    p.add_argument("--format", required=True, choices=FORMATS, help="what to write")
+    p.add_argument("-o", "--output", required=True, metavar="FILE",
+                   help="the file to write (atomically); soem-c: the C source, its header "
+                        "beside it with the suffix .h")
+    p.add_argument("--no-cache", action="store_true", help="do not use the ENI plan cache")
+    p.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    import hashlib
+    from pathlib import Path
+
+    from ecatcfg import __version__
+    from ecatcfg.cli.inputs import kind
+    from ecatcfg.cli.paths import output_file
+    from ecatcfg.eni.cache import PlanCache, read_file
+    from ecatcfg.eni.export import pysoem_module, soem_c
+    from ecatcfg.eni.export.steps import slave_setups
+    from ecatcfg.eni.reader import read_file as read_uncached
+    from ecatcfg.errors import UsageError
+    from ecatcfg.fileio import write_atomic
+
+    found = kind(args.eni)
+    if found != "eni":
+        raise UsageError(f"{args.eni} is not an ENI ({found})")
+    out = output_file(args.output)
+    if out.resolve() == Path(args.eni).resolve():
+        raise UsageError(f"-o {args.output}: would replace the ENI it exports")
+    plan = read_uncached(args.eni) if args.no_cache else \
+        read_file(args.eni, cache=PlanCache())
+    setups = slave_setups(plan, args.eni)
+    digest = hashlib.sha256(Path(args.eni).read_bytes()).hexdigest()
+    outputs: list[tuple[Path, bytes]]
+    if args.format == "pysoem":
+        outputs = [(out, pysoem_module.render(setups, Path(args.eni).name, digest,
+                                              __version__))]
+    else:
+        header = out.with_suffix(".h")
+        if header == out:
+            raise UsageError(f"-o {args.output}: the C source needs another suffix than .h")
+        source, text = soem_c.render(setups, header.name, Path(args.eni).name, digest,
+                                     __version__)
+        outputs = [(out, source), (header, text)]
+    for path, data in outputs:
+        try:
+            write_atomic(path, data)
+        except OSError as exc:
+            raise UsageError(f"{path}: cannot write: {exc.strerror}") from None
+    print(f"wrote {', '.join(str(p) for p, _ in outputs)}: {len(setups)} slaves, "
+          f"{sum(len(s.sdos) for s in setups)} SDO downloads", file=sys.stderr)
+    return 0

@@ -1,0 +1,51 @@
+"""The pysoem export: a Python module with a ``config_func`` hook per slave and ``setup``.
+
+What each hook does comes from :func:`ecatcfg.eni.export.steps.slave_setups`; this module
+only writes it with ``templates/pysoem_setup.py.j2``.  Values are written with ``repr``, so
+the module's text depends on the ENI alone: the same ENI gives the same bytes.
+"""
+
+from __future__ import annotations
+
+import functools
+from importlib import resources
+from typing import TYPE_CHECKING
+
+from ecatcfg.eni.export.steps import SlaveSetup
+from ecatcfg.esc import DC_ACTIVATE_SYNC1
+
+if TYPE_CHECKING:
+    import jinja2
+
+TEMPLATE = "pysoem_setup.py.j2"
+
+
+def _one_line(text: str) -> str:
+    """Text for a ``#`` comment: one line (a name from a file may hold line breaks)."""
+    return " ".join(text.split())
+
+
+def _sync1(activation: int) -> bool:
+    return bool(activation & DC_ACTIVATE_SYNC1)
+
+
+@functools.cache
+def _template() -> jinja2.Template:
+    import jinja2
+    folder = resources.files("ecatcfg.templates")
+    env = jinja2.Environment(
+        loader=jinja2.FunctionLoader(lambda name: folder.joinpath(name).read_text("utf-8")),
+        autoescape=False, keep_trailing_newline=True, trim_blocks=True, lstrip_blocks=True,
+        undefined=jinja2.StrictUndefined)
+    env.filters["py"] = repr
+    env.filters["line"] = _one_line
+    env.tests["sync1"] = _sync1
+    return env.get_template(TEMPLATE)
+
+
+def render(setups: list[SlaveSetup], eni_name: str, eni_sha256: str, version: str) -> bytes:
+    """The module's text for the slaves' ``setups`` of the ENI named ``eni_name``."""
+    text = _template().render(slaves=setups, eni_name=eni_name, eni_sha256=eni_sha256,
+                              version=version,
+                              any_dc=any(s.sync_activation for s in setups))
+    return text.encode("utf-8")
