@@ -141,7 +141,7 @@ def lint_errors(corpora: dict[str, Path], files: set[tuple[str, str]] | None = N
     device) -> ``"RULE message"`` of each error lint reports there, with the ETG.2000
     schema.  ``files``: only these (corpus, file) pairs; every file of each corpus is
     still given to lint as a possible module library."""
-    from ecatcfg.esi.lint import LintOptions, Target, lint_file, lint_paths, select_rules
+    from ecatcfg.esi.lint import LintOptions, lint_file, lint_paths, select_rules
     from ecatcfg.esi.lint.runner import collect
 
     out: dict[str, list[str]] = {}

@@ -133,7 +133,7 @@ def test_an_identical_copy_and_a_reworded_one_are_equal(tmp_path, capsys, corpus
     for comment in tree.iter("Comment"):
         comment.text = "changed by hand"
     init_cmds = tree.find(".//Slave/InitCmds")
-    first, second = init_cmds[0], init_cmds[1]
+    second = init_cmds[1]
     init_cmds.remove(second)
     init_cmds.insert(0, second)
     assert _diff(capsys, corpus / ELMO_ENI, _save(tree, tmp_path / "reworded.xml")) == (0, [])

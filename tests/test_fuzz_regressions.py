@@ -378,7 +378,6 @@ def test_fmmu_cannot_write_al_status():
     (an FMMU only translates the address): it keeps OP, the LWR still counts (the ESC
     answers a write to a read-only register), and the AL control request runs as usual."""
     segment = fuzzing.line_in_op(fuzzing.eni_seeds()[1])
-    drive = segment.slaves[1]
     fmmu = struct.pack("<IHBBHBBB3x", 0x200000, 2, 0, 7, 0x0130, 0, 2, 1)   # write, on
     segment.process(frame(Datagram.physical(Cmd.FPWR, 1002, 0x0660, fmmu)))
     back = wire.decode(segment.process(frame(Datagram.logical(Cmd.LWR, 0x200000,

@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 from ecatcfg.runtime.mailbox import (
     ABORT_UNKNOWN_COMMAND, OD_LIST_ALL, Decoded, Emergency, EntryDescription, MailboxCounter,
     MailboxError, MailboxProtocolError, ObjectDescription, SdoAbort, SdoInfo, SdoInfoOpcode,
-    decode, decode_od_list, encode_entry_description_request, encode_object_description_request,
+    decode, encode_entry_description_request, encode_object_description_request,
     encode_od_list_request, encode_sdo_info_error, pad_to,
 )
 
