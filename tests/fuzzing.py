@@ -1069,7 +1069,7 @@ def eni_on_segment(m: Mutant) -> None:
     outputs onto AL status, then an AL control write).  The segment must answer every
     frame and each ESC keep its invariants, as in :func:`feed_segment`."""
     from ecatcfg.eni import reader
-    from ecatcfg.runtime.slave import MEMORY_SIZE
+    from ecatcfg.runtime.segment.slave import MEMORY_SIZE
     plan = reader.read_bytes(m.data(), "fuzz.eni.xml")
     segment = line_for(plan)
     frames = (_init_cmd_frames(plan, "IP") + _init_cmd_frames(plan, "PS")
