@@ -85,7 +85,16 @@ class Running:
         os.kill(self.proc.pid, sig)
 
     def finish(self, timeout: float = APPLY_TIMEOUT) -> int:
-        rc = self.proc.wait(timeout=timeout)
+        try:
+            rc = self.proc.wait(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            # Stuck: SIGABRT makes faulthandler (PYTHONFAULTHANDLER, start_virtual) print
+            # every thread's stack, so the failure says where it hangs.
+            self.proc.send_signal(signal.SIGABRT)
+            self.proc.wait(timeout=30)
+            self._reader.join(10)
+            raise AssertionError(f"apply did not end within {timeout} s; its stderr, with "
+                                 f"the stacks of its threads:\n{self.stderr()}") from None
         self._reader.join(10)
         self._out_reader.join(10)
         self.out = "".join(self._stdout)
@@ -99,7 +108,7 @@ def start_virtual(eni: Path, *args: str, env: dict | None = None) -> Running:
     return Running(subprocess.Popen(
         [sys.executable, "-m", "ecatcfg", "apply", str(eni), "--virtual", "--esi",
          str(EXAMPLES / "esi"), *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-        text=True, env=env))
+        text=True, env={**(os.environ if env is None else env), "PYTHONFAULTHANDLER": "1"}))
 
 
 def states(report: dict) -> dict[str, tuple[str, str]]:
