@@ -98,6 +98,30 @@ class EoeInitCmd:
 
 
 @record
+class SoeInitCmd:
+    """An SoE service-channel request in a transition (ENI ``Mailbox/SoE/InitCmds``).
+
+    The fields are the ENI's, which are those of the SoE mailbox header (ETG.1000.6 5.8,
+    IEC 61800-7-304): ``op_code`` 3 is a write request (the only kind the schema documents:
+    "service channel write req"), ``drive_no`` the drive behind the slave (0..7),
+    ``elements`` the element flags byte (0x40 = the value), ``idn`` the 16-bit IDN
+    (bit 15 = P parameter, bits 14:12 parameter set, 11:0 number), ``attribute`` the
+    IDN's attribute word where the configurator knows it (0 where not)."""
+
+    transitions: list[Transition]
+    comment: str
+    idn: int
+    data: bytes
+    op_code: int = 3
+    drive_no: int = 0
+    elements: int = 0x40
+    attribute: int = 0
+    timeout: int = 0                          # ms; 0: the runtime's default
+    disabled: bool = False
+    fixed: bool = False
+
+
+@record
 class PdoEntryDesc:
     index: int
     subindex: int
@@ -173,6 +197,7 @@ class MailboxPlan:
     coe_profiles: list[tuple[int, str | None]] = field(default_factory=list)
     data_link_layer: bool | None = None
     eoe_init_cmds: list[EoeInitCmd] = field(default_factory=list)
+    soe_init_cmds: list[SoeInitCmd] = field(default_factory=list)
     aoe_net_id: str | None = None             # the slave's ADS address: no command
 
 

@@ -399,15 +399,41 @@ class EoeSettings:
 
 
 @dataclass(slots=True)
+class SoeInitCmd:
+    """Mailbox/SoE/InitCmd (ETG.2000): an IDN the master writes over SoE (Servo drive
+    profile over EtherCAT, IEC 61800-7-304) in the given transitions.  ``idn`` is the
+    16-bit IDN number as the file writes it (bit 15 = P parameter, bits 14:12 the
+    parameter set, 11:0 the number); ``channel`` is the drive number (``@Chn``)."""
+
+    transitions: list[str]
+    idn: int | None
+    data: bytes | None
+    source: Source
+    comment: str | None = None
+    channel: int = 0
+
+
+@dataclass(slots=True)
+class SoeSettings:
+    """Device/Mailbox/SoE: the drive's start-up IDN writes and its channel count."""
+
+    source: Source
+    init_cmds: list[SoeInitCmd] = field(default_factory=list)
+    channel_count: int | None = None                 # @ChannelCount: drives per slave
+    drive_follows_bit3: bool | None = None           # @DriveFollowsBit3Support
+
+
+@dataclass(slots=True)
 class Mailbox:
     """Device/Mailbox: the protocols the slave speaks; CoE details in ``coe``, EoE's in
-    ``eoe``."""
+    ``eoe``, SoE's in ``soe``."""
 
     protocols: list[str]
     source: Source
     coe: CoeSettings | None = None
     data_link_layer: bool = False
     eoe: EoeSettings | None = None
+    soe: SoeSettings | None = None
 
 
 @dataclass(slots=True)

@@ -21,8 +21,8 @@ from ecatcfg.esi.model import (
     Access, ArrayInfo, CoeInitCmd, CoeSettings, DataType, DataTypeSubItem, Dc, DcOpMode,
     Device, DeviceInfo, DictObject, Dictionary, Eeprom, EoeSettings, EsiFile, Fmmu, Group,
     IgnoredElement, Mailbox, MAILBOX_PROTOCOLS, Module, ModulePdoGroup, ObjectFlags,
-    ObjectInfo, Pdo, PdoEntry, Profile, ProblemKind, ReadProblem, Severity, Slot, Slots, Source,
-    STATES, SyncManager, Vendor, sm_type_from_control,
+    ObjectInfo, Pdo, PdoEntry, Profile, ProblemKind, ReadProblem, Severity, Slot, Slots,
+    SoeInitCmd, SoeSettings, Source, STATES, SyncManager, Vendor, sm_type_from_control,
 )
 from ecatcfg.esi.values import INT64_MIN, UINT64_MAX, parse_bool, parse_hex_bytes, parse_int
 
@@ -47,6 +47,7 @@ _SKIPPED: dict[str, frozenset[str]] = {
     "Entry": frozenset(("Comment",)),
     "Mailbox": frozenset(("VendorSpecific",)),
     "CoE": frozenset(("Object",)),
+    "SoE": frozenset(("DiagFile", "DiagMessages")),      # text for a diagnosis display
     "InitCmd": frozenset(),
     "Dc": frozenset(("VendorSpecific",)),
     "OpMode": frozenset(("Sm",)),
@@ -102,6 +103,7 @@ _RANGES: dict[str, tuple[int, int]] = {
     "RxPdo/Index": _U16, "TxPdo/Index": _U16, "RxPdo/Exclude": _U16, "TxPdo/Exclude": _U16,
     "Entry/Index": _U16, "Entry/SubIndex": _U8, "Entry/BitLen": _U16,
     "InitCmd/Index": _U16, "InitCmd/SubIndex": _U8,
+    "SoE/InitCmd/IDN": _U16, "SoE/InitCmd/@Chn": _U8, "SoE/@ChannelCount": _U8,
     "OpMode/AssignActivate": _U16,                      # register 0x0980, 16 bits
     "Category/CatNo": _U16,                             # SII category type (ETG.2010)
     # Object 0x1000 device type: profile number in the low word, additional info in the
@@ -464,6 +466,8 @@ class _Reader:
                     mbx.coe = self.coe(ch)
                 elif tag == "EoE":
                     mbx.eoe = self.eoe(ch)
+                elif tag == "SoE":
+                    mbx.soe = self.soe(ch)
             else:
                 self.unknown(ch, "Mailbox", el)
         return mbx
@@ -476,6 +480,38 @@ class _Reader:
         return EoeSettings(self.src(el), ip=flag("IP"), mac=flag("MAC"),
                            timestamp=flag("TimeStamp"),
                            init_cmds=[self.src(ch) for ch in el if ch.tag == "InitCmd"])
+
+    def soe(self, el: etree._Element) -> SoeSettings:
+        soe = SoeSettings(self.src(el),
+                          channel_count=self.int_(el.get("ChannelCount"), el,
+                                                  "SoE/@ChannelCount"),
+                          drive_follows_bit3=(
+                              None if el.get("DriveFollowsBit3Support") is None else
+                              self.bool_(el.get("DriveFollowsBit3Support"), el,
+                                         "SoE/@DriveFollowsBit3Support")))
+        for ch in el:
+            if ch.tag == "InitCmd":
+                soe.init_cmds.append(self.soe_init_cmd(ch))
+            else:
+                self.unknown(ch, "SoE", el)
+        return soe
+
+    def soe_init_cmd(self, el: etree._Element) -> SoeInitCmd:
+        cmd = SoeInitCmd([], None, None, self.src(el),
+                         channel=self.int_(el.get("Chn"), el, "SoE/InitCmd/@Chn") or 0)
+        for ch in el:
+            tag = ch.tag
+            if tag == "Transition":
+                cmd.transitions.append(text_of(ch))
+            elif tag == "IDN":
+                cmd.idn = self.int_(ch.text, ch, "SoE/InitCmd/IDN", "error")
+            elif tag == "Data":
+                cmd.data = self.hex_(ch.text or "", ch, "SoE/InitCmd/Data")
+            elif tag == "Comment":
+                cmd.comment = text_of(ch)
+            else:
+                self.unknown(ch, "InitCmd", el)
+        return cmd
 
     def coe(self, el: etree._Element) -> CoeSettings:
         g = el.get
