@@ -134,7 +134,7 @@ def _run(args: argparse.Namespace, ctx: _Run) -> int:
         try:
             try:
                 try:
-                    _up_and_cycle(net, plan, target, args, report, notify, realtime)
+                    _up_and_cycle(net, plan, target, args, report, notify, realtime, guard)
                 finally:
                     # No bytecode here checks for signals: from this store on, a signal
                     # can no longer interrupt, whatever ends the run.
@@ -143,6 +143,8 @@ def _run(args: argparse.Namespace, ctx: _Run) -> int:
                 failure = exc
             except KeyboardInterrupt as exc:   # Ctrl-C, or SIGTERM/SIGHUP (_SignalGuard)
                 report.note(f"stopped by {exc.args[0]}" if exc.args else "interrupted")
+            if guard.stop_asked:               # a signal while cycling: the loop has ended
+                report.note(f"stopped by {guard.stop_asked}")
             down_failure = _down(net, plan, args, report, notify)
             failure = failure or down_failure     # the first error is the run's
         finally:
@@ -235,7 +237,7 @@ def _network(args: argparse.Namespace, plan: NetworkPlan, on_event: Callable[[Ev
 
 def _up_and_cycle(net: Network, plan: NetworkPlan, target: AlState,
                   args: argparse.Namespace, report: ApplyReport, notify: Notifier,
-                  realtime: RealtimeOptions | None) -> None:
+                  realtime: RealtimeOptions | None, guard: _SignalGuard) -> None:
     """Bring the line up to ``target`` and, in SAFEOP or OP, cycle it (--cycles)."""
     from ecatcfg.esc import AlState
 
@@ -250,7 +252,7 @@ def _up_and_cycle(net: Network, plan: NetworkPlan, target: AlState,
     if target >= AlState.SAFEOP and args.cycles != 0:
         report.cycling(args.cycles)
         notify.ready(status.replace(";", ", cycling;", 1))
-        net.run(args.cycles, report.cycle_callback(net, notify.watchdog),
+        net.run(args.cycles, guard.cycle_callback(report.cycle_callback(net, notify.watchdog)),
                 realtime=realtime)
     else:
         notify.ready(status)
@@ -303,7 +305,14 @@ class _SignalGuard:
     (a KeyboardInterrupt naming the signal), so the slaves are brought down and the summary
     printed.  Once the way down has begun, a further signal does not abandon the slaves: it
     says how long the way down can still take (Master.down_bound); a third signal in all
-    exits at once (exit 1), naming the state each slave was last brought to."""
+    exits at once (exit 1), naming the state each slave was last brought to.
+
+    While the line cycles, the first signal raises nothing: it only asks the cycle loop to
+    end after the cycle under way (``stop_asked``, read by the loop's callback).  An
+    exception thrown at an arbitrary bytecode can land between a lock's acquire and the
+    ``try`` that releases it, in the master or in a virtual segment's queues (CPython runs
+    signal handlers between any two bytecodes, bpo-29988), and the way down then waits on
+    that lock for ever."""
 
     SIGNALS = ("SIGINT", "SIGTERM", "SIGHUP")
 
@@ -313,7 +322,21 @@ class _SignalGuard:
         self.notify = notify
         self.count = 0
         self.down = False               # True once the way down has begun: no interrupt
+        self.cycling = False            # in Network.run: ask the loop to end, raise nothing
+        self.stop_asked: str | None = None   # the signal that asked it
         self.saved: dict[int, Any] = {}
+
+    def cycle_callback(self, inner: Callable[[Network], None]) -> Callable[[Network], None]:
+        """``inner``, run after every cycle, and the end of the run once a signal asked
+        for it; the guard counts as cycling for as long as the loop calls it."""
+        self.cycling = True
+
+        def callback(net: Network) -> None:
+            inner(net)
+            if self.stop_asked is not None:
+                self.down = True        # from here on no signal interrupts
+                net.stop()
+        return callback
 
     def __enter__(self) -> _SignalGuard:
         import signal
@@ -337,8 +360,13 @@ class _SignalGuard:
         name = signal.Signals(number).name
         self.count += 1
         if not self.down:
-            self.down = True
-            raise KeyboardInterrupt(name)
+            if self.cycling:
+                if self.stop_asked is None:
+                    self.stop_asked = name      # the loop ends after this cycle
+                    return
+            else:
+                self.down = True
+                raise KeyboardInterrupt(name)
         master = self.net.master
         if self.count >= 3:
             where = ", ".join(s.name for s in master.slaves)
