@@ -202,6 +202,7 @@ def test_commands_from_a_pipe_reach_the_emulated_slaves_in_memory(eni, monkeypat
         assert lamps.state == AlState.OP and velocity(drive) == -1234
         os.write(write_end, b"u *\n")
         assert wait_for(lambda: velocity(drive) == 0)
+        os.write(write_end, f"f {LAMP} 1\nu {LAMP}\n".encode())   # together: a trace each
         os.write(write_end, b"q\n")
         thread.join(30)
         assert not thread.is_alive(), "q did not end the watch"
@@ -217,9 +218,10 @@ def test_commands_from_a_pipe_reach_the_emulated_slaves_in_memory(eni, monkeypat
            "an input" in err
     assert f"stdin line 4: f {LAMP3} 2: '{LAMP3}': 2 is outside BOOL range 0..1" in err
     last = {line.split(None, 2)[2]: n for n, line in enumerate(out.splitlines())}
-    # Each command's change is printed before the next one runs.
-    assert last[f"{LAMP3} = 1 (forced)"] < last[f"{VELOCITY} = -1234 (forced)"] \
-        < last[f"{LAMP3} = 0"] < last[f"{VELOCITY} = 0"]
+    # Each command's change is printed before the next one runs, also of commands that
+    # came in one read and left the output as it was.
+    assert last[f"{LAMP3} = 1 (forced)"] < last[f"{LAMP3} = 0"] < last[f"{VELOCITY} = 0"] \
+        < last[f"{LAMP} = 1 (forced)"] < last[f"{LAMP} = 0"]
 
 
 def test_commands_from_a_pipe_over_veth(veth_netns, eni):
