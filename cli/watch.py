@@ -6,6 +6,8 @@ import argparse
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
+    from ecatcfg.cli.watch_commands import Commands
+    from ecatcfg.cli.watch_input import Keyboard
     from ecatcfg.runtime.watch import Value, Watch
 
 
@@ -15,11 +17,15 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
         description="Bring the network of an ENI up to OP and show its process data by "
                     "variable name while it cycles: on a terminal a table refreshed in "
                     "place, in a pipe one line per variable that changed (all of them "
-                    "first).  --force writes an output variable every cycle.",
+                    "first).  --force writes an output variable every cycle.  While it "
+                    "runs, commands typed on the terminal (or read from stdin line by "
+                    "line in a pipe) force and release outputs: 'force NAME VALUE' (or "
+                    "NAME=VALUE, 'f' for short), 'unforce NAME' ('u'; a shell pattern "
+                    "releases all it matches), 'quit' ('q'); Tab completes names.",
         epilog="Variable names are the ENI's (ecatcfg show ENI lists them).  Ctrl-C stops "
                "and brings the line back to INIT.  Exit 1 when a slave refuses a state or "
                "the ENI is wrong; 2 for usage errors (an unknown variable, a value out of "
-               "range).")
+               "range), also when a command read from stdin was refused.")
     p.add_argument("eni", metavar="ENI", help="ENI file (ETG.2100 XML)")
     target = p.add_mutually_exclusive_group(required=True)
     target.add_argument("--iface", metavar="IF", help="network interface of the EtherCAT line")
@@ -38,16 +44,20 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
     p.add_argument("--cycles", type=int, metavar="N",
                    help="run N bus cycles, then stop (default: until Ctrl-C)")
     p.add_argument("--format", choices=["text", "json"], default="text",
-                   help="json: one JSON object per change, {t, name, value, output}")
+                   help="json: one JSON object per change, {t, name, value, output, forced}")
     p.add_argument("--no-cache", action="store_true",
                    help="do not read or write the ESI index cache and the ENI plan cache")
     p.set_defaults(run=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    import os
     import sys
     import time
 
+    from ecatcfg.cli import EXIT_USAGE
+    from ecatcfg.cli.watch_commands import Commands
+    from ecatcfg.cli.watch_input import Keyboard, Lines, foreground
     from ecatcfg.eni import cache as eni_cache
     from ecatcfg.errors import EcatcfgError, UsageError
     from ecatcfg.runtime.network import Network
@@ -84,29 +94,59 @@ def run(args: argparse.Namespace) -> int:
             watch = Watch(net, args.match or None, forced)
         except EcatcfgError as exc:
             raise UsageError(str(exc)) from None
+        commands = Commands(watch)
+        stdin = _stdin_fd()
+        keyboard = live and stdin is not None and os.isatty(stdin) and foreground(stdin)
+        reader: Keyboard | Lines = (Keyboard(stdin, commands) if keyboard and stdin is not None
+                                    else Lines(-1 if stdin is None else stdin, commands))
         net.up()
         start = time.monotonic()
-        show = _Live(watch) if live else _Lines(watch, args.format == "json", start)
-        due = [0.0]
+        show = (_Live(watch, commands, reader if isinstance(reader, Keyboard) else None)
+                if live else _Lines(watch, args.format == "json", start))
+        if isinstance(reader, Lines):
+            reader.after = show.refresh
+        due = [0.0, 0.0]                        # next refresh, next look at stdin
 
         def each_cycle(_net: Network) -> None:
             watch.force()
             now = time.monotonic()
-            if now >= due[0]:
+            typed = False
+            if now >= due[1]:
+                due[1] = now + KEY_POLL_S
+                typed = reader.poll()
+                if reader.quit:
+                    net.stop()
+            if now >= due[0] or typed:
                 due[0] = now + args.interval
                 show.refresh()
 
         try:
-            with show:
+            with reader, show:
                 net.run(args.cycles, each_cycle)
                 show.refresh()
         except KeyboardInterrupt:
             pass
+    if isinstance(reader, Lines) and reader.refused:
+        return EXIT_USAGE
     return 0
 
 
+# How often stdin is looked at: often enough that typing shows at once, seldom enough that
+# a 1 kHz cycle does not make a system call per cycle for it.
+KEY_POLL_S = 0.02
+
+
+def _stdin_fd() -> int | None:
+    import sys
+    try:
+        return sys.stdin.fileno() if sys.stdin is not None else None
+    except (OSError, ValueError):       # closed, or replaced by an object without a file
+        return None
+
+
 class _Lines:
-    """Plain lines (or JSON lines): each variable that changed since the last refresh."""
+    """Plain lines (or JSON lines): each variable whose value, or whether it is forced,
+    changed since the last refresh."""
 
     def __init__(self, watch: Watch, as_json: bool, start: float) -> None:
         self.watch = watch
@@ -123,26 +163,32 @@ class _Lines:
         import json
         import time
 
+        from ecatcfg.cli.watch_commands import value_text
+
         t = round(time.monotonic() - self.start, 3)
         for name, value in self.watch.changes().items():
             output = name in self.watch.outputs
+            forced = name in self.watch.forced
             if self.as_json:
-                print(json.dumps({"t": t, "name": name, "value": value, "output": output}),
-                      flush=True)
+                print(json.dumps({"t": t, "name": name, "value": value, "output": output,
+                                  "forced": forced}), flush=True)
             else:
-                forced = " (forced)" if name in self.watch.forced else ""
-                print(f"{t:9.3f}  {'out' if output else 'in '}  {name} = {_text(value)}"
-                      f"{forced}", flush=True)
+                print(f"{t:9.3f}  {'out' if output else 'in '}  {name} = {value_text(value)}"
+                      f"{' (forced)' if forced else ''}", flush=True)
 
 
 class _Live:
-    """A table refreshed in place on the terminal (rich)."""
+    """A table refreshed in place on the terminal (rich), under the line being typed and a
+    status line (what is forced, what the last command did).  They come first: rich crops
+    a table taller than the terminal at its bottom."""
 
-    def __init__(self, watch: Watch) -> None:
+    def __init__(self, watch: Watch, commands: Commands, keyboard: Keyboard | None) -> None:
         from rich.live import Live
 
         self.watch = watch
-        self.live = Live(self._table(), auto_refresh=False)
+        self.commands = commands
+        self.keyboard = keyboard
+        self.live = Live(self._view(), auto_refresh=False)
 
     def __enter__(self) -> _Live:
         self.live.__enter__()
@@ -152,22 +198,29 @@ class _Live:
         self.live.__exit__(*exc)
 
     def refresh(self) -> None:
-        self.live.update(self._table(), refresh=True)
+        self.live.update(self._view(), refresh=True)
 
-    def _table(self) -> Any:
+    def _view(self) -> Any:
+        from rich.console import Group
         from rich.table import Table
+        from rich.text import Text
+
+        from ecatcfg.cli.watch_commands import USAGE, value_text
 
         table = Table("variable", "dir", "value")
         for name, value in self.watch.values().items():
             direction = "out" if name in self.watch.outputs else "in"
-            shown = _text(value) + (" (forced)" if name in self.watch.forced else "")
+            shown = value_text(value) + (" (forced)" if name in self.watch.forced else "")
             table.add_row(name, direction, shown)
-        return table
-
-
-def _text(value: Value) -> str:
-    if isinstance(value, bool):
-        return "1" if value else "0"
-    if isinstance(value, float):
-        return f"{value:g}"
-    return str(value)
+        lines = [Text(self.commands.status())]
+        keys = self.keyboard
+        if keys is not None:
+            last = keys.last
+            if keys.candidates:
+                lines.append(Text("  ".join(keys.candidates), style="dim"))
+            elif last is not None:
+                lines.append(Text(("error: " if last.error else "") + last.message,
+                                  style="red" if last.error else "green"))
+            lines.insert(0, Text(f"> {keys.line}", style="bold")
+                         if keys.line else Text(f"> ({USAGE})", style="dim"))
+        return Group(*lines, table)
