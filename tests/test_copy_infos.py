@@ -1,0 +1,177 @@
+"""Slave-to-slave copies (ENI ``Cyclic/Frame/Cmd/CopyInfos``): read, written, applied.
+
+The example line (examples/: self-written ESI files) compiled, with CopyInfos added to its
+process-data LRW: input bits of one slave copied to output bits of another.  What the
+output slave receives is read from the emulated slave's output SyncManager memory
+(``EmulatedSlave.outputs()``), not from the master's image.  Image layout of the example:
+inputs byte 0 = buttons (bits 0-3) and sensors (bits 4-7); outputs byte 1 = lamps.
+"""
+
+from __future__ import annotations
+
+import copy as copying
+
+import pytest
+from lxml import etree
+
+from conftest import EXAMPLES
+from ecatcfg.eni import reader as eni_reader
+from ecatcfg.eni import writer as eni_writer
+from ecatcfg.eni.plan import CopyInfo, Frame, NetworkPlan
+from ecatcfg.esc import DATAGRAM_HEADER, AlState, Cmd
+from ecatcfg.runtime import Network
+
+ESI = [EXAMPLES / "esi"]
+SENSORS_IN = 4          # input bits 4..7: the sensors' channels 1-4
+LAMPS_OUT = 8           # output bits 8..15: the lamps' channels 1-8
+
+
+def _lrw(plan: NetworkPlan):
+    [cmd] = [c for cyc in plan.cyclic for f in cyc.frames for c in f.cmds if c.cmd == Cmd.LRW]
+    return cmd
+
+
+def with_copies(plan: NetworkPlan, *copies: CopyInfo) -> NetworkPlan:
+    """``plan`` with ``copies`` on its process-data LRW, written to XML and read back: the
+    runtime gets what a file says."""
+    plan = copying.deepcopy(plan)
+    _lrw(plan).copy_infos = list(copies)
+    return eni_reader.read_bytes(eni_writer.to_bytes(plan), "copies.eni.xml")
+
+
+def sensors(net: Network, bits: int) -> None:
+    """The sensors' four channels (slave 2's input SM), as its application sets them."""
+    net.segment.slaves[2].set_inputs(bytes([bits]))
+
+
+def lamps(net: Network) -> int:
+    """What the lamps (slave 3) received: its output SyncManager's byte."""
+    [value] = net.segment.slaves[3].outputs()
+    return value
+
+
+# -- the plan: read, written, schema-valid ----------------------------------------------------
+
+def test_copy_infos_round_trip_in_schema_order(example_plan, eni_schema):
+    plan = with_copies(example_plan, CopyInfo(SENSORS_IN, LAMPS_OUT + 2, 4),
+                       CopyInfo(0, LAMPS_OUT, 8))
+    assert _lrw(plan).copy_infos == [CopyInfo(4, 10, 4), CopyInfo(0, 8, 8)]
+    assert eni_reader.read_bytes(eni_writer.to_bytes(plan), "again.xml") == plan
+    root = etree.fromstring(eni_writer.to_bytes(plan))
+    assert eni_schema.validate(root.getroottree()), eni_schema.error_log
+    [cmd] = [c for c in root.iterfind(".//Cyclic/Frame/Cmd") if c.find("CopyInfos") is not None]
+    assert [e.tag for e in cmd][-3:] == ["InputOffs", "OutputOffs", "CopyInfos"]
+    assert plan.unsupported == []
+
+
+# -- on the virtual segment -------------------------------------------------------------------
+
+def test_input_bits_reach_another_slaves_outputs_one_cycle_later(example_plan):
+    """Four sensor bits (input bits 4-7) to lamps 3-6 (output bits 10-13): not byte
+    aligned, shifted by a different amount on each side; the lamps' other outputs stay as
+    the application writes them."""
+    plan = with_copies(example_plan, CopyInfo(SENSORS_IN, LAMPS_OUT + 2, 4))
+    with Network.virtual(plan, ESI, esi_cache=False) as net:
+        net.up()
+        assert net.state == AlState.OP
+        net["lamps.Channel 1-8.Output 1"] = True
+        net["lamps.Channel 1-8.Output 8"] = True
+        sensors(net, 0b1011)
+        assert net.cycle()              # reads the sensors, then copies
+        assert lamps(net) & 0b0011_1100 == 0
+        assert net.cycle()              # sends the copy
+        assert lamps(net) == 0b1010_1101
+        sensors(net, 0b0100)
+        assert net.cycle() and net.cycle()
+        assert lamps(net) == 0b1001_0001
+
+
+def test_whole_bytes_are_copied_from_two_slaves(example_plan):
+    """Input byte 0 (buttons and sensors) to the lamps' byte: the aligned copy."""
+    plan = with_copies(example_plan, CopyInfo(0, LAMPS_OUT, 8))
+    with Network.virtual(plan, ESI, esi_cache=False) as net:
+        net.up()
+        net.segment.slaves[1].set_inputs(b"\x05")
+        sensors(net, 0b1001)
+        assert net.cycle() and net.cycle()
+        assert lamps(net) == 0x95
+
+
+def test_copies_run_in_eni_order(example_plan):
+    """Two copies to the same lamps: the later one in the file wins."""
+    plan = with_copies(example_plan, CopyInfo(0, LAMPS_OUT, 4),
+                       CopyInfo(SENSORS_IN, LAMPS_OUT, 4))
+    with Network.virtual(plan, ESI, esi_cache=False) as net:
+        net.up()
+        net.segment.slaves[1].set_inputs(b"\x0f")
+        sensors(net, 0b0010)
+        assert net.cycle() and net.cycle()
+        assert lamps(net) == 0b0010
+
+
+def test_a_wrong_working_counter_keeps_the_last_value(example_plan):
+    """The drive's cable pulled: the LRW's working counter is 4, not 7, so its input data
+    is not valid and the copy is not made; the lamps keep the last copied value though the
+    sensors changed.  Back in the line, copies resume."""
+    plan = with_copies(example_plan, CopyInfo(SENSORS_IN, LAMPS_OUT, 4))
+    with Network.virtual(plan, ESI, esi_cache=False, recovery=False) as net:
+        net.up()
+        sensors(net, 0b0110)
+        assert net.cycle() and net.cycle()
+        assert lamps(net) == 0b0110
+        net.segment.remove_cable("axis1")
+        sensors(net, 0b1001)
+        for _ in range(3):
+            assert not net.cycle()
+        assert _lrw(plan).cnt == 7 and net.master.cyclic.frames  # the ENI's Cnt
+        assert net["sensors.Channel 1.Input"] is True       # read, just not copied
+        assert lamps(net) == 0b0110
+        net.segment.restore_cable("axis1")
+        net.cycle()
+        net.cycle()
+        assert lamps(net) == 0b1001
+
+
+def test_copies_in_twincats_frame_shaped_image(example_plan):
+    """The same line with TwinCAT's offsets (docs/eni-exports.md §4): each command's
+    InputOffs/OutputOffs is its datagram header's place in the Ethernet frame, the data 10
+    bytes later, and the variables' BitOffs follow.  CopyInfo offsets count in that same
+    image (ETG.2100: "bit offs in the complete process image"): the sensors' bits are at
+    input bit 8·(offs + 10) + 4, not 8·offs + 4."""
+    plan = copying.deepcopy(example_plan)
+    [frame] = [f for cyc in plan.cyclic for f in cyc.frames]
+    at = 14 + 2                        # Ethernet header + EtherCAT header
+    moved: dict[int, int] = {}
+    for cmd in frame.cmds:
+        moved[cmd.input_offs] = at     # compact offsets -> frame-shaped ones
+        cmd.input_offs = cmd.output_offs = at
+        at += DATAGRAM_HEADER + cmd.length + 2
+    assert isinstance(frame, Frame) and frame.data_shift == DATAGRAM_HEADER
+    lrw = _lrw(plan)
+    base = 8 * (lrw.input_offs + DATAGRAM_HEADER)
+    image = plan.process_image
+    for var in image.inputs + image.outputs:
+        var.bit_offs += base
+    image.inputs_size = image.outputs_size = 1536
+    plan = with_copies(plan, CopyInfo(base + SENSORS_IN, base + LAMPS_OUT + 1, 4))
+    assert plan.unsupported == []
+    with Network.virtual(plan, ESI, esi_cache=False) as net:
+        net.up()
+        assert net.state == AlState.OP
+        sensors(net, 0b1101)
+        assert net.cycle() and net.cycle()
+        assert net["sensors.Channel 1.Input"] is True
+        assert lamps(net) == 0b1101 << 1
+
+
+def test_a_copy_outside_the_images_is_refused_by_name(example_plan):
+    plan = with_copies(example_plan, CopyInfo(SENSORS_IN, LAMPS_OUT, 4),
+                       CopyInfo(8 * 25 - 2, 0, 4))
+    assert _lrw(plan).copy_infos == [CopyInfo(SENSORS_IN, LAMPS_OUT, 4)]
+    [part] = plan.unsupported
+    assert part.element == "Cyclic/Frame/Cmd/CopyInfos/CopyInfo" and part.line
+    assert part.what == ("a slave-to-slave copy outside the process image (copy 4 bits: "
+                         "input bit 198 (byte 24.6) -> output bit 0 (byte 0.0); the images "
+                         "have 25 input and 25 output bytes)")
+    with pytest.raises(Exception, match="outside the process image"):
+        Network.virtual(plan, ESI, esi_cache=False)
