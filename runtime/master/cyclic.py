@@ -29,12 +29,12 @@ import time
 from array import array
 
 from ecatcfg.eni.plan import CopyInfo, CyclicCmd, NetworkPlan
-from ecatcfg.esc import AlState, Cmd, Reg
+from ecatcfg.esc import INPUT_IMAGE_CMDS, AlState, Cmd, Reg
 from ecatcfg.record import record
 from ecatcfg.runtime import wire
 from ecatcfg.runtime.master.transport import Transport
 
-_READS = {Cmd.LRD, Cmd.LRW, Cmd.APRD, Cmd.FPRD, Cmd.BRD, Cmd.ARMW, Cmd.FRMW}
+_READS = INPUT_IMAGE_CMDS
 _FLAG_SHAPE = wire.LEN_MASK | wire.MORE          # what a slave never changes in len|flags
 PERIODS_KEPT = 65_536       # the last periods CycleStats keeps (jitter), in a ring
 REPLY_BUFFER = 2048         # > 1514, the largest Ethernet frame without FCS
