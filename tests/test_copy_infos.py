@@ -175,3 +175,53 @@ def test_a_copy_outside_the_images_is_refused_by_name(example_plan):
                          "have 25 input and 25 output bytes)")
     with pytest.raises(Exception, match="outside the process image"):
         Network.virtual(plan, ESI, esi_cache=False)
+
+
+# -- show, diff, report -----------------------------------------------------------------------
+
+def _file(tmp_path, plan: NetworkPlan, name: str):
+    path = tmp_path / name
+    path.write_bytes(eni_writer.to_bytes(plan))
+    return path
+
+
+def test_show_names_the_copies_by_their_variables(example_plan, tmp_path):
+    from ecatcfg.eni.show import as_json, summary
+    plan = with_copies(example_plan, CopyInfo(SENSORS_IN, LAMPS_OUT + 2, 4),
+                       CopyInfo(17, 200 - 8, 8))
+    lrw = next(c for f in summary(plan, "x").frames for c in f.commands if c.cmd == "LRW")
+    assert lrw.copies == [
+        "copy 4 bits: sensors.Channel 1.Input (in 0.4) -> lamps.Channel 1-8.Output 3 (out 1.2)",
+        "copy 8 bits: axis1.TxPDO 1 (CSP).Statusword +1 (in 2.1) -> out 24.0"]
+    shown = as_json(summary(plan, "x"))
+    assert [c["copies"] for f in shown["frames"] for c in f["commands"] if c["copies"]] == [
+        lrw.copies]
+
+
+def test_diff_compares_copies_by_variable_across_image_conventions(example_plan, tmp_path):
+    """Moved copies are a change; the same copies in another ENI order are one too (the
+    later wins where they overlap)."""
+    from ecatcfg.eni.diff import diff
+    a = with_copies(example_plan, CopyInfo(SENSORS_IN, LAMPS_OUT, 4))
+    b = with_copies(example_plan, CopyInfo(SENSORS_IN, LAMPS_OUT + 1, 4))
+    [change] = [c for c in diff(a, b) if c.kind == "copies"]
+    assert change.old == ("copy 4 bits: sensors.Channel 1.Input (in 0.4) -> "
+                          "lamps.Channel 1-8.Output 1 (out 1.0)")
+    assert change.new.endswith("-> lamps.Channel 1-8.Output 2 (out 1.1)")
+    assert [c for c in diff(a, a) if c.kind == "copies"] == []
+    none = [c for c in diff(example_plan, a) if c.kind == "copies"]
+    assert [(c.old, c.new) for c in none] == [("none", change.old)]
+
+
+def test_the_report_page_lists_the_copies(example_plan, tmp_path):
+    import subprocess
+    import sys
+    plan = with_copies(example_plan, CopyInfo(SENSORS_IN, LAMPS_OUT + 2, 4))
+    eni = _file(tmp_path, plan, "copies.eni.xml")
+    page = tmp_path / "page.html"
+    done = subprocess.run([sys.executable, "-m", "ecatcfg", "report", str(eni), "-o",
+                           str(page), "--esi", str(EXAMPLES / "esi")],
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert ("then copy 4 bits: sensors.Channel 1.Input (in 0.4) -&gt; lamps.Channel 1-8."
+            "Output 3 (out 1.2)") in page.read_text()
