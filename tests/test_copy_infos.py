@@ -225,3 +225,24 @@ def test_the_report_page_lists_the_copies(example_plan, tmp_path):
     assert done.returncode == 0, done.stderr
     assert ("then copy 4 bits: sensors.Channel 1.Input (in 0.4) -&gt; lamps.Channel 1-8."
             "Output 3 (out 1.2)") in page.read_text()
+
+
+@pytest.mark.parametrize("kind", ["pysoem", "soem-c"])
+def test_the_export_refuses_copies_by_file_and_line(example_plan, tmp_path, kind):
+    """SOEM's cycle has no place for the copies and gates on the group's working counter,
+    not the command's: refused by the CopyInfo's line, nothing written."""
+    import subprocess
+    import sys
+    eni = _file(tmp_path, with_copies(example_plan, CopyInfo(SENSORS_IN, LAMPS_OUT + 2, 4)),
+                "copies.eni.xml")
+    [line] = [e.sourceline for e in etree.parse(str(eni)).iterfind(".//CopyInfo")]
+    out = tmp_path / "out"
+    done = subprocess.run([sys.executable, "-m", "ecatcfg", "export", str(eni), "--format",
+                           kind, "-o", str(out), "--no-cache"], capture_output=True,
+                          text=True, timeout=60)
+    assert done.returncode == 1, done.stderr
+    assert done.stderr.startswith(
+        f"ecatcfg export: {eni}:{line}: the master: slave-to-slave copies (CopyInfos) are not "
+        "exported: copy 4 bits: sensors.Channel 1.Input (in 0.4) -> lamps.Channel 1-8.Output "
+        "3 (out 1.2)"), done.stderr
+    assert not out.exists()
