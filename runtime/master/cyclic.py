@@ -233,11 +233,11 @@ def _compile(c: CopyInfo, inputs: memoryview, outputs: memoryview) -> _CopyOp:
     """One copy over the images.  A bit offset counts from bit 0 of byte 0, least
     significant bit first, as the ``ProcessImage`` variables' ``BitOffs`` (ETG.2100)."""
     src, dst, n = c.src_bit_offs, c.dst_bit_offs, c.bit_size
+    mask = (1 << n) - 1
+    if src % 8 + n <= 8 and dst % 8 + n <= 8:     # a whole byte too: cheaper than a view
+        return src // 8, src % 8, mask, dst // 8, dst % 8, 0xFF ^ (mask << dst % 8)
     if not (src | dst | n) & 7:
         return outputs[dst // 8:(dst + n) // 8], inputs[src // 8:(src + n) // 8]
-    mask = (1 << n) - 1
-    if src % 8 + n <= 8 and dst % 8 + n <= 8:
-        return src // 8, src % 8, mask, dst // 8, dst % 8, 0xFF ^ (mask << dst % 8)
     db, de = dst // 8, (dst + n + 7) // 8
     return (src // 8, (src + n + 7) // 8, src % 8, mask, db, de, dst % 8,
             ((1 << 8 * (de - db)) - 1) ^ (mask << dst % 8))
