@@ -207,10 +207,9 @@ class _Prepared:
             if wkc < 0 or (want >= 0 and wkc != want):
                 continue                      # invalid this cycle: keep the last value
             for op in ops:
-                n = len(op)
-                if n == 2:                    # whole bytes
+                if len(op) == 2:              # whole bytes
                     op[0][:] = op[1]
-                elif n == 6:                  # within one byte each side
+                elif len(op) == 6:            # within one byte each side
                     sb, ss, mask, db, ds, keep = op
                     outputs[db] = outputs[db] & keep | (inputs[sb] >> ss & mask) << ds
                 else:
