@@ -295,3 +295,22 @@ def test_compiled_copies_match_a_bit_by_bit_copy(example_plan):
             at = copy.dst_bit_offs + k
             want[at // 8] = want[at // 8] & ~(1 << at % 8) | bit << at % 8
         assert frames.outputs == want, copy
+
+
+def test_copies_over_veth(veth_netns, example_plan):
+    """The same over raw Ethernet: the master on a veth end in one namespace, the emulated
+    line answering on the other (tests/rig.py)."""
+    from rig import serving
+    from ecatcfg.esi.library import Library
+    from ecatcfg.runtime.segment import emulate
+    plan = with_copies(example_plan, CopyInfo(SENSORS_IN, LAMPS_OUT + 2, 4))
+    seg = emulate.segment(emulate.specs_from_eni(plan, Library(ESI, cache=False), "line"))
+    with serving(veth_netns, seg):
+        with Network(plan, veth_netns.socket_in(veth_netns.ns_a)) as net:
+            net.up()
+            assert net.state == AlState.OP
+            seg.slaves[2].set_inputs(b"\x0b")
+            assert net.cycle()
+            assert seg.slaves[3].outputs() == b"\x00"
+            assert net.cycle()
+            assert seg.slaves[3].outputs() == bytes([0b0010_1100])
