@@ -314,3 +314,64 @@ def test_copies_over_veth(veth_netns, example_plan):
             assert seg.slaves[3].outputs() == b"\x00"
             assert net.cycle()
             assert seg.slaves[3].outputs() == bytes([0b0010_1100])
+
+
+# -- the compiler: master.copies in the topology ----------------------------------------------
+
+TOPOLOGY = """\
+master:
+  name: copies
+  copies:
+    - {from: sensors.Channel 2.Input, to: lamps.Channel 1-8.Output 8}
+    - {from: buttons.Channel 1.Input, to: lamps.Channel 1-8.Output 1}
+slaves:
+  - {name: coupler, device: EX1100}
+  - {name: buttons, device: EX1004}
+  - {name: sensors, device: EX1004}
+  - {name: lamps, device: EX2008}
+"""
+
+
+def _compile(tmp_path, text: str):
+    import subprocess
+    import sys
+    topo = tmp_path / "line.yaml"
+    topo.write_text(text)
+    eni = tmp_path / "line.eni.xml"
+    done = subprocess.run([sys.executable, "-m", "ecatcfg", "compile", str(topo), "--esi",
+                           str(EXAMPLES / "esi"), "-o", str(eni), "--no-cache"],
+                          capture_output=True, text=True, timeout=120)
+    return topo, eni, done
+
+
+def test_a_topologys_copies_are_compiled_and_applied(tmp_path, eni_schema):
+    """``ecatcfg compile`` writes the copies (schema-valid); applied, the lamps show the
+    sensor and the button a cycle later."""
+    _, eni, done = _compile(tmp_path, TOPOLOGY)
+    assert done.returncode == 0, done.stderr
+    assert eni_schema.validate(etree.parse(str(eni))), eni_schema.error_log
+    plan = eni_reader.read_file(eni)
+    assert plan.unsupported == []
+    with Network.virtual(plan, ESI, esi_cache=False) as net:
+        net.up()
+        net.segment.slaves[1].set_inputs(b"\x01")           # button 1
+        sensors(net, 0b0010)                               # sensor 2
+        assert net.cycle() and net.cycle()
+        assert lamps(net) == 0b1000_0001
+
+
+def test_a_topologys_wrong_copies_are_errors_at_their_lines(tmp_path):
+    text = TOPOLOGY.replace("sensors.Channel 2.Input,", "sensors.Channel 2.Inputs,").replace(
+        "to: lamps.Channel 1-8.Output 1}", "to: lamps.Channel 1-8.Output 9}")
+    topo, eni, done = _compile(tmp_path, text)
+    assert done.returncode == 1
+    assert (f"{topo}:4: 'sensors.Channel 2.Inputs' is not an input variable of the process "
+            "image; did you mean 'sensors.Channel 2.Input'") in done.stderr
+    assert f"{topo}:5: 'lamps.Channel 1-8.Output 9' is not an output variable" in done.stderr
+    assert not eni.exists()
+    sizes = TOPOLOGY.replace("buttons.Channel 1.Input", "axis1.TxPDO 1 (CSP).Statusword") \
+        + '  - {name: axis1, device: "0xE0000ECA:0x7201"}\n'
+    topo, _, done = _compile(tmp_path, sizes)
+    assert done.returncode == 1
+    assert (f"{topo}:5: copy 'axis1.TxPDO 1 (CSP).Statusword' (16 bits) to "
+            "'lamps.Channel 1-8.Output 1' (1 bit): the sizes differ") in done.stderr
