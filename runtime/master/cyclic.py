@@ -18,8 +18,10 @@ when its command brought back the working counter the ENI expects (its ``Cnt``; 
 one, when the command came back at all).  A copy of a command whose working counter was
 wrong or whose frame was lost is not made, so the destination keeps the last valid value
 (ETG.2100 ``CopyInfosType``: "valid input data of this command").  Each copy is compiled
-once per AL state and image: a memoryview slice assignment when it is whole bytes, else
-one read-mask-shift-write of the bytes it touches.
+once per AL state and image: bits within one byte on each side are one read-mask-shift-
+write of two bytes; more, in whole bytes, a memoryview slice assignment; anything else one
+read-mask-shift-write of the bytes it touches (docs/BENCHMARKS.md, "What slave-to-slave
+copies cost per cycle").
 """
 
 from __future__ import annotations
@@ -246,7 +248,6 @@ class CyclicFrames:
     """The cyclic frames of an ENI and its process image (inputs and outputs)."""
 
     def __init__(self, plan: NetworkPlan) -> None:
-        image = plan.process_image
         frames = [f for cyc in plan.cyclic for f in cyc.frames]
         # The ENI's cycle time; TwinCAT files often have none, then the DC SYNC0 cycle
         # the slaves were given; 1 ms without either.
