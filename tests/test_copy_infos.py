@@ -375,3 +375,32 @@ def test_a_topologys_wrong_copies_are_errors_at_their_lines(tmp_path):
     assert done.returncode == 1
     assert (f"{topo}:5: copy 'axis1.TxPDO 1 (CSP).Statusword' (16 bits) to "
             "'lamps.Channel 1-8.Output 1' (1 bit): the sizes differ") in done.stderr
+
+
+# -- a real TwinCAT ENI, with a copy added -----------------------------------------------------
+
+def test_a_copy_in_a_real_twincat_eni(corpus):
+    """No real ENI we have holds CopyInfos (both corpora: none), so one is added to
+    TwinCAT's (EK1100, EL2008, EL4002, EL1809; a frame-shaped image: the EL1809's inputs
+    at BitOffs 448 = 8·(LRD InputOffs 46 + 10), the EL2008's outputs at 344): EL1809
+    channels 3-6 to EL2008 channels 4-7, on the LRD that reads them, offsets as the
+    Variables give them."""
+    plan = eni_reader.read_file(corpus / "eni" / "jn-ec-master" / "mega_master_eni.xml")
+    inputs = {v.name: v.bit_offs for v in plan.process_image.inputs}
+    outputs = {v.name: v.bit_offs for v in plan.process_image.outputs}
+    src = inputs["Term 4 (EL1809).Channel 3.Input"]
+    dst = outputs["Term 2 (EL2008).Channel 4.Output"]
+    [lrd] = [c for cyc in plan.cyclic for f in cyc.frames for c in f.cmds if c.cmd == Cmd.LRD
+             and c.cnt == 1]
+    lrd.copy_infos = [CopyInfo(src, dst, 4)]
+    plan = eni_reader.read_bytes(eni_writer.to_bytes(plan), "mega-copies.xml")
+    assert plan.unsupported == []
+    with Network.virtual(plan, [corpus / "esi" / "beckhoff"], esi_cache=False) as net:
+        net.up()
+        assert net.state == AlState.OP
+        el1809, el2008 = net.segment.slaves[3], net.segment.slaves[1]
+        el1809.set_inputs(bytes([0b0010_1100, 0]))          # channels 3, 4 and 6
+        assert net.cycle()
+        assert el2008.outputs() == b"\x00"
+        assert net.cycle()
+        assert el2008.outputs() == bytes([0b0101_1000])      # channels 4, 5 and 7
