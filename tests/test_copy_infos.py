@@ -17,9 +17,11 @@ from lxml import etree
 from conftest import EXAMPLES
 from ecatcfg.eni import reader as eni_reader
 from ecatcfg.eni import writer as eni_writer
+from ecatcfg.eni.contents import UnsupportedEniError
 from ecatcfg.eni.plan import CopyInfo, Frame, NetworkPlan
 from ecatcfg.esc import DATAGRAM_HEADER, AlState, Cmd
 from ecatcfg.runtime import Network
+from ecatcfg.runtime.network import SkippedConfigWarning
 
 ESI = [EXAMPLES / "esi"]
 SENSORS_IN = 4          # input bits 4..7: the sensors' channels 1-4
@@ -173,8 +175,18 @@ def test_a_copy_outside_the_images_is_refused_by_name(example_plan):
     assert part.what == ("a slave-to-slave copy outside the process image (copy 4 bits: "
                          "input bit 198 (byte 24.6) -> output bit 0 (byte 0.0); the images "
                          "have 25 input and 25 output bytes)")
-    with pytest.raises(Exception, match="outside the process image"):
+    with pytest.raises(UnsupportedEniError, match="outside the process image") as refused:
         Network.virtual(plan, ESI, esi_cache=False)
+    assert [p.element for p in refused.value.parts] == ["Cyclic/Frame/Cmd/CopyInfos/CopyInfo"]
+    # Skipped, the copy inside the images is still made.
+    with pytest.warns(SkippedConfigWarning, match="the master: skipped a slave-to-slave copy "
+                      "outside the process image"):
+        net = Network.virtual(plan, ESI, esi_cache=False, skip_unsupported=True)
+    with net:
+        net.up()
+        sensors(net, 0b0101)
+        assert net.cycle() and net.cycle()
+        assert lamps(net) == 0b0101
 
 
 # -- show, diff, report -----------------------------------------------------------------------
