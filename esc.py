@@ -46,6 +46,10 @@ LOGICAL_CMDS = frozenset({Cmd.LRD, Cmd.LWR, Cmd.LRW})
 REGISTER_READS = frozenset({Cmd.APRD, Cmd.FPRD, Cmd.BRD, Cmd.APRW, Cmd.FPRW, Cmd.BRW})
 REGISTER_WRITES = frozenset({Cmd.APWR, Cmd.FPWR, Cmd.BWR, Cmd.APRW, Cmd.FPRW, Cmd.BRW})
 READ_WRITE_CMDS = frozenset({Cmd.APRW, Cmd.FPRW, Cmd.BRW, Cmd.LRW})
+# The cyclic commands whose reply data the master copies into its input image
+# (runtime/master/cyclic.py), the data a CopyInfo of the command copies from.
+INPUT_IMAGE_CMDS = frozenset({Cmd.LRD, Cmd.LRW, Cmd.APRD, Cmd.FPRD, Cmd.BRD, Cmd.ARMW,
+                              Cmd.FRMW})
 
 
 def wkc_increment(cmd: int, read: bool, written: bool) -> int:

@@ -37,6 +37,7 @@ Method:
 from __future__ import annotations
 
 import argparse
+import copy as copying
 import json
 import os
 import platform
@@ -375,14 +376,18 @@ def run(args: argparse.Namespace, tmp: Path) -> None:
 def python_floor(eni: Path, esi: str, cycles: int = 100_000) -> dict:
     """ecatcfg's own CPU per cycle without a wire: in this process, a link that answers
     at once with the reply the emulated line gave to the first cycle (the index copied
-    in), so only the master's Python runs; with and without the recovery supervisor."""
+    in), so only the master's Python runs; with and without the recovery supervisor, and
+    without it with slave-to-slave copies (one of a whole byte, one and eight of 4 bits
+    at other bit positions)."""
     from ecatcfg.eni import reader
     from ecatcfg.esi.library import Library
     from ecatcfg.runtime import wire
     from ecatcfg.runtime.segment import emulate
     from ecatcfg.runtime.network import Network
+    from ecatcfg.eni.plan import CopyInfo
+    from ecatcfg.esc import Cmd
 
-    plan = reader.read_file(eni)
+    read = plan = reader.read_file(eni)
 
     class Echo:
         def __init__(self) -> None:
@@ -414,8 +419,21 @@ def python_floor(eni: Path, esi: str, cycles: int = 100_000) -> dict:
         def close(self) -> None:
             pass
 
+    # Slave-to-slave copies on the process-data LRW (docs/runtime.md, "Slave-to-slave
+    # copies"): the inputs' first variable to the outputs', whole bytes or bit by bit.
+    first_in = min(v.bit_offs for v in plan.process_image.inputs)
+    first_out = min(v.bit_offs for v in plan.process_image.outputs)
+    aligned = CopyInfo(first_in // 8 * 8, first_out // 8 * 8, 8)
+    bits = CopyInfo(first_in, first_out + 1, 4)
+    variants = {"with_recovery": (True, []), "without_recovery": (False, []),
+                "copies_1_aligned": (False, [aligned]), "copies_1_bits": (False, [bits]),
+                "copies_8_bits": (False, [bits] * 8)}
     out = {}
-    for recovery in (True, False):
+    for name, (recovery, copies) in variants.items():
+        plan = copying.deepcopy(read)
+        lrw = next(c for cyc in plan.cyclic for f in cyc.frames for c in f.cmds
+                   if c.cmd == Cmd.LRW)
+        lrw.copy_infos = list(copies)
         link = Echo()
         net = Network(plan, link, recovery=recovery)   # type: ignore[arg-type]
         net.up()
@@ -430,7 +448,7 @@ def python_floor(eni: Path, esi: str, cycles: int = 100_000) -> dict:
             for _ in range(cycles):
                 net.cycle()
             best.append((time.thread_time() - start) / cycles * 1e6)
-        out["with_recovery" if recovery else "without_recovery"] = round(min(best), 2)
+        out[name] = round(min(best), 2)
     return out
 
 

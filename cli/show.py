@@ -197,6 +197,8 @@ def _eni_text(view: EniView, out: _Out) -> None:
                 f"{c.adp or 0}:0x{c.ado or 0:04X}"
             out.line(f"    {c.cmd:<4} {address:<12} len {c.length:<5} wkc {wkc:<3} "
                      f"{'/'.join(c.states)}")
+            for copy_line in c.copies:      # after a valid receive, before the next send
+                out.line(f"      {copy_line}")
     if view.unsupported:
         out.heading("Not applied by ecatcfg (apply refuses them unless --skip-unsupported)")
         for u in view.unsupported:

@@ -10,8 +10,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from ecatcfg.compiler import (esi_errors, hotconnect, initcmds, layout as layout_mod,
-                              passive, pdocmds)
+from ecatcfg.compiler import (copies, esi_errors, hotconnect, initcmds,
+                              layout as layout_mod, passive, pdocmds)
 from ecatcfg.eni.plan import (Cyclic, DcPlan, MailboxArea, MailboxPlan, MasterPlan,
                                    NetworkPlan, PreviousPort, ProcessData, ProcessImage,
                                    SlavePlan, SmSettings, Variable)
@@ -113,6 +113,9 @@ def compile_topology(loaded: LoadedTopology, library: Library,
         slaves=slaves,
         cyclic=[Cyclic(lay.frames, cycle_time=topo.master.cycle_time_us)],
         process_image=ProcessImage(lay.image_size, lay.image_size, inputs, outputs))
+    copy_errors = copies.add_copies(loaded, plan)
+    if copy_errors:
+        raise TopologyError(copy_errors)
     placed = passive.place(plan, parts.passive, whole)
     if placed:
         raise TopologyError(placed)

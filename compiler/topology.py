@@ -170,6 +170,20 @@ class _Model(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
 
 
+class Copy(_Model):
+    """A slave-to-slave copy (ENI ``CopyInfo``): each cycle, after the input variable came
+    back valid, the master copies it into the output variable, which the next cycle sends."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True, populate_by_name=True,
+                              serialize_by_alias=True)
+
+    source: XmlText = Field(alias="from", min_length=1,
+                            description="An input variable, by its ENI name "
+                                        "('sensors.Channel 1.Input')")
+    to: XmlText = Field(min_length=1, description="An output variable of the same bit size "
+                                                  "('lamps.Channel 1-8.Output 3')")
+
+
 class Master(_Model):
     """The master and its cycle."""
 
@@ -184,6 +198,9 @@ class Master(_Model):
         default="lrw", description="lrw: one LRW per frame, outputs and inputs of a slave "
                                    "overlap (EC-Engineer style); lrd_lwr: separate LWR and "
                                    "LRD windows (TwinCAT style)")
+    copies: list[Copy] = Field(
+        default_factory=list, description="Slave-to-slave copies, made by the master each "
+                                          "cycle in this order (ENI CopyInfos)")
 
 
 class Sdo(_Model):

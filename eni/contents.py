@@ -310,8 +310,8 @@ CONTENTS: dict[str, dict[str, Part]] = {
         **{tag: _read(_COMMAND) for tag in (
             "State", "Comment", "Cmd", "Adp", "Ado", "Addr", "Data", "DataLength", "Cnt",
             "InputOffs", "OutputOffs")},
-        "CopyInfos": _refused("slave-to-slave copies: the master would copy input bits "
-                              "to outputs every cycle"),
+        "CopyInfos": _read("slave-to-slave copies, each cycle (a copy outside the process "
+                           "image is refused by the reader)", "Cmd/CopyInfos"),
         # Elmo Application Studio (docs/eni-exports.md §8).
         "MaxErrors": _accepted("how many working-counter errors the Elmo master "
                                "tolerates; apply counts them and goes on"),
@@ -320,6 +320,13 @@ CONTENTS: dict[str, dict[str, Part]] = {
            for tag in ("InputDefaultData", "InputDefaultDataMask", "OutputDefaultData",
                        "OutputDefaultDataMask")},
     },
+    # -- slave-to-slave copies (ETG.2100 CopyInfosType) --
+    "Cmd/CopyInfos": {
+        "CopyInfo": _read("one copy: input bits to output bits after a valid receive",
+                          "CopyInfos/CopyInfo"),
+    },
+    "CopyInfos/CopyInfo": {tag: _read("where from, where to, how many bits")
+                           for tag in ("SrcBitOffs", "DstBitOffs", "BitSize")},
 }
 
 # Open contexts: what is inside is accepted whatever it is (with this reason).

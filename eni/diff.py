@@ -11,7 +11,9 @@ and compared as what they make the master do:
 - InitCmds per slave and transition, in words (:mod:`ecatcfg.eni.words`): added, removed,
   changed;
 - DC (reference clock, cycle and shift times) and the bus cycle time; the process-data
-  commands of the cyclic frames (command, length, expected working counter).
+  commands of the cyclic frames (command, length, expected working counter); the
+  slave-to-slave copies (``CopyInfos``), in their order, by the variables they copy from
+  and to (TwinCAT's frame-shaped offsets and a compact image compare equal).
 
 What is not a difference (docs/show-diff-check.md, "What diff does not count"):
 
@@ -35,8 +37,8 @@ from typing import Any
 
 from ecatcfg.eni.plan import (CoeInitCmd, EoeInitCmd, InitCmd, NetworkPlan, PassiveSlave,
                               SlavePlan, Variable)
-from ecatcfg.eni.words import (coe_words, command_name, eoe_words, init_cmd_words,
-                               mapping_entry)
+from ecatcfg.eni.words import (coe_words, command_name, copy_words, eoe_words,
+                               init_cmd_words, mapping_entry)
 from ecatcfg.esi.datatypes import canonical
 from ecatcfg.esc import (LOGICAL_CMDS, RX_PDO_MAPPING, SM_PDO_ASSIGN_RANGE, TX_PDO_MAPPING,
                          Transition, array_downloads)
@@ -48,7 +50,7 @@ class Change:
     """One difference.  ``kind`` (for JSON and tests): slave-added, slave-removed,
     slave-moved, identity, pdo-assignment, pdo-mapping, variable-moved, variable-changed,
     variable-added, variable-removed, initcmd-added, initcmd-removed, initcmd-changed, dc,
-    cycle-time, frames, unsupported-added, unsupported-removed, and for topologies
+    cycle-time, frames, copies, unsupported-added, unsupported-removed, and for topologies
     slave-setting and master-setting."""
 
     kind: str
@@ -334,7 +336,18 @@ def _frames(a: NetworkPlan, b: NetworkPlan) -> list[Change]:
     if la != lb:
         out.append(Change("frames", None, "process-data commands",
                           "; ".join(la) or "none", "; ".join(lb) or "none"))
+    wa, wb = copies_in_words(a), copies_in_words(b)
+    if wa != wb:
+        out.append(Change("copies", None, "slave-to-slave copies",
+                          "; ".join(wa) or "none", "; ".join(wb) or "none"))
     return out
+
+
+def copies_in_words(plan: NetworkPlan) -> list[str]:
+    """Every CopyInfo of the plan in ENI order, in words (:func:`copy_words`)."""
+    image = plan.process_image
+    return [copy_words(copy, image.inputs, image.outputs)
+            for cyc in plan.cyclic for f in cyc.frames for c in f.cmds for copy in c.copy_infos]
 
 
 def _unsupported(a: NetworkPlan, b: NetworkPlan) -> list[Change]:

@@ -275,6 +275,35 @@ class PassiveSlave:
     previous_ports: list[PreviousPort] = field(default_factory=list)
 
 
+COPY_ELEMENT = "Cyclic/Frame/Cmd/CopyInfos/CopyInfo"     # where a copy is, below Config
+
+
+@record
+class CopyInfo:
+    """A slave-to-slave copy (``Cyclic/Frame/Cmd/CopyInfos/CopyInfo``): each cycle the
+    master copies ``bit_size`` bits of the command's *valid* input data (its working
+    counter as expected) from bit ``src_bit_offs`` of the input image to bit
+    ``dst_bit_offs`` of the output image, before the next send.  ETG.2100 counts both in
+    "the complete process image": the image the ``ProcessImage`` variables' ``BitOffs`` are
+    in, so in TwinCAT's frame-shaped image (:attr:`Frame.data_shift`) too the offsets are
+    taken as written, never shifted (``docs/runtime.md``, "Slave-to-slave copies")."""
+
+    src_bit_offs: int
+    dst_bit_offs: int
+    bit_size: int
+
+    def fits(self, inputs_bytes: int, outputs_bytes: int) -> bool:
+        """Source and destination lie inside images of these sizes."""
+        return (self.src_bit_offs + self.bit_size <= 8 * inputs_bytes
+                and self.dst_bit_offs + self.bit_size <= 8 * outputs_bytes)
+
+    def describe(self) -> str:
+        """``copy 16 bits: input bit 96 (byte 12.0) -> output bit 40 (byte 5.0)``."""
+        s, d = self.src_bit_offs, self.dst_bit_offs
+        return (f"copy {self.bit_size} bit{'s' if self.bit_size != 1 else ''}: input bit {s} "
+                f"(byte {s // 8}.{s % 8}) -> output bit {d} (byte {d // 8}.{d % 8})")
+
+
 @record
 class CyclicCmd:
     states: list[str]                         # INIT / PREOP / SAFEOP / OP
@@ -288,6 +317,7 @@ class CyclicCmd:
     cnt: int | None = None                    # expected working counter
     input_offs: int = 0                       # byte offset of the data in the input image
     output_offs: int = 0                      # ... and in the output image
+    copy_infos: list[CopyInfo] = field(default_factory=list)    # in the ENI's order
 
 
 @record
@@ -377,6 +407,19 @@ class NetworkPlan:
 
     def slave(self, name: str) -> SlavePlan:
         return next(s for s in self.slaves if s.name == name)
+
+    def image_bytes(self) -> tuple[int, int]:
+        """The sizes of the input and output images a master keeps: the ``ProcessImage``
+        ``ByteSize``, or more where a cyclic command's data (at its offset in its frame's
+        convention, :attr:`Frame.data_shift`) reaches further."""
+        inputs, outputs = self.process_image.inputs_size, self.process_image.outputs_size
+        for cyclic in self.cyclic:
+            for frame in cyclic.frames:
+                shift = frame.data_shift
+                for c in frame.cmds:
+                    inputs = max(inputs, c.input_offs + shift + c.length)
+                    outputs = max(outputs, c.output_offs + shift + c.length)
+        return inputs, outputs
 
     def in_file_order(self) -> list[SlavePlan | PassiveSlave]:
         """All slaves as the ENI lists them: each passive one before the active slave

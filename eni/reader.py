@@ -22,8 +22,10 @@ from typing import Protocol
 from lxml import etree
 
 from ecatcfg.eni.plan import (
+    COPY_ELEMENT,
     BitRange,
     CoeInitCmd,
+    CopyInfo,
     Cyclic,
     CyclicCmd,
     DcPlan,
@@ -43,6 +45,7 @@ from ecatcfg.eni.plan import (
     ProcessImage,
     SlavePlan,
     SmSettings,
+    Unsupported,
     Validate,
     Variable,
 )
@@ -174,6 +177,7 @@ class _Reader:
         self.file = file
         # InitCmds the reader leaves out: refused parts (eni/contents.py dropped_init_cmds).
         self._dropped: set[Element] = set()
+        self._copy_lines: dict[int, int | None] = {}
 
     def error(self, message: str, el: _Node) -> EniReadError:
         return EniReadError(message, self.file, el.sourceline)
@@ -299,7 +303,7 @@ class _Reader:
                 passive.append((el, self.passive(el, after=len(slaves))))
         self.hot_connect_groups(slave_els, slaves)
         self.passive_outside_groups(slave_els, slaves, passive)
-        return NetworkPlan(
+        plan = NetworkPlan(
             master=self.master(self.child(config, "Master")),
             slaves=slaves,
             cyclic=[self.cyclic(el) for el in config.iterchildren("Cyclic")],
@@ -308,6 +312,8 @@ class _Reader:
             unsupported=audit(config),
             passive=[p for _, p in passive],
         )
+        plan.unsupported += self.copies_outside(plan)
+        return plan
 
     # --- commands -------------------------------------------------------------------------
 
@@ -715,7 +721,36 @@ class _Reader:
             cnt=self.opt_int(el, "Cnt", U16),
             input_offs=self.int_or(el, "InputOffs", 0, IMAGE),
             output_offs=self.int_or(el, "OutputOffs", 0, IMAGE),
+            copy_infos=[self.copy_info(c) for c in element.iterfind("CopyInfos/CopyInfo")],
         )
+
+    def copy_info(self, el: Element) -> CopyInfo:
+        copy = CopyInfo(src_bit_offs=self.req_int(el, "SrcBitOffs", IMAGE_BITS),
+                        dst_bit_offs=self.req_int(el, "DstBitOffs", IMAGE_BITS),
+                        bit_size=self.req_int(el, "BitSize", VARIABLE_BITS))
+        self._copy_lines[id(copy)] = el.sourceline
+        return copy
+
+    def copies_outside(self, plan: NetworkPlan) -> list[Unsupported]:
+        """Copies whose source or destination is outside the images the master keeps
+        (:meth:`NetworkPlan.image_bytes`): no master can carry them out faithfully.  They
+        leave the plan (a skipping apply does not perform them) and are refused by name."""
+        inputs, outputs = plan.image_bytes()
+        found = []
+        for cyclic in plan.cyclic:
+            for frame in cyclic.frames:
+                for cmd in frame.cmds:
+                    kept = []
+                    for copy in cmd.copy_infos:
+                        if copy.fits(inputs, outputs):
+                            kept.append(copy)
+                            continue
+                        found.append(Unsupported(
+                            COPY_ELEMENT, f"a slave-to-slave copy outside the process image "
+                            f"({copy.describe()}; the images have {inputs} input and "
+                            f"{outputs} output bytes)", self._copy_lines.get(id(copy))))
+                    cmd.copy_infos = kept
+        return found
 
     def process_image(self, el: Element) -> ProcessImage:
         image = ProcessImage()

@@ -3,8 +3,9 @@
 Everything on the page comes from the ENI as read into a :class:`NetworkPlan` (any tool's
 file): the topology drawn as SVG (:mod:`.network_tree`), a table per slave, the process
 image as a map of bytes and bits coloured by slave (:mod:`.image_map`), the cyclic frames
-with their expected working counters, each slave's InitCmds per transition in the words of
-``show`` (:mod:`.show`, :mod:`.words`), what ``apply`` does not do, and the findings of
+with their expected working counters and slave-to-slave copies, each slave's InitCmds per
+transition in the words of ``show`` (:mod:`.show`, :mod:`.words`), what ``apply`` does not
+do, and the findings of
 ``check`` (lint's :class:`~ecatcfg.esi.lint.finding.Finding`).
 
 The page loads nothing: CSS, the SVG and a few lines of script are inline, and its

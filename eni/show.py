@@ -13,7 +13,8 @@ from typing import Any
 
 from ecatcfg.eni.network_tree import previous_port
 from ecatcfg.eni.plan import NetworkPlan, PassiveSlave, SlavePlan, Unsupported, Variable
-from ecatcfg.eni.words import coe_words, command_name, eoe_words, init_cmd_words
+from ecatcfg.eni.words import (coe_words, command_name, copy_words, eoe_words,
+                               init_cmd_words)
 from ecatcfg.esc import Transition
 from ecatcfg.record import field, record
 
@@ -55,6 +56,7 @@ class CommandView:
     length: int
     wkc: int | None                          # expected working counter (ENI Cnt)
     states: list[str]
+    copies: list[str] = field(default_factory=list)   # its CopyInfos in words, file order
 
 
 @record
@@ -132,7 +134,8 @@ def summary(plan: NetworkPlan, file: str) -> EniView:
         [_variable(v, "out") for v in image.outputs]
     frames = [FrameView(c.cycle_time, [
         CommandView(command_name(cmd.cmd), cmd.adp, cmd.ado, cmd.addr, cmd.length, cmd.cnt,
-                    list(cmd.states)) for cmd in f.cmds])
+                    list(cmd.states), [copy_words(copy, image.inputs, image.outputs)
+                                       for copy in cmd.copy_infos]) for cmd in f.cmds])
         for c in plan.cyclic for f in c.frames]
     return EniView(file, slaves, image.inputs_size, image.outputs_size, variables, frames,
                    list(plan.unsupported), master_words(plan))
@@ -159,7 +162,8 @@ def as_json(view: EniView) -> dict[str, Any]:
         "frames": [{"cycle_time_us": f.cycle_time_us,
                     "commands": [{"cmd": c.cmd, "adp": c.adp, "ado": c.ado, "addr": c.addr,
                                   "length": c.length,
-                                  "wkc": c.wkc, "states": c.states} for c in f.commands]}
+                                  "wkc": c.wkc, "states": c.states, "copies": c.copies}
+                                 for c in f.commands]}
                    for f in view.frames],
         "unsupported": [{"slave": u.slave, "element": u.element, "what": u.what,
                          "line": u.line, "commands": u.commands} for u in view.unsupported],

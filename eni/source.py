@@ -1,4 +1,5 @@
-"""Where in its ENI file a part of a plan was written: the line of a slave's InitCmd.
+"""Where in its ENI file a part of a plan was written: the line of a slave's InitCmd, or of
+a slave-to-slave copy.
 
 The plan holds what the file says, not where (reading our own output back gives an equal
 plan, whatever its layout), so a command the runtime finds refused is located afterwards,
@@ -14,7 +15,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from pathlib import Path
 
-from ecatcfg.eni.plan import CoeInitCmd, EoeInitCmd, InitCmd, NetworkPlan
+from ecatcfg.eni.plan import CoeInitCmd, CopyInfo, EoeInitCmd, InitCmd, NetworkPlan
 from ecatcfg.errors import EcatcfgError
 from ecatcfg.esi import xmlsafe
 
@@ -50,6 +51,24 @@ def _element_line(path: str | Path, slave: int, where: str, index: int,
     parent = slaves[slave].find(where)
     elements = [] if parent is None else list(parent.iterchildren("InitCmd"))
     if len(elements) != count:
+        return None
+    line: int | None = elements[index].sourceline
+    return line
+
+
+def copy_info_line(path: str | Path, plan: NetworkPlan, copy: CopyInfo) -> int | None:
+    """The line of the ``CopyInfo`` element ``copy`` (of ``plan``, read from ``path``) comes
+    from: the reader keeps every ``Cyclic/Frame/Cmd/CopyInfos/CopyInfo`` in file order;
+    ``None`` when the file no longer matches (or the reader left some out as refused)."""
+    copies = [c for cyc in plan.cyclic for f in cyc.frames for cmd in f.cmds
+              for c in cmd.copy_infos]
+    index = next((i for i, c in enumerate(copies) if c is copy), None)
+    try:
+        root = xmlsafe.parse_bytes(Path(path).read_bytes(), str(path)).getroot()
+    except (OSError, EcatcfgError):
+        return None
+    elements = list(root.iterfind("Config/Cyclic/Frame/Cmd/CopyInfos/CopyInfo"))
+    if index is None or len(elements) != len(copies):
         return None
     line: int | None = elements[index].sourceline
     return line

@@ -15,11 +15,15 @@ from the file's ``Comment`` (free text a tool may write in any language, or leav
   ``SDO 0x1C12:00 complete = 2: 0x1600, 0x1601``: CoE downloads (ETG.1000.6; an assignment
   entry is a PDO index, a mapping entry index << 16 | subindex << 8 | bit length).
 - Any other command: its name, register and data (``FPWR 0x0103 = 0x00``).
+
+A slave-to-slave copy (``CopyInfo``) in words names the variables its bits are in:
+``copy 4 bits: sensors.Channel 1.Input (in 0.4) -> lamps.Channel 1-8.Output 3 (out 1.2)``;
+a bit no variable holds is shown as its place only.
 """
 
 from __future__ import annotations
 
-from ecatcfg.eni.plan import CoeInitCmd, EoeInitCmd, InitCmd
+from ecatcfg.eni.plan import CoeInitCmd, CopyInfo, EoeInitCmd, InitCmd, Variable
 from ecatcfg.esc import (AL_ERROR_ACK, AL_ID_REQUEST, FMMU_SIZE, REGISTER_READS,
                          REGISTER_WRITES, RX_PDO_MAPPING, SM_DIR_ECAT_WRITES, SM_DIR_MASK,
                          SM_MODE_MAILBOX, SM_MODE_MASK, SM_PDO_ASSIGN_RANGE, SM_SIZE,
@@ -241,3 +245,22 @@ def eoe_words(cmd: EoeInitCmd) -> str:
         return f"EoE set IP {cmd.request.params.describe()}"
     except ValueError:             # the reader has checked it decodes; a hand-made plan
         return f"EoE {cmd.data.hex()}"
+
+
+def _place(bit: int, variables: list[Variable], direction: str) -> str:
+    """``sensors.Channel 1.Input (in 0.4)``, ``axis1.Statusword +3 (in 2.3)``, ``in 7.0``."""
+    where = f"{direction} {bit // 8}.{bit % 8}"
+    for v in variables:
+        if v.bit_offs <= bit < v.bit_offs + v.bit_size:
+            inside = f" +{bit - v.bit_offs}" if bit != v.bit_offs else ""
+            return f"{v.name}{inside} ({where})"
+    return where
+
+
+def copy_words(copy: CopyInfo, inputs: list[Variable], outputs: list[Variable]) -> str:
+    """A copy by the variables at its first source and destination bit (the process
+    image's variables, ``ProcessImage/Inputs`` and ``Outputs``)."""
+    n = copy.bit_size
+    return (f"copy {n} bit{'s' if n != 1 else ''}: "
+            f"{_place(copy.src_bit_offs, inputs, 'in')} -> "
+            f"{_place(copy.dst_bit_offs, outputs, 'out')}")

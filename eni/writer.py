@@ -443,6 +443,13 @@ def _cyclic_cmd(parent: Element, cmd: CyclicCmd) -> None:
     _opt_int(el, "Cnt", cmd.cnt)
     _int(el, "InputOffs", cmd.input_offs)
     _int(el, "OutputOffs", cmd.output_offs)
+    if cmd.copy_infos:           # last in the Cmd's sequence (ETG.2100 CopyInfosType)
+        copies = _sub(el, "CopyInfos")
+        for copy in cmd.copy_infos:
+            info = _sub(copies, "CopyInfo")
+            _int(info, "SrcBitOffs", copy.src_bit_offs)
+            _int(info, "DstBitOffs", copy.dst_bit_offs)
+            _int(info, "BitSize", copy.bit_size)
 
 
 def _process_image(config: Element, image: ProcessImage) -> None:

@@ -172,6 +172,26 @@ def _unreadable_fmmu(root: Root) -> None:
     cmd.find("Data").text = data.hex()
 
 
+def _copies(cmd: str, *copies: tuple[int, int, int]) -> Callable[[Root], None]:
+    """CopyInfos (source bit, destination bit, bits) on the cyclic command ``cmd``."""
+    def add(root: Root) -> None:
+        parent = etree.SubElement(root.xpath(f"Config/Cyclic/Frame/Cmd[Cmd='{cmd}']")[0],
+                                  "CopyInfos")
+        for src, dst, bits in copies:
+            info = etree.SubElement(parent, "CopyInfo")
+            for tag, value in (("SrcBitOffs", src), ("DstBitOffs", dst), ("BitSize", bits)):
+                etree.SubElement(info, tag).text = str(value)
+    return add
+
+
+# The example's images are 25 bytes; the LRW's data is input/output bytes 0..17, the
+# sensors' inputs bits 4..7, the lamps' outputs bits 8..15.
+_copy_past_inputs = _copies("12", (8 * 25, 8, 1))
+_copy_from_al_status = _copies("7", (4, 8, 4))          # BRD 0x0130: input bytes 23..24
+_copy_to_no_slave = _copies("12", (4, 0, 4))
+_copies_overlap = _copies("12", (4, 8, 4), (0, 10, 4))
+
+
 def _revision_9(root: Root) -> None:
     _slave(root, "lamps").find("Info/RevisionNo").text = "9"
 
@@ -187,6 +207,14 @@ DEFECTS: list[tuple[str, Callable[[Root], None], list[str]]] = [
     ("ENI004", _big_frame, ["<Frame> of 5 commands", "1500"]),
     ("ENI104", _lrw_cnt_plus_one, ["LRW 0x10000000", "expects working counter 8", "give 7"]),
     ("ENI105", _mailbox_send_64, ["Mailbox/Send is 0x1000, 64 byte(s)", "SM0", "128"]),
+    ("ENI111", _copy_past_inputs, ["outside the process image", "input bit 200 (byte 25.0)",
+                                   "25 input and 25 output bytes"]),
+    ("ENI112", _copy_from_al_status, ["CopyInfo 1 of cyclic BRD", "not in the command's "
+                                      "input data (bits 184..199)"]),
+    ("ENI113", _copy_to_no_slave, ["4 of its 4 output bits (the first: bit 0) are no "
+                                   "slave's outputs"]),
+    ("ENI114", _copies_overlap, ["CopyInfo 2 of cyclic LRW", "overwrites output bits 10..11 "
+                                 "of CopyInfo 1 at line"]),
     ("ENI201", _mandatory_1a00_unassigned, ["TxPdo 0x1A00", "Mandatory", "not assigned"]),
     ("ENI202", _excluded_pair, ["0x1600 and 0x1601", "excludes"]),
     ("ENI203", _fixed_remapped, ["buttons", "PDO 0x1A00 is Fixed"]),
@@ -234,6 +262,14 @@ def test_working_counters_of_lwr_and_lrd(tmp_path: Path, example_eni: Path,
     wrong = check_eni(_defective(tmp_path, example_eni, as_cmd(7)), examples,
                       use_cache=False)
     assert [(f.rule, f"give {cnt}" in f.message) for f in wrong.findings] == [("ENI104", True)]
+
+
+def test_a_copy_from_one_slaves_inputs_to_anothers_outputs_is_clean(
+        tmp_path: Path, example_eni: Path, examples: Library) -> None:
+    """The sensors' four input bits to lamps 3..6: in the LRW's data, received by a slave."""
+    result = check_eni(_defective(tmp_path, example_eni, _copies("12", (4, 10, 4))),
+                       examples, use_cache=False)
+    assert result.findings == []
 
 
 def test_every_rule_has_a_defect() -> None:

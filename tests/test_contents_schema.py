@@ -18,6 +18,7 @@ import prereq
 from conftest import CORPUS, FIXTURES
 from ecatcfg.eni import contents
 from ecatcfg.eni import reader as eni_reader
+from ecatcfg.eni.plan import CopyInfo
 
 XS = "{http://www.w3.org/2001/XMLSchema}"
 EVERY = FIXTURES / "eni-every-element.xml"
@@ -142,8 +143,9 @@ def test_the_reader_reads_it_and_names_what_apply_refuses():
         ("Slave/Mailbox/SoE", "Drive", 1),
         ("Slave/Mailbox/AoE/InitCmds", "Drive", 1),
         ("Slave/Mailbox/FoE", "Drive", 1),
-        ("Slave/Mailbox/VoE", "Drive", 1),
-        ("Cyclic/Frame/Cmd/CopyInfos", None, 0)]
+        ("Slave/Mailbox/VoE", "Drive", 1)]
+    # CopyInfos are read, their #x10 (HexDecValue) as a number.
+    assert plan.cyclic[0].frames[0].cmds[0].copy_infos == [CopyInfo(16, 0, 8)]
 
 
 def _unknown(path: Path) -> list[str]:

@@ -176,6 +176,9 @@ def test_network_api_refuses_and_skips(example_eni, tmp_path):
 
 
 ACCEPTED = {   # name: (where, fragment): nothing lost, so nothing to refuse
+    "copy infos": ("//Cyclic/Frame/Cmd[1]",
+                   "<CopyInfos><CopyInfo><SrcBitOffs>0</SrcBitOffs><DstBitOffs>8</DstBitOffs>"
+                   "<BitSize>1</BitSize></CopyInfo></CopyInfos>"),
     "empty FoE": (SLAVE_MAILBOX, "<FoE/>"),
     "SoE with disabled commands only": (SLAVE_MAILBOX, _mailbox_cmds("SoE", 2, disabled=2)),
     "AoE NetId": (SLAVE_MAILBOX, "<AoE><NetId>1.1.1.1.3.234</NetId></AoE>"),
@@ -210,10 +213,12 @@ REFUSED_SETTINGS = {   # name: (where, fragment, element, words in the message)
     "unknown InitCmd field": (f"//Slave[Info/Name='{DRIVE}']/InitCmds/InitCmd[1]",
                               "<Repeat>5</Repeat>", "Slave/InitCmds/InitCmd/Repeat",
                               "<Repeat>"),
-    "copy infos": ("//Cyclic/Frame/Cmd[1]",
-                   "<CopyInfos><CopyInfo><SrcBitOffs>0</SrcBitOffs><DstBitOffs>8</DstBitOffs>"
-                   "<BitSize>1</BitSize></CopyInfo></CopyInfos>", "Cyclic/Frame/Cmd/CopyInfos",
-                   "slave-to-slave copies"),
+    "copy outside the image": ("//Cyclic/Frame/Cmd[1]",
+                               "<CopyInfos><CopyInfo><SrcBitOffs>0</SrcBitOffs><DstBitOffs>"
+                               "#x10000</DstBitOffs><BitSize>1</BitSize></CopyInfo>"
+                               "</CopyInfos>", "Cyclic/Frame/Cmd/CopyInfos/CopyInfo",
+                               "a slave-to-slave copy outside the process image (copy 1 bit: "
+                               "input bit 0 (byte 0.0) -> output bit 65536 (byte 8192.0)"),
     "master clock as DC reference": ("//Config/Master",
                                      "<DC><ReferenceClock>0</ReferenceClock><Type>1</Type>"
                                      "<MasterTimeAsRef>1</MasterTimeAsRef></DC>", "Master/DC",

@@ -8,7 +8,8 @@ from __future__ import annotations
 
 from ecatcfg.eni.check.context import CheckContext
 from ecatcfg.eni.check.rules import declare
-from ecatcfg.eni.plan import BitRange, PdoDesc, SlavePlan, SmSettings, register_writes
+from ecatcfg.eni.plan import (COPY_ELEMENT, BitRange, PdoDesc, SlavePlan, SmSettings,
+                              register_writes)
 from ecatcfg.esc import (FMMU_SIZE, LOGICAL_CMDS, SM_SIZE, AlState, Cmd, FmmuConfig,
                          FmmuType, Reg, SmConfig, Transition, wkc_increment)
 
@@ -52,6 +53,8 @@ MAILBOX = declare("ENI105", "error", "a mailbox area is not what SM0/SM1 are set
 
 def check(ctx: CheckContext) -> None:
     for item in ctx.plan.unsupported:
+        if item.element == COPY_ELEMENT:
+            continue                          # its own rule: ENI111 (eni/check/copies.py)
         slave = next((s for s in ctx.plan.slaves if s.name == item.slave), None)
         ctx.add(UNSUPPORTED, item.line, item.describe(), slave)
     for slave in ctx.plan.slaves:

@@ -6,7 +6,8 @@ in :mod:`ecatcfg.eni.check.network` and :mod:`ecatcfg.eni.check.devices`).  The 
 kept in their own registry, apart from lint's: lint's ``--list-rules`` and the compile gate
 (``esi/lint/gate.py``) are about ESI files.  Ids are grouped by topic: ENI0xx the devices
 of the slaves, ENI1xx SyncManagers, FMMUs, frames and working counters, ENI2xx PDOs,
-ENI3xx CoE InitCmds, ENI4xx DC, ENI5xx mailbox against the ESI.
+ENI3xx CoE InitCmds, ENI4xx DC, ENI5xx mailbox against the ESI; ENI11x the slave-to-slave
+copies (CopyInfos).
 """
 
 from __future__ import annotations

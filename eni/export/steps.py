@@ -19,9 +19,9 @@ So of an ENI's InitCmds the export keeps what SOEM's own sequence does not do:
 - the DC settings of ``Slave/DC`` (SYNC0/1 cycle and shift).
 
 Anything else that would change what the master does and that no hook can carry (a CoE or
-non-SOEM register command of another transition, EoE commands, parts of the ENI ``apply``
-does not implement) is an :class:`ExportError` naming the file, line and slave: nothing is
-dropped silently.  Disabled CoE commands are not run by any master and are left out.
+non-SOEM register command of another transition, EoE commands, slave-to-slave copies,
+parts of the ENI ``apply`` does not implement) is an :class:`ExportError` naming the file,
+line and slave: nothing is dropped silently.  Disabled CoE commands are not run by any master and are left out.
 """
 
 from __future__ import annotations
@@ -30,8 +30,8 @@ from pathlib import Path
 
 from ecatcfg.eni.plan import (BitRange, CoeInitCmd, DcPlan, EoeInitCmd, InitCmd,
                               NetworkPlan, SlavePlan, Variable)
-from ecatcfg.eni.source import init_cmd_line
-from ecatcfg.eni.words import coe_words, init_cmd_words
+from ecatcfg.eni.source import copy_info_line, init_cmd_line
+from ecatcfg.eni.words import coe_words, copy_words, init_cmd_words
 from ecatcfg.errors import EcatcfgError
 from ecatcfg.esc import (DC_ACTIVATION, REGISTER_READS, REGISTER_WRITES,
                          Transition, fmmu_register, sm_register)
@@ -205,6 +205,19 @@ def slave_setups(plan: NetworkPlan, file: str | Path) -> list[SlaveSetup]:
         who = f"slave {u.slave!r}" if u.slave else "the master"
         raise ExportError(f"{who}: {u.describe()} ({u.element}) is not implemented; "
                           f"{len(plan.unsupported)} such part(s) in all", name, u.line)
+    for cyclic in plan.cyclic:
+        for frame in cyclic.frames:
+            for c in frame.cmds:
+                if c.copy_infos:
+                    # SOEM's cycle (send/receive_processdata over its own IOmap) has no
+                    # place for them, and its working counter is the group's, not the
+                    # command's: the export would copy data the ENI calls invalid.
+                    copy = c.copy_infos[0]
+                    words = copy_words(copy, plan.process_image.inputs,
+                                       plan.process_image.outputs)
+                    raise ExportError(f"the master: slave-to-slave copies (CopyInfos) are "
+                                      f"not exported: {words}", name,
+                                      copy_info_line(name, plan, copy))
     for cmd in plan.master.init_cmds:
         if cmd.ado is not None and not soem_register(cmd.ado, cmd.length) and \
                 cmd.cmd in REGISTER_WRITES:

@@ -11,6 +11,17 @@ output image into it through memoryviews, sets the datagram index, receives the 
 into a buffer of its own, checks its shape and reads the working counters with one
 ``struct`` call at fixed offsets, and copies the read data into the input image.  No
 ``Datagram``, list or frame is built per cycle.
+
+Slave-to-slave copies (``CopyInfos``, :class:`~ecatcfg.eni.plan.CopyInfo`) run after the
+last frame of a cycle came back and before the next cycle sends: in ENI order, each only
+when its command brought back the working counter the ENI expects (its ``Cnt``; without
+one, when the command came back at all).  A copy of a command whose working counter was
+wrong or whose frame was lost is not made, so the destination keeps the last valid value
+(ETG.2100 ``CopyInfosType``: "valid input data of this command").  Each copy is compiled
+once per AL state and image: bits within one byte on each side are one read-mask-shift-
+write of two bytes; more, in whole bytes, a memoryview slice assignment; anything else one
+read-mask-shift-write of the bytes it touches (docs/BENCHMARKS.md, "What slave-to-slave
+copies cost per cycle").
 """
 
 from __future__ import annotations
@@ -19,13 +30,13 @@ import struct
 import time
 from array import array
 
-from ecatcfg.eni.plan import CyclicCmd, NetworkPlan
-from ecatcfg.esc import AlState, Cmd, Reg
+from ecatcfg.eni.plan import CopyInfo, CyclicCmd, NetworkPlan
+from ecatcfg.esc import INPUT_IMAGE_CMDS, AlState, Cmd, Reg
 from ecatcfg.record import record
 from ecatcfg.runtime import wire
 from ecatcfg.runtime.master.transport import Transport
 
-_READS = {Cmd.LRD, Cmd.LRW, Cmd.APRD, Cmd.FPRD, Cmd.BRD, Cmd.ARMW, Cmd.FRMW}
+_READS = INPUT_IMAGE_CMDS
 _FLAG_SHAPE = wire.LEN_MASK | wire.MORE          # what a slave never changes in len|flags
 PERIODS_KEPT = 65_536       # the last periods CycleStats keeps (jitter), in a ring
 REPLY_BUFFER = 2048         # > 1514, the largest Ethernet frame without FCS
@@ -110,7 +121,8 @@ class _Prepared:
     """One cyclic frame of one AL state, encoded once, with the places a cycle touches."""
 
     __slots__ = ("slots", "frame", "index_at", "length", "_header", "_wkcs", "_expect",
-                 "_shape", "_out_copies", "_in_copies", "_inputs", "_outputs", "wkcs")
+                 "_shape", "_out_copies", "_in_copies", "_inputs", "_outputs", "wkcs",
+                 "_slave_copies")
 
     def __init__(self, slots: list[_Slot], constant: list[bytes]) -> None:
         self.slots = slots
@@ -135,6 +147,9 @@ class _Prepared:
         self._inputs: bytearray | None = None
         self._outputs: bytearray | None = None
         self.wkcs: tuple[int, ...] = ()        # the working counters of the last reply
+        # Per command with CopyInfos: the command's slot, the working counter that makes
+        # its input data valid (-1: any that came back) and its compiled copies.
+        self._slave_copies: tuple[tuple[_Slot, int, tuple[_CopyOp, ...]], ...] = ()
 
     def bind(self, inputs: bytearray, outputs: bytearray, reply: bytearray) -> None:
         """Views from the frame to the images (again if the images were replaced)."""
@@ -150,6 +165,10 @@ class _Prepared:
             if s.cmd.cmd in _READS:
                 in_copies.append((ins[s.in_at:s.in_at + n], back[data:data + n]))
         self._out_copies, self._in_copies = tuple(out_copies), tuple(in_copies)
+        self._slave_copies = tuple(
+            (s, -1 if s.cmd.cnt is None else s.cmd.cnt,
+             tuple(_compile(c, ins, outs) for c in s.cmd.copy_infos))
+            for s in self.slots if s.cmd.copy_infos)
         self._inputs, self._outputs = inputs, outputs
 
     def fill(self) -> None:
@@ -181,12 +200,54 @@ class _Prepared:
         for to, source in self._in_copies:
             to[:] = source
 
+    def copy_slave_to_slave(self) -> None:
+        """This frame's CopyInfos, for the commands whose input data is valid."""
+        inputs, outputs = self._inputs, self._outputs
+        assert inputs is not None and outputs is not None   # bound before the exchange
+        for slot, want, ops in self._slave_copies:
+            wkc = slot.wkc
+            if wkc < 0 or (want >= 0 and wkc != want):
+                continue                      # invalid this cycle: keep the last value
+            for op in ops:
+                if len(op) == 2:              # whole bytes
+                    op[0][:] = op[1]
+                elif len(op) == 6:            # within one byte each side
+                    sb, ss, mask, db, ds, keep = op
+                    outputs[db] = outputs[db] & keep | (inputs[sb] >> ss & mask) << ds
+                else:
+                    sb, se, ss, mask, db, de, ds, keep = op
+                    value = int.from_bytes(inputs[sb:se], "little") >> ss & mask
+                    outputs[db:de] = (int.from_bytes(outputs[db:de], "little") & keep
+                                      | value << ds).to_bytes(de - db, "little")
+
+
+# A compiled copy: (destination view, source view) for whole bytes; for bits within one
+# source and one destination byte, the source byte, shift and mask and the destination
+# byte, shift and the mask of the bits it keeps (no allocation: 8x cheaper than the
+# general form); else the source's bytes [sb, se), its shift and mask, the destination's
+# bytes [db, de), shift and the mask of the bits it keeps.
+_CopyOp = (tuple[memoryview, memoryview] | tuple[int, int, int, int, int, int]
+           | tuple[int, int, int, int, int, int, int, int])
+
+
+def _compile(c: CopyInfo, inputs: memoryview, outputs: memoryview) -> _CopyOp:
+    """One copy over the images.  A bit offset counts from bit 0 of byte 0, least
+    significant bit first, as the ``ProcessImage`` variables' ``BitOffs`` (ETG.2100)."""
+    src, dst, n = c.src_bit_offs, c.dst_bit_offs, c.bit_size
+    mask = (1 << n) - 1
+    if src % 8 + n <= 8 and dst % 8 + n <= 8:     # a whole byte too: cheaper than a view
+        return src // 8, src % 8, mask, dst // 8, dst % 8, 0xFF ^ (mask << dst % 8)
+    if not (src | dst | n) & 7:
+        return outputs[dst // 8:(dst + n) // 8], inputs[src // 8:(src + n) // 8]
+    db, de = dst // 8, (dst + n + 7) // 8
+    return (src // 8, (src + n + 7) // 8, src % 8, mask, db, de, dst % 8,
+            ((1 << 8 * (de - db)) - 1) ^ (mask << dst % 8))
+
 
 class CyclicFrames:
     """The cyclic frames of an ENI and its process image (inputs and outputs)."""
 
     def __init__(self, plan: NetworkPlan) -> None:
-        image = plan.process_image
         frames = [f for cyc in plan.cyclic for f in cyc.frames]
         # The ENI's cycle time; TwinCAT files often have none, then the DC SYNC0 cycle
         # the slaves were given; 1 ms without either.
@@ -195,7 +256,9 @@ class CyclicFrames:
         self.cycle_time_us = next((c.cycle_time for c in plan.cyclic if c.cycle_time), None) \
             or dc_cycle or 1000
         self.frames: list[list[_Slot]] = []
-        in_size, out_size = image.inputs_size, image.outputs_size
+        # The images' sizes: the ProcessImage's, or as far as a command's data reaches
+        # (the same sizes the reader checks each CopyInfo against).
+        in_size, out_size = plan.image_bytes()
         for f in frames:
             shift = f.data_shift
             # "Bus shift" (APWR/FPWR of 0x0910) writes the master's own clock into the
@@ -204,10 +267,9 @@ class CyclicFrames:
             slots = [_Slot(c, c.input_offs + shift, c.output_offs + shift, c.cnt)
                      for c in f.cmds
                      if not (c.cmd in (Cmd.APWR, Cmd.FPWR) and c.ado == Reg.DC_SYSTEM_TIME)]
-            for s in slots:
-                in_size = max(in_size, s.in_at + s.cmd.length)
-                out_size = max(out_size, s.out_at + s.cmd.length)
             self.frames.append(slots)
+        # Whether any command has CopyInfos: a cycle without them pays one test.
+        self.copies = any(c.copy_infos for f in frames for c in f.cmds)
         self.inputs = bytearray(in_size)
         self.outputs = bytearray(out_size)
         self.stats = CycleStats()
@@ -240,7 +302,8 @@ class CyclicFrames:
         stats.cycles += 1
         ok = True
         inputs, outputs, reply = self.inputs, self.outputs, self._reply
-        for p in self._prepared.get(state) or self.prepared(state):
+        prepared = self._prepared.get(state) or self.prepared(state)
+        for p in prepared:
             p.bind(inputs, outputs, reply)
             p.fill()
             if not transport.exchange_prepared(p, reply, timeout):
@@ -257,6 +320,9 @@ class CyclicFrames:
                     key = s.cmd.comment or f"cmd {s.cmd.cmd}"
                     stats.wkc_error_cmds[key] = stats.wkc_error_cmds.get(key, 0) + 1
                     ok = False
+        if self.copies:
+            for p in prepared:
+                p.copy_slave_to_slave()
         return ok
 
 
