@@ -37,6 +37,7 @@ from ecatcfg.runtime.master.replay import ApplyError, MailboxChannel
 from ecatcfg.runtime.master.soe_client import SoeTransfer, soe_init_cmd_job
 from ecatcfg.runtime.master.transport import Transport
 from ecatcfg.runtime.segment import emulate
+from ecatcfg.runtime.segment.soe_server import Idn
 from ecatcfg.runtime.segment.virtual import Faults
 from ecatcfg.runtime.soe import (ELEMENT_ATTRIBUTE, ELEMENT_NAME, ELEMENT_UNIT, ELEMENT_VALUE,
                                  Reassembly, SoeOpCode, attribute_element_size, decode_list,
@@ -197,8 +198,7 @@ def test_writes_are_stored_checked_and_logged():
         [reply] = box.write(*args, **kw)
         assert (reply.op_code, reply.error, reply.error_code) == (4, True, code), (args, kw)
     # A value larger than the mailbox, in fragments: only the last is answered.
-    box.soe.drives[1].idns[0x0300] = box.soe.drives[0].idns[S30].__class__(
-        "long", 0, bytes(200))
+    box.soe.drives[1].idns[0x0300] = Idn("long", 0, bytes(200))      # writable, 200 bytes
     long = bytes(range(200))
     replies = [box.mailbox.handle(pad_to(m[:5] + bytes([m[5] | (n + 1) << 4]) + m[6:], 128),
                                   AlState.PREOP)
@@ -208,6 +208,25 @@ def test_writes_are_stored_checked_and_logged():
     assert box.soe.drives[1].idns[0x0300].value == long
     assert box.soe.drives[0].log == [(S32, b"\x0b\x00")]
     assert box.soe.drives[1].log == [(0x0300, long)]
+
+
+def test_an_esi_list_idn_takes_lists_up_to_its_maximum():
+    from ecatcfg.esi.model import SoeInitCmd as EsiSoeInitCmd, SoeSettings, Source
+    from ecatcfg.runtime.segment.soe_server import build_drives
+    source = Source("x.xml", 1)
+    # current length 6, maximum 8: a list of up to 8 bytes (10 bytes of data: not a number);
+    # written in SO, so not required
+    settings = SoeSettings(source, [EsiSoeInitCmd(["SO"], 0x8100, bytes.fromhex(
+        "0600 0800 010203040506".replace(" ", "")), source)])
+    [drive] = build_drives(settings)
+    entry = drive.idns[0x8100]
+    assert entry.is_list and entry.list_max == 8 and drive.required == []
+    for data, code in ((bytes.fromhex("0600 0800 010203040506"), 0),
+                       (bytes.fromhex("0a00 0800") + bytes(10), 0x7003),   # past the maximum
+                       (bytes.fromhex("0400 0800 0102"), 0x7002),          # shorter than said
+                       (bytes.fromhex("0200 0800 010203"), 0x7003),
+                       (bytes.fromhex("0200"), 0x7002)):
+        assert entry.write_error(data, AlState.OP) == code, data.hex()
 
 
 def test_a_read_larger_than_sm1_comes_in_fragments():

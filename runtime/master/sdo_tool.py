@@ -214,8 +214,8 @@ def _prepare(info: SlaveMailbox) -> Job:
     info.state_before = al_status
     state = al_status & AL_STATE_MASK
     if state == AlState.BOOT:
-        raise SdoToolError(f"{who} is in BOOT; CoE needs PREOP, SAFEOP or OP (request INIT "
-                           "first)")
+        raise SdoToolError(f"{who} is in BOOT; {info.protocol} needs PREOP, SAFEOP or OP "
+                           "(request INIT first)")
 
     # The mailbox from the SII, read while the EEPROM belongs to EtherCAT (0x0500 = 0);
     # a slave that is past INIT gets it back as it was (its PDI may be using it).

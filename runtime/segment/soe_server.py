@@ -94,14 +94,16 @@ class Idn:
         if self.attribute & _WP_BY_STATE.get(state, 0):
             return SOE_DATA_WRITE_PROTECTED
         if self.is_list:
+            # A list value says its current length first: fewer bytes than that is too
+            # short, more (or more than the list holds) too long.
             if len(data) < 4:
                 return SOE_DATA_TOO_SHORT
-            try:
-                items, _maximum = decode_list(data)
-            except ValueError:
-                return SOE_DATA_TOO_SHORT if len(data) - 4 < data[0] | data[1] << 8 \
-                    else SOE_DATA_TOO_LONG
-            return SOE_DATA_TOO_LONG if len(items) > self.list_max else 0
+            current = int.from_bytes(data[:2], "little")
+            if len(data) - 4 < current:
+                return SOE_DATA_TOO_SHORT
+            if len(data) - 4 > current or current > self.list_max:
+                return SOE_DATA_TOO_LONG
+            return 0
         if len(data) < len(self.value):
             return SOE_DATA_TOO_SHORT
         if len(data) > len(self.value):
