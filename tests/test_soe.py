@@ -443,14 +443,19 @@ def test_a_drive_error_names_the_slave_idn_drive_and_transition():
 # --------------------------------------------------------------------------- tshark
 
 def test_tshark_decodes_what_was_sent(tmp_path, tshark_path):
-    """Our requests and the drive's replies, a fragmented write among them, as Wireshark's
-    EtherCAT mailbox dissector reads them: no malformed packet, and the opcode, drive,
-    IDN (or fragments left) and data it decodes are what was sent."""
+    """Our requests and the drive's replies, a fragmented write and a read answered in
+    fragments among them, as Wireshark's EtherCAT mailbox dissector reads them: no
+    malformed packet, and the opcode, drive, IDN (or fragments left) and data it decodes
+    are what was sent."""
     pcap = tmp_path / "soe.pcapng"
     cmds = esi_soe_cmds() + [SoeInitCmd([Transition.PS], "long", S30, bytes(range(200)))]
     with Network.virtual(soe_plan(cmds), esi=[FIXTURE], pcap=pcap) as net:
         with pytest.raises(ApplyError, match="0x7004"):     # S-0-0030 is read-only
             net.up()
+        # The drive stays in PREOP: a read whose answer comes in two fragments.
+        net.segment.slaves[0].mailbox.soe.drives[0].idns[0x0300] = Idn("long", 0,
+                                                                       bytes(range(200)))
+        assert soe_tool.soe_transfer(net.master.transport, 0, 0x0300) == bytes(range(200))
     fields = ["ecat_mailbox.soe_opcode", "ecat_mailbox.soe_header_driveno",
               "ecat_mailbox.soe_header_incomplete", "ecat_mailbox.soe_header_error",
               "ecat_mailbox.soe_idn", "ecat_mailbox.soe_frag", "ecat_mailbox.soe_data"]
@@ -471,7 +476,10 @@ def test_tshark_decodes_what_was_sent(tmp_path, tshark_path):
     # "SoE Error" too; the error code after the header is checked by hand-written bytes.)
     expected += [(3, 0, True, False, 1, bytes(range(118))),
                  (3, 0, False, False, S30, bytes(range(118, 200))),
-                 (4, 0, False, True, S30, b"")]
+                 (4, 0, False, True, S30, b""),
+                 (1, 0, False, False, 0x0300, b""),
+                 (2, 0, True, False, 1, bytes(range(118))),
+                 (2, 0, False, False, 0x0300, bytes(range(118, 200)))]
     assert decoded == expected
     assert tshark_malformed(pcap) == []
 
