@@ -18,6 +18,7 @@ import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
+from typing import Any
 
 import pytest
 from rig import serving, start_simulate, tshark_fields, tshark_malformed
@@ -315,8 +316,9 @@ WRITTEN = bytes.fromhex("0400 0000 00 25" "04 40 0100".replace(" ", ""))   # wri
 
 def test_the_master_writes_in_fragments_and_waits_for_one_answer():
     cmd = SoeInitCmd([Transition.PS], "big", S1, bytes(range(250)), drive_no=3)
-    written = drive_job(init_job(cmd), [encode_emergency(0x8700, 1, counter=1),
-                                        bytes.fromhex("0400 0000 00 25" "64 40 0100"
+    stale_read = bytes.fromhex("0600 0000 00 35" "62 40 0100 d007".replace(" ", ""))
+    written = drive_job(init_job(cmd), [encode_emergency(0x8700, 1, counter=1), stale_read,
+                                        bytes.fromhex("0400 0000 00 45" "64 40 0100"
                                                       .replace(" ", ""))])
     assert len(written) == 3 and all(len(w) == 128 for w in written)
     # counters 1, 2, 3; opcode 3 with drive 3, incomplete in all but the last
@@ -352,6 +354,17 @@ def test_the_master_gives_up_after_the_timeout():
                                          r"\(transition PS\)"):
         drive_job(init_job(cmd), [])
     assert len(drive_job(init_job(cmd), [WRITTEN])) == 1
+
+
+def test_read_fragments_that_do_not_fit_together_fail():
+    from ecatcfg.runtime.master.soe_client import soe_job
+    channel = MailboxChannel(0x1001, CHANNEL_PLAN)
+    parts = encode_fragments(SoeOpCode.READ_RESPONSE, S30, bytes(300), 128)
+    stamped = [m[:5] + bytes([m[5] | (n + 1) << 4]) + m[6:] for n, m in enumerate(parts)]
+    with pytest.raises(ApplyError, match=r"read response fragments: fragment with 0 "
+                                         r"fragments left after one with 2"):
+        drive_job(soe_job(channel, SoeTransfer(S30), "axis", "read"),
+                  [stamped[0], stamped[2]])
 
 
 def test_a_read_reassembles_the_fragments():
@@ -487,7 +500,7 @@ def test_tshark_decodes_what_was_sent(tmp_path, tshark_path):
 # --------------------------------------------------------------------------- ecatcfg soe
 
 @contextmanager
-def memory_line(faults: Faults | None = None) -> Iterator[Transport]:
+def memory_line(faults: Faults | None = None) -> Iterator[tuple[Transport, Any]]:
     lib = Library([FIXTURE], cache=False)
     seg = emulate.segment([emulate.SlaveSpec(lib.device(lib.find("EXS5102").entry), "axis")],
                           faults)
@@ -497,14 +510,14 @@ def memory_line(faults: Faults | None = None) -> Iterator[Transport]:
                               daemon=True)
     thread.start()
     try:
-        yield Transport(ours)
+        yield Transport(ours), seg
     finally:
         stop.set()
         thread.join(5)
 
 
 def test_the_tool_reads_and_writes_in_memory_over_a_lossy_link():
-    with memory_line(Faults(drop=0.1, seed=3)) as t:
+    with memory_line(Faults(drop=0.15, seed=4)) as (t, seg):
         for n in range(6):
             value = bytes([n, 0x07])
             soe_tool.soe_transfer(t, 0, S32, value, drive_no=n % 2)
@@ -514,6 +527,15 @@ def test_the_tool_reads_and_writes_in_memory_over_a_lossy_link():
         with pytest.raises(soe_tool.SoeToolError, match=r"0x1001 \(no IDN\)") as info:
             soe_tool.soe_transfer(t, 0, 0x0999)
         assert info.value.soe_error == 0x1001
+        # Values larger than the mailbox, both ways: lost SM0 writes are sent again and
+        # dropped by the drive as repeats, lost SM1 reads asked for again.
+        drive = seg.slaves[0].mailbox.soe.drives[1]
+        drive.idns[0x0300] = Idn("long", 0, bytes(300))
+        for n in range(4):
+            value = bytes((n + i) % 256 for i in range(300))
+            soe_tool.soe_transfer(t, 0, 0x0300, value, drive_no=1)
+            assert soe_tool.soe_transfer(t, 0, 0x0300, drive_no=1) == value
+        assert [len(v) for idn, v in drive.log if idn == 0x0300] == [300] * 4
         assert t.counters.frames_lost > 0
 
 

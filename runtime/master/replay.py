@@ -188,6 +188,7 @@ class MailboxChannel:
     counter_value: int = 0
     sent_messages: int = 0
     last_received: int = 0       # counter of the slave's last message taken
+    lost_reads: int = 0          # SM1 reads whose frame was lost (a message may be gone)
 
     def counter(self) -> int:
         """The next mailbox counter, 1..7 (0 means 'not used'; SOEM never sends it)."""
@@ -235,6 +236,7 @@ class MailboxChannel:
             if now > deadline:
                 raise ApplyError("no mailbox response in time", who, what)
             if reply is None:
+                self.lost_reads += 1
                 lost_at = lost_at or now
             elif lost_at is not None and now - lost_at >= REPEAT_AFTER:
                 yield from self._repeat(deadline, who, what)

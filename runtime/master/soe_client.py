@@ -10,8 +10,10 @@ together again; a write response; an error reply with its SoE error code).  :fun
 moves the bytes through a :class:`MailboxChannel`, as ``sdo_job`` does (SOEM
 ``ecx_SoEread``/``ecx_SoEwrite``, IgH ``fsm_soe.c``).
 
-CoE emergencies that arrive in between are set aside, as the SDO client does; a message of
-another protocol or a response for another IDN, drive or opcode fails the transfer.
+CoE emergencies that arrive in between are set aside, as the SDO client does, and so is a
+whole answer of the other kind (a read response while writing), left by a request the
+slave took twice; a message of another protocol or a response for another IDN or drive
+fails the transfer.
 """
 
 from __future__ import annotations
@@ -27,8 +29,8 @@ from ecatcfg.runtime.master.replay import (TIMEOUT_MAILBOX, ApplyError, MailboxC
                                            SlaveProgress)
 from ecatcfg.runtime.master.sdo_client import CounterSource
 from ecatcfg.runtime.soe import (ELEMENT_VALUE, MAX_DRIVE, SOE_OVERHEAD, Reassembly,
-                                 SoeError, SoeOpCode, decode_soe, encode_fragments,
-                                 encode_read_request)
+                                 SoeError, SoeMessage, SoeOpCode, decode_soe,
+                                 encode_fragments, encode_read_request)
 
 
 def _stamped(message: bytes, counter: int) -> bytes:
@@ -57,7 +59,17 @@ class SoeTransfer:
         self.mbx_out_size = mbx_out_size
         self.counter = counter if counter is not None else (lambda: 0)
         self.emergencies: list[Emergency] = []
+        self.stale: list[SoeMessage] = []
         self.done = False
+        self.responses = 0               # SoE messages of the answer taken so far
+        self.broken = ""                 # why the fragments of a read do not fit together
+        self._reply = Reassembly()
+
+    def restart(self) -> None:
+        """Forget the answer so far, to ask again (a read is free of side effects)."""
+        self.done = False
+        self.responses = 0
+        self.broken = ""
         self._reply = Reassembly()
 
     @property
@@ -113,18 +125,28 @@ class SoeTransfer:
                 self.done = True
                 raise SoeError(soe.error_code, self.idn, self.drive_no, self.action)
             raise self._fail(f"error reply with opcode {soe.op_code} and no error code")
+        other = (SoeOpCode.WRITE_RESPONSE if self.data is None else SoeOpCode.READ_RESPONSE)
+        if soe.op_code == other and not soe.incomplete:
+            # The answer to an earlier request of the other kind that the slave took twice
+            # (a first message with counter 0, sent again after a lost frame, is never
+            # dropped as a repeat): set aside, as an emergency is.
+            self.stale.append(soe)
+            return False
         if soe.op_code != want or soe.drive_no != self.drive_no:
             raise self._fail(f"SoE opcode {soe.op_code} of drive {soe.drive_no} where "
                              f"opcode {want:d} of drive {self.drive_no} was expected")
         if not soe.incomplete and soe.idn != self.idn:
             raise self._fail(f"response for {format_idn(soe.idn)}")
+        self.responses += 1
         if self.data is not None:
             self.done = True
             return True
         try:
             whole = self._reply.add(soe)
         except ValueError as exc:
-            raise self._fail(f"read response fragments: {exc}") from None
+            # Read on to the answer's last fragment, so that none of it is left in SM1.
+            self.broken = self.broken or f"read response fragments: {exc}"
+            whole = None if soe.incomplete else b""
         self.done = whole is not None
         return self.done
 
@@ -145,15 +167,30 @@ class SoeRefused(ApplyError):
 def soe_job(channel: MailboxChannel, transfer: SoeTransfer, who: str | None,
             what: str | None, timeout: float = TIMEOUT_MAILBOX) -> Step[SoeTransfer]:
     """One SoE transfer through the slave's mailbox; SoE errors and protocol errors become
-    an :class:`ApplyError` naming the slave, the IDN and the drive."""
+    an :class:`ApplyError` naming the slave, the IDN and the drive.
+
+    A drive posts a long read response's fragments one after the other without being asked
+    for each (unlike SDO segments).  An SM1 read whose frame is lost on the way back may
+    have taken a fragment out of the mailbox, and the mailbox repeat only brings back a
+    message when SM1 stays empty, not when the next fragment is already there: the
+    fragments that arrive then may fit together without the lost one.  So a read during
+    which an SM1 read was lost is asked again (until the timeout).  Fragments that do not
+    fit together otherwise are the drive's error."""
     deadline = time.monotonic() + timeout
     try:
-        for request in transfer.requests():
-            yield from channel.send(request, deadline, who, what)
         while True:
-            response = yield from channel.receive(deadline, who, what)
-            if transfer.on_response(response):
-                return transfer
+            lost = channel.lost_reads
+            for request in transfer.requests():
+                yield from channel.send(request, deadline, who, what)
+            while not transfer.on_response((yield from channel.receive(deadline, who,
+                                                                       what))):
+                pass
+            if transfer.data is None and channel.lost_reads != lost:
+                transfer.restart()
+                continue
+            if transfer.broken:
+                raise MailboxProtocolError(f"{transfer.what}: {transfer.broken}")
+            return transfer
     except SoeError as error:
         raise SoeRefused(str(error), who, what, error.code) from None
     except MailboxProtocolError as error:

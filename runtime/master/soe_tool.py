@@ -16,7 +16,7 @@ from ecatcfg.runtime.master.lockstep import Job
 from ecatcfg.runtime.master.replay import TIMEOUT_MAILBOX, ApplyError, MailboxChannel
 from ecatcfg.runtime.master.sdo_tool import SdoToolError, SlaveMailbox, mailbox_session
 from ecatcfg.runtime.master.transport import Transport
-from ecatcfg.runtime.soe import ELEMENT_VALUE
+from ecatcfg.runtime.soe import ELEMENT_ATTRIBUTE, ELEMENT_VALUE, fragment_sizes
 
 
 class SoeToolError(SdoToolError):
@@ -50,6 +50,18 @@ def soe_transfer(transport: Transport, position: int, idn: int, data: bytes | No
                                    mbx_out_size=size, counter=counter)
         except ValueError as exc:
             raise SoeToolError(f"slave {position}: {exc}") from None
+        if data is not None and len(fragment_sizes(len(data), size)) > 1:
+            # The session's first message goes with counter 0, which a slave never takes
+            # for a repeat (sdo_tool): a first fragment sent again after a lost frame
+            # would then be taken twice and break the write.  A read goes first instead
+            # (its answer, an error too, does not matter), so the fragments count 1..7.
+            try:
+                yield from soe_job(channel, SoeTransfer(idn, drive_no=drive_no,
+                                                        elements=ELEMENT_ATTRIBUTE,
+                                                        mbx_out_size=size, counter=counter),
+                                   None, None, timeout)
+            except SoeRefused:
+                pass
         try:
             yield from soe_job(channel, transfer, None, None, timeout)
         except SoeRefused as exc:
