@@ -52,7 +52,6 @@ from dataclasses import dataclass, field
 
 from ecatcfg.esc import AlState
 from ecatcfg.esi.model import SoeSettings
-from ecatcfg.esi.soe_idn import format_idn
 from ecatcfg.runtime.mailbox import MailboxProtocolError, MbxErrorDetail
 from ecatcfg.runtime.soe import (
     ATTR_TYPE_BINARY, ATTR_TYPE_IDN, ATTR_TYPE_STRING, ATTR_TYPE_UINT, ATTR_WP_OP,
@@ -233,10 +232,6 @@ class SoeServer:
             if missing:
                 refused.append((drive.number, missing))
         return refused
-
-    def describe_missing(self) -> str:
-        return "; ".join(f"drive {n}: {', '.join(format_idn(i) for i in idns)} not written"
-                         for n, idns in self.safeop_refusal())
 
     def handle(self, data: bytes, state: AlState) -> list[bytes]:
         """The messages answering one SoE message (``data``: what follows the mailbox
