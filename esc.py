@@ -586,6 +586,7 @@ class AlStatusCode(IntEnum):
     DC_INVALID_SYNC_CYCLE = 0x0035
     DC_INVALID_SYNC0_CYCLE = 0x0036
     DC_INVALID_SYNC1_CYCLE = 0x0037
+    MBX_SOE = 0x0045                        # an SoE drive's parameters refuse the state
 
 
 def al_status_name(code: int) -> str:

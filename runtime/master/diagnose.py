@@ -13,6 +13,9 @@ says it in one or two lines (``docs/diagnostics.md`` has the table):
   (0x0440) and counter (0x0442): outputs stopped arriving for longer than that time;
 - 0x0035 / 0x0036 / 0x0030 DC SYNC: the activation (0x0981), SYNC0/SYNC1 cycle times
   (0x09A0, 0x09A4) and, with an ENI, the cycle time it asks for;
+- 0x0045 MBX_SOE (what an emulated SoE drive refuses SAFEOP with, ``runtime/segment/
+  al_checks.py``): each drive's S-0-0021, the IDNs it found invalid or missing before
+  SAFEOP (the Beckhoff AX5000 documentation of S-0-0021), read over SoE;
 - any code: the newest diagnosis message of a slave that has the diagnosis history object
   (0x10F3, ETG.1020 "Diagnosis history": sub 2 newest message, messages from sub 6 on:
   DiagCode u32, Flags u16, TextId u16, time stamp u64, parameters).
@@ -51,6 +54,7 @@ DIAG_NEWEST = 2                # its subindex "newest message"
 DIAG_FIRST_MESSAGE = 6         # messages from this subindex on
 _DC_CODES = (AlStatusCode.DC_INVALID_SYNC, AlStatusCode.DC_INVALID_SYNC_CYCLE,
              AlStatusCode.DC_INVALID_SYNC0_CYCLE, AlStatusCode.DC_INVALID_SYNC1_CYCLE)
+SOE_INVALID_CP2 = 21           # S-0-0021, IDN-list of invalid operation data for CP2
 SDO_TIMEOUT = 1.0              # s per diagnostic upload: a slave that does not answer is said
 
 
@@ -138,6 +142,8 @@ def explain(transport: Transport, position: int, code: int | None = None,
             lines += _watchdog(transport, position, fields)
         elif code in _DC_CODES:
             lines += _dc(transport, position, slave, fields)
+        elif code == AlStatusCode.MBX_SOE and coe:
+            lines += _soe_invalid(transport, position, fields)
     except _Unreadable as exc:
         lines.append(exc.message)
     if coe:
@@ -288,6 +294,38 @@ def _dc(transport: Transport, position: int, slave: SlavePlan | None,
         fields["dc"]["eni_sync0_cycle_ns"] = eni_ns
         lines.append(f"the ENI's SYNC0 cycle time is {eni_ns} ns; the device's DC op modes "
                      "(ESI Dc/OpMode) give the cycle times it accepts")
+    return lines
+
+
+def _soe_invalid(transport: Transport, position: int, fields: dict[str, Any]) -> list[str]:
+    """Each drive's S-0-0021 (IDN-list of invalid operation data for CP2), from drive 0 on
+    until one the slave does not have (SoE error 0x800A, invalid drive number)."""
+    from ecatcfg.esi.soe_idn import format_idn
+    from ecatcfg.runtime.master.sdo_tool import SdoToolError
+    from ecatcfg.runtime.master.soe_tool import SoeToolError, soe_transfer
+    from ecatcfg.runtime.soe import SOE_INVALID_DRIVE, decode_list
+
+    lines: list[str] = []
+    invalid: dict[int, list[str]] = {}
+    for drive in range(8):
+        try:
+            value = soe_transfer(transport, position, SOE_INVALID_CP2, drive_no=drive,
+                                 timeout=SDO_TIMEOUT)
+            items, _maximum = decode_list(value)
+        except SoeToolError as exc:
+            if exc.soe_error != SOE_INVALID_DRIVE or not drive:
+                lines.append(f"S-0-0021 of drive {drive} not read ({exc.message})")
+            break
+        except (SdoToolError, ApplyError, ValueError) as exc:
+            lines.append(f"S-0-0021 of drive {drive} not read ({exc})")
+            break
+        idns = [format_idn(int.from_bytes(items[i:i + 2], "little"))
+                for i in range(0, len(items) - 1, 2)]
+        invalid[drive] = idns
+        if idns:
+            lines.append(f"S-0-0021 of drive {drive} lists {', '.join(idns)}: IDNs the drive "
+                         "needs before SAFEOP that are missing or invalid")
+    fields["soe_invalid_idns"] = invalid
     return lines
 
 

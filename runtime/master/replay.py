@@ -16,7 +16,7 @@ import struct
 import time
 from typing import TYPE_CHECKING, Any, TypeVar
 
-from ecatcfg.eni.plan import CoeInitCmd, EoeInitCmd, InitCmd, MailboxPlan
+from ecatcfg.eni.plan import CoeInitCmd, EoeInitCmd, InitCmd, MailboxPlan, SoeInitCmd
 from ecatcfg.eni.words import init_cmd_name
 from ecatcfg.errors import EcatcfgError
 from ecatcfg.esc import (AL_STATUS_ERROR, SM1_STATUS, SM_ACTIVATE_REPEAT, SM_PDI_REPEAT_ACK, Cmd,
@@ -61,7 +61,7 @@ class ApplyError(EcatcfgError):
         self.command = command
         self.al_code = al_code
         self.abort_code = abort_code
-        self.init_cmd: InitCmd | CoeInitCmd | EoeInitCmd | None = None
+        self.init_cmd: InitCmd | CoeInitCmd | EoeInitCmd | SoeInitCmd | None = None
         # Why, as read from the slaves afterwards (runtime/master/diagnose.py): one JSON
         # object per slave ("slave", "al_status_code", "cause": lines, and the values read).
         self.causes: list[dict[str, Any]] = []
@@ -188,6 +188,7 @@ class MailboxChannel:
     counter_value: int = 0
     sent_messages: int = 0
     last_received: int = 0       # counter of the slave's last message taken
+    lost_reads: int = 0          # SM1 reads whose frame was lost (a message may be gone)
 
     def counter(self) -> int:
         """The next mailbox counter, 1..7 (0 means 'not used'; SOEM never sends it)."""
@@ -235,6 +236,7 @@ class MailboxChannel:
             if now > deadline:
                 raise ApplyError("no mailbox response in time", who, what)
             if reply is None:
+                self.lost_reads += 1
                 lost_at = lost_at or now
             elif lost_at is not None and now - lost_at >= REPEAT_AFTER:
                 yield from self._repeat(deadline, who, what)

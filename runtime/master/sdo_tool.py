@@ -7,7 +7,8 @@ until it has a station address, then by that address:
 
 1. count the slaves (BRD), read AL status and station address of the one asked for;
 2. read SII words 0x18-0x1C (the EEPROM belongs to EtherCAT while reading); refuse
-   a slave without the CoE bit (0x04) in word 0x1C;
+   a slave without the CoE bit (0x04) in word 0x1C (``ecatcfg soe``: the SoE bit, 0x10,
+   ``SlaveMailbox.protocol``);
 3. give it a station address when it has none (0x1000 + position + 1, or the next free one);
 4. if it is below PREOP: SM0/SM1 from the SII (control 0x26/0x22, enabled), EEPROM to the
    PDI (0x0500 = 1), AL control PREOP with error acknowledge (0x12) and wait for PREOP;
@@ -72,6 +73,7 @@ class SlaveMailbox:
     recv: SmConfig | None = None       # SM1
     configured: bool = False           # True: this run wrote SM0/SM1 and requested PREOP
     stale_messages: int = 0            # old messages taken out of SM1 before the transfer
+    protocol: str = "CoE"              # the mailbox protocol the SII must list (SoE: soe_tool)
 
 
 # -- INDEX:SUB and values -------------------------------------------------------------------
@@ -145,7 +147,7 @@ def _session(info: SlaveMailbox,
     send, recv = info.send, info.recv
     assert send is not None and recv is not None
     plan = MailboxPlan(MailboxArea(send.start, send.length),
-                       MailboxArea(recv.start, recv.length), protocols=["CoE"])
+                       MailboxArea(recv.start, recv.length), protocols=[info.protocol])
     channel = MailboxChannel(info.station_address, plan)
     yield from _empty_sm1(info, channel)
     yield from work(channel, send.length, _Counter())
@@ -212,8 +214,8 @@ def _prepare(info: SlaveMailbox) -> Job:
     info.state_before = al_status
     state = al_status & AL_STATE_MASK
     if state == AlState.BOOT:
-        raise SdoToolError(f"{who} is in BOOT; CoE needs PREOP, SAFEOP or OP (request INIT "
-                           "first)")
+        raise SdoToolError(f"{who} is in BOOT; {info.protocol} needs PREOP, SAFEOP or OP "
+                           "(request INIT first)")
 
     # The mailbox from the SII, read while the EEPROM belongs to EtherCAT (0x0500 = 0);
     # a slave that is past INIT gets it back as it was (its PDI may be using it).
@@ -230,13 +232,14 @@ def _prepare(info: SlaveMailbox) -> Job:
         raise SdoToolError(str(exc)) from None
     rx_start, rx_size, tx_start, tx_size = struct.unpack("<4H", mbx)
     info.protocols = protocols = struct.unpack_from("<H", proto)[0]
-    if not protocols & MAILBOX_PROTOCOL_BITS["CoE"]:
+    if not protocols & MAILBOX_PROTOCOL_BITS[info.protocol]:
         if pdi_owned:
             yield from _access(Datagram.physical(Cmd.APWR, adp, Reg.EEPROM_CONFIG, b"\x01"),
                                deadline, f"{who}: handing the SII EEPROM back (0x0500)")
-        raise SdoToolError(f"{who} does not support CoE: its SII lists the mailbox "
-                           f"protocols 0x{protocols:04X} ({protocol_names(protocols)}), "
-                           "so there is no SDO to read or write")
+        thing = "SDO" if info.protocol == "CoE" else "IDN" if info.protocol == "SoE" else "data"
+        raise SdoToolError(f"{who} does not support {info.protocol}: its SII lists the "
+                           f"mailbox protocols 0x{protocols:04X} ({protocol_names(protocols)}), "
+                           f"so there is no {thing} to read or write")
 
     address = yield from _station_address(info, adp, who)
     info.station_address = address

@@ -3,8 +3,9 @@
 Within a transition each slave runs its register commands in file order; its mailbox
 InitCmds for that transition run after the SyncManager/FMMU writes and before the
 AL-control request (ETG.2100; PDO assignment needs the mailbox up and must precede SAFEOP),
-in INIT->PREOP once the slave is in PREOP: first the CoE ones, then the EoE ones, as IgH
-``fsm_slave_config.c`` sets the IP parameters after the SDO configuration.  A station's
+in INIT->PREOP once the slave is in PREOP: first the CoE ones, then the SoE ones, then the
+EoE ones, as IgH ``fsm_slave_config.c`` writes the SoE configuration after the SDO
+configuration and sets the IP parameters last.  A station's
 plugged modules are checked before its CoE InitCmds configure them (``modules.py``).
 One command's job is ``replay.py``.
 """
@@ -14,7 +15,7 @@ from __future__ import annotations
 import struct
 import time
 
-from ecatcfg.eni.plan import CoeInitCmd, DcPlan, EoeInitCmd, InitCmd, SlavePlan
+from ecatcfg.eni.plan import CoeInitCmd, DcPlan, EoeInitCmd, InitCmd, SlavePlan, SoeInitCmd
 from ecatcfg.eni.words import init_cmd_name
 from ecatcfg.esc import Cmd, Reg, Transition
 from ecatcfg.runtime.master.lockstep import Job, Step, until_answered
@@ -36,6 +37,14 @@ def mailbox_init_cmds(slave: SlavePlan, transition: Transition
             [c for c in mailbox.eoe_init_cmds if transition in c.transitions and not c.disabled])
 
 
+def soe_init_cmds(slave: SlavePlan, transition: Transition) -> list[SoeInitCmd]:
+    """The slave's enabled SoE InitCmds of ``transition``, in file order."""
+    mailbox = slave.mailbox
+    if mailbox is None:
+        return []
+    return [c for c in mailbox.soe_init_cmds if transition in c.transitions and not c.disabled]
+
+
 def _writes_al_control(cmd: InitCmd) -> bool:
     return cmd.cmd in (Cmd.APWR, Cmd.FPWR, Cmd.BWR) and cmd.ado == Reg.AL_CONTROL
 
@@ -49,12 +58,13 @@ def slave_transition_job(slave: SlavePlan, transition: Transition,
     cmds = [c for c in slave.init_cmds if transition in c.transitions]
     mailbox = slave.mailbox
     coe, eoe = mailbox_init_cmds(slave, transition)
+    soe = soe_init_cmds(slave, transition)
     split = len(cmds)
-    if (coe or eoe) and transition != Transition.IP:
+    if (coe or eoe or soe) and transition != Transition.IP:
         split = next((i for i, c in enumerate(cmds) if _writes_al_control(c)), len(cmds))
     for cmd in cmds[:split]:
         yield from _failing(cmd, _register_cmd(slave, cmd, who, progress))
-    if mailbox is not None and (coe or eoe):
+    if mailbox is not None and (coe or eoe or soe):
         channel = channel or MailboxChannel(slave.phys_addr, mailbox)
         if coe:                     # a station's plugged modules, before they are configured
             # Imported here: modules.py needs the ESI model (esi/slots.py), which apply
@@ -63,13 +73,18 @@ def slave_transition_job(slave: SlavePlan, transition: Transition,
             yield from check_modules(channel, slave, transition, who)
         for c in coe:
             yield from _failing(c, coe_init_cmd_job(channel, c, who, progress))
+        if soe:                     # imported here: only SoE drives need the client
+            from ecatcfg.runtime.master.soe_client import soe_init_cmd_job
+            for s in soe:
+                yield from _failing(s, soe_init_cmd_job(channel, s, who, transition.name,
+                                                        progress))
         for e in eoe:
             yield from _failing(e, eoe_init_cmd_job(channel, e, who, progress))
     for cmd in cmds[split:]:
         yield from _failing(cmd, _register_cmd(slave, cmd, who, progress))
 
 
-def _failing(cmd: InitCmd | CoeInitCmd | EoeInitCmd, job: Job) -> Job:
+def _failing(cmd: InitCmd | CoeInitCmd | EoeInitCmd | SoeInitCmd, job: Job) -> Job:
     """``job``, whose ApplyError names ``cmd`` as the InitCmd that failed."""
     try:
         yield from job

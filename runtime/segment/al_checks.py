@@ -6,7 +6,8 @@ AL state machine (``slave.py``) refuses, and with which AL status code.
 - PREOP->SAFEOP (and SAFEOP->OP for SyncManagers the ESI marks OpOnly): each process-data
   SyncManager with the length the assigned PDOs need and an FMMU over it (SOES
   ``ESC_checkSM23``: 0x001D for outputs, 0x001E for inputs); with SYNC0 on, a cycle time
-  (0x0030, invalid sync cycle time).
+  (0x0030, invalid sync cycle time); an SoE drive whose required IDNs were not written
+  (0x0045, MBX_SOE: ``soe_refusal``).
 
 Each check reads what the ESC holds (its SyncManagers, FMMUs, registers) and the device's
 ESI; none changes anything.
@@ -16,11 +17,15 @@ from __future__ import annotations
 
 import struct
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 from ecatcfg.esc import (SM_DIR_MASK, SM_MODE_MASK, AlStatusCode, FmmuConfig, FmmuType, Reg,
                          fmmus_cover)
 from ecatcfg.esi.model import Device
 from ecatcfg.runtime.segment.syncman import SmState
+
+if TYPE_CHECKING:       # only SoE drives have one
+    from ecatcfg.runtime.segment.soe_server import SoeServer
 
 # SM control bits a slave checks against its own SM configuration: mode and direction.
 SM_MODE_AND_DIRECTION = SM_MODE_MASK | SM_DIR_MASK
@@ -117,6 +122,16 @@ def dc_refusal(mem: bytearray) -> int:
         if not cycle:
             return AlStatusCode.DC_INVALID_SYNC_CYCLE
     return 0
+
+
+def soe_refusal(soe: SoeServer) -> int:
+    """PREOP->SAFEOP of an SoE drive: every IDN its S-0-0018 lists must have been written,
+    else it refuses and lists the missing ones in S-0-0021 (``soe_server.py``).  Which AL
+    status code a real drive gives then, no public source says (the AX5000 manual says the
+    switch "is acknowledged with an error" and lists the IDNs in S-0-0021): the emulation
+    gives 0x0045, the code ETG.1000.6 keeps for SoE (MBX_SOE), so a master can tell an SoE
+    parameter refusal from a SyncManager or DC one (docs/diagnostics.md)."""
+    return AlStatusCode.MBX_SOE if soe.safeop_refusal() else 0
 
 
 def sm_length_note(sms: Sequence[SmState], expected_pd: dict[int, int]) -> str:

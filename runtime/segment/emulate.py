@@ -93,6 +93,9 @@ def emulated_slave(spec: SlaveSpec) -> EmulatedSlave:
         if "EoE" in dev.mailbox.protocols:
             from ecatcfg.runtime.segment.eoe_server import EoeServer
             mailbox.eoe = EoeServer(dev.mailbox.eoe, sizes[1])
+        if "SoE" in dev.mailbox.protocols:
+            from ecatcfg.runtime.segment.soe_server import SoeServer
+            mailbox.soe = SoeServer(dev.mailbox.soe, sizes[1])
     image = sii.build(dev, serial=spec.serial, alias=spec.alias)
     slave = EmulatedSlave(dev, image, name=spec.name, od=od, mailbox=mailbox,
                           chip=chip_of(dev, chip_for(dev.vendor.id, dev.product_code)),

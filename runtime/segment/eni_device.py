@@ -19,7 +19,9 @@ emulated ESC are built exactly as for a device read from an ESI file:
   from the ENI's mapping downloads, else the slave's process-image variables (as gap
   entries: the ENI names no objects for them), padded to the SM length the ENI writes;
 - mailbox: the protocols of ``Mailbox/Protocol``; CoE flags from what the InitCmds do
-  (PDO assignment, PDO configuration, complete access); EoE with IP parameters;
+  (PDO assignment, PDO configuration, complete access); EoE with IP parameters; SoE
+  drives with the IDNs the ENI's SoE InitCmds write (those of PS required before SAFEOP,
+  ``soe_server.py``), as many drives as the highest drive number they address;
 - DC: an op mode with the activation the ENI writes to 0x0980 and its SYNC0 cycle;
 - SII configuration area: the value an InitCmd checks at 0x0140, else a slave without a
   mailbox runs in ESC device emulation (0x0141 bit 0), as every such device in the
@@ -44,7 +46,8 @@ from ecatcfg.esc import (ESC_DC_LATCH_UNIT, ESC_DC_SYNC_UNIT, FMMU_SIZE, RX_PDO_
 from ecatcfg.eni.plan import (CoeInitCmd, NetworkPlan, PdoDesc, SlavePlan,
                               register_writes)
 from ecatcfg.esi.model import (CoeSettings, Dc, DcOpMode, Device, Eeprom, EoeSettings, Fmmu,
-                               Mailbox, Pdo, PdoEntry, Profile, Source, SyncManager, Vendor)
+                               Mailbox, Pdo, PdoEntry, Profile, SoeInitCmd, SoeSettings, Source,
+                               SyncManager, Vendor)
 
 # SII configuration area word 0 (PDI control 0x0140, ESC configuration 0x0141) of slaves
 # without a mailbox: device emulation, with a digital I/O PDI when they have process data
@@ -333,8 +336,14 @@ def _mailbox(slave: SlavePlan, coe: _Coe, source: Source) -> Mailbox | None:
                                pdo_config=coe.configures,
                                complete_access=coe.complete_access)
     eoe = EoeSettings(source, ip=True) if "EoE" in protocols else None
+    soe = None
+    if "SoE" in protocols:
+        cmds = [SoeInitCmd([t.value for t in c.transitions], c.idn, c.data, source,
+                           channel=c.drive_no) for c in mbx.soe_init_cmds]
+        soe = SoeSettings(source, cmds, channel_count=1 + max((c.channel for c in cmds),
+                                                              default=0))
     return Mailbox(protocols, source, coe=settings, data_link_layer=bool(mbx.data_link_layer),
-                   eoe=eoe)
+                   eoe=eoe, soe=soe)
 
 
 def _dc(slave: SlavePlan, source: Source) -> Dc | None:

@@ -14,7 +14,7 @@ SOES ``ESC_mbxprocess`` does (``docs/protocol-notes.md`` §5):
 
 Then the message's data (what follows the header, ``length`` bytes) goes to the protocol's
 server: CoE to the SDO server (``sdo_server.py``), EoE to the EoE server
-(``eoe_server.py``).  A server answers with whole mailbox messages, or raises
+(``eoe_server.py``), SoE to the SoE server (``soe_server.py``).  A server answers with whole mailbox messages, or raises
 :class:`MailboxProtocolError` with the detail of the mailbox error reply to send.  Every
 answer leaves through here: it gets the slave's next counter (1..7, SOES
 ``ESC_claimbuffer``) and is padded to the SM1 length, because writing the last byte of SM1
@@ -34,19 +34,21 @@ from ecatcfg.runtime.mailbox import (
 if TYPE_CHECKING:     # built by runtime/segment/emulate.py for the slaves that speak them
     from ecatcfg.runtime.segment.eoe_server import EoeServer
     from ecatcfg.runtime.segment.sdo_server import SdoServer
+    from ecatcfg.runtime.segment.soe_server import SoeServer
 
 
 class MailboxServer:
     """One slave's mailbox.  ``mbx_out_size`` / ``mbx_in_size``: the SM0 (master -> slave)
-    and SM1 (slave -> master) lengths; ``coe`` / ``eoe``: the protocol servers, ``None`` for
-    a protocol the slave does not speak."""
+    and SM1 (slave -> master) lengths; ``coe`` / ``eoe`` / ``soe``: the protocol servers,
+    ``None`` for a protocol the slave does not speak."""
 
     def __init__(self, mbx_out_size: int, mbx_in_size: int, *, coe: SdoServer | None = None,
-                 eoe: EoeServer | None = None) -> None:
+                 eoe: EoeServer | None = None, soe: SoeServer | None = None) -> None:
         self.mbx_out_size = mbx_out_size
         self.mbx_in_size = mbx_in_size
         self.coe = coe
         self.eoe = eoe
+        self.soe = soe
         self._counter = MailboxCounter()
         self._last_counter: int | None = None
 
@@ -54,7 +56,7 @@ class MailboxServer:
         """The mailbox starts afresh (INIT -> PREOP): forget the last counter and whatever
         the protocols have in progress, as SOES does when it starts the mailbox."""
         self._last_counter = None
-        for server in (self.coe, self.eoe):
+        for server in (self.coe, self.eoe, self.soe):
             if server is not None:
                 server.reset()
 
@@ -72,11 +74,13 @@ class MailboxServer:
             return [self._error(MbxErrorDetail.INVALID_HEADER)]
         if header.channel != 0:
             return [self._error(MbxErrorDetail.INVALID_CHANNEL)]
-        server: SdoServer | EoeServer | None = None
+        server: SdoServer | EoeServer | SoeServer | None = None
         if header.type == MbxType.COE:
             server = self.coe
         elif header.type == MbxType.EOE:
             server = self.eoe
+        elif header.type == MbxType.SOE:
+            server = self.soe
         if server is None:
             return [self._error(MbxErrorDetail.UNSUPPORTED_PROTOCOL)]
         data = request[MBX_HEADER_SIZE:MBX_HEADER_SIZE + header.length]

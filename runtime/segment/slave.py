@@ -242,8 +242,8 @@ class EmulatedSlave:
         drift, ports = self.dc.drift, self.dc.ports
         # The firmware starts afresh too: the object dictionary holds its power-on values
         # again (what the master downloaded, a PDO assignment or mapping, is gone until it
-        # downloads it again), the mailbox forgets what was in progress and EoE its IP
-        # parameters.
+        # downloads it again), the mailbox forgets what was in progress, EoE its IP
+        # parameters and SoE drives the IDNs written.
         if self.od is not None:
             for (index, sub), value in self._od_power_on.items():
                 self.od[index][sub].value = value
@@ -251,6 +251,8 @@ class EmulatedSlave:
             self.mailbox.reset()
             if self.mailbox.eoe is not None:
                 self.mailbox.eoe.params = None
+            if self.mailbox.soe is not None:
+                self.mailbox.soe.power_on()
         self.__init__(self.device, bytes(self.eeprom),   # type: ignore[misc]
                       name=self.name, od=self.od, mailbox=self.mailbox, chip=self.chip,
                       device_id=self.device_id)
@@ -816,7 +818,8 @@ class EmulatedSlave:
         if current == AlState.INIT and target == AlState.PREOP:
             return self._check_mailbox()
         if current == AlState.PREOP and target == AlState.SAFEOP:
-            return self._check_process_data(op=False) or self._check_dc()
+            return (self._check_process_data(op=False) or self._check_dc()
+                    or self._check_soe())
         if current == AlState.SAFEOP and target == AlState.OP:
             return self._check_process_data(op=True)
         return 0
@@ -836,6 +839,10 @@ class EmulatedSlave:
 
     def _check_dc(self) -> int:
         return al_checks.dc_refusal(self.mem)
+
+    def _check_soe(self) -> int:
+        soe = self.mailbox.soe if self.mailbox is not None else None
+        return al_checks.soe_refusal(soe) if soe is not None else 0
 
     def _mirror_al_control(self, control: int) -> None:
         """Device emulation: the ESC copies the AL control word into AL status, every bit
