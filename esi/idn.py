@@ -1,4 +1,4 @@
-"""SoE identification numbers (IDNs): their notation and the few standard ones ecatcfg types.
+"""SoE identification numbers (IDNs): their notation, the few standard ones ecatcfg types.
 
 SoE (Servo drive profile over EtherCAT, ETG.1000.6 §5.8, the drive profile of IEC
 61800-7-204/-304, Sercos's parameter model) addresses a drive parameter by a 16-bit IDN:
@@ -71,7 +71,8 @@ def parse_idn(text: str) -> int:
     number = int(m.group(3))
     if number > NUMBER_MASK:
         raise ValueError(f"{text!r}: an IDN's number is 0..{NUMBER_MASK}")
-    return (P_BIT if m.group(1).upper() == "P" else 0) | int(m.group(2)) << SET_SHIFT | number
+    kind = P_BIT if m.group(1).upper() == "P" else 0
+    return kind | int(m.group(2)) << SET_SHIFT | number
 
 
 def standard(idn: int) -> StandardIdn | None:

@@ -1,6 +1,6 @@
 """Checks of an ENI against itself: SyncManagers, FMMUs, the process image, expected
-working counters, mailbox areas, SoE InitCmds (a frame too long for Ethernet is refused by the reader
-already: ENI004).  They need no ESI file: the registers a slave's
+working counters, mailbox areas, SoE InitCmds (a frame too long for Ethernet is refused by
+the reader already: ENI004).  They need no ESI file: the registers a slave's
 InitCmds write (SyncManagers 0x0800 + 8·n, FMMUs 0x0600 + 16·n; ESC Section II) are
 compared with what the same file's ``ProcessData``, ``Mailbox`` and ``Cyclic`` say."""
 
@@ -41,10 +41,10 @@ WKC = declare("ENI104", "error", "an expected working counter the FMMUs do not g
     out.""")
 UNSUPPORTED = declare("ENI003", "warning", "a part of the ENI apply does not carry out", """
     The ENI asks the master for something ecatcfg does not implement (eni/contents.py
-    lists it: FoE InitCmds, SoE requests other than writes, encrypted FMMU settings, ...).  ``apply`` refuses such a
-    file unless told to skip the part; ``check`` names it and cannot check it.  Where the
-    part is a slave's FMMU settings, ENI102 and ENI104 are not checked for that slave's
-    process data (its FMMUs are unknown).""")
+    lists it: FoE InitCmds, SoE requests other than writes, encrypted FMMU settings, ...).
+    ``apply`` refuses such a file unless told to skip the part; ``check`` names it and
+    cannot check it.  Where the part is a slave's FMMU settings, ENI102 and ENI104 are not
+    checked for that slave's process data (its FMMUs are unknown).""")
 MAILBOX = declare("ENI105", "error", "a mailbox area is not what SM0/SM1 are set to", """
     Mailbox/Send and Mailbox/Recv (start and length) are where the master writes and reads
     mailbox messages; the slave's InitCmds set SyncManager 0 and 1 (registers 0x0800 and
