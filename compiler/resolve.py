@@ -194,7 +194,7 @@ def _resolve(slave: ResolvedSlave, library: Library, errors: _Errors,
     slave.eoe_cmds = eoe_params.init_cmds(slave.name, slave.device, slave.phys_addr,
                                           slave.cfg.eoe, where, errors)
     slave.soe_cmds = soe_cmds.init_cmds(slave.name, slave.device, slave.cfg.soe, where,
-                                        errors)
+                                        errors, [p.module for p in modules])
     slave.watchdog = watchdogs.resolve(slave.name, slave.cfg.watchdog,
                                        errors.loaded.topology.master.watchdog, where, errors)
 

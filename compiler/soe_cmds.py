@@ -18,6 +18,7 @@ or an IDN whose type is unknown without 'type' or 'data'.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Protocol
 
 from ecatcfg.compiler.topology import Soe
@@ -25,7 +26,7 @@ from ecatcfg.eni.plan import SoeInitCmd
 from ecatcfg.esc import Transition
 from ecatcfg.esi import datatypes
 from ecatcfg.esi.idn import ENI_TRANSITIONS, MAX_DRIVE, eni_transition, idn_text, standard
-from ecatcfg.esi.model import Device
+from ecatcfg.esi.model import Device, Module
 from ecatcfg.esi.model import SoeInitCmd as EsiSoeInitCmd
 from ecatcfg.record import replace
 
@@ -76,9 +77,16 @@ def _comment(idn: int) -> str:
 
 
 def init_cmds(name: str, device: Device, entries: list[Soe], slave: tuple[str | int, ...],
-              errors: Errors) -> list[SoeInitCmd]:
+              errors: Errors, modules: Sequence[Module] = ()) -> list[SoeInitCmd]:
     """The slave's SoE InitCmds; problems go to ``errors`` at ``slave`` (the slave's place
-    in the topology) and its keys."""
+    in the topology) and its keys.  ETG.2000 gives modules no SoE (``ModuleType/Mailbox``
+    has CoE only), so a plugged module's SoE InitCmds are an error, never left out."""
+    for module in modules:
+        extra = module.mailbox.soe if module.mailbox else None
+        if extra is not None and extra.init_cmds:
+            errors.add(f"slave {name!r}: the module at {module.source} has SoE InitCmds ("
+                       f"{extra.init_cmds[0].source}), which ETG.2000 gives devices only; "
+                       "ecatcfg would not send them", *slave, "modules")
     soe = device.mailbox.soe if device.mailbox else None
     given = soe.init_cmds if soe else []
     cmds: list[SoeInitCmd] = []

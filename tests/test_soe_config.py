@@ -485,3 +485,22 @@ def test_every_soe_device_of_the_corpora_compiles_with_its_init_cmds(
         tree = etree.fromstring(data).getroottree()
         assert eni_schema.validate(tree), (device.type_name, eni_schema.error_log)
         assert len(tree.findall(".//Mailbox/SoE/InitCmds/InitCmd")) == len(esi_cmds)
+
+
+def test_a_modules_soe_init_cmds_are_an_error_not_left_out(tmp_path: Path) -> None:
+    """ETG.2000 gives a module's Mailbox CoE only; a file that gives one SoE InitCmds anyway
+    (the reader takes a module's Mailbox as a device's) stops compile at the slave."""
+    from conftest import EXAMPLES
+    source = (EXAMPLES / "station" / "esi" / "ecatcfg-EXM-station.xml").read_text()
+    old = "        </TxPdo>\n      </Module>"
+    assert old in source
+    soe = ("        </TxPdo>\n        <Mailbox><SoE><InitCmd><Transition>PS</Transition>"
+           "<IDN>1</IDN><Data>e803</Data></InitCmd></SoE></Mailbox>\n      </Module>")
+    folder = tmp_path / "esi"
+    folder.mkdir()
+    write(folder, "station.xml", source.replace(old, soe, 1))
+    errors = compile_errors(tmp_path, "slaves:\n  - name: station\n    device: EXM100\n"
+                            "    modules:\n      1: [EXM-4DI]\n", folder)
+    assert [e for e in errors if "has SoE InitCmds" in e and
+            "which ETG.2000 gives devices only; ecatcfg would not send them" in e
+            and f"{tmp_path / 't.yaml'}:4:" in e], errors
