@@ -62,6 +62,7 @@ def run(args: argparse.Namespace) -> int:
     digest = hashlib.sha256(Path(args.eni).read_bytes()).hexdigest()
     outputs: list[tuple[Path, bytes]]
     if args.format == "pysoem":
+        pysoem_module.check(setups, args.eni)
         outputs = [(out, pysoem_module.render(setups, Path(args.eni).name, digest,
                                               __version__))]
     else:

@@ -53,7 +53,7 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
 def run(args: argparse.Namespace) -> int:
     import json
 
-    from ecatcfg.esi.soe_idn import format_idn
+    from ecatcfg.esi.idn import idn_text
     from ecatcfg.runtime.link import RawLink
     from ecatcfg.runtime.master import soe_tool
     from ecatcfg.runtime.master.sdo_tool import SlaveMailbox
@@ -70,7 +70,7 @@ def run(args: argparse.Namespace) -> int:
                                        drive_no=args.drive, elements=flags[element],
                                        timeout=args.timeout, info=info)
     out: dict[str, Any] = {"slave": args.slave, "station_address": info.station_address,
-                           "drive": args.drive, "idn": idn, "idn_text": format_idn(idn),
+                           "drive": args.drive, "idn": idn, "idn_text": idn_text(idn),
                            "action": args.action, "element": element,
                            "al_status_before": info.state_before,
                            "mailbox_configured": info.configured}
@@ -78,7 +78,7 @@ def run(args: argparse.Namespace) -> int:
     out.update(size=len(shown), hex=shown.hex())
     if data is None:
         out.update(_decoded(result, element, type_name))
-    where = f"{format_idn(idn)} (drive {args.drive})"
+    where = f"{idn_text(idn)} (drive {args.drive})"
     if args.format == "json":
         print(json.dumps(out, indent=2))
     elif data is None:
@@ -129,10 +129,10 @@ def _decoded(result: bytes, element: str, type_name: str | None) -> dict[str, An
 def _checked(args: argparse.Namespace) -> tuple[int, str | None]:
     """The IDN and base type of the command line, checked (exit 2) before a link opens."""
     from ecatcfg.errors import UsageError
-    from ecatcfg.esi.soe_idn import parse_idn
+    from ecatcfg.esi.idn import parse_idn
 
     try:
-        idn = parse_idn(args.idn)
+        idn = parse_idn(args.idn, numbers=True)
     except ValueError as exc:
         raise UsageError(str(exc)) from None
     if args.slave < 0:

@@ -284,7 +284,7 @@ def _mailbox(s: ResolvedSlave, sl: layout_mod.SlaveLayout) -> MailboxPlan | None
         status_bit_addr=sl.status_bit,
         bootstrap_send=MailboxArea(boot[0].start, boot[0].length) if boot else None,
         bootstrap_recv=MailboxArea(boot[1].start, boot[1].length) if boot else None,
-        coe_init_cmds=coe, eoe_init_cmds=list(s.eoe_cmds),
+        coe_init_cmds=coe, eoe_init_cmds=list(s.eoe_cmds), soe_init_cmds=list(s.soe_cmds),
         coe_profiles=[(p.profile_no, None if p.add_info is None else str(p.add_info))
                       for p in dev.profiles if p.profile_no is not None]
         if "CoE" in dev.mailbox.protocols else [],

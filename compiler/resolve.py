@@ -13,9 +13,9 @@ import difflib
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ecatcfg.eni.plan import CoeInitCmd, EoeInitCmd, PdoDesc, PdoEntryDesc
+from ecatcfg.eni.plan import CoeInitCmd, EoeInitCmd, PdoDesc, PdoEntryDesc, SoeInitCmd
 from ecatcfg.eni.standard import Watchdogs
-from ecatcfg.compiler import eoe_params, watchdogs, wiring
+from ecatcfg.compiler import eoe_params, soe_cmds, watchdogs, wiring
 from ecatcfg.compiler.topology import (LoadedTopology, MappingEntry, MappingVariable, Sdo,
                                        Slave)
 from ecatcfg.errors import EcatcfgError
@@ -47,6 +47,7 @@ class ResolvedSlave:
     user_cmds: list[CoeInitCmd] = field(default_factory=list)  # user SDOs replacing nothing
     module_cmds: list[CoeInitCmd] = field(default_factory=list)   # module ident list (0xF030)
     eoe_cmds: list[EoeInitCmd] = field(default_factory=list)     # topology eoe: (IP params)
+    soe_cmds: list[SoeInitCmd] = field(default_factory=list)     # ESI SoE + topology soe:
     watchdog: Watchdogs | None = None        # topology watchdog: (slave's, else master's)
     remapped: set[int] = field(default_factory=set)
     pdo_prefix: dict[int, str] = field(default_factory=dict)  # module PDOs: "Module 2 (X)"
@@ -192,6 +193,8 @@ def _resolve(slave: ResolvedSlave, library: Library, errors: _Errors,
     where = ("slaves", slave.index)
     slave.eoe_cmds = eoe_params.init_cmds(slave.name, slave.device, slave.phys_addr,
                                           slave.cfg.eoe, where, errors)
+    slave.soe_cmds = soe_cmds.init_cmds(slave.name, slave.device, slave.cfg.soe, where,
+                                        errors, [p.module for p in modules])
     slave.watchdog = watchdogs.resolve(slave.name, slave.cfg.watchdog,
                                        errors.loaded.topology.master.watchdog, where, errors)
 

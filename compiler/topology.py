@@ -29,6 +29,7 @@ from ecatcfg.eoe import DNS_NAME_SIZE
 from ecatcfg.errors import EcatcfgError
 from ecatcfg.esc import PORT_LETTERS, Transition
 from ecatcfg.esi.datatypes import bit_size as type_bits
+from ecatcfg.esi.idn import MAX_DRIVE, parse_idn
 from ecatcfg.esi.values import parse_int
 
 Path_ = tuple[str | int, ...]
@@ -239,6 +240,55 @@ class Sdo(_Model):
         if self.complete_access and (self.subindex > 1 or self.data is None):
             raise ValueError("complete_access needs 'data' (the object's bytes) and "
                              "subindex 0 or 1")
+        return self
+
+
+def _idn(value: Any) -> int:
+    """An IDN in its notation (``S-0-0001``, ``P-0-0010``: ``esi/idn.py``)."""
+    if not isinstance(value, str):
+        raise ValueError(f"an IDN is written S-<set>-<number> or P-<set>-<number> "
+                         f"(e.g. S-0-0001), not {value!r}")
+    return parse_idn(value)
+
+
+Idn = Annotated[int, BeforeValidator(_idn), WithJsonSchema(
+    {"type": "string", "pattern": r"^\s*[SPsp]\s*-\s*[0-7]\s*-\s*[0-9]{1,4}\s*$",
+     "description": "IDN, e.g. S-0-0001 or P-0-0010"})]
+
+
+class Soe(_Model):
+    """A start-up SoE write (an IDN of a servo drive), typed from the short table of
+    standard IDNs (``esi/idn.py``) or by 'type', or given as raw bytes."""
+
+    idn: Idn
+    drive: Annotated[int, *_num(0, MAX_DRIVE)] = Field(
+        default=0, description="Drive number behind the slave (ESI InitCmd@Chn), 0-7")
+    value: int | float | str | None = Field(
+        default=None, description="Value encoded by the IDN's type (the standard IDNs' or "
+                                  "'type')")
+    data: str | None = Field(default=None,
+                             description="Raw bytes in hex (wire order) instead of value")
+    type: str | None = Field(default=None,
+                             description="Data type of an IDN the table does not know "
+                                         "(e.g. UINT, UDINT)")
+    transition: Transition = Field(default=Transition.PS,
+                                   description="When to write it: PS, SO, SP, OP or OS")
+    comment: XmlText | None = None
+
+    @field_validator("value", mode="before")
+    @classmethod
+    def _value(cls, v: Any) -> Any:
+        if isinstance(v, bool):
+            return int(v)
+        return v
+
+    @model_validator(mode="after")
+    def _one_of(self) -> Soe:
+        if (self.value is None) == (self.data is None):
+            raise ValueError("give exactly one of 'value' and 'data'")
+        if self.data is not None and not re.fullmatch(r"(?:[0-9A-Fa-f]{2})+",
+                                                       self.data.replace(" ", "")):
+            raise ValueError(f"data {self.data!r} is not hex bytes (e.g. 'd007')")
         return self
 
 
@@ -477,6 +527,8 @@ class Slave(_Model):
         description="Slot number (from 1) -> its module, or the list of modules in a slot "
                     "that takes several (a station's row of I/O modules, in order)")
     sdos: list[Sdo] = Field(default_factory=list)
+    soe: list[Soe] = Field(default_factory=list,
+                           description="SoE start-up writes (servo drive IDNs)")
     dc: str | None = Field(default=None, description="DC OpMode name from the ESI")
     eoe: Eoe | None = Field(default=None, description="EoE IP parameters to set")
     watchdog: Watchdog | None = Field(

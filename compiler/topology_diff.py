@@ -4,8 +4,8 @@ Two topologies are compared as the validated model (``compiler/topology.py``) th
 reads, not as YAML text: comments, key order, quoting and number spellings (``0x1600``,
 ``"#x1600"``, ``5632``) are not differences.  Slaves are matched by name; a slave is
 added, removed or moved (its place in the file is its bus order on a line), and every
-other key that differs (device, PDOs, mapping, modules, SDOs, DC, EoE, watchdog, parent,
-port, ...) is one change naming the key, as are the master's keys (cycle time, layout).
+other key that differs (device, PDOs, mapping, modules, SDOs, SoE, DC, EoE, watchdog,
+parent, port, ...) is one change naming the key, as are the master's keys (cycle time, layout).
 The changes are :class:`ecatcfg.eni.diff.Change` records, as for ENIs.
 """
 
@@ -17,6 +17,7 @@ from typing import Any
 from ecatcfg.compiler.topology import LoadedTopology
 from ecatcfg.eni.diff import Change
 from ecatcfg.errors import EcatcfgError
+from ecatcfg.esi.idn import idn_text
 from ecatcfg.esi.library import Library, SelectorError
 from ecatcfg.esi.model import format_selector
 
@@ -47,7 +48,9 @@ def _spell(value: Any, hex_numbers: bool = False) -> str:
     if isinstance(value, list):
         return "[" + ", ".join(_spell(v, hex_numbers) for v in value) + "]"
     return "{" + ", ".join(
-        f"{_spell_key(k, hex_numbers)}: {_spell(v, hex_numbers or k in _INDEX_KEYS)}"
+        f"{_spell_key(k, hex_numbers)}: "
+        + (idn_text(v) if k == "idn" and isinstance(v, int) else
+           _spell(v, hex_numbers or k in _INDEX_KEYS))
         for k, v in value.items() if v is not None) + "}"
 
 

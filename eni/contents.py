@@ -19,7 +19,7 @@ so is an attribute of a child that is not listed as ``Tag@Name`` (``Slave@HotPlu
 What is inside a part without a context of its own (``within`` None) is covered by that
 part, whatever it is: a description whose effect reaches the wire only through InitCmds
 (``ProcessData``, ``ProcessImage``, the master's ``Info``), a part read or accepted as a
-whole (``Validate``, ``Identification``), or refused as a whole (``SoE``).  Outside
+whole (``Validate``, ``Identification``), or refused as a whole (``FoE``).  Outside
 ``<Config>`` is open too (:data:`OPEN`: vendor data such as Elmo Application Studio's
 ``ElmoSpecialResources``), but for :data:`ROOT`.  Every element and attribute of the
 ETG.2100 schema has its part (:func:`covering`; a test parses the schema).
@@ -36,6 +36,7 @@ from lxml import etree
 from ecatcfg.eni.plan import NetworkPlan, Unsupported
 from ecatcfg.errors import EcatcfgError, location
 from ecatcfg.esc import LOGICAL_CMDS, TRANSITION_RULES, Transition
+from ecatcfg.esi.idn import WRITE_REQUEST
 from ecatcfg.esi.values import SPELLABLE, parse_bool, parse_int
 from ecatcfg.record import record
 
@@ -248,8 +249,8 @@ CONTENTS: dict[str, dict[str, Part]] = {
         "CoE": _read("SDO downloads (and uploads) per transition", "Mailbox/CoE"),
         "EoE": _read("set IP parameter requests per transition", "Mailbox/EoE"),
         "AoE": _read("the slave's AMS NetId", "Mailbox/AoE"),
+        "SoE": _read("SoE writes of drive parameters (IDNs) per transition", "Mailbox/SoE"),
         # Without (enabled) InitCmds these only say the protocol is there: nothing is lost.
-        "SoE": _refused("SoE InitCmds (servo drive parameters)", True, True),
         "FoE": _refused("FoE InitCmds (file transfers)", True, True),
         "VoE": _refused("VoE InitCmds (vendor-specific mailbox messages)", True, True),
     },
@@ -281,6 +282,18 @@ CONTENTS: dict[str, dict[str, Part]] = {
     },
     "EoE/InitCmds/InitCmd": {tag: _read(_COMMAND) for tag in (
         "Transition", "Comment", "Timeout", "Data", "Disabled")},
+    "Mailbox/SoE": {"InitCmds": _read("SoE service-channel requests", "SoE/InitCmds")},
+    "SoE/InitCmds": {
+        "InitCmd": _read("one SoE request", "SoE/InitCmds/InitCmd"),
+        "InitCmd@Fixed": _read(_FIXED),
+    },
+    "SoE/InitCmds/InitCmd": {
+        **{tag: _read(_COMMAND) for tag in (
+            "Transition", "Comment", "Timeout", "DriveNo", "IDN", "Elements", "Attribute",
+            "Data", "Disabled")},
+        "OpCode": _read("3, a write request (the schema's \"service channel write req\"); "
+                        "another OpCode is refused"),
+    },
     "Mailbox/AoE": {
         "NetId": _accepted("an address, no command"),
         "InitCmds": _refused("AoE InitCmds (ADS requests)", True, True),
@@ -401,23 +414,25 @@ def audit(config: Element) -> list[Unsupported]:
             "every frame in one cycle", first.sourceline))
     found += [part for _, part in _unmapped_fmmus(config)]
     found += [part for _, part in _mailbox_without_mailbox(config)]
+    found += [part for _, part in _soe_not_write(config)]
     return found
 
 
 def dropped_init_cmds(config: Element) -> set[Element]:
     """The refused parts that are InitCmds among commands the plan reads: the reader
     leaves them out of the plan, so that a skipping apply does not write them."""
-    return {init for init, _ in _unmapped_fmmus(config) + _mailbox_without_mailbox(config)}
+    return {init for init, _ in _unmapped_fmmus(config) + _mailbox_without_mailbox(config)
+            + _soe_not_write(config)}
 
 
 def _mailbox_without_mailbox(config: Element) -> list[tuple[Element, Unsupported]]:
-    """Enabled CoE and EoE InitCmds of a transition in which the slave has no mailbox to
-    answer them (``esc.TRANSITION_RULES``: INIT->INIT, INIT->BOOT, BOOT->INIT): no master
+    """Enabled CoE, EoE and SoE InitCmds of a transition in which the slave has no mailbox
+    to answer them (``esc.TRANSITION_RULES``: INIT->INIT, INIT->BOOT, BOOT->INIT): no master
     can run them there, and leaving them out unsaid would lose them."""
     found: list[tuple[Element, Unsupported]] = []
     for slave in config.iterchildren("Slave"):
         name = slave.findtext("Info/Name", "").strip() or f"line {slave.sourceline}"
-        for protocol in ("CoE", "EoE"):
+        for protocol in ("CoE", "EoE", "SoE"):
             for init in slave.iterfind(f"Mailbox/{protocol}/InitCmds/InitCmd"):
                 if not _zero_or_absent(init.findtext("Disabled")):
                     continue
@@ -435,6 +450,26 @@ def _mailbox_without_mailbox(config: Element) -> list[tuple[Element, Unsupported
                         f"({transition.source.name}->{transition.target.name}): {rule.why}",
                         el.sourceline, name, 1)))
                     break
+    return found
+
+
+def _soe_not_write(config: Element) -> list[tuple[Element, Unsupported]]:
+    """Enabled SoE InitCmds that are not write requests (OpCode 3, ETG.1000.6 §5.8): the
+    schema documents the InitCmd as a "service channel write req", and a read (1) or a
+    procedure command's other services would ask apply for what it does not do."""
+    found: list[tuple[Element, Unsupported]] = []
+    for slave in config.iterchildren("Slave"):
+        name = slave.findtext("Info/Name", "").strip() or f"line {slave.sourceline}"
+        for init in slave.iterfind("Mailbox/SoE/InitCmds/InitCmd"):
+            op = init.find("OpCode")
+            if op is None or not _zero_or_absent(init.findtext("Disabled")):
+                continue                      # a missing OpCode: the reader's error
+            code = _number(_text(op))
+            if code == WRITE_REQUEST or not isinstance(code, int):
+                continue                      # not a number: the reader's error, with its line
+            found.append((init, Unsupported(
+                "SoE/InitCmds/InitCmd", f"an SoE request with OpCode {code} (apply sends "
+                f"write requests, OpCode {WRITE_REQUEST}, only)", op.sourceline, name, 1)))
     return found
 
 
@@ -581,7 +616,7 @@ def _owner(part: Unsupported) -> str:
 
 
 def line_of(part: Unsupported, file: str | None) -> str:
-    """``eni.xml:210: slave 'Drive': SoE InitCmds (servo drive parameters): 3 commands would
+    """``eni.xml:210: slave 'Drive': FoE InitCmds (file transfers): 3 commands would
     be lost``."""
     where = location(file, part.line)
     lost = (f": {part.commands} command{'s' if part.commands != 1 else ''} would be lost"
@@ -602,7 +637,7 @@ def refuse(plan: NetworkPlan, file: str | None) -> None:
 
 def skip_warnings(plan: NetworkPlan, file: str | None) -> list[str]:
     """One warning per slave (and one for the master) naming what is skipped:
-    ``eni.xml: slave 'Drive': skipped SoE InitCmds (servo drive parameters) [Slave/Mailbox/SoE]
+    ``eni.xml: slave 'Drive': skipped FoE InitCmds (file transfers) [Slave/Mailbox/FoE]
     at line 210, 3 commands not sent``."""
     owners: dict[str, list[Unsupported]] = {}
     for part in plan.unsupported:

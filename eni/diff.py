@@ -25,7 +25,8 @@ What is not a difference (docs/show-diff-check.md, "What diff does not count"):
   the transition's downloads are done (``esc.array_downloads``): EC-Engineer clears
   0x1C12:00 before a CompleteAccess write of 0x1C12, TwinCAT writes the CompleteAccess
   alone, another tool writes subindex by subindex; all three assign the same PDOs;
-- for other objects, only the last download of each ``index:sub`` in a transition counts.
+- for other objects, only the last download of each ``index:sub`` in a transition counts;
+  likewise for SoE, only the last write of each IDN of each drive in a transition.
 """
 
 from __future__ import annotations
@@ -36,9 +37,10 @@ from collections.abc import Iterable
 from typing import Any
 
 from ecatcfg.eni.plan import (CoeInitCmd, EoeInitCmd, InitCmd, NetworkPlan, PassiveSlave,
-                              SlavePlan, Variable)
+                              SlavePlan, SoeInitCmd, Variable)
 from ecatcfg.eni.words import (coe_words, command_name, copy_words, eoe_words,
-                               init_cmd_words, mapping_entry)
+                               init_cmd_words, mapping_entry, soe_words)
+from ecatcfg.esi.idn import idn_text
 from ecatcfg.esi.datatypes import canonical
 from ecatcfg.esc import (LOGICAL_CMDS, RX_PDO_MAPPING, SM_PDO_ASSIGN_RANGE, TX_PDO_MAPPING,
                          Transition, array_downloads)
@@ -264,6 +266,29 @@ def _init_cmds(name: str, a: SlavePlan, b: SlavePlan) -> list[Change]:
                                   transition=t.value))
             elif ca[key] != cb[key]:
                 out.append(Change("initcmd-changed", name, what, ca[key], cb[key], t.value))
+        out += _soe_changes(name, a, b, t)
+    return out
+
+
+def _soe_state(s: SlavePlan, t: Transition) -> dict[tuple[int, int], str]:
+    """What one transition's SoE writes leave in the drives: each (drive, IDN) by its last
+    write, in words."""
+    cmds: list[SoeInitCmd] = s.mailbox.soe_init_cmds if s.mailbox else []
+    return {(c.drive_no, c.idn): soe_words(c) for c in cmds
+            if t in c.transitions and not c.disabled}
+
+
+def _soe_changes(name: str, a: SlavePlan, b: SlavePlan, t: Transition) -> list[Change]:
+    out: list[Change] = []
+    sa, sb = _soe_state(a, t), _soe_state(b, t)
+    for key in sorted(set(sa) | set(sb)):
+        what = f"SoE {idn_text(key[1])} (drive {key[0]})"
+        if key not in sb:
+            out.append(Change("initcmd-removed", name, what, old=sa[key], transition=t.value))
+        elif key not in sa:
+            out.append(Change("initcmd-added", name, what, new=sb[key], transition=t.value))
+        elif sa[key] != sb[key]:
+            out.append(Change("initcmd-changed", name, what, sa[key], sb[key], t.value))
     return out
 
 

@@ -45,6 +45,7 @@ from ecatcfg.eni.plan import (
     ProcessImage,
     SlavePlan,
     SmSettings,
+    SoeInitCmd,
     Unsupported,
     Validate,
     Variable,
@@ -52,6 +53,7 @@ from ecatcfg.eni.plan import (
 from ecatcfg.errors import EcatcfgError
 from ecatcfg.esc import FRAME_PAYLOAD, MAX_DATAGRAM_DATA, Transition, frame_bytes
 from ecatcfg.esi import xmlsafe
+from ecatcfg.esi.idn import MAX_DRIVE
 from ecatcfg.esi.values import SPELLABLE, parse_bool, parse_hex_bytes, parse_int
 
 Element = etree._Element
@@ -93,6 +95,9 @@ IMAGE: Bounds = (0, IMAGE_BYTES, "the process image this master keeps (1 MiB)")
 IMAGE_BITS: Bounds = (0, 8 * IMAGE_BYTES, "the process image this master keeps (1 MiB)")
 VARIABLE_BITS: Bounds = (1, 8 * IMAGE_BYTES, "1 bit or more, within the process image (1 MiB)")
 SM_NUMBER: Bounds = (0, 15, "an ESC has SyncManagers 0..15")
+# The SoE mailbox header's OpCode and drive number are 3 bits each (ETG.1000.6 §5.8).
+SOE_OPCODE: Bounds = (0, 7, "an SoE OpCode (3 bits)")
+SOE_DRIVE: Bounds = (0, MAX_DRIVE, "an SoE drive number (3 bits)")
 
 
 class EniReadError(EcatcfgError):
@@ -601,7 +606,7 @@ class _Reader:
     def mailbox(self, el: Element) -> MailboxPlan:
         recv = self.child(el, "Recv")
         boot = el.find("BootStrap")
-        coe, eoe, aoe = el.find("CoE"), el.find("EoE"), el.find("AoE")
+        coe, eoe, aoe, soe = (el.find(tag) for tag in ("CoE", "EoE", "AoE", "SoE"))
         return MailboxPlan(
             send=self.mailbox_area(self.child(el, "Send")),
             recv=self.mailbox_area(recv),
@@ -614,6 +619,7 @@ class _Reader:
             coe_profiles=[] if coe is None else self.coe_profiles(coe),
             data_link_layer=self.attr_bool(el, "DataLinkLayer"),
             eoe_init_cmds=[] if eoe is None else self.eoe_init_cmds(eoe),
+            soe_init_cmds=[] if soe is None else self.soe_init_cmds(soe),
             aoe_net_id=None if aoe is None else self.opt_text(aoe, "NetId"),
         )
 
@@ -640,6 +646,31 @@ class _Reader:
             transitions=self.transitions(el),
             comment=self.opt_text(el, "Comment") or "",
             data=data,
+            timeout=self.int_or(el, "Timeout", 0, COUNT),
+            disabled=bool(self.opt_bool(el, "Disabled")),
+            fixed=bool(self.attr_bool(el, "Fixed")),
+        )
+
+    def soe_init_cmds(self, soe: Element) -> list[SoeInitCmd]:
+        cmds = soe.find("InitCmds")
+        if cmds is None:
+            return []
+        return [self.soe_init_cmd(c) for c in cmds.iterchildren("InitCmd")
+                if c not in self._dropped]
+
+    def soe_init_cmd(self, element: Element) -> SoeInitCmd:
+        """ETG.2100 ``Mailbox/SoE/InitCmds/InitCmd``: an SoE service-channel request.
+        The OpCode is read as written (what apply refuses is ``eni/contents.py``'s)."""
+        el = _Children(element)
+        return SoeInitCmd(
+            transitions=self.transitions(el),
+            comment=self.opt_text(el, "Comment") or "",
+            idn=self.req_int(el, "IDN", U16),
+            data=self.hex_or(el, "Data", b""),
+            op_code=self.req_int(el, "OpCode", SOE_OPCODE),
+            drive_no=self.req_int(el, "DriveNo", SOE_DRIVE),
+            elements=self.req_int(el, "Elements", U8),
+            attribute=self.uint32(el, "Attribute"),
             timeout=self.int_or(el, "Timeout", 0, COUNT),
             disabled=bool(self.opt_bool(el, "Disabled")),
             fixed=bool(self.attr_bool(el, "Fixed")),

@@ -14,7 +14,7 @@ from typing import Any
 from ecatcfg.eni.network_tree import previous_port
 from ecatcfg.eni.plan import NetworkPlan, PassiveSlave, SlavePlan, Unsupported, Variable
 from ecatcfg.eni.words import (coe_words, command_name, copy_words, eoe_words,
-                               init_cmd_words)
+                               init_cmd_words, soe_words)
 from ecatcfg.esc import Transition
 from ecatcfg.record import field, record
 
@@ -90,7 +90,7 @@ def master_words(plan: NetworkPlan) -> dict[str, list[str]]:
 
 def transition_words(slave: SlavePlan) -> dict[str, list[str]]:
     """Each transition's InitCmds in words: the register commands in file order, then the
-    CoE, then the EoE ones (the ENI keeps them apart, ``Mailbox/CoE/InitCmds``);
+    CoE, the SoE, then the EoE ones (the ENI keeps them apart, ``Mailbox/CoE/InitCmds``);
     transitions in the order of ``esc.Transition``."""
     out: dict[str, list[str]] = {t.value: [] for t in Transition}
     for cmd in slave.init_cmds:
@@ -101,6 +101,9 @@ def transition_words(slave: SlavePlan) -> dict[str, list[str]]:
         for coe in mailbox.coe_init_cmds:
             for t in coe.transitions:
                 out[t.value].append(coe_words(coe))
+        for soe in mailbox.soe_init_cmds:
+            for t in soe.transitions:
+                out[t.value].append(soe_words(soe))
         for eoe in mailbox.eoe_init_cmds:
             for t in eoe.transitions:
                 out[t.value].append(eoe_words(eoe))

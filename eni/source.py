@@ -4,7 +4,7 @@ a slave-to-slave copy.
 The plan holds what the file says, not where (reading our own output back gives an equal
 plan, whatever its layout), so a command the runtime finds refused is located afterwards,
 by reading the file again: the reader keeps a slave's register InitCmds
-(``Slave/InitCmds``) and its mailbox InitCmds (``Slave/Mailbox/CoE|SoE|EoE/InitCmds``) in file
+(``Slave/InitCmds``) and its mailbox InitCmds (``Slave/Mailbox/CoE|EoE|SoE/InitCmds``) in file
 order, so the n-th command of a list is the n-th ``InitCmd`` element of the slave's
 element.  Only used on an error path; the file is parsed as the reader parses it
 (``esi/xmlsafe.py``).

@@ -1,4 +1,4 @@
-"""An ENI's InitCmds in words: what each register, CoE or EoE command does to the slave.
+"""An ENI's InitCmds in words: what each register, CoE, EoE or SoE command does to the slave.
 
 ``show`` lists them per transition, ``diff`` compares them, and ``apply`` names a failing
 command by :func:`init_cmd_name`.  The words come from the register a command writes and its
@@ -14,6 +14,8 @@ from the file's ``Comment`` (free text a tool may write in any language, or leav
 - ``SDO 0x1C12:00 = 0``, ``SDO 0x1C12:01 = 0x1600``, ``SDO 0x1A00:01 = 0x6041:00 16 bit``,
   ``SDO 0x1C12:00 complete = 2: 0x1600, 0x1601``: CoE downloads (ETG.1000.6; an assignment
   entry is a PDO index, a mapping entry index << 16 | subindex << 8 | bit length).
+- ``SoE write S-0-0001 (drive 0) = d0 07``: an SoE write request of an IDN's value
+  (ETG.1000.6 SoE, IDN notation of ``esi/idn.py``), its data in wire order.
 - Any other command: its name, register and data (``FPWR 0x0103 = 0x00``).
 
 A slave-to-slave copy (``CopyInfo``) in words names the variables its bits are in:
@@ -23,13 +25,14 @@ a bit no variable holds is shown as its place only.
 
 from __future__ import annotations
 
-from ecatcfg.eni.plan import CoeInitCmd, CopyInfo, EoeInitCmd, InitCmd, Variable
+from ecatcfg.eni.plan import CoeInitCmd, CopyInfo, EoeInitCmd, InitCmd, SoeInitCmd, Variable
 from ecatcfg.esc import (AL_ERROR_ACK, AL_ID_REQUEST, FMMU_SIZE, REGISTER_READS,
                          REGISTER_WRITES, RX_PDO_MAPPING, SM_DIR_ECAT_WRITES, SM_DIR_MASK,
                          SM_MODE_MAILBOX, SM_MODE_MASK, SM_PDO_ASSIGN_RANGE, SM_SIZE,
                          TX_PDO_MAPPING, Cmd, FmmuConfig, FmmuType, Reg, SmConfig,
                          al_state_name, fmmu_register, sm_register,
                          watchdog_base_ns)
+from ecatcfg.esi.idn import VALUE_ELEMENT, WRITE_REQUEST, idn_text
 
 _SM_AREA = range(sm_register(0), sm_register(32))          # 32 SyncManagers
 _FMMU_AREA = range(fmmu_register(0), fmmu_register(16))    # 16 FMMUs
@@ -264,3 +267,15 @@ def copy_words(copy: CopyInfo, inputs: list[Variable], outputs: list[Variable]) 
     return (f"copy {n} bit{'s' if n != 1 else ''}: "
             f"{_place(copy.src_bit_offs, inputs, 'in')} -> "
             f"{_place(copy.dst_bit_offs, outputs, 'out')}")
+
+
+def soe_words(cmd: SoeInitCmd) -> str:
+    """``SoE write S-0-0001 (drive 0) = d0 07``; another element than the value, or another
+    OpCode than a write request, is named (``elements 0x08``, ``SoE OpCode 1``)."""
+    service = "SoE write" if cmd.op_code == WRITE_REQUEST else f"SoE OpCode {cmd.op_code}"
+    text = f"{service} {idn_text(cmd.idn)} (drive {cmd.drive_no})"
+    if cmd.elements != VALUE_ELEMENT:
+        text += f" elements 0x{cmd.elements:02X}"
+    if cmd.data or cmd.op_code == WRITE_REQUEST:
+        text += " = " + (cmd.data.hex(" ") if cmd.data else "(no data)")
+    return text + (" (disabled)" if cmd.disabled else "")

@@ -39,6 +39,7 @@ from ecatcfg.eni.plan import (
     ProcessImage,
     SlavePlan,
     SmSettings,
+    SoeInitCmd,
     Variable,
 )
 from ecatcfg.fileio import write_atomic
@@ -340,6 +341,10 @@ def _mailbox(parent: Element, mb: MailboxPlan) -> None:
     if mb.coe_init_cmds or mb.coe_profiles:
         _coe(el, mb)
     # ETG.2100 order: CoE, SoE, AoE, EoE, FoE, VoE.
+    if mb.soe_init_cmds:
+        cmds = _sub(_sub(el, "SoE"), "InitCmds")
+        for soe_cmd in mb.soe_init_cmds:
+            _soe_init_cmd(cmds, soe_cmd)
     if mb.aoe_net_id is not None:
         _sub(_sub(el, "AoE"), "NetId", mb.aoe_net_id)
     if mb.eoe_init_cmds:
@@ -387,6 +392,26 @@ def _eoe_init_cmd(parent: Element, cmd: EoeInitCmd) -> None:
     _text(el, "Comment", cmd.comment)
     _int(el, "Timeout", cmd.timeout)
     _hex(el, "Data", cmd.data)
+    if cmd.disabled:
+        _sub(el, "Disabled", _bool(True))
+
+
+def _soe_init_cmd(parent: Element, cmd: SoeInitCmd) -> None:
+    """ETG.2100 ``Mailbox/SoE/InitCmds/InitCmd``: Transition+, Comment?, Timeout, OpCode,
+    DriveNo, IDN, Elements, Attribute, Data?, Disabled?, @Fixed."""
+    el = _sub(parent, "InitCmd")
+    _set_flag(el, "Fixed", cmd.fixed)
+    for transition in cmd.transitions:
+        _sub(el, "Transition", transition.value)
+    _text(el, "Comment", cmd.comment)
+    _int(el, "Timeout", cmd.timeout)
+    _int(el, "OpCode", cmd.op_code)
+    _int(el, "DriveNo", cmd.drive_no)
+    _int(el, "IDN", cmd.idn)
+    _int(el, "Elements", cmd.elements)
+    _uint32(el, "Attribute", cmd.attribute)     # the IDN's 32-bit attribute, in an xs:int
+    if cmd.data:
+        _hex(el, "Data", cmd.data)
     if cmd.disabled:
         _sub(el, "Disabled", _bool(True))
 

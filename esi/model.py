@@ -422,6 +422,13 @@ class SoeSettings:
     channel_count: int | None = None                 # @ChannelCount: drives per slave
     drive_follows_bit3: bool | None = None           # @DriveFollowsBit3Support
 
+    @property
+    def drives(self) -> int:
+        """The drives behind the slave: ``@ChannelCount``, 1 where the file does not say
+        (ETG.2000 gives no default; the single-axis AX5101 leaves it out and writes no
+        ``InitCmd@Chn``)."""
+        return self.channel_count if self.channel_count else 1
+
 
 @dataclass(slots=True)
 class Mailbox:

@@ -35,7 +35,8 @@ import struct
 from enum import IntEnum
 
 from ecatcfg.errors import EcatcfgError
-from ecatcfg.esi.soe_idn import format_idn
+from ecatcfg.esi.idn import MAX_DRIVE, VALUE_ELEMENT, idn_text
+from ecatcfg.esi.idn import WRITE_REQUEST as WRITE_REQUEST_OPCODE
 from ecatcfg.record import record
 from ecatcfg.runtime.mailbox import (MBX_HEADER_SIZE, MailboxProtocolError, MbxErrorDetail,
                                      MbxType, encode_mailbox)
@@ -48,7 +49,6 @@ OPCODE_MASK = 0x07
 INCOMPLETE = 0x08
 ERROR = 0x10
 DRIVE_SHIFT = 5
-MAX_DRIVE = 7
 
 
 class SoeOpCode(IntEnum):
@@ -56,7 +56,7 @@ class SoeOpCode(IntEnum):
 
     READ_REQUEST = 1
     READ_RESPONSE = 2
-    WRITE_REQUEST = 3
+    WRITE_REQUEST = WRITE_REQUEST_OPCODE
     WRITE_RESPONSE = 4
     NOTIFICATION = 5
     SLAVE_INFO = 6
@@ -70,7 +70,7 @@ ELEMENT_ATTRIBUTE = 0x04
 ELEMENT_UNIT = 0x08
 ELEMENT_MIN = 0x10
 ELEMENT_MAX = 0x20
-ELEMENT_VALUE = 0x40
+ELEMENT_VALUE = VALUE_ELEMENT
 ELEMENT_DEFAULT = 0x80
 ELEMENT_NAMES: dict[int, str] = {
     ELEMENT_DATA_STATE: "data state", ELEMENT_NAME: "name", ELEMENT_ATTRIBUTE: "attribute",
@@ -159,7 +159,7 @@ class SoeError(EcatcfgError):
     def __init__(self, code: int, idn: int, drive_no: int = 0, action: str = "") -> None:
         what = f" {action}" if action else ""
         super().__init__(f"SoE error 0x{code:04X} ({soe_error_name(code)}){what} "
-                         f"{format_idn(idn)} of drive {drive_no}")
+                         f"{idn_text(idn)} of drive {drive_no}")
         self.code = code
         self.idn = idn
         self.drive_no = drive_no

@@ -98,6 +98,12 @@ def init_cmd(index: str, data: str, transition: str = "PS", mark: bool = False) 
             f"<Data>{data}</Data></InitCmd>\n</CoE></Mailbox>")
 
 
+def soe_mailbox(init_cmds: str, attributes: str = "") -> str:
+    """A drive's mailbox with CoE and SoE (Mailbox/SoE/InitCmd, ETG.2000)."""
+    return (f"<Mailbox><CoE SdoInfo=\"1\" PdoAssign=\"1\"/>\n<SoE {attributes}>\n{init_cmds}"
+            "\n</SoE></Mailbox>")
+
+
 def opmode(aa: str, cycle: str = '<CycleTimeSync0 Factor="1">0</CycleTimeSync0>',
            shift: str = "0", name: str = "DC", mark: bool = False, extra: str = "") -> str:
     return (f"{MARK if mark else ''}<OpMode><Name>{name}</Name><Desc>d</Desc>"
@@ -213,6 +219,16 @@ CASES: list[Case] = [
          esi(drive(mailbox=MAILBOX.replace("<Mailbox>", "<Mailbox><EoE IP=\"1\"/>")))),
 
     Case("ESI215", esi(drive(sm3=M + SM3.replace(">Inputs<", "><"))), esi()),
+    Case("ESI216", esi(drive(mailbox=soe_mailbox(
+        f"{M}<InitCmd><Transition>PS</Transition><IDN>1</IDN></InitCmd>"))),
+         esi(drive(mailbox=soe_mailbox(
+             "<InitCmd><Transition>PS</Transition><IDN>1</IDN><Data>d007</Data></InitCmd>")))),
+    Case("ESI217", esi(drive(mailbox=soe_mailbox(
+        f"{M}<InitCmd Chn=\"2\"><Transition>PS</Transition><IDN>32</IDN><Data>0b00</Data>"
+        "</InitCmd>", 'ChannelCount="2"'))),
+         esi(drive(mailbox=soe_mailbox(
+             "<InitCmd Chn=\"1\"><Transition>PS</Transition><IDN>32</IDN><Data>0b00</Data>"
+             "</InitCmd>", 'ChannelCount="2"')))),
 
     Case("ESI301", esi(drive(mailbox=init_cmd("#x8001", "0100", mark=True))), esi()),
     Case("ESI302", esi(drive(mailbox=init_cmd("#x8000", "0100", "SO", mark=True))),

@@ -151,6 +151,23 @@ def _coe_cmd(index: int, subindex: int, data: str, transition: str = "PS"
     return add
 
 
+def _soe_cmd(transition: str = "PS", drive: int = 0, listed: bool = False
+             ) -> Callable[[Root], None]:
+    """An SoE write of S-0-0032 added to axis1 (a CoE drive): ``listed`` adds SoE to its
+    Mailbox/Protocol list too."""
+    def add(root: Root) -> None:
+        mailbox = _slave(root, "axis1").find("Mailbox")
+        if listed:
+            mailbox.find("Protocol").addnext(etree.fromstring("<Protocol>SoE</Protocol>"))
+        soe = etree.fromstring(
+            f"<SoE><InitCmds><InitCmd><Transition>{transition}</Transition><Timeout>0"
+            f"</Timeout><OpCode>3</OpCode><DriveNo>{drive}</DriveNo><IDN>32</IDN>"
+            "<Elements>64</Elements><Attribute>0</Attribute><Data>0b00</Data></InitCmd>"
+            "</InitCmds></SoE>")
+        mailbox.find("CoE").addnext(soe)
+    return add
+
+
 def _assign_activate_0700(root: Root) -> None:
     _init_cmd(_slave(root, "axis1"), "set DC activation").find("Data").text = "0007"
 
@@ -207,6 +224,9 @@ DEFECTS: list[tuple[str, Callable[[Root], None], list[str]]] = [
     ("ENI004", _big_frame, ["<Frame> of 5 commands", "1500"]),
     ("ENI104", _lrw_cnt_plus_one, ["LRW 0x10000000", "expects working counter 8", "give 7"]),
     ("ENI105", _mailbox_send_64, ["Mailbox/Send is 0x1000, 64 byte(s)", "SM0", "128"]),
+    ("ENI106", _soe_cmd(), ["1 SoE InitCmd(s)", "Mailbox/Protocol lists CoE"]),
+    ("ENI107", _soe_cmd("IP", listed=True), ["SoE write S-0-0032 (drive 0) = 0b 00 in IP",
+                                             "PS, SO, SP, OP, OS"]),
     ("ENI111", _copy_past_inputs, ["outside the process image", "input bit 200 (byte 25.0)",
                                    "25 input and 25 output bytes"]),
     ("ENI112", _copy_from_al_status, ["CopyInfo 1 of cyclic BRD", "not in the command's "
@@ -226,6 +246,7 @@ DEFECTS: list[tuple[str, Callable[[Root], None], list[str]]] = [
     ("ENI303", _coe_cmd(0x6060, 0, "0900"), ["2 byte(s) to 0x6060:00", "SINT of 1"]),
     ("ENI401", _assign_activate_0700, ["AssignActivate 0x0700", "DC 0x0300"]),
     ("ENI501", _mailbox_512, ["Mailbox/Send", "length 512", "34..256"]),
+    ("ENI502", _soe_cmd(listed=True), ["SoE write S-0-0032 (drive 0)", "no SoE mailbox"]),
 ]
 
 

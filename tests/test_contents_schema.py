@@ -19,6 +19,7 @@ from conftest import CORPUS, FIXTURES
 from ecatcfg.eni import contents
 from ecatcfg.eni import reader as eni_reader
 from ecatcfg.eni.plan import CopyInfo
+from ecatcfg.esc import Transition
 
 XS = "{http://www.w3.org/2001/XMLSchema}"
 EVERY = FIXTURES / "eni-every-element.xml"
@@ -139,8 +140,10 @@ def test_the_reader_reads_it_and_names_what_apply_refuses():
     [coe] = drive.mailbox.coe_init_cmds
     assert (coe.index, coe.complete_access, coe.fixed) == (0x1C13, True, True)
     assert drive.mailbox.data_link_layer is True
+    [soe] = drive.mailbox.soe_init_cmds
+    assert (soe.transitions, soe.op_code, soe.drive_no, soe.idn, soe.elements, soe.data) == (
+        [Transition.PS], 3, 0, 32, 0x40, bytes([0x0B, 0]))
     assert [(p.element, p.slave, p.commands) for p in plan.unsupported] == [
-        ("Slave/Mailbox/SoE", "Drive", 1),
         ("Slave/Mailbox/AoE/InitCmds", "Drive", 1),
         ("Slave/Mailbox/FoE", "Drive", 1),
         ("Slave/Mailbox/VoE", "Drive", 1)]

@@ -325,33 +325,33 @@ def test_two_exports_of_one_drive_at_1_and_4_ms(capsys, corpus):
     assert {c["slave"] for c in changes} == {drive}
 
 
-SOE = ("<SoE><InitCmds>" + "".join(
-    f"<InitCmd><Transition>PS</Transition><Comment>SoE {i}</Comment><Timeout>1000</Timeout>"
-    "<OpCode>3</OpCode><DriveNo>0</DriveNo><IDN>32</IDN><Elements>64</Elements>"
-    "<Attribute>0</Attribute><Data>0100</Data></InitCmd>" for i in range(2))
-    + "</InitCmds></SoE>")
+VOE = ("<VoE><InitCmds>" + "".join(
+    f"<InitCmd><Transition>PS</Transition><Comment>VoE {i}</Comment><Timeout>1000</Timeout>"
+    "<Data>0100</Data></InitCmd>" for i in range(2)) + "</InitCmds></VoE>")
 
 
 def test_parts_apply_does_not_do_are_compared_and_shown(tmp_path, capsys, corpus):
-    """SoE InitCmds (which apply refuses unless told to skip them) added to a drive: diff
+    """VoE InitCmds (which apply refuses unless told to skip them) added to a drive: diff
     names them, and show lists them with their line, rather than passing over them."""
     tree = _tree(corpus / ELMO_ENI)
-    tree.find(".//Slave/Mailbox/CoE").addnext(etree.fromstring(SOE))
-    edited = _save(tree, tmp_path / "soe.xml")
-    line = _tree(edited).find(".//Slave/Mailbox/SoE").sourceline
+    tree.find(".//Slave/Mailbox").append(etree.fromstring(VOE))
+    edited = _save(tree, tmp_path / "voe.xml")
+    line = _tree(edited).find(".//Slave/Mailbox/VoE").sourceline
     code, changes = _diff(capsys, corpus / ELMO_ENI, edited)
     assert code == 1
     assert changes == [{"kind": "unsupported-added", "slave": DRIVE, "transition": None,
-                        "what": "Slave/Mailbox/SoE: SoE InitCmds (servo drive parameters)",
+                        "what": "Slave/Mailbox/VoE: VoE InitCmds (vendor-specific mailbox "
+                                "messages)",
                         "old": None,
                         "new": "2 command(s)"}]
     assert main(["show", str(edited), "--format", "json", "--no-cache"]) == 0
     assert json.loads(capsys.readouterr().out)["unsupported"] == [
-        {"slave": DRIVE, "element": "Slave/Mailbox/SoE",
-         "what": "SoE InitCmds (servo drive parameters)",
+        {"slave": DRIVE, "element": "Slave/Mailbox/VoE",
+         "what": "VoE InitCmds (vendor-specific mailbox messages)",
          "line": line, "commands": 2}]
     assert main(["show", str(edited), "--no-cache"]) == 0
-    assert f"SoE InitCmds (servo drive parameters) (2 commands) at line {line}" in capsys.readouterr().out
+    assert f"VoE InitCmds (vendor-specific mailbox messages) (2 commands) at line {line}" \
+        in capsys.readouterr().out
 
 
 def test_the_masters_own_init_cmds_are_compared(tmp_path, capsys, corpus):

@@ -257,16 +257,14 @@ def test_json_for_an_unsupported_part(compiled, tmp_path):
     tree = etree.parse(str(compiled))
     [mailbox] = tree.xpath("Config/Slave[Info/Name='axis1']/Mailbox")
     mailbox.append(etree.fromstring(
-        "<SoE><InitCmds><InitCmd><Transition>PS</Transition><Comment>x</Comment>"
-        "<Timeout>100</Timeout><OpCode>3</OpCode><DriveNo>0</DriveNo><IDN>32</IDN>"
-        "<Elements>64</Elements><Attribute>0</Attribute><Data>0100</Data></InitCmd>"
-        "</InitCmds></SoE>"))
-    eni = tmp_path / "soe.xml"
+        "<VoE><InitCmds><InitCmd><Transition>PS</Transition><Comment>x</Comment>"
+        "<Timeout>100</Timeout><Data>0100</Data></InitCmd></InitCmds></VoE>"))
+    eni = tmp_path / "voe.xml"
     tree.write(str(eni))
     rc, report, _ = apply_json(eni)
     assert rc == 1 and report["frames"]["sent"] == 0
     [part] = report["refused"]
     assert (part["slave"], part["element"], part["commands"]) == (
-        "axis1", "Slave/Mailbox/SoE", 1)
+        "axis1", "Slave/Mailbox/VoE", 1)
     assert part["line"] == etree.parse(str(eni)).xpath(
-        "Config/Slave[Info/Name='axis1']/Mailbox/SoE")[0].sourceline
+        "Config/Slave[Info/Name='axis1']/Mailbox/VoE")[0].sourceline

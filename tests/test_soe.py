@@ -1,5 +1,5 @@
 """SoE (servo drive profile over EtherCAT, ETG.1000.6 5.8), the runtime side: the codec
-(``runtime/soe.py``), IDN text (``esi/soe_idn.py``), the emulated drive's IDN store and its
+(``runtime/soe.py``), IDN text (``esi/idn.py``), the emulated drive's IDN store and its
 refusal of SAFEOP (``runtime/segment/soe_server.py``), the master's client and the replay of
 a plan's SoE InitCmds (``runtime/master/soe_client.py``), ``ecatcfg soe`` and the wire as
 tshark dissects it.
@@ -28,7 +28,7 @@ from ecatcfg.eni.plan import MailboxArea, MailboxPlan, NetworkPlan, SoeInitCmd
 from ecatcfg.esc import AlState, AlStatusCode, Cmd, Transition
 from ecatcfg.esi.library import Library
 from ecatcfg.esi.reader import read_file
-from ecatcfg.esi.soe_idn import format_idn, parse_idn
+from ecatcfg.esi.idn import idn_text, parse_idn
 from ecatcfg.runtime import Network
 from ecatcfg.runtime.link import MemoryLink
 from ecatcfg.runtime.mailbox import (MbxType, decode, encode_emergency, encode_mailbox,
@@ -57,15 +57,20 @@ S1, S2, S11, S17, S18, S21, S30, S32, P10 = 1, 2, 11, 17, 18, 21, 30, 32, 0x800A
     ("S-0-0001", 1), ("P-0-0010", 0x800A), ("S-7-4095", 0x7FFF), ("P-7-4095", 0xFFFF),
     ("s-0-32", 32), ("32778", 0x800A), ("0x800A", 0x800A), ("#x0020", 32)])
 def test_idn_text_and_numbers(text, number):
-    assert parse_idn(text) == number
+    assert parse_idn(text, numbers=True) == number
     if text[0] in "SP":
-        assert format_idn(number) == text.upper()
+        assert parse_idn(text) == number
+    else:                          # a topology writes the notation only
+        with pytest.raises(ValueError):
+            parse_idn(text)
+    if text[0] in "SP":
+        assert idn_text(number) == text.upper()
 
 
 def test_idn_text_that_is_not_an_idn():
     for bad in ("S-8-0001", "S-0-4096", "Q-0-0001", "65536", "S-0-", "x"):
         with pytest.raises(ValueError):
-            parse_idn(bad)
+            parse_idn(bad, numbers=True)
 
 
 # --------------------------------------------------------------------------- the codec

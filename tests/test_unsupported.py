@@ -85,7 +85,6 @@ def _apply(eni: Path, *args: str, esi: Path = ESI) -> subprocess.CompletedProces
 SLAVE_MAILBOX = f"//Slave[Info/Name='{DRIVE}']/Mailbox"
 
 CASES = {   # name: (where, fragment, element path, what the message says, commands lost)
-    "SoE": (SLAVE_MAILBOX, _mailbox_cmds("SoE", 3), "Slave/Mailbox/SoE", "SoE InitCmds", 3),
     "FoE": (SLAVE_MAILBOX, _mailbox_cmds("FoE", 2), "Slave/Mailbox/FoE", "FoE InitCmds", 2),
     "AoE": (SLAVE_MAILBOX, _mailbox_cmds("AoE", 1), "Slave/Mailbox/AoE/InitCmds",
             "AoE InitCmds", 1),
@@ -129,7 +128,7 @@ def test_refused_before_anything_is_sent_then_skipped_with_a_warning(case, examp
 
 
 def test_several_parts_are_all_named_and_warned_once_per_slave(example_eni, tmp_path):
-    first, _ = _insert(example_eni, SLAVE_MAILBOX, _mailbox_cmds("SoE", 2), tmp_path, "a.xml")
+    first, _ = _insert(example_eni, SLAVE_MAILBOX, _mailbox_cmds("VoE", 2), tmp_path, "a.xml")
     second, _ = _insert(first.read_bytes(), SLAVE_MAILBOX, _mailbox_cmds("FoE", 1), tmp_path,
                         "b.xml")
     eni, _ = _insert(second.read_bytes(), "//Slave[Info/Name='lamps']",
@@ -143,16 +142,16 @@ def test_several_parts_are_all_named_and_warned_once_per_slave(example_eni, tmp_
     lines = [w for w in done.stderr.splitlines() if w.startswith("warning:")]
     assert len(lines) == 2                                  # axis1 and lamps
     drive = next(w for w in lines if f"'{DRIVE}'" in w)
-    assert "SoE InitCmds" in drive and "FoE InitCmds" in drive
+    assert "VoE InitCmds" in drive and "FoE InitCmds" in drive
 
 
 def test_network_api_refuses_and_skips(example_eni, tmp_path):
-    eni, line = _insert(example_eni, SLAVE_MAILBOX, _mailbox_cmds("SoE", 3), tmp_path)
+    eni, line = _insert(example_eni, SLAVE_MAILBOX, _mailbox_cmds("VoE", 3), tmp_path)
     with pytest.raises(UnsupportedEniError) as caught:
         Network.virtual(eni, esi=[ESI])
     [part] = caught.value.parts
     assert (part.slave, part.element, part.line, part.commands) == (
-        DRIVE, "Slave/Mailbox/SoE", line, 3)
+        DRIVE, "Slave/Mailbox/VoE", line, 3)
     # The constructor refuses too, and closes the link it was given (it owns it).
     ours, theirs = MemoryLink.pair()
     with pytest.raises(UnsupportedEniError):
@@ -396,24 +395,24 @@ def test_encrypted_fmmu_settings_are_refused_and_never_written(corpus, tmp_path)
         run.stderr and "nothing was written to the bus" in run.stderr
 
 
-def test_corpus_eni_with_soe_added_is_refused(corpus, tmp_path):
-    """eni1.xml (Elmo Application Studio) with an SoE section added to its drive."""
+def test_corpus_eni_with_voe_added_is_refused(corpus, tmp_path):
+    """eni1.xml (Elmo Application Studio) with a VoE section added to its drive."""
     source = (corpus / "eni" / "rocos-ethercat" / "eni1.xml").read_bytes()
     eni, line = _insert(source, "//Slave[Info/Name='Elmo Drive']/Mailbox",
-                        _mailbox_cmds("SoE", 2), tmp_path)
+                        _mailbox_cmds("VoE", 2), tmp_path)
     refused = _apply(eni, esi=corpus / "esi")
     assert refused.returncode == 1
-    assert f"{eni}:{line}: slave 'Elmo Drive': SoE InitCmds" in refused.stderr
+    assert f"{eni}:{line}: slave 'Elmo Drive': VoE InitCmds" in refused.stderr
     assert ": 2 commands would be lost" in refused.stderr
     done = _apply(eni, "--skip-unsupported", esi=corpus / "esi")
     assert done.returncode == 0, done.stderr
-    assert "warning:" in done.stderr and "slave 'Elmo Drive': skipped SoE" in done.stderr
+    assert "warning:" in done.stderr and "slave 'Elmo Drive': skipped VoE" in done.stderr
 
 
 def test_simulate_eni_names_what_it_ignores(veth_netns, example_eni, tmp_path):
     """simulate is not the master: it emulates the slaves of an ENI apply would refuse,
     and says which parts it ignores."""
-    eni, line = _insert(example_eni, SLAVE_MAILBOX, _mailbox_cmds("SoE", 3), tmp_path)
+    eni, line = _insert(example_eni, SLAVE_MAILBOX, _mailbox_cmds("VoE", 3), tmp_path)
     done = veth_netns.run_in(veth_netns.ns_b, [
         sys.executable, "-m", "ecatcfg", "simulate", "--iface", veth_netns.if_b,
         "--no-cache", "--esi", str(ESI), "--eni", str(eni), "--duration", "0.3"],
@@ -421,5 +420,5 @@ def test_simulate_eni_names_what_it_ignores(veth_netns, example_eni, tmp_path):
     assert done.returncode == 0, done.stderr
     assert "ready: 5 slaves" in done.stdout
     [note] = [n for n in done.stderr.splitlines() if n.startswith("note:")]
-    assert f"{eni}:{line}: slave '{DRIVE}': SoE InitCmds" in note
+    assert f"{eni}:{line}: slave '{DRIVE}': VoE InitCmds" in note
     assert "3 commands would be lost" in note

@@ -10,6 +10,7 @@ from ecatcfg.eni.check.context import CheckContext
 from ecatcfg.eni.check.network import sm_pdos
 from ecatcfg.eni.check.rules import declare
 from ecatcfg.eni.plan import CoeInitCmd, PdoDesc, SlavePlan
+from ecatcfg.eni.words import soe_words
 from ecatcfg.esc import REGISTER_WRITES, Reg
 from ecatcfg.esi import datatypes
 from ecatcfg.esi.coe import (TRANSITION_STATE, DictEntry, dictionary_with_objects, lookup,
@@ -72,6 +73,13 @@ MAILBOX_SIZE = declare("ENI501", "error", "a mailbox outside the ESI's SyncManag
     (AL status code 0x0016, invalid mailbox configuration).""")
 
 
+SOE_DRIVE = declare("ENI502", "error", "an SoE InitCmd the device cannot take", """
+    The slave's ESI has no SoE in its mailbox (Mailbox/SoE), or the InitCmd's DriveNo is
+    beyond the drives the ESI gives (Mailbox/SoE@ChannelCount; one drive, 0, without it).
+    The slave answers such a write with a mailbox or SoE error, and the transition
+    fails.""")
+
+
 def check(ctx: CheckContext, library: Library) -> None:
     for slave in ctx.plan.slaves:
         device = _device(ctx, library, slave)
@@ -82,6 +90,24 @@ def check(ctx: CheckContext, library: Library) -> None:
         _coe(ctx, slave, device)
         _dc(ctx, slave, device)
         _mailbox(ctx, slave, device)
+        _soe(ctx, slave, device)
+
+
+def _soe(ctx: CheckContext, slave: SlavePlan, device: Device) -> None:
+    cmds = slave.mailbox.soe_init_cmds if slave.mailbox else []
+    soe = device.mailbox.soe if device.mailbox else None
+    esi = f"{device.source.file}:{device.source.line}"
+    for n, cmd in enumerate(cmds):
+        if cmd.disabled:
+            continue
+        line = ctx.lines.listed(slave, "Mailbox/SoE/InitCmds", n, len(cmds))
+        if soe is None:
+            ctx.add(SOE_DRIVE, line, f"{soe_words(cmd)}: the device has no SoE mailbox "
+                    f"({esi})", slave)
+            return
+        if cmd.drive_no >= soe.drives:
+            ctx.add(SOE_DRIVE, line, f"{soe_words(cmd)}: the device has {soe.drives} "
+                    f"drive(s), numbered from 0 (ChannelCount, {esi})", slave)
 
 
 def _device(ctx: CheckContext, library: Library, slave: SlavePlan) -> Device | None:

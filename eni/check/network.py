@@ -1,6 +1,6 @@
 """Checks of an ENI against itself: SyncManagers, FMMUs, the process image, expected
-working counters, mailbox areas (a frame too long for Ethernet is refused by the reader
-already: ENI004).  They need no ESI file: the registers a slave's
+working counters, mailbox areas, SoE InitCmds (a frame too long for Ethernet is refused by
+the reader already: ENI004).  They need no ESI file: the registers a slave's
 InitCmds write (SyncManagers 0x0800 + 8·n, FMMUs 0x0600 + 16·n; ESC Section II) are
 compared with what the same file's ``ProcessData``, ``Mailbox`` and ``Cyclic`` say."""
 
@@ -10,6 +10,8 @@ from ecatcfg.eni.check.context import CheckContext
 from ecatcfg.eni.check.rules import declare
 from ecatcfg.eni.plan import (COPY_ELEMENT, BitRange, PdoDesc, SlavePlan, SmSettings,
                               register_writes)
+from ecatcfg.eni.words import soe_words
+from ecatcfg.esi.idn import ENI_TRANSITIONS
 from ecatcfg.esc import (FMMU_SIZE, LOGICAL_CMDS, SM_SIZE, AlState, Cmd, FmmuConfig,
                          FmmuType, Reg, SmConfig, Transition, wkc_increment)
 
@@ -40,15 +42,30 @@ WKC = declare("ENI104", "error", "an expected working counter the FMMUs do not g
     out.""")
 UNSUPPORTED = declare("ENI003", "warning", "a part of the ENI apply does not carry out", """
     The ENI asks the master for something ecatcfg does not implement (eni/contents.py
-    lists it: SoE or FoE InitCmds, encrypted FMMU settings, ...).  ``apply`` refuses such a
-    file unless told to skip the part; ``check`` names it and cannot check it.  Where the
-    part is a slave's FMMU settings, ENI102 and ENI104 are not checked for that slave's
-    process data (its FMMUs are unknown).""")
+    lists it: FoE InitCmds, SoE requests other than writes, encrypted FMMU settings, ...).
+    ``apply`` refuses such a file unless told to skip the part; ``check`` names it and
+    cannot check it.  Where the part is a slave's FMMU settings, ENI102 and ENI104 are not
+    checked for that slave's process data (its FMMUs are unknown).""")
 MAILBOX = declare("ENI105", "error", "a mailbox area is not what SM0/SM1 are set to", """
     Mailbox/Send and Mailbox/Recv (start and length) are where the master writes and reads
     mailbox messages; the slave's InitCmds set SyncManager 0 and 1 (registers 0x0800 and
     0x0808).  When they differ, the master writes requests where no SyncManager takes
     them, or reads replies of a wrong length.""")
+
+
+SOE_PROTOCOL = declare("ENI106", "error", "SoE InitCmds for a slave whose mailbox lacks SoE", """
+    The slave's Mailbox lists the protocols it speaks (Mailbox/Protocol), and SoE is not
+    among them, yet Mailbox/SoE/InitCmds asks the master to write drive parameters over
+    SoE (ETG.1000.6).  A slave answers a mailbox message of a protocol it does not have
+    with the mailbox error "unsupported protocol", and the transition fails.  A file that
+    lists no protocol at all is not judged.""")
+SOE_TRANSITION = declare("ENI107", "warning", "an SoE InitCmd in a transition the schema "
+                         "does not allow", """
+    ETG.2100 allows an SoE InitCmd in PS, SO, SP, OP and OS only: the transitions in which
+    the mailbox works and the drive is past INIT->PREOP.  apply sends one of IP once the
+    slave is in PREOP (and refuses one of II, IB or BI, where no mailbox answers), but the
+    file does not validate against the schema, and other masters may refuse it.  An ESI
+    SoE InitCmd of IP belongs to PS (ecatcfg's compiler writes it there, first).""")
 
 
 def check(ctx: CheckContext) -> None:
@@ -60,6 +77,7 @@ def check(ctx: CheckContext) -> None:
     for slave in ctx.plan.slaves:
         _sm_lengths(ctx, slave)
         _mailbox(ctx, slave)
+        _soe(ctx, slave)
     _overlaps(ctx)
     _frames(ctx)
 
@@ -161,6 +179,24 @@ def _mailbox(ctx: CheckContext, slave: SlavePlan) -> None:
                         f"{area.length} byte(s), SM{n} is set to 0x{sm.start:04X}, "
                         f"{sm.length} byte(s)", slave)
                 break
+
+
+def _soe(ctx: CheckContext, slave: SlavePlan) -> None:
+    mb = slave.mailbox
+    cmds = [] if mb is None else mb.soe_init_cmds
+    if mb is None or not cmds:
+        return
+    if mb.protocols and "SoE" not in mb.protocols and any(not c.disabled for c in cmds):
+        ctx.add(SOE_PROTOCOL, ctx.lines.child(slave, "Mailbox/SoE"),
+                f"{len(cmds)} SoE InitCmd(s), but Mailbox/Protocol lists "
+                + ", ".join(mb.protocols), slave)
+    for n, cmd in enumerate(cmds):
+        bad = [t.value for t in cmd.transitions if t not in ENI_TRANSITIONS]
+        if bad:
+            ctx.add(SOE_TRANSITION, ctx.lines.listed(slave, "Mailbox/SoE/InitCmds", n,
+                                                     len(cmds)),
+                    f"{soe_words(cmd)} in {', '.join(bad)} (the schema allows "
+                    + ", ".join(t.value for t in ENI_TRANSITIONS) + ")", slave)
 
 
 def _overlaps(ctx: CheckContext) -> None:

@@ -11,7 +11,7 @@ import functools
 from importlib import resources
 from typing import TYPE_CHECKING
 
-from ecatcfg.eni.export.steps import SlaveSetup
+from ecatcfg.eni.export.steps import ExportError, SlaveSetup
 from ecatcfg.esc import DC_ACTIVATE_SYNC1
 
 if TYPE_CHECKING:
@@ -41,6 +41,18 @@ def _template() -> jinja2.Template:
     env.filters["line"] = _one_line
     env.tests["sync1"] = _sync1
     return env.get_template(TEMPLATE)
+
+
+def check(setups: list[SlaveSetup], file: str) -> None:
+    """Refuse what pysoem cannot do: SoE writes (pysoem 1.1 wraps SOEM's CoE, FoE and
+    register calls, not ``ecx_SoEwrite``; leaving them out would start the drive without
+    its parameters).  The SOEM C export makes them."""
+    for s in setups:
+        if s.soe:
+            step = s.soe[0]
+            raise ExportError(f"slave {s.position} ({s.name!r}): {step.words}: pysoem has no "
+                              f"SoE call ({len(s.soe)} SoE write(s) in all); export "
+                              "--format soem-c makes them with ecx_SoEwrite", file, step.line)
 
 
 def render(setups: list[SlaveSetup], eni_name: str, eni_sha256: str, version: str) -> bytes:

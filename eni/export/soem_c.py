@@ -98,7 +98,7 @@ class SlaveCode:
 
 def _slave_code(s: SlaveSetup) -> SlaveCode:
     ident = f"{identifier(s.name).lower()}_{s.position}"
-    return SlaveCode(s, ident, bool(s.registers or s.sdos or s.sync_activation),
+    return SlaveCode(s, ident, bool(s.registers or s.sdos or s.soe or s.sync_activation),
                      bool(s.sync_activation & DC_ACTIVATE_SYNC1),
                      layout(f"ecatcfg_{ident}_out_t", s.outputs, s.output_bits),
                      layout(f"ecatcfg_{ident}_in_t", s.inputs, s.input_bits))

@@ -16,6 +16,9 @@ So of an ENI's InitCmds the export keeps what SOEM's own sequence does not do:
   ENI order, with CompleteAccess where the ENI says;
 - register writes and checks outside the registers SOEM configures itself
   (:data:`SOEM_REGISTERS`), of the same transitions, before the CoE downloads;
+- the SoE writes of the same transitions (``Mailbox/SoE/InitCmds``), after the CoE
+  downloads: SOEM's ``ecx_SoEwrite`` makes them (``ethercatsoe.c``); pysoem has no SoE
+  call, so the pysoem export refuses them (:func:`ecatcfg.eni.export.pysoem_module.check`);
 - the DC settings of ``Slave/DC`` (SYNC0/1 cycle and shift).
 
 Anything else that would change what the master does and that no hook can carry (a CoE or
@@ -29,9 +32,9 @@ from __future__ import annotations
 from pathlib import Path
 
 from ecatcfg.eni.plan import (BitRange, CoeInitCmd, DcPlan, EoeInitCmd, InitCmd,
-                              NetworkPlan, SlavePlan, Variable)
+                              NetworkPlan, SlavePlan, SoeInitCmd, Variable)
 from ecatcfg.eni.source import copy_info_line, init_cmd_line
-from ecatcfg.eni.words import coe_words, copy_words, init_cmd_words
+from ecatcfg.eni.words import coe_words, copy_words, init_cmd_words, soe_words
 from ecatcfg.errors import EcatcfgError
 from ecatcfg.esc import (DC_ACTIVATION, REGISTER_READS, REGISTER_WRITES,
                          Transition, fmmu_register, sm_register)
@@ -66,6 +69,16 @@ class SdoStep:
     data: bytes
     complete_access: bool
     words: str                                # eni/words.py: ``SDO 0x1C12:00 = 0``
+
+
+@record
+class SoeStep:
+    drive_no: int
+    elements: int
+    idn: int
+    data: bytes
+    words: str                                # eni/words.py: ``SoE write S-0-0001 ...``
+    line: int | None                          # its InitCmd in the ENI file
 
 
 @record
@@ -104,6 +117,7 @@ class SlaveSetup:
     input_bits: int = 0                       # ProcessData Recv
     outputs: list[ImageEntry] = field(default_factory=list)
     inputs: list[ImageEntry] = field(default_factory=list)
+    soe: list[SoeStep] = field(default_factory=list)
 
 
 def soem_register(ado: int, length: int) -> bool:
@@ -112,7 +126,7 @@ def soem_register(ado: int, length: int) -> bool:
 
 
 def _refuse(file: str, plan: NetworkPlan, slave: SlavePlan,
-            cmd: InitCmd | CoeInitCmd | EoeInitCmd, what: str) -> ExportError:
+            cmd: InitCmd | CoeInitCmd | EoeInitCmd | SoeInitCmd, what: str) -> ExportError:
     return ExportError(f"slave {slave.position} ({slave.name!r}): {what}: the exported "
                        f"hooks run in PREOP before SAFEOP only (IP, PS)", file,
                        init_cmd_line(file, plan, cmd))
@@ -181,6 +195,20 @@ def _sdo_steps(file: str, plan: NetworkPlan, slave: SlavePlan) -> list[SdoStep]:
     return steps
 
 
+def _soe_steps(file: str, plan: NetworkPlan, slave: SlavePlan) -> list[SoeStep]:
+    """The slave's SoE writes, in ENI order: those of PS (an ENI gives SoE no IP)."""
+    steps = []
+    for cmd in slave.mailbox.soe_init_cmds if slave.mailbox else []:
+        if cmd.disabled:
+            continue
+        if not set(cmd.transitions) & HOOK_TRANSITIONS:
+            raise _refuse(file, plan, slave, cmd, f"{soe_words(cmd)} in "
+                          f"{'/'.join(t.value for t in cmd.transitions)}")
+        steps.append(SoeStep(cmd.drive_no, cmd.elements, cmd.idn, cmd.data, soe_words(cmd),
+                             init_cmd_line(file, plan, cmd)))
+    return steps
+
+
 def _entries(variables: list[Variable], ranges: list[BitRange]) -> list[ImageEntry]:
     """The variables inside ``ranges`` (a slave's Send or Recv), at their bit offset in the
     slave's own bytes: the ranges follow each other there, each from a whole byte."""
@@ -234,5 +262,5 @@ def slave_setups(plan: NetworkPlan, file: str | Path) -> list[SlaveSetup]:
             _sync_activation(slave),
             sum(r.bit_length for r in send), sum(r.bit_length for r in recv),
             _entries(plan.process_image.outputs, send),
-            _entries(plan.process_image.inputs, recv)))
+            _entries(plan.process_image.inputs, recv), _soe_steps(name, plan, slave)))
     return out

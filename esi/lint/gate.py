@@ -41,6 +41,10 @@ DOES_NOT_STOP: dict[str, str] = {
     "ESI102": "two PDOs with one index: the resolver refuses them with its own message, "
               "--allow-esi-errors or not (an ENI names a PDO by its index)",
     "ESI214": "an EoE InitCmd: the resolver refuses the device with its own message",
+    "ESI216": "an SoE InitCmd without IDN or Data: the resolver refuses the device with its "
+              "own message",
+    "ESI217": "an SoE InitCmd for a drive the device does not have: the resolver refuses "
+              "the device with its own message",
     "ESI301": "an object the ESI's dictionary does not list: ESI dictionaries are often "
               "partial, and the real slave's dictionary decides",
     "ESI303": "an unknown data type name: the ENI carries the name as written, sizes come "

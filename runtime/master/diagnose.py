@@ -300,7 +300,7 @@ def _dc(transport: Transport, position: int, slave: SlavePlan | None,
 def _soe_invalid(transport: Transport, position: int, fields: dict[str, Any]) -> list[str]:
     """Each drive's S-0-0021 (IDN-list of invalid operation data for CP2), from drive 0 on
     until one the slave does not have (SoE error 0x800A, invalid drive number)."""
-    from ecatcfg.esi.soe_idn import format_idn
+    from ecatcfg.esi.idn import idn_text
     from ecatcfg.runtime.master.sdo_tool import SdoToolError
     from ecatcfg.runtime.master.soe_tool import SoeToolError, soe_transfer
     from ecatcfg.runtime.soe import SOE_INVALID_DRIVE, decode_list
@@ -319,7 +319,7 @@ def _soe_invalid(transport: Transport, position: int, fields: dict[str, Any]) ->
         except (SdoToolError, ApplyError, ValueError) as exc:
             lines.append(f"S-0-0021 of drive {drive} not read ({exc})")
             break
-        idns = [format_idn(int.from_bytes(items[i:i + 2], "little"))
+        idns = [idn_text(int.from_bytes(items[i:i + 2], "little"))
                 for i in range(0, len(items) - 1, 2)]
         invalid[drive] = idns
         if idns:

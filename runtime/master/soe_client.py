@@ -21,16 +21,35 @@ from __future__ import annotations
 import time
 
 from ecatcfg.eni.plan import SoeInitCmd
-from ecatcfg.esi.soe_idn import format_idn
-from ecatcfg.runtime.mailbox import (Emergency, MailboxError, MailboxHeader,
-                                     MailboxProtocolError, MbxType, decode, pad_to)
+from ecatcfg.esi.idn import MAX_DRIVE, idn_text
+from ecatcfg.runtime.mailbox import (
+    Emergency,
+    MailboxError,
+    MailboxHeader,
+    MailboxProtocolError,
+    MbxType,
+    decode,
+    pad_to,
+)
 from ecatcfg.runtime.master.lockstep import Job, Step
-from ecatcfg.runtime.master.replay import (TIMEOUT_MAILBOX, ApplyError, MailboxChannel,
-                                           SlaveProgress)
+from ecatcfg.runtime.master.replay import (
+    TIMEOUT_MAILBOX,
+    ApplyError,
+    MailboxChannel,
+    SlaveProgress,
+)
 from ecatcfg.runtime.master.sdo_client import CounterSource
-from ecatcfg.runtime.soe import (ELEMENT_VALUE, MAX_DRIVE, SOE_OVERHEAD, Reassembly,
-                                 SoeError, SoeMessage, SoeOpCode, decode_soe,
-                                 encode_fragments, encode_read_request)
+from ecatcfg.runtime.soe import (
+    ELEMENT_VALUE,
+    SOE_OVERHEAD,
+    Reassembly,
+    SoeError,
+    SoeMessage,
+    SoeOpCode,
+    decode_soe,
+    encode_fragments,
+    encode_read_request,
+)
 
 
 def _stamped(message: bytes, counter: int) -> bytes:
@@ -78,7 +97,7 @@ class SoeTransfer:
 
     @property
     def what(self) -> str:
-        return f"{format_idn(self.idn)} of drive {self.drive_no}"
+        return f"{idn_text(self.idn)} of drive {self.drive_no}"
 
     @property
     def result(self) -> bytes:
@@ -136,7 +155,7 @@ class SoeTransfer:
             raise self._fail(f"SoE opcode {soe.op_code} of drive {soe.drive_no} where "
                              f"opcode {want:d} of drive {self.drive_no} was expected")
         if not soe.incomplete and soe.idn != self.idn:
-            raise self._fail(f"response for {format_idn(soe.idn)}")
+            raise self._fail(f"response for {idn_text(soe.idn)}")
         self.responses += 1
         if self.data is not None:
             self.done = True
@@ -199,7 +218,7 @@ def soe_job(channel: MailboxChannel, transfer: SoeTransfer, who: str | None,
 
 def soe_init_cmd_name(cmd: SoeInitCmd) -> str:
     """An SoE InitCmd in messages: its comment, else ``SoE write S-0-0001 (drive 0)``."""
-    return cmd.comment.strip() or f"SoE write {format_idn(cmd.idn)} (drive {cmd.drive_no})"
+    return cmd.comment.strip() or f"SoE write {idn_text(cmd.idn)} (drive {cmd.drive_no})"
 
 
 def soe_init_cmd_job(channel: MailboxChannel, cmd: SoeInitCmd, who: str | None,

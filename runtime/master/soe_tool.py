@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from ecatcfg.esi.soe_idn import format_idn
+from ecatcfg.esi.idn import idn_text
 from ecatcfg.runtime.master.lockstep import Job
 from ecatcfg.runtime.master.replay import TIMEOUT_MAILBOX, ApplyError, MailboxChannel
 from ecatcfg.runtime.master.sdo_tool import SdoToolError, SlaveMailbox, mailbox_session
@@ -42,7 +42,7 @@ def soe_transfer(transport: Transport, position: int, idn: int, data: bytes | No
     info = info if info is not None else SlaveMailbox(position)
     info.protocol = "SoE"
     result: list[bytes] = []
-    what = f"SoE {'read' if data is None else 'write'} {format_idn(idn)} (drive {drive_no})"
+    what = f"SoE {'read' if data is None else 'write'} {idn_text(idn)} (drive {drive_no})"
 
     def work(channel: MailboxChannel, size: int, counter: Callable[[], int]) -> Job:
         try:
