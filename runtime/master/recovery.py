@@ -46,7 +46,9 @@ from ecatcfg.runtime.master.transition import slave_transition_job
 from ecatcfg.runtime.wire import Datagram
 
 if TYPE_CHECKING:
+    from ecatcfg.esi.library import Library
     from ecatcfg.runtime.master.cyclic import CyclicFrames, _Slot
+    from ecatcfg.runtime.master.diagnose import Cause
     from ecatcfg.runtime.master.transport import Transport
 
 PROBE_INTERVAL = 0.1           # s between looks for the slaves that are offline
@@ -75,6 +77,7 @@ class SlaveHealth:
     gave_up: bool = False       # MAX_ATTEMPTS failed: Network.recover() tries again
     next_try: float = 0.0
     refused: set[tuple[object, ...]] = field(default_factory=set)   # reported, once each
+    cause: list[str] = field(default_factory=list)  # why the last attempt was refused
 
 
 # -- what each slave adds to the cyclic frames --------------------------------------------------
@@ -162,6 +165,8 @@ class SupervisedMaster(Protocol):
     def progress(self) -> dict[str, SlaveProgress]: ...
     @property
     def mailboxes(self) -> dict[str, MailboxChannel]: ...
+    @property
+    def esi(self) -> Library | None: ...
 
     def layout(self, present: set[str]) -> None: ...
     def dc_rejoin_job(self, slave: SlavePlan) -> Step[None]: ...
@@ -369,18 +374,20 @@ class Supervisor:
         h = self.health[name]
         h.gave_up, h.attempts, h.next_try = False, 0, 0.0
 
-    def _failed(self, h: SlaveHealth, error: str) -> None:
+    def _failed(self, h: SlaveHealth, error: str, cause: Cause | None = None) -> None:
         h.joining = False
         h.attempts += 1
+        h.cause = cause.lines if cause is not None else []
+        why = f"; cause: {cause.text()}" if cause is not None else ""
         if h.attempts >= MAX_ATTEMPTS:
             h.gave_up = True
             self._event("offline", f"{self._where(h)}: gave up after {h.attempts} attempts "
-                                   f"({error})", h.name)
+                                   f"({error}){why}", h.name)
             return
         wait = min(BACKOFF_FIRST * 2 ** (h.attempts - 1), BACKOFF_MAX)
         h.next_try = time.monotonic() + wait
         self._event("retry", f"{self._where(h)}: attempt {h.attempts} of {MAX_ATTEMPTS} "
-                             f"failed ({error}); again in {wait:g} s", h.name)
+                             f"failed ({error}); again in {wait:g} s{why}", h.name)
 
     # -- jobs ------------------------------------------------------------------------------
 
@@ -484,6 +491,7 @@ class Supervisor:
         h = self.health[plan.name]
         slave = at_position(plan, position)
         master = self.master
+        channel: MailboxChannel | None = None
         try:
             from ecatcfg.runtime.master.scan import FoundSlave, compare, identity_job
             found: dict[int, FoundSlave] = {}
@@ -532,7 +540,24 @@ class Supervisor:
                 state = transition.target
             self._online(plan.name)
         except ApplyError as exc:
-            self._failed(h, str(exc))
+            cause = None
+            if exc.al_code:
+                # Why, read from the slave as it refused, one round per cycle as the
+                # attempt itself (docs/diagnostics.md).
+                cause = yield from self._cause(slave, position, exc.al_code, channel)
+            self._failed(h, str(exc), cause)
+
+    def _cause(self, slave: SlavePlan, position: int, code: int,
+               channel: MailboxChannel | None) -> Step[Cause | None]:
+        """The cause of a refusal during an attempt (``diagnose.explain_step``); None when
+        the slave cannot be read (it left the line again)."""
+        from ecatcfg.runtime.master.diagnose import Context, bus_cycle, explain_step
+        context = Context(slave=slave, channel=channel, bus_cycle_ns=bus_cycle(self.master.plan),
+                          esi=self.master.esi)
+        try:
+            return (yield from explain_step(position, code, context))
+        except ApplyError:
+            return None
 
 
 def _request(slave: SlavePlan, control: int, wait: AlState | None) -> Step[None]:
