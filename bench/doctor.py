@@ -16,6 +16,17 @@ PREOP+ERR.  Then, each repetition:
   PDO's mapping entries, 0x1C13 is not read for 0x001D), and 0x10F3 where present.
 
 The figure that matters is the ratio doctor / scan, measured in the same run.
+
+    python3 bench/doctor.py --veth [--repeat N]
+
+The same line served by ``ecatcfg simulate`` on one end of a veth pair (its own network
+namespace, ``tests/rig.py``; root needed), brought up with the broken ENI by ``ecatcfg apply
+--stay`` (the drives stay in PREOP+ERR), then ``ecatcfg scan --iface`` (baseline) and
+``ecatcfg doctor ENI --iface`` as processes in the master's namespace, as a user runs them;
+each process's wall time, Python's start-up included, and ``scan()`` and ``doctor()`` in
+this process through a raw socket in the same namespace (time and frames).  The commands
+run with the ``PYTHONPATH`` this script gets, so two trees can be compared in one sitting.
+``--realistic``: ``simulate --realistic`` (the timing model's slaves).
 """
 
 from __future__ import annotations
@@ -67,10 +78,85 @@ def broken_plan():  # type: ignore[no-untyped-def]
     return plan
 
 
+def over_veth(repeat: int, realistic: bool) -> None:
+    import subprocess
+
+    root = Path(__file__).resolve().parent.parent
+    sys.path.insert(0, str(root / "tests"))
+    import rig
+
+    from ecatcfg.eni import writer as eni_writer
+
+    broken = broken_plan()
+    with tempfile.TemporaryDirectory() as tmp, rig.veth_pair("doc") as veth:
+        eni = Path(tmp) / "three.eni.xml"
+        eni.write_bytes(eni_writer.to_bytes(broken))
+        sim, lines = rig.start_simulate(veth, "--esi", str(EXAMPLES / "esi"), "--eni",
+                                        str(eni), *(["--realistic"] if realistic else []),
+                                        duration=600)
+        if not lines or not lines[-1].startswith("ready:"):
+            sys.exit(f"simulate did not start: {lines}")
+        try:
+            ecatcfg = [sys.executable, "-m", "ecatcfg"]
+            up = veth.run_in(veth.ns_a, ecatcfg + ["apply", str(eni), "--iface", veth.if_a,
+                                                   "--stay", "--no-cache"], timeout=120)
+            if up.returncode != 1 or "0x001D" not in up.stdout + up.stderr:
+                sys.exit(f"apply did not stop at the refusal: {up.stdout}{up.stderr}")
+            times: dict[str, list[float]] = {"scan": [], "doctor": [], "in": [],
+                                             "in-scan": []}
+            frames = {"in": 0, "in-scan": 0}
+            from ecatcfg.runtime.master.transport import Transport
+            for _ in range(repeat):
+                # In this process, through a raw socket in the master's namespace: the
+                # diagnosis alone, and its frames.
+                with veth.socket_in(veth.ns_a) as link:
+                    transport = Transport(link)
+                    for key, call in (("in-scan", lambda: scan(transport)),
+                                      ("in", lambda: doctor(transport, AlState.OP,
+                                                            broken))):
+                        sent = transport.counters.frames_sent
+                        t0 = time.perf_counter()
+                        call()
+                        times[key].append(time.perf_counter() - t0)
+                        frames[key] = transport.counters.frames_sent - sent
+                for what, argv in (("scan", ["scan", "--iface", veth.if_a]),
+                                   ("doctor", ["doctor", str(eni), "--iface", veth.if_a])):
+                    t0 = time.perf_counter()
+                    done = veth.run_in(veth.ns_a, ecatcfg + argv, timeout=120)
+                    times[what].append(time.perf_counter() - t0)
+                    if what == "doctor" and done.stdout.count("gives 6 bytes") != 3:
+                        sys.exit(f"unexpected doctor output: {done.stdout}{done.stderr}")
+                    if what == "scan" and done.returncode != 0:
+                        sys.exit(f"scan failed: {done.stdout}{done.stderr}")
+        finally:
+            sim.send_signal(2)
+            sim.wait(10)
+    print(f"over veth{' (simulate --realistic)' if realistic else ''}: "
+          f"{platform.machine()}, Python {platform.python_version()}, repeat {repeat}")
+    print(f"{'what':32} {'min':>9} {'median':>9} {'frames':>7}")
+    for name, key in (("scan() in process (baseline)", "in-scan"),
+                      ("doctor() in process", "in"),
+                      ("ecatcfg scan (baseline)", "scan"),
+                      ("ecatcfg doctor, 3 x 0x001D", "doctor")):
+        print(f"{name:32} {min(times[key]) * 1e3:7.1f}ms "
+              f"{statistics.median(times[key]) * 1e3:7.1f}ms {frames.get(key, ''):>7}")
+    for a, b in (("in", "in-scan"), ("doctor", "scan")):
+        print(f"ratio {a} / {b} (median): "
+              f"{statistics.median(times[a]) / statistics.median(times[b]):.1f}x")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeat", type=int, default=5)
+    parser.add_argument("--veth", action="store_true",
+                        help="ecatcfg scan and doctor as processes over a veth pair")
+    parser.add_argument("--realistic", action="store_true",
+                        help="with --veth: simulate --realistic (slaves that take the time "
+                             "real ones do)")
     args = parser.parse_args()
+    if args.veth:
+        over_veth(args.repeat, args.realistic)
+        return
     plan = broken_plan()
     scans: list[float] = []
     doctors: list[float] = []

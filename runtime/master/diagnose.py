@@ -543,6 +543,7 @@ def doctor(transport: Transport, target: AlState, plan: NetworkPlan | None = Non
     bus_cycle_ns = bus_cycle(plan) if plan is not None else None
     sii = {s.position: s.identity for s in found}
     findings = []
+    jobs: list[Job] = []
     for position, st in enumerate(states(transport, count)):
         slave = names.get(position)
         name = slave.name if slave is not None else None
@@ -554,14 +555,20 @@ def doctor(transport: Transport, target: AlState, plan: NetworkPlan | None = Non
         shown = al_state_name(state | (AL_STATUS_ERROR if error else 0))
         if state == target and not error and position not in identity:
             continue
-        cause = None
+        finding = Finding(position, name, shown, None, identity.get(position, []))
+        findings.append(finding)
         if code or error:
             context = Context(slave=slave if position not in identity else None,
                               bus_cycle_ns=bus_cycle_ns, esi=esi,
                               identity=sii.get(position))
-            cause = explain(transport, position, code, context=context)
-        findings.append(Finding(position, name, shown, cause, identity.get(position, [])))
+            jobs.append(_explain_into(finding, code, context))
+    # Every slave's diagnosis at once, their frames shared (each its own mailbox).
+    run_jobs(transport, jobs)
     return count, findings
+
+
+def _explain_into(finding: Finding, code: int, context: Context) -> Job:
+    finding.cause = yield from explain_step(finding.position, code, context)
 
 
 def bus_cycle(plan: NetworkPlan) -> int | None:
