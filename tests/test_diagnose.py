@@ -492,3 +492,45 @@ def test_a_diagnosis_prepares_the_mailbox_once_for_all_its_uploads(plan):
     # 0x1C12:00, 0x1C12:01, 0x1601:00..02, 0x10F3:02 (the drive has none: an abort).
     assert len(uploads) >= 6, uploads
     assert 1 <= len(sii_reads) <= 3, sii_reads
+
+
+def test_apply_and_doctor_compare_with_the_esi_over_veth(veth_netns, plan, slow_drive_esi,
+                                                         tmp_path):
+    """``apply --iface --esi`` and ``doctor --esi`` as processes against ``simulate`` of the
+    drive whose 0x1C32:05 is 500 µs: apply of the 250 µs ENI is refused with 0x0035 and
+    its cause has the ESI's view; after it (``--stay``: the drive keeps PREOP+ERR and
+    0x09A0 = 250 µs), doctor with the line's 1000 µs ENI finds the op mode's cycle is
+    not the one the drive holds."""
+    from rig import start_simulate
+
+    from ecatcfg.eni import writer as eni_writer
+    good = tmp_path / "line.eni.xml"
+    good.write_bytes(eni_writer.to_bytes(plan))
+    bad = tmp_path / "fast.eni.xml"
+    bad.write_bytes(eni_writer.to_bytes(cycle_250us(copy.deepcopy(plan))))
+    proc, _ = start_simulate(veth_netns, "--esi", str(slow_drive_esi), "--eni", str(good))
+    try:
+        done = veth_netns.run_in(veth_netns.ns_a, [
+            sys.executable, "-m", "ecatcfg", "apply", str(bad), "--iface", veth_netns.if_a,
+            "--esi", str(slow_drive_esi), "--stay", "--no-cache", "--format", "json"],
+            timeout=60, cwd=ROOT)
+        assert "Traceback" not in done.stderr, done.stderr
+        assert done.returncode == 1
+        [cause] = json.loads(done.stdout)["causes"]
+        assert cause["slave"] == "axis1" and cause["al_status_code"] == 0x0035
+        assert "the SYNC0 cycle 250 µs, the device allows ≥ 500 µs" in cause["cause"][2]
+        assert cause["dc"]["esi"]["min_cycle_ns"] == 500_000
+        assert cause["dc"]["esi"]["op_modes"][0]["cycle_ns"] == 250_000
+
+        done = veth_netns.run_in(veth_netns.ns_a, [
+            sys.executable, "-m", "ecatcfg", "doctor", str(good), "--iface",
+            veth_netns.if_a, "--esi", str(slow_drive_esi), "--no-cache"],
+            timeout=60, cwd=ROOT)
+        assert "Traceback" not in done.stderr, done.stderr
+        assert done.returncode == 1
+        assert "slave 4 (axis1): PREOP+ERR, not OP" in done.stdout, done.stdout
+        assert "the ENI's SYNC0 cycle time is 1000000 ns" in done.stdout
+        assert "SYNC0 every bus cycle = 1000 µs, not 250 µs" in done.stdout, done.stdout
+    finally:
+        proc.send_signal(2)
+        proc.wait(10)
