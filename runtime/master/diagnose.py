@@ -149,7 +149,6 @@ class _Mailbox:
         self.channel = channel
         self.counter: Callable[[], int] | None = channel.counter if channel else None
         self.error: str | None = None if coe is not False else f"slave {position} {NO_COE}"
-        self.uploads = 0
 
     def upload(self, index: int, sub: int) -> Step[bytes]:
         from ecatcfg.runtime.master.sdo_client import SdoUpload
@@ -163,7 +162,6 @@ class _Mailbox:
         if self.error is not None:
             raise _Unreadable(f"0x{index:04X}:{sub:02X} not read ({self.error})")
         assert self.channel is not None and self.counter is not None
-        self.uploads += 1
         try:
             t = SdoUpload(index, sub, False, self.channel.plan.send.length, self.counter)
             yield from sdo_job(self.channel, t, None, None, SDO_TIMEOUT)
@@ -216,7 +214,8 @@ def explain(transport: Transport, position: int, code: int | None = None,
     ENI entry, when there is one (the DC cycle time the ENI asks for)."""
     context = context or Context()
     if slave is not None:
-        context.slave = slave
+        context = Context(slave, context.channel, context.bus_cycle_ns, context.esi,
+                          context.identity)
     out: list[Cause] = []
 
     def job() -> Job:
@@ -428,7 +427,10 @@ def _dc(position: int, context: Context, fields: dict[str, Any],
             lines.append(f"{whose} {us(cycle)}, the device allows ≥ {us(ns)} ({said})")
         else:
             lines.append(said)
-    device, where = context.device()
+    try:
+        device, where = context.device()
+    except EcatcfgError as exc:         # an ESI file that does not read: said, not raised
+        device, where = None, f"the device's ESI was not read: {exc.message}"
     if device is None:
         lines.append("with --esi, the cycle would be compared with the device's DC op modes "
                      "and its ESI minimum cycle time" + (f" ({where})" if where else ""))
