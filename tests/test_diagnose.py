@@ -534,3 +534,27 @@ def test_apply_and_doctor_compare_with_the_esi_over_veth(veth_netns, plan, slow_
     finally:
         proc.send_signal(2)
         proc.wait(10)
+
+
+def test_a_slave_that_leaves_op_with_a_code_while_cycling_is_reported_with_its_cause(plan):
+    """No cycle for 0.3 s: the lamps terminal's SM watchdog (100 ms) expires and it falls to
+    SAFEOP+ERR 0x001B.  Once the line cycles again the supervisor takes it offline and its
+    offline event carries the cause (the watchdog registers), read between the cycles;
+    then it is brought back."""
+    events = []
+    with Network.virtual(plan, esi=[ESI], on_event=events.append) as net:
+        net.up()
+        time.sleep(0.3)
+        deadline = time.monotonic() + 5
+        while not any(e.slave == "lamps" and e.kind == "online" for e in events):
+            assert time.monotonic() < deadline, [e.text for e in events]
+            net.cycle()
+            time.sleep(0.001)
+        lamps = [e for e in events if e.slave == "lamps"]
+        assert [e.kind for e in lamps] == ["offline", "online"], [e.text for e in lamps]
+        text = lamps[0].text
+        assert "fell to SAFEOP+ERR, AL status code 0x001B" in text, text
+        assert ("cause: 0x001B sync manager watchdog: no process data for 100 ms: outputs "
+                "stopped arriving for longer than the SM watchdog time (0x0420 = 1000 x "
+                "100 µs, 0x0400 = 2498)") in text, text
+        assert net.health["lamps"].cause == []          # back online: nothing to say

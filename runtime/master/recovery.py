@@ -77,7 +77,7 @@ class SlaveHealth:
     gave_up: bool = False       # MAX_ATTEMPTS failed: Network.recover() tries again
     next_try: float = 0.0
     refused: set[tuple[object, ...]] = field(default_factory=set)   # reported, once each
-    cause: list[str] = field(default_factory=list)  # why the last attempt was refused
+    cause: list[str] = field(default_factory=list)  # why it left, or its last refusal
 
 
 # -- what each slave adds to the cyclic frames --------------------------------------------------
@@ -313,26 +313,49 @@ class Supervisor:
     def _where(self, h: SlaveHealth) -> str:
         return f"slave {h.name!r} (position {h.position})"
 
-    def _offline(self, name: str, reason: str) -> None:
+    def _offline(self, name: str, reason: str, announce: bool = True) -> None:
+        """``name`` goes offline at once (its share of the working counters, its inputs
+        cleared); the event now, or (``announce`` false) once its cause is read."""
         h = self.health[name]
         if not h.online:
             return
         h.online, h.reason, h.since = False, reason, time.monotonic()
         self._all_online = False
         h.attempts, h.gave_up, h.next_try = 0, False, 0.0
+        h.cause = []
         for slot, share in self._shares[name]:
             if slot.expected is not None:
                 slot.expected -= share
         self._update_clear()
-        self._event("offline", f"{self._where(h)} {reason}; the others go on", name)
+        if announce:
+            self._event("offline", f"{self._where(h)} {reason}; the others go on", name)
         self._group_left(name)
+
+    def _offline_cause(self, slave: SlavePlan, code: int) -> Job:
+        """The cause of a slave that left the network's state with an AL status code
+        (0x001B after its watchdog expired, 0x001A ...), read between the cycles; then its
+        offline event, with the cause.  Bringing it back waits for this (``joining``), so
+        the slave is read as it was found."""
+        h = self.health[slave.name]
+        h.joining = True
+        try:
+            cause = yield from self._cause(slave, h.position, code,
+                                           self.master.mailboxes.get(slave.name))
+        finally:
+            h.joining = False
+        why = ""
+        if cause is not None:
+            h.cause = cause.lines
+            why = f"; cause: {cause.text()}"
+        self._event("offline", f"{self._where(h)} {h.reason}; the others go on{why}",
+                    slave.name)
 
     def _online(self, name: str) -> None:
         h = self.health[name]
         for slot, share in self._shares[name]:
             if slot.expected is not None:
                 slot.expected += share
-        h.online, h.joining, h.reason, h.attempts = True, False, "", 0
+        h.online, h.joining, h.reason, h.attempts, h.cause = True, False, "", 0, []
         self._all_online = all(h.online for h in self.health.values())
         h.refused.clear()
         self._update_clear()
@@ -414,7 +437,10 @@ class Supervisor:
                     text = f"fell to {al_state_name(status)}"
                     if status & AL_STATUS_ERROR or code:
                         text += f", AL status code 0x{code:04X} ({al_status_name(code)})"
-                    self._offline(s.name, text)
+                    online = self.health[s.name].online
+                    self._offline(s.name, text, announce=not code)
+                    if code and online:
+                        self._incoming.append(self._offline_cause(s, code))
         finally:
             self._diagnosing = False
 
