@@ -437,9 +437,9 @@ class Supervisor:
                     text = f"fell to {al_state_name(status)}"
                     if status & AL_STATUS_ERROR or code:
                         text += f", AL status code 0x{code:04X} ({al_status_name(code)})"
-                    online = self.health[s.name].online
+                    was_online = self.health[s.name].online
                     self._offline(s.name, text, announce=not code)
-                    if code and online:
+                    if code and was_online:
                         self._incoming.append(self._offline_cause(s, code))
         finally:
             self._diagnosing = False
