@@ -472,6 +472,13 @@ SM_COMM_TYPE = 0x1C00                         # communication type of each SM
 SM_PDO_ASSIGN = 0x1C10                        # + SM number: the PDOs assigned to that SM
 SM_PDO_ASSIGN_RANGE = range(0x1C10, 0x1C30)   # 32 SyncManagers
 MODULE_IDENT_LIST = 0xF030                    # configured module ident list (modular devices)
+# The SyncManager parameter objects of the outputs (SM2) and inputs (SM3), ETG.1020
+# "Synchronization": subindex 5 is the minimum cycle time in ns the slave supports; the
+# Slave Stack Code refuses a SYNC0 cycle time (0x09A0) below it (AL status code 0x0035 or
+# 0x0036) and reports MIN_PD_CYCLE_TIME there.
+SM_OUTPUT_PARAMETER = 0x1C32
+SM_INPUT_PARAMETER = 0x1C33
+SM_PARAMETER_MIN_CYCLE = 5
 # The most entries a PDO mapping object can hold: subindex 0 counts them in a UINT8, and
 # subindex 0xFF is reserved for the object's structure (CiA 301, which CoE follows).
 MAX_PDO_ENTRIES = 254

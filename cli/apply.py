@@ -35,8 +35,12 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                         help="a virtual segment emulating the ENI's slaves: from their ESI "
                              "files (--esi), else from the ENI alone")
     p.add_argument("--esi", action="append", metavar="PATH",
-                   help="ESI file or folder for --virtual; repeatable.  A slave whose "
-                        "device is not there is emulated from the ENI alone")
+                   help="ESI file or folder; repeatable.  With --virtual the slaves are "
+                        "emulated from them (a slave whose device is not there from the ENI "
+                        "alone); on a line and in the virtual case, a refusal's cause is "
+                        "compared with the device found by its identity (a DC refusal: its "
+                        "DC op modes and minimum cycle time).  Nothing is configured from "
+                        "them")
     p.add_argument("--prefer", action="append", default=[], metavar="PATH",
                    help="an ESI file or folder of --esi whose description wins where files describe one device (vendor, product, revision) differently; repeatable, first wins (default: such a device is an error naming the files)")
     p.add_argument("--state", choices=list(STATES), default="op",
@@ -169,8 +173,6 @@ def _checked_options(args: argparse.Namespace
 
     if not Path(args.eni).exists():
         raise UsageError(f"{args.eni}: no such file")
-    if args.esi and not args.virtual:
-        raise UsageError("--esi is for --virtual (the ESI files of the slaves to emulate)")
     if args.prefer and not args.esi:
         raise UsageError("--prefer ranks files of --esi: give them with --esi")
     if args.cycles is not None and args.cycles < 0:
@@ -231,7 +233,8 @@ def _network(args: argparse.Namespace, plan: NetworkPlan, on_event: Callable[[Ev
                                dc_threshold_ns=dc_threshold, dc_timeout_s=dc_timeout)
     from ecatcfg.runtime.link import RawLink
     return Network(plan, RawLink(args.iface), pcap=args.pcap, on_event=on_event,
-                   skip_unsupported=True, eni_name=args.eni,
+                   skip_unsupported=True, eni_name=args.eni, esi=args.esi,
+                   esi_prefer=args.prefer,
                    dc_threshold_ns=dc_threshold, dc_timeout_s=dc_timeout)
 
 

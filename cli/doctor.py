@@ -15,7 +15,9 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                     "one not in the target state or with the error flag, the cause of its "
                     "AL status code as the slave holds it: SyncManager and FMMU registers "
                     "and the PDO assignment over CoE for 0x001D/0x001E, the watchdog "
-                    "registers for 0x001B, the DC registers for 0x0035, the newest 0x10F3 "
+                    "registers for 0x001B, the DC registers and the minimum cycle time the "
+                    "slave reports (0x1C32:05) for 0x0035, with --esi also the device's DC "
+                    "op modes and ESI minimum cycle time, the newest 0x10F3 "
                     "diagnosis message where the slave has one.  With an ENI, slaves "
                     "whose SII identity is not the ENI's are reported too, and the DC "
                     "cycle time the ENI asks for is shown.  Nothing is configured; a "
@@ -27,6 +29,16 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                    help="network interface of the EtherCAT line")
     p.add_argument("--state", choices=list(STATES), default="op",
                    help="the target state of every slave (default op)")
+    p.add_argument("--esi", action="append", default=[], metavar="PATH",
+                   help="ESI file or folder (repeatable; folders searched for *.xml): each "
+                        "slave's device, found by the identity in its SII, for the causes "
+                        "that compare with it (a DC refusal: the device's DC op modes and "
+                        "minimum cycle time)")
+    p.add_argument("--prefer", action="append", default=[], metavar="PATH",
+                   help="where several ESI files describe one identity differently, take "
+                        "the description from this file or folder (repeatable, first first)")
+    p.add_argument("--no-cache", action="store_true",
+                   help="read the ESI files without the index cache")
     p.add_argument("--format", choices=["text", "json"], default="text")
     p.set_defaults(run=run)
 
@@ -49,8 +61,15 @@ def run(args: argparse.Namespace) -> int:
         if not Path(args.eni).is_file():
             raise UsageError(f"{args.eni}: no such file")
         plan = eni_reader.read_file(args.eni)
+    library = None
+    if args.esi:
+        from ecatcfg.esi.library import Library
+        library = Library(args.esi, cache=not args.no_cache, prefer=args.prefer)
+    elif args.prefer:
+        from ecatcfg.errors import UsageError
+        raise UsageError("--prefer ranks files of --esi: give them with --esi")
     with RawLink(args.iface) as link:
-        count, findings = doctor(Transport(link), target, plan)
+        count, findings = doctor(Transport(link), target, plan, library)
     out: dict[str, Any] = {"iface": args.iface, "eni": args.eni, "target": target.name,
                            "slaves": count, "ok": not findings,
                            "findings": [f.as_json() for f in findings]}

@@ -142,22 +142,8 @@ def run(args: argparse.Namespace) -> int:
 
 def _esi_entry(lib: Library, s: FoundSlave
                ) -> tuple[DeviceEntry | None, DeviceEntry | None, str | None]:
-    """The library's entry of a found slave: the exact revision, else (``other``) the
-    highest revision of the same product, with a note saying which revisions there are."""
-    same = [e for e in lib.entries
-            if (e.vendor_id, e.product_code) == (s.vendor_id, s.product_code)]
-    exact = next((e for e in same if e.revision == s.revision), None)
-    other = None
-    if exact is None and same:
-        other = max(same, key=lambda e: e.revision if e.revision is not None else -1)
-    note = None
-    if other is not None:
-        note = (f"revision 0x{s.revision:x} is not in the ESI files; they have "
-                + ", ".join(sorted({f"0x{e.revision:x}" for e in lib.entries
-                                    if (e.vendor_id, e.product_code) ==
-                                    (s.vendor_id, s.product_code)
-                                    and e.revision is not None})))
-    return exact, other, note
+    """The library's entry of a found slave (``Library.entry_for_identity``)."""
+    return lib.entry_for_identity(s.vendor_id, s.product_code, s.revision)
 
 
 def _print_table(rows: list[dict[str, Any]], iface: str) -> None:

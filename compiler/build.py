@@ -20,6 +20,7 @@ from ecatcfg.compiler.topology import LoadedTopology, TopologyError
 from ecatcfg.errors import EcatcfgError
 from ecatcfg.esc import MAILBOX_STATE_ADDR, PORT_LETTERS, SmConfig
 from ecatcfg.esi.library import Library
+from ecatcfg.esi.dc_cycle import sync_cycle
 from ecatcfg.esi.model import Device
 from ecatcfg.esi.physics import DEFAULT_PHYSICS, eni_physics
 
@@ -215,20 +216,14 @@ def _dc_plan(s: ResolvedSlave, cycle_ns: int, reference: bool) -> DcPlan | None:
     mode = s.dc_mode
     if mode is None or not mode.assign_activate:
         return None
-    cycle0 = _cycle(mode.cycle_time_sync0, mode.cycle_time_sync0_factor, cycle_ns) or cycle_ns
+    cycle0 = sync_cycle(mode.cycle_time_sync0, mode.cycle_time_sync0_factor, cycle_ns) or cycle_ns
     cycle1 = 0
     if mode.assign_activate & SYNC1_BIT:
         # ETG.2000: the SYNC1 factor multiplies the SYNC0 cycle; 0x09A4 counts from SYNC0
         # and includes the SYNC1 shift (as IgH writes it).
-        cycle1 = (_cycle(mode.cycle_time_sync1, mode.cycle_time_sync1_factor, cycle0) or 0) \
+        cycle1 = (sync_cycle(mode.cycle_time_sync1, mode.cycle_time_sync1_factor, cycle0) or 0) \
             + (mode.shift_time_sync1 or 0)
     return DcPlan(reference, cycle0, cycle1, mode.shift_time_sync0 or 0)
-
-
-def _cycle(value: int | None, factor: int | None, base: int) -> int | None:
-    if factor is not None and factor != 0:
-        return base * factor if factor > 0 else base // -factor
-    return value or None
 
 
 def _bootstrap(s: ResolvedSlave) -> tuple[SmConfig, SmConfig] | None:

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ecatcfg.esi.model import Device, DictObject, Dictionary, ObjectFlags
+from ecatcfg.esi.model import Device, DictObject, Dictionary, ObjectFlags, ObjectInfo
 
 # The AL state an InitCmd's SDO runs in: a transition's commands are sent from its source
 # state, except I->P, whose mailbox commands can only run once the mailbox is up (PreOp).
@@ -87,6 +87,25 @@ def lookup(dic: Dictionary, index: int, subindex: int | None) -> DictEntry | Dic
             size = dt.bit_size // ai.elements if dt.bit_size else None
             return DictEntry(obj, dt.base_type or "", size, obj.flags)
     return obj
+
+
+def match_infos(subentries: list[tuple[int, str]],
+                infos: list[tuple[str, ObjectInfo]]) -> dict[int, ObjectInfo]:
+    """Which ``Object/Info/SubItem`` gives the default of which subindex: by name where the
+    name is a subentry's (ETG.2000 names the Info's SubItems after the type's), else by
+    position (array elements are listed one Info/SubItem per subindex).  ``subentries``:
+    the object's (subindex, name) in subindex order, as its data type lays them out."""
+    by_name: dict[str, tuple[int, str]] = {}
+    for entry in subentries:
+        by_name.setdefault(entry[1].strip().lower(), entry)
+    matched: dict[int, ObjectInfo] = {}
+    for pos, (name, info) in enumerate(infos):
+        match = by_name.get(name.strip().lower())
+        if match is None or match[0] in matched:
+            match = subentries[pos] if pos < len(subentries) else None
+        if match is not None and match[0] not in matched:
+            matched[match[0]] = info
+    return matched
 
 
 def write_target(dic: Dictionary, index: int, subindex: int | None,

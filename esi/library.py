@@ -213,6 +213,26 @@ class Library:
 
     # -- lookup ---------------------------------------------------------------------------
 
+    def entry_for_identity(self, vendor_id: int, product_code: int, revision: int
+                           ) -> tuple[DeviceEntry | None, DeviceEntry | None, str | None]:
+        """The entry of a slave found on a line by its SII identity: the exact revision
+        (the ``prefer`` files first where several files have it), else (``other``) the
+        highest revision of the same product, with a note saying which revisions there
+        are."""
+        same = [e for e in self.entries
+                if (e.vendor_id, e.product_code) == (vendor_id, product_code)]
+        exact = min((e for e in same if e.revision == revision), key=self._rank,
+                    default=None)
+        other = None
+        if exact is None and same:
+            other = max(same, key=lambda e: e.revision if e.revision is not None else -1)
+        note = None
+        if other is not None:
+            note = (f"revision 0x{revision:x} is not in the ESI files; they have "
+                    + ", ".join(sorted({f"0x{e.revision:x}" for e in same
+                                        if e.revision is not None})))
+        return exact, other, note
+
     def find(self, selector: str, within: LibraryFile | None = None) -> Selection:
         """The one device ``selector`` names, or :class:`SelectorError` saying why not.
 

@@ -73,6 +73,8 @@ class Network:
                  skip_unsupported: bool = False, eni_name: str | None = None,
                  dc_threshold_ns: int = DC_THRESHOLD_NS, dc_timeout_s: float = DC_TIMEOUT_S,
                  recovery: bool = True,
+                 esi: list[str | Path] | Library | None = None,
+                 esi_prefer: list[str | Path] | None = None,
                  _closers: Iterable[Callable[[], None]] = ()) -> None:
         """``skip_unsupported``: run an ENI that asks for what this master does not do
         (``eni/contents.py``: SoE/FoE/AoE/VoE InitCmds, slave-to-slave copies ...) without
@@ -85,7 +87,11 @@ class Network:
         threshold (0: no wait), and raises :class:`~ecatcfg.runtime.master.bringup.DcSyncError`
         naming the slave furthest off after the timeout.  ``recovery``: while cycling,
         bring back slaves that drop out (``runtime/master/recovery.py``, :attr:`health`); when
-        false, a slave that drops out only makes :meth:`cycle` return ``False``."""
+        false, a slave that drops out only makes :meth:`cycle` return ``False``.
+        ``esi``, ``esi_prefer``: ESI files or folders (or a :class:`Library`), used only to
+        explain refusals: the cause of a DC refusal is compared with the device's DC op
+        modes and minimum cycle time (``runtime/master/diagnose.py``), the device found by
+        the slave's identity; without them the cause says what the slave holds."""
         try:
             if not isinstance(eni, NetworkPlan):
                 from ecatcfg.eni import reader as eni_reader
@@ -93,6 +99,7 @@ class Network:
                 eni = eni_reader.read_file(eni)
             _check_supported(eni, eni_name, skip_unsupported, on_event)
             eni = _completed(eni, eni_name, on_event)
+            library = _library(esi, esi_prefer)
         except BaseException:
             link.close()                    # the Network owns the link from the start
             raise
@@ -105,7 +112,7 @@ class Network:
             self.recorder = PcapRecorder(pcap)
         self.master = Master(eni, link, recorder=self.recorder, on_event=on_event,
                              dc_threshold_ns=dc_threshold_ns, dc_timeout_s=dc_timeout_s,
-                             recovery=recovery)
+                             recovery=recovery, esi=library)
         self._vars = {v.name: _Var(v, False) for v in eni.process_image.inputs}
         self._vars.update({v.name: _Var(v, True) for v in eni.process_image.outputs})
         # Which slave each variable belongs to: its name starts with the slave's name and a
@@ -145,7 +152,6 @@ class Network:
         several describe one device differently (``Library``'s ``prefer``); without it such
         a device is an error naming the files."""
         from ecatcfg.eni import reader as eni_reader
-        from ecatcfg.esi.library import Library
         from ecatcfg.runtime.segment import emulate
         from ecatcfg.runtime.link import MemoryLink
 
@@ -157,9 +163,7 @@ class Network:
         # The slaves of a partial ENI are emulated as configured by its derived set-up.
         plan = _completed(plan, eni_name or (None if isinstance(eni, NetworkPlan)
                                              else str(eni)), on_event)
-        library = (esi if isinstance(esi, Library) else
-                   Library([str(p) for p in esi], cache=esi_cache,
-                           prefer=list(esi_prefer or [])) if esi else None)
+        library = _library(esi, esi_prefer, esi_cache)
         segment = emulate.segment(emulate.specs_from_eni(plan, library, shown), faults,
                                   timing, dc=dc)
         if on_event is not None:
@@ -182,7 +186,7 @@ class Network:
         net = cls(plan, ours, pcap=pcap, on_event=on_event, skip_unsupported=skip_unsupported,
                   eni_name=eni_name or (None if isinstance(eni, NetworkPlan) else str(eni)),
                   dc_threshold_ns=dc_threshold_ns, dc_timeout_s=dc_timeout_s,
-                  recovery=recovery, _closers=[close_segment])
+                  recovery=recovery, esi=library, _closers=[close_segment])
         net.segment = segment
         return net
 
@@ -221,7 +225,8 @@ class Network:
         the cause to the error: a slave whose identity is not the ENI's, a slave that
         refused a state with an AL status code."""
         from ecatcfg.runtime.master.bringup import NotReachedError, VerifyError
-        from ecatcfg.runtime.master.diagnose import explain, identity_cause
+        from ecatcfg.runtime.master.diagnose import (Context, bus_cycle, explain,
+                                                     identity_cause)
         master = self.master
         transport = master.transport
         if isinstance(exc, VerifyError):
@@ -250,8 +255,10 @@ class Network:
         else:
             return
         for slave, code in refused:
+            context = Context(slave=slave, channel=master.mailboxes.get(slave.name),
+                              bus_cycle_ns=bus_cycle(self.plan), esi=master.esi)
             try:
-                cause = explain(transport, slave.position, code, slave)
+                cause = explain(transport, slave.position, code, context=context)
             except ApplyError as failed:        # the line itself stopped answering
                 exc.add_cause(slave.name, {"position": slave.position,
                                            "al_status_code": code,
@@ -568,6 +575,16 @@ def _completed(plan: NetworkPlan, name: str | None,
             on_event(Event("derived", f"slave {d.slave!r}: {d.text}" if d.slave else
                            f"master: no InitCmds in the ENI: {d.text}", d.slave or None))
     return done
+
+
+def _library(esi: list[str | Path] | Library | None, prefer: list[str | Path] | None,
+             cache: bool = True) -> Library | None:
+    """The ESI library of ``esi`` (files or folders, or a library already built)."""
+    from ecatcfg.esi.library import Library
+    if esi is None or isinstance(esi, Library):
+        return esi
+    return Library([str(p) for p in esi], cache=cache,
+                   prefer=list(prefer or [])) if esi else None
 
 
 def _check_supported(plan: NetworkPlan, name: str | None, skip: bool,

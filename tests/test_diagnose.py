@@ -44,6 +44,28 @@ def patched(plan, slave: str, comment: str, offset: int, value: int):
     raise AssertionError(f"no InitCmd {comment!r}")
 
 
+def upload_requests(frame: bytes, sm0_start: int) -> list[tuple[int, int]]:
+    """The (index, subindex) of each CoE SDO upload request a master frame writes into a
+    mailbox at ``sm0_start``: mailbox type 3 (CoE), CoE service 2 (SDO request), command
+    specifier 0x40 (initiate upload; ETG.1000.6)."""
+    from ecatcfg.esc import Cmd
+    from ecatcfg.runtime.wire import decode
+    out = []
+    for dg in decode(frame).datagrams:
+        data = dg.data
+        if dg.cmd == Cmd.FPWR and dg.address >> 16 == sm0_start and len(data) >= 12 \
+                and data[5] & 0x0F == 3 and data[7] >> 4 == 2 and data[8] == 0x40:
+            out.append((int.from_bytes(data[9:11], "little"), data[11]))
+    return out
+
+
+def has_logical(frame: bytes) -> bool:
+    """Whether the frame carries process data (LRD, LWR, LRW: the cyclic frames)."""
+    from ecatcfg.esc import LOGICAL_CMDS
+    from ecatcfg.runtime.wire import decode
+    return any(dg.cmd in LOGICAL_CMDS for dg in decode(frame).datagrams)
+
+
 def refusal(plan) -> ApplyError:
     with Network.virtual(plan, esi=[ESI]) as net:
         with pytest.raises(ApplyError) as err:
@@ -251,3 +273,288 @@ def test_apply_and_doctor_say_the_cause_over_veth(veth_netns, plan, tmp_path):
     finally:
         proc.send_signal(2)
         proc.wait(10)
+
+
+# -- a refusal while the network cycles (runtime/master/recovery.py) ---------------------------
+
+def test_a_refusal_during_recovery_carries_its_cause_and_the_cycle_goes_on(plan):
+    """The drive is powered off and on while the line cycles in OP, and the master's
+    configuration of it has meanwhile lost a byte of SM2: the recovery configures it again
+    from INIT, it refuses SAFEOP with 0x001D, and the retry event and ``health`` carry the
+    cause line.  The diagnosis runs as the attempt does, one round per cycle: the cycles
+    between the refusal and the event are many (a diagnosis that blocked the cycle would
+    take none), and in every cycle the lamps got the pattern sent."""
+    events = []
+    with Network.virtual(plan, esi=[ESI], on_event=events.append) as net:
+        net.up()
+        patched(net.master.plan, "axis1", "set sm 2 (outputs)", 2, 5)
+        drive = next(s for s in net.segment.slaves if s.name == "axis1")
+        lamps = next(s for s in net.segment.slaves if s.name == "lamps")
+        sm0 = drive.device.sms[0].start_address
+        # The master's frames in order: "cyclic", or the objects of the uploads they carry.
+        wire: list[object] = []
+
+        def record(frame: bytes, sent: bool) -> None:
+            if sent:
+                wire.extend(upload_requests(frame, sm0))
+                if has_logical(frame):
+                    wire.append("cyclic")
+        net.master.transport.recorder = record
+        drive.power_cycle()                 # registers gone: configured again from INIT
+        wrong: list[int] = []
+        cycles = 0
+        deadline = time.monotonic() + 10
+        while not any(e.kind == "retry" and e.slave == "axis1" for e in events):
+            assert time.monotonic() < deadline, [e.text for e in events]
+            cycles += 1
+            pattern = cycles % 256
+            for k in range(8):
+                net[f"lamps.Channel 1-8.Output {k + 1}"] = bool(pattern >> k & 1)
+            net.cycle()
+            if lamps.outputs() != bytes([pattern]):
+                wrong.append(cycles)
+            time.sleep(0.0005)
+        [retry] = [e for e in events if e.kind == "retry"]
+        assert "0x001D" in retry.text
+        assert ("cause: 0x001D invalid output configuration: SM2 length 5 bytes (0x0812), but "
+                "the PDO assignment the slave holds (0x1C12 = 0x1601) gives 6 bytes"
+                ) in retry.text, retry.text
+        assert net.health["axis1"].cause[0].startswith("SM2 length 5 bytes (0x0812)")
+        # The diagnosis's uploads, from 0x1C12:00 to the last, went out between cycles: a
+        # diagnosis that held the cycle up would send them all with no cyclic frame between.
+        first = wire.index((0x1C12, 0))
+        last = max(i for i, w in enumerate(wire) if w != "cyclic")
+        assert wire[first:last].count("cyclic") >= 5, wire[first:last + 1]
+        assert wrong == [], wrong
+
+
+# -- a DC refusal against the device's ESI --------------------------------------------------
+
+# The ETG.1020 SyncManager output parameter object with its minimum cycle time (subindex 5)
+# 500 µs (0x0007A120), added to the example drive as a Beckhoff ESI gives it.
+SM_PARAM_TYPES = """
+              <DataType>
+                <Name>DT1C32</Name>
+                <BitSize>80</BitSize>
+                <SubItem><SubIdx>0</SubIdx><Name>SubIndex 000</Name><Type>USINT</Type><BitSize>8</BitSize><BitOffs>0</BitOffs><Flags><Access>ro</Access></Flags></SubItem>
+                <SubItem><SubIdx>1</SubIdx><Name>Sync mode</Name><Type>UINT</Type><BitSize>16</BitSize><BitOffs>16</BitOffs><Flags><Access>rw</Access></Flags></SubItem>
+                <SubItem><SubIdx>5</SubIdx><Name>Minimum cycle time</Name><Type>UDINT</Type><BitSize>32</BitSize><BitOffs>48</BitOffs><Flags><Access>ro</Access></Flags></SubItem>
+              </DataType>
+"""
+SM_PARAM_OBJECT = """
+              <Object>
+                <Index>#x1C32</Index><Name>SM output parameter</Name><Type>DT1C32</Type><BitSize>80</BitSize>
+                <Info>
+                  <SubItem><Name>SubIndex 000</Name><Info><DefaultData>05</DefaultData></Info></SubItem>
+                  <SubItem><Name>Sync mode</Name><Info><DefaultData>0200</DefaultData></Info></SubItem>
+                  <SubItem><Name>Minimum cycle time</Name><Info><DefaultData>20a10700</DefaultData></Info></SubItem>
+                </Info>
+                <Flags><Access>ro</Access><Category>o</Category></Flags>
+              </Object>
+"""
+
+
+@pytest.fixture
+def slow_drive_esi(tmp_path):
+    """The example ESI files, the drive's with 0x1C32:05 = 500 µs."""
+    import shutil
+    folder = tmp_path / "esi"
+    folder.mkdir()
+    for esi in ESI.glob("*.xml"):
+        shutil.copy(esi, folder)
+    drive = folder / "ecatcfg-EXD402-drive.xml"
+    text = drive.read_text()
+    text = text.replace("<DataTypes>", "<DataTypes>" + SM_PARAM_TYPES, 1)
+    text = text.replace("<Objects>", "<Objects>" + SM_PARAM_OBJECT, 1)
+    drive.write_text(text)
+    return folder
+
+
+def cycle_250us(plan):
+    """The example line at a 250 µs bus cycle: the drive's SYNC0 every cycle (its op mode
+    'DC', CycleTimeSync0 Factor 1), 0x09A0 = 250000 ns."""
+    cmd = next(c for c in plan.slave("axis1").init_cmds if c.comment == "set DC cycle time")
+    data = bytearray(cmd.payload)
+    struct.pack_into("<I", data, 0, 250_000)
+    cmd.data = bytes(data)
+    plan.slave("axis1").dc.cycle_time0 = 250_000
+    for cyclic in plan.cyclic:
+        cyclic.cycle_time = 250
+    return plan
+
+
+def test_0x0035_compares_the_sync0_cycle_with_the_devices_minimum_and_op_mode(
+        plan, slow_drive_esi):
+    """A drive whose dictionary says 0x1C32:05 = 500 µs refuses a 250 µs SYNC0 cycle with
+    0x0035, as firmware on the Slave Stack Code does; the cause names the cycle, the
+    minimum the slave holds, and, from its ESI, the minimum and the op mode 'DC'."""
+    from ecatcfg.esi.library import Library
+    with Network.virtual(cycle_250us(plan), esi=[slow_drive_esi], esi_cache=False) as net:
+        with pytest.raises(ApplyError) as err:
+            net.up()
+        # doctor without the ENI: the device found by the identity in the drive's SII; the
+        # op mode's cycle is not known without the ENI's bus cycle.
+        _, findings = doctor(net.master.transport, AlState.OP, None,
+                             Library([slow_drive_esi], cache=False))
+    [drive] = [f for f in findings if f.cause is not None]
+    assert drive.position == 4 and drive.cause.code == 0x0035
+    assert drive.cause.lines[1] == ("the SYNC0 cycle 250 µs, the device allows ≥ 500 µs (the "
+                                    "slave's minimum cycle time 0x1C32:05 = 500000 ns)")
+    assert drive.cause.lines[2].startswith("the device's ESI gives a minimum cycle time "
+                                           "500 µs")
+    assert drive.cause.lines[3].endswith("): SYNC0 every bus cycle")
+    assert err.value.al_code == 0x0035
+    [cause] = err.value.causes
+    lines = cause["cause"]
+    assert lines[0].startswith("SYNC activation 0x0981 = 0x03, SYNC0 cycle time 0x09A0 = "
+                               "250000 ns")
+    assert lines[1] == "the ENI's SYNC0 cycle time is 250000 ns"
+    assert lines[2] == ("the SYNC0 cycle 250 µs, the device allows ≥ 500 µs (the slave's "
+                        "minimum cycle time 0x1C32:05 = 500000 ns)")
+    drive = slow_drive_esi / "ecatcfg-EXD402-drive.xml"
+    assert lines[3].startswith("the device's ESI gives a minimum cycle time 500 µs (ESI "
+                               f"0x1C32:05 default, {drive}:")
+    assert lines[4].startswith("DC OpMode 'DC' (AssignActivate 0x0300, ")
+    assert lines[4].endswith("): SYNC0 every bus cycle = 250 µs")
+    dc = cause["dc"]
+    assert (dc["sync0_cycle_ns"], dc["min_cycle_ns"], dc["esi"]["min_cycle_ns"]) == (
+        250_000, 500_000, 500_000)
+    assert dc["esi"]["op_modes"] == [{"name": "DC", "assign_activate": 0x0300, "factor": 1,
+                                      "fixed_ns": None, "cycle_ns": 250_000}]
+
+
+def test_0x0035_without_esi_says_what_the_slave_holds_and_that_esi_says_more(
+        plan, slow_drive_esi):
+    """The same line emulated from the ESI, the master given none: the cause has the
+    registers, the minimum the slave reports over CoE, and the hint."""
+    from rig import serve_in_memory
+
+    from ecatcfg.esi.library import Library
+    from ecatcfg.runtime.segment import emulate
+    plan = cycle_250us(plan)
+    segment = emulate.segment(emulate.specs_from_eni(
+        plan, Library([slow_drive_esi], cache=False), "x"))
+    link, close = serve_in_memory(segment)
+    with Network(plan, link, _closers=[close]) as net:
+        with pytest.raises(ApplyError) as err:
+            net.up()
+    [cause] = err.value.causes
+    assert cause["cause"][2] == ("the SYNC0 cycle 250 µs, the device allows ≥ 500 µs (the "
+                                 "slave's minimum cycle time 0x1C32:05 = 500000 ns)")
+    assert cause["cause"][3].startswith("with --esi, the cycle would be compared with the "
+                                        "device's DC op modes")
+    assert "esi" not in cause["dc"]
+
+
+def test_the_emulated_drive_takes_a_sync0_cycle_at_its_minimum(plan, slow_drive_esi):
+    """500 µs, the minimum its dictionary gives, is accepted (the check is "shorter than")."""
+    plan = cycle_250us(plan)
+    cmd = next(c for c in plan.slave("axis1").init_cmds if c.comment == "set DC cycle time")
+    data = bytearray(cmd.payload)
+    struct.pack_into("<I", data, 0, 500_000)
+    cmd.data = bytes(data)
+    with Network.virtual(plan, esi=[slow_drive_esi], esi_cache=False) as net:
+        net.up()
+        assert net.state == AlState.OP
+
+
+# -- one mailbox per diagnosis ----------------------------------------------------------------
+
+def test_a_diagnosis_prepares_the_mailbox_once_for_all_its_uploads(plan):
+    """``doctor`` without an ENI reads the drive's CoE objects through a mailbox it finds
+    from the SII (words 0x0018-0x001C) and its SyncManagers: that is done once per
+    diagnosis, not once per upload.  Counted on the wire: the SII read commands (a write
+    of the read command 0x0100 to 0x0502) against the SDO upload requests (CoE SDO
+    service, command specifier 2: "initiate upload")."""
+    from ecatcfg.esc import EEPROM_CMD_READ, Cmd, Reg
+    from ecatcfg.runtime.wire import decode
+    with Network.virtual(patched(plan, "axis1", "set sm 2 (outputs)", 2, 5),
+                         esi=[ESI]) as net:
+        with pytest.raises(ApplyError):
+            net.up()
+        transport = net.master.transport
+        sii_reads: list[int] = []
+        uploads: list[tuple[int, int]] = []
+        sm0 = next(s for s in net.segment.slaves if s.name == "axis1").device.sms[0]
+
+        def record(frame: bytes, sent: bool) -> None:
+            if not sent:
+                return
+            uploads.extend(upload_requests(frame, sm0.start_address))
+            for dg in decode(frame).datagrams:
+                if dg.cmd in (Cmd.APWR, Cmd.FPWR) and dg.address >> 16 == Reg.EEPROM_CONTROL \
+                        and int.from_bytes(dg.data[:2], "little") & EEPROM_CMD_READ:
+                    sii_reads.append(dg.address)
+        transport.recorder = record
+        count, findings = doctor(transport, AlState.OP)
+    [axis] = [f for f in findings if f.cause is not None and f.cause.code == 0x001D]
+    assert "0x1C12 = 0x1601" in axis.cause.lines[0]
+    # 0x1C12:00, 0x1C12:01, 0x1601:00..02, 0x10F3:02 (the drive has none: an abort).
+    assert len(uploads) >= 6, uploads
+    assert 1 <= len(sii_reads) <= 3, sii_reads
+
+
+def test_apply_and_doctor_compare_with_the_esi_over_veth(veth_netns, plan, slow_drive_esi,
+                                                         tmp_path):
+    """``apply --iface --esi`` and ``doctor --esi`` as processes against ``simulate`` of the
+    drive whose 0x1C32:05 is 500 µs: apply of the 250 µs ENI is refused with 0x0035 and
+    its cause has the ESI's view; after it (``--stay``: the drive keeps PREOP+ERR and
+    0x09A0 = 250 µs), doctor with the line's 1000 µs ENI finds the op mode's cycle is
+    not the one the drive holds."""
+    from rig import start_simulate
+
+    from ecatcfg.eni import writer as eni_writer
+    good = tmp_path / "line.eni.xml"
+    good.write_bytes(eni_writer.to_bytes(plan))
+    bad = tmp_path / "fast.eni.xml"
+    bad.write_bytes(eni_writer.to_bytes(cycle_250us(copy.deepcopy(plan))))
+    proc, _ = start_simulate(veth_netns, "--esi", str(slow_drive_esi), "--eni", str(good))
+    try:
+        done = veth_netns.run_in(veth_netns.ns_a, [
+            sys.executable, "-m", "ecatcfg", "apply", str(bad), "--iface", veth_netns.if_a,
+            "--esi", str(slow_drive_esi), "--stay", "--no-cache", "--format", "json"],
+            timeout=60, cwd=ROOT)
+        assert "Traceback" not in done.stderr, done.stderr
+        assert done.returncode == 1
+        [cause] = json.loads(done.stdout)["causes"]
+        assert cause["slave"] == "axis1" and cause["al_status_code"] == 0x0035
+        assert "the SYNC0 cycle 250 µs, the device allows ≥ 500 µs" in cause["cause"][2]
+        assert cause["dc"]["esi"]["min_cycle_ns"] == 500_000
+        assert cause["dc"]["esi"]["op_modes"][0]["cycle_ns"] == 250_000
+
+        done = veth_netns.run_in(veth_netns.ns_a, [
+            sys.executable, "-m", "ecatcfg", "doctor", str(good), "--iface",
+            veth_netns.if_a, "--esi", str(slow_drive_esi), "--no-cache"],
+            timeout=60, cwd=ROOT)
+        assert "Traceback" not in done.stderr, done.stderr
+        assert done.returncode == 1
+        assert "slave 4 (axis1): PREOP+ERR, not OP" in done.stdout, done.stdout
+        assert "the ENI's SYNC0 cycle time is 1000000 ns" in done.stdout
+        assert "SYNC0 every bus cycle = 1000 µs, not 250 µs" in done.stdout, done.stdout
+    finally:
+        proc.send_signal(2)
+        proc.wait(10)
+
+
+def test_a_slave_that_leaves_op_with_a_code_while_cycling_is_reported_with_its_cause(plan):
+    """No cycle for 0.3 s: the lamps terminal's SM watchdog (100 ms) expires and it falls to
+    SAFEOP+ERR 0x001B.  Once the line cycles again the supervisor takes it offline and its
+    offline event carries the cause (the watchdog registers), read between the cycles;
+    then it is brought back."""
+    events = []
+    with Network.virtual(plan, esi=[ESI], on_event=events.append) as net:
+        net.up()
+        time.sleep(0.3)
+        deadline = time.monotonic() + 5
+        while not any(e.slave == "lamps" and e.kind == "online" for e in events):
+            assert time.monotonic() < deadline, [e.text for e in events]
+            net.cycle()
+            time.sleep(0.001)
+        lamps = [e for e in events if e.slave == "lamps"]
+        assert [e.kind for e in lamps] == ["offline", "online"], [e.text for e in lamps]
+        text = lamps[0].text
+        assert "fell to SAFEOP+ERR, AL status code 0x001B" in text, text
+        assert ("cause: 0x001B sync manager watchdog: no process data for 100 ms: outputs "
+                "stopped arriving for longer than the SM watchdog time (0x0420 = 1000 x "
+                "100 µs, 0x0400 = 2498)") in text, text
+        assert net.health["lamps"].cause == []          # back online: nothing to say

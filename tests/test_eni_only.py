@@ -225,12 +225,14 @@ def test_apply_names_the_file_line_and_cause_of_a_refused_sdo(esi_index):
             "0x1C12:00") in " ".join(run.stdout.split()), run.stdout
 
 
-def test_esi_without_virtual_is_a_usage_error(corpus, tmp_path):
+def test_prefer_without_esi_is_a_usage_error(corpus, tmp_path):
+    """``--esi`` is taken on a line too (the ESI a refusal's cause is compared with:
+    docs/diagnostics.md); ``--prefer`` ranks its files and means nothing alone."""
     eni = corpus / "eni" / "rocos-ethercat" / "eni.xml"
     run = subprocess.run([sys.executable, "-m", "ecatcfg", "apply", str(eni), "--iface", "lo",
-                          "--esi", str(corpus / "esi")], capture_output=True, text=True,
+                          "--prefer", str(corpus / "esi")], capture_output=True, text=True,
                          timeout=60)
-    assert run.returncode == 2 and "--esi is for --virtual" in run.stderr
+    assert run.returncode == 2 and "--prefer ranks files of --esi" in run.stderr
 
 
 # -- the device an ENI describes, against the vendor's ESI ---------------------------------

@@ -39,6 +39,7 @@ from ecatcfg.runtime.wire import Datagram
 from ecatcfg.runtime.wiring import CHILD_PORTS, active_ports
 
 if TYPE_CHECKING:
+    from ecatcfg.esi.library import Library
     from ecatcfg.runtime.link import Link
     from ecatcfg.runtime.master.recovery import Supervisor
 
@@ -145,13 +146,17 @@ class Master:
                  recorder: Callable[[bytes, bool], None] | None = None,
                  on_event: Callable[[Event], None] | None = None,
                  dc_threshold_ns: int = DC_THRESHOLD_NS,
-                 dc_timeout_s: float = DC_TIMEOUT_S, recovery: bool = True) -> None:
+                 dc_timeout_s: float = DC_TIMEOUT_S, recovery: bool = True,
+                 esi: Library | None = None) -> None:
         """``dc_threshold_ns``, ``dc_timeout_s``: before SAFEOP->OP, wait until every DC
         slave's system time difference (0x092C) is under the threshold, for at most the
         timeout (then :class:`DcSyncError`); a threshold of 0 skips the wait.
-        ``recovery``: bring back slaves that drop out while the network cycles."""
+        ``recovery``: bring back slaves that drop out while the network cycles.  ``esi``:
+        the ESI files a refusal's cause is compared with (``diagnose.py``); the master
+        configures from the ENI alone."""
         check_dc_wait(dc_threshold_ns, dc_timeout_s)
         self.recovery = recovery
+        self.esi = esi
         self.dc_threshold_ns = dc_threshold_ns
         self.dc_timeout_s = dc_timeout_s
         self.plan = plan

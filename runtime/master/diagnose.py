@@ -12,7 +12,10 @@ says it in one or two lines (``docs/diagnostics.md`` has the table):
 - 0x001B SM watchdog: the watchdog time (0x0420 in the base of 0x0400), its status
   (0x0440) and counter (0x0442): outputs stopped arriving for longer than that time;
 - 0x0035 / 0x0036 / 0x0030 DC SYNC: the activation (0x0981), SYNC0/SYNC1 cycle times
-  (0x09A0, 0x09A4) and, with an ENI, the cycle time it asks for;
+  (0x09A0, 0x09A4), with an ENI the cycle time it asks for, the minimum cycle time the
+  slave reports over CoE (0x1C32:05 / 0x1C33:05, ETG.1020: Slave Stack Code firmware
+  refuses a shorter SYNC0 cycle) and, with ESI files, the device's SYNC0 op modes and
+  its ESI minimum cycle time;
 - 0x0045 MBX_SOE (what an emulated SoE drive refuses SAFEOP with, ``runtime/segment/
   al_checks.py``): each drive's S-0-0021, the IDNs it found invalid or missing before
   SAFEOP (the Beckhoff AX5000 documentation of S-0-0021), read over SoE;
@@ -21,31 +24,43 @@ says it in one or two lines (``docs/diagnostics.md`` has the table):
   DiagCode u32, Flags u16, TextId u16, time stamp u64, parameters).
 
 Everything is read by auto-increment position, so it works with or without an ENI and
-before station addresses are set (``ecatcfg doctor``); CoE goes through ``sdo_tool`` (the
-slave's mailbox as its SII and SyncManagers give it).  Nothing here writes a register
-except what an SDO upload needs.
+before station addresses are set (``ecatcfg doctor``).  The diagnosis is a lockstep job
+(``lockstep.py``): :func:`explain` runs it to the end, and the recovery
+(``recovery.py``) runs :func:`explain_step` between cycles while the others' data goes on.
+CoE goes through one mailbox per diagnosis: the master's own channel where it configured the
+slave (the ENI's mailbox), else the one ``sdo_tool.open_mailbox`` prepares once from the
+slave's SII and SyncManagers, used for every upload that follows.  Nothing here writes a
+register except what an SDO upload needs.
+
+With the device's ESI (``esi``: a :class:`~ecatcfg.esi.library.Library`, the device found by
+the slave's identity), a DC refusal is compared with what the ESI says of the SYNC0 cycle
+(``esi/dc_cycle.py``: the DC op modes and the minimum cycle time of 0x1C32:05/0x1C33:05).
 """
 
 from __future__ import annotations
 
 import struct
 import time
+from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 from ecatcfg.errors import EcatcfgError
 from ecatcfg.esc import (AL_STATE_MASK, AL_STATUS_ERROR, FMMU_SIZE, SII_PRODUCT_CODE,
                          SII_REVISION, SII_VENDOR_ID, SM_DIR_ECAT_WRITES, SM_DIR_MASK,
-                         SM_MODE_BUFFERED, SM_MODE_MAILBOX, SM_MODE_MASK, SM_PDO_ASSIGN,
-                         SM_SIZE, AlState, AlStatusCode, Cmd, FmmuConfig, FmmuType, Reg,
-                         SmConfig, al_state_name, al_status_name, fmmus_cover, sm_register,
+                         SM_INPUT_PARAMETER, SM_MODE_BUFFERED, SM_MODE_MAILBOX, SM_MODE_MASK,
+                         SM_OUTPUT_PARAMETER, SM_PARAMETER_MIN_CYCLE, SM_PDO_ASSIGN, SM_SIZE,
+                         AlState, AlStatusCode, Cmd, FmmuConfig, FmmuType, Reg, SmConfig,
+                         al_state_name, al_status_name, fmmus_cover, sm_register,
                          watchdog_base_ns)
 from ecatcfg.record import record
-from ecatcfg.runtime.master.lockstep import Step, run_jobs
-from ecatcfg.runtime.master.replay import TIMEOUT_COMMAND, ApplyError
+from ecatcfg.runtime.master.lockstep import Job, Step, run_jobs
+from ecatcfg.runtime.master.replay import TIMEOUT_COMMAND, ApplyError, MailboxChannel, sdo_job
 from ecatcfg.runtime.wire import Datagram
 
 if TYPE_CHECKING:
     from ecatcfg.eni.plan import NetworkPlan, SlavePlan
+    from ecatcfg.esi.library import Library
+    from ecatcfg.esi.model import Device
     from ecatcfg.runtime.master.scan import Mismatch
     from ecatcfg.runtime.master.transport import Transport
 
@@ -56,6 +71,7 @@ _DC_CODES = (AlStatusCode.DC_INVALID_SYNC, AlStatusCode.DC_INVALID_SYNC_CYCLE,
              AlStatusCode.DC_INVALID_SYNC0_CYCLE, AlStatusCode.DC_INVALID_SYNC1_CYCLE)
 SOE_INVALID_CP2 = 21           # S-0-0021, IDN-list of invalid operation data for CP2
 SDO_TIMEOUT = 1.0              # s per diagnostic upload: a slave that does not answer is said
+NO_COE = "does not support CoE"
 
 
 @record
@@ -96,21 +112,98 @@ def _read(position: int, ado: int, length: int, out: dict[int, bytes]) -> Step[N
             return
 
 
+def _registers(position: int, spans: list[tuple[int, int]]) -> Step[dict[int, bytes]]:
+    """A job step: ``{address: bytes}`` of each (address, length) read from the slave at
+    ``position``, all in one round (again for those not answered); a span without an
+    answer by the command timeout is left out."""
+    adp = -position & 0xFFFF
+    wanted = {ado: Datagram.physical(Cmd.APRD, adp, ado, n) for ado, n in spans}
+    out: dict[int, bytes] = {}
+    deadline = time.monotonic() + TIMEOUT_COMMAND
+    while True:
+        missing = [ado for ado in wanted if ado not in out]
+        if not missing:
+            return out
+        reply = yield [wanted[ado] for ado in missing]
+        if reply is not None:
+            for ado, dg in zip(missing, reply):
+                if dg.wkc == 1:
+                    out[ado] = bytes(dg.data)
+        if time.monotonic() > deadline:
+            return out
+
+
 def read_registers(transport: Transport, position: int,
                    spans: list[tuple[int, int]]) -> dict[int, bytes]:
-    """``{address: bytes}`` of each (address, length) read from the slave at ``position``
-    (one job per span, sharing frames); a span without an answer is left out."""
+    """``{address: bytes}`` of each (address, length) read from the slave at ``position``;
+    a span without an answer is left out."""
     out: dict[int, bytes] = {}
-    run_jobs(transport, [_read(position, ado, n, out) for ado, n in spans])
+
+    def job() -> Job:
+        out.update((yield from _registers(position, spans)))
+    run_jobs(transport, [job()])
     return out
 
 
-def _upload(transport: Transport, position: int, index: int, sub: int) -> bytes:
-    from ecatcfg.runtime.master.sdo_tool import SdoToolError, sdo_transfer
-    try:
-        return sdo_transfer(transport, position, index, sub, timeout=SDO_TIMEOUT)
-    except (SdoToolError, ApplyError) as exc:
-        raise _Unreadable(f"0x{index:04X}:{sub:02X} not read ({exc.message})") from None
+class _Mailbox:
+    """The CoE uploads (and SoE reads) of one diagnosis over one mailbox: ``channel`` when
+    the master has one for the slave (its ENI mailbox, configured by the master), else
+    prepared from the slave's SII at the first transfer (``sdo_tool.open_mailbox``) and kept
+    for the others."""
+
+    def __init__(self, position: int, channel: MailboxChannel | None, coe: bool | None
+                 ) -> None:
+        self.position = position
+        self.channel = channel
+        self.counter: Callable[[], int] | None = channel.counter if channel else None
+        self.no_coe = coe is False
+        self.error: str | None = None          # why the mailbox could not be prepared
+
+    def _open(self, protocol: str) -> Step[None]:
+        from ecatcfg.runtime.master.sdo_tool import SdoToolError, SlaveMailbox, open_mailbox
+        if self.channel is None and self.error is None:
+            info = SlaveMailbox(self.position)
+            info.protocol = protocol           # the protocol the slave's SII must list
+            try:
+                self.channel, self.counter = yield from open_mailbox(info)
+            except (SdoToolError, ApplyError) as exc:
+                self.error = exc.message
+
+    def upload(self, index: int, sub: int) -> Step[bytes]:
+        from ecatcfg.runtime.master.sdo_client import SdoUpload
+        if self.no_coe:
+            raise _Unreadable(f"0x{index:04X}:{sub:02X} not read (slave {self.position} "
+                              f"{NO_COE})")
+        yield from self._open("CoE")
+        if self.error is not None:
+            raise _Unreadable(f"0x{index:04X}:{sub:02X} not read ({self.error})")
+        assert self.channel is not None and self.counter is not None
+        try:
+            t = SdoUpload(index, sub, False, self.channel.plan.send.length, self.counter)
+            yield from sdo_job(self.channel, t, None, None, SDO_TIMEOUT)
+        except (ApplyError, ValueError) as exc:
+            raise _Unreadable(f"0x{index:04X}:{sub:02X} not read ("
+                              f"{getattr(exc, 'message', str(exc))})") from None
+        return t.result
+
+    def soe_read(self, idn: int, drive: int) -> Step[bytes]:
+        """The value of ``idn`` of drive ``drive``; an SoE error reply raises
+        ``SoeRefused`` (its ``soe_error``), anything else :class:`_Unreadable`."""
+        from ecatcfg.esi.idn import idn_text
+        from ecatcfg.runtime.master.soe_client import SoeRefused, SoeTransfer, soe_job
+        yield from self._open("SoE")
+        if self.error is not None:
+            raise _Unreadable(f"{idn_text(idn)} not read ({self.error})")
+        assert self.channel is not None and self.counter is not None
+        t = SoeTransfer(idn, drive_no=drive, mbx_out_size=self.channel.plan.send.length,
+                        counter=self.counter)
+        try:
+            yield from soe_job(self.channel, t, None, None, SDO_TIMEOUT)
+        except SoeRefused:
+            raise
+        except ApplyError as exc:
+            raise _Unreadable(f"{idn_text(idn)} not read ({exc.message})") from None
+        return t.result
 
 
 def _u(data: bytes) -> int:
@@ -119,12 +212,56 @@ def _u(data: bytes) -> int:
 
 # -- the causes ------------------------------------------------------------------------------
 
+@record
+class Context:
+    """What the diagnosis knows besides the slave: its ENI entry (``slave``: the cycle the
+    ENI asks for; its mailbox channel ``channel`` when the master configured it), the
+    ENI's bus cycle, and the ESI files (``esi``) to find the device in."""
+
+    slave: SlavePlan | None = None
+    channel: MailboxChannel | None = None
+    bus_cycle_ns: int | None = None
+    esi: Library | None = None
+    identity: tuple[int, int, int] | None = None    # vendor, product, revision (SII)
+
+    def device(self) -> tuple[Device | None, str]:
+        """The slave's ESI device by its identity, and where it was found (or why not)."""
+        if self.esi is None:
+            return None, ""
+        ident = self.identity or (
+            (self.slave.vendor_id, self.slave.product_code, self.slave.revision)
+            if self.slave is not None else None)
+        if ident is None:
+            return None, "its identity is not known"
+        exact, other, note = self.esi.entry_for_identity(*ident)
+        entry = exact or other
+        if entry is None:
+            return None, (f"no device 0x{ident[0]:08X}:0x{ident[1]:08X} in the ESI files "
+                          "given")
+        where = f"{entry.file}:{entry.line}" + (f"; {note}" if note else "")
+        return self.esi.device(entry), where
+
+
 def explain(transport: Transport, position: int, code: int | None = None,
-            slave: SlavePlan | None = None) -> Cause:
+            slave: SlavePlan | None = None, context: Context | None = None) -> Cause:
     """The cause of the slave at ``position`` not being where it was asked to go: its AL
     status code (read when ``code`` is None) and what its check looks at.  ``slave``: its
     ENI entry, when there is one (the DC cycle time the ENI asks for)."""
-    regs = read_registers(transport, position, [(Reg.AL_STATUS, 6)])
+    context = context or Context()
+    if slave is not None:
+        context = Context(slave, context.channel, context.bus_cycle_ns, context.esi,
+                          context.identity)
+    out: list[Cause] = []
+
+    def job() -> Job:
+        out.append((yield from explain_step(position, code, context)))
+    run_jobs(transport, [job()])
+    return out[0]
+
+
+def explain_step(position: int, code: int | None, context: Context) -> Step[Cause]:
+    """:func:`explain` as a job step (the recovery runs it while the network cycles)."""
+    regs = yield from _registers(position, [(Reg.AL_STATUS, 6), (Reg.SM0, 2 * SM_SIZE)])
     status = regs.get(Reg.AL_STATUS)
     fields: dict[str, Any] = {}
     if status is not None:
@@ -132,31 +269,34 @@ def explain(transport: Transport, position: int, code: int | None = None,
         fields["al_state"] = al_state_name(al_status)
         code = read_code if code is None else code
     code = code or 0
-    coe = _mailbox_ready(transport, position)
+    slave = context.slave
+    coe_known = None
+    if slave is not None:
+        coe_known = slave.mailbox is not None and "CoE" in slave.mailbox.protocols
+    mailbox = _Mailbox(position, context.channel, coe_known) if _mailbox_ready(regs) else None
     lines: list[str] = []
     try:
         if code in (AlStatusCode.INVALID_OUTPUTS, AlStatusCode.INVALID_INPUTS):
-            lines += _process_data(transport, position, code == AlStatusCode.INVALID_OUTPUTS,
-                                   fields, coe)
+            lines += yield from _process_data(position, code == AlStatusCode.INVALID_OUTPUTS,
+                                              fields, mailbox)
         elif code == AlStatusCode.SM_WATCHDOG:
-            lines += _watchdog(transport, position, fields)
+            lines += yield from _watchdog(position, fields)
         elif code in _DC_CODES:
-            lines += _dc(transport, position, slave, fields)
-        elif code == AlStatusCode.MBX_SOE and coe:
-            lines += _soe_invalid(transport, position, fields)
+            lines += yield from _dc(position, context, fields, mailbox)
+        elif code == AlStatusCode.MBX_SOE and mailbox is not None:
+            lines += yield from _soe_invalid(mailbox, fields)
     except _Unreadable as exc:
         lines.append(exc.message)
-    if coe:
-        lines += _diagnosis_message(transport, position, fields)
+    if mailbox is not None:
+        lines += yield from _diagnosis_message(mailbox, fields)
     return Cause(position, code, lines, fields)
 
 
-def _mailbox_ready(transport: Transport, position: int) -> bool:
+def _mailbox_ready(regs: dict[int, bytes]) -> bool:
     """Whether the slave's mailbox works as it is: PREOP or above (not BOOT) with SM0/SM1 in
     mailbox mode and enabled.  Only then are CoE objects read: a diagnosis must not set up
     a mailbox or change a slave's state (``sdo_tool`` would, for a slave below PREOP)."""
-    regs = read_registers(transport, position, [(Reg.AL_STATUS, 2), (Reg.SM0, 2 * SM_SIZE)])
-    if len(regs) < 2:
+    if Reg.AL_STATUS not in regs or Reg.SM0 not in regs:
         return False
     state = regs[Reg.AL_STATUS][0] & AL_STATE_MASK
     if state not in (AlState.PREOP, AlState.SAFEOP, AlState.OP):
@@ -165,14 +305,14 @@ def _mailbox_ready(transport: Transport, position: int) -> bool:
     return all(sm.enable and sm.control & SM_MODE_MASK == SM_MODE_MAILBOX for sm in (sm0, sm1))
 
 
-def _sms(transport: Transport, position: int) -> tuple[list[SmConfig], list[FmmuConfig]]:
-    counts = read_registers(transport, position, [(Reg.FMMUS_SUPPORTED, 2)]).get(
+def _sms(position: int) -> Step[tuple[list[SmConfig], list[FmmuConfig]]]:
+    counts = (yield from _registers(position, [(Reg.FMMUS_SUPPORTED, 2)])).get(
         Reg.FMMUS_SUPPORTED)
     if counts is None:
         raise _Unreadable(f"FMMU and SM counts (0x{Reg.FMMUS_SUPPORTED:04X}) not read")
     fmmus_n, sms_n = counts[0], counts[1]
-    regs = read_registers(transport, position,
-                          [(Reg.SM0, SM_SIZE * sms_n), (Reg.FMMU0, FMMU_SIZE * fmmus_n)])
+    regs = yield from _registers(position, [(Reg.SM0, SM_SIZE * sms_n),
+                                            (Reg.FMMU0, FMMU_SIZE * fmmus_n)])
     if Reg.SM0 not in regs or Reg.FMMU0 not in regs:
         raise _Unreadable("SyncManager (0x0800) and FMMU (0x0600) registers not read")
     sms = [SmConfig.from_bytes(regs[Reg.SM0][SM_SIZE * n:]) for n in range(sms_n)]
@@ -180,29 +320,30 @@ def _sms(transport: Transport, position: int) -> tuple[list[SmConfig], list[Fmmu
     return sms, fmmus
 
 
-def _assigned_bits(transport: Transport, position: int, sm: int
-                   ) -> tuple[list[int], int] | None:
+def _assigned_bits(mailbox: _Mailbox, sm: int) -> Step[tuple[list[int], int] | None]:
     """The PDOs assigned to SM ``sm`` (0x1C10 + sm) and the bits their mappings hold, as the
     slave has them now; None without CoE."""
     index = SM_PDO_ASSIGN + sm
     try:
-        count = _upload(transport, position, index, 0)[0]
+        count = (yield from mailbox.upload(index, 0))[0]
     except _Unreadable as exc:
-        if "does not support CoE" in exc.message:
+        if NO_COE in exc.message:
             return None
         raise
-    pdos = [_u(_upload(transport, position, index, k)) & 0xFFFF for k in range(1, count + 1)]
+    pdos = []
+    for k in range(1, count + 1):
+        pdos.append(_u((yield from mailbox.upload(index, k))) & 0xFFFF)
     bits = 0
     for pdo in pdos:
-        entries = _upload(transport, position, pdo, 0)[0]
+        entries = (yield from mailbox.upload(pdo, 0))[0]
         for k in range(1, entries + 1):
-            bits += _u(_upload(transport, position, pdo, k)) & 0xFF
+            bits += _u((yield from mailbox.upload(pdo, k))) & 0xFF
     return pdos, bits
 
 
-def _process_data(transport: Transport, position: int, outputs: bool,
-                  fields: dict[str, Any], coe: bool) -> list[str]:
-    sms, fmmus = _sms(transport, position)
+def _process_data(position: int, outputs: bool, fields: dict[str, Any],
+                  mailbox: _Mailbox | None) -> Step[list[str]]:
+    sms, fmmus = yield from _sms(position)
     want_dir = SM_DIR_ECAT_WRITES if outputs else 0
     kind = FmmuType.WRITE if outputs else FmmuType.READ
     lines: list[str] = []
@@ -211,7 +352,7 @@ def _process_data(transport: Transport, position: int, outputs: bool,
         if n < 2 or sm.control & SM_MODE_MASK != SM_MODE_BUFFERED \
                 or sm.control & SM_DIR_MASK != want_dir or not (sm.length or sm.enable):
             continue
-        held = _assigned_bits(transport, position, n) if coe else None
+        held = (yield from _assigned_bits(mailbox, n)) if mailbox is not None else None
         entry: dict[str, Any] = {"sm": n, "register": f"0x{sm_register(n):04X}",
                                  "start": sm.start, "length": sm.length,
                                  "enabled": sm.enable}
@@ -254,11 +395,10 @@ def _process_data(transport: Transport, position: int, outputs: bool,
     return lines
 
 
-def _watchdog(transport: Transport, position: int, fields: dict[str, Any]) -> list[str]:
-    regs = read_registers(transport, position, [(Reg.WATCHDOG_DIVIDER, 2),
-                                                (Reg.WATCHDOG_SM, 2),
-                                                (Reg.WATCHDOG_STATUS, 2),
-                                                (Reg.WATCHDOG_COUNTER_SM, 1)])
+def _watchdog(position: int, fields: dict[str, Any]) -> Step[list[str]]:
+    regs = yield from _registers(position, [(Reg.WATCHDOG_DIVIDER, 2), (Reg.WATCHDOG_SM, 2),
+                                            (Reg.WATCHDOG_STATUS, 2),
+                                            (Reg.WATCHDOG_COUNTER_SM, 1)])
     if len(regs) < 4:
         raise _Unreadable("watchdog registers (0x0400-0x0442) not read")
     divider = struct.unpack("<H", regs[Reg.WATCHDOG_DIVIDER])[0]
@@ -274,49 +414,115 @@ def _watchdog(transport: Transport, position: int, fields: dict[str, Any]) -> li
             f"{'expired' if expired else 'running'}, counter 0x0442 = {counter}"]
 
 
-def _dc(transport: Transport, position: int, slave: SlavePlan | None,
-        fields: dict[str, Any]) -> list[str]:
-    regs = read_registers(transport, position, [(Reg.DC_CYCLIC_UNIT_CONTROL, 2),
-                                                (Reg.DC_SYNC0_CYCLE_TIME, 8)])
+def _min_cycle_held(mailbox: _Mailbox | None) -> Step[tuple[int, int] | None]:
+    """The minimum cycle time the slave reports over CoE (0x1C32:05, else 0x1C33:05; ETG.1020
+    SyncManager parameters) and its index; None where it has neither or no mailbox works."""
+    if mailbox is None:
+        return None
+    for index in (SM_OUTPUT_PARAMETER, SM_INPUT_PARAMETER):
+        try:
+            value = _u((yield from mailbox.upload(index, SM_PARAMETER_MIN_CYCLE)))
+        except _Unreadable:
+            continue
+        if value:
+            return value, index
+    return None
+
+
+def _dc(position: int, context: Context, fields: dict[str, Any],
+        mailbox: _Mailbox | None) -> Step[list[str]]:
+    from ecatcfg.esi.dc_cycle import min_cycle_time, sync0_rules, us
+    regs = yield from _registers(position, [(Reg.DC_CYCLIC_UNIT_CONTROL, 2),
+                                            (Reg.DC_SYNC0_CYCLE_TIME, 8)])
     if len(regs) < 2:
         raise _Unreadable("DC registers (0x0980, 0x09A0) not read")
-    activation = regs[Reg.DC_CYCLIC_UNIT_CONTROL][1]
+    assign = struct.unpack("<H", regs[Reg.DC_CYCLIC_UNIT_CONTROL])[0]
+    activation = assign >> 8
     sync0, sync1 = struct.unpack("<II", regs[Reg.DC_SYNC0_CYCLE_TIME])
-    fields["dc"] = {"activation": activation, "sync0_cycle_ns": sync0,
-                    "sync1_cycle_ns": sync1}
+    dc: dict[str, Any] = {"activation": activation, "sync0_cycle_ns": sync0,
+                          "sync1_cycle_ns": sync1}
+    fields["dc"] = dc
     text = (f"SYNC activation 0x0981 = 0x{activation:02X}, SYNC0 cycle time 0x09A0 = "
             f"{sync0} ns, SYNC1 cycle time 0x09A4 = {sync1} ns")
     if activation & 0x03 == 0x03 and not sync0:
         text += ": SYNC0 is on without a cycle time (no InitCmd wrote 0x09A0?)"
     lines = [text]
-    if slave is not None and slave.dc is not None:
-        eni_ns = slave.dc.cycle_time0
-        fields["dc"]["eni_sync0_cycle_ns"] = eni_ns
-        lines.append(f"the ENI's SYNC0 cycle time is {eni_ns} ns; the device's DC op modes "
-                     "(ESI Dc/OpMode) give the cycle times it accepts")
+    slave = context.slave
+    eni_ns = slave.dc.cycle_time0 if slave is not None and slave.dc is not None else None
+    if eni_ns is not None:
+        dc["eni_sync0_cycle_ns"] = eni_ns
+        lines.append(f"the ENI's SYNC0 cycle time is {eni_ns} ns")
+    cycle = sync0 or eni_ns            # the cycle the slave was asked to run at
+    whose = "the SYNC0 cycle" if sync0 else "the ENI's SYNC0 cycle"
+    held = yield from _min_cycle_held(mailbox)
+    if held is not None:
+        ns, index = held
+        dc["min_cycle_ns"] = ns
+        said = (f"the slave's minimum cycle time 0x{index:04X}:{SM_PARAMETER_MIN_CYCLE:02X} "
+                f"= {ns} ns")
+        if cycle and cycle < ns:
+            lines.append(f"{whose} {us(cycle)}, the device allows ≥ {us(ns)} ({said})")
+        else:
+            lines.append(said)
+    try:
+        device, where = context.device()
+    except EcatcfgError as exc:         # an ESI file that does not read: said, not raised
+        device, where = None, f"the device's ESI was not read: {exc.message}"
+    if device is None:
+        lines.append("with --esi, the cycle would be compared with the device's DC op modes "
+                     "and its ESI minimum cycle time" + (f" ({where})" if where else ""))
+        return lines
+    minimum = min_cycle_time(device)
+    rules = sync0_rules(device)
+    esi: dict[str, Any] = {"device": where,
+                           "min_cycle_ns": minimum.ns if minimum else None,
+                           "op_modes": [{"name": r.mode,
+                                         "assign_activate": r.assign_activate,
+                                         "factor": r.factor, "fixed_ns": r.fixed_ns,
+                                         "cycle_ns": r.cycle_ns(context.bus_cycle_ns)}
+                                        for r in rules]}
+    dc["esi"] = esi
+    if minimum is not None and cycle and cycle < minimum.ns and held is None:
+        lines.append(f"{whose} {us(cycle)}, the device allows ≥ {us(minimum.ns)} "
+                     f"(its ESI: {minimum.text()})")
+    elif minimum is not None:
+        lines.append(f"the device's ESI gives a {minimum.text()}")
+    # The op mode the slave runs (the AssignActivate written), else every one with SYNC0.
+    running = [r for r in rules if r.assign_activate >> 8 == activation] or rules
+    for rule in running:
+        want = rule.cycle_ns(context.bus_cycle_ns)
+        line = rule.text()
+        if want and cycle and want != cycle:
+            line += f" = {us(want)}, not {us(cycle)}"
+        elif want:
+            line += f" = {us(want)}"
+        lines.append(line)
+    if not rules:
+        lines.append(f"the device's ESI ({where}) has no DC op mode with SYNC0")
     return lines
 
 
-def _soe_invalid(transport: Transport, position: int, fields: dict[str, Any]) -> list[str]:
+def _soe_invalid(mailbox: _Mailbox, fields: dict[str, Any]) -> Step[list[str]]:
     """Each drive's S-0-0021 (IDN-list of invalid operation data for CP2), from drive 0 on
     until one the slave does not have (SoE error 0x800A, invalid drive number)."""
     from ecatcfg.esi.idn import idn_text
-    from ecatcfg.runtime.master.sdo_tool import SdoToolError
-    from ecatcfg.runtime.master.soe_tool import SoeToolError, soe_transfer
+    from ecatcfg.runtime.master.soe_client import SoeRefused
     from ecatcfg.runtime.soe import SOE_INVALID_DRIVE, decode_list
 
     lines: list[str] = []
     invalid: dict[int, list[str]] = {}
     for drive in range(8):
         try:
-            value = soe_transfer(transport, position, SOE_INVALID_CP2, drive_no=drive,
-                                 timeout=SDO_TIMEOUT)
+            value = yield from mailbox.soe_read(SOE_INVALID_CP2, drive)
             items, _maximum = decode_list(value)
-        except SoeToolError as exc:
+        except SoeRefused as exc:
             if exc.soe_error != SOE_INVALID_DRIVE or not drive:
                 lines.append(f"S-0-0021 of drive {drive} not read ({exc.message})")
             break
-        except (SdoToolError, ApplyError, ValueError) as exc:
+        except (_Unreadable, ApplyError) as exc:
+            lines.append(f"S-0-0021 of drive {drive} not read ({exc.message})")
+            break
+        except ValueError as exc:
             lines.append(f"S-0-0021 of drive {drive} not read ({exc})")
             break
         idns = [idn_text(int.from_bytes(items[i:i + 2], "little"))
@@ -329,14 +535,13 @@ def _soe_invalid(transport: Transport, position: int, fields: dict[str, Any]) ->
     return lines
 
 
-def _diagnosis_message(transport: Transport, position: int,
-                       fields: dict[str, Any]) -> list[str]:
+def _diagnosis_message(mailbox: _Mailbox, fields: dict[str, Any]) -> Step[list[str]]:
     """The newest 0x10F3 message, where the slave has the object; nothing otherwise."""
     try:
-        newest = _upload(transport, position, DIAG_HISTORY, DIAG_NEWEST)[0]
+        newest = (yield from mailbox.upload(DIAG_HISTORY, DIAG_NEWEST))[0]
         if newest < DIAG_FIRST_MESSAGE:
             return []
-        message = _upload(transport, position, DIAG_HISTORY, newest)
+        message = yield from mailbox.upload(DIAG_HISTORY, newest)
     except (_Unreadable, IndexError):
         return []
     if len(message) < 16:
@@ -381,17 +586,21 @@ class Finding:
         return out
 
 
-def doctor(transport: Transport, target: AlState, plan: NetworkPlan | None = None
-           ) -> tuple[int, list[Finding]]:
+def doctor(transport: Transport, target: AlState, plan: NetworkPlan | None = None,
+           esi: Library | None = None) -> tuple[int, list[Finding]]:
     """Every slave on the line that is not in ``target`` without the error flag, or, with
     the ENI ``plan``, whose SII identity is not the ENI's: the number of slaves and one
-    :class:`Finding` each, with the cause of its AL status code."""
-    from ecatcfg.runtime.master.scan import count_slaves, paired, scan, verify
+    :class:`Finding` each, with the cause of its AL status code.  ``esi``: the ESI files the
+    devices are found in (by the identity in each slave's SII) for what the causes compare
+    with the ESI."""
+    from ecatcfg.runtime.master.scan import FoundSlave, count_slaves, paired, scan, verify
     count = count_slaves(transport)
     names: dict[int, SlavePlan] = {}
     identity: dict[int, list[str]] = {}
-    if plan is not None:
+    found: list[FoundSlave] = []
+    if plan is not None or esi is not None:
         found = scan(transport)
+    if plan is not None:
         pairs = paired(plan, found)
         for s in plan.slaves:
             if pairs.get(s.position) is not None:
@@ -403,7 +612,10 @@ def doctor(transport: Transport, target: AlState, plan: NetworkPlan | None = Non
             lines = identity_cause(m, found[at].identity) if m.problem.startswith(
                 ("other device", "other revision")) else [f"{m.problem}: {m.found}"]
             identity.setdefault(at, []).extend(lines)
+    bus_cycle_ns = bus_cycle(plan) if plan is not None else None
+    sii = {s.position: s.identity for s in found}
     findings = []
+    jobs: list[Job] = []
     for position, st in enumerate(states(transport, count)):
         slave = names.get(position)
         name = slave.name if slave is not None else None
@@ -415,9 +627,27 @@ def doctor(transport: Transport, target: AlState, plan: NetworkPlan | None = Non
         shown = al_state_name(state | (AL_STATUS_ERROR if error else 0))
         if state == target and not error and position not in identity:
             continue
-        cause = explain(transport, position, code, slave) if code or error else None
-        findings.append(Finding(position, name, shown, cause, identity.get(position, [])))
+        finding = Finding(position, name, shown, None, identity.get(position, []))
+        findings.append(finding)
+        if code or error:
+            context = Context(slave=slave if position not in identity else None,
+                              bus_cycle_ns=bus_cycle_ns, esi=esi,
+                              identity=sii.get(position))
+            jobs.append(_explain_into(finding, code, context))
+    # Every slave's diagnosis at once, their frames shared (each its own mailbox).
+    run_jobs(transport, jobs)
     return count, findings
+
+
+def _explain_into(finding: Finding, code: int, context: Context) -> Job:
+    finding.cause = yield from explain_step(finding.position, code, context)
+
+
+def bus_cycle(plan: NetworkPlan) -> int | None:
+    """The ENI's bus cycle in ns (``Cyclic/CycleTime``), None where it gives none: what an
+    op mode's SYNC0 factor multiplies."""
+    us = next((c.cycle_time for c in plan.cyclic if c.cycle_time), None)
+    return us * 1000 if us else None
 
 
 def states(transport: Transport, count: int) -> list[tuple[int, bool, int] | None]:

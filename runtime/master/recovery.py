@@ -46,7 +46,9 @@ from ecatcfg.runtime.master.transition import slave_transition_job
 from ecatcfg.runtime.wire import Datagram
 
 if TYPE_CHECKING:
+    from ecatcfg.esi.library import Library
     from ecatcfg.runtime.master.cyclic import CyclicFrames, _Slot
+    from ecatcfg.runtime.master.diagnose import Cause
     from ecatcfg.runtime.master.transport import Transport
 
 PROBE_INTERVAL = 0.1           # s between looks for the slaves that are offline
@@ -75,6 +77,7 @@ class SlaveHealth:
     gave_up: bool = False       # MAX_ATTEMPTS failed: Network.recover() tries again
     next_try: float = 0.0
     refused: set[tuple[object, ...]] = field(default_factory=set)   # reported, once each
+    cause: list[str] = field(default_factory=list)  # why it left, or its last refusal
 
 
 # -- what each slave adds to the cyclic frames --------------------------------------------------
@@ -162,6 +165,8 @@ class SupervisedMaster(Protocol):
     def progress(self) -> dict[str, SlaveProgress]: ...
     @property
     def mailboxes(self) -> dict[str, MailboxChannel]: ...
+    @property
+    def esi(self) -> Library | None: ...
 
     def layout(self, present: set[str]) -> None: ...
     def dc_rejoin_job(self, slave: SlavePlan) -> Step[None]: ...
@@ -308,26 +313,49 @@ class Supervisor:
     def _where(self, h: SlaveHealth) -> str:
         return f"slave {h.name!r} (position {h.position})"
 
-    def _offline(self, name: str, reason: str) -> None:
+    def _offline(self, name: str, reason: str, announce: bool = True) -> None:
+        """``name`` goes offline at once (its share of the working counters, its inputs
+        cleared); the event now, or (``announce`` false) once its cause is read."""
         h = self.health[name]
         if not h.online:
             return
         h.online, h.reason, h.since = False, reason, time.monotonic()
         self._all_online = False
         h.attempts, h.gave_up, h.next_try = 0, False, 0.0
+        h.cause = []
         for slot, share in self._shares[name]:
             if slot.expected is not None:
                 slot.expected -= share
         self._update_clear()
-        self._event("offline", f"{self._where(h)} {reason}; the others go on", name)
+        if announce:
+            self._event("offline", f"{self._where(h)} {reason}; the others go on", name)
         self._group_left(name)
+
+    def _offline_cause(self, slave: SlavePlan, code: int) -> Job:
+        """The cause of a slave that left the network's state with an AL status code
+        (0x001B after its watchdog expired, 0x001A ...), read between the cycles; then its
+        offline event, with the cause.  Bringing it back waits for this (``joining``), so
+        the slave is read as it was found."""
+        h = self.health[slave.name]
+        h.joining = True
+        try:
+            cause = yield from self._cause(slave, h.position, code,
+                                           self.master.mailboxes.get(slave.name))
+        finally:
+            h.joining = False
+        why = ""
+        if cause is not None:
+            h.cause = cause.lines
+            why = f"; cause: {cause.text()}"
+        self._event("offline", f"{self._where(h)} {h.reason}; the others go on{why}",
+                    slave.name)
 
     def _online(self, name: str) -> None:
         h = self.health[name]
         for slot, share in self._shares[name]:
             if slot.expected is not None:
                 slot.expected += share
-        h.online, h.joining, h.reason, h.attempts = True, False, "", 0
+        h.online, h.joining, h.reason, h.attempts, h.cause = True, False, "", 0, []
         self._all_online = all(h.online for h in self.health.values())
         h.refused.clear()
         self._update_clear()
@@ -369,18 +397,20 @@ class Supervisor:
         h = self.health[name]
         h.gave_up, h.attempts, h.next_try = False, 0, 0.0
 
-    def _failed(self, h: SlaveHealth, error: str) -> None:
+    def _failed(self, h: SlaveHealth, error: str, cause: Cause | None = None) -> None:
         h.joining = False
         h.attempts += 1
+        h.cause = cause.lines if cause is not None else []
+        why = f"; cause: {cause.text()}" if cause is not None else ""
         if h.attempts >= MAX_ATTEMPTS:
             h.gave_up = True
             self._event("offline", f"{self._where(h)}: gave up after {h.attempts} attempts "
-                                   f"({error})", h.name)
+                                   f"({error}){why}", h.name)
             return
         wait = min(BACKOFF_FIRST * 2 ** (h.attempts - 1), BACKOFF_MAX)
         h.next_try = time.monotonic() + wait
         self._event("retry", f"{self._where(h)}: attempt {h.attempts} of {MAX_ATTEMPTS} "
-                             f"failed ({error}); again in {wait:g} s", h.name)
+                             f"failed ({error}); again in {wait:g} s{why}", h.name)
 
     # -- jobs ------------------------------------------------------------------------------
 
@@ -407,7 +437,10 @@ class Supervisor:
                     text = f"fell to {al_state_name(status)}"
                     if status & AL_STATUS_ERROR or code:
                         text += f", AL status code 0x{code:04X} ({al_status_name(code)})"
-                    self._offline(s.name, text)
+                    was_online = self.health[s.name].online
+                    self._offline(s.name, text, announce=not code)
+                    if code and was_online:
+                        self._incoming.append(self._offline_cause(s, code))
         finally:
             self._diagnosing = False
 
@@ -484,6 +517,7 @@ class Supervisor:
         h = self.health[plan.name]
         slave = at_position(plan, position)
         master = self.master
+        channel: MailboxChannel | None = None
         try:
             from ecatcfg.runtime.master.scan import FoundSlave, compare, identity_job
             found: dict[int, FoundSlave] = {}
@@ -532,7 +566,24 @@ class Supervisor:
                 state = transition.target
             self._online(plan.name)
         except ApplyError as exc:
-            self._failed(h, str(exc))
+            cause = None
+            if exc.al_code:
+                # Why, read from the slave as it refused, one round per cycle as the
+                # attempt itself (docs/diagnostics.md).
+                cause = yield from self._cause(slave, position, exc.al_code, channel)
+            self._failed(h, str(exc), cause)
+
+    def _cause(self, slave: SlavePlan, position: int, code: int,
+               channel: MailboxChannel | None) -> Step[Cause | None]:
+        """The cause of a refusal during an attempt (``diagnose.explain_step``); None when
+        the slave cannot be read (it left the line again)."""
+        from ecatcfg.runtime.master.diagnose import Context, bus_cycle, explain_step
+        context = Context(slave=slave, channel=channel, bus_cycle_ns=bus_cycle(self.master.plan),
+                          esi=self.master.esi)
+        try:
+            return (yield from explain_step(position, code, context))
+        except ApplyError:
+            return None
 
 
 def _request(slave: SlavePlan, control: int, wait: AlState | None) -> Step[None]:

@@ -143,6 +143,16 @@ def mailbox_session(transport: Transport, position: int,
 
 def _session(info: SlaveMailbox,
              work: Callable[[MailboxChannel, int, Callable[[], int]], Job]) -> Job:
+    channel, counter = yield from open_mailbox(info)
+    yield from work(channel, channel.plan.send.length, counter)
+
+
+def open_mailbox(info: SlaveMailbox) -> Step[tuple[MailboxChannel, Callable[[], int]]]:
+    """A job step: prepare the slave at ``info.position`` (steps 2-5 above, the slave known
+    to be on the line) and return its mailbox channel with the counters for the transfers
+    that follow; any number of transfers may then use it, with no second preparation
+    (``runtime/master/diagnose.py`` reads many objects in a row).  Raises
+    :class:`SdoToolError` as :func:`sdo_transfer` does."""
     yield from _prepare(info)
     send, recv = info.send, info.recv
     assert send is not None and recv is not None
@@ -150,7 +160,7 @@ def _session(info: SlaveMailbox,
                        MailboxArea(recv.start, recv.length), protocols=[info.protocol])
     channel = MailboxChannel(info.station_address, plan)
     yield from _empty_sm1(info, channel)
-    yield from work(channel, send.length, _Counter())
+    return channel, _Counter()
 
 
 def _transfer(info: SlaveMailbox, channel: MailboxChannel, size: int,

@@ -6,8 +6,8 @@ AL state machine (``slave.py``) refuses, and with which AL status code.
 - PREOP->SAFEOP (and SAFEOP->OP for SyncManagers the ESI marks OpOnly): each process-data
   SyncManager with the length the assigned PDOs need and an FMMU over it (SOES
   ``ESC_checkSM23``: 0x001D for outputs, 0x001E for inputs); with SYNC0 on, a cycle time
-  (0x0030, invalid sync cycle time); an SoE drive whose required IDNs were not written
-  (0x0045, MBX_SOE: ``soe_refusal``).
+  no shorter than the device's minimum (0x0035, invalid sync cycle time); an SoE drive
+  whose required IDNs were not written (0x0045, MBX_SOE: ``soe_refusal``).
 
 Each check reads what the ESC holds (its SyncManagers, FMMUs, registers) and the device's
 ESI; none changes anything.
@@ -113,13 +113,16 @@ def process_data_refusal(device: Device, sms: Sequence[SmState],
     return 0
 
 
-def dc_refusal(mem: bytearray) -> int:
-    """PREOP->SAFEOP with SYNC0 in cyclic operation (0x0981 bits 0-1): a cycle time
-    (0x09A0) is needed, else 0x0030; 0 otherwise."""
+def dc_refusal(mem: bytearray, min_cycle_ns: int = 0) -> int:
+    """PREOP->SAFEOP with SYNC0 in cyclic operation (0x0981 bits 0-1): a SYNC0 cycle time
+    (0x09A0) that is 0 or shorter than the device's minimum cycle time (its 0x1C32:05 /
+    0x1C33:05, ETG.1020; 0 where it has none) is refused with 0x0035, invalid sync cycle
+    time, as the Slave Stack Code's StartInputHandler checks it (V4: the cycle against
+    MIN_PD_CYCLE_TIME, which it also reports in 0x1C32:05); 0 otherwise."""
     activation = mem[Reg.DC_CYCLIC_UNIT_CONTROL + 1]
     if activation & 0x03 == 0x03:       # cyclic operation with SYNC0
         cycle, = struct.unpack_from("<I", mem, Reg.DC_SYNC0_CYCLE_TIME)
-        if not cycle:
+        if not cycle or cycle < min_cycle_ns:
             return AlStatusCode.DC_INVALID_SYNC_CYCLE
     return 0
 

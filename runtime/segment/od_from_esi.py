@@ -10,7 +10,7 @@ the dictionary does with SDO requests is ``objects.py``.
 from __future__ import annotations
 
 from ecatcfg.esc import MAX_PDO_ENTRIES, SM_COMM_TYPE, SM_PDO_ASSIGN, SM_TYPE_CODES, AlState
-from ecatcfg.esi.coe import device_dictionary
+from ecatcfg.esi.coe import device_dictionary, match_infos
 from ecatcfg.esi.datatypes import bit_size as base_bit_size
 from ecatcfg.esi.datatypes import canonical
 from ecatcfg.esi.model import (
@@ -216,23 +216,6 @@ def _entry_from_spec(spec: _EntrySpec, info: ObjectInfo | None,
     return entry
 
 
-def _match_infos(specs: list[_EntrySpec],
-                 infos: list[tuple[str, ObjectInfo]]) -> dict[int, ObjectInfo]:
-    """Info/SubItem -> subindex: by name where the name is a subentry's, else by
-    position (array elements are listed one Info/SubItem per subindex)."""
-    by_name: dict[str, _EntrySpec] = {}
-    for spec in specs:
-        by_name.setdefault(spec.name.strip().lower(), spec)
-    matched: dict[int, ObjectInfo] = {}
-    for pos, (name, info) in enumerate(infos):
-        match = by_name.get(name.strip().lower())
-        if match is None or match.subindex in matched:
-            match = specs[pos] if pos < len(specs) else None
-        if match is not None and match.subindex not in matched:
-            matched[match.subindex] = info
-    return matched
-
-
 def _standard(entry: OdEntry, type_: str, bits: int) -> None:
     """Give a communication-area entry its ETG.1000.6 type, whatever the ESI declares:
     masters read these into fixed-size buffers (SOEM reads 0x1C00:n into one byte and fails
@@ -279,7 +262,8 @@ class _Builder:
         if variable:
             infos = {0: obj.info} if obj.info is not None else {}
         else:
-            infos = _match_infos(specs, obj.info.sub_items) if obj.info is not None else {}
+            infos = match_infos([(sp.subindex, sp.name) for sp in specs],
+                                obj.info.sub_items) if obj.info is not None else {}
         defaults: set[int] = set()
         for spec in specs:
             od_obj.entries[spec.subindex] = _entry_from_spec(spec, infos.get(spec.subindex),

@@ -29,7 +29,8 @@ from ecatcfg.esc import (AL_ERROR_ACK, AL_ID_REQUEST, AL_STATE_MASK, AL_STATUS_E
                          EEPROM_CMD_MASK, EEPROM_CMD_READ, EEPROM_CMD_RELOAD, EEPROM_CMD_WRITE,
                          EEPROM_ERROR_ACKNOWLEDGE, EEPROM_ERROR_WRITE_ENABLE, EEPROM_R64,
                          EEPROM_WRITE_ENABLE, ESC_DEVICE_EMULATION, FMMU_SIZE, PDI_DIGITAL_IO,
-                         SM_ACTIVATE_REPEAT, SM_WATCHDOG_ENABLE,
+                         SM_ACTIVATE_REPEAT, SM_INPUT_PARAMETER, SM_OUTPUT_PARAMETER,
+                         SM_PARAMETER_MIN_CYCLE, SM_WATCHDOG_ENABLE,
                          AlState, AlStatusCode, FmmuConfig, FmmuType, Reg, fmmu_register,
                          sm_register)
 from ecatcfg.esc import WATCHDOG_DIVIDER_DEFAULT, WATCHDOG_TIME_DEFAULT, watchdog_base_ns
@@ -838,7 +839,17 @@ class EmulatedSlave:
                                               self._pd_bits(), self._internal_sms, op)
 
     def _check_dc(self) -> int:
-        return al_checks.dc_refusal(self.mem)
+        return al_checks.dc_refusal(self.mem, self._min_cycle_ns())
+
+    def _min_cycle_ns(self) -> int:
+        """The minimum cycle time the slave's dictionary reports (0x1C32:05, 0x1C33:05;
+        the larger), 0 without one."""
+        found = [0]
+        for index in (SM_OUTPUT_PARAMETER, SM_INPUT_PARAMETER):
+            if self.od is not None and index in self.od \
+                    and SM_PARAMETER_MIN_CYCLE in self.od[index].entries:
+                found.append(self.od.int_value(index, SM_PARAMETER_MIN_CYCLE))
+        return max(found)
 
     def _check_soe(self) -> int:
         soe = self.mailbox.soe if self.mailbox is not None else None
