@@ -574,6 +574,7 @@ class AlStatusCode(IntEnum):
     INVALID_STATE_CHANGE = 0x0011
     UNKNOWN_STATE = 0x0012
     BOOT_NOT_SUPPORTED = 0x0013
+    INVALID_MAILBOX_BOOT = 0x0015           # invalid mailbox configuration (BOOT)
     INVALID_MAILBOX = 0x0016                # invalid mailbox configuration (PREOP)
     SM_WATCHDOG = 0x001B
     INVALID_OUTPUTS = 0x001D

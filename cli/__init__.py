@@ -19,7 +19,8 @@ from ecatcfg.errors import EcatcfgError
 # Subcommands in the order --help lists them (module names in ecatcfg.cli, but see MODULES).
 SUBCOMMANDS = ("devices", "lint", "check", "schema", "compile", "show", "diff", "report",
                "export", "demo", "apply", "simulate", "sii", "scan", "sdo", "od", "pdos", "watch",
-               "states", "reg", "counters", "graph", "doctor", "alias")
+               "states", "reg", "counters", "graph", "doctor", "alias",
+               "foe")
 # A subcommand whose module is not named after it: cli/report.py is apply's progress and
 # tables, older than the `report` command.
 MODULES = {"report": "network_report"}
