@@ -19,7 +19,7 @@ from the file's ``Comment`` (free text a tool may write in any language, or leav
 
 from __future__ import annotations
 
-from ecatcfg.eni.plan import CoeInitCmd, EoeInitCmd, InitCmd
+from ecatcfg.eni.plan import CoeInitCmd, EoeInitCmd, FoeInitCmd, InitCmd
 from ecatcfg.esc import (AL_ERROR_ACK, AL_ID_REQUEST, FMMU_SIZE, REGISTER_READS,
                          REGISTER_WRITES, RX_PDO_MAPPING, SM_DIR_ECAT_WRITES, SM_DIR_MASK,
                          SM_MODE_MAILBOX, SM_MODE_MASK, SM_PDO_ASSIGN_RANGE, SM_SIZE,
@@ -241,3 +241,16 @@ def eoe_words(cmd: EoeInitCmd) -> str:
         return f"EoE set IP {cmd.request.params.describe()}"
     except ValueError:             # the reader has checked it decodes; a hand-made plan
         return f"EoE {cmd.data.hex()}"
+
+
+def foe_words(cmd: FoeInitCmd) -> str:
+    """``FoE read 'config.bin' (password 0x0000002A)``; another OpCode by number (the
+    reader has refused it unless it is disabled)."""
+    if cmd.opcode == 1:
+        password = f" (password 0x{cmd.password:08X})" if cmd.password else ""
+        text = f"FoE read {cmd.file_name!r}{password}"
+    elif cmd.opcode == 2:
+        text = f"FoE write {cmd.file_name!r}"
+    else:
+        text = f"FoE {cmd.data.hex()}"
+    return text + (" (disabled)" if cmd.disabled else "")

@@ -23,26 +23,14 @@ import struct
 from enum import IntEnum
 
 from ecatcfg.errors import EcatcfgError
+from ecatcfg.esc import FOE_HEADER, FoeOpCode
 from ecatcfg.record import record
 from ecatcfg.runtime.mailbox import MBX_HEADER_SIZE, MbxType, encode_mailbox
 
-FOE_HEADER = struct.Struct("<BxI")        # opcode, reserved, password / packet / error code
-FOE_HEADER_SIZE = FOE_HEADER.size         # 6
+FOE_HEADER_SIZE = FOE_HEADER.size         # 6: OpCode, reserved, a UINT32 (esc.FOE_HEADER)
 BUSY_BODY = struct.Struct("<HH")          # done, entire (replaces the UINT32 of the header)
 # Bytes of a mailbox message in front of a data packet's file bytes: 6 + 6.
 FOE_OVERHEAD = MBX_HEADER_SIZE + FOE_HEADER_SIZE
-
-
-class FoeOpCode(IntEnum):
-    """FoE OpCode, the first byte of every FoE message (SOEM ``ECT_FOE_*``, SOES
-    ``FOE_OP_*``)."""
-
-    READ = 1
-    WRITE = 2
-    DATA = 3
-    ACK = 4
-    ERROR = 5
-    BUSY = 6
 
 
 class FoeErrorCode(IntEnum):

@@ -141,9 +141,9 @@ def test_the_reader_reads_it_and_names_what_apply_refuses():
     assert [(p.element, p.slave, p.commands) for p in plan.unsupported] == [
         ("Slave/Mailbox/SoE", "Drive", 1),
         ("Slave/Mailbox/AoE/InitCmds", "Drive", 1),
-        ("Slave/Mailbox/FoE", "Drive", 1),
         ("Slave/Mailbox/VoE", "Drive", 1),
-        ("Cyclic/Frame/Cmd/CopyInfos", None, 0)]
+        ("Cyclic/Frame/Cmd/CopyInfos", None, 0),
+        ("FoE/InitCmds/InitCmd", "Drive", 1)]       # in BI: apply does not go to BOOT
 
 
 def _unknown(path: Path) -> list[str]:

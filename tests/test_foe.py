@@ -353,3 +353,107 @@ def test_soem_writes_and_reads_files_of_the_emulated_slave(veth_netns, pysoem_mo
     assert "hex" not in results[2] or results[2]["hex"] == "", results
     assert seg.slaves[0].mailbox.foe.files["cal.bin"] == data
     assert "app.efw" not in seg.slaves[0].mailbox.foe.files
+
+
+# --------------------------------------------------------------------------- FoE InitCmds
+
+def read_request(name: str, password: int = 0) -> bytes:
+    """An FoE read request as an ENI's Data holds it (ETG.2100 MailboxCmdType: the message
+    without the mailbox header): OpCode 1, reserved, password, name."""
+    return bytes([1, 0]) + struct.pack("<I", password) + name.encode()
+
+
+def plan_with_foe(lib: Library, cmds: list) -> object:
+    from ecatcfg.compiler import build, topology
+    text = "slaves:\n  - {name: box, device: EXF1000}\n"
+    plan = build.compile_topology(topology.loads(text, "t.yaml"), lib).plan
+    plan.slaves[0].mailbox.foe_init_cmds.extend(cmds)
+    return plan
+
+
+def test_foe_init_cmds_round_trip_and_follow_the_schema(lib, eni_schema):
+    from lxml import etree
+
+    from ecatcfg.eni import reader as eni_reader
+    from ecatcfg.eni import writer as eni_writer
+    from ecatcfg.eni.plan import FoeInitCmd
+    from ecatcfg.esc import Transition
+    cmds = [FoeInitCmd([Transition.PS], "check calibration", read_request("cal.bin", 0x2A),
+                       timeout=2500, fixed=True),
+            FoeInitCmd([Transition.IP, Transition.PS], "", read_request("x"), disabled=True)]
+    plan = plan_with_foe(lib, cmds)
+    data = eni_writer.to_bytes(plan)
+    assert eni_schema.validate(etree.fromstring(data)), eni_schema.error_log
+    back = eni_reader.read_bytes(data, "foe.xml")
+    assert back.slaves[0].mailbox.foe_init_cmds == cmds and back.unsupported == []
+    assert back == eni_reader.read_bytes(eni_writer.to_bytes(back), "again.xml")
+    text = data.decode()
+    assert "<FoE>" in text and "<Data>01002a000000" + b"cal.bin".hex() + "</Data>" in text
+
+
+def test_apply_reads_the_file_of_a_read_request_and_names_a_refusal(lib, tmp_path):
+    from ecatcfg.eni import writer as eni_writer
+    from ecatcfg.eni.plan import FoeInitCmd
+    from ecatcfg.esc import Transition
+    from ecatcfg.runtime import Network
+    from ecatcfg.runtime.master.replay import ApplyError
+    ok = FoeInitCmd([Transition.PS], "calibration present", read_request("cal.bin"))
+    eni = tmp_path / "ok.xml"
+    eni.write_bytes(eni_writer.to_bytes(plan_with_foe(lib, [ok])))
+    with Network.virtual(eni, esi=[ESI]) as net:
+        foe_server = net.segment.slaves[0].mailbox.foe
+        foe_server.files["cal.bin"] = bytes(range(250)) * 3     # 3 packets of 116
+        net.up()
+        assert net.state == AlState.OP
+    missing = FoeInitCmd([Transition.PS], "calibration present", read_request("none.bin"))
+    eni = tmp_path / "missing.xml"
+    eni.write_bytes(eni_writer.to_bytes(plan_with_foe(lib, [missing])))
+    with Network.virtual(eni, esi=[ESI]) as net:
+        with pytest.raises(ApplyError, match=r"slave 'box' \[calibration present\]: FoE read "
+                                             r"of 'none.bin': FoE error 0x8001 \(not found\)"
+                           ) as refused:
+            net.up()
+    line = next(i for i, text in enumerate(eni.read_text().splitlines(), 1)
+                if "<Comment>calibration present</Comment>" in text) - 2
+    assert str(refused.value).startswith(f"{eni}:{line}: slave 'box'")     # file and line
+
+
+@pytest.mark.parametrize("data, why", [
+    (bytes([2, 0]) + bytes(4) + b"fw.efw", "FoE InitCmd: a write request: Data holds the "
+                                           "file name but an ENI has no place"),
+    (bytes.fromhex("0400 01000000"), "FoE InitCmd: an ack: part of a transfer"),
+    (bytes.fromhex("0100"), "FoE InitCmd: <Data> of 2 bytes"),
+])
+def test_other_foe_init_cmds_are_refused_by_name(lib, tmp_path, data, why):
+    from ecatcfg.eni import writer as eni_writer
+    from ecatcfg.eni.plan import FoeInitCmd
+    from ecatcfg.esc import Transition
+    eni = tmp_path / "refused.xml"
+    eni.write_bytes(eni_writer.to_bytes(plan_with_foe(
+        lib, [FoeInitCmd([Transition.PS], "update", data)])))
+    done = subprocess.run([sys.executable, "-m", "ecatcfg", "apply", str(eni), "--virtual",
+                           "--esi", str(ESI)], capture_output=True, text=True, timeout=120,
+                          cwd=ROOT)
+    line = next(i for i, text in enumerate(eni.read_text().splitlines(), 1)
+                if "<Comment>update</Comment>" in text) - 2
+    assert done.returncode == 1 and "Traceback" not in done.stderr
+    assert f"{eni}:{line}: slave 'box': {why}" in done.stderr, done.stderr
+    assert "[FoE/InitCmds/InitCmd]: 1 command would be lost" in done.stderr
+    skipped = subprocess.run([sys.executable, "-m", "ecatcfg", "apply", str(eni), "--virtual",
+                              "--esi", str(ESI), "--skip-unsupported", "--cycles", "3",
+                              "--format", "json"],
+                             capture_output=True, text=True, timeout=120, cwd=ROOT)
+    assert skipped.returncode == 0, skipped.stderr
+    assert json.loads(skipped.stdout)["skipped"][0]["element"] == "FoE/InitCmds/InitCmd"
+
+
+def test_a_foe_init_cmd_in_boot_transitions_is_refused(lib, tmp_path):
+    from ecatcfg.eni import reader as eni_reader
+    from ecatcfg.eni import writer as eni_writer
+    from ecatcfg.eni.plan import FoeInitCmd
+    from ecatcfg.esc import Transition
+    plan = plan_with_foe(lib, [FoeInitCmd([Transition.IB], "boot", read_request("a"))])
+    back = eni_reader.read_bytes(eni_writer.to_bytes(plan), "boot.xml")
+    [part] = back.unsupported
+    assert part.element == "FoE/InitCmds/InitCmd" and "transition IB" in part.what
+    assert back.slaves[0].mailbox.foe_init_cmds == []       # left out: never sent

@@ -86,7 +86,6 @@ SLAVE_MAILBOX = f"//Slave[Info/Name='{DRIVE}']/Mailbox"
 
 CASES = {   # name: (where, fragment, element path, what the message says, commands lost)
     "SoE": (SLAVE_MAILBOX, _mailbox_cmds("SoE", 3), "Slave/Mailbox/SoE", "SoE InitCmds", 3),
-    "FoE": (SLAVE_MAILBOX, _mailbox_cmds("FoE", 2), "Slave/Mailbox/FoE", "FoE InitCmds", 2),
     "AoE": (SLAVE_MAILBOX, _mailbox_cmds("AoE", 1), "Slave/Mailbox/AoE/InitCmds",
             "AoE InitCmds", 1),
     "VoE": (SLAVE_MAILBOX, _mailbox_cmds("VoE", 4), "Slave/Mailbox/VoE", "VoE InitCmds", 4),
@@ -143,7 +142,7 @@ def test_several_parts_are_all_named_and_warned_once_per_slave(example_eni, tmp_
     lines = [w for w in done.stderr.splitlines() if w.startswith("warning:")]
     assert len(lines) == 2                                  # axis1 and lamps
     drive = next(w for w in lines if f"'{DRIVE}'" in w)
-    assert "SoE InitCmds" in drive and "FoE InitCmds" in drive
+    assert "SoE InitCmds" in drive and "FoE InitCmd: <Data> of 2 bytes" in drive
 
 
 def test_network_api_refuses_and_skips(example_eni, tmp_path):

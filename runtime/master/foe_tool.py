@@ -36,6 +36,7 @@ from ecatcfg.record import field, record
 from ecatcfg.runtime.foe import FOE_OVERHEAD
 from ecatcfg.runtime.master.foe_client import (FoeRead, FoeTransferError, FoeWrite, Progress,
                                                ProgressHook)
+from ecatcfg.runtime.master.foe_init import run_transfer
 from ecatcfg.runtime.master.lockstep import Job, Step, run_jobs
 from ecatcfg.runtime.master.replay import TIMEOUT_COMMAND, ApplyError, MailboxChannel
 from ecatcfg.runtime.master.scan import count_slaves, sii_words
@@ -186,7 +187,7 @@ def _session(report: FoeReport, data: bytes | None, password: int, state: AlStat
                      mbx_in_size=tx_size, counter=_Counter(), progress=hook)
     what = f"FoE {report.action} of {report.name!r}"
     try:
-        yield from _run(channel, t, timeout, who, what)
+        yield from run_transfer(channel, t, timeout, who, what)
     except FoeTransferError as exc:
         # Leave the slave as a firmware update leaves it: back in INIT.
         yield from _request_state(address, AlState.INIT, who)
@@ -224,24 +225,6 @@ def _identity(adp: int, pos: int, who: str) -> Step[Identity]:
     vendor, product = struct.unpack("<II", ids)
     revision, serial = struct.unpack("<II", rev)
     return Identity(vendor, product, revision, serial)
-
-
-def _run(channel: MailboxChannel, t: FoeRead | FoeWrite, timeout: float, who: str,
-         what: str) -> Job:
-    """Move the transfer's messages through the mailbox until it is done."""
-    request: bytes | None = t.first_request()
-    while True:
-        if request is not None:
-            yield from channel.send(request, time.monotonic() + TIMEOUT_COMMAND, who, what)
-        if t.done:
-            if t.wrong_number is not None:
-                raise t.wrong_number
-            return
-        try:
-            reply = yield from channel.receive(time.monotonic() + timeout, who, what)
-        except ApplyError as exc:
-            raise FoeTransferError(str(exc)) from None
-        request = t.on_response(reply)
 
 
 def parse_password(text: str) -> int:

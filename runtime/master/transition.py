@@ -4,7 +4,8 @@ Within a transition each slave runs its register commands in file order; its mai
 InitCmds for that transition run after the SyncManager/FMMU writes and before the
 AL-control request (ETG.2100; PDO assignment needs the mailbox up and must precede SAFEOP),
 in INIT->PREOP once the slave is in PREOP: first the CoE ones, then the EoE ones, as IgH
-``fsm_slave_config.c`` sets the IP parameters after the SDO configuration.  A station's
+``fsm_slave_config.c`` sets the IP parameters after the SDO configuration, then the FoE
+ones (``foe_init.py``).  A station's
 plugged modules are checked before its CoE InitCmds configure them (``modules.py``).
 One command's job is ``replay.py``.
 """
@@ -14,7 +15,7 @@ from __future__ import annotations
 import struct
 import time
 
-from ecatcfg.eni.plan import CoeInitCmd, DcPlan, EoeInitCmd, InitCmd, SlavePlan
+from ecatcfg.eni.plan import CoeInitCmd, DcPlan, EoeInitCmd, FoeInitCmd, InitCmd, SlavePlan
 from ecatcfg.eni.words import init_cmd_name
 from ecatcfg.esc import Cmd, Reg, Transition
 from ecatcfg.runtime.master.lockstep import Job, Step, until_answered
@@ -36,6 +37,15 @@ def mailbox_init_cmds(slave: SlavePlan, transition: Transition
             [c for c in mailbox.eoe_init_cmds if transition in c.transitions and not c.disabled])
 
 
+def foe_init_cmds(slave: SlavePlan, transition: Transition) -> list[FoeInitCmd]:
+    """The slave's enabled FoE InitCmds of ``transition``, in file order: they run after
+    the EoE ones, last of the mailbox commands."""
+    if slave.mailbox is None:
+        return []
+    return [c for c in slave.mailbox.foe_init_cmds
+            if transition in c.transitions and not c.disabled]
+
+
 def _writes_al_control(cmd: InitCmd) -> bool:
     return cmd.cmd in (Cmd.APWR, Cmd.FPWR, Cmd.BWR) and cmd.ado == Reg.AL_CONTROL
 
@@ -52,9 +62,12 @@ def slave_transition_job(slave: SlavePlan, transition: Transition,
     split = len(cmds)
     if (coe or eoe) and transition != Transition.IP:
         split = next((i for i, c in enumerate(cmds) if _writes_al_control(c)), len(cmds))
+    foe = foe_init_cmds(slave, transition)
+    if foe and transition != Transition.IP and split == len(cmds):
+        split = next((i for i, c in enumerate(cmds) if _writes_al_control(c)), len(cmds))
     for cmd in cmds[:split]:
         yield from _failing(cmd, _register_cmd(slave, cmd, who, progress))
-    if mailbox is not None and (coe or eoe):
+    if mailbox is not None and (coe or eoe or foe):
         channel = channel or MailboxChannel(slave.phys_addr, mailbox)
         if coe:                     # a station's plugged modules, before they are configured
             # Imported here: modules.py needs the ESI model (esi/slots.py), which apply
@@ -65,11 +78,15 @@ def slave_transition_job(slave: SlavePlan, transition: Transition,
             yield from _failing(c, coe_init_cmd_job(channel, c, who, progress))
         for e in eoe:
             yield from _failing(e, eoe_init_cmd_job(channel, e, who, progress))
+        if foe:
+            from ecatcfg.runtime.master.foe_init import foe_init_cmd_job
+            for f in foe:
+                yield from _failing(f, foe_init_cmd_job(channel, f, who, progress))
     for cmd in cmds[split:]:
         yield from _failing(cmd, _register_cmd(slave, cmd, who, progress))
 
 
-def _failing(cmd: InitCmd | CoeInitCmd | EoeInitCmd, job: Job) -> Job:
+def _failing(cmd: InitCmd | CoeInitCmd | EoeInitCmd | FoeInitCmd, job: Job) -> Job:
     """``job``, whose ApplyError names ``cmd`` as the InitCmd that failed."""
     try:
         yield from job
