@@ -108,6 +108,7 @@ def _json(report: Any) -> dict[str, Any]:
             "mailbox": {"receive": report.mailbox[0], "send": report.mailbox[1]},
             "bytes": report.size, "packets": report.packets,
             "busy_replies": report.busy_replies, "seconds": round(report.seconds, 6),
+            "frames": report.frames,
             "identity_before": report.identity_before.as_dict()
             if report.identity_before else None,
             "identity_after": report.identity_after.as_dict()

@@ -87,7 +87,8 @@ class FoeReport:
     size: int = 0                              # file bytes moved
     packets: int = 0
     busy_replies: int = 0
-    seconds: float = 0.0
+    seconds: float = 0.0                       # the transfer (request to last ack)
+    frames: int = 0                            # frames sent in the whole session
     identity_before: Identity | None = None
     identity_after: Identity | None = None
     data: bytes = b""                          # what a read returned
@@ -115,10 +116,12 @@ def foe_transfer(transport: Transport, position: int, name: str, data: bytes | N
         if progress is not None:
             progress(p)
 
+    sent = transport.counters.frames_sent
     try:
         run_jobs(transport, [_session(report, data, password, state, timeout, hook, limit)])
     except SdoToolError as exc:
         raise FoeToolError(str(exc), al_code=exc.al_code) from None
+    report.frames = transport.counters.frames_sent - sent
     return report
 
 

@@ -66,7 +66,7 @@ class Write:
     complete_access: bool = False
 
 
-def _add_foe(mailbox: MailboxServer, dev: Device, image: bytes) -> None:
+def _add_foe(mailbox: MailboxServer, image: bytes) -> None:
     """An FoE server (``runtime/segment/foe_server.py``), with the bootstrap mailbox the
     SII image gives (words 0x14-0x17: receive offset, size, send offset, size; ETG.2010)
     for BOOT."""
@@ -113,8 +113,8 @@ def emulated_slave(spec: SlaveSpec) -> EmulatedSlave:
             from ecatcfg.runtime.segment.eoe_server import EoeServer
             mailbox.eoe = EoeServer(dev.mailbox.eoe, sizes[1])
     image = sii.build(dev, serial=spec.serial, alias=spec.alias)
-    if mailbox is not None and "FoE" in dev.mailbox.protocols:   # type: ignore[union-attr]
-        _add_foe(mailbox, dev, image)
+    if mailbox is not None and dev.mailbox is not None and "FoE" in dev.mailbox.protocols:
+        _add_foe(mailbox, image)
     slave = EmulatedSlave(dev, image, name=spec.name, od=od, mailbox=mailbox,
                           chip=chip_of(dev, chip_for(dev.vendor.id, dev.product_code)),
                           device_id=spec.device_id)
