@@ -131,28 +131,29 @@ def _print_text(report: Any, path: Any) -> None:
 
 
 class _Bar:
-    """A one-line progress bar on a terminal (carriage return, no scrolling)."""
-
-    WIDTH = 30
+    """A progress bar on a terminal (rich, as ``apply`` draws its progress): bytes moved
+    of the file's size (a write; a read's size is unknown until its last packet), and the
+    slave's last busy report (done/entire)."""
 
     def __init__(self, stream: Any) -> None:
-        self.stream = stream
-        self.shown = False
+        from rich.console import Console
+        from rich.progress import (BarColumn, DownloadColumn, Progress, TextColumn,
+                                   TransferSpeedColumn)
+
+        self.progress = Progress(TextColumn("FoE"), BarColumn(), DownloadColumn(),
+                                 TransferSpeedColumn(), TextColumn("{task.fields[busy]}"),
+                                 console=Console(file=stream), transient=False)
+        self.task = self.progress.add_task("foe", total=None, busy="")
+        self.started = False
 
     def __call__(self, progress: Any) -> None:
-        done, total = progress.done, progress.total
-        if total:
-            filled = self.WIDTH * done // total
-            text = f"[{'#' * filled}{'.' * (self.WIDTH - filled)}] {done}/{total} bytes"
-        else:
-            text = f"{done} bytes"
-        if progress.busy is not None:
-            text += f"  busy {progress.busy[0]}/{progress.busy[1]}"
-        self.stream.write("\r" + text.ljust(70))
-        self.stream.flush()
-        self.shown = True
+        if not self.started:
+            self.progress.start()
+            self.started = True
+        busy = f"busy {progress.busy[0]}/{progress.busy[1]}" if progress.busy else ""
+        self.progress.update(self.task, completed=progress.done, total=progress.total,
+                             busy=busy)
 
     def close(self) -> None:
-        if self.shown:
-            self.stream.write("\n")
-            self.stream.flush()
+        if self.started:
+            self.progress.stop()

@@ -20,6 +20,8 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from rig import serving, start_simulate, tshark_fields, tshark_malformed
 
 from ecatcfg.esc import AlState, Reg, SmConfig, sm_register
@@ -104,6 +106,26 @@ def test_error_codes_have_their_names():
     assert foe.foe_error_name(0x800A) == "no rights"
     assert foe.foe_error_name(0x9999) == "vendor-specific or unknown code"
     assert foe.packet_data_size(BOOT_MBX) == 232
+
+
+@settings(max_examples=300, database=None, deadline=None)
+@given(st.binary(max_size=64), st.sampled_from([AlState.BOOT, AlState.PREOP]),
+       st.sampled_from([16, 20, 64, 244]))
+def test_any_bytes_get_an_answer_or_a_mailbox_error_from_the_server(data, state, size):
+    """Whatever an FoE message holds, the emulated firmware answers with FoE messages that
+    fit its SM1 or a mailbox error; it never breaks."""
+    from ecatcfg.runtime.mailbox import MailboxProtocolError
+    from ecatcfg.runtime.segment.foe_server import FoeServer
+    server = FoeServer(VENDOR, BOOT_PRODUCT, bootstrap=True, disk_size=100)
+    server.files["a"] = bytes(50)
+    for message in (data, bytes([1, 0]) + bytes(4) + b"a", data):
+        try:
+            replies = server.handle(message, state, size, size)
+        except MailboxProtocolError:
+            continue
+        for reply in replies:
+            assert len(reply) <= size
+            foe.decode_foe(reply[6:])
 
 
 # --------------------------------------------------------------------------- the client alone
