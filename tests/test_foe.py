@@ -310,6 +310,10 @@ def ecatcfg_in(rig, *argv: str, timeout: float = 60) -> subprocess.CompletedProc
 
 
 def test_foe_command_against_ecatcfg_simulate(veth_netns, tmp_path):
+    """The update workflow against ``ecatcfg simulate``: write in BOOT, read back, named
+    errors, then the line's power off and on (SIGUSR1) and ``ecatcfg scan`` shows the
+    firmware's revision."""
+    import signal
     topo = tmp_path / "line.yaml"
     topo.write_text("slaves:\n  - {name: box, device: EXF1000}\n")
     sim, lines = start_simulate(veth_netns, "--esi", str(ESI), "--topology", str(topo))
@@ -338,6 +342,14 @@ def test_foe_command_against_ecatcfg_simulate(veth_netns, tmp_path):
     assert missing.returncode == 1 and "FoE error 0x8001 (not found)" in missing.stderr
     usage = ecatcfg_in(veth_netns, "foe", "write", "--slave", "0", str(tmp_path / "no"))
     assert usage.returncode == 2
+    sim.send_signal(signal.SIGUSR1)
+    assert sim.stdout is not None
+    for line in sim.stdout:
+        if line.startswith("power cycle:"):
+            break
+    scan = ecatcfg_in(veth_netns, "scan", "--format", "json")
+    assert scan.returncode == 0, scan.stderr
+    assert json.loads(scan.stdout)["slaves"][0]["revision"] == 0x00020000
     sim.terminate()
     sim.communicate(timeout=10)
 
