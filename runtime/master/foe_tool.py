@@ -40,8 +40,9 @@ from ecatcfg.runtime.master.foe_init import run_transfer
 from ecatcfg.runtime.master.lockstep import Job, Step, run_jobs
 from ecatcfg.runtime.master.replay import TIMEOUT_COMMAND, ApplyError, MailboxChannel
 from ecatcfg.runtime.master.scan import count_slaves, sii_words
-from ecatcfg.runtime.master.sdo_tool import (SdoToolError, _access, _Counter, _empty_sm1,
-                                             _request_state, _station_address,
+# The preparation steps ecatcfg sdo takes too (its module's helpers: one definition).
+from ecatcfg.runtime.master.sdo_tool import (SdoToolError, SlaveMailbox, _access, _Counter,
+                                             _empty_sm1, _request_state, _station_address,
                                              protocol_names)
 from ecatcfg.runtime.master.transport import Transport
 from ecatcfg.runtime.wire import Datagram
@@ -162,7 +163,7 @@ def _session(report: FoeReport, data: bytes | None, password: int, state: AlStat
     report.state = target.name
     report.mailbox = (rx_size, tx_size)
 
-    address = yield from _station_address_of(report, adp, who)
+    address = yield from _station_address(SlaveMailbox(pos), adp, who)
     report.station_address = address
     yield from _request_state(address, AlState.INIT, who)
     sm0 = SmConfig(rx_start, rx_size, SM_CONTROL_MBOX_OUT, True)
@@ -178,7 +179,6 @@ def _session(report: FoeReport, data: bytes | None, password: int, state: AlStat
     plan = MailboxPlan(MailboxArea(rx_start, rx_size), MailboxArea(tx_start, tx_size),
                        protocols=["FoE"])
     channel = MailboxChannel(address, plan)
-    from ecatcfg.runtime.master.sdo_tool import SlaveMailbox
     yield from _empty_sm1(SlaveMailbox(pos), channel)
     started = time.monotonic()
     t: FoeRead | FoeWrite
@@ -207,12 +207,6 @@ def _session(report: FoeReport, data: bytes | None, password: int, state: AlStat
     yield from _access(Datagram.physical(Cmd.FPWR, address, Reg.EEPROM_CONFIG, b"\x00"),
                        deadline, f"{who}: taking the SII EEPROM back (0x0500)")
     report.identity_after = yield from _identity(adp, pos, who)
-
-
-def _station_address_of(report: FoeReport, adp: int, who: str) -> Step[int]:
-    from ecatcfg.runtime.master.sdo_tool import SlaveMailbox
-    address: int = yield from _station_address(SlaveMailbox(report.position), adp, who)
-    return address
 
 
 def _identity(adp: int, pos: int, who: str) -> Step[Identity]:
