@@ -464,6 +464,25 @@ MAILBOX_HEADER_SIZE = 6           # length, address, channel/priority, type/coun
 SDO_MIN_SIZE = 2 + 8              # CoE header + SDO command, index, subindex, 4 data bytes
 MIN_MAILBOX_SIZE = MAILBOX_HEADER_SIZE + SDO_MIN_SIZE       # 16
 
+# -- FoE (ETG.1000.6 FoE, mailbox type 4): the header every FoE message starts with.  The
+# codec of the messages is runtime/foe.py; the ENI's FoE InitCmds (eni/plan.py FoeInitCmd)
+# carry one such message as Data, so the header is here, below both (SOEM ec_FOEt, SOES
+# FOE_OP_*, Wireshark packet-ecatmb.c). ------------------------------------------------------
+
+FOE_HEADER = struct.Struct("<BxI")    # OpCode, reserved, password / packet number / error code
+
+
+class FoeOpCode(IntEnum):
+    """FoE OpCode, the first byte of every FoE message."""
+
+    READ = 1          # read request: password, file name
+    WRITE = 2         # write request: password, file name
+    DATA = 3          # packet number, file bytes
+    ACK = 4           # packet number
+    ERROR = 5         # error code, text
+    BUSY = 6          # done, entire (UINT16 each), text
+
+
 # -- CoE communication area (ETG.1000.6 object dictionary) ---------------------------------
 
 RX_PDO_MAPPING = range(0x1600, 0x1800)        # RxPDO (outputs) mapping objects
@@ -585,6 +604,7 @@ class AlStatusCode(IntEnum):
     INVALID_STATE_CHANGE = 0x0011
     UNKNOWN_STATE = 0x0012
     BOOT_NOT_SUPPORTED = 0x0013
+    INVALID_MAILBOX_BOOT = 0x0015           # invalid mailbox configuration (BOOT)
     INVALID_MAILBOX = 0x0016                # invalid mailbox configuration (PREOP)
     SM_WATCHDOG = 0x001B
     INVALID_OUTPUTS = 0x001D

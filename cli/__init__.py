@@ -20,7 +20,7 @@ from ecatcfg.errors import EcatcfgError
 SUBCOMMANDS = ("devices", "lint", "check", "schema", "compile", "show", "diff", "report",
                "export", "demo", "apply", "simulate", "sii", "scan", "sdo", "od", "pdos", "watch",
                "states", "reg", "counters", "graph", "doctor", "alias",
-               "soe")
+               "soe", "foe")
 # A subcommand whose module is not named after it: cli/report.py is apply's progress and
 # tables, older than the `report` command.
 MODULES = {"report": "network_report"}

@@ -317,8 +317,19 @@ def _serve(seg: VirtualSegment, link: RawLink, args: argparse.Namespace,
 
     for number in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
         signal.signal(number, on_signal)
+    # SIGUSR1 switches the line's power off and on (every slave's power_cycle: registers
+    # reset, EEPROM kept, a firmware written over FoE started), between two frames.
+    power = threading.Event()
+    signal.signal(signal.SIGUSR1, lambda _n, _f: power.set())
+
+    def on_tick() -> None:
+        if power.is_set():
+            power.clear()
+            for slave in list(seg.wired):
+                seg.power_cycle(slave)
+            print(f"power cycle: {len(seg.wired)} slaves switched off and on", flush=True)
     with link:
-        seg.serve(link, duration=args.duration, stop=stop,
+        seg.serve(link, duration=args.duration, stop=stop, on_tick=on_tick,
                   on_ready=lambda: print(f"ready: {len(seg.slaves)} slaves on "
                                          f"{args.iface}" + (
                                              f" ({len(passive)} passive not emulated)"

@@ -35,7 +35,7 @@ from lxml import etree
 
 from ecatcfg.eni.plan import NetworkPlan, Unsupported
 from ecatcfg.errors import EcatcfgError, location
-from ecatcfg.esc import LOGICAL_CMDS, TRANSITION_RULES, Transition
+from ecatcfg.esc import FOE_HEADER, LOGICAL_CMDS, TRANSITION_RULES, FoeOpCode, Transition
 from ecatcfg.esi.idn import WRITE_REQUEST
 from ecatcfg.esi.values import SPELLABLE, parse_bool, parse_int
 from ecatcfg.record import record
@@ -251,7 +251,7 @@ CONTENTS: dict[str, dict[str, Part]] = {
         "AoE": _read("the slave's AMS NetId", "Mailbox/AoE"),
         "SoE": _read("SoE writes of drive parameters (IDNs) per transition", "Mailbox/SoE"),
         # Without (enabled) InitCmds these only say the protocol is there: nothing is lost.
-        "FoE": _refused("FoE InitCmds (file transfers)", True, True),
+        "FoE": _read("FoE read requests per transition", "Mailbox/FoE"),
         "VoE": _refused("VoE InitCmds (vendor-specific mailbox messages)", True, True),
     },
     "Mailbox/CoE": {
@@ -294,6 +294,14 @@ CONTENTS: dict[str, dict[str, Part]] = {
         "OpCode": _read("3, a write request (the schema's \"service channel write req\"); "
                         "another OpCode is refused"),
     },
+    "Mailbox/FoE": {"InitCmds": _read("FoE requests", "FoE/InitCmds")},
+    "FoE/InitCmds": {
+        "InitCmd": _read("one FoE read request, the file read to its end (other FoE "
+                         "requests are refused by name)", "FoE/InitCmds/InitCmd"),
+        "InitCmd@Fixed": _read(_FIXED),
+    },
+    "FoE/InitCmds/InitCmd": {tag: _read(_COMMAND) for tag in (
+        "Transition", "Comment", "Timeout", "Data", "Disabled")},
     "Mailbox/AoE": {
         "NetId": _accepted("an address, no command"),
         "InitCmds": _refused("AoE InitCmds (ADS requests)", True, True),
@@ -413,26 +421,35 @@ def audit(config: Element) -> list[Unsupported]:
             "Cyclic", f"cyclic tasks with different cycle times ({listed} µs): apply runs "
             "every frame in one cycle", first.sourceline))
     found += [part for _, part in _unmapped_fmmus(config)]
-    found += [part for _, part in _mailbox_without_mailbox(config)]
-    found += [part for _, part in _soe_not_write(config)]
+    found += [part for _, part in _refused_mailbox_cmds(config)]
     return found
 
 
 def dropped_init_cmds(config: Element) -> set[Element]:
     """The refused parts that are InitCmds among commands the plan reads: the reader
     leaves them out of the plan, so that a skipping apply does not write them."""
-    return {init for init, _ in _unmapped_fmmus(config) + _mailbox_without_mailbox(config)
-            + _soe_not_write(config)}
+    return {init for init, _ in _unmapped_fmmus(config) + _refused_mailbox_cmds(config)}
+
+
+def _refused_mailbox_cmds(config: Element) -> list[tuple[Element, Unsupported]]:
+    """Mailbox InitCmds refused one by one: those of a transition without a mailbox, then
+    SoE ones that are no write request and FoE ones that are no read request (each command
+    named once, for its first reason)."""
+    found = _mailbox_without_mailbox(config)
+    named = {init for init, _ in found}
+    return found + [(init, part) for init, part in
+                    _soe_not_write(config) + _foe_not_read_requests(config)
+                    if init not in named]
 
 
 def _mailbox_without_mailbox(config: Element) -> list[tuple[Element, Unsupported]]:
-    """Enabled CoE, EoE and SoE InitCmds of a transition in which the slave has no mailbox
-    to answer them (``esc.TRANSITION_RULES``: INIT->INIT, INIT->BOOT, BOOT->INIT): no master
-    can run them there, and leaving them out unsaid would lose them."""
+    """Enabled CoE, EoE, SoE and FoE InitCmds of a transition in which the slave has no
+    mailbox to answer them (``esc.TRANSITION_RULES``: INIT->INIT, INIT->BOOT, BOOT->INIT): no
+    master can run them there, and leaving them out unsaid would lose them."""
     found: list[tuple[Element, Unsupported]] = []
     for slave in config.iterchildren("Slave"):
         name = slave.findtext("Info/Name", "").strip() or f"line {slave.sourceline}"
-        for protocol in ("CoE", "EoE", "SoE"):
+        for protocol in ("CoE", "EoE", "SoE", "FoE"):
             for init in slave.iterfind(f"Mailbox/{protocol}/InitCmds/InitCmd"):
                 if not _zero_or_absent(init.findtext("Disabled")):
                     continue
@@ -470,6 +487,44 @@ def _soe_not_write(config: Element) -> list[tuple[Element, Unsupported]]:
             found.append((init, Unsupported(
                 "SoE/InitCmds/InitCmd", f"an SoE request with OpCode {code} (apply sends "
                 f"write requests, OpCode {WRITE_REQUEST}, only)", op.sourceline, name, 1)))
+    return found
+
+
+# Why an FoE InitCmd other than a read request cannot be run (ETG.2100 MailboxCmdType: Data
+# is "data of the mailbox cmd (excl. the mailbox)", one FoE message; esc.FoeOpCode).
+_FOE_REFUSED: dict[int, str] = {
+    FoeOpCode.WRITE: "a write request: Data holds the file name but an ENI has no place "
+                     "for the file's contents, so apply cannot write the file",
+    FoeOpCode.DATA: "a data packet: part of a transfer, not a request of its own",
+    FoeOpCode.ACK: "an ack: part of a transfer, not a request of its own",
+    FoeOpCode.ERROR: "an error: part of a transfer, not a request of its own",
+    FoeOpCode.BUSY: "a busy reply: the slave's answer, not a request",
+}
+
+
+def _foe_not_read_requests(config: Element) -> list[tuple[Element, Unsupported]]:
+    """Enabled FoE InitCmds whose Data is not an FoE read request (OpCode 1, password,
+    file name): apply reads a file to its end and checks the slave serves it; anything
+    else it cannot do faithfully (``_FOE_REFUSED``)."""
+    found: list[tuple[Element, Unsupported]] = []
+    for slave in config.iterchildren("Slave"):
+        name = slave.findtext("Info/Name", "").strip() or f"line {slave.sourceline}"
+        for init in slave.iterfind("Mailbox/FoE/InitCmds/InitCmd"):
+            if not _zero_or_absent(init.findtext("Disabled")):
+                continue
+            try:
+                data = bytes.fromhex(init.findtext("Data") or "")
+            except ValueError:
+                continue                      # the reader reports bad hex with its line
+            if len(data) < FOE_HEADER.size:
+                why = (f"<Data> of {len(data)} bytes: an FoE message has a "
+                       f"{FOE_HEADER.size}-byte header (OpCode, reserved, UINT32)")
+            elif data[0] == FoeOpCode.READ:
+                continue
+            else:
+                why = _FOE_REFUSED.get(data[0], f"OpCode {data[0]}, none of 1-6")
+            found.append((init, Unsupported("FoE/InitCmds/InitCmd", f"FoE InitCmd: {why}",
+                                            init.sourceline, name, 1)))
     return found
 
 

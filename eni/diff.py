@@ -36,9 +36,9 @@ from collections import Counter
 from collections.abc import Iterable
 from typing import Any
 
-from ecatcfg.eni.plan import (CoeInitCmd, EoeInitCmd, InitCmd, NetworkPlan, PassiveSlave,
-                              SlavePlan, SoeInitCmd, Variable)
-from ecatcfg.eni.words import (coe_words, command_name, copy_words, eoe_words,
+from ecatcfg.eni.plan import (CoeInitCmd, EoeInitCmd, FoeInitCmd, InitCmd, NetworkPlan,
+                              PassiveSlave, SlavePlan, SoeInitCmd, Variable)
+from ecatcfg.eni.words import (coe_words, command_name, copy_words, eoe_words, foe_words,
                                init_cmd_words, mapping_entry, soe_words)
 from ecatcfg.esi.idn import idn_text
 from ecatcfg.esi.datatypes import canonical
@@ -201,9 +201,10 @@ def _record_words(words: str) -> list[str]:
     return out
 
 
-def _register_state(cmds: list[InitCmd], eoe: list[EoeInitCmd],
+def _register_state(cmds: list[InitCmd], eoe: list[EoeInitCmd | FoeInitCmd],
                     t: Transition) -> dict[str, Counter[str]]:
-    """A transition's register (and EoE) commands in words, by the register they address."""
+    """A transition's register (and EoE and FoE) commands in words, by the register they
+    address."""
     out: dict[str, Counter[str]] = {}
     for c in cmds:
         if t not in c.transitions:
@@ -217,12 +218,16 @@ def _register_state(cmds: list[InitCmd], eoe: list[EoeInitCmd],
             out.setdefault(record.group(1) if record else where, Counter())[part] += 1
     for e in eoe:
         if t in e.transitions and not e.disabled:
-            out.setdefault("EoE", Counter())[eoe_words(e)] += 1
+            if isinstance(e, FoeInitCmd):
+                out.setdefault("FoE", Counter())[foe_words(e)] += 1
+            else:
+                out.setdefault("EoE", Counter())[eoe_words(e)] += 1
     return out
 
 
-def _register_changes(name: str | None, prefix: str, a: list[InitCmd], eoe_a: list[EoeInitCmd],
-                      b: list[InitCmd], eoe_b: list[EoeInitCmd], t: Transition) -> list[Change]:
+def _register_changes(name: str | None, prefix: str, a: list[InitCmd],
+                      eoe_a: list[EoeInitCmd | FoeInitCmd], b: list[InitCmd],
+                      eoe_b: list[EoeInitCmd | FoeInitCmd], t: Transition) -> list[Change]:
     out: list[Change] = []
     ra, rb = _register_state(a, eoe_a, t), _register_state(b, eoe_b, t)
     for where in sorted(set(ra) | set(rb)):
@@ -245,12 +250,18 @@ def _master_init_cmds(a: NetworkPlan, b: NetworkPlan) -> list[Change]:
         None, "master ", a.master.init_cmds, [], b.master.init_cmds, [], t)]
 
 
+def _eoe_foe(slave: SlavePlan) -> list[EoeInitCmd | FoeInitCmd]:
+    """The slave's EoE and FoE InitCmds: compared in words like its register commands."""
+    if slave.mailbox is None:
+        return []
+    return [*slave.mailbox.eoe_init_cmds, *slave.mailbox.foe_init_cmds]
+
+
 def _init_cmds(name: str, a: SlavePlan, b: SlavePlan) -> list[Change]:
     out: list[Change] = []
     for t in Transition:
-        out += _register_changes(name, "", a.init_cmds,
-                                 a.mailbox.eoe_init_cmds if a.mailbox else [], b.init_cmds,
-                                 b.mailbox.eoe_init_cmds if b.mailbox else [], t)
+        out += _register_changes(name, "", a.init_cmds, _eoe_foe(a), b.init_cmds,
+                                 _eoe_foe(b), t)
         ca = _coe_state(c for c in (a.mailbox.coe_init_cmds if a.mailbox else [])
                         if t in c.transitions)
         cb = _coe_state(c for c in (b.mailbox.coe_init_cmds if b.mailbox else [])

@@ -14,8 +14,8 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Literal
 
-from ecatcfg.esc import (DATAGRAM_HEADER, DATAGRAM_OVERHEAD, ETH_HEADER_SIZE, FRAME_HEADER,
-                         REGISTER_WRITES, Transition)
+from ecatcfg.esc import (DATAGRAM_HEADER, DATAGRAM_OVERHEAD, ETH_HEADER_SIZE, FOE_HEADER,
+                         FRAME_HEADER, REGISTER_WRITES, Transition)
 from ecatcfg.record import field, record
 
 if TYPE_CHECKING:         # imported where used: only ENIs with EoE InitCmds need the codec
@@ -122,6 +122,38 @@ class SoeInitCmd:
 
 
 @record
+class FoeInitCmd:
+    """An FoE request in a transition (ENI ``Mailbox/FoE/InitCmds``, ETG.2100
+    ``MailboxCmdType``).  ``data`` is the FoE message as the file writes it ("data of the
+    mailbox cmd (excl. the mailbox)"): OpCode, reserved byte, password, file name
+    (``esc.FOE_HEADER``).  Apply runs read requests (OpCode 1) and refuses the others
+    (``eni/contents.py``): a write request's file contents are not in an ENI."""
+
+    transitions: list[Transition]
+    comment: str
+    data: bytes
+    timeout: int = 0                          # ms; 0: the runtime's default
+    disabled: bool = False
+    fixed: bool = False
+
+    @property
+    def opcode(self) -> int | None:
+        """The FoE OpCode (``esc.FoeOpCode``), ``None`` for data shorter than the header."""
+        return self.data[0] if len(self.data) >= FOE_HEADER.size else None
+
+    @property
+    def password(self) -> int:
+        word: int = FOE_HEADER.unpack_from(self.data)[1] if self.opcode is not None else 0
+        return word
+
+    @property
+    def file_name(self) -> str:
+        """The file name of a read or write request (bytes as Latin-1: ETG.1000.6 gives
+        no encoding)."""
+        return self.data[FOE_HEADER.size:].decode("latin-1")
+
+
+@record
 class PdoEntryDesc:
     index: int
     subindex: int
@@ -198,6 +230,7 @@ class MailboxPlan:
     data_link_layer: bool | None = None
     eoe_init_cmds: list[EoeInitCmd] = field(default_factory=list)
     soe_init_cmds: list[SoeInitCmd] = field(default_factory=list)
+    foe_init_cmds: list[FoeInitCmd] = field(default_factory=list)
     aoe_net_id: str | None = None             # the slave's ADS address: no command
 
 

@@ -30,6 +30,7 @@ from ecatcfg.eni.plan import (
     CyclicCmd,
     DcPlan,
     EoeInitCmd,
+    FoeInitCmd,
     Frame,
     HotConnectPlan,
     InitCmd,
@@ -607,6 +608,7 @@ class _Reader:
         recv = self.child(el, "Recv")
         boot = el.find("BootStrap")
         coe, eoe, aoe, soe = (el.find(tag) for tag in ("CoE", "EoE", "AoE", "SoE"))
+        foe = el.find("FoE")
         return MailboxPlan(
             send=self.mailbox_area(self.child(el, "Send")),
             recv=self.mailbox_area(recv),
@@ -620,6 +622,7 @@ class _Reader:
             data_link_layer=self.attr_bool(el, "DataLinkLayer"),
             eoe_init_cmds=[] if eoe is None else self.eoe_init_cmds(eoe),
             soe_init_cmds=[] if soe is None else self.soe_init_cmds(soe),
+            foe_init_cmds=[] if foe is None else self.foe_init_cmds(foe),
             aoe_net_id=None if aoe is None else self.opt_text(aoe, "NetId"),
         )
 
@@ -675,6 +678,27 @@ class _Reader:
             disabled=bool(self.opt_bool(el, "Disabled")),
             fixed=bool(self.attr_bool(el, "Fixed")),
         )
+
+    def foe_init_cmds(self, foe: Element) -> list[FoeInitCmd]:
+        """ETG.2100 ``MailboxCmdType``; what the FoE message in ``Data`` may be is
+        ``eni/contents.py``'s (a refused one is left out of the plan)."""
+        cmds = foe.find("InitCmds")
+        if cmds is None:
+            return []
+        out = []
+        for element in cmds.iterchildren("InitCmd"):
+            if element in self._dropped:
+                continue
+            el = _Children(element)
+            out.append(FoeInitCmd(
+                transitions=self.transitions(el),
+                comment=self.opt_text(el, "Comment") or "",
+                data=self.hex_bytes(self.child(el, "Data")),
+                timeout=self.int_or(el, "Timeout", 0, COUNT),
+                disabled=bool(self.opt_bool(el, "Disabled")),
+                fixed=bool(self.attr_bool(el, "Fixed")),
+            ))
+        return out
 
     def coe_init_cmds(self, coe: Element) -> list[CoeInitCmd]:
         cmds = coe.find("InitCmds")

@@ -13,7 +13,7 @@ from typing import Any
 
 from ecatcfg.eni.network_tree import previous_port
 from ecatcfg.eni.plan import NetworkPlan, PassiveSlave, SlavePlan, Unsupported, Variable
-from ecatcfg.eni.words import (coe_words, command_name, copy_words, eoe_words,
+from ecatcfg.eni.words import (coe_words, command_name, copy_words, eoe_words, foe_words,
                                init_cmd_words, soe_words)
 from ecatcfg.esc import Transition
 from ecatcfg.record import field, record
@@ -90,7 +90,7 @@ def master_words(plan: NetworkPlan) -> dict[str, list[str]]:
 
 def transition_words(slave: SlavePlan) -> dict[str, list[str]]:
     """Each transition's InitCmds in words: the register commands in file order, then the
-    CoE, the SoE, then the EoE ones (the ENI keeps them apart, ``Mailbox/CoE/InitCmds``);
+    CoE, the SoE, then the EoE and FoE ones (the ENI keeps them apart, ``Mailbox/CoE/InitCmds``);
     transitions in the order of ``esc.Transition``."""
     out: dict[str, list[str]] = {t.value: [] for t in Transition}
     for cmd in slave.init_cmds:
@@ -107,6 +107,9 @@ def transition_words(slave: SlavePlan) -> dict[str, list[str]]:
         for eoe in mailbox.eoe_init_cmds:
             for t in eoe.transitions:
                 out[t.value].append(eoe_words(eoe))
+        for foe in mailbox.foe_init_cmds:
+            for t in foe.transitions:
+                out[t.value].append(foe_words(foe))
     return {t: words for t, words in out.items() if words}
 
 

@@ -4,8 +4,8 @@ a slave-to-slave copy.
 The plan holds what the file says, not where (reading our own output back gives an equal
 plan, whatever its layout), so a command the runtime finds refused is located afterwards,
 by reading the file again: the reader keeps a slave's register InitCmds
-(``Slave/InitCmds``) and its mailbox InitCmds (``Slave/Mailbox/CoE|EoE|SoE/InitCmds``) in file
-order, so the n-th command of a list is the n-th ``InitCmd`` element of the slave's
+(``Slave/InitCmds``) and its mailbox InitCmds (``Slave/Mailbox/CoE|EoE|SoE|FoE/InitCmds``)
+in file order, so the n-th command of a list is the n-th ``InitCmd`` element of the slave's
 element.  Only used on an error path; the file is parsed as the reader parses it
 (``esi/xmlsafe.py``).
 """
@@ -15,24 +15,27 @@ from __future__ import annotations
 from collections.abc import Sequence
 from pathlib import Path
 
-from ecatcfg.eni.plan import (CoeInitCmd, CopyInfo, EoeInitCmd, InitCmd, NetworkPlan,
-                             SoeInitCmd)
+from ecatcfg.eni.plan import (CoeInitCmd, CopyInfo, EoeInitCmd, FoeInitCmd, InitCmd,
+                             NetworkPlan, SoeInitCmd)
 from ecatcfg.errors import EcatcfgError
 from ecatcfg.esi import xmlsafe
 
 
 def init_cmd_line(path: str | Path, plan: NetworkPlan,
-                  cmd: InitCmd | CoeInitCmd | EoeInitCmd | SoeInitCmd) -> int | None:
+                  cmd: InitCmd | CoeInitCmd | EoeInitCmd | SoeInitCmd | FoeInitCmd
+                  ) -> int | None:
     """The line of the ``InitCmd`` element that ``cmd`` (an object of ``plan``, read from
     ``path``) comes from; ``None`` when it is not a slave's command or the file no longer
     matches the plan (changed since, or commands the reader left out as refused)."""
     for number, slave in enumerate(plan.slaves):
-        lists: list[tuple[str, Sequence[InitCmd | CoeInitCmd | EoeInitCmd | SoeInitCmd]]] = [
+        lists: list[tuple[str, Sequence[InitCmd | CoeInitCmd | EoeInitCmd | SoeInitCmd
+                                        | FoeInitCmd]]] = [
             ("InitCmds", slave.init_cmds)]
         if slave.mailbox is not None:
             lists += [("Mailbox/CoE/InitCmds", slave.mailbox.coe_init_cmds),
                       ("Mailbox/EoE/InitCmds", slave.mailbox.eoe_init_cmds),
-                      ("Mailbox/SoE/InitCmds", slave.mailbox.soe_init_cmds)]
+                      ("Mailbox/SoE/InitCmds", slave.mailbox.soe_init_cmds),
+                      ("Mailbox/FoE/InitCmds", slave.mailbox.foe_init_cmds)]
         for where, cmds in lists:
             index = next((i for i, c in enumerate(cmds) if c is cmd), None)
             if index is not None:

@@ -25,7 +25,8 @@ a bit no variable holds is shown as its place only.
 
 from __future__ import annotations
 
-from ecatcfg.eni.plan import CoeInitCmd, CopyInfo, EoeInitCmd, InitCmd, SoeInitCmd, Variable
+from ecatcfg.eni.plan import (CoeInitCmd, CopyInfo, EoeInitCmd, FoeInitCmd, InitCmd,
+                              SoeInitCmd, Variable)
 from ecatcfg.esc import (AL_ERROR_ACK, AL_ID_REQUEST, FMMU_SIZE, REGISTER_READS,
                          REGISTER_WRITES, RX_PDO_MAPPING, SM_DIR_ECAT_WRITES, SM_DIR_MASK,
                          SM_MODE_MAILBOX, SM_MODE_MASK, SM_PDO_ASSIGN_RANGE, SM_SIZE,
@@ -278,4 +279,17 @@ def soe_words(cmd: SoeInitCmd) -> str:
         text += f" elements 0x{cmd.elements:02X}"
     if cmd.data or cmd.op_code == WRITE_REQUEST:
         text += " = " + (cmd.data.hex(" ") if cmd.data else "(no data)")
+    return text + (" (disabled)" if cmd.disabled else "")
+
+
+def foe_words(cmd: FoeInitCmd) -> str:
+    """``FoE read 'config.bin' (password 0x0000002A)``; another OpCode by number (the
+    reader has refused it unless it is disabled)."""
+    if cmd.opcode == 1:
+        password = f" (password 0x{cmd.password:08X})" if cmd.password else ""
+        text = f"FoE read {cmd.file_name!r}{password}"
+    elif cmd.opcode == 2:
+        text = f"FoE write {cmd.file_name!r}"
+    else:
+        text = f"FoE {cmd.data.hex()}"
     return text + (" (disabled)" if cmd.disabled else "")

@@ -25,6 +25,7 @@ from ecatcfg.eni.plan import (
     CyclicCmd,
     DcPlan,
     EoeInitCmd,
+    FoeInitCmd,
     HotConnectPlan,
     InitCmd,
     MailboxArea,
@@ -351,6 +352,10 @@ def _mailbox(parent: Element, mb: MailboxPlan) -> None:
         cmds = _sub(_sub(el, "EoE"), "InitCmds")
         for eoe_cmd in mb.eoe_init_cmds:
             _eoe_init_cmd(cmds, eoe_cmd)
+    if mb.foe_init_cmds:
+        cmds = _sub(_sub(el, "FoE"), "InitCmds")
+        for foe_cmd in mb.foe_init_cmds:
+            _mailbox_cmd(cmds, foe_cmd)
 
 
 def _coe(parent: Element, mb: MailboxPlan) -> None:
@@ -384,6 +389,10 @@ def _coe_init_cmd(parent: Element, cmd: CoeInitCmd) -> None:
 
 
 def _eoe_init_cmd(parent: Element, cmd: EoeInitCmd) -> None:
+    _mailbox_cmd(parent, cmd)
+
+
+def _mailbox_cmd(parent: Element, cmd: EoeInitCmd | FoeInitCmd) -> None:
     """ETG.2100 ``MailboxCmdType``: Transition+, Comment?, Timeout, Data, Disabled?."""
     el = _sub(parent, "InitCmd")
     _set_flag(el, "Fixed", cmd.fixed)

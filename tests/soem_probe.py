@@ -12,7 +12,10 @@ SOEM user configures a slave whose mapping the master chooses; aborts in ``write
 as hex in ``read``), ``dc`` (true: SOEM's ``config_dc`` after config_map, which works out
 the tree from the DL statuses and writes each slave's propagation delay; read back from
 0x0928 into ``delays``), ``sii_words`` (N: read the first N SII words of every slave with
-SOEM's EEPROM reader into ``sii`` (hex) and register 0x0012 into ``alias``, then stop).
+SOEM's EEPROM reader into ``sii`` (hex) and register 0x0012 into ``alias``, then stop), ``foe`` ([[slave, "write" | "read", name, password, hex
+or maximum size], ...]: SOEM's FoE client (ecx_FOEwrite / ecx_FOEread) in PREOP after
+config_init, results in ``foe``: {"result": SOEM's return value, "hex": what a read
+returned} or {"error": the exception}; then stop).
 """
 
 from __future__ import annotations
@@ -40,6 +43,20 @@ def main() -> None:
         result["slaves"] = [{"name": s.name, "vendor": s.man, "product": s.id,
                              "revision": s.rev} for s in master.slaves]
         if found <= 0:
+            return
+        if "foe" in options:
+            result["foe"] = []
+            for slave, action, name, password, arg in options["foe"]:
+                target = master.slaves[slave]
+                try:
+                    if action == "write":
+                        got = {"result": target.foe_write(name, password,
+                                                          bytes.fromhex(arg))}
+                    else:
+                        got = {"hex": target.foe_read(name, password, arg).hex()}
+                except Exception as exc:          # pysoem's errors, reported as they are
+                    got = {"error": f"{type(exc).__name__}: {exc}"}
+                result["foe"].append(got)
             return
         if "sii_words" in options:
             # SOEM's own EEPROM reader (ecx_readeeprom, 4 bytes per read) over the first

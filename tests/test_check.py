@@ -172,6 +172,19 @@ def _assign_activate_0700(root: Root) -> None:
     _init_cmd(_slave(root, "axis1"), "set DC activation").find("Data").text = "0007"
 
 
+def _foe_on_lamps(root: Root) -> None:
+    """An FoE read request InitCmd (OpCode 1, password 0, "cal.bin") for the EX2008, whose
+    ESI has no mailbox at all."""
+    lamps = _slave(root, "lamps")
+    data = "0100" + "00000000" + b"cal.bin".hex()
+    mailbox = etree.fromstring(
+        "<Mailbox><Send><Start>4096</Start><Length>128</Length></Send><Recv><Start>4224"
+        "</Start><Length>128</Length></Recv><FoE><InitCmds><InitCmd><Transition>PS"
+        f"</Transition><Comment>calibration</Comment><Timeout>0</Timeout><Data>{data}"
+        "</Data></InitCmd></InitCmds></FoE></Mailbox>")
+    lamps.find("ProcessData").addnext(mailbox)
+
+
 def _mailbox_512(root: Root) -> None:
     axis = _slave(root, "axis1")
     axis.find("Mailbox/Send/Length").text = "512"
@@ -247,6 +260,7 @@ DEFECTS: list[tuple[str, Callable[[Root], None], list[str]]] = [
     ("ENI401", _assign_activate_0700, ["AssignActivate 0x0700", "DC 0x0300"]),
     ("ENI501", _mailbox_512, ["Mailbox/Send", "length 512", "34..256"]),
     ("ENI502", _soe_cmd(listed=True), ["SoE write S-0-0032 (drive 0)", "no SoE mailbox"]),
+    ("ENI503", _foe_on_lamps, ["FoE InitCmd 'calibration'", "lists no FoE"]),
 ]
 
 

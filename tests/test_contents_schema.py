@@ -145,8 +145,8 @@ def test_the_reader_reads_it_and_names_what_apply_refuses():
         [Transition.PS], 3, 0, 32, 0x40, bytes([0x0B, 0]))
     assert [(p.element, p.slave, p.commands) for p in plan.unsupported] == [
         ("Slave/Mailbox/AoE/InitCmds", "Drive", 1),
-        ("Slave/Mailbox/FoE", "Drive", 1),
-        ("Slave/Mailbox/VoE", "Drive", 1)]
+        ("Slave/Mailbox/VoE", "Drive", 1),
+        ("FoE/InitCmds/InitCmd", "Drive", 1)]       # in BI: apply does not go to BOOT
     # CopyInfos are read, their #x10 (HexDecValue) as a number.
     assert plan.cyclic[0].frames[0].cmds[0].copy_infos == [CopyInfo(16, 0, 8)]
 

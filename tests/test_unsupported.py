@@ -85,7 +85,6 @@ def _apply(eni: Path, *args: str, esi: Path = ESI) -> subprocess.CompletedProces
 SLAVE_MAILBOX = f"//Slave[Info/Name='{DRIVE}']/Mailbox"
 
 CASES = {   # name: (where, fragment, element path, what the message says, commands lost)
-    "FoE": (SLAVE_MAILBOX, _mailbox_cmds("FoE", 2), "Slave/Mailbox/FoE", "FoE InitCmds", 2),
     "AoE": (SLAVE_MAILBOX, _mailbox_cmds("AoE", 1), "Slave/Mailbox/AoE/InitCmds",
             "AoE InitCmds", 1),
     "VoE": (SLAVE_MAILBOX, _mailbox_cmds("VoE", 4), "Slave/Mailbox/VoE", "VoE InitCmds", 4),
@@ -142,7 +141,7 @@ def test_several_parts_are_all_named_and_warned_once_per_slave(example_eni, tmp_
     lines = [w for w in done.stderr.splitlines() if w.startswith("warning:")]
     assert len(lines) == 2                                  # axis1 and lamps
     drive = next(w for w in lines if f"'{DRIVE}'" in w)
-    assert "VoE InitCmds" in drive and "FoE InitCmds" in drive
+    assert "VoE InitCmds" in drive and "FoE InitCmd: <Data> of 2 bytes" in drive
 
 
 def test_network_api_refuses_and_skips(example_eni, tmp_path):

@@ -10,7 +10,7 @@ from ecatcfg.eni.check.context import CheckContext
 from ecatcfg.eni.check.network import sm_pdos
 from ecatcfg.eni.check.rules import declare
 from ecatcfg.eni.plan import CoeInitCmd, PdoDesc, SlavePlan
-from ecatcfg.eni.words import soe_words
+from ecatcfg.eni.words import foe_words, soe_words
 from ecatcfg.esc import REGISTER_WRITES, Reg
 from ecatcfg.esi import datatypes
 from ecatcfg.esi.coe import (TRANSITION_STATE, DictEntry, dictionary_with_objects, lookup,
@@ -71,6 +71,10 @@ MAILBOX_SIZE = declare("ENI501", "error", "a mailbox outside the ESI's SyncManag
     the DefaultSize when no bounds are given) or a start address other than the ESI's
     StartAddress.  The slave checks its mailbox SyncManagers before PREOP and refuses them
     (AL status code 0x0016, invalid mailbox configuration).""")
+FOE = declare("ENI503", "error", "an FoE InitCmd for a device without FoE", """
+    The slave has an enabled FoE InitCmd (Mailbox/FoE/InitCmds) but its ESI does not list
+    FoE under Mailbox (ETG.2000).  A slave answers an FoE message with mailbox error 2
+    (unsupported protocol), and the transition fails.""")
 
 
 SOE_DRIVE = declare("ENI502", "error", "an SoE InitCmd the device cannot take", """
@@ -294,6 +298,13 @@ def _mailbox(ctx: CheckContext, slave: SlavePlan, device: Device) -> None:
     mb = slave.mailbox
     if mb is None:
         return
+    if device.mailbox is None or "FoE" not in device.mailbox.protocols:
+        cmds = mb.foe_init_cmds
+        for index, cmd in enumerate(cmds):
+            if not cmd.disabled:
+                ctx.add(FOE, ctx.lines.listed(slave, "Mailbox/FoE/InitCmds", index, len(cmds)),
+                        f"FoE InitCmd {cmd.comment or foe_words(cmd)!r}: the device's ESI "
+                        f"lists no FoE ({device.source.file}:{device.source.line})", slave)
     boxes = [sm for sm in device.sms if sm.is_mailbox]
     for area, name, sm in ((mb.send, "Send", device.sms[0] if device.sms else None),
                            (mb.recv, "Recv", device.sms[1] if len(device.sms) > 1 else None)):

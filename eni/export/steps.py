@@ -34,7 +34,7 @@ from pathlib import Path
 from ecatcfg.eni.plan import (BitRange, CoeInitCmd, DcPlan, EoeInitCmd, InitCmd,
                               NetworkPlan, SlavePlan, SoeInitCmd, Variable)
 from ecatcfg.eni.source import copy_info_line, init_cmd_line
-from ecatcfg.eni.words import coe_words, copy_words, init_cmd_words, soe_words
+from ecatcfg.eni.words import coe_words, copy_words, foe_words, init_cmd_words, soe_words
 from ecatcfg.errors import EcatcfgError
 from ecatcfg.esc import (DC_ACTIVATION, REGISTER_READS, REGISTER_WRITES,
                          Transition, fmmu_register, sm_register)
@@ -175,6 +175,11 @@ def _sdo_steps(file: str, plan: NetworkPlan, slave: SlavePlan) -> list[SdoStep]:
             raise ExportError(f"slave {slave.position} ({slave.name!r}): EoE InitCmd "
                               f"({eoe.comment or 'set IP parameter'}): SOEM's hooks carry "
                               f"CoE only", file, init_cmd_line(file, plan, eoe))
+    for foe in slave.mailbox.foe_init_cmds:
+        if not foe.disabled:
+            raise ExportError(f"slave {slave.position} ({slave.name!r}): FoE InitCmd "
+                              f"({foe.comment or foe_words(foe)}): SOEM's hooks carry "
+                              f"CoE only", file, init_cmd_line(file, plan, foe))
     steps = []
     for ip_first in (True, False):            # IP's downloads before PS's (ETG.2100 order)
         for cmd in slave.mailbox.coe_init_cmds:

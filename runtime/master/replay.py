@@ -16,7 +16,8 @@ import struct
 import time
 from typing import TYPE_CHECKING, Any, TypeVar
 
-from ecatcfg.eni.plan import CoeInitCmd, EoeInitCmd, InitCmd, MailboxPlan, SoeInitCmd
+from ecatcfg.eni.plan import (CoeInitCmd, EoeInitCmd, FoeInitCmd, InitCmd, MailboxPlan,
+                              SoeInitCmd)
 from ecatcfg.eni.words import init_cmd_name
 from ecatcfg.errors import EcatcfgError
 from ecatcfg.esc import (AL_STATUS_ERROR, SM1_STATUS, SM_ACTIVATE_REPEAT, SM_PDI_REPEAT_ACK, Cmd,
@@ -61,7 +62,8 @@ class ApplyError(EcatcfgError):
         self.command = command
         self.al_code = al_code
         self.abort_code = abort_code
-        self.init_cmd: InitCmd | CoeInitCmd | EoeInitCmd | SoeInitCmd | None = None
+        self.init_cmd: (InitCmd | CoeInitCmd | EoeInitCmd | SoeInitCmd | FoeInitCmd
+                        | None) = None
         # Why, as read from the slaves afterwards (runtime/master/diagnose.py): one JSON
         # object per slave ("slave", "al_status_code", "cause": lines, and the values read).
         self.causes: list[dict[str, Any]] = []

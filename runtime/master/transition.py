@@ -5,7 +5,7 @@ InitCmds for that transition run after the SyncManager/FMMU writes and before th
 AL-control request (ETG.2100; PDO assignment needs the mailbox up and must precede SAFEOP),
 in INIT->PREOP once the slave is in PREOP: first the CoE ones, then the SoE ones, then the
 EoE ones, as IgH ``fsm_slave_config.c`` writes the SoE configuration after the SDO
-configuration and sets the IP parameters last.  A station's
+configuration and sets the IP parameters last, then the FoE ones (``foe_init.py``).  A station's
 plugged modules are checked before its CoE InitCmds configure them (``modules.py``).
 One command's job is ``replay.py``.
 """
@@ -15,7 +15,8 @@ from __future__ import annotations
 import struct
 import time
 
-from ecatcfg.eni.plan import CoeInitCmd, DcPlan, EoeInitCmd, InitCmd, SlavePlan, SoeInitCmd
+from ecatcfg.eni.plan import (CoeInitCmd, DcPlan, EoeInitCmd, FoeInitCmd, InitCmd, SlavePlan,
+                              SoeInitCmd)
 from ecatcfg.eni.words import init_cmd_name
 from ecatcfg.esc import Cmd, Reg, Transition
 from ecatcfg.runtime.master.lockstep import Job, Step, until_answered
@@ -45,6 +46,15 @@ def soe_init_cmds(slave: SlavePlan, transition: Transition) -> list[SoeInitCmd]:
     return [c for c in mailbox.soe_init_cmds if transition in c.transitions and not c.disabled]
 
 
+def foe_init_cmds(slave: SlavePlan, transition: Transition) -> list[FoeInitCmd]:
+    """The slave's enabled FoE InitCmds of ``transition``, in file order: they run after
+    the EoE ones, last of the mailbox commands."""
+    if slave.mailbox is None:
+        return []
+    return [c for c in slave.mailbox.foe_init_cmds
+            if transition in c.transitions and not c.disabled]
+
+
 def _writes_al_control(cmd: InitCmd) -> bool:
     return cmd.cmd in (Cmd.APWR, Cmd.FPWR, Cmd.BWR) and cmd.ado == Reg.AL_CONTROL
 
@@ -59,12 +69,13 @@ def slave_transition_job(slave: SlavePlan, transition: Transition,
     mailbox = slave.mailbox
     coe, eoe = mailbox_init_cmds(slave, transition)
     soe = soe_init_cmds(slave, transition)
+    foe = foe_init_cmds(slave, transition)
     split = len(cmds)
-    if (coe or eoe or soe) and transition != Transition.IP:
+    if (coe or eoe or soe or foe) and transition != Transition.IP:
         split = next((i for i, c in enumerate(cmds) if _writes_al_control(c)), len(cmds))
     for cmd in cmds[:split]:
         yield from _failing(cmd, _register_cmd(slave, cmd, who, progress))
-    if mailbox is not None and (coe or eoe or soe):
+    if mailbox is not None and (coe or eoe or soe or foe):
         channel = channel or MailboxChannel(slave.phys_addr, mailbox)
         if coe:                     # a station's plugged modules, before they are configured
             # Imported here: modules.py needs the ESI model (esi/slots.py), which apply
@@ -80,11 +91,16 @@ def slave_transition_job(slave: SlavePlan, transition: Transition,
                                                         progress))
         for e in eoe:
             yield from _failing(e, eoe_init_cmd_job(channel, e, who, progress))
+        if foe:
+            from ecatcfg.runtime.master.foe_init import foe_init_cmd_job
+            for f in foe:
+                yield from _failing(f, foe_init_cmd_job(channel, f, who, progress))
     for cmd in cmds[split:]:
         yield from _failing(cmd, _register_cmd(slave, cmd, who, progress))
 
 
-def _failing(cmd: InitCmd | CoeInitCmd | EoeInitCmd | SoeInitCmd, job: Job) -> Job:
+def _failing(cmd: InitCmd | CoeInitCmd | EoeInitCmd | SoeInitCmd | FoeInitCmd,
+             job: Job) -> Job:
     """``job``, whose ApplyError names ``cmd`` as the InitCmd that failed."""
     try:
         yield from job

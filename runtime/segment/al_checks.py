@@ -1,6 +1,7 @@
 """The checks emulated firmware makes before it enters PREOP, SAFEOP and OP: what a slave's
 AL state machine (``slave.py``) refuses, and with which AL status code.
 
+- INIT->BOOT: SM0/SM1 as the bootstrap mailbox of the slave's SII (0x0015 otherwise);
 - INIT->PREOP: the mailbox SyncManagers as the slave's ESI places them (SOES
   ``ESC_checkmbx``: otherwise 0x0016, invalid mailbox configuration);
 - PREOP->SAFEOP (and SAFEOP->OP for SyncManagers the ESI marks OpOnly): each process-data
@@ -19,7 +20,8 @@ import struct
 from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
-from ecatcfg.esc import (SM_DIR_MASK, SM_MODE_MASK, AlStatusCode, FmmuConfig, FmmuType, Reg,
+from ecatcfg.esc import (SM_DIR_ECAT_READS, SM_DIR_ECAT_WRITES, SM_DIR_MASK, SM_MODE_MAILBOX,
+                         SM_MODE_MASK, AlStatusCode, FmmuConfig, FmmuType, Reg,
                          fmmus_cover)
 from ecatcfg.esi.model import Device
 from ecatcfg.runtime.segment.syncman import SmState
@@ -43,6 +45,22 @@ def mailbox_refusal(device: Device, sms: Sequence[SmState]) -> int:
         got = (sm.start, sm.length, sm.control & SM_MODE_AND_DIRECTION)
         if not sm.enabled or got != want:
             return AlStatusCode.INVALID_MAILBOX
+    return 0
+
+
+def bootstrap_refusal(bootstrap: tuple[int, int, int, int], sms: Sequence[SmState]) -> int:
+    """INIT->BOOT: SM0/SM1 as the slave's bootstrap mailbox, SII words 0x14-0x17 (receive
+    offset, size, send offset, size; ETG.2010), master-written SM0 and master-read SM1 in
+    mailbox mode, enabled (SOES ``ESC_checkmbx`` in BOOT: otherwise 0x0015, invalid
+    mailbox configuration (BOOT)); 0 when they are.  A slave without a bootstrap mailbox
+    does not support BOOT (0x0013), which the caller decides before."""
+    rx_start, rx_size, tx_start, tx_size = bootstrap
+    wants = ((rx_start, rx_size, SM_MODE_MAILBOX | SM_DIR_ECAT_WRITES),
+             (tx_start, tx_size, SM_MODE_MAILBOX | SM_DIR_ECAT_READS))
+    for sm, want in zip(sms[:2], wants, strict=True):
+        if not sm.enabled or (sm.start, sm.length,
+                              sm.control & SM_MODE_AND_DIRECTION) != want:
+            return AlStatusCode.INVALID_MAILBOX_BOOT
     return 0
 
 

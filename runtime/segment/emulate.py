@@ -4,7 +4,8 @@ Each device gets its SII image (``esi/sii.py``) and, when it has a mailbox, a ma
 (``runtime/segment/mailbox_server.py``) with a server for each protocol the ESI declares that the
 emulation speaks: CoE, a runtime object dictionary with an SDO server
 (``runtime/segment/objects.py``, ``runtime/segment/sdo_server.py``); EoE, the IP parameter services
-(``runtime/segment/eoe_server.py``).  Other protocols get the mailbox error "unsupported protocol".
+(``runtime/segment/eoe_server.py``); FoE, files and firmware (``runtime/segment/foe_server.py``),
+in BOOT over the bootstrap mailbox of the SII.  Other protocols get the mailbox error "unsupported protocol".
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ if TYPE_CHECKING:
 
     from ecatcfg.esi.library import Library
     from ecatcfg.runtime.segment.dc_clock import DcModel
+    from ecatcfg.runtime.segment.mailbox_server import MailboxServer
     from ecatcfg.runtime.segment.objects import ObjectDictionary
     from ecatcfg.runtime.segment.timing import Timing
 
@@ -64,6 +66,23 @@ class Write:
     complete_access: bool = False
 
 
+def _add_foe(mailbox: MailboxServer, image: bytes) -> None:
+    """An FoE server (``runtime/segment/foe_server.py``), with the bootstrap mailbox the
+    SII image gives (words 0x14-0x17: receive offset, size, send offset, size; ETG.2010)
+    for BOOT."""
+    import struct
+
+    from ecatcfg.esc import SII_BOOTSTRAP_MAILBOX, SII_VENDOR_ID
+    from ecatcfg.runtime.segment.foe_server import FoeServer
+
+    # The firmware knows its identity: the one its SII holds (words 0x08, 0x0A).
+    vendor, product = struct.unpack_from("<II", image, 2 * SII_VENDOR_ID)
+    _rx, rx_size, _tx, tx_size = struct.unpack_from("<4H", image, 2 * SII_BOOTSTRAP_MAILBOX)
+    boot = rx_size >= MIN_MAILBOX_SIZE and tx_size >= MIN_MAILBOX_SIZE
+    mailbox.foe = FoeServer(vendor, product, bootstrap=boot)
+    mailbox.boot_sizes = (rx_size, tx_size) if boot else None
+
+
 def emulated_slave(spec: SlaveSpec) -> EmulatedSlave:
     dev = spec.device
     od = mailbox = None
@@ -97,6 +116,8 @@ def emulated_slave(spec: SlaveSpec) -> EmulatedSlave:
             from ecatcfg.runtime.segment.soe_server import SoeServer
             mailbox.soe = SoeServer(dev.mailbox.soe, sizes[1])
     image = sii.build(dev, serial=spec.serial, alias=spec.alias)
+    if mailbox is not None and dev.mailbox is not None and "FoE" in dev.mailbox.protocols:
+        _add_foe(mailbox, image)
     slave = EmulatedSlave(dev, image, name=spec.name, od=od, mailbox=mailbox,
                           chip=chip_of(dev, chip_for(dev.vendor.id, dev.product_code)),
                           device_id=spec.device_id)

@@ -29,9 +29,10 @@ from ecatcfg.esc import (AL_ERROR_ACK, AL_ID_REQUEST, AL_STATE_MASK, AL_STATUS_E
                          EEPROM_CMD_MASK, EEPROM_CMD_READ, EEPROM_CMD_RELOAD, EEPROM_CMD_WRITE,
                          EEPROM_ERROR_ACKNOWLEDGE, EEPROM_ERROR_WRITE_ENABLE, EEPROM_R64,
                          EEPROM_WRITE_ENABLE, ESC_DEVICE_EMULATION, FMMU_SIZE, PDI_DIGITAL_IO,
-                         SM_ACTIVATE_REPEAT, SM_INPUT_PARAMETER, SM_OUTPUT_PARAMETER,
-                         SM_PARAMETER_MIN_CYCLE, SM_WATCHDOG_ENABLE,
-                         AlState, AlStatusCode, FmmuConfig, FmmuType, Reg, fmmu_register,
+                         SII_BOOTSTRAP_MAILBOX, SII_REVISION, SM_ACTIVATE_REPEAT,
+                         SM_INPUT_PARAMETER, SM_OUTPUT_PARAMETER, SM_PARAMETER_MIN_CYCLE,
+                         SM_WATCHDOG_ENABLE, AlState, AlStatusCode, FmmuConfig, FmmuType,
+                         Reg, fmmu_register,
                          sm_register)
 from ecatcfg.esc import WATCHDOG_DIVIDER_DEFAULT, WATCHDOG_TIME_DEFAULT, watchdog_base_ns
 from ecatcfg.esi.model import Device
@@ -56,7 +57,9 @@ DEFAULT_WD_DIVIDER = WATCHDOG_DIVIDER_DEFAULT     # (0x09C2 + 2) x 40 ns = 100 u
 DEFAULT_WD_TIME = WATCHDOG_TIME_DEFAULT           # x 100 us = 100 ms
 
 # Transitions the state machine allows (SOES ESC_state, KickCAT ESMStates); any -> INIT too.
-_ALLOWED = {(AlState.INIT, AlState.PREOP), (AlState.PREOP, AlState.SAFEOP),
+# BOOT is entered from INIT only and left to INIT only (ETG.1000.6 state machine).
+_ALLOWED = {(AlState.INIT, AlState.PREOP), (AlState.INIT, AlState.BOOT),
+            (AlState.PREOP, AlState.SAFEOP),
             (AlState.SAFEOP, AlState.OP), (AlState.OP, AlState.SAFEOP),
             (AlState.OP, AlState.PREOP), (AlState.SAFEOP, AlState.PREOP)}
 _LETTER = {AlState.INIT: "I", AlState.PREOP: "P", AlState.BOOT: "B", AlState.SAFEOP: "S",
@@ -254,12 +257,25 @@ class EmulatedSlave:
                 self.mailbox.eoe.params = None
             if self.mailbox.soe is not None:
                 self.mailbox.soe.power_on()
+            if self.mailbox.foe is not None:
+                self._install_firmware(self.mailbox.foe.take_pending_revision())
         self.__init__(self.device, bytes(self.eeprom),   # type: ignore[misc]
                       name=self.name, od=self.od, mailbox=self.mailbox, chip=self.chip,
                       device_id=self.device_id)
         (self.clock_ns, self.timing, self.on_state_change, self.on_mapping_change,
          self.position, self.eni_only, self.refuse) = keep
         self.dc = DcClock(drift, 0, self.clock_ns(), ports)
+
+    def _install_firmware(self, revision: int | None) -> None:
+        """A firmware written over FoE starts at power-on and reports its revision: in the
+        SII revision word (0x0C; outside the CRC of words 0-6) and in 0x1018:03."""
+        if revision is None:
+            return
+        struct.pack_into("<I", self.eeprom, 2 * SII_REVISION, revision)
+        if self.od is not None and 0x1018 in self.od and 3 in self.od[0x1018].entries:
+            value = struct.pack("<I", revision)
+            self._od_power_on[(0x1018, 3)] = value
+            self.od[0x1018][3].value = value
 
     def _power_on(self) -> None:
         m = self.mem
@@ -574,13 +590,15 @@ class EmulatedSlave:
         was_repeat = sm.repeat_request
         sm.load(self.mem)
         request = bool(self.mem[reg + 6] & SM_ACTIVATE_REPEAT)
-        if not self.device_emulation and self._mailbox_running() and self._check_mailbox():
+        refusal = (self._check_mailbox() if not self.device_emulation
+                   and self._mailbox_running() else 0)
+        if refusal:
             # The mailbox SMs no longer as the firmware set them up: it stops the mailbox
-            # and falls back to INIT with 0x0016 (SOES ESC_sm_act_event, ESC_checkmbx).
-            # It never writes a reply into an area the master moved (over registers,
-            # past the end of memory).
+            # and falls back to INIT with 0x0016, 0x0015 in BOOT (SOES ESC_sm_act_event,
+            # ESC_checkmbx).  It never writes a reply into an area the master moved (over
+            # registers, past the end of memory).
             self._stop_mailbox()
-            self._set_state(AlState.INIT, AlStatusCode.INVALID_MAILBOX)
+            self._set_state(AlState.INIT, refusal)
         elif sm.number == self._mbx_in and request != was_repeat:
             # Repeat: post the last message again (the master lost it) and acknowledge.
             # Before PREOP the mailbox is not running: the bit is only taken over
@@ -595,8 +613,8 @@ class EmulatedSlave:
             self.on_mapping_change()
 
     def _mailbox_running(self) -> bool:
-        return self.mem[Reg.AL_STATUS] & AL_STATE_MASK in (AlState.PREOP, AlState.SAFEOP,
-                                                            AlState.OP)
+        return self.mem[Reg.AL_STATUS] & AL_STATE_MASK in (AlState.PREOP, AlState.BOOT,
+                                                            AlState.SAFEOP, AlState.OP)
 
     def _stop_mailbox(self) -> None:
         self.mailbox_queue.clear()
@@ -646,7 +664,7 @@ class EmulatedSlave:
         """The firmware takes the message out of SM0 at once (the buffer is empty again)
         and queues its answers for SM1."""
         state = self.state
-        if state is None or state in (AlState.INIT, AlState.BOOT) or self.mailbox is None:
+        if state is None or state == AlState.INIT or self.mailbox is None:
             return
         replies = self.mailbox.handle(message, state)
         if replies and self.timing and self.timing.mailbox_reply_ns:
@@ -795,7 +813,7 @@ class EmulatedSlave:
         target = AlState(requested)
         if target == current:
             return
-        if target == AlState.BOOT:
+        if target == AlState.BOOT and not self.boot_supported:
             self._set_state(current, AlStatusCode.BOOT_NOT_SUPPORTED if current == AlState.INIT
                             else AlStatusCode.INVALID_STATE_CHANGE)
             return
@@ -818,6 +836,8 @@ class EmulatedSlave:
         """The AL status code that refuses ``current`` -> ``target``, or 0."""
         if current == AlState.INIT and target == AlState.PREOP:
             return self._check_mailbox()
+        if current == AlState.INIT and target == AlState.BOOT:
+            return al_checks.bootstrap_refusal(self.bootstrap_mailbox, self.sms)
         if current == AlState.PREOP and target == AlState.SAFEOP:
             return (self._check_process_data(op=False) or self._check_dc()
                     or self._check_soe())
@@ -826,7 +846,26 @@ class EmulatedSlave:
         return 0
 
     def _check_mailbox(self) -> int:
+        if self.state == AlState.BOOT:
+            return al_checks.bootstrap_refusal(self.bootstrap_mailbox, self.sms)
         return al_checks.mailbox_refusal(self.device, self.sms)
+
+    @property
+    def bootstrap_mailbox(self) -> tuple[int, int, int, int]:
+        """The bootstrap mailbox the firmware uses, as its SII gives it (words 0x14-0x17:
+        receive offset, size, send offset, size; ETG.2010)."""
+        words = self.eeprom[2 * SII_BOOTSTRAP_MAILBOX:2 * SII_BOOTSTRAP_MAILBOX + 8]
+        if len(words) < 8:
+            return (0, 0, 0, 0)
+        rx, rx_size, tx, tx_size = struct.unpack("<4H", words)
+        return rx, rx_size, tx, tx_size
+
+    @property
+    def boot_supported(self) -> bool:
+        """BOOT needs a boot loader: here, an FoE server and a bootstrap mailbox in the
+        SII (otherwise the firmware refuses with 0x0013, bootstrap not supported)."""
+        return (self.mailbox is not None and self.mailbox.foe is not None
+                and self.mailbox.boot_sizes is not None)
 
     def _pd_bits(self) -> dict[int, int | None]:
         """Process-data bits per SM that the slave's current PDO assignment needs."""
@@ -897,7 +936,7 @@ class EmulatedSlave:
             self._arm_watchdog()
         if new == AlState.INIT:
             self._stop_mailbox()
-        if new == AlState.PREOP and old == AlState.INIT:
+        if new in (AlState.PREOP, AlState.BOOT) and old == AlState.INIT:
             self.last_mailbox = None
             if self.mailbox is not None:
                 self.mailbox.reset()

@@ -553,8 +553,11 @@ class VirtualSegment:
 
     def serve(self, link: Link, *, duration: float | None = None,
               stop: threading.Event | None = None,
-              on_ready: Callable[[], None] | None = None) -> None:
-        """Answer frames from ``link`` until ``stop`` is set or ``duration`` has passed."""
+              on_ready: Callable[[], None] | None = None,
+              on_tick: Callable[[], None] | None = None) -> None:
+        """Answer frames from ``link`` until ``stop`` is set or ``duration`` has passed.
+        ``on_tick`` runs every 2 ms between frames: where a caller changes the segment
+        (a power cycle asked for by a signal) without cutting a frame in two."""
         faults = self.faults
         end = time.monotonic() + duration if duration is not None else None
         delayed: list[tuple[float, int, bytes]] = []
@@ -573,6 +576,8 @@ class VirtualSegment:
                 self.settle()
                 for s in self.wired:            # unplugged slaves time out too
                     s.check_watchdog(slave_now)
+                if on_tick is not None:
+                    on_tick()
                 next_tick = now + 0.002
             wait = 0.002
             if delayed:
