@@ -204,6 +204,20 @@ class Master(_Model):
                                           "cycle in this order (ENI CopyInfos)")
 
 
+def _bool_as_int(v: Any) -> Any:
+    """YAML's true/false as 1/0 for a ``value`` that is a number."""
+    return int(v) if isinstance(v, bool) else v
+
+
+def _value_or_data(value: object, data: str | None) -> None:
+    """An SDO's or IDN's start-up value: exactly one of a typed ``value`` and raw ``data``
+    (hex bytes in wire order)."""
+    if (value is None) == (data is None):
+        raise ValueError("give exactly one of 'value' and 'data'")
+    if data is not None and not re.fullmatch(r"(?:[0-9A-Fa-f]{2})+", data.replace(" ", "")):
+        raise ValueError(f"data {data!r} is not hex bytes (e.g. '0a00')")
+
+
 class Sdo(_Model):
     """A startup SDO download, typed from the device's object dictionary."""
 
@@ -224,17 +238,11 @@ class Sdo(_Model):
     @field_validator("value", mode="before")
     @classmethod
     def _value(cls, v: Any) -> Any:
-        if isinstance(v, bool):
-            return int(v)
-        return v
+        return _bool_as_int(v)
 
     @model_validator(mode="after")
     def _one_of(self) -> Sdo:
-        if (self.value is None) == (self.data is None):
-            raise ValueError("give exactly one of 'value' and 'data'")
-        if self.data is not None and not re.fullmatch(r"(?:[0-9A-Fa-f]{2})+",
-                                                       self.data.replace(" ", "")):
-            raise ValueError(f"data {self.data!r} is not hex bytes (e.g. '0a00')")
+        _value_or_data(self.value, self.data)
         # CompleteAccess writes a whole object from subindex 0 or 1 (ETG.1000.6): its bytes
         # are the object's layout, which one typed value cannot give.
         if self.complete_access and (self.subindex > 1 or self.data is None):
@@ -278,17 +286,11 @@ class Soe(_Model):
     @field_validator("value", mode="before")
     @classmethod
     def _value(cls, v: Any) -> Any:
-        if isinstance(v, bool):
-            return int(v)
-        return v
+        return _bool_as_int(v)
 
     @model_validator(mode="after")
     def _one_of(self) -> Soe:
-        if (self.value is None) == (self.data is None):
-            raise ValueError("give exactly one of 'value' and 'data'")
-        if self.data is not None and not re.fullmatch(r"(?:[0-9A-Fa-f]{2})+",
-                                                       self.data.replace(" ", "")):
-            raise ValueError(f"data {self.data!r} is not hex bytes (e.g. 'd007')")
+        _value_or_data(self.value, self.data)
         return self
 
 
