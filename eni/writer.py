@@ -372,20 +372,35 @@ def _coe(parent: Element, mb: MailboxPlan) -> None:
             _opt_text(channel, "AddInfo", add_info)
 
 
-def _coe_init_cmd(parent: Element, cmd: CoeInitCmd) -> None:
+MailboxInitCmd = CoeInitCmd | EoeInitCmd | SoeInitCmd | FoeInitCmd
+
+
+def _mailbox_cmd_head(parent: Element, cmd: MailboxInitCmd) -> Element:
+    """What every mailbox InitCmd of ETG.2100 starts with: @Fixed, Transition+, Comment?,
+    Timeout (required here, unlike in ECatCmdType)."""
     el = _sub(parent, "InitCmd")
     _set_flag(el, "Fixed", cmd.fixed)
-    _set_flag(el, "CompleteAccess", cmd.complete_access)
+    if isinstance(cmd, CoeInitCmd):
+        _set_flag(el, "CompleteAccess", cmd.complete_access)
     for transition in cmd.transitions:
         _sub(el, "Transition", transition.value)
     _text(el, "Comment", cmd.comment)
-    _int(el, "Timeout", cmd.timeout)        # required here, unlike in ECatCmdType
+    _int(el, "Timeout", cmd.timeout)
+    return el
+
+
+def _mailbox_cmd_tail(el: Element, cmd: MailboxInitCmd) -> None:
+    if cmd.disabled:
+        _sub(el, "Disabled", _bool(True))
+
+
+def _coe_init_cmd(parent: Element, cmd: CoeInitCmd) -> None:
+    el = _mailbox_cmd_head(parent, cmd)
     _int(el, "Ccs", cmd.ccs)
     _int(el, "Index", cmd.index)
     _int(el, "SubIndex", cmd.subindex)
     _hex(el, "Data", cmd.data)
-    if cmd.disabled:
-        _sub(el, "Disabled", _bool(True))
+    _mailbox_cmd_tail(el, cmd)
 
 
 def _eoe_init_cmd(parent: Element, cmd: EoeInitCmd) -> None:
@@ -394,26 +409,15 @@ def _eoe_init_cmd(parent: Element, cmd: EoeInitCmd) -> None:
 
 def _mailbox_cmd(parent: Element, cmd: EoeInitCmd | FoeInitCmd) -> None:
     """ETG.2100 ``MailboxCmdType``: Transition+, Comment?, Timeout, Data, Disabled?."""
-    el = _sub(parent, "InitCmd")
-    _set_flag(el, "Fixed", cmd.fixed)
-    for transition in cmd.transitions:
-        _sub(el, "Transition", transition.value)
-    _text(el, "Comment", cmd.comment)
-    _int(el, "Timeout", cmd.timeout)
+    el = _mailbox_cmd_head(parent, cmd)
     _hex(el, "Data", cmd.data)
-    if cmd.disabled:
-        _sub(el, "Disabled", _bool(True))
+    _mailbox_cmd_tail(el, cmd)
 
 
 def _soe_init_cmd(parent: Element, cmd: SoeInitCmd) -> None:
     """ETG.2100 ``Mailbox/SoE/InitCmds/InitCmd``: Transition+, Comment?, Timeout, OpCode,
     DriveNo, IDN, Elements, Attribute, Data?, Disabled?, @Fixed."""
-    el = _sub(parent, "InitCmd")
-    _set_flag(el, "Fixed", cmd.fixed)
-    for transition in cmd.transitions:
-        _sub(el, "Transition", transition.value)
-    _text(el, "Comment", cmd.comment)
-    _int(el, "Timeout", cmd.timeout)
+    el = _mailbox_cmd_head(parent, cmd)
     _int(el, "OpCode", cmd.op_code)
     _int(el, "DriveNo", cmd.drive_no)
     _int(el, "IDN", cmd.idn)
@@ -421,8 +425,7 @@ def _soe_init_cmd(parent: Element, cmd: SoeInitCmd) -> None:
     _uint32(el, "Attribute", cmd.attribute)     # the IDN's 32-bit attribute, in an xs:int
     if cmd.data:
         _hex(el, "Data", cmd.data)
-    if cmd.disabled:
-        _sub(el, "Disabled", _bool(True))
+    _mailbox_cmd_tail(el, cmd)
 
 
 def _previous_port(parent: Element, port: PreviousPort) -> None:
