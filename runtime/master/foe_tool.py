@@ -41,9 +41,9 @@ from ecatcfg.runtime.master.lockstep import Job, Step, run_jobs
 from ecatcfg.runtime.master.replay import TIMEOUT_COMMAND, ApplyError, MailboxChannel
 from ecatcfg.runtime.master.scan import count_slaves, sii_words
 # The preparation steps ecatcfg sdo takes too (its module's helpers: one definition).
-from ecatcfg.runtime.master.sdo_tool import (SdoToolError, SlaveMailbox, _access, _Counter,
-                                             _empty_sm1, _request_state, _station_address,
-                                             protocol_names)
+from ecatcfg.runtime.master.sdo_tool import (MailboxCounter, SdoToolError, SlaveMailbox,
+                                             access, empty_sm1, protocol_names, request_state,
+                                             station_address_of)
 from ecatcfg.runtime.master.transport import Transport
 from ecatcfg.runtime.wire import Datagram
 
@@ -132,7 +132,7 @@ def _session(report: FoeReport, data: bytes | None, password: int, state: AlStat
     who = f"slave {pos}"
     adp = -pos & 0xFFFF
     deadline = time.monotonic() + TIMEOUT_COMMAND
-    status = yield from _access(Datagram.physical(Cmd.APRD, adp, Reg.AL_STATUS, 2), deadline,
+    status = yield from access(Datagram.physical(Cmd.APRD, adp, Reg.AL_STATUS, 2), deadline,
                                 f"{who}: reading the AL status (0x0130)")
     report.al_status_before = struct.unpack_from("<H", status.data)[0]
     report.identity_before = yield from _identity(adp, pos, who)
@@ -163,37 +163,37 @@ def _session(report: FoeReport, data: bytes | None, password: int, state: AlStat
     report.state = target.name
     report.mailbox = (rx_size, tx_size)
 
-    address = yield from _station_address(SlaveMailbox(pos), adp, who)
+    address = yield from station_address_of(SlaveMailbox(pos), adp, who)
     report.station_address = address
-    yield from _request_state(address, AlState.INIT, who)
+    yield from request_state(address, AlState.INIT, who)
     sm0 = SmConfig(rx_start, rx_size, SM_CONTROL_MBOX_OUT, True)
     sm1 = SmConfig(tx_start, tx_size, SM_CONTROL_MBOX_IN, True)
     deadline = time.monotonic() + TIMEOUT_COMMAND
-    yield from _access(Datagram.physical(Cmd.FPWR, address, Reg.SM0,
+    yield from access(Datagram.physical(Cmd.FPWR, address, Reg.SM0,
                                          sm0.to_bytes() + sm1.to_bytes()),
                        deadline, f"{who}: writing SM0/SM1 ({target.name} mailbox, 0x0800)")
-    yield from _access(Datagram.physical(Cmd.FPWR, address, Reg.EEPROM_CONFIG, b"\x01"),
+    yield from access(Datagram.physical(Cmd.FPWR, address, Reg.EEPROM_CONFIG, b"\x01"),
                        deadline, f"{who}: handing the SII EEPROM to the PDI (0x0500)")
-    yield from _request_state(address, target, who)
+    yield from request_state(address, target, who)
 
     plan = MailboxPlan(MailboxArea(rx_start, rx_size), MailboxArea(tx_start, tx_size),
                        protocols=["FoE"])
     channel = MailboxChannel(address, plan)
-    yield from _empty_sm1(SlaveMailbox(pos), channel)
+    yield from empty_sm1(SlaveMailbox(pos), channel)
     started = time.monotonic()
     t: FoeRead | FoeWrite
     if data is None:
         t = FoeRead(report.name, password, mbx_out_size=rx_size, mbx_in_size=tx_size,
-                    counter=_Counter(), progress=hook, limit=limit)
+                    counter=MailboxCounter(), progress=hook, limit=limit)
     else:
         t = FoeWrite(report.name, data, password, mbx_out_size=rx_size,
-                     mbx_in_size=tx_size, counter=_Counter(), progress=hook)
+                     mbx_in_size=tx_size, counter=MailboxCounter(), progress=hook)
     what = f"FoE {report.action} of {report.name!r}"
     try:
         yield from run_transfer(channel, t, timeout, who, what)
     except FoeTransferError as exc:
         # Leave the slave as a firmware update leaves it: back in INIT.
-        yield from _request_state(address, AlState.INIT, who)
+        yield from request_state(address, AlState.INIT, who)
         raise FoeToolError(f"{who}, {what}: {exc}", foe_code=exc.code) from None
     report.seconds = time.monotonic() - started
     report.packets, report.busy_replies = t.packets, t.busy_replies
@@ -202,9 +202,9 @@ def _session(report: FoeReport, data: bytes | None, password: int, state: AlStat
         report.size = len(report.data)
     else:
         report.size = len(t.data)
-    yield from _request_state(address, AlState.INIT, who)
+    yield from request_state(address, AlState.INIT, who)
     deadline = time.monotonic() + TIMEOUT_COMMAND
-    yield from _access(Datagram.physical(Cmd.FPWR, address, Reg.EEPROM_CONFIG, b"\x00"),
+    yield from access(Datagram.physical(Cmd.FPWR, address, Reg.EEPROM_CONFIG, b"\x00"),
                        deadline, f"{who}: taking the SII EEPROM back (0x0500)")
     report.identity_after = yield from _identity(adp, pos, who)
 
@@ -212,7 +212,7 @@ def _session(report: FoeReport, data: bytes | None, password: int, state: AlStat
 def _identity(adp: int, pos: int, who: str) -> Step[Identity]:
     """The identity in the SII (words 0x08-0x0F), read while EtherCAT owns the EEPROM."""
     deadline = time.monotonic() + TIMEOUT_COMMAND
-    yield from _access(Datagram.physical(Cmd.APWR, adp, Reg.EEPROM_CONFIG, b"\x00"),
+    yield from access(Datagram.physical(Cmd.APWR, adp, Reg.EEPROM_CONFIG, b"\x00"),
                        deadline, f"{who}: taking the SII EEPROM (0x0500)")
     try:
         ids = yield from sii_words(pos, SII_VENDOR_ID, time.monotonic() + TIMEOUT_COMMAND)

@@ -159,8 +159,8 @@ def open_mailbox(info: SlaveMailbox) -> Step[tuple[MailboxChannel, Callable[[], 
     plan = MailboxPlan(MailboxArea(send.start, send.length),
                        MailboxArea(recv.start, recv.length), protocols=[info.protocol])
     channel = MailboxChannel(info.station_address, plan)
-    yield from _empty_sm1(info, channel)
-    return channel, _Counter()
+    yield from empty_sm1(info, channel)
+    return channel, MailboxCounter()
 
 
 def _transfer(info: SlaveMailbox, channel: MailboxChannel, size: int,
@@ -187,7 +187,7 @@ def _transfer(info: SlaveMailbox, channel: MailboxChannel, size: int,
     result.append(t.result if isinstance(t, SdoUpload) else b"")
 
 
-class _Counter:
+class MailboxCounter:
     """Mailbox counters for one transfer: 0 first (never taken for a repeat), then 1..7."""
 
     def __init__(self) -> None:
@@ -200,7 +200,7 @@ class _Counter:
 
 # -- preparing the slave ----------------------------------------------------------------------
 
-def _access(dg: Datagram, deadline: float, what: str, wkc: int = 1) -> Step[Datagram]:
+def access(dg: Datagram, deadline: float, what: str, wkc: int = 1) -> Step[Datagram]:
     """Send ``dg`` until it comes back with working counter ``wkc``; the returned datagram."""
     last = "no reply (frames lost)"
     while True:
@@ -218,7 +218,7 @@ def _prepare(info: SlaveMailbox) -> Job:
     adp = -pos & 0xFFFF
     who = f"slave {pos}"
     deadline = time.monotonic() + TIMEOUT_COMMAND
-    status = yield from _access(Datagram.physical(Cmd.APRD, adp, Reg.AL_STATUS, 6), deadline,
+    status = yield from access(Datagram.physical(Cmd.APRD, adp, Reg.AL_STATUS, 6), deadline,
                                 f"{who}: reading the AL status (0x0130)")
     al_status = struct.unpack_from("<H", status.data)[0]
     info.state_before = al_status
@@ -229,10 +229,10 @@ def _prepare(info: SlaveMailbox) -> Job:
 
     # The mailbox from the SII, read while the EEPROM belongs to EtherCAT (0x0500 = 0);
     # a slave that is past INIT gets it back as it was (its PDI may be using it).
-    owner = yield from _access(Datagram.physical(Cmd.APRD, adp, Reg.EEPROM_CONFIG, 1),
+    owner = yield from access(Datagram.physical(Cmd.APRD, adp, Reg.EEPROM_CONFIG, 1),
                                deadline, f"{who}: reading the SII EEPROM owner (0x0500)")
     pdi_owned = bool(owner.data[0] & 0x01)
-    yield from _access(Datagram.physical(Cmd.APWR, adp, Reg.EEPROM_CONFIG, b"\x00"),
+    yield from access(Datagram.physical(Cmd.APWR, adp, Reg.EEPROM_CONFIG, b"\x00"),
                        deadline, f"{who}: taking the SII EEPROM (0x0500)")
     sii_deadline = time.monotonic() + TIMEOUT_COMMAND
     try:
@@ -244,25 +244,25 @@ def _prepare(info: SlaveMailbox) -> Job:
     info.protocols = protocols = struct.unpack_from("<H", proto)[0]
     if not protocols & MAILBOX_PROTOCOL_BITS[info.protocol]:
         if pdi_owned:
-            yield from _access(Datagram.physical(Cmd.APWR, adp, Reg.EEPROM_CONFIG, b"\x01"),
+            yield from access(Datagram.physical(Cmd.APWR, adp, Reg.EEPROM_CONFIG, b"\x01"),
                                deadline, f"{who}: handing the SII EEPROM back (0x0500)")
         thing = "SDO" if info.protocol == "CoE" else "IDN" if info.protocol == "SoE" else "data"
         raise SdoToolError(f"{who} does not support {info.protocol}: its SII lists the "
                            f"mailbox protocols 0x{protocols:04X} ({protocol_names(protocols)}), "
                            f"so there is no {thing} to read or write")
 
-    address = yield from _station_address(info, adp, who)
+    address = yield from station_address_of(info, adp, who)
     info.station_address = address
 
     if state in (AlState.PREOP, AlState.SAFEOP, AlState.OP):
         deadline = time.monotonic() + TIMEOUT_COMMAND
-        regs = yield from _access(Datagram.physical(Cmd.FPRD, address, Reg.SM0, 16),
+        regs = yield from access(Datagram.physical(Cmd.FPRD, address, Reg.SM0, 16),
                                   deadline, f"{who}: reading SM0/SM1 (0x0800)")
         sm0 = SmConfig.from_bytes(regs.data[:8])
         sm1 = SmConfig.from_bytes(regs.data[8:16])
         if _is_mailbox(sm0, True) and _is_mailbox(sm1, False):
             if pdi_owned:
-                yield from _access(Datagram.physical(Cmd.FPWR, address, Reg.EEPROM_CONFIG,
+                yield from access(Datagram.physical(Cmd.FPWR, address, Reg.EEPROM_CONFIG,
                                                      b"\x01"),
                                    deadline, f"{who}: handing the SII EEPROM back to the "
                                              "PDI (0x0500)")
@@ -284,13 +284,13 @@ def _prepare(info: SlaveMailbox) -> Job:
     deadline = time.monotonic() + TIMEOUT_COMMAND
     if state != AlState.INIT:
         # PREOP+ERR without a mailbox: back to INIT before the SMs change.
-        yield from _request_state(address, AlState.INIT, who)
-    yield from _access(Datagram.physical(Cmd.FPWR, address, Reg.SM0,
+        yield from request_state(address, AlState.INIT, who)
+    yield from access(Datagram.physical(Cmd.FPWR, address, Reg.SM0,
                                          sm0.to_bytes() + sm1.to_bytes()),
                        deadline, f"{who}: writing SM0/SM1 (0x0800)")
-    yield from _access(Datagram.physical(Cmd.FPWR, address, Reg.EEPROM_CONFIG, b"\x01"),
+    yield from access(Datagram.physical(Cmd.FPWR, address, Reg.EEPROM_CONFIG, b"\x01"),
                        deadline, f"{who}: handing the SII EEPROM to the PDI (0x0500)")
-    yield from _request_state(address, AlState.PREOP, who)
+    yield from request_state(address, AlState.PREOP, who)
     info.send, info.recv, info.state, info.configured = sm0, sm1, AlState.PREOP, True
 
 
@@ -305,10 +305,10 @@ def _sm_text(sm: SmConfig) -> str:
             f"{' enabled' if sm.enable else ' disabled'}")
 
 
-def _station_address(info: SlaveMailbox, adp: int, who: str) -> Step[int]:
+def station_address_of(info: SlaveMailbox, adp: int, who: str) -> Step[int]:
     """The slave's configured station address; it gets one when it has none."""
     deadline = time.monotonic() + TIMEOUT_COMMAND
-    reply = yield from _access(Datagram.physical(Cmd.APRD, adp, Reg.STATION_ADDRESS, 2),
+    reply = yield from access(Datagram.physical(Cmd.APRD, adp, Reg.STATION_ADDRESS, 2),
                                deadline, f"{who}: reading the station address (0x0010)")
     address: int = struct.unpack("<H", reply.data)[0]
     if address:
@@ -337,16 +337,16 @@ def _station_address(info: SlaveMailbox, adp: int, who: str) -> Step[int]:
             break
     else:                                               # pragma: no cover (65000 slaves)
         raise SdoToolError(f"{who}: no free station address")
-    yield from _access(Datagram.physical(Cmd.APWR, adp, Reg.STATION_ADDRESS,
+    yield from access(Datagram.physical(Cmd.APWR, adp, Reg.STATION_ADDRESS,
                                          struct.pack("<H", candidate)),
                        deadline, f"{who}: writing station address 0x{candidate:04X}")
     return candidate
 
 
-def _request_state(address: int, target: AlState, who: str) -> Job:
+def request_state(address: int, target: AlState, who: str) -> Job:
     """AL control = target | acknowledge; wait until AL status shows it (or a refusal)."""
     deadline = time.monotonic() + TIMEOUT_COMMAND
-    yield from _access(Datagram.physical(Cmd.FPWR, address, Reg.AL_CONTROL,
+    yield from access(Datagram.physical(Cmd.FPWR, address, Reg.AL_CONTROL,
                                          struct.pack("<H", target | AL_ERROR_ACK)),
                        deadline, f"{who}: requesting {target.name} (0x0120)")
     read = Datagram.physical(Cmd.FPRD, address, Reg.AL_STATUS, 6)
@@ -383,7 +383,7 @@ def _refused(who: str, target: AlState, al_status: int, code: int,
     return SdoToolError(text, al_code=code)
 
 
-def _empty_sm1(info: SlaveMailbox, channel: MailboxChannel) -> Job:
+def empty_sm1(info: SlaveMailbox, channel: MailboxChannel) -> Job:
     """Take out the messages an earlier transfer left for SM1 (a slave may have queued more
     than one, e.g. two answers to a request that was written twice)."""
     deadline = time.monotonic() + TIMEOUT_COMMAND
@@ -392,7 +392,7 @@ def _empty_sm1(info: SlaveMailbox, channel: MailboxChannel) -> Job:
     recv = channel.plan.recv
     read = Datagram.physical(Cmd.FPRD, channel.address, recv.start, recv.length)
     for _ in range(STALE_MESSAGES):
-        status = yield from _access(status_dg, deadline,
+        status = yield from access(status_dg, deadline,
                                     f"{who}: reading the SM1 status (0x080D)")
         if not status.data[0] & SM_STATUS_MAILBOX_FULL:
             return
@@ -409,5 +409,6 @@ def _empty_sm1(info: SlaveMailbox, channel: MailboxChannel) -> Job:
                        "read): is another master using this slave's mailbox?")
 
 
-__all__ = ["SdoToolError", "SlaveMailbox", "abort_name", "parse_address", "protocol_names",
-           "sdo_transfer"]
+__all__ = ["MailboxCounter", "SdoToolError", "SlaveMailbox", "abort_name", "access",
+           "empty_sm1", "mailbox_session", "open_mailbox", "parse_address", "protocol_names",
+           "request_state", "sdo_transfer", "station_address_of"]
