@@ -214,6 +214,7 @@ ESC_DC_SYNC_UNIT = 0x04
 # DC activation 0x0981 (the high byte of AssignActivate): bit 0 cyclic operation, bit 1
 # SYNC0, bit 2 SYNC1 (ESC Section II, Activation register 0x0981).
 DC_ACTIVATION = 0x0981
+DC_ACTIVATE_SYNC0 = 0x02
 DC_ACTIVATE_SYNC1 = 0x04
 ESC_DC_LATCH_UNIT = 0x08
 # PDI control 0x0140: the process data interface.  0x04 = digital I/O, the PDI of simple

@@ -308,7 +308,7 @@ def test_a_copy_from_one_slaves_inputs_to_anothers_outputs_is_clean(
 
 
 def test_every_rule_has_a_defect() -> None:
-    covered = {r for r, _, _ in DEFECTS} | {"ENI002", "ENI402"}   # tested below
+    covered = {r for r, _, _ in DEFECTS} | {"ENI002", "ENI402", "ENI403"}   # tested below
     assert covered == set(all_rules())
 
 
@@ -340,6 +340,32 @@ def test_a_fixed_sync0_cycle_other_than_the_enis_warns(tmp_path: Path,
     assert list(found) == ["ENI402"]
     assert "CycleTime0 is 1000000 ns" in found["ENI402"][0]
     assert "gives 500000 ns" in found["ENI402"][0]
+
+
+def test_a_sync0_cycle_below_the_devices_minimum_is_an_error(tmp_path: Path,
+                                                             example_eni: Path) -> None:
+    """The drive's dictionary says 0x1C32:05 = 500 µs (as Beckhoff files give it): the
+    example's 1 ms SYNC0 is fine; with a minimum of 2 ms (0x001E8480) it is refused."""
+    from test_diagnose import SM_PARAM_OBJECT, SM_PARAM_TYPES
+    for minimum, expected in (("20a10700", []), ("80841e00", ["ENI403"])):
+        shutil.rmtree(tmp_path / "esi", ignore_errors=True)
+        _drive_copy(tmp_path / "esi", "<DataTypes>", "<DataTypes>" + SM_PARAM_TYPES)
+        _drive_copy_more(tmp_path / "esi", "<Objects>", "<Objects>" + SM_PARAM_OBJECT.replace(
+            "20a10700", minimum))
+        found = _rules(check_eni(example_eni, Library([tmp_path / "esi"], cache=False),
+                                 use_cache=False))
+        assert list(found) == expected, found
+    [message] = found["ENI403"]
+    assert "DC CycleTime0 is 1000 µs with SYNC0 on" in message
+    assert "minimum cycle time 2000 µs (ESI 0x1C32:05 default" in message
+    assert "0x0035" in message
+
+
+def _drive_copy_more(folder: Path, old: str, new: str) -> None:
+    drive = folder / "ecatcfg-EXD402-drive.xml"
+    text = drive.read_text()
+    assert old in text
+    drive.write_text(text.replace(old, new, 1))
 
 
 def test_differing_descriptions_of_a_slave_are_named(tmp_path: Path,

@@ -11,10 +11,11 @@ from ecatcfg.eni.check.network import sm_pdos
 from ecatcfg.eni.check.rules import declare
 from ecatcfg.eni.plan import CoeInitCmd, PdoDesc, SlavePlan
 from ecatcfg.eni.words import foe_words, soe_words
-from ecatcfg.esc import REGISTER_WRITES, Reg
+from ecatcfg.esc import DC_ACTIVATE_SYNC0, REGISTER_WRITES, Reg
 from ecatcfg.esi import datatypes
 from ecatcfg.esi.coe import (TRANSITION_STATE, DictEntry, dictionary_with_objects, lookup,
                              write_refusal, write_target)
+from ecatcfg.esi.dc_cycle import min_cycle_time, us
 from ecatcfg.esi.library import DuplicateError, Library, SelectorError
 from ecatcfg.esi.model import Device, Pdo
 
@@ -66,6 +67,11 @@ CYCLE = declare("ENI402", "warning", "a DC cycle time the device's OpMode does n
     The ENI's DC CycleTime0/1 differ from the fixed CycleTimeSync0/1 (in ns, without a
     Factor) of the device's OpMode with the AssignActivate the ENI writes: the device's
     description says it takes that cycle only.""")
+MIN_CYCLE = declare("ENI403", "error", "a SYNC0 cycle shorter than the device's minimum", """
+    The ENI switches SYNC0 on (AssignActivate) with a DC CycleTime0 below the minimum cycle
+    time the device's dictionary gives (the default of 0x1C32:05 or 0x1C33:05, ETG.1020
+    "Minimum cycle time"). Slave Stack Code firmware checks the SYNC0 cycle against it
+    and refuses SAFEOP with AL status code 0x0035 (invalid sync cycle time).""")
 MAILBOX_SIZE = declare("ENI501", "error", "a mailbox outside the ESI's SyncManager sizes", """
     Mailbox/Send or Recv has a length outside the ESI's SM0/SM1 MinSize..MaxSize (or not
     the DefaultSize when no bounds are given) or a start address other than the ESI's
@@ -282,6 +288,12 @@ def _dc(ctx: CheckContext, slave: SlavePlan, device: Device) -> None:
     dc = slave.dc
     if dc is None:
         return
+    minimum = min_cycle_time(device)
+    if value >> 8 & DC_ACTIVATE_SYNC0 and dc.cycle_time0 and minimum is not None \
+            and dc.cycle_time0 < minimum.ns:
+        ctx.add(MIN_CYCLE, ctx.lines.child(slave, "DC"), f"DC CycleTime0 is "
+                f"{us(dc.cycle_time0)} with SYNC0 on; the device's {minimum.text()}: its "
+                "firmware refuses SAFEOP with AL status code 0x0035", slave)
     for mode in matching:
         fixed = [(name, want, got) for name, want, factor, got in (
             ("CycleTime0", mode.cycle_time_sync0, mode.cycle_time_sync0_factor, dc.cycle_time0),
