@@ -18,6 +18,10 @@ Run from the checkout:  python3 bench/soe.py [--writes 0,8,32] [--sizes 1024,409
    configuration (the rest).  Per added write: (configuration frames at N - at 0) / N and
    (PS time at N - at 0) / N, medians of R runs; the least a write can cost is 2 frames,
    one that writes the request into SM0 and one that reads the answer from SM1.
+   Over veth too (root): each ENI written (``eni.writer``) and run by ``ecatcfg apply ENI
+   --cycles 0 --format json`` as a process in one namespace, ``ecatcfg simulate`` of the
+   device started afresh for each device and round in the other; PS time and frames from
+   apply's own events (whole ms; its frames include the cyclic ones).
 2. **Fragmented transfers** (in memory: ``VirtualSegment.serve`` on a thread, the master's
    ``sdo_tool.mailbox_session`` + ``soe_client.soe_job``, what ``ecatcfg soe`` runs).  The
    same drive, its ESI rewritten into a temporary folder with both mailbox SyncManagers of
@@ -31,12 +35,14 @@ Run from the checkout:  python3 bench/soe.py [--writes 0,8,32] [--sizes 1024,409
    SM1 read per fragment.  Time is the transfer's alone (after the session's preparation);
    the baseline of the same run, a read of the 2-byte S-0-0032 (1 fragment each way).
 3. **Processes over veth** (root): ``ecatcfg simulate`` of the drive in one network
-   namespace; in the other, alternately ``ecatcfg scan --iface va`` and ``ecatcfg soe read
-   --iface va --slave 0 S-0-0030 --format json``, each a whole new process timed from spawn
-   to exit (``bench/startup.py``'s ``StartupBench.timed``).
+   namespace (``bench/virtual_segment.py``'s namespaces and veth pair); in the other,
+   alternately ``ecatcfg scan --iface va`` and ``ecatcfg soe read --iface va --slave 0
+   S-0-0030 --format json``, each a whole new process timed from spawn to exit
+   (``bench/startup.py``'s ``StartupBench.timed``).
 
-Nothing is asserted but the fragment counts and that a list read back is the list written:
-the figures go to docs/BENCHMARKS.md.
+Nothing is asserted but what makes the figures mean something: OP reached, the drive's
+log holding the writes, the fragment counts, the list read back equal to the list
+written, the version string read.  The figures go to docs/BENCHMARKS.md.
 """
 
 from __future__ import annotations
@@ -52,12 +58,12 @@ import sys
 import tempfile
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Generator, Iterator
 from pathlib import Path
 from typing import Any
 
 from startup import LOGICAL, StartupBench, datagrams
-from virtual_segment import IF_A, IF_B
+from virtual_segment import IF_A, IF_B, stop, wait_for
 
 ROOT = Path(__file__).resolve().parent.parent
 SOE_ESI = ROOT / "tests" / "fixtures" / "esi" / "soe_drive.xml"
@@ -128,6 +134,7 @@ def startup_plan(kind: str, n: int) -> Any:
         topology.loads(f"slaves:\n  - {{name: axis, device: {device}}}\n", "bench.yaml"),
         Library([esi], cache=False)).plan
     mailbox = plan.slaves[0].mailbox
+    assert mailbox is not None
     if kind == "SoE":
         mailbox.soe_init_cmds += [SoeInitCmd([Transition.PS], f"bench {i}", S_0_0032,
                                              b"\x0b\x00") for i in range(n)]
@@ -290,10 +297,10 @@ def transfers(sizes: list[int], mailboxes: list[int], repeat: int) -> dict[str, 
                 ("read S-0-0032 (baseline)", S_0_0032, None, 2, 1)]
             for size in sizes:
                 body = bytes((i * 31 + 7) & 0xFF for i in range(size - 4))
-                data = encode_list(body, max(sizes) - 4)
-                cases += [(f"write {size} B", LIST_IDN, data, size, fragments(size, mbx)),
+                listed = encode_list(body, max(sizes) - 4)
+                cases += [(f"write {size} B", LIST_IDN, listed, size, fragments(size, mbx)),
                           (f"read {size} B", LIST_IDN, None, size, fragments(size, mbx))]
-            rows: dict[str, list[dict[str, float]]] = {}
+            rows: dict[str, list[dict[str, Any]]] = {}
             for _ in range(repeat + 1):
                 for label, idn, data, size, frags in cases:
                     rows.setdefault(label, []).append(
@@ -310,7 +317,7 @@ def transfers(sizes: list[int], mailboxes: list[int], repeat: int) -> dict[str, 
             # What ``ecatcfg soe`` sends in all (soe_tool.soe_transfer): the preparation,
             # and for a write in fragments the attribute read that goes first.
             sessions = {}
-            for label, idn, data, *_ in cases:
+            for label, idn, data, _size, _frags in cases:
                 before = transport.counters.frames_sent
                 soe_tool.soe_transfer(transport, 0, idn, data)
                 sessions[label] = transport.counters.frames_sent - before
@@ -352,7 +359,7 @@ def one_transfer(transport: Any, census: MailboxCensus, idn: int,
     info = SlaveMailbox(0)
     info.protocol = "SoE"
 
-    def work(channel: Any, size: int, counter: Callable[[], int]) -> Iterator[Any]:
+    def work(channel: Any, size: int, counter: Callable[[], int]) -> Generator[Any, Any, None]:
         transfer = SoeTransfer(idn, data, mbx_out_size=size, counter=counter)
         start, t0 = len(census.frames), time.perf_counter()
         yield from soe_job(channel, transfer, None, None)
@@ -376,40 +383,103 @@ def print_transfers(res: dict[str, Any]) -> None:
               f"{r['tool_session_frames']} |")
 
 
-# ------------------------------------------------------------------ 3. processes over veth
+# ------------------------------------------------------------------ over veth
 
-def processes(repeat: int) -> dict[str, Any]:
-    bench = StartupBench()
+PS_LINE = re.compile(r"^PREOP -> SAFEOP: SAFEOP in (\d+) ms, (\d+) frames")
+
+
+def simulator(bench: StartupBench, esi: Path, device: str, folder: Path) -> Any:
+    """``ecatcfg simulate`` of one ``device`` in B, from power-on, once it is ready."""
+    topo = folder / f"{device.replace(' ', '_')}.yaml"
+    topo.write_text(f"slaves:\n  - {{name: axis, device: {device}}}\n")
+    sim = bench.start(bench.ns_b, [sys.executable, "-m", "ecatcfg", "simulate", "--esi",
+                                   str(esi), "--topology", str(topo), "--iface", IF_B,
+                                   "--duration", "3600", "--no-cache"])
+    wait_for(sim, "ready:", 60)
+    return sim
+
+
+def startup_veth(bench: StartupBench, writes: list[int], repeat: int,
+                 folder: Path) -> dict[str, Any]:
+    """``ecatcfg apply`` of each ENI as a process in A against a simulator started afresh
+    for each device and round; PS time and frames from apply's JSON events (whole ms; the
+    frames include the few cyclic frames PS runs)."""
+    from ecatcfg.eni import writer
+
+    enis = {}
+    for kind in ("CoE", "SoE"):
+        for n in writes:
+            enis[kind, n] = folder / f"{kind}-{n}.xml"
+            writer.write(startup_plan(kind, n), enis[kind, n])
+    runs: dict[tuple[str, int], list[dict[str, float]]] = {}
+    for i in range(repeat + 1):                          # the first round warms up
+        for kind, esi, device in (("CoE", COE_ESI, COE_DEVICE), ("SoE", SOE_ESI, SOE_DEVICE)):
+            sim = simulator(bench, esi, device, folder)
+            try:
+                for n in writes:
+                    argv = [sys.executable, "-m", "ecatcfg", "apply", str(enis[kind, n]),
+                            "--iface", IF_A, "--state", "op", "--cycles", "0",
+                            "--format", "json"]
+                    wall, stdout, _ = bench.timed(argv, 120)
+                    res = json.loads(stdout)
+                    if res.get("ok") is not True:
+                        raise SystemExit(f"apply {kind} {n} over veth: {stdout[:500]}")
+                    [ps] = [h for h in map(PS_LINE.match, res["events"]) if h]
+                    if i:
+                        runs.setdefault((kind, n), []).append(
+                            {"wall_s": wall, "frames": res["frames"]["sent"],
+                             "ps_ms": float(ps.group(1)), "ps_frames": float(ps.group(2))})
+            finally:
+                stop(sim)
+    out: dict[str, Any] = {}
+    for (kind, n), rows in runs.items():
+        out[f"{kind} {n}"] = {k: med([r[k] for r in rows]) for k in rows[0]} | {
+            "min_wall_s": min(r["wall_s"] for r in rows), "kind": kind, "writes": n}
+    for kind in ("CoE", "SoE"):
+        if 0 not in writes:
+            break
+        base = out[f"{kind} 0"]
+        for n in writes:
+            if n:
+                row = out[f"{kind} {n}"]
+                row["per_write_ps_frames"] = (row["ps_frames"] - base["ps_frames"]) / n
+                row["per_write_us"] = (row["ps_ms"] - base["ps_ms"]) / n * 1e3
+    return out
+
+
+def print_startup_veth(res: dict[str, Any]) -> None:
+    # No time per write here: PS's whole-ms time varies between runs by more than 32
+    # writes cost (the JSON has it all the same).
+    print("\n| over veth: device, added PS writes | apply process ms (min / median) | "
+          "frames | PS: ms, frames | per added write: PS frames |")
+    print("|---|---|---|---|---|")
+    for key, r in res.items():
+        per = (f"{r['per_write_ps_frames']:.2f}" if "per_write_ps_frames" in r else "-")
+        print(f"| {key} | {r['min_wall_s'] * 1e3:.0f} / {r['wall_s'] * 1e3:.0f} | "
+              f"{r['frames']:.0f} | {r['ps_ms']:.0f}, {r['ps_frames']:.0f} | {per} |")
+
+
+def processes(bench: StartupBench, repeat: int, folder: Path) -> dict[str, Any]:
+    """``ecatcfg scan`` and ``ecatcfg soe read`` as processes in A, alternately."""
     walls: dict[str, list[float]] = {"scan": [], "soe read": []}
     argvs = {"scan": [sys.executable, "-m", "ecatcfg", "scan", "--iface", IF_A],
              "soe read": [sys.executable, "-m", "ecatcfg", "soe", "read", "--iface", IF_A,
                           "--slave", "0", "S-0-0030", "--format", "json"]}
-    with tempfile.TemporaryDirectory() as tmp:
-        topo = Path(tmp) / "line.yaml"
-        topo.write_text(f"slaves:\n  - {{name: axis, device: {SOE_DEVICE}}}\n")
-        try:
-            bench.up()
-            sim = bench.start(bench.ns_b, [sys.executable, "-m", "ecatcfg", "simulate",
-                                           "--esi", str(SOE_ESI), "--topology", str(topo),
-                                           "--iface", IF_B, "--duration", "3600",
-                                           "--no-cache"])
-            while True:
-                line = sim.lines.get(timeout=60)                # type: ignore[attr-defined]
-                if line is None or line.startswith("ready:"):
-                    break
-            for i in range(repeat + 1):
-                for kind, argv in argvs.items():
-                    wall, out, _ = bench.timed(argv, 120)
-                    if kind == "soe read" and "ecatcfg emulated SoE drive" not in \
-                            bytes.fromhex(json.loads(out)["hex"]).decode("latin-1"):
-                        raise SystemExit(f"soe read answered {out[:300]!r}")
-                    if i:
-                        walls[kind].append(wall)
-        finally:
-            bench.close()
+    sim = simulator(bench, SOE_ESI, SOE_DEVICE, folder)
+    try:
+        for i in range(repeat + 1):
+            for kind, argv in argvs.items():
+                wall, out, _ = bench.timed(argv, 120)
+                if kind == "soe read" and "ecatcfg emulated SoE drive" not in \
+                        bytes.fromhex(json.loads(out)["hex"]).decode("latin-1"):
+                    raise SystemExit(f"soe read answered {out[:300]!r}")
+                if i:
+                    walls[kind].append(wall)
+    finally:
+        stop(sim)
     s, r = walls["scan"], walls["soe read"]
-    return {"scan_ms": [min(s) * 1e3, med(s) * 1e3], "soe_read_ms": [min(r) * 1e3,
-                                                                     med(r) * 1e3],
+    return {"scan_ms": [min(s) * 1e3, med(s) * 1e3],
+            "soe_read_ms": [min(r) * 1e3, med(r) * 1e3],
             "ratio": [min(r) / min(s), med(r) / med(s)]}
 
 
@@ -440,8 +510,17 @@ def main() -> None:
     results["load"]["after transfers"] = loadavg()
     print_transfers(results["transfers"])
     if not args.no_veth:
-        results["processes"] = p = processes(args.repeat)
-        results["load"]["after processes"] = loadavg()
+        bench = StartupBench()
+        try:
+            bench.up()
+            with tempfile.TemporaryDirectory() as tmp:
+                results["startup_veth"] = startup_veth(bench, writes, args.repeat, Path(tmp))
+                results["load"]["after start-up over veth"] = loadavg()
+                print_startup_veth(results["startup_veth"])
+                results["processes"] = p = processes(bench, args.repeat, Path(tmp))
+                results["load"]["after processes"] = loadavg()
+        finally:
+            bench.close()
         print(f"\nprocesses over veth, ms min / median: ecatcfg scan {p['scan_ms'][0]:.0f} / "
               f"{p['scan_ms'][1]:.0f}, ecatcfg soe read {p['soe_read_ms'][0]:.0f} / "
               f"{p['soe_read_ms'][1]:.0f}; soe read / scan {p['ratio'][0]:.2f}x / "
