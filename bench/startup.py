@@ -110,7 +110,7 @@ from virtual_segment import (IF_A, IF_B, RECORD, Bench, line, read_frames, run_a
 
 ROOT = Path(__file__).resolve().parent.parent
 ESI_DIR = ROOT / "examples" / "esi"
-CORPUS = ROOT.parent / "shared" / "corpus" / "esi"
+CORPUS = Path(os.environ.get("ECATCFG_CORPUS", ROOT.parent / "shared" / "corpus")) / "esi"
 TIME_TARGET = 1.0
 REALISTIC_TARGET = 0.2
 FRAME_TARGET = 1.2
