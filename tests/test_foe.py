@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import struct
 import subprocess
 import sys
@@ -328,10 +329,14 @@ def test_foe_command_against_ecatcfg_simulate(veth_netns, tmp_path):
                                                             math.ceil(3000 / 232))
     assert out["identity_before"]["revision"] == REVISION
     back = tmp_path / "back.efw"
+    earlier = tmp_path / "earlier.efw"
+    earlier.write_bytes(b"an earlier image")
+    os.link(earlier, back)          # FILE is replaced whole, never rewritten in place
     done = ecatcfg_in(veth_netns, "foe", "read", "--slave", "0", str(back), "--name",
                       "app.efw")
     assert done.returncode == 0, done.stderr
     assert back.read_bytes() == image.read_bytes()
+    assert earlier.read_bytes() == b"an earlier image"
     assert "3000 bytes read from slave 0 in BOOT" in done.stdout
     wrong = ecatcfg_in(veth_netns, "foe", "read", "--slave", "0", str(back), "--name",
                        "app.efw", "--password", "0x1234")
