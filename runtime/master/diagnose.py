@@ -69,7 +69,6 @@ DIAG_NEWEST = 2                # its subindex "newest message"
 DIAG_FIRST_MESSAGE = 6         # messages from this subindex on
 _DC_CODES = (AlStatusCode.DC_INVALID_SYNC, AlStatusCode.DC_INVALID_SYNC_CYCLE,
              AlStatusCode.DC_INVALID_SYNC0_CYCLE, AlStatusCode.DC_INVALID_SYNC1_CYCLE)
-SOE_INVALID_CP2 = 21           # S-0-0021, IDN-list of invalid operation data for CP2
 SDO_TIMEOUT = 1.0              # s per diagnostic upload: a slave that does not answer is said
 NO_COE = "does not support CoE"
 
@@ -505,7 +504,7 @@ def _dc(position: int, context: Context, fields: dict[str, Any],
 def _soe_invalid(mailbox: _Mailbox, fields: dict[str, Any]) -> Step[list[str]]:
     """Each drive's S-0-0021 (IDN-list of invalid operation data for CP2), from drive 0 on
     until one the slave does not have (SoE error 0x800A, invalid drive number)."""
-    from ecatcfg.esi.idn import idn_text
+    from ecatcfg.esi.idn import IDN_LIST_INVALID_CP2, idn_text
     from ecatcfg.runtime.master.soe_client import SoeRefused
     from ecatcfg.runtime.soe import SOE_INVALID_DRIVE, decode_list
 
@@ -513,7 +512,7 @@ def _soe_invalid(mailbox: _Mailbox, fields: dict[str, Any]) -> Step[list[str]]:
     invalid: dict[int, list[str]] = {}
     for drive in range(8):
         try:
-            value = yield from mailbox.soe_read(SOE_INVALID_CP2, drive)
+            value = yield from mailbox.soe_read(IDN_LIST_INVALID_CP2, drive)
             items, _maximum = decode_list(value)
         except SoeRefused as exc:
             if exc.soe_error != SOE_INVALID_DRIVE or not drive:

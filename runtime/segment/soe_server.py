@@ -51,6 +51,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass, field
 
 from ecatcfg.esc import AlState
+from ecatcfg.esi.idn import IDN_LIST_ALL, IDN_LIST_CP2, IDN_LIST_INVALID_CP2
 from ecatcfg.esi.model import SoeSettings
 from ecatcfg.runtime.mailbox import MailboxProtocolError, MbxErrorDetail
 from ecatcfg.runtime.soe import (
@@ -71,7 +72,6 @@ _RUNNING = ATTR_WP_SAFEOP | ATTR_WP_OP
 _WP_BY_STATE = {AlState.PREOP: ATTR_WP_PREOP, AlState.SAFEOP: ATTR_WP_SAFEOP,
                 AlState.OP: ATTR_WP_OP}
 
-S_0_0017, S_0_0018, S_0_0021 = 17, 18, 21
 LIST_MAX = 128                      # bytes an emulated IDN list can hold
 
 
@@ -180,9 +180,10 @@ def build_drives(settings: SoeSettings | None) -> list[SoeDrive]:
                                                                is_list=True) | _READ_ONLY,
                              encode_list(MANUFACTURER_VERSION), True,
                              len(MANUFACTURER_VERSION))
-        for idn, name in ((S_0_0017, "IDN-list of all operation data"),
-                          (S_0_0018, "IDN-list of operation data for CP2"),
-                          (S_0_0021, "IDN-list of invalid operation data for CP2")):
+        for idn, name in ((IDN_LIST_ALL, "IDN-list of all operation data"),
+                          (IDN_LIST_CP2, "IDN-list of operation data for CP2"),
+                          (IDN_LIST_INVALID_CP2,
+                           "IDN-list of invalid operation data for CP2")):
             drive.idns[idn] = _list(name, b"", ATTR_TYPE_IDN, 2)
     for cmd in settings.init_cmds if settings is not None else []:
         if cmd.idn is None or cmd.data is None or cmd.channel >= len(drives):
@@ -196,8 +197,8 @@ def build_drives(settings: SoeSettings | None) -> list[SoeDrive]:
         if required and cmd.idn not in drive.required:
             drive.required.append(cmd.idn)
     for drive in drives:
-        drive.set_list(S_0_0017, sorted(drive.idns))
-        drive.set_list(S_0_0018, drive.required)
+        drive.set_list(IDN_LIST_ALL, sorted(drive.idns))
+        drive.set_list(IDN_LIST_CP2, drive.required)
     return drives
 
 
@@ -228,7 +229,7 @@ class SoeServer:
         refused = []
         for drive in self.drives:
             missing = drive.missing()
-            drive.set_list(S_0_0021, missing)
+            drive.set_list(IDN_LIST_INVALID_CP2, missing)
             if missing:
                 refused.append((drive.number, missing))
         return refused
