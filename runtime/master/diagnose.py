@@ -504,13 +504,13 @@ def _dc(position: int, context: Context, fields: dict[str, Any],
 def _soe_invalid(mailbox: _Mailbox, fields: dict[str, Any]) -> Step[list[str]]:
     """Each drive's S-0-0021 (IDN-list of invalid operation data for CP2), from drive 0 on
     until one the slave does not have (SoE error 0x800A, invalid drive number)."""
-    from ecatcfg.esi.idn import IDN_LIST_INVALID_CP2, idn_text
+    from ecatcfg.esi.idn import IDN_LIST_INVALID_CP2, MAX_DRIVE, idn_text
     from ecatcfg.runtime.master.soe_client import SoeRefused
     from ecatcfg.runtime.soe import SOE_INVALID_DRIVE, decode_list
 
     lines: list[str] = []
     invalid: dict[int, list[str]] = {}
-    for drive in range(8):
+    for drive in range(MAX_DRIVE + 1):
         try:
             value = yield from mailbox.soe_read(IDN_LIST_INVALID_CP2, drive)
             items, _maximum = decode_list(value)
