@@ -43,7 +43,10 @@ IDN_LIST_ALL = 17              # S-0-0017, IDN-list of all operation data
 IDN_LIST_CP2 = 18              # S-0-0018, IDN-list of operation data for CP2
 IDN_LIST_INVALID_CP2 = 21      # S-0-0021, IDN-list of invalid operation data for CP2
 
-_NOTATION = re.compile(r"^\s*([SP])\s*-\s*([0-7])\s*-\s*([0-9]{1,4})\s*$", re.IGNORECASE)
+# The notation as a regular expression without flags, so that the topology's JSON schema
+# (compiler/topology.py) takes the same text.
+NOTATION_PATTERN = r"^\s*([SPsp])\s*-\s*([0-7])\s*-\s*([0-9]{1,4})\s*$"
+_NOTATION = re.compile(NOTATION_PATTERN)
 
 
 class StandardIdn(NamedTuple):
