@@ -59,14 +59,11 @@ from ecatcfg.runtime.soe import (
     ATTR_WP_PREOP, ATTR_WP_SAFEOP, ELEMENT_ATTRIBUTE, ELEMENT_NAME, ELEMENT_VALUE,
     SOE_DATA_READ_ONLY, SOE_DATA_TOO_LONG, SOE_DATA_TOO_SHORT, SOE_DATA_WRITE_PROTECTED,
     SOE_GENERAL_ERROR, SOE_INVALID_DRIVE, SOE_NO_ELEMENT, SOE_NO_ELEMENT_CODES, SOE_NO_IDN,
+    SOE_READ_ONLY_ELEMENT_CODES,
     Reassembly, SoeMessage, SoeOpCode, attribute, decode_list, decode_soe, encode_error,
     encode_fragments, encode_list, encode_write_response,
 )
 
-# Errors for writing an element other than the value: it is read only (name, attribute,
-# unit, minimum, maximum, default).
-_READ_ONLY_ELEMENT = {0x02: 0x2004, 0x04: 0x3004, 0x08: 0x4004, 0x10: 0x5004, 0x20: 0x6004,
-                      0x80: 0x8004}
 _READ_ONLY = ATTR_WP_PREOP | ATTR_WP_SAFEOP | ATTR_WP_OP
 _RUNNING = ATTR_WP_SAFEOP | ATTR_WP_OP
 _WP_BY_STATE = {AlState.PREOP: ATTR_WP_PREOP, AlState.SAFEOP: ATTR_WP_SAFEOP,
@@ -293,7 +290,7 @@ class SoeServer:
             if not message.elements:
                 return self._error(op, message, SOE_NO_ELEMENT)
             lowest = other & -other
-            return self._error(op, message, _READ_ONLY_ELEMENT.get(lowest, SOE_NO_ELEMENT))
+            return self._error(op, message, SOE_READ_ONLY_ELEMENT_CODES.get(lowest, SOE_NO_ELEMENT))
         drive = self.drives[message.drive_no]
         entry = drive.idns.get(message.idn)
         if entry is None:
