@@ -77,10 +77,11 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                          "(less wake-up jitter for that much CPU time per cycle; default 0)")
     p.add_argument("--format", choices=["text", "json"], default="text")
     p.add_argument("--skip-unsupported", action="store_true",
-                   help="apply an ENI that asks for what apply does not do (SoE, FoE, AoE or "
-                        "VoE InitCmds, slave-to-slave copies ...: see docs/runtime.md) without "
-                        "those parts, with one warning per slave; by default it is refused "
-                        "before anything is sent")
+                   help="apply an ENI that asks for what apply does not do (AoE or VoE "
+                        "InitCmds, SoE requests other than writes, FoE requests other than "
+                        "reads, copies outside the process image ...: see docs/runtime.md) "
+                        "without those parts, with one warning per slave; by default it is "
+                        "refused before anything is sent")
     p.add_argument("--no-cache", action="store_true",
                    help="parse the ENI (and with --virtual the ESI files) even if cached "
                         "in $XDG_CACHE_HOME/ecatcfg")

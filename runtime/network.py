@@ -77,7 +77,8 @@ class Network:
                  esi_prefer: list[str | Path] | None = None,
                  _closers: Iterable[Callable[[], None]] = ()) -> None:
         """``skip_unsupported``: run an ENI that asks for what this master does not do
-        (``eni/contents.py``: SoE/FoE/AoE/VoE InitCmds, slave-to-slave copies ...) without
+        (``eni/contents.py``: AoE and VoE InitCmds, SoE requests other than writes, FoE
+        requests other than reads, copies outside the process image ...) without
         those parts, with one warning per slave (an ``Event("skipped", ...)`` to
         ``on_event``, else a :class:`SkippedConfigWarning`); by default such an ENI raises
         :class:`~ecatcfg.eni.contents.UnsupportedEniError` here, before any frame is sent.
