@@ -30,7 +30,7 @@ from ecatcfg.eni.plan import (CoeInitCmd, CopyInfo, EoeInitCmd, FoeInitCmd, Init
 from ecatcfg.esc import (AL_ERROR_ACK, AL_ID_REQUEST, FMMU_SIZE, REGISTER_READS,
                          REGISTER_WRITES, RX_PDO_MAPPING, SM_DIR_ECAT_WRITES, SM_DIR_MASK,
                          SM_MODE_MAILBOX, SM_MODE_MASK, SM_PDO_ASSIGN_RANGE, SM_SIZE,
-                         TX_PDO_MAPPING, Cmd, FmmuConfig, FmmuType, Reg, SmConfig,
+                         TX_PDO_MAPPING, Cmd, FmmuConfig, FmmuType, FoeOpCode, Reg, SmConfig,
                          al_state_name, fmmu_register, sm_register,
                          watchdog_base_ns)
 from ecatcfg.esi.idn import VALUE_ELEMENT, WRITE_REQUEST, idn_text
@@ -285,10 +285,10 @@ def soe_words(cmd: SoeInitCmd) -> str:
 def foe_words(cmd: FoeInitCmd) -> str:
     """``FoE read 'config.bin' (password 0x0000002A)``; another OpCode by number (the
     reader has refused it unless it is disabled)."""
-    if cmd.opcode == 1:
+    if cmd.opcode == FoeOpCode.READ:
         password = f" (password 0x{cmd.password:08X})" if cmd.password else ""
         text = f"FoE read {cmd.file_name!r}{password}"
-    elif cmd.opcode == 2:
+    elif cmd.opcode == FoeOpCode.WRITE:
         text = f"FoE write {cmd.file_name!r}"
     else:
         text = f"FoE {cmd.data.hex()}"
