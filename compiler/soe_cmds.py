@@ -25,8 +25,7 @@ from ecatcfg.compiler.topology import Soe
 from ecatcfg.eni.plan import SoeInitCmd
 from ecatcfg.esc import Transition
 from ecatcfg.esi import datatypes
-from ecatcfg.esi.idn import (ENI_TRANSITIONS, MAX_DRIVE, STANDARD_IDNS, eni_transition,
-                             idn_text, standard)
+from ecatcfg.esi.idn import ENI_TRANSITIONS, STANDARD_IDNS, eni_transition, idn_text, standard
 from ecatcfg.esi.model import Device, Module
 from ecatcfg.esi.model import SoeInitCmd as EsiSoeInitCmd
 from ecatcfg.record import replace
@@ -37,10 +36,9 @@ class Errors(Protocol):
 
 
 def drive_count(device: Device) -> int:
-    """The drives behind the slave (``SoeSettings.drives``; 1 without ``Mailbox/SoE``), at
-    most the 8 the SoE header's drive number can address."""
+    """The drives behind the slave (``SoeSettings.drives``; 1 without ``Mailbox/SoE``)."""
     soe = device.mailbox.soe if device.mailbox else None
-    return min(soe.drives, MAX_DRIVE + 1) if soe is not None else 1
+    return soe.drives if soe is not None else 1
 
 
 def esi_problem(cmd: EsiSoeInitCmd, device: Device) -> str:

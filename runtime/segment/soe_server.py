@@ -51,7 +51,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass, field
 
 from ecatcfg.esc import AlState
-from ecatcfg.esi.idn import IDN_LIST_ALL, IDN_LIST_CP2, IDN_LIST_INVALID_CP2, MAX_DRIVE
+from ecatcfg.esi.idn import IDN_LIST_ALL, IDN_LIST_CP2, IDN_LIST_INVALID_CP2
 from ecatcfg.esi.model import SoeSettings
 from ecatcfg.runtime.mailbox import MailboxProtocolError, MbxErrorDetail
 from ecatcfg.runtime.soe import (
@@ -168,8 +168,8 @@ def _esi_idn(data: bytes, required: bool) -> Idn:
 def build_drives(settings: SoeSettings | None) -> list[SoeDrive]:
     """The drives of an ESI's ``Mailbox/SoE``: the standard IDNs, the IDNs its InitCmds
     write, S-0-0018 listing those written in PS."""
-    count = max(1, settings.channel_count or 1) if settings is not None else 1
-    drives = [SoeDrive(n) for n in range(min(count, MAX_DRIVE + 1))]
+    count = settings.drives if settings is not None else 1
+    drives = [SoeDrive(n) for n in range(count)]
     for drive in drives:
         for idn, (name, size, protect) in STANDARD_IDNS.items():
             drive.idns[idn] = _number(name, size, protect)
