@@ -11,7 +11,7 @@ says it in one or two lines (``docs/diagnostics.md`` has the table):
   enabled, or no FMMU of that direction over it (SOES ``ESC_checkSM23`` checks the same);
 - 0x001B SM watchdog: the watchdog time (0x0420 in the base of 0x0400), its status
   (0x0440) and counter (0x0442): outputs stopped arriving for longer than that time;
-- 0x0035 / 0x0036 / 0x0030 DC SYNC: the activation (0x0981), SYNC0/SYNC1 cycle times
+- 0x0030 / 0x0035 / 0x0036 / 0x0037 DC SYNC: the activation (0x0981), SYNC0/SYNC1 cycle times
   (0x09A0, 0x09A4), with an ENI the cycle time it asks for, the minimum cycle time the
   slave reports over CoE (0x1C32:05 / 0x1C33:05, ETG.1020: Slave Stack Code firmware
   refuses a shorter SYNC0 cycle) and, with ESI files, the device's SYNC0 op modes and
