@@ -67,6 +67,8 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"--slave {args.slave}: positions count from 0")
     if args.timeout <= 0:
         raise UsageError(f"--timeout {args.timeout}: must be positive")
+    if getattr(args, "max_size", 0) < 0:
+        raise UsageError(f"--max-size {args.max_size}: a file has 0 bytes or more")
     try:
         password = foe_tool.parse_password(args.password)
     except ValueError as exc:

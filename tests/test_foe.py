@@ -498,3 +498,15 @@ def test_a_foe_init_cmd_in_boot_transitions_is_refused(lib, tmp_path):
     [part] = back.unsupported
     assert part.element == "FoE/InitCmds/InitCmd" and "transition IB" in part.what
     assert back.slaves[0].mailbox.foe_init_cmds == []       # left out: never sent
+
+
+def test_a_negative_max_size_is_refused_before_the_line_is_touched(tmp_path):
+    """--max-size is checked with the other options (exit 2 naming it), not after the
+    slave has been taken to BOOT and its first data packet has come."""
+    done = subprocess.run([sys.executable, "-m", "ecatcfg", "foe", "read", "--iface",
+                           "ecatcfg-none0", "--slave", "0", str(tmp_path / "back.efw"),
+                           "--max-size", "-1"], capture_output=True, text=True, cwd=ROOT,
+                          timeout=60)
+    assert done.returncode == 2, done.stderr
+    assert "--max-size -1" in done.stderr and "Traceback" not in done.stderr
+    assert not (tmp_path / "back.efw").exists()
