@@ -283,7 +283,8 @@ TRANSITION_RULES: dict[Transition, TransitionRule] = {
         "the scan; for a slave brought back, after its INIT request)",
         _NO_MAILBOX_INIT, False),
     Transition.IP: TransitionRule(
-        "on the way up; CoE and EoE once the slave is in PREOP",
+        "on the way up; the mailbox InitCmds (CoE, SoE, EoE, FoE) once the slave is in "
+        "PREOP",
         "the mailbox starts working in PREOP", True),
     Transition.PS: TransitionRule("on the way up", "mailbox in PREOP (the PDO assignment "
                                   "before SAFEOP)", True),
