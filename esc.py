@@ -262,7 +262,7 @@ class TransitionRule:
     ``sent``: where apply's sequence sends them, or ``""`` for a transition apply never
     takes (its commands belong to a path apply does not go: nothing it promises needs
     them).  ``mailbox``: whether the slave's mailbox works during the transition, so that a
-    CoE or EoE command there can be answered at all (ETG.1000.6: no mailbox in INIT; in
+    CoE, SoE, EoE or FoE command there can be answered at all (ETG.1000.6: no mailbox in INIT; in
     BOOT only the bootstrap mailbox, for FoE); a mailbox command in a transition without
     one is refused by name, whoever would run it."""
 

@@ -1,4 +1,5 @@
-"""An ENI's InitCmds in words: what each register, CoE, EoE or SoE command does to the slave.
+"""An ENI's InitCmds in words: what each register, CoE, EoE, SoE or FoE command does to the
+slave.
 
 ``show`` lists them per transition, ``diff`` compares them, and ``apply`` names a failing
 command by :func:`init_cmd_name`.  The words come from the register a command writes and its
@@ -16,6 +17,7 @@ from the file's ``Comment`` (free text a tool may write in any language, or leav
   entry is a PDO index, a mapping entry index << 16 | subindex << 8 | bit length).
 - ``SoE write S-0-0001 (drive 0) = d0 07``: an SoE write request of an IDN's value
   (ETG.1000.6 SoE, IDN notation of ``esi/idn.py``), its data in wire order.
+- ``FoE read 'cal.bin' (password 0x0000002A)``: an FoE read request (ETG.1000.6 FoE).
 - Any other command: its name, register and data (``FPWR 0x0103 = 0x00``).
 
 A slave-to-slave copy (``CopyInfo``) in words names the variables its bits are in:
