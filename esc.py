@@ -214,9 +214,19 @@ ESC_DC_SYNC_UNIT = 0x04
 # DC activation 0x0981 (the high byte of AssignActivate): bit 0 cyclic operation, bit 1
 # SYNC0, bit 2 SYNC1 (ESC Section II, Activation register 0x0981).
 DC_ACTIVATION = 0x0981
+DC_ACTIVATE_CYCLIC = 0x01
 DC_ACTIVATE_SYNC0 = 0x02
 DC_ACTIVATE_SYNC1 = 0x04
 ESC_DC_LATCH_UNIT = 0x08
+
+
+def sync0_running(activation: int) -> bool:
+    """Whether the activation byte of 0x0981 (an AssignActivate's high byte) runs SYNC0:
+    cyclic operation and SYNC0 both on."""
+    on = DC_ACTIVATE_CYCLIC | DC_ACTIVATE_SYNC0
+    return activation & on == on
+
+
 # PDI control 0x0140: the process data interface.  0x04 = digital I/O, the PDI of simple
 # terminals (EL1xxx, EL2xxx): the ESC drives the I/O pins from process memory itself
 # (ESC Section II, PDI Control 0x0140).

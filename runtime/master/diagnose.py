@@ -51,6 +51,7 @@ from ecatcfg.esc import (AL_STATE_MASK, AL_STATUS_ERROR, FMMU_SIZE, SII_PRODUCT_
                          SM_OUTPUT_PARAMETER, SM_PARAMETER_MIN_CYCLE, SM_PDO_ASSIGN, SM_SIZE,
                          AlState, AlStatusCode, Cmd, FmmuConfig, FmmuType, Reg, SmConfig,
                          al_state_name, al_status_name, fmmus_cover, sm_register,
+                         sync0_running,
                          watchdog_base_ns)
 from ecatcfg.record import record
 from ecatcfg.runtime.master.lockstep import Job, Step, run_jobs
@@ -443,7 +444,7 @@ def _dc(position: int, context: Context, fields: dict[str, Any],
     fields["dc"] = dc
     text = (f"SYNC activation 0x0981 = 0x{activation:02X}, SYNC0 cycle time 0x09A0 = "
             f"{sync0} ns, SYNC1 cycle time 0x09A4 = {sync1} ns")
-    if activation & 0x03 == 0x03 and not sync0:
+    if sync0_running(activation) and not sync0:
         text += ": SYNC0 is on without a cycle time (no InitCmd wrote 0x09A0?)"
     lines = [text]
     slave = context.slave
