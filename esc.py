@@ -214,9 +214,19 @@ ESC_DC_SYNC_UNIT = 0x04
 # DC activation 0x0981 (the high byte of AssignActivate): bit 0 cyclic operation, bit 1
 # SYNC0, bit 2 SYNC1 (ESC Section II, Activation register 0x0981).
 DC_ACTIVATION = 0x0981
+DC_ACTIVATE_CYCLIC = 0x01
 DC_ACTIVATE_SYNC0 = 0x02
 DC_ACTIVATE_SYNC1 = 0x04
 ESC_DC_LATCH_UNIT = 0x08
+
+
+def sync0_running(activation: int) -> bool:
+    """Whether the activation byte of 0x0981 (an AssignActivate's high byte) runs SYNC0:
+    cyclic operation and SYNC0 both on."""
+    on = DC_ACTIVATE_CYCLIC | DC_ACTIVATE_SYNC0
+    return activation & on == on
+
+
 # PDI control 0x0140: the process data interface.  0x04 = digital I/O, the PDI of simple
 # terminals (EL1xxx, EL2xxx): the ESC drives the I/O pins from process memory itself
 # (ESC Section II, PDI Control 0x0140).
@@ -262,7 +272,7 @@ class TransitionRule:
     ``sent``: where apply's sequence sends them, or ``""`` for a transition apply never
     takes (its commands belong to a path apply does not go: nothing it promises needs
     them).  ``mailbox``: whether the slave's mailbox works during the transition, so that a
-    CoE or EoE command there can be answered at all (ETG.1000.6: no mailbox in INIT; in
+    CoE, SoE, EoE or FoE command there can be answered at all (ETG.1000.6: no mailbox in INIT; in
     BOOT only the bootstrap mailbox, for FoE); a mailbox command in a transition without
     one is refused by name, whoever would run it."""
 
@@ -283,7 +293,8 @@ TRANSITION_RULES: dict[Transition, TransitionRule] = {
         "the scan; for a slave brought back, after its INIT request)",
         _NO_MAILBOX_INIT, False),
     Transition.IP: TransitionRule(
-        "on the way up; CoE and EoE once the slave is in PREOP",
+        "on the way up; the mailbox InitCmds (CoE, SoE, EoE, FoE) once the slave is in "
+        "PREOP",
         "the mailbox starts working in PREOP", True),
     Transition.PS: TransitionRule("on the way up", "mailbox in PREOP (the PDO assignment "
                                   "before SAFEOP)", True),

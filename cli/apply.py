@@ -77,12 +77,13 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                          "(less wake-up jitter for that much CPU time per cycle; default 0)")
     p.add_argument("--format", choices=["text", "json"], default="text")
     p.add_argument("--skip-unsupported", action="store_true",
-                   help="apply an ENI that asks for what apply does not do (SoE, FoE, AoE or "
-                        "VoE InitCmds, slave-to-slave copies ...: see docs/runtime.md) without "
-                        "those parts, with one warning per slave; by default it is refused "
-                        "before anything is sent")
+                   help="apply an ENI that asks for what apply does not do (AoE or VoE "
+                        "InitCmds, SoE requests other than writes, FoE requests other than "
+                        "reads, copies outside the process image ...: see docs/runtime.md) "
+                        "without those parts, with one warning per slave; by default it is "
+                        "refused before anything is sent")
     p.add_argument("--no-cache", action="store_true",
-                   help="parse the ENI (and with --virtual the ESI files) even if cached "
+                   help="parse the ENI (and the ESI files of --esi) even if cached "
                         "in $XDG_CACHE_HOME/ecatcfg")
     p.set_defaults(run=run)
 
@@ -234,7 +235,7 @@ def _network(args: argparse.Namespace, plan: NetworkPlan, on_event: Callable[[Ev
     from ecatcfg.runtime.link import RawLink
     return Network(plan, RawLink(args.iface), pcap=args.pcap, on_event=on_event,
                    skip_unsupported=True, eni_name=args.eni, esi=args.esi,
-                   esi_prefer=args.prefer,
+                   esi_prefer=args.prefer, esi_cache=not args.no_cache,
                    dc_threshold_ns=dc_threshold, dc_timeout_s=dc_timeout)
 
 

@@ -58,6 +58,7 @@ def run(args: argparse.Namespace) -> int:
     from ecatcfg.cli.paths import output_file
     from ecatcfg.errors import UsageError
     from ecatcfg.esc import AlState
+    from ecatcfg.fileio import write_atomic
     from ecatcfg.runtime.link import RawLink
     from ecatcfg.runtime.master import foe_tool
     from ecatcfg.runtime.master.transport import Transport
@@ -66,6 +67,8 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"--slave {args.slave}: positions count from 0")
     if args.timeout <= 0:
         raise UsageError(f"--timeout {args.timeout}: must be positive")
+    if getattr(args, "max_size", 0) < 0:
+        raise UsageError(f"--max-size {args.max_size}: a file has 0 bytes or more")
     try:
         password = foe_tool.parse_password(args.password)
     except ValueError as exc:
@@ -75,7 +78,10 @@ def run(args: argparse.Namespace) -> int:
     if args.action == "write":
         if not path.is_file():
             raise UsageError(f"{args.file}: no such file")
-        data = path.read_bytes()
+        try:
+            data = path.read_bytes()
+        except OSError as exc:
+            raise UsageError(f"{args.file}: cannot read: {exc.strerror}") from None
     else:
         output_file(path)
     name = args.name if args.name is not None else path.name
@@ -92,7 +98,12 @@ def run(args: argparse.Namespace) -> int:
             if bar is not None:
                 bar.close()
     if data is None:
-        path.write_bytes(report.data)
+        # Replaced whole or not at all: an interrupted or refused write never leaves a
+        # firmware image half-written where a later `foe write` could send it.
+        try:
+            write_atomic(path, report.data)
+        except OSError as exc:
+            raise UsageError(f"{args.file}: cannot write: {exc.strerror}") from None
     out = _json(report)
     if args.format == "json":
         print(json.dumps(out, indent=2))

@@ -129,7 +129,7 @@ def _decoded(result: bytes, element: str, type_name: str | None) -> dict[str, An
 def _checked(args: argparse.Namespace) -> tuple[int, str | None]:
     """The IDN and base type of the command line, checked (exit 2) before a link opens."""
     from ecatcfg.errors import UsageError
-    from ecatcfg.esi.idn import parse_idn
+    from ecatcfg.esi.idn import MAX_DRIVE, parse_idn
 
     try:
         idn = parse_idn(args.idn, numbers=True)
@@ -137,8 +137,8 @@ def _checked(args: argparse.Namespace) -> tuple[int, str | None]:
         raise UsageError(str(exc)) from None
     if args.slave < 0:
         raise UsageError(f"--slave {args.slave}: positions count from 0")
-    if not 0 <= args.drive <= 7:
-        raise UsageError(f"--drive {args.drive}: the SoE header numbers drives 0..7")
+    if not 0 <= args.drive <= MAX_DRIVE:
+        raise UsageError(f"--drive {args.drive}: the SoE header numbers drives 0..{MAX_DRIVE}")
     if args.timeout <= 0:
         raise UsageError(f"--timeout {args.timeout}: must be positive")
     type_name = None

@@ -25,7 +25,7 @@ from ecatcfg.compiler.topology import Soe
 from ecatcfg.eni.plan import SoeInitCmd
 from ecatcfg.esc import Transition
 from ecatcfg.esi import datatypes
-from ecatcfg.esi.idn import ENI_TRANSITIONS, MAX_DRIVE, eni_transition, idn_text, standard
+from ecatcfg.esi.idn import ENI_TRANSITIONS, STANDARD_IDNS, eni_transition, idn_text, standard
 from ecatcfg.esi.model import Device, Module
 from ecatcfg.esi.model import SoeInitCmd as EsiSoeInitCmd
 from ecatcfg.record import replace
@@ -36,10 +36,9 @@ class Errors(Protocol):
 
 
 def drive_count(device: Device) -> int:
-    """The drives behind the slave (``SoeSettings.drives``; 1 without ``Mailbox/SoE``), at
-    most the 8 the SoE header's drive number can address."""
+    """The drives behind the slave (``SoeSettings.drives``; 1 without ``Mailbox/SoE``)."""
     soe = device.mailbox.soe if device.mailbox else None
-    return min(soe.drives, MAX_DRIVE + 1) if soe is not None else 1
+    return soe.drives if soe is not None else 1
 
 
 def esi_problem(cmd: EsiSoeInitCmd, device: Device) -> str:
@@ -145,9 +144,9 @@ def _data(name: str, entry: Soe, shown: str, where: tuple[str | int, ...],
     known = standard(entry.idn)
     type_name = entry.type or (known.type if known else None)
     if type_name is None:
+        known_idns = ", ".join(idn_text(idn) for idn in sorted(STANDARD_IDNS))
         errors.add(f"slave {name!r}: {shown} is not among the IDNs ecatcfg knows the type "
-                   "of (S-0-0001, S-0-0002, S-0-0015, S-0-0032, S-0-0099); give 'type' "
-                   "(e.g. UINT) or 'data'", *where)
+                   f"of ({known_idns}); give 'type' (e.g. UINT) or 'data'", *where)
         return None
     if known is not None and entry.type is not None:
         given, want = datatypes.bit_size(entry.type), datatypes.bit_size(known.type)

@@ -29,7 +29,7 @@ from ecatcfg.eoe import DNS_NAME_SIZE
 from ecatcfg.errors import EcatcfgError
 from ecatcfg.esc import PORT_LETTERS, Transition
 from ecatcfg.esi.datatypes import bit_size as type_bits
-from ecatcfg.esi.idn import MAX_DRIVE, parse_idn
+from ecatcfg.esi.idn import MAX_DRIVE, NOTATION_PATTERN, parse_idn
 from ecatcfg.esi.values import parse_int
 
 Path_ = tuple[str | int, ...]
@@ -260,7 +260,7 @@ def _idn(value: Any) -> int:
 
 
 Idn = Annotated[int, BeforeValidator(_idn), WithJsonSchema(
-    {"type": "string", "pattern": r"^\s*[SPsp]\s*-\s*[0-7]\s*-\s*[0-9]{1,4}\s*$",
+    {"type": "string", "pattern": NOTATION_PATTERN,
      "description": "IDN, e.g. S-0-0001 or P-0-0010"})]
 
 

@@ -38,9 +38,12 @@ FORMAT_VERSION = 1
 KEEP = 32                                   # entries; the oldest go when a new one is written
 # A change to any of these changes every key (contents.py: what is refused; eoe.py: which
 # EoE data decodes; esc.py: the Transition values; xmlsafe.py:
-# how the XML is parsed and its namespaces stripped; values.py: number and boolean syntax).
+# how the XML is parsed and its namespaces stripped; values.py: number and boolean syntax;
+# idn.py: an SoE drive number's bounds and the OpCode apply sends; record.py: how the
+# plan's classes are built).  Every module the reader imports is here but errors.py
+# (tests/test_eni_cache.py).
 _FINGERPRINTED = ("eni/reader.py", "eni/contents.py", "eni/plan.py", "eoe.py", "esc.py",
-                  "esi/xmlsafe.py", "esi/values.py")
+                  "esi/xmlsafe.py", "esi/values.py", "esi/idn.py", "record.py")
 
 
 def _fingerprint() -> int:

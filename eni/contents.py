@@ -19,7 +19,7 @@ so is an attribute of a child that is not listed as ``Tag@Name`` (``Slave@HotPlu
 What is inside a part without a context of its own (``within`` None) is covered by that
 part, whatever it is: a description whose effect reaches the wire only through InitCmds
 (``ProcessData``, ``ProcessImage``, the master's ``Info``), a part read or accepted as a
-whole (``Validate``, ``Identification``), or refused as a whole (``FoE``).  Outside
+whole (``Validate``, ``Identification``), or refused as a whole (``VoE``).  Outside
 ``<Config>`` is open too (:data:`OPEN`: vendor data such as Elmo Application Studio's
 ``ElmoSpecialResources``), but for :data:`ROOT`.  Every element and attribute of the
 ETG.2100 schema has its part (:func:`covering`; a test parses the schema).
@@ -671,8 +671,8 @@ def _owner(part: Unsupported) -> str:
 
 
 def line_of(part: Unsupported, file: str | None) -> str:
-    """``eni.xml:210: slave 'Drive': FoE InitCmds (file transfers): 3 commands would
-    be lost``."""
+    """``eni.xml:210: slave 'Drive': VoE InitCmds (vendor-specific mailbox messages): 3
+    commands would be lost``."""
     where = location(file, part.line)
     lost = (f": {part.commands} command{'s' if part.commands != 1 else ''} would be lost"
             if part.commands else "")
@@ -692,8 +692,8 @@ def refuse(plan: NetworkPlan, file: str | None) -> None:
 
 def skip_warnings(plan: NetworkPlan, file: str | None) -> list[str]:
     """One warning per slave (and one for the master) naming what is skipped:
-    ``eni.xml: slave 'Drive': skipped FoE InitCmds (file transfers) [Slave/Mailbox/FoE]
-    at line 210, 3 commands not sent``."""
+    ``eni.xml: slave 'Drive': skipped VoE InitCmds (vendor-specific mailbox messages)
+    [Slave/Mailbox/VoE] at line 210, 3 commands not sent``."""
     owners: dict[str, list[Unsupported]] = {}
     for part in plan.unsupported:
         owners.setdefault(_owner(part), []).append(part)

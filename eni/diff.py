@@ -387,7 +387,7 @@ def copies_in_words(plan: NetworkPlan) -> list[str]:
 
 
 def _unsupported(a: NetworkPlan, b: NetworkPlan) -> list[Change]:
-    """What the reader kept but apply does not do (``eni/contents.py``: SoE InitCmds,
+    """What the reader kept but apply does not do (``eni/contents.py``: VoE InitCmds,
     encrypted FMMU settings, ...) is compared by what it is, so nothing in a file goes
     uncompared without a word."""
     def parts(plan: NetworkPlan) -> Counter[tuple[str | None, str, str, int]]:

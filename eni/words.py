@@ -1,4 +1,5 @@
-"""An ENI's InitCmds in words: what each register, CoE, EoE or SoE command does to the slave.
+"""An ENI's InitCmds in words: what each register, CoE, EoE, SoE or FoE command does to the
+slave.
 
 ``show`` lists them per transition, ``diff`` compares them, and ``apply`` names a failing
 command by :func:`init_cmd_name`.  The words come from the register a command writes and its
@@ -16,6 +17,7 @@ from the file's ``Comment`` (free text a tool may write in any language, or leav
   entry is a PDO index, a mapping entry index << 16 | subindex << 8 | bit length).
 - ``SoE write S-0-0001 (drive 0) = d0 07``: an SoE write request of an IDN's value
   (ETG.1000.6 SoE, IDN notation of ``esi/idn.py``), its data in wire order.
+- ``FoE read 'cal.bin' (password 0x0000002A)``: an FoE read request (ETG.1000.6 FoE).
 - Any other command: its name, register and data (``FPWR 0x0103 = 0x00``).
 
 A slave-to-slave copy (``CopyInfo``) in words names the variables its bits are in:
@@ -30,7 +32,7 @@ from ecatcfg.eni.plan import (CoeInitCmd, CopyInfo, EoeInitCmd, FoeInitCmd, Init
 from ecatcfg.esc import (AL_ERROR_ACK, AL_ID_REQUEST, FMMU_SIZE, REGISTER_READS,
                          REGISTER_WRITES, RX_PDO_MAPPING, SM_DIR_ECAT_WRITES, SM_DIR_MASK,
                          SM_MODE_MAILBOX, SM_MODE_MASK, SM_PDO_ASSIGN_RANGE, SM_SIZE,
-                         TX_PDO_MAPPING, Cmd, FmmuConfig, FmmuType, Reg, SmConfig,
+                         TX_PDO_MAPPING, Cmd, FmmuConfig, FmmuType, FoeOpCode, Reg, SmConfig,
                          al_state_name, fmmu_register, sm_register,
                          watchdog_base_ns)
 from ecatcfg.esi.idn import VALUE_ELEMENT, WRITE_REQUEST, idn_text
@@ -285,10 +287,10 @@ def soe_words(cmd: SoeInitCmd) -> str:
 def foe_words(cmd: FoeInitCmd) -> str:
     """``FoE read 'config.bin' (password 0x0000002A)``; another OpCode by number (the
     reader has refused it unless it is disabled)."""
-    if cmd.opcode == 1:
+    if cmd.opcode == FoeOpCode.READ:
         password = f" (password 0x{cmd.password:08X})" if cmd.password else ""
         text = f"FoE read {cmd.file_name!r}{password}"
-    elif cmd.opcode == 2:
+    elif cmd.opcode == FoeOpCode.WRITE:
         text = f"FoE write {cmd.file_name!r}"
     else:
         text = f"FoE {cmd.data.hex()}"

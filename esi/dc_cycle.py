@@ -26,7 +26,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ecatcfg.esc import SM_INPUT_PARAMETER, SM_OUTPUT_PARAMETER, SM_PARAMETER_MIN_CYCLE
+from ecatcfg.esc import (SM_INPUT_PARAMETER, SM_OUTPUT_PARAMETER, SM_PARAMETER_MIN_CYCLE,
+                         sync0_running)
 from ecatcfg.esi.coe import device_dictionary, match_infos
 from ecatcfg.esi.model import DcOpMode, Device, Source
 
@@ -77,7 +78,7 @@ def sync0_rules(device: Device) -> list[Sync0Rule]:
     if device.dc is None:
         return []
     return [_rule(m) for m in device.dc.opmodes
-            if m.assign_activate is not None and m.assign_activate & 0x0300 == 0x0300]
+            if m.assign_activate is not None and sync0_running(m.assign_activate >> 8)]
 
 
 def _rule(mode: DcOpMode) -> Sync0Rule:

@@ -36,7 +36,17 @@ MAX_DRIVE = 7                  # the SoE header's drive number has 3 bits (ETG.1
 WRITE_REQUEST = 3              # SoE OpCode "write request" (ETG.1000.6 Table: SoE OpCodes)
 VALUE_ELEMENT = 0x40           # element flags: bit 6, the value (operation data)
 
-_NOTATION = re.compile(r"^\s*([SP])\s*-\s*([0-7])\s*-\s*([0-9]{1,4})\s*$", re.IGNORECASE)
+# The IDN lists a drive keeps of its own parameters (IEC 61800-7-204; the AX5000 IDN
+# reference): all its IDNs, those it needs before SAFEOP (communication phase 2 -> 3 is
+# PREOP -> SAFEOP), and those of the latter found missing or invalid at the switch.
+IDN_LIST_ALL = 17              # S-0-0017, IDN-list of all operation data
+IDN_LIST_CP2 = 18              # S-0-0018, IDN-list of operation data for CP2
+IDN_LIST_INVALID_CP2 = 21      # S-0-0021, IDN-list of invalid operation data for CP2
+
+# The notation as a regular expression without flags, so that the topology's JSON schema
+# (compiler/topology.py) takes the same text.
+NOTATION_PATTERN = r"^\s*([SPsp])\s*-\s*([0-7])\s*-\s*([0-9]{1,4})\s*$"
+_NOTATION = re.compile(NOTATION_PATTERN)
 
 
 class StandardIdn(NamedTuple):

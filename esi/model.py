@@ -18,6 +18,7 @@ from typing import Literal, NamedTuple
 from ecatcfg.esc import (ESC_DEVICE_EMULATION, SM_CONTROL_MBOX_IN, SM_CONTROL_MBOX_OUT,
                          SM_DIR_ECAT_READS, SM_DIR_ECAT_WRITES, SM_DIR_MASK, SM_MODE_BUFFERED,
                          SM_MODE_MAILBOX, SM_MODE_MASK)
+from ecatcfg.esi.idn import MAX_DRIVE
 
 # LcId 1033 is English (US); ETG.2000 makes it the default language of a NameType.
 ENGLISH = 1033
@@ -426,8 +427,9 @@ class SoeSettings:
     def drives(self) -> int:
         """The drives behind the slave: ``@ChannelCount``, 1 where the file does not say
         (ETG.2000 gives no default; the single-axis AX5101 leaves it out and writes no
-        ``InitCmd@Chn``)."""
-        return self.channel_count if self.channel_count else 1
+        ``InitCmd@Chn``), at most the 8 the SoE header's 3-bit drive number addresses."""
+        count = self.channel_count if self.channel_count else 1
+        return min(count, MAX_DRIVE + 1)
 
 
 @dataclass(slots=True)

@@ -74,10 +74,11 @@ class Network:
                  dc_threshold_ns: int = DC_THRESHOLD_NS, dc_timeout_s: float = DC_TIMEOUT_S,
                  recovery: bool = True,
                  esi: list[str | Path] | Library | None = None,
-                 esi_prefer: list[str | Path] | None = None,
+                 esi_prefer: list[str | Path] | None = None, esi_cache: bool = True,
                  _closers: Iterable[Callable[[], None]] = ()) -> None:
         """``skip_unsupported``: run an ENI that asks for what this master does not do
-        (``eni/contents.py``: SoE/FoE/AoE/VoE InitCmds, slave-to-slave copies ...) without
+        (``eni/contents.py``: AoE and VoE InitCmds, SoE requests other than writes, FoE
+        requests other than reads, copies outside the process image ...) without
         those parts, with one warning per slave (an ``Event("skipped", ...)`` to
         ``on_event``, else a :class:`SkippedConfigWarning`); by default such an ENI raises
         :class:`~ecatcfg.eni.contents.UnsupportedEniError` here, before any frame is sent.
@@ -91,7 +92,8 @@ class Network:
         ``esi``, ``esi_prefer``: ESI files or folders (or a :class:`Library`), used only to
         explain refusals: the cause of a DC refusal is compared with the device's DC op
         modes and minimum cycle time (``runtime/master/diagnose.py``), the device found by
-        the slave's identity; without them the cause says what the slave holds."""
+        the slave's identity; without them the cause says what the slave holds.
+        ``esi_cache``: the ESI files' index through the cache (``Library``'s ``cache``)."""
         try:
             if not isinstance(eni, NetworkPlan):
                 from ecatcfg.eni import reader as eni_reader
@@ -99,7 +101,7 @@ class Network:
                 eni = eni_reader.read_file(eni)
             _check_supported(eni, eni_name, skip_unsupported, on_event)
             eni = _completed(eni, eni_name, on_event)
-            library = _library(esi, esi_prefer)
+            library = _library(esi, esi_prefer, esi_cache)
         except BaseException:
             link.close()                    # the Network owns the link from the start
             raise

@@ -147,6 +147,13 @@ SOE_NO_ELEMENT_CODES: dict[int, int] = {
     ELEMENT_NAME: 0x2001, ELEMENT_UNIT: 0x4001, ELEMENT_MIN: 0x5001, ELEMENT_MAX: 0x6001,
     ELEMENT_DATA_STATE: 0x7014, ELEMENT_DEFAULT: 0x8001,
 }
+# "<element> cannot be changed (read only)": what a drive answers for a write of an
+# element other than the value (the name, attribute, unit, limits and default are the
+# drive's own, IEC 61800-7-204).
+SOE_READ_ONLY_ELEMENT_CODES: dict[int, int] = {
+    ELEMENT_NAME: 0x2004, ELEMENT_ATTRIBUTE: 0x3004, ELEMENT_UNIT: 0x4004,
+    ELEMENT_MIN: 0x5004, ELEMENT_MAX: 0x6004, ELEMENT_DEFAULT: 0x8004,
+}
 
 
 def soe_error_name(code: int) -> str:

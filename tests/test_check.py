@@ -628,3 +628,23 @@ def test_the_igh_dump_of_a_ur20_gets_its_mandatory_pdos(corpus_extra: Path,
         assert sorted(int(x.text) for x in el.iterfind("Pdo")) == sorted(wanted[sm])
     assert [f for f in check_eni(eni, lib, use_cache=False).findings
             if f.severity == "error"] == []
+
+
+def test_a_copy_after_one_the_reader_left_out_is_not_given_the_left_out_ones_line(
+        tmp_path: Path, example_eni: Path, examples: Library) -> None:
+    """The first CopyInfo lies outside the images (ENI111, at its own line) and leaves the
+    plan; the second, kept, writes bits no slave receives (ENI113).  Counted among the
+    kept copies the second is the first: its finding names the command's line, never the
+    line of the copy that was left out."""
+    tree = etree.parse(str(example_eni))
+    _copies("12", (8 * 25, 8, 1), (4, 0, 4))(tree.getroot())
+    etree.indent(tree)                        # each CopyInfo on lines of its own
+    eni = tmp_path / "copies.xml"
+    tree.write(str(eni), xml_declaration=True, encoding="UTF-8")
+    tree = etree.parse(str(eni))
+    lrw = tree.getroot().xpath("Config/Cyclic/Frame/Cmd[Cmd='12']")[0]
+    outside, kept = lrw.iterfind("CopyInfos/CopyInfo")
+    result = check_eni(eni, examples, use_cache=False)
+    lines = {f.rule: f.line for f in result.findings}
+    assert lines["ENI111"] == outside.sourceline
+    assert lines["ENI113"] in (kept.sourceline, lrw.sourceline)

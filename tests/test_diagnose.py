@@ -558,3 +558,17 @@ def test_a_slave_that_leaves_op_with_a_code_while_cycling_is_reported_with_its_c
                 "stopped arriving for longer than the SM watchdog time (0x0420 = 1000 x "
                 "100 µs, 0x0400 = 2498)") in text, text
         assert net.health["lamps"].cause == []          # back online: nothing to say
+
+
+def test_esi_files_for_the_causes_are_read_without_the_cache_when_told(plan, tmp_path,
+                                                                       monkeypatch):
+    """``apply --no-cache --esi`` on a line: the ESI files the causes compare with are
+    indexed afresh, with no cache entry written; with the cache, they leave one."""
+    from ecatcfg.runtime.link import MemoryLink
+
+    for cached in (False, True):
+        home = tmp_path / f"xdg-{cached}"
+        monkeypatch.setenv("XDG_CACHE_HOME", str(home))
+        Network(plan, MemoryLink(), esi=[ESI], esi_cache=cached).close()
+        entries = list((home / "ecatcfg").glob("esi-index-*/*")) if home.exists() else []
+        assert bool(entries) == cached, entries

@@ -84,6 +84,32 @@ def test_a_new_reader_source_changes_every_key(tmp_path, monkeypatch):
     assert "esi/xmlsafe.py" in eni_cache._FINGERPRINTED
 
 
+def test_every_module_the_reader_reads_with_is_in_the_key():
+    """What the reader decides with (bounds such as an SoE drive number's, what is refused,
+    the plan's classes) lives in the modules it imports, at module level or inside a
+    function, and in theirs: each one's source is in the key, so a change to any is a miss.
+    Only ``errors.py`` is left out: its exception types say where a file is wrong, not
+    what a plan holds."""
+    import ast
+
+    root = Path(eni_cache.__file__).parent.parent
+    todo, seen = ["eni/reader.py"], set()
+    while todo:
+        name = todo.pop()
+        if name in seen:
+            continue
+        seen.add(name)
+        for node in ast.walk(ast.parse((root / name).read_text())):
+            if isinstance(node, ast.ImportFrom) and node.module and \
+                    node.module.startswith("ecatcfg."):
+                base = node.module.removeprefix("ecatcfg.").replace(".", "/")
+                for path in [f"{base}.py"] + [f"{base}/{a.name}.py" for a in node.names]:
+                    if (root / path).is_file():       # a module, or one of a package's
+                        todo.append(path)
+    assert seen - {"errors.py"} <= set(eni_cache._FINGERPRINTED), \
+        sorted(seen - {"errors.py"} - set(eni_cache._FINGERPRINTED))
+
+
 def test_an_install_without_sources_still_caches(tmp_path, monkeypatch, parses):
     """Only .pyc files installed: the key falls back to the version, apply still works."""
     monkeypatch.setattr(eni_cache, "_FINGERPRINTED", ("compiler/no_such_file.py",))

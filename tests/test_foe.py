@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import struct
 import subprocess
 import sys
@@ -328,10 +329,14 @@ def test_foe_command_against_ecatcfg_simulate(veth_netns, tmp_path):
                                                             math.ceil(3000 / 232))
     assert out["identity_before"]["revision"] == REVISION
     back = tmp_path / "back.efw"
+    earlier = tmp_path / "earlier.efw"
+    earlier.write_bytes(b"an earlier image")
+    os.link(earlier, back)          # FILE is replaced whole, never rewritten in place
     done = ecatcfg_in(veth_netns, "foe", "read", "--slave", "0", str(back), "--name",
                       "app.efw")
     assert done.returncode == 0, done.stderr
     assert back.read_bytes() == image.read_bytes()
+    assert earlier.read_bytes() == b"an earlier image"
     assert "3000 bytes read from slave 0 in BOOT" in done.stdout
     wrong = ecatcfg_in(veth_netns, "foe", "read", "--slave", "0", str(back), "--name",
                        "app.efw", "--password", "0x1234")
@@ -493,3 +498,15 @@ def test_a_foe_init_cmd_in_boot_transitions_is_refused(lib, tmp_path):
     [part] = back.unsupported
     assert part.element == "FoE/InitCmds/InitCmd" and "transition IB" in part.what
     assert back.slaves[0].mailbox.foe_init_cmds == []       # left out: never sent
+
+
+def test_a_negative_max_size_is_refused_before_the_line_is_touched(tmp_path):
+    """--max-size is checked with the other options (exit 2 naming it), not after the
+    slave has been taken to BOOT and its first data packet has come."""
+    done = subprocess.run([sys.executable, "-m", "ecatcfg", "foe", "read", "--iface",
+                           "ecatcfg-none0", "--slave", "0", str(tmp_path / "back.efw"),
+                           "--max-size", "-1"], capture_output=True, text=True, cwd=ROOT,
+                          timeout=60)
+    assert done.returncode == 2, done.stderr
+    assert "--max-size -1" in done.stderr and "Traceback" not in done.stderr
+    assert not (tmp_path / "back.efw").exists()

@@ -46,7 +46,7 @@ def check(ctx: CheckContext) -> None:
             for k, cmd in enumerate(frame.cmds):
                 first = 8 * (cmd.input_offs + shift)
                 for j, copy in enumerate(cmd.copy_infos):
-                    line = ctx.lines.copy_info(ci, fi, k, j)
+                    line = ctx.lines.copy_info(ci, fi, k, j, len(cmd.copy_infos))
                     name = f"CopyInfo {j + 1} of cyclic {_name(cmd.cmd)} ({copy.describe()})"
                     src, dst, n = copy.src_bit_offs, copy.dst_bit_offs, copy.bit_size
                     if cmd.cmd not in INPUT_IMAGE_CMDS:

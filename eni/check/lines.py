@@ -59,17 +59,18 @@ class EniLines:
         except IndexError:
             return self.config_line
 
-    def copy_info(self, cyclic: int, frame: int, cmd: int, copy: int) -> int | None:
+    def copy_info(self, cyclic: int, frame: int, cmd: int, copy: int,
+                  kept: int) -> int | None:
         """The line of that command's ``CopyInfos/CopyInfo[copy]``, else the command's.
-        The reader leaves out copies it refuses: counted among the kept, the line is found
-        only while the counts match."""
+        The reader leaves out copies it refuses: ``copy`` counts among the ``kept`` ones,
+        so the line is found only while the file has as many."""
         try:
             frame_el = list(self._cyclic[cyclic].iterchildren("Frame"))[frame]
             cmd_el = list(frame_el.iterchildren("Cmd"))[cmd]
         except IndexError:
             return self.config_line
         copies = list(cmd_el.iterfind("CopyInfos/CopyInfo"))
-        return copies[copy].sourceline if copy < len(copies) else cmd_el.sourceline
+        return copies[copy].sourceline if len(copies) == kept else cmd_el.sourceline
 
     def frame(self, cyclic: int, frame: int) -> int | None:
         try:

@@ -42,7 +42,8 @@ WKC = declare("ENI104", "error", "an expected working counter the FMMUs do not g
     out.""")
 UNSUPPORTED = declare("ENI003", "warning", "a part of the ENI apply does not carry out", """
     The ENI asks the master for something ecatcfg does not implement (eni/contents.py
-    lists it: FoE InitCmds, SoE requests other than writes, encrypted FMMU settings, ...).
+    lists it: FoE requests other than reads, SoE requests other than writes, encrypted FMMU
+    settings, ...).
     ``apply`` refuses such a file unless told to skip the part; ``check`` names it and
     cannot check it.  Where the part is a slave's FMMU settings, ENI102 and ENI104 are not
     checked for that slave's process data (its FMMUs are unknown).""")

@@ -6,11 +6,13 @@ replies matched), ``lockstep.py`` (slaves' command chains sharing frames), ``rep
 (one InitCmd: register, CoE, EoE), ``scan.py``, ``cyclic.py``, ``reached.py`` (whether a
 state is reached), ``modules.py`` (a station's plugged modules), ``hotconnect.py`` and
 ``recovery.py`` (slaves that drop out and come back), ``realtime.py`` (the cycling thread's
-scheduling).  The tools: ``sdo_client.py`` / ``sdo_tool.py`` (``ecatcfg sdo``) and
-``eeprom.py`` (SII read and write), ``diagnose.py`` (why a slave refuses a state:
-``ecatcfg doctor`` and the cause lines of apply's errors).
+scheduling).  SoE and FoE: ``soe_client.py`` (SoE reads, writes and InitCmds),
+``foe_client.py`` and ``foe_init.py`` (FoE transfers and InitCmds).  The tools:
+``sdo_client.py`` / ``sdo_tool.py`` (``ecatcfg sdo``), ``soe_tool.py`` (``ecatcfg soe``),
+``foe_tool.py`` (``ecatcfg foe``) and ``eeprom.py`` (SII read and write), ``diagnose.py``
+(why a slave refuses a state: ``ecatcfg doctor`` and the cause lines of apply's errors).
 
 This side drives the wire: it imports the shared codec (``runtime/wire.py``,
-``mailbox.py``, ``link.py``, ``wiring.py``) and never :mod:`ecatcfg.runtime.segment`
+``mailbox.py``, ``soe.py``, ``foe.py``, ``link.py``, ``wiring.py``) and never :mod:`ecatcfg.runtime.segment`
 (import-linter contract in ``pyproject.toml``, ``docs/architecture.md``).
 """

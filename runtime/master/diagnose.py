@@ -11,7 +11,7 @@ says it in one or two lines (``docs/diagnostics.md`` has the table):
   enabled, or no FMMU of that direction over it (SOES ``ESC_checkSM23`` checks the same);
 - 0x001B SM watchdog: the watchdog time (0x0420 in the base of 0x0400), its status
   (0x0440) and counter (0x0442): outputs stopped arriving for longer than that time;
-- 0x0035 / 0x0036 / 0x0030 DC SYNC: the activation (0x0981), SYNC0/SYNC1 cycle times
+- 0x0030 / 0x0035 / 0x0036 / 0x0037 DC SYNC: the activation (0x0981), SYNC0/SYNC1 cycle times
   (0x09A0, 0x09A4), with an ENI the cycle time it asks for, the minimum cycle time the
   slave reports over CoE (0x1C32:05 / 0x1C33:05, ETG.1020: Slave Stack Code firmware
   refuses a shorter SYNC0 cycle) and, with ESI files, the device's SYNC0 op modes and
@@ -51,6 +51,7 @@ from ecatcfg.esc import (AL_STATE_MASK, AL_STATUS_ERROR, FMMU_SIZE, SII_PRODUCT_
                          SM_OUTPUT_PARAMETER, SM_PARAMETER_MIN_CYCLE, SM_PDO_ASSIGN, SM_SIZE,
                          AlState, AlStatusCode, Cmd, FmmuConfig, FmmuType, Reg, SmConfig,
                          al_state_name, al_status_name, fmmus_cover, sm_register,
+                         sync0_running,
                          watchdog_base_ns)
 from ecatcfg.record import record
 from ecatcfg.runtime.master.lockstep import Job, Step, run_jobs
@@ -69,7 +70,6 @@ DIAG_NEWEST = 2                # its subindex "newest message"
 DIAG_FIRST_MESSAGE = 6         # messages from this subindex on
 _DC_CODES = (AlStatusCode.DC_INVALID_SYNC, AlStatusCode.DC_INVALID_SYNC_CYCLE,
              AlStatusCode.DC_INVALID_SYNC0_CYCLE, AlStatusCode.DC_INVALID_SYNC1_CYCLE)
-SOE_INVALID_CP2 = 21           # S-0-0021, IDN-list of invalid operation data for CP2
 SDO_TIMEOUT = 1.0              # s per diagnostic upload: a slave that does not answer is said
 NO_COE = "does not support CoE"
 
@@ -444,7 +444,7 @@ def _dc(position: int, context: Context, fields: dict[str, Any],
     fields["dc"] = dc
     text = (f"SYNC activation 0x0981 = 0x{activation:02X}, SYNC0 cycle time 0x09A0 = "
             f"{sync0} ns, SYNC1 cycle time 0x09A4 = {sync1} ns")
-    if activation & 0x03 == 0x03 and not sync0:
+    if sync0_running(activation) and not sync0:
         text += ": SYNC0 is on without a cycle time (no InitCmd wrote 0x09A0?)"
     lines = [text]
     slave = context.slave
@@ -505,15 +505,15 @@ def _dc(position: int, context: Context, fields: dict[str, Any],
 def _soe_invalid(mailbox: _Mailbox, fields: dict[str, Any]) -> Step[list[str]]:
     """Each drive's S-0-0021 (IDN-list of invalid operation data for CP2), from drive 0 on
     until one the slave does not have (SoE error 0x800A, invalid drive number)."""
-    from ecatcfg.esi.idn import idn_text
+    from ecatcfg.esi.idn import IDN_LIST_INVALID_CP2, MAX_DRIVE, idn_text
     from ecatcfg.runtime.master.soe_client import SoeRefused
     from ecatcfg.runtime.soe import SOE_INVALID_DRIVE, decode_list
 
     lines: list[str] = []
     invalid: dict[int, list[str]] = {}
-    for drive in range(8):
+    for drive in range(MAX_DRIVE + 1):
         try:
-            value = yield from mailbox.soe_read(SOE_INVALID_CP2, drive)
+            value = yield from mailbox.soe_read(IDN_LIST_INVALID_CP2, drive)
             items, _maximum = decode_list(value)
         except SoeRefused as exc:
             if exc.soe_error != SOE_INVALID_DRIVE or not drive:

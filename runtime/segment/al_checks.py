@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING
 
 from ecatcfg.esc import (SM_DIR_ECAT_READS, SM_DIR_ECAT_WRITES, SM_DIR_MASK, SM_MODE_MAILBOX,
                          SM_MODE_MASK, AlStatusCode, FmmuConfig, FmmuType, Reg,
-                         fmmus_cover)
+                         fmmus_cover, sync0_running)
 from ecatcfg.esi.model import Device
 from ecatcfg.runtime.segment.syncman import SmState
 
@@ -138,7 +138,7 @@ def dc_refusal(mem: bytearray, min_cycle_ns: int = 0) -> int:
     time, as the Slave Stack Code's StartInputHandler checks it (V4: the cycle against
     MIN_PD_CYCLE_TIME, which it also reports in 0x1C32:05); 0 otherwise."""
     activation = mem[Reg.DC_CYCLIC_UNIT_CONTROL + 1]
-    if activation & 0x03 == 0x03:       # cyclic operation with SYNC0
+    if sync0_running(activation):
         cycle, = struct.unpack_from("<I", mem, Reg.DC_SYNC0_CYCLE_TIME)
         if not cycle or cycle < min_cycle_ns:
             return AlStatusCode.DC_INVALID_SYNC_CYCLE

@@ -4,8 +4,9 @@ Each device gets its SII image (``esi/sii.py``) and, when it has a mailbox, a ma
 (``runtime/segment/mailbox_server.py``) with a server for each protocol the ESI declares that the
 emulation speaks: CoE, a runtime object dictionary with an SDO server
 (``runtime/segment/objects.py``, ``runtime/segment/sdo_server.py``); EoE, the IP parameter services
-(``runtime/segment/eoe_server.py``); FoE, files and firmware (``runtime/segment/foe_server.py``),
-in BOOT over the bootstrap mailbox of the SII.  Other protocols get the mailbox error "unsupported protocol".
+(``runtime/segment/eoe_server.py``); SoE, the drives' IDNs and the ones they require before
+SAFEOP (``runtime/segment/soe_server.py``); FoE, files and firmware
+(``runtime/segment/foe_server.py``), in BOOT over the bootstrap mailbox of the SII.  Other protocols get the mailbox error "unsupported protocol".
 """
 
 from __future__ import annotations

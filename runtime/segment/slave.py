@@ -5,7 +5,7 @@ Built from the device's ESI: the SII EEPROM image (``esi/sii.py``) backs the SII
 dictionary (``runtime/segment/objects.py``) backs the CoE SDO server and decides which
 SyncManager lengths the slave accepts in SAFEOP; the mailbox
 (``runtime/segment/mailbox_server.py``) hands each message the master writes to the protocol's
-server (CoE, EoE).  Register addresses and the rules the firmware applies are those of
+server (CoE, EoE, SoE, FoE; in BOOT FoE alone).  Register addresses and the rules the firmware applies are those of
 ``docs/protocol-notes.md`` §2-§4 (ETG.1000.4/.6, SOES, KickCAT).
 
 The ESC's 64 KiB address space is one ``bytearray``: registers below 0x1000, process memory

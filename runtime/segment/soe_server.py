@@ -51,6 +51,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass, field
 
 from ecatcfg.esc import AlState
+from ecatcfg.esi.idn import IDN_LIST_ALL, IDN_LIST_CP2, IDN_LIST_INVALID_CP2
 from ecatcfg.esi.model import SoeSettings
 from ecatcfg.runtime.mailbox import MailboxProtocolError, MbxErrorDetail
 from ecatcfg.runtime.soe import (
@@ -58,20 +59,16 @@ from ecatcfg.runtime.soe import (
     ATTR_WP_PREOP, ATTR_WP_SAFEOP, ELEMENT_ATTRIBUTE, ELEMENT_NAME, ELEMENT_VALUE,
     SOE_DATA_READ_ONLY, SOE_DATA_TOO_LONG, SOE_DATA_TOO_SHORT, SOE_DATA_WRITE_PROTECTED,
     SOE_GENERAL_ERROR, SOE_INVALID_DRIVE, SOE_NO_ELEMENT, SOE_NO_ELEMENT_CODES, SOE_NO_IDN,
+    SOE_READ_ONLY_ELEMENT_CODES,
     Reassembly, SoeMessage, SoeOpCode, attribute, decode_list, decode_soe, encode_error,
     encode_fragments, encode_list, encode_write_response,
 )
 
-# Errors for writing an element other than the value: it is read only (name, attribute,
-# unit, minimum, maximum, default).
-_READ_ONLY_ELEMENT = {0x02: 0x2004, 0x04: 0x3004, 0x08: 0x4004, 0x10: 0x5004, 0x20: 0x6004,
-                      0x80: 0x8004}
 _READ_ONLY = ATTR_WP_PREOP | ATTR_WP_SAFEOP | ATTR_WP_OP
 _RUNNING = ATTR_WP_SAFEOP | ATTR_WP_OP
 _WP_BY_STATE = {AlState.PREOP: ATTR_WP_PREOP, AlState.SAFEOP: ATTR_WP_SAFEOP,
                 AlState.OP: ATTR_WP_OP}
 
-S_0_0017, S_0_0018, S_0_0021 = 17, 18, 21
 LIST_MAX = 128                      # bytes an emulated IDN list can hold
 
 
@@ -171,8 +168,8 @@ def _esi_idn(data: bytes, required: bool) -> Idn:
 def build_drives(settings: SoeSettings | None) -> list[SoeDrive]:
     """The drives of an ESI's ``Mailbox/SoE``: the standard IDNs, the IDNs its InitCmds
     write, S-0-0018 listing those written in PS."""
-    count = max(1, settings.channel_count or 1) if settings is not None else 1
-    drives = [SoeDrive(n) for n in range(min(count, 8))]
+    count = settings.drives if settings is not None else 1
+    drives = [SoeDrive(n) for n in range(count)]
     for drive in drives:
         for idn, (name, size, protect) in STANDARD_IDNS.items():
             drive.idns[idn] = _number(name, size, protect)
@@ -180,9 +177,10 @@ def build_drives(settings: SoeSettings | None) -> list[SoeDrive]:
                                                                is_list=True) | _READ_ONLY,
                              encode_list(MANUFACTURER_VERSION), True,
                              len(MANUFACTURER_VERSION))
-        for idn, name in ((S_0_0017, "IDN-list of all operation data"),
-                          (S_0_0018, "IDN-list of operation data for CP2"),
-                          (S_0_0021, "IDN-list of invalid operation data for CP2")):
+        for idn, name in ((IDN_LIST_ALL, "IDN-list of all operation data"),
+                          (IDN_LIST_CP2, "IDN-list of operation data for CP2"),
+                          (IDN_LIST_INVALID_CP2,
+                           "IDN-list of invalid operation data for CP2")):
             drive.idns[idn] = _list(name, b"", ATTR_TYPE_IDN, 2)
     for cmd in settings.init_cmds if settings is not None else []:
         if cmd.idn is None or cmd.data is None or cmd.channel >= len(drives):
@@ -196,8 +194,8 @@ def build_drives(settings: SoeSettings | None) -> list[SoeDrive]:
         if required and cmd.idn not in drive.required:
             drive.required.append(cmd.idn)
     for drive in drives:
-        drive.set_list(S_0_0017, sorted(drive.idns))
-        drive.set_list(S_0_0018, drive.required)
+        drive.set_list(IDN_LIST_ALL, sorted(drive.idns))
+        drive.set_list(IDN_LIST_CP2, drive.required)
     return drives
 
 
@@ -228,7 +226,7 @@ class SoeServer:
         refused = []
         for drive in self.drives:
             missing = drive.missing()
-            drive.set_list(S_0_0021, missing)
+            drive.set_list(IDN_LIST_INVALID_CP2, missing)
             if missing:
                 refused.append((drive.number, missing))
         return refused
@@ -292,7 +290,7 @@ class SoeServer:
             if not message.elements:
                 return self._error(op, message, SOE_NO_ELEMENT)
             lowest = other & -other
-            return self._error(op, message, _READ_ONLY_ELEMENT.get(lowest, SOE_NO_ELEMENT))
+            return self._error(op, message, SOE_READ_ONLY_ELEMENT_CODES.get(lowest, SOE_NO_ELEMENT))
         drive = self.drives[message.drive_no]
         entry = drive.idns.get(message.idn)
         if entry is None:

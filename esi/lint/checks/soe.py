@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from typing import Iterator
 
-from ecatcfg.esi.idn import MAX_DRIVE, idn_text
+from ecatcfg.esi.idn import idn_text
 from ecatcfg.esi.lint.context import FileContext
 from ecatcfg.esi.lint.rules import Hit, device_rule
 from ecatcfg.esi.model import Device
@@ -39,7 +39,7 @@ def soe_init_cmd_drive(dev: Device, ctx: FileContext) -> Iterator[Hit]:
     soe = dev.mailbox.soe if dev.mailbox else None
     if soe is None:
         return
-    count = min(soe.drives, MAX_DRIVE + 1)
+    count = soe.drives
     for cmd in soe.init_cmds:
         if not 0 <= cmd.channel < count:
             what = idn_text(cmd.idn) if cmd.idn is not None else "an IDN"
