@@ -126,6 +126,24 @@ def test_a_coe_command_after_safeop_is_refused_by_file_line_and_slave(example_en
     assert not out.exists()
 
 
+def test_a_coe_command_repeated_after_safeop_is_refused_not_exported_once(example_eni,
+                                                                          tmp_path):
+    """The start-up SDO written in PS and again in SO (ETG.2100 allows several
+    Transition elements): the hook would make the PS write and lose the SO one."""
+    from lxml import etree
+    tree = etree.parse(str(example_eni))
+    cmd = tree.xpath("//CoE/InitCmds/InitCmd[Index='24672']")[0]
+    cmd.find("Transition").addnext(etree.fromstring("<Transition>SO</Transition>"))
+    eni = tmp_path / "ps-so.xml"
+    tree.write(str(eni), xml_declaration=True, encoding="utf-8")
+    out = tmp_path / "ps-so.py"
+    done = export(eni, out)
+    assert done.returncode == 1, done.stderr
+    assert "slave 4 ('axis1'): SDO 0x6060:00 = 9 in PS/SO (SO too)" in done.stderr, \
+        done.stderr
+    assert not out.exists()
+
+
 ELMO_TOPOLOGY = """
 master: {name: rocos, cycle_time_us: 1000}
 slaves:

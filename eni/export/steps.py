@@ -132,6 +132,19 @@ def _refuse(file: str, plan: NetworkPlan, slave: SlavePlan,
                        init_cmd_line(file, plan, cmd))
 
 
+def _in_hook_only(file: str, plan: NetworkPlan, slave: SlavePlan,
+                  cmd: InitCmd | CoeInitCmd | SoeInitCmd, words: str) -> None:
+    """Refuse a command that runs in a transition the hook does not stand for, also when
+    it runs in IP or PS as well: exported once, its repeat (in SAFEOP->OP, on the way
+    down) would be lost without a word."""
+    other = [t.value for t in cmd.transitions if t not in HOOK_TRANSITIONS]
+    if other:
+        raise _refuse(file, plan, slave, cmd, f"{words} in "
+                      f"{'/'.join(t.value for t in cmd.transitions)} ({'/'.join(other)} "
+                      "too)" if len(other) < len(cmd.transitions) else f"{words} in "
+                      f"{'/'.join(other)}")
+
+
 def _sync_activation(slave: SlavePlan) -> int:
     """The DC activation byte (0x0981, ESC Section II) the slave has when it enters SAFEOP,
     which ``dc_sync`` programs through SOEM instead: the last write of INIT->PREOP, then of
@@ -154,9 +167,7 @@ def _register_steps(file: str, plan: NetworkPlan, slave: SlavePlan) -> list[Regi
         write = cmd.cmd in REGISTER_WRITES
         if not write and (cmd.cmd not in REGISTER_READS or cmd.validate is None):
             continue                          # a read nobody checks changes nothing
-        if not set(cmd.transitions) & HOOK_TRANSITIONS:
-            raise _refuse(file, plan, slave, cmd, f"{init_cmd_words(cmd)} in "
-                          f"{'/'.join(t.value for t in cmd.transitions)}")
+        _in_hook_only(file, plan, slave, cmd, init_cmd_words(cmd))
         if write:
             steps.append(RegisterStep(cmd.ado, cmd.payload, True, None, cmd.length,
                                       init_cmd_words(cmd)))
@@ -185,11 +196,8 @@ def _sdo_steps(file: str, plan: NetworkPlan, slave: SlavePlan) -> list[SdoStep]:
         for cmd in slave.mailbox.coe_init_cmds:
             if cmd.disabled:
                 continue
-            hook = set(cmd.transitions) & HOOK_TRANSITIONS
-            if not hook:
-                raise _refuse(file, plan, slave, cmd, f"{coe_words(cmd)} in "
-                              f"{'/'.join(t.value for t in cmd.transitions)}")
-            if (Transition.IP in hook) != ip_first:
+            _in_hook_only(file, plan, slave, cmd, coe_words(cmd))
+            if (Transition.IP in cmd.transitions) != ip_first:
                 continue
             if cmd.ccs != 1:
                 raise ExportError(f"slave {slave.position} ({slave.name!r}): "
@@ -206,9 +214,7 @@ def _soe_steps(file: str, plan: NetworkPlan, slave: SlavePlan) -> list[SoeStep]:
     for cmd in slave.mailbox.soe_init_cmds if slave.mailbox else []:
         if cmd.disabled:
             continue
-        if not set(cmd.transitions) & HOOK_TRANSITIONS:
-            raise _refuse(file, plan, slave, cmd, f"{soe_words(cmd)} in "
-                          f"{'/'.join(t.value for t in cmd.transitions)}")
+        _in_hook_only(file, plan, slave, cmd, soe_words(cmd))
         steps.append(SoeStep(cmd.drive_no, cmd.elements, cmd.idn, cmd.data, soe_words(cmd),
                              init_cmd_line(file, plan, cmd)))
     return steps
