@@ -11,7 +11,7 @@ from ecatcfg.eni.check.network import sm_pdos
 from ecatcfg.eni.check.rules import declare
 from ecatcfg.eni.plan import CoeInitCmd, PdoDesc, SlavePlan
 from ecatcfg.eni.words import foe_words, soe_words
-from ecatcfg.esc import DC_ACTIVATE_SYNC0, REGISTER_WRITES, Reg
+from ecatcfg.esc import REGISTER_WRITES, Reg, sync0_running
 from ecatcfg.esi import datatypes
 from ecatcfg.esi.coe import (TRANSITION_STATE, DictEntry, dictionary_with_objects, lookup,
                              write_refusal, write_target)
@@ -289,7 +289,7 @@ def _dc(ctx: CheckContext, slave: SlavePlan, device: Device) -> None:
     if dc is None:
         return
     minimum = min_cycle_time(device)
-    if value >> 8 & DC_ACTIVATE_SYNC0 and dc.cycle_time0 and minimum is not None \
+    if sync0_running(value >> 8) and dc.cycle_time0 and minimum is not None \
             and dc.cycle_time0 < minimum.ns:
         ctx.add(MIN_CYCLE, ctx.lines.child(slave, "DC"), f"DC CycleTime0 is "
                 f"{us(dc.cycle_time0)} with SYNC0 on; the device's {minimum.text()}: its "
