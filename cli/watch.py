@@ -107,7 +107,12 @@ def run(args: argparse.Namespace) -> int:
             reader.after = show.refresh
         due = [0.0, 0.0]                        # next refresh, next look at stdin
 
+        stop = StopOnSignal()
+
         def each_cycle(_net: Network) -> None:
+            if stop.asked:
+                net.stop()
+                return
             watch.force()
             now = time.monotonic()
             typed = False
@@ -121,7 +126,7 @@ def run(args: argparse.Namespace) -> int:
                 show.refresh()
 
         try:
-            with reader, show:
+            with reader, show, stop:
                 net.run(args.cycles, each_cycle)
                 show.refresh()
         except KeyboardInterrupt:
@@ -129,6 +134,44 @@ def run(args: argparse.Namespace) -> int:
     if isinstance(reader, Lines) and reader.refused:
         return EXIT_USAGE
     return 0
+
+
+class StopOnSignal:
+    """SIGINT, SIGTERM and SIGHUP while the watch cycles: the first one only asks the cycle
+    loop to end after the cycle under way (``asked``, read by the loop's callback), so the
+    slaves are brought down and the terminal put back.  Nothing is raised into the loop:
+    an exception at an arbitrary bytecode can land between a lock's acquire and the ``try``
+    that releases it, and the way down then waits on that lock for ever (CPython runs
+    signal handlers between any two bytecodes, bpo-29988; ``apply`` does the same).  A
+    second signal interrupts at once, for a loop that no longer comes round."""
+
+    SIGNALS = ("SIGINT", "SIGTERM", "SIGHUP")
+
+    def __init__(self) -> None:
+        self.asked: str | None = None
+        self._saved: dict[int, Any] = {}
+
+    def __enter__(self) -> StopOnSignal:
+        import signal
+        import threading
+        if threading.current_thread() is threading.main_thread():
+            for name in self.SIGNALS:
+                number = getattr(signal, name)
+                self._saved[number] = signal.signal(number, self._handle)
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        import signal
+        for number, handler in self._saved.items():
+            signal.signal(number, handler)
+        self._saved.clear()
+
+    def _handle(self, number: int, _frame: object) -> None:
+        import signal
+        name = signal.Signals(number).name
+        if self.asked is not None:
+            raise KeyboardInterrupt(name)
+        self.asked = name
 
 
 # How often stdin is looked at: often enough that typing shows at once, seldom enough that

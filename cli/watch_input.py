@@ -4,9 +4,9 @@ bus cycle: stdin is polled with ``select`` from the cycle's callback, never read
 - :class:`Keyboard`: the live table's terminal.  stdin goes to cbreak mode (no line
   buffering, no echo; signals stay on, so Ctrl-C still interrupts) and the line being typed
   is drawn by the table.  The saved mode is put back when the block ends, by ``q``, by the
-  end of ``--cycles``, by Ctrl-C or by an exception; SIGTERM and SIGHUP end the block as
-  Ctrl-C does, and SIGCONT (after Ctrl-Z) puts cbreak mode back, as the shell restores its
-  own mode on a stop.
+  end of ``--cycles``, by Ctrl-C, SIGTERM or SIGHUP (which ask the cycle loop to end:
+  ``cli/watch.py`` ``StopOnSignal``) or by an exception; SIGCONT (after Ctrl-Z) puts
+  cbreak mode back, as the shell restores its own mode on a stop.
 - :class:`Lines`: stdin in a pipe, a file, or a terminal whose output is not the table:
   one command per line; a refused one is said on stderr with its line number.
 """
@@ -72,9 +72,9 @@ class Keyboard:
 
         self._saved = termios.tcgetattr(self.fd)
         tty.setcbreak(self.fd, termios.TCSANOW)
-        for name in ("SIGTERM", "SIGHUP", "SIGCONT"):
-            number = getattr(signal, name)
-            self._handlers[number] = signal.signal(number, self._signal)
+        # SIGCONT (``fg`` after Ctrl-Z): the shell put the terminal back in line mode.
+        # SIGINT, SIGTERM and SIGHUP end the watch through ``StopOnSignal``.
+        self._handlers[signal.SIGCONT] = signal.signal(signal.SIGCONT, self._signal)
         return self
 
     def __exit__(self, *exc: object) -> None:
@@ -93,11 +93,8 @@ class Keyboard:
         import termios
         import tty
 
-        if number == signal.SIGCONT:
-            if self._saved is not None and foreground(self.fd):
-                tty.setcbreak(self.fd, termios.TCSANOW)
-            return
-        raise KeyboardInterrupt(signal.Signals(number).name)
+        if number == signal.SIGCONT and self._saved is not None and foreground(self.fd):
+            tty.setcbreak(self.fd, termios.TCSANOW)
 
     def poll(self) -> bool:
         """Take the keys typed since the last call; True when the line or the status

@@ -398,10 +398,10 @@ def test_keys_typed_into_the_live_table(eni):
         term.close()
 
 
-@pytest.mark.parametrize("stop", ["ctrl-c", "sigterm"])
+@pytest.mark.parametrize("stop", ["ctrl-c", "sigterm", "sighup"])
 def test_a_signal_in_the_live_table_puts_the_terminal_back(eni, stop):
-    """Ctrl-C typed (SIGINT from the terminal: cbreak mode keeps signals on) or SIGTERM
-    stops the watch with the terminal's mode put back, no traceback."""
+    """Ctrl-C typed (SIGINT from the terminal: cbreak mode keeps signals on), SIGTERM or
+    SIGHUP stops the watch with the terminal's mode put back, no traceback."""
     term = Terminal(str(eni), "--virtual", "--esi", str(ESI), "--match", "lamps.*",
                     "--cycles", "600000")
     try:
@@ -411,7 +411,7 @@ def test_a_signal_in_the_live_table_puts_the_terminal_back(eni, stop):
         if stop == "ctrl-c":
             term.type("\x03")
         else:
-            term.proc.send_signal(signal.SIGTERM)
+            term.proc.send_signal(signal.SIGTERM if stop == "sigterm" else signal.SIGHUP)
         err = term.finish()
         assert term.proc.returncode == 0, err
         assert "Traceback" not in err, err
