@@ -272,6 +272,12 @@ def copy_words(copy: CopyInfo, inputs: list[Variable], outputs: list[Variable]) 
             f"{_place(copy.dst_bit_offs, outputs, 'out')}")
 
 
+def soe_init_cmd_name(cmd: SoeInitCmd) -> str:
+    """How messages name an SoE InitCmd (as :func:`init_cmd_name` a register one): its
+    comment, else ``SoE write S-0-0001 (drive 0)``."""
+    return cmd.comment.strip() or f"SoE write {idn_text(cmd.idn)} (drive {cmd.drive_no})"
+
+
 def soe_words(cmd: SoeInitCmd) -> str:
     """``SoE write S-0-0001 (drive 0) = d0 07``; another element than the value, or another
     OpCode than a write request, is named (``elements 0x08``, ``SoE OpCode 1``)."""

@@ -21,6 +21,7 @@ from __future__ import annotations
 import time
 
 from ecatcfg.eni.plan import SoeInitCmd
+from ecatcfg.eni.words import soe_init_cmd_name
 from ecatcfg.esi.idn import MAX_DRIVE, idn_text
 from ecatcfg.runtime.mailbox import (
     Emergency,
@@ -214,11 +215,6 @@ def soe_job(channel: MailboxChannel, transfer: SoeTransfer, who: str | None,
         raise SoeRefused(str(error), who, what, error.code) from None
     except MailboxProtocolError as error:
         raise ApplyError(f"mailbox protocol error: {error}", who, what) from None
-
-
-def soe_init_cmd_name(cmd: SoeInitCmd) -> str:
-    """An SoE InitCmd in messages: its comment, else ``SoE write S-0-0001 (drive 0)``."""
-    return cmd.comment.strip() or f"SoE write {idn_text(cmd.idn)} (drive {cmd.drive_no})"
 
 
 def soe_init_cmd_job(channel: MailboxChannel, cmd: SoeInitCmd, who: str | None,
