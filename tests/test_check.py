@@ -168,6 +168,13 @@ def _soe_cmd(transition: str = "PS", drive: int = 0, listed: bool = False
     return add
 
 
+def _coe_not_listed(root: Root) -> None:
+    """axis1's Mailbox/Protocol says EoE only, though its CoE InitCmds set its PDOs up."""
+    protocol = _slave(root, "axis1").find("Mailbox/Protocol")
+    assert protocol.text == "CoE"
+    protocol.text = "EoE"
+
+
 def _assign_activate_0700(root: Root) -> None:
     _init_cmd(_slave(root, "axis1"), "set DC activation").find("Data").text = "0007"
 
@@ -238,6 +245,7 @@ DEFECTS: list[tuple[str, Callable[[Root], None], list[str]]] = [
     ("ENI104", _lrw_cnt_plus_one, ["LRW 0x10000000", "expects working counter 8", "give 7"]),
     ("ENI105", _mailbox_send_64, ["Mailbox/Send is 0x1000, 64 byte(s)", "SM0", "128"]),
     ("ENI106", _soe_cmd(), ["1 SoE InitCmd(s)", "Mailbox/Protocol lists CoE"]),
+    ("ENI106", _coe_not_listed, ["CoE InitCmd(s), but Mailbox/Protocol lists EoE"]),
     ("ENI107", _soe_cmd("IP", listed=True), ["SoE write S-0-0032 (drive 0) = 0b 00 in IP",
                                              "PS, SO, SP, OP, OS"]),
     ("ENI111", _copy_past_inputs, ["outside the process image", "input bit 200 (byte 25.0)",

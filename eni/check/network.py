@@ -1,15 +1,17 @@
 """Checks of an ENI against itself: SyncManagers, FMMUs, the process image, expected
-working counters, mailbox areas, SoE InitCmds (a frame too long for Ethernet is refused by
+working counters, mailbox areas and protocols, SoE InitCmds (a frame too long for Ethernet is refused by
 the reader already: ENI004).  They need no ESI file: the registers a slave's
 InitCmds write (SyncManagers 0x0800 + 8·n, FMMUs 0x0600 + 16·n; ESC Section II) are
 compared with what the same file's ``ProcessData``, ``Mailbox`` and ``Cyclic`` say."""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 from ecatcfg.eni.check.context import CheckContext
 from ecatcfg.eni.check.rules import declare
-from ecatcfg.eni.plan import (COPY_ELEMENT, BitRange, PdoDesc, SlavePlan, SmSettings,
-                              register_writes)
+from ecatcfg.eni.plan import (COPY_ELEMENT, BitRange, CoeInitCmd, EoeInitCmd, FoeInitCmd,
+                              PdoDesc, SlavePlan, SmSettings, SoeInitCmd, register_writes)
 from ecatcfg.eni.words import soe_words
 from ecatcfg.esi.idn import ENI_TRANSITIONS
 from ecatcfg.esc import (FMMU_SIZE, LOGICAL_CMDS, SM_SIZE, AlState, Cmd, FmmuConfig,
@@ -54,12 +56,14 @@ MAILBOX = declare("ENI105", "error", "a mailbox area is not what SM0/SM1 are set
     them, or reads replies of a wrong length.""")
 
 
-SOE_PROTOCOL = declare("ENI106", "error", "SoE InitCmds for a slave whose mailbox lacks SoE", """
-    The slave's Mailbox lists the protocols it speaks (Mailbox/Protocol), and SoE is not
-    among them, yet Mailbox/SoE/InitCmds asks the master to write drive parameters over
-    SoE (ETG.1000.6).  A slave answers a mailbox message of a protocol it does not have
-    with the mailbox error "unsupported protocol", and the transition fails.  A file that
-    lists no protocol at all is not judged.""")
+PROTOCOL = declare("ENI106", "error", "mailbox InitCmds of a protocol the slave's mailbox "
+                   "lacks", """
+    The slave's Mailbox lists the protocols it speaks (Mailbox/Protocol), and the protocol
+    of some of its enabled mailbox InitCmds (Mailbox/CoE, SoE, EoE or FoE/InitCmds) is not
+    among them, yet the master is asked to send them (ETG.1000.6).  A slave answers a
+    mailbox message of a protocol it does not have with the mailbox error "unsupported
+    protocol", and the transition fails.  A file that lists no protocol at all is not
+    judged.""")
 SOE_TRANSITION = declare("ENI107", "warning", "an SoE InitCmd in a transition the schema "
                          "does not allow", """
     ETG.2100 allows an SoE InitCmd in PS, SO, SP, OP and OS only: the transitions in which
@@ -78,6 +82,7 @@ def check(ctx: CheckContext) -> None:
     for slave in ctx.plan.slaves:
         _sm_lengths(ctx, slave)
         _mailbox(ctx, slave)
+        _protocols(ctx, slave)
         _soe(ctx, slave)
     _overlaps(ctx)
     _frames(ctx)
@@ -182,15 +187,26 @@ def _mailbox(ctx: CheckContext, slave: SlavePlan) -> None:
                 break
 
 
+def _protocols(ctx: CheckContext, slave: SlavePlan) -> None:
+    mb = slave.mailbox
+    if mb is None or not mb.protocols:
+        return
+    lists: list[tuple[str, Sequence[CoeInitCmd | SoeInitCmd | EoeInitCmd | FoeInitCmd]]] = [
+        ("CoE", mb.coe_init_cmds), ("SoE", mb.soe_init_cmds), ("EoE", mb.eoe_init_cmds),
+        ("FoE", mb.foe_init_cmds)]
+    for protocol, cmds in lists:
+        enabled = [c for c in cmds if not c.disabled]
+        if enabled and protocol not in mb.protocols:
+            ctx.add(PROTOCOL, ctx.lines.child(slave, f"Mailbox/{protocol}"),
+                    f"{len(enabled)} {protocol} InitCmd(s), but Mailbox/Protocol lists "
+                    + ", ".join(mb.protocols), slave)
+
+
 def _soe(ctx: CheckContext, slave: SlavePlan) -> None:
     mb = slave.mailbox
     cmds = [] if mb is None else mb.soe_init_cmds
     if mb is None or not cmds:
         return
-    if mb.protocols and "SoE" not in mb.protocols and any(not c.disabled for c in cmds):
-        ctx.add(SOE_PROTOCOL, ctx.lines.child(slave, "Mailbox/SoE"),
-                f"{len(cmds)} SoE InitCmd(s), but Mailbox/Protocol lists "
-                + ", ".join(mb.protocols), slave)
     for n, cmd in enumerate(cmds):
         bad = [t.value for t in cmd.transitions if t not in ENI_TRANSITIONS]
         if bad:
