@@ -51,13 +51,12 @@ class FoeErrorCode(IntEnum):
     CHECKSUM = 0x800C
 
 
+# The names are the codes' own (NOT_FOUND -> "not found"), but for the last: SOES calls it
+# FOE_ERR_CHECKSUM, a checksum that is wrong.
 FOE_ERROR_NAMES: dict[int, str] = {
-    0x8000: "not defined", 0x8001: "not found", 0x8002: "access denied",
-    0x8003: "disk full", 0x8004: "illegal", 0x8005: "packet number wrong",
-    0x8006: "already exists", 0x8007: "no user", 0x8008: "bootstrap only",
-    0x8009: "not bootstrap", 0x800A: "no rights", 0x800B: "program error",
-    0x800C: "checksum wrong",
-}
+    code: "checksum wrong" if code == FoeErrorCode.CHECKSUM
+    else code.name.lower().replace("_", " ")
+    for code in FoeErrorCode}
 
 
 def foe_error_name(code: int) -> str:
