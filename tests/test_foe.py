@@ -128,6 +128,28 @@ def test_any_bytes_get_an_answer_or_a_mailbox_error_from_the_server(data, state,
             foe.decode_foe(reply[6:])
 
 
+def test_the_server_refuses_in_the_bytes_of_an_foe_error():
+    """Hand-written requests and the error replies they get, byte for byte: opcode 5, a
+    reserved byte, the UINT32 code, the text (ETG.1000.6 FoE; SOES ``FOE_ERR_*``)."""
+    from ecatcfg.runtime.segment.foe_server import FoeServer
+    server = FoeServer(VENDOR, BOOT_PRODUCT, bootstrap=True)
+
+    def reply(request: bytes, state: AlState) -> bytes:
+        [answer] = server.handle(request, state, 128, 128)
+        return answer
+
+    def error(code: int, text: bytes) -> bytes:
+        # Mailbox header: length, address 0, channel 0, type 4 (FoE) with counter 0.
+        return struct.pack("<HHBB", 6 + len(text), 0, 0, 0x04) + \
+            bytes.fromhex("0500") + struct.pack("<I", code) + text
+    # A firmware file written outside BOOT on a device with a boot loader: 0x8009.
+    assert reply(bytes.fromhex("0200 00000000") + b"app.efw", AlState.PREOP) == \
+        error(0x8009, b"firmware is written in BOOT only")
+    # Busy is the slave's to send (ETG.1000.6): from the master it is illegal, 0x8004.
+    assert reply(bytes.fromhex("0600 0100 0200"), AlState.BOOT) == \
+        error(0x8004, b"unexpected busy")
+
+
 # --------------------------------------------------------------------------- the client alone
 
 def test_a_write_sends_a_final_empty_packet_after_a_full_one():
@@ -165,6 +187,40 @@ def test_a_wrong_packet_number_is_answered_with_error_0x8005():
     assert answer is not None and t.done
     assert foe.decode_foe(answer[6:12]) == foe.FoeError(0x8005)
     assert isinstance(t.wrong_number, FoeTransferError) and t.wrong_number.code == 0x8005
+
+
+def test_a_mailbox_error_reply_ends_the_transfer_with_its_detail():
+    t = FoeWrite("f", bytes(30), mbx_out_size=32, mbx_in_size=32)
+    t.first_request()
+    # ETG.1000.4 mailbox error: header type 0, then Type 0x0001 and Detail 0x0002
+    # (unsupported protocol), each UINT16 little-endian.
+    reply = bytes.fromhex("0400 0000 00 00" "0100 0200".replace(" ", "")).ljust(32, b"\x00")
+    with pytest.raises(FoeTransferError, match=r"mailbox error 2 \(unsupported protocol\)") \
+            as refused:
+        t.on_response(reply)
+    assert t.done and refused.value.code is None and refused.value.text == ""
+
+
+def test_the_master_stamps_its_counter_and_refuses_a_wrong_ack_by_text():
+    t = FoeWrite("f", bytes(30), mbx_out_size=32, mbx_in_size=32, counter=lambda: 5)
+    # Mailbox header byte 5: type 4 (FoE) in bits 0-3, the counter 5 in bits 4-6.
+    assert t.first_request()[5] == 0x54
+    answer = t.on_response(foe.encode_foe_mailbox(foe.FoeAck(3)).ljust(32, b"\x00"))
+    text = b"ack 3, expected 0"
+    assert answer == (struct.pack("<HHBB", 6 + len(text), 0, 0, 0x54) + bytes.fromhex("0500")
+                      + struct.pack("<I", 0x8005) + text).ljust(32, b"\x00")
+    read = FoeRead("f", mbx_out_size=32, mbx_in_size=32, counter=lambda: 3)
+    assert read.first_request()[:6] == bytes.fromhex("0700 0000 00 34".replace(" ", ""))
+
+
+def test_a_read_past_its_limit_ends_the_transfer():
+    t = FoeRead("f", mbx_out_size=32, mbx_in_size=32, limit=30)
+    t.first_request()
+    # SM1 of 32 bytes carries 20 file bytes a packet: the second full one passes 30.
+    assert t.on_response(foe.encode_foe_mailbox(foe.FoeData(1, bytes(20))).ljust(32, b"\x00"))
+    with pytest.raises(FoeTransferError, match="longer than 30 bytes"):
+        t.on_response(foe.encode_foe_mailbox(foe.FoeData(2, bytes(20))).ljust(32, b"\x00"))
+    assert t.done is True
 
 
 # --------------------------------------------------------------------------- in memory

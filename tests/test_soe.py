@@ -40,9 +40,11 @@ from ecatcfg.runtime.master.transport import Transport
 from ecatcfg.runtime.segment import emulate
 from ecatcfg.runtime.segment.soe_server import Idn
 from ecatcfg.runtime.segment.virtual import Faults
-from ecatcfg.runtime.soe import (ELEMENT_ATTRIBUTE, ELEMENT_NAME, ELEMENT_UNIT, ELEMENT_VALUE,
-                                 Reassembly, SoeOpCode, attribute_element_size, decode_list,
-                                 decode_soe, encode_fragments, encode_soe, soe_error_name)
+from ecatcfg.runtime.soe import (ATTR_TYPE_HEX, ATTR_TYPE_IDN, ATTR_TYPE_INT, ELEMENT_ATTRIBUTE,
+                                 ELEMENT_NAME, ELEMENT_UNIT, ELEMENT_VALUE, Reassembly,
+                                 SoeOpCode, attribute, attribute_element_size, decode_list,
+                                 decode_soe, encode_fragments, encode_soe, fragment_sizes,
+                                 soe_error_name)
 from ecatcfg.runtime.wire import Datagram
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -117,6 +119,25 @@ def test_fragments_count_down_and_are_put_together():
     with pytest.raises(ValueError, match="fragments left"):
         broken.add(parts[2])
     assert len(encode_fragments(SoeOpCode.READ_RESPONSE, S1, b"", 16)) == 1
+
+
+def test_the_attribute_word_bit_fields():
+    # SOEM ethercatsoe.h ec_SoEattributet, least significant first: conversion factor 16
+    # bits, length 2 (0: 1 byte .. 3: 8 bytes), list 1, command 1, data type 3, reserved 1,
+    # decimals 4, write-protected in PREOP, SAFEOP, OP one bit each (28, 29, 30).
+    assert attribute(4, ATTR_TYPE_INT, factor=1, wp_op=True) == 0x4022_0001
+    assert attribute(2, ATTR_TYPE_HEX, is_list=True, factor=0, wp_safeop=True,
+                     wp_op=True) == 0x6035_0000
+    assert attribute(8, ATTR_TYPE_IDN, wp_preop=True) == 0x1053_0001
+    with pytest.raises(ValueError, match="1, 2, 4 or 8 bytes, not 3"):
+        attribute(3)
+
+
+def test_a_mailbox_without_room_for_soe_data_is_refused():
+    # 6 bytes of mailbox header and 4 of SoE header: an 11-byte mailbox carries 1 data byte.
+    assert fragment_sizes(3, 11) == [1, 1, 1]
+    with pytest.raises(ValueError, match="a 10-byte mailbox cannot carry SoE data"):
+        fragment_sizes(1, 10)
 
 
 # --------------------------------------------------------------------------- the emulated drive
@@ -233,6 +254,52 @@ def test_an_esi_list_idn_takes_lists_up_to_its_maximum():
                        (bytes.fromhex("0200 0800 010203"), 0x7003),
                        (bytes.fromhex("0200"), 0x7002)):
         assert entry.write_error(data, AlState.OP) == code, data.hex()
+
+
+def test_esi_idns_are_sized_by_the_data_their_init_cmds_write():
+    from ecatcfg.esi.model import SoeInitCmd as EsiSoeInitCmd, SoeSettings, Source
+    from ecatcfg.runtime.segment.soe_server import SoeServer
+    source = Source("x.xml", 1)
+    settings = SoeSettings(source, [
+        EsiSoeInitCmd(["PS"], 0x8103, b"\x01\x00", source, channel=1),   # no drive 1: skipped
+        EsiSoeInitCmd(["PS"], 0x8104, None, source),                   # no data: skipped
+        EsiSoeInitCmd(["PS"], 0x8101, bytes.fromhex("01020304"), source),   # a UINT32
+        EsiSoeInitCmd(["SO"], 0x8102, bytes.fromhex("010203"), source),     # 3 raw bytes
+        EsiSoeInitCmd(["SO"], 0x8100, bytes.fromhex("0200 0400 0102".replace(" ", "")),
+                      source)])                                        # a list of up to 4
+    server = SoeServer(settings, 128)
+    assert [d.required for d in server.drives] == [[0x8101]]
+
+    def read(idn: int) -> bytes:
+        # Read request (opcode 1), elements name | attribute | value (0x02 | 0x04 | 0x40).
+        request = bytes([0x01, 0x46]) + idn.to_bytes(2, "little")
+        [reply] = server.handle(request, AlState.PREOP)
+        return reply
+
+    # The attribute words, SOEM ec_SoEattributet: factor 1; length code 2 (4 bytes) or 0 (1
+    # byte); bit 18 list; data type 1 (unsigned) or 0 (binary) in bits 20-22; an IDN written
+    # in PS is write-protected in SAFEOP and OP (bits 29, 30).
+    name = b"\x0e\x00\x0e\x00(from the ESI)"
+    for idn, attribute_word, value in ((0x8101, "01001260", "00000000"),
+                                       (0x8102, "01000000", "000000"),
+                                       (0x8100, "01000400", "00000400")):
+        body = bytes([0x02, 0x46]) + idn.to_bytes(2, "little") + name + \
+            bytes.fromhex(attribute_word + value)
+        # Mailbox header: length, address 0, channel 0, type 5 (SoE) with counter 0.
+        assert read(idn) == len(body).to_bytes(2, "little") + bytes.fromhex("0000 00 05"
+                                                                           .replace(" ", "")) \
+            + body, hex(idn)
+
+
+def test_a_fragment_out_of_turn_gets_the_general_error():
+    box = DriveBox()
+    # The first fragment says 2 more follow; the next is the last: one is missing.
+    assert box.send(SoeOpCode.WRITE_REQUEST, 2, b"\x0b", incomplete=True) == []
+    [reply] = box.write(S32, b"\x00")
+    assert (reply.op_code, reply.error, reply.error_code) == (4, True, 0x800B)
+    # The drive starts afresh: the next write is a whole one.
+    [ok] = box.write(S32, b"\x0b\x00")
+    assert (ok.op_code, ok.error) == (4, False)
 
 
 def test_a_read_larger_than_sm1_comes_in_fragments():
