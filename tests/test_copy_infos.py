@@ -281,32 +281,49 @@ def _bits(image: bytes | bytearray, first: int, n: int) -> list[int]:
     return [image[b // 8] >> b % 8 & 1 for b in range(first, first + n)]
 
 
+def _copy_and_compare(example_plan, copy: CopyInfo, rng) -> None:
+    """``copy`` made by the cyclic frames over random images, against the same copy made
+    here one bit at a time; the bits around the destination are left as they were."""
+    from ecatcfg.runtime.master.cyclic import CyclicFrames
+    n = copy.bit_size
+    plan = copying.deepcopy(example_plan)
+    lrw = _lrw(plan)
+    lrw.copy_infos = [copy]
+    frames = CyclicFrames(plan)
+    frames.inputs[:] = rng.randbytes(len(frames.inputs))
+    frames.outputs[:] = before = bytearray(rng.randbytes(len(frames.outputs)))
+    for p in frames.prepared(AlState.OP):
+        p.bind(frames.inputs, frames.outputs, bytearray(2048))
+        for s in p.slots:
+            s.wkc = s.cmd.cnt if s.cmd.cnt is not None else 0
+        p.copy_slave_to_slave()
+    want = bytearray(before)
+    for k, bit in enumerate(_bits(frames.inputs, copy.src_bit_offs, n)):
+        at = copy.dst_bit_offs + k
+        want[at // 8] = want[at // 8] & ~(1 << at % 8) | bit << at % 8
+    assert frames.outputs == want, copy
+
+
 def test_compiled_copies_match_a_bit_by_bit_copy(example_plan):
     """Every placement of 1..24-bit copies (a seeded sample) against a copy made here one
-    bit at a time; the bits around the destination are left as they were."""
+    bit at a time."""
     import random
-    from ecatcfg.runtime.master.cyclic import CyclicFrames
     rng = random.Random(7)
     size = 25 * 8
     for _ in range(300):
         n = rng.randint(1, 24)
-        copy = CopyInfo(rng.randrange(size - n), rng.randrange(size - n), n)
-        plan = copying.deepcopy(example_plan)
-        lrw = _lrw(plan)
-        lrw.copy_infos = [copy]
-        frames = CyclicFrames(plan)
-        frames.inputs[:] = rng.randbytes(len(frames.inputs))
-        frames.outputs[:] = before = bytearray(rng.randbytes(len(frames.outputs)))
-        for p in frames.prepared(AlState.OP):
-            p.bind(frames.inputs, frames.outputs, bytearray(2048))
-            for s in p.slots:
-                s.wkc = s.cmd.cnt if s.cmd.cnt is not None else 0
-            p.copy_slave_to_slave()
-        want = bytearray(before)
-        for k, bit in enumerate(_bits(frames.inputs, copy.src_bit_offs, n)):
-            at = copy.dst_bit_offs + k
-            want[at // 8] = want[at // 8] & ~(1 << at % 8) | bit << at % 8
-        assert frames.outputs == want, copy
+        _copy_and_compare(example_plan,
+                          CopyInfo(rng.randrange(size - n), rng.randrange(size - n), n), rng)
+
+
+@pytest.mark.parametrize("src, dst, n", [
+    (0, 72, 16), (8, 80, 24), (16, 0, 16), (80, 152, 16), (96, 8, 24), (0, 128, 8)])
+def test_whole_byte_copies_of_several_bytes_match_a_bit_by_bit_copy(example_plan, src, dst,
+                                                                    n):
+    """Byte-aligned copies of two or three bytes (a random placement is seldom aligned),
+    from and to bytes past the eighth."""
+    import random
+    _copy_and_compare(example_plan, CopyInfo(src, dst, n), random.Random(src * 1000 + dst))
 
 
 def test_copies_over_veth(veth_netns, example_plan):
