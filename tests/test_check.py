@@ -278,6 +278,20 @@ def test_a_defect_fires_its_rule(tmp_path: Path, example_eni: Path, examples: Li
     assert any(f.severity == severity for f in result.findings if f.rule == rule)
 
 
+def test_copy_checks_at_the_edges_of_a_command_and_of_another_copy(
+        tmp_path: Path, example_eni: Path, examples: Library) -> None:
+    """A copy whose source starts in the LRW's input data (bits 0..143) and ends past it is
+    ENI112 at its own line; two copies whose destinations only touch (bits 12..15, then
+    8..11) overlap nowhere: no ENI114."""
+    path = _defective(tmp_path, example_eni, _copies("12", (140, 8, 8)))
+    result = check_eni(path, examples, use_cache=False)
+    [info] = etree.parse(str(path)).xpath("//CopyInfo")      # lxml's own line count
+    assert [(f.rule, f.line) for f in result.findings] == [("ENI112", info.sourceline)]
+    assert "input data (bits 0..143)" in result.findings[0].message
+    touching = _defective(tmp_path, example_eni, _copies("12", (0, 12, 4), (4, 8, 4)))
+    assert check_eni(touching, examples, use_cache=False).findings == []
+
+
 @pytest.mark.parametrize("cmd, cnt", [(11, 2), (10, 3)])
 def test_working_counters_of_lwr_and_lrd(tmp_path: Path, example_eni: Path,
                                          examples: Library, cmd: int, cnt: int) -> None:

@@ -100,6 +100,15 @@ def test_messages_decode_back():
         foe.decode_foe(bytes.fromhex("0700 00000000"))
 
 
+def test_the_text_of_an_error_or_busy_ends_at_its_padding():
+    # A slave pads its message with zeros (SOES fills the mailbox): the text is what comes
+    # before them, its own spaces included.
+    assert foe.decode_foe(bytes.fromhex("0600 0100 0200") + b"flash \x00\x00") == \
+        foe.FoeBusy(1, 2, "flash ")
+    assert foe.decode_foe(bytes.fromhex("0500 01800000") + b"no file \x00") == \
+        foe.FoeError(0x8001, "no file ")
+
+
 def test_error_codes_have_their_names():
     assert foe.foe_error_name(0x8001) == "not found"
     assert foe.foe_error_name(0x8003) == "disk full"

@@ -73,6 +73,18 @@ def test_idn_text_that_is_not_an_idn():
     for bad in ("S-8-0001", "S-0-4096", "Q-0-0001", "65536", "S-0-", "x"):
         with pytest.raises(ValueError):
             parse_idn(bad, numbers=True)
+    with pytest.raises(ValueError, match=r"'x' is not an IDN: write S-<set>-<number> or "
+                       r"P-<set>-<number>, e.g. S-0-0001, P-0-0010$"):
+        parse_idn("x")
+    for bad_number in (-1, 0x10000):
+        with pytest.raises(ValueError, match="not a 16-bit number"):
+            idn_text(bad_number)
+
+
+def test_idn_zero_is_an_idn():
+    # S-0-0000: the 16-bit number 0 is an IDN like any other (bits 15, 14:12, 11:0 all 0).
+    assert idn_text(0) == "S-0-0000"
+    assert parse_idn("0", numbers=True) == parse_idn("S-0-0000") == 0
 
 
 # --------------------------------------------------------------------------- the codec
@@ -418,6 +430,35 @@ def test_the_master_names_what_went_wrong(answer, message):
     with pytest.raises(ApplyError, match=r"slave 'axis' \[SoE write S-0-0001 \(drive 0\)\]: .*"
                        + message):
         drive_job(init_job(cmd), [answer])
+
+
+def test_an_emergency_and_a_stale_read_response_before_the_answer_are_set_aside():
+    cmd = SoeInitCmd([Transition.PS], "", S1, b"\xd0\x07")
+    # A CoE emergency (mailbox type 3, CoE header service 1 in bits 12-15, error code
+    # 0x8700, error register 1, 5 bytes), a read response (opcode 2) left by an earlier
+    # read, then the drive's refusal of the write: the refusal is the answer.
+    emergency = bytes.fromhex("0a00 0000 00 13" "0010 0087 01 0000000000".replace(" ", ""))
+    stale_read = bytes.fromhex("0600 0000 00 25" "02 40 0100 d007".replace(" ", ""))
+    refusal = bytes.fromhex("0600 0000 00 35" "14 40 0100 0470".replace(" ", ""))
+    with pytest.raises(ApplyError, match=r"SoE error 0x7004"):
+        drive_job(init_job(cmd), [emergency, stale_read, refusal])
+
+
+def test_an_init_cmd_the_master_cannot_send_is_refused_by_slave_and_transition():
+    from ecatcfg.runtime.master.replay import SlaveProgress
+    progress = SlaveProgress("axis")
+    read = SoeInitCmd([Transition.PS], "", S1, b"", op_code=1)
+    with pytest.raises(ApplyError, match=r"op code 1: only write requests .*\(transition "
+                       r"PS\)") as refused:
+        next(soe_init_cmd_job(MailboxChannel(0x1001, CHANNEL_PLAN), read, "axis", "PS",
+                              progress))
+    assert refused.value.slave == "axis"
+    assert refused.value.command == progress.last_command == "SoE write S-0-0001 (drive 0)"
+    # A 10-byte SM0 holds the mailbox and SoE headers and no data.
+    small = MailboxPlan(MailboxArea(0x1000, 10), MailboxArea(0x1080, 128))
+    with pytest.raises(ApplyError, match=r"slave 'axis' .*a 10-byte SM0 cannot carry an SoE "
+                       r"request \(transition PS\)"):
+        drive_job(init_job(SoeInitCmd([Transition.PS], "", S1, b"\xd0\x07"), small), [])
 
 
 def test_the_master_gives_up_after_the_timeout():
