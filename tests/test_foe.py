@@ -16,6 +16,7 @@ import struct
 import subprocess
 import sys
 import threading
+import time
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -24,12 +25,15 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from rig import serving, start_simulate, tshark_fields, tshark_malformed
 
-from ecatcfg.esc import AlState, Reg, SmConfig, sm_register
+from ecatcfg.eni.plan import FoeInitCmd, MailboxArea, MailboxPlan
+from ecatcfg.esc import AlState, Reg, SmConfig, Transition, sm_register
 from ecatcfg.esi.library import Library
 from ecatcfg.runtime import foe
 from ecatcfg.runtime.link import MemoryLink
 from ecatcfg.runtime.master import foe_tool, sdo_tool
 from ecatcfg.runtime.master.foe_client import FoeRead, FoeTransferError, FoeWrite
+from ecatcfg.runtime.master.foe_init import foe_init_cmd_job
+from ecatcfg.runtime.master.replay import ApplyError, MailboxChannel
 from ecatcfg.runtime.master.transport import Transport
 from ecatcfg.runtime.pcap import PcapRecorder
 from ecatcfg.runtime.segment.emulate import SlaveSpec, segment
@@ -490,6 +494,88 @@ def test_foe_init_cmds_round_trip_and_follow_the_schema(lib, eni_schema):
     assert back == eni_reader.read_bytes(eni_writer.to_bytes(back), "again.xml")
     text = data.decode()
     assert "<FoE>" in text and "<Data>01002a000000" + b"cal.bin".hex() + "</Data>" in text
+
+
+# -- an FoE InitCmd's job against hand-written mailbox answers -------------------------------
+
+MAILBOX_PLAN = MailboxPlan(MailboxArea(0x1000, 128), MailboxArea(0x1080, 128))
+
+
+def run_mailbox_job(job, answers: list[bytes], *, answer_after: float = 0.0,
+                    refuse_writes: int = 0, give_up: float = 10.0) -> list[bytes]:
+    """Run a mailbox job against a slave whose SM0 (0x1000) takes each write but the first
+    ``refuse_writes`` (working counter 0: the mailbox is full) and whose SM1 (0x1080) hands
+    out ``answers``, one per read once a request was written and ``answer_after`` s have
+    passed; the messages written.  A job still running after ``give_up`` s fails the
+    test."""
+    from ecatcfg.esc import Cmd
+    from ecatcfg.runtime.mailbox import pad_to
+    from ecatcfg.runtime.wire import Datagram
+    started = time.monotonic()
+    written: list[bytes] = []
+    pending = list(answers)
+    request = next(job)
+    try:
+        while True:
+            if time.monotonic() - started > give_up:
+                pytest.fail(f"the job still runs after {give_up} s")
+            replies = []
+            for dg in request:
+                data, wkc = dg.data, 0
+                if dg.cmd == Cmd.FPWR and dg.ado == 0x1000:
+                    if refuse_writes:
+                        refuse_writes -= 1
+                    else:
+                        written.append(bytes(dg.data))
+                        wkc = 1
+                elif dg.cmd == Cmd.FPRD and dg.ado == 0x1080 and pending and written and \
+                        time.monotonic() - started >= answer_after:
+                    data, wkc = pad_to(pending.pop(0), len(dg.data)), 1
+                replies.append(Datagram(dg.cmd, dg.idx, dg.address, data, wkc=wkc))
+            request = job.send(replies)
+    except StopIteration:
+        return written
+
+
+def foe_read_cmd(data: bytes, comment: str = "", timeout: int = 0) -> FoeInitCmd:
+    return FoeInitCmd([Transition.PS], comment, data, timeout=timeout)
+
+
+def test_a_foe_init_cmd_reads_with_its_password_on_the_channels_counter():
+    channel = MailboxChannel(0x1001, MAILBOX_PLAN)
+    assert channel.counter() == 1          # an earlier mailbox command took counter 1
+    # Read request (OpCode 1), password 0x1234, file "cal.bin"; the slave answers late,
+    # with data packet 1 of 3 bytes (short: the last), mailbox counter 1.
+    cmd = foe_read_cmd(bytes.fromhex("0100 34120000") + b"cal.bin")
+    last = bytes.fromhex("0900 0000 00 14" "0300 01000000".replace(" ", "")) + b"abc"
+    written = run_mailbox_job(foe_init_cmd_job(channel, cmd, "s1"), [last],
+                              answer_after=0.3, refuse_writes=1)
+    # Mailbox header: length 13, address 0, channel 0, type 4 (FoE) with counter 2, then 3.
+    assert [w[:19] for w in written] == [
+        bytes.fromhex("0d00 0000 00 24" "0100 34120000".replace(" ", "")) + b"cal.bin",
+        bytes.fromhex("0600 0000 00 34" "0400 01000000".replace(" ", "")).ljust(19, b"\x00")]
+
+
+def test_a_foe_init_cmd_gives_up_after_its_own_timeout():
+    started = time.monotonic()
+    with pytest.raises(ApplyError, match="no mailbox response in time"):
+        run_mailbox_job(foe_init_cmd_job(MailboxChannel(0x1001, MAILBOX_PLAN),
+                                         foe_read_cmd(bytes.fromhex("0100 00000000") + b"x",
+                                                      timeout=100), "s1"), [])
+    assert time.monotonic() - started < 2.5        # 100 ms, not the 3 s default
+
+
+def test_a_foe_init_cmd_apply_cannot_run_is_refused_by_name():
+    write = foe_read_cmd(bytes.fromhex("0200 00000000") + b"x", comment="firmware")
+    with pytest.raises(ApplyError, match=r"slave 's1' \[firmware\]: FoE InitCmd with OpCode "
+                       r"2: apply runs read requests \(1\) only$") as refused:
+        next(foe_init_cmd_job(MailboxChannel(0x1001, MAILBOX_PLAN), write, "s1"))
+    assert refused.value.command == "firmware"
+    small = MailboxPlan(MailboxArea(0x1000, 12), MailboxArea(0x1080, 128))
+    with pytest.raises(ApplyError, match=r"slave 's1' \[FoE read 'x'\]: a 12-byte SM0 "
+                       "cannot carry FoE data"):
+        next(foe_init_cmd_job(MailboxChannel(0x1001, small),
+                              foe_read_cmd(bytes.fromhex("0100 00000000") + b"x"), "s1"))
 
 
 def test_apply_reads_the_file_of_a_read_request_and_names_a_refusal(lib, tmp_path):
