@@ -406,6 +406,71 @@ def test_a_topologys_wrong_copies_are_errors_at_their_lines(tmp_path):
             "'lamps.Channel 1-8.Output 1' (1 bit): the sizes differ") in done.stderr
 
 
+def _compile_here(tmp_path, text: str):
+    """The topology compiled in this process (``ecatcfg compile`` above runs in another):
+    the plan, or the TopologyError's problems as text."""
+    from ecatcfg.compiler import build, topology
+    from ecatcfg.compiler.topology import TopologyError
+    from ecatcfg.esi.library import Library
+    topo = tmp_path / "here.yaml"
+    topo.write_text(text)
+    try:
+        return topo, build.compile_topology(topology.load(topo),
+                                            Library(ESI, cache=False)).plan
+    except TopologyError as exc:
+        return topo, [str(problem) for problem in exc.problems]
+
+
+def test_a_topologys_copies_land_on_the_command_that_reads_them(tmp_path):
+    """The example's image (module docstring): buttons inputs bits 0-3, sensors 4-7, lamps
+    outputs bits 8-15; so sensor channel 2 is input bit 5, lamp output 8 is bit 15, button 1
+    bit 0, lamp 1 bit 8, all on the process data LRW that reads the inputs in OP."""
+    _, plan = _compile_here(tmp_path, TOPOLOGY)
+    assert isinstance(plan, NetworkPlan), plan
+    assert _lrw(plan).copy_infos == [CopyInfo(5, 15, 1), CopyInfo(0, 8, 1)]
+    assert [c for cyc in plan.cyclic for f in cyc.frames for c in f.cmds
+            if c.copy_infos] == [_lrw(plan)]
+
+
+def test_a_topologys_wrong_copies_are_errors_at_their_lines_in_process(tmp_path):
+    text = TOPOLOGY.replace("sensors.Channel 2.Input,", "sensors.Channel 2.Inputs,").replace(
+        "to: lamps.Channel 1-8.Output 1}", "to: lamps.Channel 1-8.Output 9}")
+    topo, problems = _compile_here(tmp_path, text)
+    assert (f"{topo}:4: 'sensors.Channel 2.Inputs' is not an input variable of the process "
+            "image; did you mean 'sensors.Channel 2.Input'") in "\n".join(problems)
+    assert f"{topo}:5: 'lamps.Channel 1-8.Output 9' is not an output variable" in \
+        "\n".join(problems)
+    sizes = TOPOLOGY.replace("buttons.Channel 1.Input", "axis1.TxPDO 1 (CSP).Statusword") \
+        + '  - {name: axis1, device: "0xE0000ECA:0x7201"}\n'
+    topo, problems = _compile_here(tmp_path, sizes)
+    assert problems == [f"{topo}:5: copy 'axis1.TxPDO 1 (CSP).Statusword' (16 bits) to "
+                        "'lamps.Channel 1-8.Output 1' (1 bit): the sizes differ"]
+
+
+def test_a_copy_written_as_a_block_is_refused_at_its_from_line(tmp_path):
+    text = TOPOLOGY.replace("    - {from: sensors.Channel 2.Input, to: lamps.Channel 1-8.Output 8}\n",
+                            "    - to: lamps.Channel 1-8.Output 8\n"
+                            "      from: sensors.Channel 2.Inputs\n")
+    topo, problems = _compile_here(tmp_path, text)
+    assert [p.split(": ")[0] for p in problems] == [f"{topo}:5"]
+
+
+def test_an_input_no_command_reads_in_op_is_an_error_at_its_line(tmp_path):
+    """The LRW that reads the sensors made to run in SAFEOP only: no command reads the
+    copy's input in OP, whose copies run then (docs/runtime.md)."""
+    from ecatcfg.compiler import copies, topology
+    _, plan = _compile_here(tmp_path, TOPOLOGY.replace(
+        "  copies:\n    - {from: sensors.Channel 2.Input, to: lamps.Channel 1-8.Output 8}\n"
+        "    - {from: buttons.Channel 1.Input, to: lamps.Channel 1-8.Output 1}\n", ""))
+    assert isinstance(plan, NetworkPlan), plan
+    _lrw(plan).states = ["SAFEOP"]
+    topo = tmp_path / "line.yaml"
+    topo.write_text(TOPOLOGY)
+    errors = copies.add_copies(topology.load(topo), plan)
+    assert [str(e) for e in errors][:1] == [
+        f"{topo}:4: no cyclic command reads 'sensors.Channel 2.Input' in OP"]
+
+
 # -- a real TwinCAT ENI, with a copy added -----------------------------------------------------
 
 def test_a_copy_in_a_real_twincat_eni(corpus):
