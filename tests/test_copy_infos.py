@@ -448,9 +448,9 @@ def test_a_topologys_wrong_copies_are_errors_at_their_lines_in_process(tmp_path)
 
 
 def test_a_copy_written_as_a_block_is_refused_at_its_from_line(tmp_path):
-    text = TOPOLOGY.replace("    - {from: sensors.Channel 2.Input, to: lamps.Channel 1-8.Output 8}\n",
-                            "    - to: lamps.Channel 1-8.Output 8\n"
-                            "      from: sensors.Channel 2.Inputs\n")
+    flow = "    - {from: sensors.Channel 2.Input, to: lamps.Channel 1-8.Output 8}\n"
+    text = TOPOLOGY.replace(flow, "    - to: lamps.Channel 1-8.Output 8\n"
+                                  "      from: sensors.Channel 2.Inputs\n")
     topo, problems = _compile_here(tmp_path, text)
     assert [p.split(": ")[0] for p in problems] == [f"{topo}:5"]
 
