@@ -31,8 +31,8 @@ from ecatcfg.esi.reader import read_file
 from ecatcfg.esi.idn import idn_text, parse_idn
 from ecatcfg.runtime import Network
 from ecatcfg.runtime.link import MemoryLink
-from ecatcfg.runtime.mailbox import (MbxType, decode, encode_emergency, encode_mailbox,
-                                     encode_mailbox_error, pad_to)
+from ecatcfg.runtime.mailbox import (MailboxProtocolError, MbxType, decode, encode_emergency,
+                                     encode_mailbox, encode_mailbox_error, pad_to)
 from ecatcfg.runtime.master import soe_tool
 from ecatcfg.runtime.master.replay import ApplyError, MailboxChannel
 from ecatcfg.runtime.master.soe_client import SoeTransfer, soe_init_cmd_job
@@ -143,6 +143,17 @@ def test_the_attribute_word_bit_fields():
     assert attribute(8, ATTR_TYPE_IDN, wp_preop=True) == 0x1053_0001
     with pytest.raises(ValueError, match="1, 2, 4 or 8 bytes, not 3"):
         attribute(3)
+
+
+def test_malformed_lists_and_headers_are_named():
+    # A list: current length 5, maximum 8, then 2 bytes (ETG.1000.6 / SOEM ec_SoElistt).
+    with pytest.raises(ValueError, match="list of 2 bytes says current length 5, maximum 8"):
+        decode_list(bytes.fromhex("0500 0800 6162".replace(" ", "")))
+    with pytest.raises(MailboxProtocolError,
+                       match="SoE message of 2 bytes is shorter than the 4-byte SoE header") \
+            as short:
+        decode_soe(bytes.fromhex("0140"))
+    assert short.value.detail == 6                    # ETG.1000.4: size too short
 
 
 def test_a_mailbox_without_room_for_soe_data_is_refused():
@@ -301,6 +312,18 @@ def test_esi_idns_are_sized_by_the_data_their_init_cmds_write():
         assert read(idn) == len(body).to_bytes(2, "little") + bytes.fromhex("0000 00 05"
                                                                            .replace(" ", "")) \
             + body, hex(idn)
+
+
+def test_the_standard_lists_and_the_version_before_any_state_change():
+    box = DriveBox()
+    # S-0-0021 (invalid operation data) before SAFEOP was ever asked: an empty list of at
+    # most 128 bytes (current length 0, maximum 0x0080).
+    assert box.read(S21).data == bytes.fromhex("0000 8000".replace(" ", ""))
+    # S-0-0030, the manufacturer version: a list (bit 18) of 1-byte (length code 0) string
+    # characters (data type 4, bits 20-22), read-only in PREOP, SAFEOP and OP (bits
+    # 28-30), factor 1: SOEM ec_SoEattributet.
+    word = box.read(S30, elements=ELEMENT_ATTRIBUTE).data
+    assert word == (0x7044_0001).to_bytes(4, "little")
 
 
 def test_a_fragment_out_of_turn_gets_the_general_error():
