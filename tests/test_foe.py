@@ -161,6 +161,30 @@ def test_the_server_refuses_in_the_bytes_of_an_foe_error():
     # Busy is the slave's to send (ETG.1000.6): from the master it is illegal, 0x8004.
     assert reply(bytes.fromhex("0600 0100 0200"), AlState.BOOT) == \
         error(0x8004, b"unexpected busy")
+    # Password 7, not the slave's 0: 0x800A (no rights).
+    assert reply(bytes.fromhex("0100 07000000") + b"a", AlState.BOOT) == \
+        error(0x800A, b"wrong password")
+    # A write acknowledged with ack 0, then data packet 3 where 1 is due: 0x8005.
+    assert reply(bytes.fromhex("0200 00000000") + b"b", AlState.BOOT) == \
+        struct.pack("<HHBB", 6, 0, 0, 0x04) + bytes.fromhex("0400 00000000")
+    assert reply(bytes.fromhex("0300 03000000") + b"xy", AlState.BOOT) == \
+        error(0x8005, b"packet 3, expected 1")
+    # A read of a file: data packet 1, then an ack of packet 5 where 1 is due: 0x8005.
+    server.files["c"] = b"hello"
+    assert reply(bytes.fromhex("0100 00000000") + b"c", AlState.BOOT) == \
+        struct.pack("<HHBB", 11, 0, 0, 0x04) + bytes.fromhex("0300 01000000") + b"hello"
+    assert reply(bytes.fromhex("0400 05000000"), AlState.BOOT) == \
+        error(0x8005, b"ack 5, expected 1")
+
+
+def test_a_firmware_file_may_be_its_header_alone():
+    """The 16-byte header (b"ECFW", vendor, product, revision) with no image after it is
+    still this device's firmware file, of revision 3."""
+    from ecatcfg.runtime.segment.foe_server import firmware_revision
+    header = b"ECFW" + struct.pack("<III", VENDOR, BOOT_PRODUCT, 3)
+    assert firmware_revision("app.efw", header, VENDOR, BOOT_PRODUCT) == 3
+    assert firmware_revision("app.efw", header[:15], VENDOR, BOOT_PRODUCT) == \
+        "no firmware header (ECFW)"
 
 
 # --------------------------------------------------------------------------- the client alone
