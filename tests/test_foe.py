@@ -224,6 +224,25 @@ def test_a_wrong_packet_number_is_answered_with_error_0x8005():
     assert answer is not None and t.done
     assert foe.decode_foe(answer[6:12]) == foe.FoeError(0x8005)
     assert isinstance(t.wrong_number, FoeTransferError) and t.wrong_number.code == 0x8005
+    assert str(t.wrong_number) == ("data packet 2, expected 1 (FoE error 0x8005, packet "
+                                   "number wrong, sent to the slave)")
+
+
+def test_the_slaves_error_text_and_a_mailbox_error_without_its_type_word():
+    t = FoeRead("f", mbx_out_size=32, mbx_in_size=32)
+    t.first_request()
+    # FoE error 0x8001 (not found) with the text "no file", zero-padded.
+    with pytest.raises(FoeTransferError, match=r"FoE error 0x8001 \(not found\): 'no file'") \
+            as refused:
+        t.on_response((bytes.fromhex("0d00 0000 00 04" "0500 01800000".replace(" ", ""))
+                       + b"no file").ljust(32, b"\x00"))
+    assert (refused.value.code, refused.value.text) == (0x8001, "no file")
+    # A mailbox error reply (type 0) whose first word is not Type 0x0001: no detail read.
+    t = FoeRead("f", mbx_out_size=32, mbx_in_size=32)
+    t.first_request()
+    with pytest.raises(FoeTransferError, match=r"mailbox error 0 \(unknown detail\)"):
+        t.on_response(bytes.fromhex("0400 0000 00 00" "0200 0200".replace(" ", ""))
+                      .ljust(32, b"\x00"))
 
 
 def test_a_mailbox_error_reply_ends_the_transfer_with_its_detail():
