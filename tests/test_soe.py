@@ -447,6 +447,12 @@ def test_the_master_writes_in_fragments_and_waits_for_one_answer():
      r"response for S-0-0002"),
     (bytes.fromhex("0400 0000 00 23" "0000 0000".replace(" ", "")),
      r"mailbox type 3 where an SoE response"),
+    # FoE (type 4): an ack of packet 0
+    (bytes.fromhex("0600 0000 00 24" "0400 00000000".replace(" ", "")),
+     r"mailbox type 4 where an SoE response"),
+    # a write response with the Error bit and no code after the header
+    (bytes.fromhex("0400 0000 00 25" "14 40 0100".replace(" ", "")),
+     r"error reply with opcode 4 and no error code"),
 ])
 def test_the_master_names_what_went_wrong(answer, message):
     cmd = SoeInitCmd([Transition.PS], "", S1, b"\xd0\x07")
@@ -482,6 +488,13 @@ def test_an_init_cmd_the_master_cannot_send_is_refused_by_slave_and_transition()
     with pytest.raises(ApplyError, match=r"slave 'axis' .*a 10-byte SM0 cannot carry an SoE "
                        r"request \(transition PS\)"):
         drive_job(init_job(SoeInitCmd([Transition.PS], "", S1, b"\xd0\x07"), small), [])
+
+
+def test_the_master_writes_the_elements_it_was_given():
+    # Elements 0x80 (the default value) and drive 2: byte 1 of the SoE header is the
+    # element flags; byte 0 opcode 3 with the drive in bits 5-7 (0x43).
+    [request] = SoeTransfer(S1, b"\xd0\x07", drive_no=2, elements=0x80).requests()
+    assert request[6:12] == bytes.fromhex("43 80 0100 d007".replace(" ", ""))
 
 
 def test_the_master_gives_up_after_the_timeout():
