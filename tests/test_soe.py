@@ -76,6 +76,8 @@ def test_idn_text_that_is_not_an_idn():
     with pytest.raises(ValueError, match=r"'x' is not an IDN: write S-<set>-<number> or "
                        r"P-<set>-<number>, e.g. S-0-0001, P-0-0010$"):
         parse_idn("x")
+    with pytest.raises(ValueError, match=r"e\.g\. S-0-0001, P-0-0010, or a 16-bit number$"):
+        parse_idn("x", numbers=True)              # the command line takes numbers too
     for bad_number in (-1, 0x10000):
         with pytest.raises(ValueError, match="not a 16-bit number"):
             idn_text(bad_number)
