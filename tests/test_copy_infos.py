@@ -465,10 +465,13 @@ def test_an_input_no_command_reads_in_op_is_an_error_at_its_line(tmp_path):
     assert isinstance(plan, NetworkPlan), plan
     _lrw(plan).states = ["SAFEOP"]
     topo = tmp_path / "line.yaml"
-    topo.write_text(TOPOLOGY)
+    # The first copy as a block, its 'from' on line 5: the error is at that line.
+    topo.write_text(TOPOLOGY.replace(
+        "    - {from: sensors.Channel 2.Input, to: lamps.Channel 1-8.Output 8}\n",
+        "    - to: lamps.Channel 1-8.Output 8\n      from: sensors.Channel 2.Input\n"))
     errors = copies.add_copies(topology.load(topo), plan)
     assert [str(e) for e in errors][:1] == [
-        f"{topo}:4: no cyclic command reads 'sensors.Channel 2.Input' in OP"]
+        f"{topo}:5: no cyclic command reads 'sensors.Channel 2.Input' in OP"]
 
 
 # -- a real TwinCAT ENI, with a copy added -----------------------------------------------------

@@ -601,11 +601,23 @@ def test_a_foe_init_cmd_reads_with_its_password_on_the_channels_counter():
 
 def test_a_foe_init_cmd_gives_up_after_its_own_timeout():
     started = time.monotonic()
-    with pytest.raises(ApplyError, match="no mailbox response in time"):
+    with pytest.raises(ApplyError) as late:
         run_mailbox_job(foe_init_cmd_job(MailboxChannel(0x1001, MAILBOX_PLAN),
                                          foe_read_cmd(bytes.fromhex("0100 00000000") + b"x",
                                                       timeout=100), "s1"), [])
     assert time.monotonic() - started < 2.5        # 100 ms, not the 3 s default
+    # The slave and the command named once.
+    assert str(late.value) == ("slave 's1' [FoE read 'x']: FoE read of 'x': no mailbox "
+                               "response in time")
+
+
+def test_a_foe_init_cmd_whose_request_sm0_never_takes_names_the_slave():
+    with pytest.raises(ApplyError) as refused:
+        run_mailbox_job(foe_init_cmd_job(MailboxChannel(0x1001, MAILBOX_PLAN),
+                                         foe_read_cmd(bytes.fromhex("0100 00000000") + b"x"),
+                                         "s1"), [], refuse_writes=10**9)
+    assert str(refused.value) == ("slave 's1' [FoE read 'x']: the mailbox (SM0) did not take "
+                                  "the request")
 
 
 def test_a_foe_init_cmd_apply_cannot_run_is_refused_by_name():

@@ -242,6 +242,32 @@ def test_an_esi_init_cmd_no_eni_can_carry_stops_compile(tmp_path: Path, change, 
     assert f"the SoE InitCmd at {drive}:{cmd_line} {says}" in mine[0]
 
 
+def test_an_esi_ip_write_later_in_the_file_still_goes_first(tmp_path: Path) -> None:
+    """Drive 0's IP write of P-0-0010 moved to the end of the file: the IP writes still
+    open PS (esi/idn.py eni_transition), in their file order among themselves."""
+    block = ('            <InitCmd Chn="0">\n              <Transition>IP</Transition>\n'
+             "              <IDN>32778</IDN>\n              <Data>fe7f000000000000</Data>\n"
+             "              <Comment>Feature flags</Comment>\n            </InitCmd>\n")
+    last = "<Comment>Drive-specific setting</Comment>\n            </InitCmd>\n"
+    text = DRIVE.read_text()
+    assert block in text and last in text
+    folder = tmp_path / "esi"
+    folder.mkdir()
+    write(folder, "drive.xml", text.replace(block, "", 1).replace(last, last + block, 1))
+    assert soe_cmds(compile_text(tmp_path, TOPOLOGY, folder)) == \
+        [FROM_ESI[1], FROM_ESI[0], *FROM_ESI[2:]]
+
+
+def test_a_type_of_unknown_size_for_a_known_idn_is_an_error_at_its_type(tmp_path: Path) -> None:
+    text = TOPOLOGY + ("    soe:\n      - idn: S-0-0001\n        value: 5\n"
+                       "        type: NOSUCHTYPE\n")
+    [error] = compile_errors(tmp_path, text)
+    line = text.splitlines().index("        type: NOSUCHTYPE") + 1
+    assert error.endswith(f"t.yaml:{line}: slave 'axes': S-0-0001 (drive 0) (NC cycle time "
+                          "(TNcyc)) is 16 bits (UINT), but 'type' NOSUCHTYPE is of unknown "
+                          "bits"), error
+
+
 def test_lint_stops_nothing_the_resolver_does_not(tmp_path: Path) -> None:
     """ESI216 and ESI217 find the same defects the resolver refuses."""
     from ecatcfg.esi.lint import LintOptions, Target, lint_file, select_rules
