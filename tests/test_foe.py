@@ -161,6 +161,11 @@ def test_the_server_refuses_in_the_bytes_of_an_foe_error():
     # Busy is the slave's to send (ETG.1000.6): from the master it is illegal, 0x8004.
     assert reply(bytes.fromhex("0600 0100 0200"), AlState.BOOT) == \
         error(0x8004, b"unexpected busy")
+    # An ack or a data packet with no transfer going on: 0x8004 (illegal).
+    assert reply(bytes.fromhex("0400 01000000"), AlState.BOOT) == \
+        error(0x8004, b"ack without a read in progress")
+    assert reply(bytes.fromhex("0300 01000000") + b"z", AlState.BOOT) == \
+        error(0x8004, b"data without a write request")
     # Password 7, not the slave's 0: 0x800A (no rights).
     assert reply(bytes.fromhex("0100 07000000") + b"a", AlState.BOOT) == \
         error(0x800A, b"wrong password")
