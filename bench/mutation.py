@@ -1,6 +1,7 @@
 """Mutation testing: how many deliberate small faults in a module its focused tests catch.
 
-    python3 bench/mutation.py [MODULE ...] [--sample N] [--seed S] [--keep DIR] [--json FILE]
+    python3 bench/mutation.py [MODULE ...] [--functions F,...] [--sample N] [--seed S]
+                              [--keep DIR] [--json FILE]
 
 MODULE is a key of bench/mutation.toml (``runtime/master/recovery.py``), a unique part of one
 (``recovery``), or nothing for every module there.  For each module, in a temporary copy of
@@ -12,7 +13,9 @@ each mutant against the tests that call its function, one at a time under ``nice
 Per module it prints the mutants made, how many were tested (all, or a seeded sample of
 ``--sample N``), and of those: killed, survived, timeout, no tests (no focused test calls the
 function), other (mutmut's "suspicious", "segfault", ...) and the score, (killed + timeout) /
-tested.  ``--json FILE`` writes the same with the names of the survivors; ``--keep DIR``
+tested.  ``--functions F,...`` keeps only the mutants of those functions or methods (by
+name, ``_compile,copy_slave_to_slave``) before the sample is drawn: part of a module.
+``--json FILE`` writes the same with the names of the survivors; ``--keep DIR``
 keeps each module's copy as DIR/<module>, where ``mutmut show NAME`` prints a survivor's
 diff and ``mutmut results`` lists them all (docs/BENCHMARKS.md, "Mutation testing").
 
@@ -170,8 +173,15 @@ class Failed(Exception):
     """mutmut could not test the module (its log says why)."""
 
 
+def function_of(mutant: str) -> str:
+    """The function or method a mutant's name belongs to: mutmut names a mutant
+    ``<module>.x_<function>__mutmut_<n>``, or ``<module>.xǁ<class>ǁ<method>__mutmut_<n>``."""
+    stem = mutant.rsplit("__mutmut_", 1)[0].rsplit(".", 1)[-1]
+    return stem.rsplit("ǁ", 1)[-1] if "ǁ" in stem else stem.removeprefix("x_")
+
+
 def run_module(module: str, focus: Focus, work: Path, sample: int | None,
-               seed: int) -> Result:
+               seed: int, functions: list[str] | None = None) -> Result:
     from mutmut.stats import status_by_exit_code  # the tool's own reading of its exit codes
 
     started = time.monotonic()
@@ -183,6 +193,10 @@ def run_module(module: str, focus: Focus, work: Path, sample: int | None,
     if not names:
         raise Failed("mutmut made no mutants (the clean run of its tests failed?); the end of "
                      f"its log:\n{_tail(log)}")
+    if functions:
+        names = [n for n in names if function_of(n) in functions]
+        if not names:
+            raise Failed(f"no mutant of {module} is in {', '.join(functions)}")
     chosen = names
     if sample is not None and sample < len(names):
         chosen = sorted(random.Random(seed).sample(names, sample))
@@ -223,6 +237,8 @@ def _slug(module: str) -> str:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("modules", nargs="*", help="keys of bench/mutation.toml (default: all)")
+    parser.add_argument("--functions", type=lambda v: [f for f in v.split(",") if f],
+                        help="only the mutants of these functions or methods, comma-separated")
     parser.add_argument("--sample", type=int, help="test N mutants per module, drawn at random")
     parser.add_argument("--seed", type=int, default=1, help="seed of the sample (default 1)")
     parser.add_argument("--keep", type=Path, help="keep each module's copy in DIR/<module>")
@@ -244,7 +260,8 @@ def main(argv: list[str] | None = None) -> int:
                     shutil.rmtree(work)
                 work.mkdir(parents=True)
             try:
-                r = run_module(module, config[module], work, args.sample, args.seed)
+                r = run_module(module, config[module], work, args.sample, args.seed,
+                               args.functions)
             except Failed as exc:
                 failed[module] = str(exc)
                 print(f"{module:24} not tested: {exc}", flush=True)

@@ -286,6 +286,69 @@ def test_a_defect_fires_its_rule(tmp_path: Path, example_eni: Path, examples: Li
     assert any(f.severity == severity for f in result.findings if f.rule == rule)
 
 
+def test_copy_checks_at_the_edges_of_a_command_and_of_another_copy(
+        tmp_path: Path, example_eni: Path, examples: Library) -> None:
+    """A copy whose source starts in the LRW's input data (bits 0..143) and ends past it is
+    ENI112 at its own line; two copies whose destinations only touch (bits 12..15, then
+    8..11) overlap nowhere: no ENI114."""
+    path = _defective(tmp_path, example_eni, _copies("12", (140, 8, 8)))
+    result = check_eni(path, examples, use_cache=False)
+    [info] = etree.parse(str(path)).xpath("//CopyInfo")      # lxml's own line count
+    assert [(f.rule, f.line) for f in result.findings] == [("ENI112", info.sourceline)]
+    assert "input data (bits 0..143)" in result.findings[0].message
+    touching = _defective(tmp_path, example_eni, _copies("12", (0, 12, 4), (4, 8, 4)))
+    assert check_eni(touching, examples, use_cache=False).findings == []
+    # The other order (the later copy starts where the earlier ends), and a source that
+    # ends exactly with the LRW's data (bits 136..143): nothing to report.
+    edge = _defective(tmp_path, example_eni, _copies("12", (4, 8, 4), (0, 12, 4),
+                                                      (136, 16, 8)))
+    assert check_eni(edge, examples, use_cache=False).findings == []
+
+
+def test_copy_findings_are_at_their_copy_info_lines(tmp_path: Path, example_eni: Path,
+                                                    examples: Library) -> None:
+    """ENI111, ENI112 (a command that writes only: the LRW as an LWR) and ENI114 each at
+    the line of its CopyInfo (for ENI114 the later one), as lxml counts it."""
+    def as_lwr(root: Root) -> None:
+        lrw = root.xpath("Config/Cyclic/Frame/Cmd[Cmd='12']")[0]
+        lrw.find("Cmd").text, lrw.find("Cnt").text = "11", "2"
+        _copies("11", (4, 8, 4))(root)
+
+    for rule, defect, index in (("ENI111", _copy_past_inputs, 0), ("ENI112", as_lwr, 0),
+                                ("ENI114", _copies_overlap, 1)):
+        path = _defective(tmp_path, example_eni, defect)
+        info = etree.parse(str(path)).xpath("//CopyInfo")[index]
+        found = [(f.line, f.message) for f in check_eni(path, examples, use_cache=False)
+                 .findings if f.rule == rule]
+        assert [line for line, _ in found] == [info.sourceline], (rule, found)
+        if rule == "ENI112":
+            assert "the command reads no input data" in found[0][1]
+
+
+def test_a_copy_in_a_frame_shaped_image_is_checked_in_that_image(tmp_path: Path,
+                                                                  corpus: Path) -> None:
+    """TwinCAT's frame-shaped image (docs/eni-exports.md §4): the EL1809's inputs at
+    BitOffs 448 = 8·(the LRD's InputOffs 46 + 10).  A copy of its channels 3-6 to the
+    EL2008's channels 4-7 is in the LRD's data counted in that image: no copy finding."""
+    from ecatcfg.eni import reader as eni_reader
+    from ecatcfg.eni import writer as eni_writer
+    from ecatcfg.eni.plan import CopyInfo
+    from ecatcfg.esc import Cmd
+    plan = eni_reader.read_file(corpus / "eni" / "jn-ec-master" / "mega_master_eni.xml")
+    inputs = {v.name: v.bit_offs for v in plan.process_image.inputs}
+    outputs = {v.name: v.bit_offs for v in plan.process_image.outputs}
+    [lrd] = [c for cyc in plan.cyclic for f in cyc.frames for c in f.cmds if c.cmd == Cmd.LRD
+             and c.cnt == 1]
+    lrd.copy_infos = [CopyInfo(inputs["Term 4 (EL1809).Channel 3.Input"],
+                               outputs["Term 2 (EL2008).Channel 4.Output"], 4)]
+    path = tmp_path / "mega-copies.xml"
+    path.write_bytes(eni_writer.to_bytes(plan))
+    result = check_eni(path, Library([corpus / "esi" / "beckhoff"], cache=False),
+                       use_cache=False)
+    assert [f for f in result.findings if f.rule in ("ENI111", "ENI112", "ENI113",
+                                                      "ENI114")] == []
+
+
 @pytest.mark.parametrize("cmd, cnt", [(11, 2), (10, 3)])
 def test_working_counters_of_lwr_and_lrd(tmp_path: Path, example_eni: Path,
                                          examples: Library, cmd: int, cnt: int) -> None:

@@ -281,32 +281,49 @@ def _bits(image: bytes | bytearray, first: int, n: int) -> list[int]:
     return [image[b // 8] >> b % 8 & 1 for b in range(first, first + n)]
 
 
+def _copy_and_compare(example_plan, copy: CopyInfo, rng) -> None:
+    """``copy`` made by the cyclic frames over random images, against the same copy made
+    here one bit at a time; the bits around the destination are left as they were."""
+    from ecatcfg.runtime.master.cyclic import CyclicFrames
+    n = copy.bit_size
+    plan = copying.deepcopy(example_plan)
+    lrw = _lrw(plan)
+    lrw.copy_infos = [copy]
+    frames = CyclicFrames(plan)
+    frames.inputs[:] = rng.randbytes(len(frames.inputs))
+    frames.outputs[:] = before = bytearray(rng.randbytes(len(frames.outputs)))
+    for p in frames.prepared(AlState.OP):
+        p.bind(frames.inputs, frames.outputs, bytearray(2048))
+        for s in p.slots:
+            s.wkc = s.cmd.cnt if s.cmd.cnt is not None else 0
+        p.copy_slave_to_slave()
+    want = bytearray(before)
+    for k, bit in enumerate(_bits(frames.inputs, copy.src_bit_offs, n)):
+        at = copy.dst_bit_offs + k
+        want[at // 8] = want[at // 8] & ~(1 << at % 8) | bit << at % 8
+    assert frames.outputs == want, copy
+
+
 def test_compiled_copies_match_a_bit_by_bit_copy(example_plan):
     """Every placement of 1..24-bit copies (a seeded sample) against a copy made here one
-    bit at a time; the bits around the destination are left as they were."""
+    bit at a time."""
     import random
-    from ecatcfg.runtime.master.cyclic import CyclicFrames
     rng = random.Random(7)
     size = 25 * 8
     for _ in range(300):
         n = rng.randint(1, 24)
-        copy = CopyInfo(rng.randrange(size - n), rng.randrange(size - n), n)
-        plan = copying.deepcopy(example_plan)
-        lrw = _lrw(plan)
-        lrw.copy_infos = [copy]
-        frames = CyclicFrames(plan)
-        frames.inputs[:] = rng.randbytes(len(frames.inputs))
-        frames.outputs[:] = before = bytearray(rng.randbytes(len(frames.outputs)))
-        for p in frames.prepared(AlState.OP):
-            p.bind(frames.inputs, frames.outputs, bytearray(2048))
-            for s in p.slots:
-                s.wkc = s.cmd.cnt if s.cmd.cnt is not None else 0
-            p.copy_slave_to_slave()
-        want = bytearray(before)
-        for k, bit in enumerate(_bits(frames.inputs, copy.src_bit_offs, n)):
-            at = copy.dst_bit_offs + k
-            want[at // 8] = want[at // 8] & ~(1 << at % 8) | bit << at % 8
-        assert frames.outputs == want, copy
+        _copy_and_compare(example_plan,
+                          CopyInfo(rng.randrange(size - n), rng.randrange(size - n), n), rng)
+
+
+@pytest.mark.parametrize("src, dst, n", [
+    (0, 72, 16), (8, 80, 24), (16, 0, 16), (80, 152, 16), (96, 8, 24), (0, 128, 8)])
+def test_whole_byte_copies_of_several_bytes_match_a_bit_by_bit_copy(example_plan, src, dst,
+                                                                    n):
+    """Byte-aligned copies of two or three bytes (a random placement is seldom aligned),
+    from and to bytes past the eighth."""
+    import random
+    _copy_and_compare(example_plan, CopyInfo(src, dst, n), random.Random(src * 1000 + dst))
 
 
 def test_copies_over_veth(veth_netns, example_plan):
@@ -387,6 +404,74 @@ def test_a_topologys_wrong_copies_are_errors_at_their_lines(tmp_path):
     assert done.returncode == 1
     assert (f"{topo}:5: copy 'axis1.TxPDO 1 (CSP).Statusword' (16 bits) to "
             "'lamps.Channel 1-8.Output 1' (1 bit): the sizes differ") in done.stderr
+
+
+def _compile_here(tmp_path, text: str):
+    """The topology compiled in this process (``ecatcfg compile`` above runs in another):
+    the plan, or the TopologyError's problems as text."""
+    from ecatcfg.compiler import build, topology
+    from ecatcfg.compiler.topology import TopologyError
+    from ecatcfg.esi.library import Library
+    topo = tmp_path / "here.yaml"
+    topo.write_text(text)
+    try:
+        return topo, build.compile_topology(topology.load(topo),
+                                            Library(ESI, cache=False)).plan
+    except TopologyError as exc:
+        return topo, [str(problem) for problem in exc.problems]
+
+
+def test_a_topologys_copies_land_on_the_command_that_reads_them(tmp_path):
+    """The example's image (module docstring): buttons inputs bits 0-3, sensors 4-7, lamps
+    outputs bits 8-15; so sensor channel 2 is input bit 5, lamp output 8 is bit 15, button 1
+    bit 0, lamp 1 bit 8, all on the process data LRW that reads the inputs in OP."""
+    _, plan = _compile_here(tmp_path, TOPOLOGY)
+    assert isinstance(plan, NetworkPlan), plan
+    assert _lrw(plan).copy_infos == [CopyInfo(5, 15, 1), CopyInfo(0, 8, 1)]
+    assert [c for cyc in plan.cyclic for f in cyc.frames for c in f.cmds
+            if c.copy_infos] == [_lrw(plan)]
+
+
+def test_a_topologys_wrong_copies_are_errors_at_their_lines_in_process(tmp_path):
+    text = TOPOLOGY.replace("sensors.Channel 2.Input,", "sensors.Channel 2.Inputs,").replace(
+        "to: lamps.Channel 1-8.Output 1}", "to: lamps.Channel 1-8.Output 9}")
+    topo, problems = _compile_here(tmp_path, text)
+    assert (f"{topo}:4: 'sensors.Channel 2.Inputs' is not an input variable of the process "
+            "image; did you mean 'sensors.Channel 2.Input'") in "\n".join(problems)
+    assert f"{topo}:5: 'lamps.Channel 1-8.Output 9' is not an output variable" in \
+        "\n".join(problems)
+    sizes = TOPOLOGY.replace("buttons.Channel 1.Input", "axis1.TxPDO 1 (CSP).Statusword") \
+        + '  - {name: axis1, device: "0xE0000ECA:0x7201"}\n'
+    topo, problems = _compile_here(tmp_path, sizes)
+    assert problems == [f"{topo}:5: copy 'axis1.TxPDO 1 (CSP).Statusword' (16 bits) to "
+                        "'lamps.Channel 1-8.Output 1' (1 bit): the sizes differ"]
+
+
+def test_a_copy_written_as_a_block_is_refused_at_its_from_line(tmp_path):
+    flow = "    - {from: sensors.Channel 2.Input, to: lamps.Channel 1-8.Output 8}\n"
+    text = TOPOLOGY.replace(flow, "    - to: lamps.Channel 1-8.Output 8\n"
+                                  "      from: sensors.Channel 2.Inputs\n")
+    topo, problems = _compile_here(tmp_path, text)
+    assert [p.split(": ")[0] for p in problems] == [f"{topo}:5"]
+
+
+def test_an_input_no_command_reads_in_op_is_an_error_at_its_line(tmp_path):
+    """The LRW that reads the sensors made to run in SAFEOP only: no command reads the
+    copy's input in OP, whose copies run then (docs/runtime.md)."""
+    from ecatcfg.compiler import copies, topology
+    _, plan = _compile_here(tmp_path, TOPOLOGY.replace(
+        "  copies:\n    - {from: sensors.Channel 2.Input, to: lamps.Channel 1-8.Output 8}\n"
+        "    - {from: buttons.Channel 1.Input, to: lamps.Channel 1-8.Output 1}\n", ""))
+    assert isinstance(plan, NetworkPlan), plan
+    _lrw(plan).states = ["SAFEOP"]
+    topo = tmp_path / "line.yaml"
+    # The first copy as a block, its 'from' on line 5: the error is at that line.
+    topo.write_text(TOPOLOGY.replace(
+        "    - {from: sensors.Channel 2.Input, to: lamps.Channel 1-8.Output 8}\n",
+        "    - to: lamps.Channel 1-8.Output 8\n      from: sensors.Channel 2.Input\n"))
+    errors = copies.add_copies(topology.load(topo), plan)
+    assert [str(e) for e in errors][:1] == [
+        f"{topo}:5: no cyclic command reads 'sensors.Channel 2.Input' in OP"]
 
 
 # -- a real TwinCAT ENI, with a copy added -----------------------------------------------------

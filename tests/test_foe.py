@@ -17,6 +17,7 @@ import struct
 import subprocess
 import sys
 import threading
+import time
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -25,12 +26,15 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from rig import serving, start_simulate, tshark_fields, tshark_malformed
 
-from ecatcfg.esc import AlState, Reg, SmConfig, sm_register
+from ecatcfg.eni.plan import FoeInitCmd, MailboxArea, MailboxPlan
+from ecatcfg.esc import AlState, Reg, SmConfig, Transition, sm_register
 from ecatcfg.esi.library import Library
 from ecatcfg.runtime import foe
 from ecatcfg.runtime.link import MemoryLink
 from ecatcfg.runtime.master import foe_tool, sdo_tool
 from ecatcfg.runtime.master.foe_client import FoeRead, FoeTransferError, FoeWrite
+from ecatcfg.runtime.master.foe_init import foe_init_cmd_job
+from ecatcfg.runtime.master.replay import ApplyError, MailboxChannel
 from ecatcfg.runtime.master.transport import Transport
 from ecatcfg.runtime.pcap import PcapRecorder
 from ecatcfg.runtime.segment.emulate import SlaveSpec, segment
@@ -101,6 +105,15 @@ def test_messages_decode_back():
         foe.decode_foe(bytes.fromhex("0700 00000000"))
 
 
+def test_the_text_of_an_error_or_busy_ends_at_its_padding():
+    # A slave pads its message with zeros (SOES fills the mailbox): the text is what comes
+    # before them, its own spaces included.
+    assert foe.decode_foe(bytes.fromhex("0600 0100 0200") + b"flash \x00\x00") == \
+        foe.FoeBusy(1, 2, "flash ")
+    assert foe.decode_foe(bytes.fromhex("0500 01800000") + b"no file \x00") == \
+        foe.FoeError(0x8001, "no file ")
+
+
 def test_error_codes_have_their_names():
     assert foe.foe_error_name(0x8001) == "not found"
     assert foe.foe_error_name(0x8003) == "disk full"
@@ -127,6 +140,57 @@ def test_any_bytes_get_an_answer_or_a_mailbox_error_from_the_server(data, state,
         for reply in replies:
             assert len(reply) <= size
             foe.decode_foe(reply[6:])
+
+
+def test_the_server_refuses_in_the_bytes_of_an_foe_error():
+    """Hand-written requests and the error replies they get, byte for byte: opcode 5, a
+    reserved byte, the UINT32 code, the text (ETG.1000.6 FoE; SOES ``FOE_ERR_*``)."""
+    from ecatcfg.runtime.segment.foe_server import FoeServer
+    server = FoeServer(VENDOR, BOOT_PRODUCT, bootstrap=True)
+
+    def reply(request: bytes, state: AlState) -> bytes:
+        [answer] = server.handle(request, state, 128, 128)
+        return answer
+
+    def error(code: int, text: bytes) -> bytes:
+        # Mailbox header: length, address 0, channel 0, type 4 (FoE) with counter 0.
+        return struct.pack("<HHBB", 6 + len(text), 0, 0, 0x04) + \
+            bytes.fromhex("0500") + struct.pack("<I", code) + text
+    # A firmware file written outside BOOT on a device with a boot loader: 0x8009.
+    assert reply(bytes.fromhex("0200 00000000") + b"app.efw", AlState.PREOP) == \
+        error(0x8009, b"firmware is written in BOOT only")
+    # Busy is the slave's to send (ETG.1000.6): from the master it is illegal, 0x8004.
+    assert reply(bytes.fromhex("0600 0100 0200"), AlState.BOOT) == \
+        error(0x8004, b"unexpected busy")
+    # An ack or a data packet with no transfer going on: 0x8004 (illegal).
+    assert reply(bytes.fromhex("0400 01000000"), AlState.BOOT) == \
+        error(0x8004, b"ack without a read in progress")
+    assert reply(bytes.fromhex("0300 01000000") + b"z", AlState.BOOT) == \
+        error(0x8004, b"data without a write request")
+    # Password 7, not the slave's 0: 0x800A (no rights).
+    assert reply(bytes.fromhex("0100 07000000") + b"a", AlState.BOOT) == \
+        error(0x800A, b"wrong password")
+    # A write acknowledged with ack 0, then data packet 3 where 1 is due: 0x8005.
+    assert reply(bytes.fromhex("0200 00000000") + b"b", AlState.BOOT) == \
+        struct.pack("<HHBB", 6, 0, 0, 0x04) + bytes.fromhex("0400 00000000")
+    assert reply(bytes.fromhex("0300 03000000") + b"xy", AlState.BOOT) == \
+        error(0x8005, b"packet 3, expected 1")
+    # A read of a file: data packet 1, then an ack of packet 5 where 1 is due: 0x8005.
+    server.files["c"] = b"hello"
+    assert reply(bytes.fromhex("0100 00000000") + b"c", AlState.BOOT) == \
+        struct.pack("<HHBB", 11, 0, 0, 0x04) + bytes.fromhex("0300 01000000") + b"hello"
+    assert reply(bytes.fromhex("0400 05000000"), AlState.BOOT) == \
+        error(0x8005, b"ack 5, expected 1")
+
+
+def test_a_firmware_file_may_be_its_header_alone():
+    """The 16-byte header (b"ECFW", vendor, product, revision) with no image after it is
+    still this device's firmware file, of revision 3."""
+    from ecatcfg.runtime.segment.foe_server import firmware_revision
+    header = b"ECFW" + struct.pack("<III", VENDOR, BOOT_PRODUCT, 3)
+    assert firmware_revision("app.efw", header, VENDOR, BOOT_PRODUCT) == 3
+    assert firmware_revision("app.efw", header[:15], VENDOR, BOOT_PRODUCT) == \
+        "no firmware header (ECFW)"
 
 
 # --------------------------------------------------------------------------- the client alone
@@ -166,6 +230,59 @@ def test_a_wrong_packet_number_is_answered_with_error_0x8005():
     assert answer is not None and t.done
     assert foe.decode_foe(answer[6:12]) == foe.FoeError(0x8005)
     assert isinstance(t.wrong_number, FoeTransferError) and t.wrong_number.code == 0x8005
+    assert str(t.wrong_number) == ("data packet 2, expected 1 (FoE error 0x8005, packet "
+                                   "number wrong, sent to the slave)")
+
+
+def test_the_slaves_error_text_and_a_mailbox_error_without_its_type_word():
+    t = FoeRead("f", mbx_out_size=32, mbx_in_size=32)
+    t.first_request()
+    # FoE error 0x8001 (not found) with the text "no file", zero-padded.
+    with pytest.raises(FoeTransferError, match=r"FoE error 0x8001 \(not found\): 'no file'") \
+            as refused:
+        t.on_response((bytes.fromhex("0d00 0000 00 04" "0500 01800000".replace(" ", ""))
+                       + b"no file").ljust(32, b"\x00"))
+    assert (refused.value.code, refused.value.text) == (0x8001, "no file")
+    # A mailbox error reply (type 0) whose first word is not Type 0x0001: no detail read.
+    t = FoeRead("f", mbx_out_size=32, mbx_in_size=32)
+    t.first_request()
+    with pytest.raises(FoeTransferError, match=r"mailbox error 0 \(unknown detail\)"):
+        t.on_response(bytes.fromhex("0400 0000 00 00" "0200 0200".replace(" ", ""))
+                      .ljust(32, b"\x00"))
+
+
+def test_a_mailbox_error_reply_ends_the_transfer_with_its_detail():
+    t = FoeWrite("f", bytes(30), mbx_out_size=32, mbx_in_size=32)
+    t.first_request()
+    # ETG.1000.4 mailbox error: header type 0, then Type 0x0001 and Detail 0x0002
+    # (unsupported protocol), each UINT16 little-endian.
+    reply = bytes.fromhex("0400 0000 00 00" "0100 0200".replace(" ", "")).ljust(32, b"\x00")
+    with pytest.raises(FoeTransferError, match=r"mailbox error 2 \(unsupported protocol\)") \
+            as refused:
+        t.on_response(reply)
+    assert t.done and refused.value.code is None and refused.value.text == ""
+
+
+def test_the_master_stamps_its_counter_and_refuses_a_wrong_ack_by_text():
+    t = FoeWrite("f", bytes(30), mbx_out_size=32, mbx_in_size=32, counter=lambda: 5)
+    # Mailbox header byte 5: type 4 (FoE) in bits 0-3, the counter 5 in bits 4-6.
+    assert t.first_request()[5] == 0x54
+    answer = t.on_response(foe.encode_foe_mailbox(foe.FoeAck(3)).ljust(32, b"\x00"))
+    text = b"ack 3, expected 0"
+    assert answer == (struct.pack("<HHBB", 6 + len(text), 0, 0, 0x54) + bytes.fromhex("0500")
+                      + struct.pack("<I", 0x8005) + text).ljust(32, b"\x00")
+    read = FoeRead("f", mbx_out_size=32, mbx_in_size=32, counter=lambda: 3)
+    assert read.first_request()[:6] == bytes.fromhex("0700 0000 00 34".replace(" ", ""))
+
+
+def test_a_read_past_its_limit_ends_the_transfer():
+    t = FoeRead("f", mbx_out_size=32, mbx_in_size=32, limit=30)
+    t.first_request()
+    # SM1 of 32 bytes carries 20 file bytes a packet: the second full one passes 30.
+    assert t.on_response(foe.encode_foe_mailbox(foe.FoeData(1, bytes(20))).ljust(32, b"\x00"))
+    with pytest.raises(FoeTransferError, match="longer than 30 bytes"):
+        t.on_response(foe.encode_foe_mailbox(foe.FoeData(2, bytes(20))).ljust(32, b"\x00"))
+    assert t.done is True
 
 
 # --------------------------------------------------------------------------- in memory
@@ -430,6 +547,100 @@ def test_foe_init_cmds_round_trip_and_follow_the_schema(lib, eni_schema):
     assert back == eni_reader.read_bytes(eni_writer.to_bytes(back), "again.xml")
     text = data.decode()
     assert "<FoE>" in text and "<Data>01002a000000" + b"cal.bin".hex() + "</Data>" in text
+
+
+# -- an FoE InitCmd's job against hand-written mailbox answers -------------------------------
+
+MAILBOX_PLAN = MailboxPlan(MailboxArea(0x1000, 128), MailboxArea(0x1080, 128))
+
+
+def run_mailbox_job(job, answers: list[bytes], *, answer_after: float = 0.0,
+                    refuse_writes: int = 0, give_up: float = 10.0) -> list[bytes]:
+    """Run a mailbox job against a slave whose SM0 (0x1000) takes each write but the first
+    ``refuse_writes`` (working counter 0: the mailbox is full) and whose SM1 (0x1080) hands
+    out ``answers``, one per read once a request was written and ``answer_after`` s have
+    passed; the messages written.  A job still running after ``give_up`` s fails the
+    test."""
+    from ecatcfg.esc import Cmd
+    from ecatcfg.runtime.mailbox import pad_to
+    from ecatcfg.runtime.wire import Datagram
+    started = time.monotonic()
+    written: list[bytes] = []
+    pending = list(answers)
+    request = next(job)
+    try:
+        while True:
+            if time.monotonic() - started > give_up:
+                pytest.fail(f"the job still runs after {give_up} s")
+            replies = []
+            for dg in request:
+                data, wkc = dg.data, 0
+                if dg.cmd == Cmd.FPWR and dg.ado == 0x1000:
+                    if refuse_writes:
+                        refuse_writes -= 1
+                    else:
+                        written.append(bytes(dg.data))
+                        wkc = 1
+                elif dg.cmd == Cmd.FPRD and dg.ado == 0x1080 and pending and written and \
+                        time.monotonic() - started >= answer_after:
+                    data, wkc = pad_to(pending.pop(0), len(dg.data)), 1
+                replies.append(Datagram(dg.cmd, dg.idx, dg.address, data, wkc=wkc))
+            request = job.send(replies)
+    except StopIteration:
+        return written
+
+
+def foe_read_cmd(data: bytes, comment: str = "", timeout: int = 0) -> FoeInitCmd:
+    return FoeInitCmd([Transition.PS], comment, data, timeout=timeout)
+
+
+def test_a_foe_init_cmd_reads_with_its_password_on_the_channels_counter():
+    channel = MailboxChannel(0x1001, MAILBOX_PLAN)
+    assert channel.counter() == 1          # an earlier mailbox command took counter 1
+    # Read request (OpCode 1), password 0x1234, file "cal.bin"; the slave answers late,
+    # with data packet 1 of 3 bytes (short: the last), mailbox counter 1.
+    cmd = foe_read_cmd(bytes.fromhex("0100 34120000") + b"cal.bin")
+    last = bytes.fromhex("0900 0000 00 14" "0300 01000000".replace(" ", "")) + b"abc"
+    written = run_mailbox_job(foe_init_cmd_job(channel, cmd, "s1"), [last],
+                              answer_after=0.3, refuse_writes=1)
+    # Mailbox header: length 13, address 0, channel 0, type 4 (FoE) with counter 2, then 3.
+    assert [w[:19] for w in written] == [
+        bytes.fromhex("0d00 0000 00 24" "0100 34120000".replace(" ", "")) + b"cal.bin",
+        bytes.fromhex("0600 0000 00 34" "0400 01000000".replace(" ", "")).ljust(19, b"\x00")]
+
+
+def test_a_foe_init_cmd_gives_up_after_its_own_timeout():
+    started = time.monotonic()
+    with pytest.raises(ApplyError) as late:
+        run_mailbox_job(foe_init_cmd_job(MailboxChannel(0x1001, MAILBOX_PLAN),
+                                         foe_read_cmd(bytes.fromhex("0100 00000000") + b"x",
+                                                      timeout=100), "s1"), [])
+    assert time.monotonic() - started < 2.5        # 100 ms, not the 3 s default
+    # The slave and the command named once.
+    assert str(late.value) == ("slave 's1' [FoE read 'x']: FoE read of 'x': no mailbox "
+                               "response in time")
+
+
+def test_a_foe_init_cmd_whose_request_sm0_never_takes_names_the_slave():
+    with pytest.raises(ApplyError) as refused:
+        run_mailbox_job(foe_init_cmd_job(MailboxChannel(0x1001, MAILBOX_PLAN),
+                                         foe_read_cmd(bytes.fromhex("0100 00000000") + b"x"),
+                                         "s1"), [], refuse_writes=10**9)
+    assert str(refused.value) == ("slave 's1' [FoE read 'x']: the mailbox (SM0) did not take "
+                                  "the request")
+
+
+def test_a_foe_init_cmd_apply_cannot_run_is_refused_by_name():
+    write = foe_read_cmd(bytes.fromhex("0200 00000000") + b"x", comment="firmware")
+    with pytest.raises(ApplyError, match=r"slave 's1' \[firmware\]: FoE InitCmd with OpCode "
+                       r"2: apply runs read requests \(1\) only$") as refused:
+        next(foe_init_cmd_job(MailboxChannel(0x1001, MAILBOX_PLAN), write, "s1"))
+    assert refused.value.command == "firmware"
+    small = MailboxPlan(MailboxArea(0x1000, 12), MailboxArea(0x1080, 128))
+    with pytest.raises(ApplyError, match=r"slave 's1' \[FoE read 'x'\]: a 12-byte SM0 "
+                       "cannot carry FoE data"):
+        next(foe_init_cmd_job(MailboxChannel(0x1001, small),
+                              foe_read_cmd(bytes.fromhex("0100 00000000") + b"x"), "s1"))
 
 
 def test_apply_reads_the_file_of_a_read_request_and_names_a_refusal(lib, tmp_path):

@@ -18,7 +18,11 @@ SCORED = {"runtime/master/recovery.py", "runtime/master/hotconnect.py",
           "runtime/segment/eni_device.py", "eni/contents.py", "eoe.py",
           "runtime/segment/eoe_server.py", "runtime/master/cyclic.py",
           "runtime/master/modules.py", "runtime/segment/dc_clock.py",
-          "runtime/segment/timing.py", "runtime/wiring.py"}
+          "runtime/segment/timing.py", "runtime/wiring.py",
+          "runtime/soe.py", "runtime/segment/soe_server.py", "runtime/master/soe_client.py",
+          "esi/idn.py", "compiler/soe_cmds.py", "runtime/foe.py",
+          "runtime/segment/foe_server.py", "runtime/master/foe_client.py",
+          "runtime/master/foe_init.py", "eni/check/copies.py", "compiler/copies.py"}
 
 
 @pytest.fixture
@@ -69,3 +73,12 @@ def test_mutmut_is_told_the_one_module_and_its_tests(mutation, tmp_path):
     assert settings["also_copy"] == ["ecatcfg"]
     assert settings["pytest_add_cli_args_test_selection"] == ["ecatcfg/tests/test_timing.py"]
     assert settings["pytest_add_cli_args"][-2:] == ["-k", "not fit"]
+
+
+def test_a_mutant_is_counted_in_its_function_or_method(mutation):
+    # mutmut 3 names: x_<function>__mutmut_<n>, xǁ<class>ǁ<method>__mutmut_<n>.
+    base = "ecatcfg.runtime.master.cyclic."
+    assert mutation.function_of(base + "x__compile__mutmut_12") == "_compile"
+    assert mutation.function_of(base + "xǁ_Preparedǁcopy_slave_to_slave__mutmut_3") == \
+        "copy_slave_to_slave"
+    assert mutation.function_of(base + "xǁCycleStatsǁ__init____mutmut_1") == "__init__"

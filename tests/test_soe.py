@@ -31,8 +31,8 @@ from ecatcfg.esi.reader import read_file
 from ecatcfg.esi.idn import idn_text, parse_idn
 from ecatcfg.runtime import Network
 from ecatcfg.runtime.link import MemoryLink
-from ecatcfg.runtime.mailbox import (MbxType, decode, encode_emergency, encode_mailbox,
-                                     encode_mailbox_error, pad_to)
+from ecatcfg.runtime.mailbox import (MailboxProtocolError, MbxType, decode, encode_emergency,
+                                     encode_mailbox, encode_mailbox_error, pad_to)
 from ecatcfg.runtime.master import soe_tool
 from ecatcfg.runtime.master.replay import ApplyError, MailboxChannel
 from ecatcfg.runtime.master.soe_client import SoeTransfer, soe_init_cmd_job
@@ -40,9 +40,11 @@ from ecatcfg.runtime.master.transport import Transport
 from ecatcfg.runtime.segment import emulate
 from ecatcfg.runtime.segment.soe_server import Idn
 from ecatcfg.runtime.segment.virtual import Faults
-from ecatcfg.runtime.soe import (ELEMENT_ATTRIBUTE, ELEMENT_NAME, ELEMENT_UNIT, ELEMENT_VALUE,
-                                 Reassembly, SoeOpCode, attribute_element_size, decode_list,
-                                 decode_soe, encode_fragments, encode_soe, soe_error_name)
+from ecatcfg.runtime.soe import (ATTR_TYPE_HEX, ATTR_TYPE_IDN, ATTR_TYPE_INT, ELEMENT_ATTRIBUTE,
+                                 ELEMENT_NAME, ELEMENT_UNIT, ELEMENT_VALUE, Reassembly,
+                                 SoeOpCode, attribute, attribute_element_size, decode_list,
+                                 decode_soe, encode_fragments, encode_soe, fragment_sizes,
+                                 soe_error_name)
 from ecatcfg.runtime.wire import Datagram
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -71,6 +73,20 @@ def test_idn_text_that_is_not_an_idn():
     for bad in ("S-8-0001", "S-0-4096", "Q-0-0001", "65536", "S-0-", "x"):
         with pytest.raises(ValueError):
             parse_idn(bad, numbers=True)
+    with pytest.raises(ValueError, match=r"'x' is not an IDN: write S-<set>-<number> or "
+                       r"P-<set>-<number>, e.g. S-0-0001, P-0-0010$"):
+        parse_idn("x")
+    with pytest.raises(ValueError, match=r"e\.g\. S-0-0001, P-0-0010, or a 16-bit number$"):
+        parse_idn("x", numbers=True)              # the command line takes numbers too
+    for bad_number in (-1, 0x10000):
+        with pytest.raises(ValueError, match="not a 16-bit number"):
+            idn_text(bad_number)
+
+
+def test_idn_zero_is_an_idn():
+    # S-0-0000: the 16-bit number 0 is an IDN like any other (bits 15, 14:12, 11:0 all 0).
+    assert idn_text(0) == "S-0-0000"
+    assert parse_idn("0", numbers=True) == parse_idn("S-0-0000") == 0
 
 
 # --------------------------------------------------------------------------- the codec
@@ -117,6 +133,36 @@ def test_fragments_count_down_and_are_put_together():
     with pytest.raises(ValueError, match="fragments left"):
         broken.add(parts[2])
     assert len(encode_fragments(SoeOpCode.READ_RESPONSE, S1, b"", 16)) == 1
+
+
+def test_the_attribute_word_bit_fields():
+    # SOEM ethercatsoe.h ec_SoEattributet, least significant first: conversion factor 16
+    # bits, length 2 (0: 1 byte .. 3: 8 bytes), list 1, command 1, data type 3, reserved 1,
+    # decimals 4, write-protected in PREOP, SAFEOP, OP one bit each (28, 29, 30).
+    assert attribute(4, ATTR_TYPE_INT, factor=1, wp_op=True) == 0x4022_0001
+    assert attribute(2, ATTR_TYPE_HEX, is_list=True, factor=0, wp_safeop=True,
+                     wp_op=True) == 0x6035_0000
+    assert attribute(8, ATTR_TYPE_IDN, wp_preop=True) == 0x1053_0001
+    with pytest.raises(ValueError, match="1, 2, 4 or 8 bytes, not 3"):
+        attribute(3)
+
+
+def test_malformed_lists_and_headers_are_named():
+    # A list: current length 5, maximum 8, then 2 bytes (ETG.1000.6 / SOEM ec_SoElistt).
+    with pytest.raises(ValueError, match="list of 2 bytes says current length 5, maximum 8"):
+        decode_list(bytes.fromhex("0500 0800 6162".replace(" ", "")))
+    with pytest.raises(MailboxProtocolError,
+                       match="SoE message of 2 bytes is shorter than the 4-byte SoE header") \
+            as short:
+        decode_soe(bytes.fromhex("0140"))
+    assert short.value.detail == 6                    # ETG.1000.4: size too short
+
+
+def test_a_mailbox_without_room_for_soe_data_is_refused():
+    # 6 bytes of mailbox header and 4 of SoE header: an 11-byte mailbox carries 1 data byte.
+    assert fragment_sizes(3, 11) == [1, 1, 1]
+    with pytest.raises(ValueError, match="a 10-byte mailbox cannot carry SoE data"):
+        fragment_sizes(1, 10)
 
 
 # --------------------------------------------------------------------------- the emulated drive
@@ -235,6 +281,64 @@ def test_an_esi_list_idn_takes_lists_up_to_its_maximum():
         assert entry.write_error(data, AlState.OP) == code, data.hex()
 
 
+def test_esi_idns_are_sized_by_the_data_their_init_cmds_write():
+    from ecatcfg.esi.model import SoeInitCmd as EsiSoeInitCmd, SoeSettings, Source
+    from ecatcfg.runtime.segment.soe_server import SoeServer
+    source = Source("x.xml", 1)
+    settings = SoeSettings(source, [
+        EsiSoeInitCmd(["PS"], 0x8103, b"\x01\x00", source, channel=1),   # no drive 1: skipped
+        EsiSoeInitCmd(["PS"], 0x8104, None, source),                   # no data: skipped
+        EsiSoeInitCmd(["PS"], 0x8101, bytes.fromhex("01020304"), source),   # a UINT32
+        EsiSoeInitCmd(["SO"], 0x8102, bytes.fromhex("010203"), source),     # 3 raw bytes
+        EsiSoeInitCmd(["SO"], 0x8100, bytes.fromhex("0200 0400 0102".replace(" ", "")),
+                      source)])                                        # a list of up to 4
+    server = SoeServer(settings, 128)
+    assert [d.required for d in server.drives] == [[0x8101]]
+
+    def read(idn: int) -> bytes:
+        # Read request (opcode 1), elements name | attribute | value (0x02 | 0x04 | 0x40).
+        request = bytes([0x01, 0x46]) + idn.to_bytes(2, "little")
+        [reply] = server.handle(request, AlState.PREOP)
+        return reply
+
+    # The attribute words, SOEM ec_SoEattributet: factor 1; length code 2 (4 bytes) or 0 (1
+    # byte); bit 18 list; data type 1 (unsigned) or 0 (binary) in bits 20-22; an IDN written
+    # in PS is write-protected in SAFEOP and OP (bits 29, 30).
+    name = b"\x0e\x00\x0e\x00(from the ESI)"
+    for idn, attribute_word, value in ((0x8101, "01001260", "00000000"),
+                                       (0x8102, "01000000", "000000"),
+                                       (0x8100, "01000400", "00000400")):
+        body = bytes([0x02, 0x46]) + idn.to_bytes(2, "little") + name + \
+            bytes.fromhex(attribute_word + value)
+        # Mailbox header: length, address 0, channel 0, type 5 (SoE) with counter 0.
+        assert read(idn) == len(body).to_bytes(2, "little") + bytes.fromhex("0000 00 05"
+                                                                           .replace(" ", "")) \
+            + body, hex(idn)
+
+
+def test_the_standard_lists_and_the_version_before_any_state_change():
+    box = DriveBox()
+    # S-0-0021 (invalid operation data) before SAFEOP was ever asked: an empty list of at
+    # most 128 bytes (current length 0, maximum 0x0080).
+    assert box.read(S21).data == bytes.fromhex("0000 8000".replace(" ", ""))
+    # S-0-0030, the manufacturer version: a list (bit 18) of 1-byte (length code 0) string
+    # characters (data type 4, bits 20-22), read-only in PREOP, SAFEOP and OP (bits
+    # 28-30), factor 1: SOEM ec_SoEattributet.
+    word = box.read(S30, elements=ELEMENT_ATTRIBUTE).data
+    assert word == (0x7044_0001).to_bytes(4, "little")
+
+
+def test_a_fragment_out_of_turn_gets_the_general_error():
+    box = DriveBox()
+    # The first fragment says 2 more follow; the next is the last: one is missing.
+    assert box.send(SoeOpCode.WRITE_REQUEST, 2, b"\x0b", incomplete=True) == []
+    [reply] = box.write(S32, b"\x00")
+    assert (reply.op_code, reply.error, reply.error_code) == (4, True, 0x800B)
+    # The drive starts afresh: the next write is a whole one.
+    [ok] = box.write(S32, b"\x0b\x00")
+    assert (ok.op_code, ok.error) == (4, False)
+
+
 def test_a_read_larger_than_sm1_comes_in_fragments():
     box = DriveBox(mbx=20)              # 10 data bytes per fragment
     replies = box.send(SoeOpCode.READ_REQUEST, S30)
@@ -345,12 +449,54 @@ def test_the_master_writes_in_fragments_and_waits_for_one_answer():
      r"response for S-0-0002"),
     (bytes.fromhex("0400 0000 00 23" "0000 0000".replace(" ", "")),
      r"mailbox type 3 where an SoE response"),
+    # FoE (type 4): an ack of packet 0
+    (bytes.fromhex("0600 0000 00 24" "0400 00000000".replace(" ", "")),
+     r"mailbox type 4 where an SoE response"),
+    # a write response with the Error bit and no code after the header
+    (bytes.fromhex("0400 0000 00 25" "14 40 0100".replace(" ", "")),
+     r"error reply with opcode 4 and no error code"),
 ])
 def test_the_master_names_what_went_wrong(answer, message):
     cmd = SoeInitCmd([Transition.PS], "", S1, b"\xd0\x07")
     with pytest.raises(ApplyError, match=r"slave 'axis' \[SoE write S-0-0001 \(drive 0\)\]: .*"
                        + message):
         drive_job(init_job(cmd), [answer])
+
+
+def test_an_emergency_and_a_stale_read_response_before_the_answer_are_set_aside():
+    cmd = SoeInitCmd([Transition.PS], "", S1, b"\xd0\x07")
+    # A CoE emergency (mailbox type 3, CoE header service 1 in bits 12-15, error code
+    # 0x8700, error register 1, 5 bytes), a read response (opcode 2) left by an earlier
+    # read, then the drive's refusal of the write: the refusal is the answer.
+    emergency = bytes.fromhex("0a00 0000 00 13" "0010 0087 01 0000000000".replace(" ", ""))
+    stale_read = bytes.fromhex("0600 0000 00 25" "02 40 0100 d007".replace(" ", ""))
+    refusal = bytes.fromhex("0600 0000 00 35" "14 40 0100 0470".replace(" ", ""))
+    with pytest.raises(ApplyError, match=r"SoE error 0x7004"):
+        drive_job(init_job(cmd), [emergency, stale_read, refusal])
+
+
+def test_an_init_cmd_the_master_cannot_send_is_refused_by_slave_and_transition():
+    from ecatcfg.runtime.master.replay import SlaveProgress
+    progress = SlaveProgress("axis")
+    read = SoeInitCmd([Transition.PS], "", S1, b"", op_code=1)
+    with pytest.raises(ApplyError, match=r"op code 1: only write requests .*\(transition "
+                       r"PS\)") as refused:
+        next(soe_init_cmd_job(MailboxChannel(0x1001, CHANNEL_PLAN), read, "axis", "PS",
+                              progress))
+    assert refused.value.slave == "axis"
+    assert refused.value.command == progress.last_command == "SoE write S-0-0001 (drive 0)"
+    # A 10-byte SM0 holds the mailbox and SoE headers and no data.
+    small = MailboxPlan(MailboxArea(0x1000, 10), MailboxArea(0x1080, 128))
+    with pytest.raises(ApplyError, match=r"slave 'axis' .*a 10-byte SM0 cannot carry an SoE "
+                       r"request \(transition PS\)"):
+        drive_job(init_job(SoeInitCmd([Transition.PS], "", S1, b"\xd0\x07"), small), [])
+
+
+def test_the_master_writes_the_elements_it_was_given():
+    # Elements 0x80 (the default value) and drive 2: byte 1 of the SoE header is the
+    # element flags; byte 0 opcode 3 with the drive in bits 5-7 (0x43).
+    [request] = SoeTransfer(S1, b"\xd0\x07", drive_no=2, elements=0x80).requests()
+    assert request[6:12] == bytes.fromhex("43 80 0100 d007".replace(" ", ""))
 
 
 def test_the_master_gives_up_after_the_timeout():

@@ -123,6 +123,18 @@ def test_topology_entries_replace_and_add(tmp_path: Path, eni_schema) -> None:
     assert eni_schema.validate(etree.parse(str(eni))), eni_schema.error_log
 
 
+def test_data_with_spaces_and_a_type_that_matches_the_idns(tmp_path: Path) -> None:
+    """'data' is hex bytes with spaces anywhere (the topology's check takes them out);
+    'type' for an IDN ecatcfg types is accepted when it has the IDN's size (S-0-0002:
+    UINT, 16 bits), and the value is encoded by it (1000 = 0x03E8, little endian)."""
+    plan = compile_text(tmp_path, TOPOLOGY + "    soe:\n"
+                        '      - {idn: P-0-0015, data: "0 a 0 0", transition: SO}\n'
+                        "      - {idn: S-0-0002, value: 1000, type: UINT}\n")
+    found = {(c.idn, c.drive_no, tuple(c.transitions)): c.data for c in soe_cmds(plan)}
+    assert found[(0x800F, 0, (SO,))] == bytes([0x0A, 0x00])
+    assert found[(2, 0, (PS,))] == bytes([0xE8, 0x03])
+
+
 def test_an_entry_in_another_transition_is_added_not_replaced(tmp_path: Path) -> None:
     plan = compile_text(tmp_path, TOPOLOGY + "    soe:\n"
                         "      - {idn: S-0-0032, value: 8, transition: SO}\n")
@@ -209,6 +221,8 @@ slaves:
      "writes P-0-0100 of drive 2 (Chn), but the device has 2 drives (ChannelCount)"),
     (("<Transition>SO</Transition>", "<Transition>II</Transition>"),
      "writes P-0-0100 in transition II: an SoE write needs the mailbox"),
+    (("<Transition>SO</Transition>", ""),
+     "writes P-0-0100 in transition (none): an SoE write needs the mailbox"),
 ])
 def test_an_esi_init_cmd_no_eni_can_carry_stops_compile(tmp_path: Path, change, says) -> None:
     old, new = change
@@ -226,6 +240,32 @@ def test_an_esi_init_cmd_no_eni_can_carry_stops_compile(tmp_path: Path, change, 
     cmd_line = max(n for n, t in enumerate(text.splitlines(), 1)
                    if "<InitCmd" in t and n <= line)
     assert f"the SoE InitCmd at {drive}:{cmd_line} {says}" in mine[0]
+
+
+def test_an_esi_ip_write_later_in_the_file_still_goes_first(tmp_path: Path) -> None:
+    """Drive 0's IP write of P-0-0010 moved to the end of the file: the IP writes still
+    open PS (esi/idn.py eni_transition), in their file order among themselves."""
+    block = ('            <InitCmd Chn="0">\n              <Transition>IP</Transition>\n'
+             "              <IDN>32778</IDN>\n              <Data>fe7f000000000000</Data>\n"
+             "              <Comment>Feature flags</Comment>\n            </InitCmd>\n")
+    last = "<Comment>Drive-specific setting</Comment>\n            </InitCmd>\n"
+    text = DRIVE.read_text()
+    assert block in text and last in text
+    folder = tmp_path / "esi"
+    folder.mkdir()
+    write(folder, "drive.xml", text.replace(block, "", 1).replace(last, last + block, 1))
+    assert soe_cmds(compile_text(tmp_path, TOPOLOGY, folder)) == \
+        [FROM_ESI[1], FROM_ESI[0], *FROM_ESI[2:]]
+
+
+def test_a_type_of_unknown_size_for_a_known_idn_is_an_error_at_its_type(tmp_path: Path) -> None:
+    text = TOPOLOGY + ("    soe:\n      - idn: S-0-0001\n        value: 5\n"
+                       "        type: NOSUCHTYPE\n")
+    [error] = compile_errors(tmp_path, text)
+    line = text.splitlines().index("        type: NOSUCHTYPE") + 1
+    assert error.endswith(f"t.yaml:{line}: slave 'axes': S-0-0001 (drive 0) (NC cycle time "
+                          "(TNcyc)) is 16 bits (UINT), but 'type' NOSUCHTYPE is of unknown "
+                          "bits"), error
 
 
 def test_lint_stops_nothing_the_resolver_does_not(tmp_path: Path) -> None:

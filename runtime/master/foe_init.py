@@ -40,7 +40,9 @@ def run_transfer(channel: MailboxChannel, t: FoeRead | FoeWrite, timeout: float,
                 raise t.wrong_number
             return
         try:
-            reply = yield from channel.receive(time.monotonic() + timeout, who, what)
+            # Unnamed: the callers put the slave and the command in front of the
+            # FoeTransferError's text, which would else name them twice.
+            reply = yield from channel.receive(time.monotonic() + timeout, None, None)
         except ApplyError as exc:
             raise FoeTransferError(exc.message) from None
         request = t.on_response(reply)
