@@ -304,6 +304,29 @@ def _copy_and_compare(example_plan, copy: CopyInfo, rng) -> None:
     assert frames.outputs == want, copy
 
 
+@pytest.mark.parametrize("cnt, wkc, copied", [
+    (7, 7, True), (7, 4, False), (7, -1, False),           # the ENI's Cnt decides
+    (None, 3, True), (None, 0, False), (None, -1, False)])  # without: some slave answered
+def test_input_data_is_valid_for_a_copy(example_plan, cnt, wkc, copied):
+    """ETG.2100 CopyInfos: "copy valid input data of this command".  With a Cnt the data
+    is valid at that working counter only; without one, when some slave put data in: a
+    working counter of 0 means the data came back as the master sent it."""
+    from ecatcfg.runtime.master.cyclic import CyclicFrames
+    plan = copying.deepcopy(example_plan)
+    lrw = _lrw(plan)
+    lrw.cnt = cnt
+    lrw.copy_infos = [CopyInfo(0, 0, 8)]
+    frames = CyclicFrames(plan)
+    frames.inputs[:] = bytes([0x5A]) * len(frames.inputs)
+    frames.outputs[:] = bytes(len(frames.outputs))
+    for p in frames.prepared(AlState.OP):
+        p.bind(frames.inputs, frames.outputs, bytearray(2048))
+        for s in p.slots:
+            s.wkc = wkc if s.cmd is lrw else -1
+        p.copy_slave_to_slave()
+    assert frames.outputs[0] == (0x5A if copied else 0)
+
+
 def test_compiled_copies_match_a_bit_by_bit_copy(example_plan):
     """Every placement of 1..24-bit copies (a seeded sample) against a copy made here one
     bit at a time."""

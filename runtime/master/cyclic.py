@@ -206,7 +206,9 @@ class _Prepared:
         assert inputs is not None and outputs is not None   # bound before the exchange
         for slot, want, ops in self._slave_copies:
             wkc = slot.wkc
-            if wkc < 0 or (want >= 0 and wkc != want):
+            # Valid input data: the working counter the ENI expects, or, without a Cnt,
+            # one at least: 0 means no slave put data in (and -1, the frame was lost).
+            if wkc != want if want >= 0 else wkc <= 0:
                 continue                      # invalid this cycle: keep the last value
             for op in ops:
                 if len(op) == 2:              # whole bytes
