@@ -15,6 +15,7 @@ import json
 import os
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -138,6 +139,12 @@ def test_corpus_eni_reaches_op_and_cycles(request, monkeypatch, eni, with_esi):
             dropped = [e.text for e in events if e.kind == "offline"]
             assert dropped and all("0x001B" in t for t in dropped), \
                 (stats.wkc_error_cmds, dropped)
+            # ... and back: the recovery reads the refusal's cause first, so the 100
+            # cycles may end before it is done; it has the recovery's bound to finish.
+            deadline = time.monotonic() + 10.0
+            while not all(h.online for h in net.health.values()) \
+                    and time.monotonic() < deadline:
+                net.run(50)
             assert all(h.online for h in net.health.values()), dropped
         assert net.master.state == AlState.OP
         net.down()
