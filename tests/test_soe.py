@@ -22,10 +22,13 @@ from typing import Any
 
 import pytest
 from rig import serving, start_simulate, tshark_fields, tshark_malformed
+# The mailbox that takes every SM0 write and answers from a list: test_eoe's.
+from test_eoe import CHANNEL_PLAN
+from test_eoe import drive as drive_job
 
 from ecatcfg.compiler import build, topology
 from ecatcfg.eni.plan import MailboxArea, MailboxPlan, NetworkPlan, SoeInitCmd
-from ecatcfg.esc import AlState, AlStatusCode, Cmd, Transition
+from ecatcfg.esc import AlState, AlStatusCode, Transition
 from ecatcfg.esi.library import Library
 from ecatcfg.esi.reader import read_file
 from ecatcfg.esi.idn import idn_text, parse_idn
@@ -45,7 +48,6 @@ from ecatcfg.runtime.soe import (ATTR_TYPE_HEX, ATTR_TYPE_IDN, ATTR_TYPE_INT, EL
                                  SoeOpCode, attribute, attribute_element_size, decode_list,
                                  decode_soe, encode_fragments, encode_soe, fragment_sizes,
                                  soe_error_name)
-from ecatcfg.runtime.wire import Datagram
 
 ROOT = Path(__file__).resolve().parent.parent
 FIXTURE = ROOT / "tests" / "fixtures" / "soe" / "soe_drive_rt.xml"
@@ -391,29 +393,6 @@ def test_the_real_ax5000_esi_makes_a_drive(corpus_extra):
 
 # --------------------------------------------------------------------------- the master's client
 
-CHANNEL_PLAN = MailboxPlan(MailboxArea(0x1000, 128), MailboxArea(0x1080, 128))
-
-
-def drive_job(job, answers: list[bytes]) -> list[bytes]:
-    """Run a mailbox job against a mailbox that takes every SM0 write and hands out
-    ``answers`` one per SM1 read (then nothing): the messages the job wrote."""
-    written: list[bytes] = []
-    pending = list(answers)
-    request = next(job)
-    try:
-        while True:
-            replies = []
-            for dg in request:
-                data, wkc = dg.data, 0
-                if dg.cmd == Cmd.FPWR and dg.ado == 0x1000:
-                    written.append(bytes(dg.data))
-                    wkc = 1
-                elif dg.cmd == Cmd.FPRD and dg.ado == 0x1080 and pending and written:
-                    data, wkc = pad_to(pending.pop(0), len(dg.data)), 1
-                replies.append(Datagram(dg.cmd, dg.idx, dg.address, data, wkc=wkc))
-            request = job.send(replies)
-    except StopIteration:
-        return written
 
 
 def init_job(cmd: SoeInitCmd, plan: MailboxPlan = CHANNEL_PLAN):
