@@ -68,7 +68,22 @@ WITH_ESI = {"corpus/jn-ec-master/mega_master_eni.xml": {"Term 1 (EK1100)", "Term
             "corpus-extra/marcelgehrig-ethercattest/01_ENI_1Elmo_1000ms.xml":
                 {"Slave_1001 [Elmo Drive ]"},
             "corpus-extra/marcelgehrig-ethercattest/10_ENI_2Elmo_1000ms_extended.xml": ELMO_2,
-            "corpus-extra/marcelgehrig-ethercattest/30_ENI_2Elmo_1Maxpos505_1000ms.xml": ELMO_2}
+            "corpus-extra/marcelgehrig-ethercattest/30_ENI_2Elmo_1Maxpos505_1000ms.xml": ELMO_2,
+            "corpus-extra/rocos-ecm-history/eni_elmox2.xml": ELMO_2,
+            "corpus-extra/marcelgehrig-ectest/eni_1ELMO_PTP1.xml": {"Slave_1001 [Elmo Drive ]"},
+            # Inovance SV660N (corpus esi/drives), Mitsubishi MR-J4-TM (corpus-extra
+            # esi/mitsubishi), the EL6695-0002 bridge (corpus-extra esi/dls EL66xx)
+            "corpus-extra/minzesun-speedgoat/ENI2.xml": {"Drive 1 (InoSV660N)"},
+            "corpus-extra/pmec-linear-actuator/linear_actuator.xml": {"Drive 1 (MR-J4-TM)"},
+            "corpus-extra/pmec-fostwin/FOSTWIN_Secondary1.xml": {"Box 1 (EL6695-0002)"},
+            # Elmo Gold, EK1100 (corpus), EL9510 rev 0x110000 (corpus-extra esi/dls EL9xxx;
+            # not its other revision), EL1002 (corpus), EL3692 (corpus-extra beckhoff-vera)
+            "corpus-extra/pmec-wec-bench/DriveMotorXML.xml": {"Drive 4 (Elmo Drive )",
+                                                              "Term 1 (EK1100)"},
+            "corpus-extra/pmec-lupa/LUPA1kHz_DC.xml": {"Drive 12 (Elmo Drive )", "Term 1 (EK1100)",
+                                                       "Term 3 (EK1100)", "Term 6 (EL9510)"},
+            "corpus-extra/pmec-foswec2/FOSWEC2_MD_20230314.xml": {
+                "Term 1 (EK1100)", "Term 5 (EK1100)", "Term 6 (EL1002)", "Term 14 (EL3692)"}}
 
 
 @pytest.fixture(scope="session")
@@ -95,10 +110,16 @@ def _line(path: Path, xpath: str) -> int:
 
 
 def xml_slaves(path: Path) -> list[dict]:
-    """Identity and process-data bits of each slave, straight from the XML."""
+    """Identity and process-data bits of each slave with an ESC, straight from the XML.
+
+    A passive slave (an end cap such as the EL9011: no ESC, so nothing answers a datagram)
+    is written by TwinCAT as a ``<Slave>`` without ``Info/PhysAddr`` and
+    ``Info/AutoIncAddr``; no master finds it on the wire and no segment emulates it."""
     config = etree.parse(str(path)).getroot().find("Config")
     out = []
     for s in config.iterfind("Slave"):
+        if s.find("Info/PhysAddr") is None and s.find("Info/AutoIncAddr") is None:
+            continue
         def bits(kind: str) -> int:
             return sum(int(b.findtext("BitLength")) for b in s.iterfind(f"ProcessData/{kind}"))
         out.append({"name": s.findtext("Info/Name").strip(),
