@@ -254,3 +254,51 @@ def test_show_errors_name_the_file(tmp_path, corpus, capsys):
     err = capsys.readouterr().err
     assert f"{broken}:" in err and "Traceback" not in err
     assert main(["show", str(tmp_path / "missing.xml")]) == 2
+
+
+def test_show_lists_a_transition_in_the_order_apply_sends_it(tmp_path, capsys):
+    """``show`` and ``apply`` take the order from one definition (``eni/sequence.py``); this
+    checks them against each other on the wire.  The example drive's PS transition: its SDO
+    downloads (PDO assignment and mapping) are on the wire before the AL control write that
+    requests SAFEOP (tshark reads the pcap of ``apply --virtual``), in the order ``show``
+    lists them, and ``show`` lists the request after them."""
+    import subprocess
+    import re
+
+    from conftest import EXAMPLES, compile_example
+    from rig import require_tshark
+    from test_apply import _datagram_trees, _walk, sdo_requests
+
+    eni = compile_example(tmp_path / "line.xml")
+    shown = _json(capsys, str(eni))
+    [drive] = [s for s in shown["slaves"] if s["name"] == "axis1"]
+    ps = drive["init_cmds"]["PS"]
+    sdos = [m.group(1, 2) for w in ps if (m := re.match(r"SDO 0x([0-9A-F]{4}):([0-9A-F]{2})", w))]
+    assert len(sdos) >= 4
+    last_sdo = max(i for i, w in enumerate(ps) if w.startswith("SDO "))
+    assert ps.index("request SAFEOP") > last_sdo
+
+    pcap = tmp_path / "line.pcapng"
+    assert main(["apply", str(eni), "--virtual", "--esi", str(EXAMPLES / "esi"), "--cycles",
+                 "2", "--pcap", str(pcap)]) == 0
+    capsys.readouterr()
+    station = drive["phys_addr"]
+    # The outbound frame that requests SAFEOP of the drive: FPWR 0x0120 = 0x0004.
+    proc = subprocess.run([require_tshark(), "-n", "-r", str(pcap), "-T", "json",
+                           "--no-duplicate-keys", "-Y",
+                           "frame.packet_flags_direction == 2 && ecat.ado == 0x0120"],
+                          capture_output=True, text=True, timeout=120)
+    requests = []
+    for packet in json.loads(proc.stdout):
+        layers = packet["_source"]["layers"]
+        for ecat in layers["ecat"] if isinstance(layers["ecat"], list) else [layers["ecat"]]:
+            for dg in _datagram_trees(ecat):
+                if (int(_walk(dg, "ecat.adp"), 16), int(_walk(dg, "ecat.ado"), 16)) == (
+                        station, 0x0120) and _walk(dg, "ecat.reg.alctrl.ctrl") == "0x0004":
+                    requests.append(int(_walk(layers["frame"], "frame.number")))
+    safeop = min(requests)
+    sent = [(r["sdoidx"], r["sdosub"], r["frame"]) for r in sdo_requests(pcap)[station]]
+    before = [(f"{int(i, 16):04X}", f"{int(s, 16):02X}") for i, s, f in sent if f < safeop]
+    # Resends of a lost frame repeat a request; the wire order, once each, is show's order.
+    once = [x for k, x in enumerate(before) if k == 0 or before[k - 1] != x]
+    assert once == sdos
