@@ -364,7 +364,10 @@ def _moves(direction: str, moved: list[Move], common: list[str],
     by one amount is one ``variables-moved`` line.  What moved otherwise follows, a
     ``variable-moved`` line each: the differences a reader must look at."""
     out: list[Change] = []
-    shift = lambda m: m[2].bit_offs - m[1].bit_offs          # noqa: E731
+
+    def shift(m: Move) -> int:
+        return m[2].bit_offs - m[1].bit_offs
+
     rest = moved
     if moved:
         delta, count = Counter(shift(m) for m in moved).most_common(1)[0]

@@ -68,7 +68,8 @@ def transition_sequence(slave: SlavePlan, transition: Transition,
         out.eoe = [c for c in mailbox.eoe_init_cmds if wanted(c)]
         out.foe = [c for c in mailbox.foe_init_cmds if wanted(c)]
     # The split follows what is sent: disabled commands shown alongside do not move it.
-    sent = any(not c.disabled for c in (*out.coe, *out.soe, *out.eoe, *out.foe))
+    mailbox_cmds: list[MailboxInitCmd] = [*out.coe, *out.soe, *out.eoe, *out.foe]
+    sent = any(not c.disabled for c in mailbox_cmds)
     split = len(cmds)
     if sent and transition != Transition.IP:
         split = next((i for i, c in enumerate(cmds) if writes_al_control(c)), len(cmds))

@@ -75,8 +75,10 @@ def test_compiled_elmo_against_ec_engineer_has_only_the_watchdogs(tmp_path, caps
     assert sorted((c["kind"], c["slave"], c["transition"], c["what"], c["old"])
                   for c in changes) == [
         ("initcmd-removed", DRIVE, "IP", "0x0400", "set watchdog divider 2498 (100000 ns)"),
-        ("initcmd-removed", DRIVE, "IP", "0x0410", "set PDI watchdog 1000"),
-        ("initcmd-removed", DRIVE, "IP", "0x0420", "set SM watchdog 10000"),
+        ("initcmd-removed", DRIVE, "IP", "0x0410",
+         "set PDI watchdog 1000 (100 ms at the default divider)"),
+        ("initcmd-removed", DRIVE, "IP", "0x0420",
+         "set SM watchdog 10000 (1000 ms at the default divider)"),
     ]
 
 
@@ -410,8 +412,9 @@ def test_the_masters_own_init_cmds_are_compared(tmp_path, capsys, corpus):
     assert code == 1
     value = int.from_bytes(bytes.fromhex(old), "little")
     assert changes == [{"kind": "initcmd-changed", "slave": None, "transition": "IP",
-                        "what": "master 0x0200", "old": f"BWR 0x0200 = 0x{value:04X}",
-                        "new": "BWR 0x0200 = 0x0000"}]
+                        "what": "master 0x0200",
+                        "old": f"set ECAT event mask = 0x{value:04X}",
+                        "new": "set ECAT event mask = 0x0000"}]
 
 
 def test_topologies_with_esi_compare_the_devices_selected(tmp_path, capsys):
