@@ -1,0 +1,321 @@
+"""``ecatcfg export --format igh-c``: the C it writes compiles with ``-Wall -Wextra -Werror``
+against the IgH master's own ``ecrt.h`` (from the master's archive in the corpus), and,
+linked with a recording implementation of the ``ecrt_*`` calls
+(``fixtures/igh/recorder.c``, after libfakeethercat's semantics) and run with its
+``-DECATCFG_MAIN`` task, configures IgH as the ENI says: for every ENI of both corpora the
+export accepts, the slave configurations, SyncManagers, PDO assignment and mapping,
+start-up SDOs in order, DC, watchdog and reference clock the program makes, and the place
+of each variable it registers, equal what the test reads from the ENI itself with lxml.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import re
+import shutil
+import subprocess
+import sys
+import tarfile
+from pathlib import Path
+
+import pytest
+from conftest import corpus_eni, corpus_enis
+from lxml import etree
+
+IGH_ARCHIVE = "third-party/igh-ethercat-master-userspace.tar.gz"
+RECORDER = Path(__file__).parent / "fixtures" / "igh" / "recorder.c"
+STRICT = ["gcc", "-std=c11", "-Wall", "-Wextra", "-Werror"]
+
+# ETG.1000.6 CoE communication area: PDO assignment and mapping objects.
+ASSIGNMENT = range(0x1C10, 0x1C30)
+MAPPING = (range(0x1600, 0x1800), range(0x1A00, 0x1C00))
+# ecrt.h ec_watchdog_mode_t
+WD_DEFAULT, WD_ENABLE, WD_DISABLE = 0, 1, 2
+
+
+@pytest.fixture(scope="module")
+def ecrt_include(corpus: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The folder of ``ecrt.h`` unpacked from the IgH master's archive."""
+    if shutil.which("gcc") is None:
+        pytest.fail("gcc is not installed")
+    folder = tmp_path_factory.mktemp("igh")
+    with tarfile.open(corpus / IGH_ARCHIVE) as archive:
+        member = next(m for m in archive.getmembers() if m.name.endswith("include/ecrt.h"))
+        archive.extractall(folder, members=[member], filter="data")
+    return next(folder.rglob("ecrt.h")).parent
+
+
+@pytest.fixture(scope="module")
+def recorder(ecrt_include: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    obj = tmp_path_factory.mktemp("recorder") / "recorder.o"
+    done = subprocess.run([*STRICT, f"-I{ecrt_include}", "-c", str(RECORDER), "-o", str(obj)],
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    return obj
+
+
+def export(eni: Path, out: Path, fmt: str = "igh-c") -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", "ecatcfg", "export", str(eni), "--format",
+                           fmt, "-o", str(out), "--no-cache"], capture_output=True,
+                          text=True, timeout=120)
+
+
+def build_and_run(source: Path, ecrt_include: Path, recorder: Path) -> str:
+    """The exported source built strictly with its main, linked with the recorder, run for
+    two cycles: its output."""
+    program = source.with_suffix("")
+    done = subprocess.run([*STRICT, "-DECATCFG_MAIN", f"-I{ecrt_include}",
+                           f"-I{source.parent}", str(source), str(recorder), "-o",
+                           str(program)], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, f"{source}: {done.stderr}"
+    run = subprocess.run([str(program), "2"], capture_output=True, text=True, timeout=60)
+    assert run.returncode == 0, run.stdout + run.stderr
+    return run.stdout
+
+
+# -- the ENI read with lxml (ETG.2100), independently of ecatcfg's reader ----------------
+
+def _int(text: str | None, default: int | None = None) -> int:
+    if text is None or not text.strip():
+        assert default is not None
+        return default
+    text = text.strip()
+    return int(text[2:], 16) if text[:2] in ("#x", "#X") else int(text, 0)
+
+
+def _bool(text: str | None) -> bool:
+    return (text or "").strip().lower() in ("1", "true")
+
+
+def _transitions(cmd: etree._Element) -> list[str]:
+    return [t.text.strip() for t in cmd.iterfind("Transition") if t.text]
+
+
+def eni_expectations(path: Path) -> tuple[list[str], list[tuple[str, int, int]]]:
+    """(the configuration calls, in the order the export makes them, as the recorder prints
+    them; each variable a slave's PDOs hold: (name, slave, bit offset within its PDO)),
+    from the ENI file."""
+    root = etree.parse(str(path)).getroot()
+    slaves = [s for s in root.iterfind("Config/Slave")
+              if s.find("Info/PhysAddr") is not None or s.find("Info/AutoIncAddr") is not None]
+    calls: list[str] = []
+    reference = None
+    pdo_bits: list[dict[bool, list[tuple[int, list[tuple[int, int, int]]]]]] = []
+    for pos, slave in enumerate(slaves):
+        vendor = _int(slave.findtext("Info/VendorId"))
+        product = _int(slave.findtext("Info/ProductCode"))
+        calls.append(f"slave_config 0 {pos} {vendor} {product}")
+        pd = slave.find("ProcessData")
+        sms: dict[int, etree._Element] = {}
+        pdos: list[etree._Element] = []
+        if pd is not None:
+            sms = {int(el.tag[2:]): el for el in pd if re.fullmatch(r"Sm\d+", str(el.tag))}
+            pdos = [p for p in pd if p.tag in ("RxPdo", "TxPdo")]
+        assigned: set[int] = set()
+        per_dir: dict[bool, list[tuple[int, list[tuple[int, int, int]]]]] = {True: [],
+                                                                             False: []}
+        numbers = sorted(set(sms) | {int(p.get("Sm")) for p in pdos if p.get("Sm")})
+        for n in numbers:
+            mine = [p for p in pdos if p.get("Sm") is not None and int(p.get("Sm")) == n]
+            sm = sms.get(n)
+            listed = [_int(x.text) for x in sm.iterfind("Pdo")] if sm is not None else []
+            if listed:
+                mine = [next(p for p in mine if _int(p.findtext("Index")) == i) for i in listed]
+            if sm is not None:
+                output = sm.findtext("Type") == "Outputs"
+                wd = WD_ENABLE if _int(sm.findtext("ControlByte"), 0) & 0x40 else WD_DISABLE
+            else:
+                output = mine[0].tag == "RxPdo"
+                wd = WD_DEFAULT
+            calls.append(f"sync {pos} {n} {'out' if output else 'in'} {wd} {len(mine)}")
+            for p in mine:
+                index = _int(p.findtext("Index"))
+                assigned.add(index)
+                entries = [(_int(e.findtext("Index")), _int(e.findtext("SubIndex"), 0),
+                            _int(e.findtext("BitLen"))) for e in p.iterfind("Entry")]
+                calls.append(f"pdo {pos} {n} {index} {len(entries)}")
+                calls += [f"entry {pos} {n} {index} {i} {s} {b}" for i, s, b in entries]
+                per_dir[output].append((index, entries))
+        pdo_bits.append(per_dir)
+        coe = [c for c in slave.iterfind("Mailbox/CoE/InitCmds/InitCmd")
+               if not _bool(c.findtext("Disabled"))]
+        for ip_first in (True, False):
+            for c in coe:
+                if ("IP" in _transitions(c)) != ip_first:
+                    continue
+                index = _int(c.findtext("Index"))
+                if index in ASSIGNMENT or (any(index in r for r in MAPPING)
+                                           and index in assigned):
+                    continue                  # the PDO tables say it
+                kind = "complete_sdo" if _bool(c.get("CompleteAccess")) else "sdo"
+                calls.append(f"{kind} {pos} {index} {_int(c.findtext('SubIndex'), 0)} "
+                             f"{(c.findtext('Data') or '').strip().lower() or '-'}")
+        assign = divider = intervals = 0
+        for c in slave.iterfind("InitCmds/InitCmd"):
+            ado = c.findtext("Ado")
+            data = bytes.fromhex((c.findtext("Data") or "").strip())
+            if ado is None or not data:
+                continue
+            ado_n = _int(ado)
+            if ado_n == 0x0980 and "PS" in _transitions(c):
+                assign = int.from_bytes(data[:2], "little")
+            elif ado_n == 0x0400 and int.from_bytes(data[:2], "little"):
+                divider = int.from_bytes(data[:2], "little")
+            elif ado_n == 0x0420 and int.from_bytes(data[:2], "little"):
+                intervals = int.from_bytes(data[:2], "little")
+        if divider or intervals:
+            calls.append(f"watchdog {pos} {divider} {intervals}")
+        dc = slave.find("DC")
+        if assign:
+            calls.append(f"dc {pos} {assign} {_int(dc.findtext('CycleTime0'))} "
+                         f"{_int(dc.findtext('ShiftTime'), 0)} "
+                         f"{_int(dc.findtext('CycleTime1'), 0)} 0")
+        if dc is not None and _bool(dc.findtext("ReferenceClock")) and reference is None:
+            reference = pos
+    if reference is not None:
+        calls.append(f"reference_clock {reference}")
+    variables = []
+    for output, where in ((True, "Outputs"), (False, "Inputs")):
+        found = root.findall(f"Config/ProcessImage/{where}/Variable")
+        for v in sorted(found, key=lambda v: _int(v.findtext("BitOffs"))):
+            offs = _int(v.findtext("BitOffs"))
+            for pos, slave in enumerate(slaves):
+                r = slave.find(f"ProcessData/{'Send' if output else 'Recv'}")
+                if r is None:
+                    continue
+                start = _int(r.findtext("BitStart"))
+                if start <= offs < start + _int(r.findtext("BitLength")):
+                    local = offs - start
+                    for index, entries in pdo_bits[pos][output]:
+                        size = sum(b for _, _, b in entries)
+                        if local < size:
+                            variables.append((v.findtext("Name") or "", pos, local))
+                            break
+                        local -= size
+                    break
+    return calls, variables
+
+
+def recorded(output: str) -> tuple[list[str], list[tuple[str, int, int]]]:
+    """(the configuration calls; each variable: name, slave and bit offset within its PDO,
+    from the offset the program printed and the PDO's place in the domain)."""
+    config = [line for line in output.splitlines()
+              if line.split(" ", 1)[0] in ("slave_config", "sync", "pdo", "entry", "sdo",
+                                           "complete_sdo", "idn", "dc", "watchdog",
+                                           "reference_clock")]
+    regs = [tuple(map(int, line.split()[1:])) for line in output.splitlines()
+            if line.startswith("reg ")]
+    blocks = [tuple(map(int, line.split()[1:])) for line in output.splitlines()
+              if line.startswith("map ")]
+    variables = []
+    # (a name may hold a line break: the ENI's own name, byte for byte)
+    shown = re.findall(r"^variable (.*?) offset (\d+) bit (\d+)$", output, re.M | re.S)
+    for (name, offset, bit), (pos, _index, _sub, reg_offset, reg_bit) in zip(shown, regs):
+        # the block the registered entry lies in: the last laid at or before its offset
+        block = max((b for b in blocks if b[0] == pos and b[3] <= reg_offset),
+                    key=lambda b: b[3])
+        variables.append((name, pos, int(offset) * 8 + int(bit) - block[3] * 8))
+    return config, variables
+
+
+def _accepted(path: Path):
+    from ecatcfg.eni.export.igh import igh_config
+    from ecatcfg.eni.export.steps import ExportError
+    from ecatcfg.eni.reader import read_file
+    from ecatcfg.errors import EcatcfgError
+    try:
+        return igh_config(read_file(path), path)
+    except (ExportError, EcatcfgError):
+        return None
+
+
+def test_every_accepted_corpus_eni_configures_igh_as_the_eni_says(
+        corpus, corpus_extra, ecrt_include, recorder, tmp_path):
+    from ecatcfg.eni.export import igh_c
+    checked = 0
+    for path in sorted([*corpus.glob("eni/**/*.xml"), *corpus_extra.glob("eni/**/*.xml")]):
+        config = _accepted(path)
+        if config is None:
+            continue                          # refused by name: the sweep below
+        source = tmp_path / f"eni{checked}.c"
+        text, header = igh_c.render(config, source.with_suffix(".h").name, path.name,
+                                    "0" * 64, "test")
+        source.write_bytes(text)
+        source.with_suffix(".h").write_bytes(header)
+        output = build_and_run(source, ecrt_include, recorder)
+        calls, variables = recorded(output)
+        want_calls, want_variables = eni_expectations(path)
+        assert calls == want_calls, path
+        assert variables == want_variables, path
+        assert re.search(r"^cycles 2 incomplete 0 ", output, re.M), output
+        checked += 1
+    assert checked >= 25
+
+
+def test_the_export_is_deterministic_and_says_where_it_came_from(corpus, tmp_path):
+    eni = corpus / "eni" / "acontis-doc" / "acontis-TrainingSlaves-ENI.xml"
+    a, b = tmp_path / "a" / "line.c", tmp_path / "b" / "line.c"
+    for path in (a, b):
+        path.parent.mkdir()
+        done = export(eni, path)
+        assert done.returncode == 0, done.stderr
+    assert a.read_bytes() == b.read_bytes()
+    assert a.with_suffix(".h").read_bytes() == b.with_suffix(".h").read_bytes()
+    header = a.with_suffix(".h").read_text()
+    digest = hashlib.sha256(eni.read_bytes()).hexdigest()
+    assert f'#define ECATCFG_ENI_SHA256 "{digest}"' in header
+    assert f'#define ECATCFG_ENI_NAME "{eni.name}"' in header
+    assert '#include "line.h"' in a.read_text()
+
+
+def test_a_variable_is_read_by_its_eni_name(corpus, ecrt_include, recorder, tmp_path):
+    """An application that names the ENI's variable gets its registered place."""
+    eni = corpus / "eni" / "acontis-doc" / "acontis-TrainingSlaves-ENI.xml"
+    source = tmp_path / "line.c"
+    assert export(eni, source).returncode == 0
+    app = tmp_path / "app.c"
+    app.write_text('#include <stdio.h>\n#include "line.h"\n'
+                   "int main(void) {\n"
+                   "    ec_master_t *m = ecrt_request_master(0);\n"
+                   "    if (ecatcfg_configure(m, ecrt_master_create_domain(m))) return 1;\n"
+                   '    printf("%s %u %u\\n", ecatcfg_variables[ECATCFG_SLAVE_1002_EC_'
+                   'TRAINING_GENERATOR_COUNTER2_VALUE].name, ecatcfg_offset[ECATCFG_SLAVE_'
+                   "1002_EC_TRAINING_GENERATOR_COUNTER2_VALUE], ecatcfg_bit_position[ECATCFG_"
+                   "SLAVE_1002_EC_TRAINING_GENERATOR_COUNTER2_VALUE]);\n"
+                   "    return 0;\n}\n")
+    program = tmp_path / "app"
+    done = subprocess.run([*STRICT, f"-I{ecrt_include}", f"-I{tmp_path}", str(app),
+                           str(source), str(recorder), "-o", str(program)],
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    out = subprocess.run([str(program)], capture_output=True, text=True, timeout=30).stdout
+    # Counter2 (0x1A01) of the generator: its Value first; the block of 0x1A01 is laid when
+    # its first entry is registered, after every PDO registered before it.
+    last = out.strip().splitlines()[-1]
+    blocks = {tuple(map(int, line.split()[1:4])): int(line.split()[4])
+              for line in out.splitlines() if line.startswith("map ")}
+    assert last == (f"Slave_1002 [EC-Training Generator].Counter2.Value "
+                    f"{blocks[(1, 3, 0x1A01)]} 0")
+
+
+@pytest.mark.parametrize("eni", corpus_enis())
+def test_every_corpus_eni_exports_for_igh_or_is_refused_by_name(request, eni):
+    """Each ENI gives the IgH configuration or an error naming the file and the line (of
+    the command, else of the slave) where it says what IgH cannot be told."""
+    from ecatcfg.eni.export.igh import igh_config
+    from ecatcfg.eni.export.steps import ExportError
+    from ecatcfg.eni.reader import read_file
+    from ecatcfg.errors import EcatcfgError
+    path = corpus_eni(request, eni)
+    try:
+        plan = read_file(path)
+    except EcatcfgError:
+        pytest.skip("the reader refuses it (tests/test_eni_io.py says why)")
+    try:
+        config = igh_config(plan, path)
+    except ExportError as exc:
+        assert exc.file == str(path)
+        assert exc.line is not None or "master" in exc.message or plan.unsupported
+        assert "slave" in exc.message or "master" in exc.message
+        return
+    assert len(config.slaves) == len(plan.slaves)
