@@ -319,3 +319,114 @@ def test_every_corpus_eni_exports_for_igh_or_is_refused_by_name(request, eni):
         assert "slave" in exc.message or "master" in exc.message
         return
     assert len(config.slaves) == len(plan.slaves)
+
+
+def _edited(corpus: Path, tmp_path: Path, edit) -> Path:
+    """The acontis training ENI of the corpus with ``edit(first slave element)`` applied."""
+    tree = etree.parse(str(corpus / "eni" / "acontis-doc" / "acontis-TrainingSlaves-ENI.xml"))
+    edit(tree.getroot().find("Config/Slave"))
+    path = tmp_path / "edited.xml"
+    tree.write(str(path), xml_declaration=True, encoding="utf-8")
+    return path
+
+
+def _soe(transitions: list[str], drive: int, idn: int, data: str, elements: int = 0x40,
+         op_code: int = 3) -> etree._Element:
+    cmd = etree.Element("InitCmd")
+    for t in transitions:
+        etree.SubElement(cmd, "Transition").text = t
+    for tag, text in (("Comment", "test"), ("OpCode", str(op_code)),
+                      ("DriveNo", str(drive)), ("IDN", str(idn)),
+                      ("Elements", str(elements)), ("Attribute", "0"), ("Data", data)):
+        etree.SubElement(cmd, tag).text = text
+    return cmd
+
+
+def _add_soe(*cmds: etree._Element):
+    def edit(slave: etree._Element) -> None:
+        mailbox = slave.find("Mailbox")
+        etree.SubElement(mailbox, "Protocol").text = "SoE"
+        init_cmds = etree.SubElement(etree.SubElement(mailbox, "SoE"), "InitCmds")
+        for cmd in cmds:
+            init_cmds.append(cmd)
+    return edit
+
+
+def test_soe_writes_are_idns_in_the_state_igh_writes_them(corpus, ecrt_include, recorder,
+                                                           tmp_path):
+    """A write of PREOP->SAFEOP is an IDN of PREOP, one of SAFEOP->OP an IDN of SAFEOP, one
+    of both is both; drive number, IDN and data as the ENI has them, in its order."""
+    eni = _edited(corpus, tmp_path, _add_soe(_soe(["PS", "SO"], 0, 32, "0b00"),
+                                             _soe(["PS"], 1, 0x8000 | 47, "e8030000")))
+    source = tmp_path / "soe.c"
+    done = export(eni, source)
+    assert done.returncode == 0, done.stderr
+    output = build_and_run(source, ecrt_include, recorder)
+    idns = [line for line in output.splitlines() if line.startswith("idn ")]
+    # ecrt.h ec_al_state_t: PREOP 2, SAFEOP 4
+    assert idns == ["idn 0 0 32 2 0b00", "idn 0 0 32 4 0b00", "idn 0 1 32815 2 e8030000"]
+
+
+@pytest.mark.parametrize("edit, words", [
+    (_add_soe(_soe(["PS"], 0, 32, "0b00", elements=0x08)),
+     "SoE write S-0-0032 (drive 0) elements 0x08 = 0b 00: IgH's IDN configuration"),
+    (_add_soe(_soe(["SO", "OS"], 0, 32, "0b00")),
+     "SoE write S-0-0032 (drive 0) = 0b 00 in SO/OS: IgH makes start-up commands"),
+], ids=["soe-element", "soe-transition"])
+def test_what_igh_cannot_be_told_is_refused_by_line(corpus, tmp_path, edit, words):
+    eni = _edited(corpus, tmp_path, edit)
+    done = export(eni, tmp_path / "out.c")
+    assert done.returncode == 1
+    assert re.search(rf"{re.escape(str(eni))}:\d+: slave 0 \('Slave_1001 \[EC-Training "
+                     rf"Sampler\]'\): {re.escape(words)}", done.stderr), done.stderr
+    assert not (tmp_path / "out.c").exists() and not (tmp_path / "out.h").exists()
+
+
+def _coe_in(transition: str):
+    def edit(slave: etree._Element) -> None:
+        cmd = slave.find("Mailbox/CoE/InitCmds/InitCmd")
+        for t in cmd.findall("Transition"):
+            cmd.remove(t)
+        t = etree.Element("Transition")
+        t.text = transition
+        cmd.insert(0, t)
+    return edit
+
+
+def _register_write(ado: int, data: str):
+    def edit(slave: etree._Element) -> None:
+        cmd = etree.SubElement(slave.find("InitCmds"), "InitCmd")
+        for tag, text in (("Transition", "IP"), ("Comment", "test"), ("Requires", "cycle"),
+                          ("Cmd", "5"), ("Adp", "1001"), ("Ado", str(ado)),
+                          ("Data", data), ("Retries", "3")):
+            etree.SubElement(cmd, tag).text = text
+    return edit
+
+
+@pytest.mark.parametrize("edit, words", [
+    (_coe_in("SO"), "SDO 0x1C12:00 = 0 in SO: IgH makes start-up commands in PREOP"),
+    (_register_write(0x0410, "0000"), "IgH writes no register 0x0410 = 0x0000"),
+    (_register_write(0x09A8, "0100"), "IgH writes no register 0x09A8 = 0x0001"),
+], ids=["coe-in-so", "pdi-watchdog-off", "latch-control"])
+def test_commands_igh_has_no_place_for_are_refused_by_line(corpus, tmp_path, edit, words):
+    eni = _edited(corpus, tmp_path, edit)
+    done = export(eni, tmp_path / "out.c")
+    assert done.returncode == 1, done.stderr
+    assert re.search(rf"{re.escape(str(eni))}:\d+: slave 0 \(.*\): .*{re.escape(words)}",
+                     done.stderr), done.stderr
+
+
+def test_register_writes_of_reset_values_are_noted(corpus, ecrt_include, recorder, tmp_path):
+    """A write of the PDI watchdog's reset value (which IgH leaves) is accepted and noted in
+    the code; the watchdog divider and SM time become ecrt_slave_config_watchdog."""
+    def edit(slave: etree._Element) -> None:
+        _register_write(0x0410, "e803")(slave)
+        _register_write(0x0400, "c209")(slave)
+        _register_write(0x0420, "1027")(slave)
+    eni = _edited(corpus, tmp_path, edit)
+    source = tmp_path / "wd.c"
+    done = export(eni, source)
+    assert done.returncode == 0, done.stderr
+    assert "PDI watchdog time's reset value, which IgH does not change" in source.read_text()
+    output = build_and_run(source, ecrt_include, recorder)
+    assert "watchdog 0 2498 10000" in output.splitlines()
