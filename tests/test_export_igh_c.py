@@ -91,9 +91,9 @@ def _transitions(cmd: etree._Element) -> list[str]:
     return [t.text.strip() for t in cmd.iterfind("Transition") if t.text]
 
 
-def eni_expectations(path: Path) -> tuple[list[str], list[tuple[str, int, int]]]:
+def eni_expectations(path: Path) -> tuple[list[str], list[tuple[str, int, int, int]]]:
     """(the configuration calls, in the order the export makes them, as the recorder prints
-    them; each variable a slave's PDOs hold: (name, slave, bit offset within its PDO)),
+    them; each variable a slave's PDOs hold: (name, slave, PDO, bit offset within the PDO)),
     from the ENI file."""
     root = etree.parse(str(path)).getroot()
     slaves = [s for s in root.iterfind("Config/Slave")
@@ -102,8 +102,9 @@ def eni_expectations(path: Path) -> tuple[list[str], list[tuple[str, int, int]]]
     reference = None
     pdo_bits: list[dict[bool, list[tuple[int, list[tuple[int, int, int]]]]]] = []
     for pos, slave in enumerate(slaves):
-        vendor = _int(slave.findtext("Info/VendorId"))
-        product = _int(slave.findtext("Info/ProductCode"))
+        # (ETG.2100 types them xs:int: a vendor ID of bit 31 set may be written negative)
+        vendor = _int(slave.findtext("Info/VendorId")) & 0xFFFFFFFF
+        product = _int(slave.findtext("Info/ProductCode")) & 0xFFFFFFFF
         calls.append(f"slave_config 0 {pos} {vendor} {product}")
         pd = slave.find("ProcessData")
         sms: dict[int, etree._Element] = {}
@@ -189,32 +190,30 @@ def eni_expectations(path: Path) -> tuple[list[str], list[tuple[str, int, int]]]
                     for index, entries in pdo_bits[pos][output]:
                         size = sum(b for _, _, b in entries)
                         if local < size:
-                            variables.append((v.findtext("Name") or "", pos, local))
+                            variables.append((v.findtext("Name") or "", pos, index, local))
                             break
                         local -= size
                     break
     return calls, variables
 
 
-def recorded(output: str) -> tuple[list[str], list[tuple[str, int, int]]]:
-    """(the configuration calls; each variable: name, slave and bit offset within its PDO,
-    from the offset the program printed and the PDO's place in the domain)."""
+def recorded(output: str) -> tuple[list[str], list[tuple[str, int, int, int]]]:
+    """(the configuration calls; each variable: name, slave, PDO and bit offset within the
+    PDO, from the offset the program printed and the PDO blocks laid in the domain)."""
     config = [line for line in output.splitlines()
               if line.split(" ", 1)[0] in ("slave_config", "sync", "pdo", "entry", "sdo",
                                            "complete_sdo", "idn", "dc", "watchdog",
                                            "reference_clock")]
-    regs = [tuple(map(int, line.split()[1:])) for line in output.splitlines()
-            if line.startswith("reg ")]
     blocks = [tuple(map(int, line.split()[1:])) for line in output.splitlines()
               if line.startswith("map ")]
     variables = []
     # (a name may hold a line break: the ENI's own name, byte for byte)
     shown = re.findall(r"^variable (.*?) offset (\d+) bit (\d+)$", output, re.M | re.S)
-    for (name, offset, bit), (pos, _index, _sub, reg_offset, reg_bit) in zip(shown, regs):
-        # the block the registered entry lies in: the last laid at or before its offset
-        block = max((b for b in blocks if b[0] == pos and b[3] <= reg_offset),
-                    key=lambda b: b[3])
-        variables.append((name, pos, int(offset) * 8 + int(bit) - block[3] * 8))
+    for name, offset, bit in shown:
+        at = int(offset) * 8 + int(bit)
+        pos, _sm, pdo, start, size = next(b for b in blocks
+                                          if b[3] * 8 <= at < (b[3] + b[4]) * 8)
+        variables.append((name, pos, pdo, at - start * 8))
     return config, variables
 
 
@@ -430,3 +429,17 @@ def test_register_writes_of_reset_values_are_noted(corpus, ecrt_include, recorde
     assert "PDI watchdog time's reset value, which IgH does not change" in source.read_text()
     output = build_and_run(source, ecrt_include, recorder)
     assert "watchdog 0 2498 10000" in output.splitlines()
+
+
+def test_the_example_line_configures_igh_as_its_eni_says(ecrt_include, recorder, tmp_path):
+    """Our own ENI of the example line through the command: a drive whose two TxPDOs both
+    hold 0x6041:00, registered by place, DC with SYNC0, start-up SDOs."""
+    from conftest import compile_example
+    eni = compile_example(tmp_path / "line.eni.xml")
+    source = tmp_path / "line.c"
+    done = export(eni, source)
+    assert done.returncode == 0, done.stderr
+    assert "ecrt_slave_config_reg_pdo_entry_pos" in source.read_text()
+    output = build_and_run(source, ecrt_include, recorder)
+    assert recorded(output) == eni_expectations(eni)
+    assert any(line.startswith("dc 4 ") for line in output.splitlines())
