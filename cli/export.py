@@ -1,4 +1,4 @@
-"""``ecatcfg export ENI --format pysoem|soem-c|igh-c -o FILE``: an ENI (any tool's) as code
+"""``ecatcfg export ENI --format pysoem|soem-c|igh-c|lcec -o FILE``: an ENI (any tool's) as code
 for the master a user already runs (``eni/export/``); ``soem-c`` and ``igh-c`` write
 ``FILE`` (C) and the header beside it (``FILE`` with ``.h``).
 
@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:
     from ecatcfg.eni.plan import NetworkPlan
 
-FORMATS = ("pysoem", "soem-c", "igh-c")
+FORMATS = ("pysoem", "soem-c", "igh-c", "lcec")
 
 
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -35,7 +35,10 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                                    "and header for the IgH master (ecrt.h): slave "
                                    "configurations with PDO tables, start-up SDOs, SoE IDNs, "
                                    "DC and watchdogs, the variables registered in a domain "
-                                   "by name, and a minimal cyclic task (-DECATCFG_MAIN).")
+                                   "by name, and a minimal cyclic task (-DECATCFG_MAIN).  "
+                                   "lcec: LinuxCNC's ethercat.xml (generic slaves with "
+                                   "their PDO tree and HAL pins named after the variables, "
+                                   "dcConf, watchdog, sdoConfig).")
     p.add_argument("eni", metavar="ENI", help="ENI file")
     p.add_argument("--format", required=True, choices=FORMATS, help="what to write")
     p.add_argument("-o", "--output", required=True, metavar="FILE",
@@ -70,6 +73,8 @@ def run(args: argparse.Namespace) -> int:
     outputs: list[tuple[Path, bytes]]
     if args.format == "igh-c":
         return _write_igh_c(args, plan, out, digest)
+    if args.format == "lcec":
+        return _write_lcec(args, plan, out, digest)
     setups = slave_setups(plan, args.eni)
     if args.format == "pysoem":
         pysoem_module.check(setups, args.eni)
@@ -122,4 +127,15 @@ def _write_igh_c(args: argparse.Namespace, plan: NetworkPlan, out: Path, digest:
     print(f"wrote {out}, {header}: {len(config.slaves)} slaves, "
           f"{sum(len(s.sdos) for s in config.slaves)} SDO downloads, "
           f"{len(config.registrations)} variables", file=sys.stderr)
+    return 0
+
+
+def _write_lcec(args: argparse.Namespace, plan: NetworkPlan, out: Path, digest: str) -> int:
+    from ecatcfg import __version__
+    from ecatcfg.eni.export import lcec
+    from ecatcfg.eni.export.igh import igh_config
+    config = igh_config(plan, args.eni)
+    _write([(out, lcec.render(config, args.eni, Path(args.eni).name, digest, __version__))])
+    print(f"wrote {out}: {len(config.slaves)} slaves, "
+          f"{sum(len(s.sdos) for s in config.slaves)} SDO downloads", file=sys.stderr)
     return 0

@@ -70,6 +70,7 @@ class PdoEntry:
     subindex: int
     bit_len: int
     name: str
+    data_type: str | None = None
 
 
 @record
@@ -170,7 +171,7 @@ class _Slave:
     def refuse(self, cmd: InitCmd | CoeInitCmd | SoeInitCmd | EoeInitCmd | FoeInitCmd | None,
                what: str) -> ExportError:
         line = init_cmd_line(self.file, self.plan, cmd) if cmd is not None else None
-        return _refuse(self.file, self.position, self.slave.name, what, line)
+        return slave_error(self.file, self.position, self.slave.name, what, line)
 
     def preop_only(self, cmd: InitCmd | CoeInitCmd | SoeInitCmd, words: str,
                    allowed: frozenset[Transition] = PREOP_TRANSITIONS) -> None:
@@ -184,7 +185,7 @@ class _Slave:
                                    f"only{also}")
 
 
-def _refuse(file: str, position: int, name: str, what: str,
+def slave_error(file: str, position: int, name: str, what: str,
             line: int | None = None) -> ExportError:
     """An error naming the slave and the line of its command, else of its element."""
     return ExportError(f"slave {position} ({name!r}): {what}", file,
@@ -250,8 +251,8 @@ def _syncs(ctx: _Slave) -> list[Sync]:
 
 
 def _pdo(p: PdoDesc) -> Pdo:
-    return Pdo(p.index, p.name, [PdoEntry(e.index, e.subindex, e.bit_len, e.name)
-                                 for e in p.entries])
+    return Pdo(p.index, p.name, [PdoEntry(e.index, e.subindex, e.bit_len, e.name,
+                                          e.data_type) for e in p.entries])
 
 
 def _check_pdo_downloads(ctx: _Slave, syncs: list[Sync]) -> tuple[set[int], list[str]]:
@@ -454,7 +455,7 @@ def _registrations(file: str, plan: NetworkPlan, slaves: list[IghSlave]
                         bit += entry.bit_len
             total = sum(r.bit_length for r in ranges)
             if bit != total:
-                raise _refuse(file, ig.position, sp.name,
+                raise slave_error(file, ig.position, sp.name,
                               f"its {'outputs' if output else 'inputs'} are {total} bits "
                               f"(ProcessData/{'Send' if output else 'Recv'}) but its "
                               f"assigned PDOs map {bit}")
@@ -472,7 +473,7 @@ def _registrations(file: str, plan: NetworkPlan, slaves: list[IghSlave]
             if local not in places or first is None or \
                     last + places[last][0].bit_len != end or \
                     len({places[b][1:3] for b in covered}) != 1:
-                raise _refuse(file, ig.position, sp.name,
+                raise slave_error(file, ig.position, sp.name,
                               f"variable {v.name!r} (bit {local} of its "
                               f"{'outputs' if output else 'inputs'}, {v.bit_size} bit) is not "
                               f"a run of PDO entries of one PDO: IgH registers PDO entries")
