@@ -57,8 +57,19 @@ def hal_name(text: str) -> str:
     return ".".join(p for p in parts if p) or "x"
 
 
+def _fit(name: str, limit: int) -> str:
+    """``name`` within ``limit`` characters, its last part (the entry's name) kept whole
+    where it can be and the parts before it shortened."""
+    if len(name) <= limit:
+        return name
+    head, _, last = name.rpartition(".")
+    last = last[:limit]
+    room = limit - len(last) - 1
+    return f"{head[:room].rstrip('.-')}.{last}" if head and room >= 4 else last
+
+
 def _unique(name: str, taken: set[str], limit: int) -> str:
-    base = name[:limit].rstrip(".-")
+    base = _fit(name, limit).rstrip(".-")
     out, n = base, 1
     while out in taken:
         n += 1
