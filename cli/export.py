@@ -1,6 +1,7 @@
-"""``ecatcfg export ENI --format pysoem|soem-c|igh-c|lcec -o FILE``: an ENI (any tool's) as code
-for the master a user already runs (``eni/export/``); ``soem-c`` and ``igh-c`` write
-``FILE`` (C) and the header beside it (``FILE`` with ``.h``).
+"""``ecatcfg export ENI --format pysoem|soem-c|igh-c|lcec|ros2 -o FILE``: an ENI (any
+tool's) as code for the master a user already runs (``eni/export/``); ``soem-c`` and
+``igh-c`` write ``FILE`` (C) and the header beside it (``FILE`` with ``.h``); ``ros2``
+writes ``FILE`` (the ros2_control fragment) and a generic-slave YAML per slave beside it.
 
 The file is written atomically, and nothing is written when the ENI has errors or asks for
 something the exported hooks cannot carry (the message names the file, line and slave;
@@ -11,13 +12,8 @@ from __future__ import annotations
 
 import argparse
 import sys
-from pathlib import Path
-from typing import TYPE_CHECKING
 
-if TYPE_CHECKING:
-    from ecatcfg.eni.plan import NetworkPlan
-
-FORMATS = ("pysoem", "soem-c", "igh-c", "lcec")
+FORMATS = ("pysoem", "soem-c", "igh-c", "lcec", "ros2")
 
 
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -38,20 +34,26 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                                    "by name, and a minimal cyclic task (-DECATCFG_MAIN).  "
                                    "lcec: LinuxCNC's ethercat.xml (generic slaves with "
                                    "their PDO tree and HAL pins named after the variables, "
-                                   "dcConf, watchdog, sdoConfig).")
+                                   "dcConf, watchdog, sdoConfig).  ros2: for "
+                                   "ethercat_driver_ros2, a generic-slave YAML per slave and "
+                                   "the ros2_control fragment that loads them in bus "
+                                   "order.")
     p.add_argument("eni", metavar="ENI", help="ENI file")
     p.add_argument("--format", required=True, choices=FORMATS, help="what to write")
     p.add_argument("-o", "--output", required=True, metavar="FILE",
-                   help="the file to write (atomically); soem-c, igh-c: the C source, its header "
-                        "beside it with the suffix .h")
+                   help="the file to write (atomically); soem-c, igh-c: the C source, its "
+                        "header beside it with the suffix .h; ros2: the ros2_control "
+                        "fragment, a YAML per slave beside it")
     p.add_argument("--no-cache", action="store_true", help="do not use the ENI plan cache")
     p.set_defaults(run=run)
 
 
 def run(args: argparse.Namespace) -> int:
     import hashlib
+    from pathlib import Path
 
     from ecatcfg import __version__
+    from ecatcfg.cli import export_igh
     from ecatcfg.cli.inputs import kind
     from ecatcfg.cli.paths import output_file
     from ecatcfg.eni.cache import PlanCache, read_file
@@ -71,10 +73,8 @@ def run(args: argparse.Namespace) -> int:
         read_file(args.eni, cache=PlanCache())
     digest = hashlib.sha256(Path(args.eni).read_bytes()).hexdigest()
     outputs: list[tuple[Path, bytes]]
-    if args.format == "igh-c":
-        return _write_igh_c(args, plan, out, digest)
-    if args.format == "lcec":
-        return _write_lcec(args, plan, out, digest)
+    if args.format in export_igh.WRITERS:
+        return export_igh.WRITERS[args.format](args, plan, out, digest)
     setups = slave_setups(plan, args.eni)
     if args.format == "pysoem":
         pysoem_module.check(setups, args.eni)
@@ -94,48 +94,4 @@ def run(args: argparse.Namespace) -> int:
             raise UsageError(f"{path}: cannot write: {exc.strerror}") from None
     print(f"wrote {', '.join(str(p) for p, _ in outputs)}: {len(setups)} slaves, "
           f"{sum(len(s.sdos) for s in setups)} SDO downloads", file=sys.stderr)
-    return 0
-
-
-def _c_outputs(args: argparse.Namespace, out: Path) -> Path:
-    from ecatcfg.errors import UsageError
-    header = out.with_suffix(".h")
-    if header == out:
-        raise UsageError(f"-o {args.output}: the C source needs another suffix than .h")
-    return header
-
-
-def _write(outputs: list[tuple[Path, bytes]]) -> None:
-    from ecatcfg.errors import UsageError
-    from ecatcfg.fileio import write_atomic
-    for path, data in outputs:
-        try:
-            write_atomic(path, data)
-        except OSError as exc:
-            raise UsageError(f"{path}: cannot write: {exc.strerror}") from None
-
-
-def _write_igh_c(args: argparse.Namespace, plan: NetworkPlan, out: Path, digest: str) -> int:
-    from ecatcfg import __version__
-    from ecatcfg.eni.export import igh_c
-    from ecatcfg.eni.export.igh import igh_config
-    config = igh_config(plan, args.eni)
-    header = _c_outputs(args, out)
-    source, text = igh_c.render(config, header.name, Path(args.eni).name, digest,
-                                __version__)
-    _write([(out, source), (header, text)])
-    print(f"wrote {out}, {header}: {len(config.slaves)} slaves, "
-          f"{sum(len(s.sdos) for s in config.slaves)} SDO downloads, "
-          f"{len(config.registrations)} variables", file=sys.stderr)
-    return 0
-
-
-def _write_lcec(args: argparse.Namespace, plan: NetworkPlan, out: Path, digest: str) -> int:
-    from ecatcfg import __version__
-    from ecatcfg.eni.export import lcec
-    from ecatcfg.eni.export.igh import igh_config
-    config = igh_config(plan, args.eni)
-    _write([(out, lcec.render(config, args.eni, Path(args.eni).name, digest, __version__))])
-    print(f"wrote {out}: {len(config.slaves)} slaves, "
-          f"{sum(len(s.sdos) for s in config.slaves)} SDO downloads", file=sys.stderr)
     return 0
