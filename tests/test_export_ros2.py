@@ -174,6 +174,13 @@ def check_export(path: Path, fragment: bytes, files: list[tuple[str, bytes]]) ->
         assert [i[0] for i in got["interfaces"]["tpdo"]] == p["state"]
         assert len(set(p["command"])) == len(p["command"])
         assert len(set(p["state"])) == len(p["state"])
+        # a bool's mask is its bit in its byte: IgH lays each SM's data from a byte
+        start = {pdo: sum(b for _q, entries in pdos[:k] for _i, _s, b in entries)
+                 for _i, _d, _w, pdos in w["syncs"] for k, (pdo, _e) in enumerate(pdos)}
+        for kind in ("rpdo", "tpdo"):
+            for _name, pdo, bit, channel in got["interfaces"][kind]:
+                if channel["type"] == "bool":
+                    assert channel["mask"] == 1 << (start[pdo] + bit) % 8, (path, channel)
         # each ENI variable of this slave: an interface on its entry, or a comment why not
         placed = {(pdo, bit) for kind in ("rpdo", "tpdo")
                   for _name, pdo, bit, _c in got["interfaces"][kind]}
