@@ -18,6 +18,7 @@ import sys
 import tarfile
 from pathlib import Path
 
+import prereq
 import pytest
 from conftest import corpus_eni, corpus_enis
 from lxml import etree
@@ -37,7 +38,7 @@ WD_DEFAULT, WD_ENABLE, WD_DISABLE = 0, 1, 2
 def ecrt_include(corpus: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
     """The folder of ``ecrt.h`` unpacked from the IgH master's archive."""
     if shutil.which("gcc") is None:
-        pytest.fail("gcc is not installed")
+        prereq.missing("gcc", "not on the PATH", prereq.TOOLS)
     folder = tmp_path_factory.mktemp("igh")
     with tarfile.open(corpus / IGH_ARCHIVE) as archive:
         member = next(m for m in archive.getmembers() if m.name.endswith("include/ecrt.h"))

@@ -19,6 +19,7 @@ import sys
 import tarfile
 from pathlib import Path
 
+import prereq
 import pytest
 from conftest import corpus_eni, corpus_enis
 from lxml import etree
@@ -34,7 +35,11 @@ PARSER_SOURCES = ("lcec_conf.c", "lcec_conf_util.c", "lcec_conf_icmds.c", "lcec_
 def lcec_conf(corpus: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
     """lcec's configuration parser from the archive, linked with the HAL harness."""
     if shutil.which("gcc") is None:
-        pytest.fail("gcc is not installed")
+        prereq.missing("gcc", "not on the PATH", prereq.TOOLS)
+    if not Path("/usr/include/expat.h").is_file():
+        # lcec's parser is built on libexpat (Debian's libexpat1-dev, which the Python
+        # headers' package depends on)
+        prereq.missing("libexpat's header", "/usr/include/expat.h not found", prereq.TOOLS)
     folder = tmp_path_factory.mktemp("lcec")
     with tarfile.open(corpus / LCEC_ARCHIVE) as archive:
         members = [m for m in archive.getmembers()
