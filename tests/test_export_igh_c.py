@@ -92,6 +92,31 @@ def _transitions(cmd: etree._Element) -> list[str]:
     return [t.text.strip() for t in cmd.iterfind("Transition") if t.text]
 
 
+def _eoe_expected(slave: etree._Element, pos: int) -> list[str]:
+    """The EoE set IP parameter requests of the slave (ETG.1000.6 EoE: flags, then MAC,
+    IP address, subnet mask, gateway, DNS server at fixed places, IPv4 numbers
+    little-endian, and the DNS name), each field the last one set, as the recorder prints
+    IgH's EoE calls.  ENI files write the body alone or after the 4-byte EoE header of a
+    set IP parameter request (frame type 2)."""
+    fields: dict[str, str] = {}
+    for c in slave.iterfind("Mailbox/EoE/InitCmds/InitCmd"):
+        if _bool(c.findtext("Disabled")):
+            continue
+        data = bytes.fromhex((c.findtext("Data") or "").strip())
+        body = data[4:] if data[0] & 0x0F == 2 and len(data) == 4 + 58 else data
+        flags = int.from_bytes(body[:4], "little")
+        if flags & 1:
+            fields["mac"] = ":".join(f"{b:02x}" for b in body[4:10])
+        for bit, name, at in ((2, "ip", 10), (4, "subnet", 14), (8, "gateway", 18),
+                              (16, "dns", 22)):
+            if flags & bit:
+                fields[name] = ".".join(str(b) for b in reversed(body[at:at + 4]))
+        if flags & 32:
+            fields["name"] = body[26:58].split(b"\0")[0].decode()
+    return [f"eoe {pos} {k} {fields[k]}" for k in ("mac", "ip", "subnet", "gateway", "dns",
+                                                   "name") if k in fields]
+
+
 def eni_expectations(path: Path) -> tuple[list[str], list[tuple[str, int, int, int]]]:
     """(the configuration calls, in the order the export makes them, as the recorder prints
     them; each variable a slave's PDOs hold: (name, slave, PDO, bit offset within the PDO)),
@@ -152,6 +177,7 @@ def eni_expectations(path: Path) -> tuple[list[str], list[tuple[str, int, int, i
                 kind = "complete_sdo" if _bool(c.get("CompleteAccess")) else "sdo"
                 calls.append(f"{kind} {pos} {index} {_int(c.findtext('SubIndex'), 0)} "
                              f"{(c.findtext('Data') or '').strip().lower() or '-'}")
+        calls += _eoe_expected(slave, pos)
         assign = divider = intervals = 0
         for c in slave.iterfind("InitCmds/InitCmd"):
             ado = c.findtext("Ado")
@@ -203,8 +229,8 @@ def recorded(output: str) -> tuple[list[str], list[tuple[str, int, int, int]]]:
     PDO, from the offset the program printed and the PDO blocks laid in the domain)."""
     config = [line for line in output.splitlines()
               if line.split(" ", 1)[0] in ("slave_config", "sync", "pdo", "entry", "sdo",
-                                           "complete_sdo", "idn", "dc", "watchdog",
-                                           "reference_clock")]
+                                           "complete_sdo", "idn", "eoe", "dc",
+                                           "watchdog", "reference_clock")]
     blocks = [tuple(map(int, line.split()[1:])) for line in output.splitlines()
               if line.startswith("map ")]
     variables = []
@@ -444,3 +470,35 @@ def test_the_example_line_configures_igh_as_its_eni_says(ecrt_include, recorder,
     output = build_and_run(source, ecrt_include, recorder)
     assert recorded(output) == eni_expectations(eni)
     assert any(line.startswith("dc 4 ") for line in output.splitlines())
+
+
+def test_eoe_requests_are_igh_eoe_parameters(corpus, ecrt_include, recorder, tmp_path):
+    """Two set IP parameter requests (the body alone, as Elmo's tool writes it): IgH gets
+    each field from the last request that sets it."""
+    def body(flags: int, ip: str = "0.0.0.0", mask: str = "0.0.0.0", name: str = "") -> str:
+        def le(address: str) -> bytes:
+            return bytes(reversed([int(x) for x in address.split(".")]))
+        data = (flags.to_bytes(4, "little") + bytes(6) + le(ip) + le(mask) + bytes(8) +
+                name.encode().ljust(32, b"\0"))
+        return data.hex()
+
+    def edit(slave: etree._Element) -> None:
+        mailbox = slave.find("Mailbox")
+        etree.SubElement(mailbox, "Protocol").text = "EoE"
+        cmds = etree.SubElement(etree.SubElement(mailbox, "EoE"), "InitCmds")
+        for data in (body(0x02 | 0x04 | 0x20, "192.168.1.4", "255.255.0.0", "first"),
+                     body(0x02 | 0x20, "10.0.0.7", name="drive")):
+            cmd = etree.SubElement(cmds, "InitCmd")
+            for tag, text in (("Transition", "IP"), ("Comment", "eoe"), ("Data", data)):
+                etree.SubElement(cmd, tag).text = text
+    eni = _edited(corpus, tmp_path, edit)
+    source = tmp_path / "eoe.c"
+    done = export(eni, source)
+    assert done.returncode == 0, done.stderr
+    calls, _ = recorded(build_and_run(source, ecrt_include, recorder))
+    assert [c for c in calls if c.startswith("eoe ")] == [
+        "eoe 0 ip 10.0.0.7", "eoe 0 subnet 255.255.0.0", "eoe 0 name drive"]
+    assert calls == eni_expectations(eni)[0]
+    for fmt in ("lcec", "ros2"):
+        done = export(eni, tmp_path / f"out-{fmt}.xml", fmt)
+        assert done.returncode == 1 and "no EoE configuration" in done.stderr, done.stderr

@@ -25,14 +25,17 @@ So of an ENI each slave's configuration becomes:
 - the SoE writes of PREOP->SAFEOP (written in PREOP) and SAFEOP->OP (in SAFEOP);
 - the DC AssignActivate word (the ENI's PREOP->SAFEOP write of 0x0980) with ``Slave/DC``'s
   cycles and shift, and the reference clock;
-- the watchdog divider and SM watchdog time of the ENI's writes of 0x0400 and 0x0420.
+- the watchdog divider and SM watchdog time of the ENI's writes of 0x0400 and 0x0420;
+- the EoE set IP parameter requests as IgH's EoE configuration (MAC, IP address, subnet
+  mask, gateway, DNS server and name: ``ecrt_slave_config_eoe_*``), which IgH sends in
+  PREOP.
 
 Anything else that would change what the master does is an :class:`ExportError` naming the
 file, line and slave (a command in a transition IgH has no place for, a register write IgH
-cannot make, EoE/FoE commands, slave-to-slave copies, parts of the ENI ``apply`` does not
-implement).  Two register writes that leave an ESC register at its reset value, which IgH
-never changes, are kept as notes in the output (DC latch control 0x09A8 = 0, PDI watchdog
-0x0410 = 1000): any other value is refused.
+cannot make, FoE commands, EoE to another port than 0, slave-to-slave copies, parts of the
+ENI ``apply`` does not implement).  Two register writes that leave an ESC register at its
+reset value, which IgH never changes, are kept as notes in the output (DC latch control
+0x09A8 = 0, PDI watchdog 0x0410 = 1000): any other value is refused.
 """
 
 from __future__ import annotations
@@ -43,7 +46,9 @@ from ecatcfg.eni.export.steps import ExportError, SdoStep, soem_register
 from ecatcfg.eni.plan import (CoeInitCmd, EoeInitCmd, FoeInitCmd, InitCmd, NetworkPlan,
                               PdoDesc, SlavePlan, SoeInitCmd, Variable)
 from ecatcfg.eni.source import copy_info_line, init_cmd_line
-from ecatcfg.eni.words import coe_words, copy_words, foe_words, init_cmd_words, soe_words
+from ecatcfg.eni.words import (coe_words, copy_words, eoe_words, foe_words, init_cmd_words,
+                               soe_words)
+from ecatcfg.eoe import IpParameters
 from ecatcfg.errors import EcatcfgError
 from ecatcfg.esc import (REGISTER_READS, REGISTER_WRITES, RX_PDO_MAPPING,
                          SM_PDO_ASSIGN, SM_PDO_ASSIGN_RANGE, SM_WATCHDOG_ENABLE,
@@ -98,6 +103,15 @@ class Idn:
 
 
 @record
+class Eoe:
+    """The EoE IP parameters IgH sets in PREOP (``ecrt_slave_config_eoe_*``): the ENI's
+    set IP parameter requests of the slave, each field the last one given."""
+
+    params: IpParameters
+    words: str
+
+
+@record
 class Dc:
     assign_activate: int
     sync0_cycle: int                          # ns
@@ -146,6 +160,7 @@ class IghSlave:
     reference_clock: bool = False
     watchdog: Watchdog | None = None
     notes: list[str] = field(default_factory=list)    # ENI commands IgH makes itself
+    eoe: Eoe | None = None
 
 
 @record
@@ -173,7 +188,7 @@ class _Slave:
         line = init_cmd_line(self.file, self.plan, cmd) if cmd is not None else None
         return slave_error(self.file, self.position, self.slave.name, what, line)
 
-    def preop_only(self, cmd: InitCmd | CoeInitCmd | SoeInitCmd, words: str,
+    def preop_only(self, cmd: InitCmd | CoeInitCmd | SoeInitCmd | EoeInitCmd, words: str,
                    allowed: frozenset[Transition] = PREOP_TRANSITIONS) -> None:
         """Refuse a command of a transition IgH has no place for, also when it runs in an
         allowed one too: made once, its repeat (on the way down, say) would be lost."""
@@ -302,10 +317,6 @@ def _sdos(ctx: _Slave, by_pdos: set[int]) -> list[SdoStep]:
     mailbox = ctx.slave.mailbox
     if mailbox is None:
         return []
-    for eoe in mailbox.eoe_init_cmds:
-        if not eoe.disabled:
-            raise ctx.refuse(eoe, f"EoE InitCmd ({eoe.comment or 'set IP parameter'}): not "
-                                  f"exported for IgH")
     for foe in mailbox.foe_init_cmds:
         if not foe.disabled:
             raise ctx.refuse(foe, f"FoE InitCmd ({foe.comment or foe_words(foe)}): IgH has "
@@ -330,6 +341,25 @@ def _sdos(ctx: _Slave, by_pdos: set[int]) -> list[SdoStep]:
             steps.append(SdoStep(cmd.index, cmd.subindex, cmd.data, cmd.complete_access,
                                  words))
     return steps
+
+
+def _eoe(ctx: _Slave) -> Eoe | None:
+    """The slave's EoE set IP parameter requests of INIT->PREOP and PREOP->SAFEOP as the
+    parameters IgH sends in PREOP; later requests set the fields they name."""
+    params: IpParameters | None = None
+    words = []
+    for cmd in ctx.slave.mailbox.eoe_init_cmds if ctx.slave.mailbox else []:
+        if cmd.disabled:
+            continue
+        text = eoe_words(cmd)
+        ctx.preop_only(cmd, text)
+        request = cmd.request
+        if request.port:
+            raise ctx.refuse(cmd, f"{text}: to EoE port {request.port}: IgH's EoE "
+                                  f"configuration has no port")
+        params = request.params if params is None else params.updated(request.params)
+        words.append(text)
+    return None if params is None else Eoe(params, "; ".join(words))
 
 
 def _idns(ctx: _Slave) -> list[Idn]:
@@ -425,7 +455,7 @@ def _slave(file: str, plan: NetworkPlan, position: int) -> IghSlave:
     return IghSlave(position, slave.name, slave.vendor_id, slave.product_code,
                     slave.revision, syncs, sdos, idns, _dc(ctx, assign),
                     bool(slave.dc and slave.dc.reference_clock), watchdog,
-                    notes + register_notes)
+                    notes + register_notes, _eoe(ctx))
 
 
 def _registrations(file: str, plan: NetworkPlan, slaves: list[IghSlave]

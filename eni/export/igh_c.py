@@ -73,6 +73,8 @@ def render(config: IghConfig, header_name: str, eni_name: str, eni_sha256: str,
                   regs=list(zip(config.registrations, names)), header=comment(header_name),
                   guard=guard, eni_name=comment(eni_name), eni_sha256=eni_sha256,
                   version=version, any_dc=any(s.dc for s in config.slaves),
+                  any_ipv4=any(s.eoe and s.eoe.params.values[1:5] != (None,) * 4
+                               for s in config.slaves),
                   by_position={s.position: k for k, s in enumerate(config.slaves)})
     env = _env().overlay()
     env.filters["c_string"] = c_string

@@ -167,6 +167,9 @@ def check(config: IghConfig, file: str) -> None:
             raise slave_error(file, s.position, s.name,
                               f"{s.idns[0].words}: lcec's <idnConfig> cannot be given its "
                               f"state (lcec_conf.c reads no 'state' attribute)")
+        if s.eoe:
+            raise slave_error(file, s.position, s.name,
+                              f"{s.eoe.words}: lcec's XML has no EoE configuration")
         for sdo in s.sdos:
             if sdo.index > MAX_INDEX or sdo.subindex > MAX_SUBINDEX:
                 raise slave_error(file, s.position, s.name,

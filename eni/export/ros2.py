@@ -114,6 +114,8 @@ def check(config: IghConfig, file: str) -> None:
             raise slave_error(file, s.position, s.name, what)
         if s.idns:
             refuse(f"{s.idns[0].words}: the driver's generic slave has no SoE configuration")
+        if s.eoe:
+            refuse(f"{s.eoe.words}: the driver's generic slave has no EoE configuration")
         for sdo in s.sdos:
             if sdo.complete_access or len(sdo.data) not in SDO_TYPES:
                 refuse(f"{sdo.words}: the driver's SDO configuration downloads 1, 2 or 4 "
