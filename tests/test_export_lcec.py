@@ -221,7 +221,8 @@ def test_the_export_is_deterministic_and_says_where_it_came_from(corpus, tmp_pat
     assert f"from {eni.name}, sha256 {digest}." in a.read_text()
 
 
-def test_pins_are_named_after_the_variables_within_hal_names(corpus, lcec_conf, tmp_path):
+def test_pins_are_named_after_the_variables_within_hal_names(corpus, corpus_extra, lcec_conf,
+                                                            tmp_path):
     """HAL names are at most 47 characters ("lcec.0.<slave>.<pin>"); an array of bytes
     becomes a complex entry of a pin per byte."""
     eni = corpus / "eni" / "acontis-doc" / "acontis-TrainingSlaves-ENI.xml"
@@ -233,17 +234,11 @@ def test_pins_are_named_after_the_variables_within_hal_names(corpus, lcec_conf, 
     pins = [r.split()[6] for r in records if r.startswith("entry ") and r.split()[6] != "-"]
     assert "outputdigital.bit0" in pins and "inputanalog.triangle" in pins
     assert all(len(f"lcec.0.{slave_name}.{p}") <= 47 for p in pins)
-    moobot = _accepted_path(corpus, "altinay-moobot/ENI.xml")
-    if moobot is not None:
-        out = tmp_path / "moobot.xml"
-        assert export(moobot, out).returncode == 0
-        complex_pins = [r for r in parse(lcec_conf, out) if r.startswith("complex ")]
-        assert len(complex_pins) >= 10 and all(r.split()[2] == "8" for r in complex_pins)
-
-
-def _accepted_path(corpus: Path, name: str) -> Path | None:
-    path = corpus.parent / "corpus-extra" / "eni" / name
-    return path if path.is_file() else None
+    # an ARRAY [0..9] OF BYTE of a safety PLC: a complex entry of ten 8-bit pins
+    out = tmp_path / "moobot.xml"
+    assert export(corpus_extra / "eni" / "altinay-moobot" / "ENI.xml", out).returncode == 0
+    complex_pins = [r for r in parse(lcec_conf, out) if r.startswith("complex ")]
+    assert len(complex_pins) >= 10 and all(r.split()[2] == "8" for r in complex_pins)
 
 
 @pytest.mark.parametrize("eni", corpus_enis())
@@ -266,3 +261,21 @@ def test_every_corpus_eni_exports_for_lcec_or_is_refused_by_name(request, eni):
         assert "slave" in exc.message or "master" in exc.message
         return
     etree.fromstring(xml)
+
+
+def test_soe_and_a_duplicate_entry_are_refused_by_name(corpus, tmp_path):
+    """lcec cannot read an idnConfig (its parser tests "drive" twice) and registers a pin's
+    entry by index and subindex: both refused, nothing written."""
+    from test_export_igh_c import _add_soe, _edited, _soe
+    eni = _edited(corpus, tmp_path, _add_soe(_soe(["PS"], 0, 32, "0b00")))
+    done = export(eni, tmp_path / "soe.xml")
+    assert done.returncode == 1
+    assert re.search(r":\d+: slave 0 \('Slave_1001 \[EC-Training Sampler\]'\): SoE write "
+                     r"S-0-0032 \(drive 0\) = 0b 00: lcec's <idnConfig> cannot be given its "
+                     r"state", done.stderr), done.stderr
+    assert not (tmp_path / "soe.xml").exists()
+    from conftest import compile_example
+    line = compile_example(tmp_path / "line.eni.xml")
+    done = export(line, tmp_path / "line.xml")
+    assert done.returncode == 1
+    assert "entry 0x6041:00 is twice in the slave's PDOs" in done.stderr, done.stderr

@@ -252,3 +252,20 @@ def test_every_corpus_eni_exports_for_ros2_or_is_refused_by_name(request, eni):
     assert len(files) == len(plan.slaves)
     for _name, data in files:
         load_slave(data.decode())
+
+
+def test_what_the_driver_cannot_be_told_is_refused_by_name(corpus, corpus_extra, tmp_path):
+    """SoE writes, and a DC SYNC1 cycle (the driver gives IgH no SYNC1): refused naming
+    the slave, nothing written."""
+    from test_export_igh_c import _add_soe, _edited, _soe
+    eni = _edited(corpus, tmp_path, _add_soe(_soe(["PS"], 0, 32, "0b00")))
+    done = export(eni, tmp_path / "soe.xml")
+    assert done.returncode == 1
+    assert re.search(r":\d+: slave 0 \('Slave_1001 \[EC-Training Sampler\]'\): SoE write "
+                     r"S-0-0032 \(drive 0\) = 0b 00: the driver's generic slave has no SoE",
+                     done.stderr), done.stderr
+    assert list(tmp_path.glob("soe*")) == []
+    drive = corpus_extra / "eni" / "pmec-wec-bench" / "DriveMotorXML.xml"
+    done = export(drive, tmp_path / "drive.xml")
+    assert done.returncode == 1
+    assert "SYNC1 cycle 100000 ns: the driver gives ecrt_slave_config_dc" in done.stderr
