@@ -54,8 +54,11 @@ def write_lcec(args: argparse.Namespace, plan: NetworkPlan, out: Path, digest: s
     from ecatcfg.eni.export import lcec
     from ecatcfg.eni.export.igh import igh_config
     config = igh_config(plan, args.eni)
-    _write([(out, lcec.render(config, args.eni, Path(args.eni).name, digest, __version__))])
-    print(f"wrote {out}: {len(config.slaves)} slaves, "
+    xml, extra = lcec.render(config, args.eni, Path(args.eni).name, digest, __version__,
+                             out.stem)
+    _write([(out, xml), *((out.with_name(name), data) for name, data in extra)])
+    print(f"wrote {out}{f' and {len(extra)} initCmds files' if extra else ''}: "
+          f"{len(config.slaves)} slaves, "
           f"{sum(len(s.sdos) for s in config.slaves)} SDO downloads", file=sys.stderr)
     return 0
 

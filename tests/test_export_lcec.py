@@ -69,8 +69,9 @@ def lcec_conf(corpus: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 def parse(lcec_conf: Path, xml: Path) -> list[str]:
-    done = subprocess.run([str(lcec_conf), str(xml)], capture_output=True, text=True,
-                          timeout=60)
+    # (an initCmds file is opened by its name as given: from the folder of the XML)
+    done = subprocess.run([str(lcec_conf), xml.name], capture_output=True, text=True,
+                          timeout=60, cwd=xml.parent)
     assert done.returncode == 0, f"{xml}: {done.stdout}{done.stderr}"
     lines = done.stdout.splitlines()
     assert lines[-1] == "end", lines[-5:]
@@ -195,11 +196,12 @@ def test_lcec_reads_every_accepted_corpus_eni_as_the_eni_says(corpus, corpus_ext
         if config is None:
             continue                          # refused for IgH: test_export_igh_c
         try:
-            xml = lcec.render(config, str(path), path.name, "0" * 64, "test")
+            xml, extra = lcec.render(config, str(path), path.name, "0" * 64, "test")
         except ExportError:
             continue                          # refused for lcec: the sweep below
         out = tmp_path / f"eni{checked}.xml"
         out.write_bytes(xml)
+        assert extra == []                    # no corpus ENI has SoE writes
         records = parse(lcec_conf, out)
         master, slaves = by_slave(records)
         want_master, want_slaves, variables = expected_records(path)
@@ -254,7 +256,8 @@ def test_every_corpus_eni_exports_for_lcec_or_is_refused_by_name(request, eni):
     except EcatcfgError:
         pytest.skip("the reader refuses it (tests/test_eni_io.py says why)")
     try:
-        xml = lcec.render(igh_config(plan, path), str(path), path.name, "0" * 64, "t")
+        xml, _initcmds = lcec.render(igh_config(plan, path), str(path), path.name, "0" * 64,
+                                     "t")
     except ExportError as exc:
         assert exc.file == str(path)
         assert exc.line is not None or "master" in exc.message or plan.unsupported
@@ -263,19 +266,29 @@ def test_every_corpus_eni_exports_for_lcec_or_is_refused_by_name(request, eni):
     etree.fromstring(xml)
 
 
-def test_soe_and_a_duplicate_entry_are_refused_by_name(corpus, tmp_path):
-    """lcec cannot read an idnConfig (its parser tests "drive" twice) and registers a pin's
-    entry by index and subindex: both refused, nothing written."""
+def test_soe_writes_go_to_an_initcmds_file_lcec_reads(corpus, lcec_conf, tmp_path):
+    """lcec's <idnConfig> cannot be read (its parser tests "drive" twice), so SoE writes go
+    to an initCmds file beside the XML, which lcec's parser reads as IDNs of PREOP (PS) and
+    SAFEOP (SO): ecrt.h ec_al_state_t 2 and 4."""
     from test_export_igh_c import _add_soe, _edited, _soe
-    eni = _edited(corpus, tmp_path, _add_soe(_soe(["PS"], 0, 32, "0b00")))
-    done = export(eni, tmp_path / "soe.xml")
-    assert done.returncode == 1
-    assert re.search(r":\d+: slave 0 \('Slave_1001 \[EC-Training Sampler\]'\): SoE write "
-                     r"S-0-0032 \(drive 0\) = 0b 00: lcec's <idnConfig> cannot be given its "
-                     r"state", done.stderr), done.stderr
-    assert not (tmp_path / "soe.xml").exists()
+    eni = _edited(corpus, tmp_path, _add_soe(_soe(["PS", "SO"], 0, 32, "0b00"),
+                                             _soe(["PS"], 1, 0x8000 | 47, "e8030000")))
+    out = tmp_path / "machine.xml"
+    done = export(eni, out)
+    assert done.returncode == 0, done.stderr
+    assert (tmp_path / "machine_0_soe.xml").is_file()
+    records = parse(lcec_conf, out)
+    assert [r for r in records if r.startswith("idn ")] == [
+        "idn 0 32 2 0b00", "idn 0 32 4 0b00", "idn 1 32815 2 e8030000"]
+
+
+def test_a_duplicate_entry_is_refused_by_name(tmp_path):
+    """lcec registers a pin's entry by index and subindex: a variable on an entry that is
+    twice in the slave's PDOs is refused, nothing written."""
     from conftest import compile_example
     line = compile_example(tmp_path / "line.eni.xml")
     done = export(line, tmp_path / "line.xml")
     assert done.returncode == 1
-    assert "entry 0x6041:00 is twice in the slave's PDOs" in done.stderr, done.stderr
+    assert re.search(r":\d+: slave 4 \('axis1'\): variable 'axis1.TxPDO 1 \(CSP\).Statusword': "
+                     r"entry 0x6041:00 is twice in the slave's PDOs", done.stderr), done.stderr
+    assert not (tmp_path / "line.xml").exists()
