@@ -1,7 +1,8 @@
 """``ecatcfg export ENI --format pysoem|soem-c|igh-c|lcec|ros2 -o FILE``: an ENI (any
 tool's) as code for the master a user already runs (``eni/export/``); ``soem-c`` and
 ``igh-c`` write ``FILE`` (C) and the header beside it (``FILE`` with ``.h``); ``ros2``
-writes ``FILE`` (the ros2_control fragment) and a generic-slave YAML per slave beside it.
+writes ``FILE`` (the ros2_control fragment) and a generic-slave YAML per slave beside it;
+``lcec`` ``FILE`` and an initCmds file per slave with SoE writes.
 
 The file is written atomically, and nothing is written when the ENI has errors or asks for
 something the exported hooks cannot carry (the message names the file, line and slave;
@@ -34,7 +35,8 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                                    "by name, and a minimal cyclic task (-DECATCFG_MAIN).  "
                                    "lcec: LinuxCNC's ethercat.xml (generic slaves with "
                                    "their PDO tree and HAL pins named after the variables, "
-                                   "dcConf, watchdog, sdoConfig).  ros2: for "
+                                   "dcConf, watchdog, sdoConfig; SoE writes in an "
+                                   "initCmds file beside it).  ros2: for "
                                    "ethercat_driver_ros2, a generic-slave YAML per slave and "
                                    "the ros2_control fragment that loads them in bus "
                                    "order.")
@@ -42,8 +44,9 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
     p.add_argument("--format", required=True, choices=FORMATS, help="what to write")
     p.add_argument("-o", "--output", required=True, metavar="FILE",
                    help="the file to write (atomically); soem-c, igh-c: the C source, its "
-                        "header beside it with the suffix .h; ros2: the ros2_control "
-                        "fragment, a YAML per slave beside it")
+                        "header beside it with the suffix .h; lcec: ethercat.xml, an "
+                        "initCmds file per slave with SoE writes beside it; ros2: the "
+                        "ros2_control fragment, a YAML per slave beside it")
     p.add_argument("--no-cache", action="store_true", help="do not use the ENI plan cache")
     p.set_defaults(run=run)
 
