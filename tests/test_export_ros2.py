@@ -239,8 +239,11 @@ def test_every_corpus_eni_exports_for_ros2_or_is_refused_by_name(request, eni):
     path = corpus_eni(request, eni)
     try:
         plan = read_file(path)
-    except EcatcfgError:
-        pytest.skip("the reader refuses it (tests/test_eni_io.py says why)")
+    except EcatcfgError as exc:
+        # Refused by the reader (tests/test_eni_io.py says why): refused by name, as the
+        # export reads it the same way; nothing CI can provide may skip.
+        assert str(path) in str(exc), exc
+        return
     try:
         fragment, files = ros2.render(igh_config(plan, path), str(path), "x", path.name,
                                       "0" * 64, "t")
