@@ -151,8 +151,10 @@ class Network:
         ``Timing()`` for the table); instantaneous slaves by default.  ``dc``: the emulated
         clocks and line timing (``runtime/segment/dc_clock.py``; seeded ±100 ppm drift by
         default).  ``esi_prefer``: the ESI files or folders whose description wins where
-        several describe one device differently (``Library``'s ``prefer``); without it such
-        a device is an error naming the files."""
+        several describe one device differently (``Library``'s ``prefer``); without it the
+        description that agrees with the ENI's slave is taken, said in an
+        ``Event("esi", ...)``, and where none or several agree the device is an error
+        naming the files and what differs."""
         from ecatcfg.eni import reader as eni_reader
         from ecatcfg.runtime.segment import emulate
         from ecatcfg.runtime.link import MemoryLink
@@ -166,9 +168,13 @@ class Network:
         plan = _completed(plan, eni_name or (None if isinstance(eni, NetworkPlan)
                                              else str(eni)), on_event)
         library = _library(esi, esi_prefer, esi_cache)
-        segment = emulate.segment(emulate.specs_from_eni(plan, library, shown), faults,
-                                  timing, dc=dc)
+        specs = emulate.specs_from_eni(plan, library, shown)
+        segment = emulate.segment(specs, faults, timing, dc=dc)
         if on_event is not None:
+            for spec, slave in zip(specs, segment.slaves):
+                if spec.esi_choice is not None:
+                    on_event(Event("esi", f"slave {slave.name!r} (position {slave.position})"
+                                          f": {spec.esi_choice}"))
             for slave in segment.slaves:
                 if slave.eni_only is not None:
                     on_event(Event("emulated", f"slave {slave.name!r} (position "
