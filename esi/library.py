@@ -115,6 +115,9 @@ class Library:
         self._descriptions: dict[tuple[str, int], Description] = {}
         self._trees: dict[str, etree._ElementTree] = {}
         self.evidence_for: Callable[[int, int, int], Evidence | None] | None = None
+        # What the evidence chose (the notes of :meth:`find`), in order: a caller that
+        # selects through code it does not own (a check's rules) reports them.
+        self.decisions: list[str] = []
 
     def _preferred(self, given: str | Path) -> Path:
         path = Path(given)
@@ -282,6 +285,7 @@ class Library:
         identity."""
         view = copy.copy(self)
         view.evidence_for = evidence_for
+        view.decisions = []
         return view
 
     def select(self, selector: str, esi: str | None = None, base: Path | None = None
@@ -459,6 +463,7 @@ class Library:
             note = (f"{head}; took {_where(fits[0])}: the only description that agrees with "
                     f"{evidence.what}" + (f" (the others differ from it: {others})"
                                           if others else ""))
+            self.decisions.append(note)
             return Selection(fits[0], found.note, note)
         if not fits:
             raise DuplicateError(

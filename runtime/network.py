@@ -66,6 +66,9 @@ class Network:
     """An ENI running on a link (see the module docstring)."""
 
     segment: VirtualSegment     # the emulated slaves, set by Network.virtual only
+    # Network.virtual only: the ESI file each emulated slave's device is from (None: the
+    # ENI alone), and why, where several files describe its identity differently.
+    esi_sources: list[tuple[str | None, str | None]]
 
     def __init__(self, eni: NetworkPlan | str | Path, link: Link, *,
                  pcap: str | Path | None = None,
@@ -196,6 +199,9 @@ class Network:
                   dc_threshold_ns=dc_threshold_ns, dc_timeout_s=dc_timeout_s,
                   recovery=recovery, esi=library, _closers=[close_segment])
         net.segment = segment
+        net.esi_sources = [(None if spec.eni_only is not None else
+                            f"{spec.device.source.file}:{spec.device.source.line}",
+                            spec.esi_choice) for spec in specs]
         return net
 
     # -- state ------------------------------------------------------------------------------
