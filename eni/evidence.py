@@ -106,13 +106,16 @@ def _pdos(slave: SlavePlan, device: Device) -> list[str]:
             out.append(f"{_name(direction)} {indices_said(diff)} entries differ from the ENI's")
     # The default assignment, where the ENI does not write the assignment object.
     in_eni = {(p.direction, p.index) for p in listed}
+    # What the ENI assigns to each SM: the SM's Pdo list, else the PDOs whose Sm names it
+    # (the one reading of it, eni/check/network.py; imported here, not at the top: the
+    # check package imports this module).
+    from ecatcfg.eni.check.network import sm_pdos
     eni_assigned: dict[int, set[int]] = {}
     for p in listed:
         if p.sm is not None:
             eni_assigned.setdefault(p.sm, set()).add(p.index)
     for sm in pd.sms if pd is not None else []:
-        if sm.pdos:
-            eni_assigned.setdefault(sm.number, set()).update(sm.pdos)
+        eni_assigned[sm.number] = {p.index for p in sm_pdos(slave, sm)}
     default: dict[int, list[Pdo]] = {}
     for mine in assigned_pdos(device.pdos):
         assert mine.sm is not None and mine.index is not None

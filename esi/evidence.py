@@ -33,7 +33,7 @@ class Evidence(Protocol):
     def disagreements(self, device: Device) -> list[str]: ...
 
 
-def said(items: list[str], limit: int = 4) -> str:
+def in_brief(items: list[str], limit: int = 4) -> str:
     """At most ``limit`` items of a list of disagreements, the last saying how many more."""
     if len(items) > limit:
         items = items[:limit - 1] + [f"{len(items) - limit + 1} more"]

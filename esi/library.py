@@ -35,7 +35,7 @@ from ecatcfg.errors import EcatcfgError, UsageError
 from ecatcfg.esi import reader, xmlsafe
 from ecatcfg.esi.cache import IndexCache, content_digest
 from ecatcfg.esi.duplicates import Description, describe, device_elements, differences
-from ecatcfg.esi.evidence import Evidence, said
+from ecatcfg.esi.evidence import Evidence, in_brief
 from ecatcfg.esi.index import DeviceEntry, FileSummary, summarize
 from ecatcfg.esi.model import Device, EsiFile, Module, format_selector
 from ecatcfg.esi.values import parse_int
@@ -439,6 +439,10 @@ class Library:
             note = (f"{_selector(chosen)} ({chosen.type}) is described differently by "
                     f"{len({e.file for e in same})} ESI files; took {_where(top[0])} "
                     f"(--prefer {self.prefer[best]}); differs: {said}")
+            against = evidence.disagreements(self.device(top[0])) if evidence else []
+            if evidence is not None and against:
+                note += (f"; it does not agree with {evidence.what}: "
+                         + in_brief(against))
             return Selection(top[0], found.note, note)
         if evidence is not None:
             return self._by_evidence(found, same, evidence)
@@ -457,7 +461,7 @@ class Library:
         head = (f"{_selector(chosen)} ({chosen.type}) is described differently by "
                 + (f"{files} ESI files" if files > 1 else
                    f"{len(same)} Device elements of one file"))
-        others = "; ".join(f"{_where(e)}: {said(against[id(e)], 3)}" for e in same
+        others = "; ".join(f"{_where(e)}: {in_brief(against[id(e)], 3)}" for e in same
                            if against[id(e)])
         if fits and not self.differing(fits):
             note = (f"{head}; took {_where(fits[0])}: the only description that agrees with "
