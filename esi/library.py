@@ -251,6 +251,14 @@ class Library:
                                         if e.revision is not None})))
         return exact, other, note
 
+    def differs(self, vendor_id: int, product_code: int, revision: int) -> bool:
+        """Whether several descriptions give this identity differently (a caller that must
+        read evidence from a slave to choose, its SII, reads it only then)."""
+        same = [e for e in self.entries
+                if (e.vendor_id, e.product_code, e.revision)
+                == (vendor_id, product_code, revision)]
+        return len(same) > 1 and bool(self.differing(same))
+
     def find(self, selector: str, within: LibraryFile | None = None,
              evidence: Evidence | None = None) -> Selection:
         """The one device ``selector`` names, or :class:`SelectorError` saying why not.

@@ -24,7 +24,9 @@ from conftest import FIXTURES
 from ecatcfg.eni import reader as eni_reader
 from ecatcfg.eni.evidence import EniSlaveEvidence
 from ecatcfg.esc import AlState
+from ecatcfg.esi.evidence import SiiEvidence
 from ecatcfg.esi.library import DuplicateError, Library
+from ecatcfg.esi.sii import build, decode
 from ecatcfg.runtime import Network
 
 HERE = FIXTURES / "same-identity"
@@ -223,6 +225,48 @@ def test_check_uses_the_chosen_description():
     messages = [f["message"] for f in _findings(json.loads(wrong.stdout))]
     assert any("TxPdo 0x1A02" in m and "Mandatory" in m and "project-b.xml" in m
                for m in messages), messages
+
+
+# -- a live line: the slave's SII ------------------------------------------------------------
+
+def test_each_fixture_description_agrees_with_its_own_sii_alone():
+    """The SII a device built from each file carries (what the emulated slave's EEPROM
+    holds) agrees with that file and with no other: the PDO categories differ."""
+    lib = Library([HERE], cache=False)
+    for f in ESIS:
+        mine = lib.device(next(e for e in lib.entries if e.file == str(f)))
+        evidence = SiiEvidence(decode(build(mine)), "slave 0")
+        fits = [e.file for e in lib.entries if not evidence.disagreements(lib.device(e))]
+        assert fits == [str(f)]
+        chosen = lib.find(SELECTOR, evidence=evidence)
+        assert chosen.entry.file == str(f)
+        assert "the only description that agrees with the SII of slave 0" in chosen.preferred
+
+
+def test_scan_chooses_by_the_sii_read_from_the_slave(veth_netns):
+    """``scan --esi`` on a line whose slave carries project-a.xml's SII: the scan reads
+    the EEPROM and names project-a.xml, saying why; the other files are named with what
+    their SII would have that the slave's has not."""
+    from rig import serving
+
+    from ecatcfg.runtime.segment.emulate import SlaveSpec, segment
+
+    lib = Library([HERE], cache=False)
+    project_a = HERE / "project-a.xml"
+    device = lib.device(lib.find(SELECTOR, within=lib.file_named(str(project_a))).entry)
+    with serving(veth_netns, segment([SlaveSpec(device, "daq")])):
+        done = veth_netns.run_in(veth_netns.ns_a, [
+            sys.executable, "-m", "ecatcfg", "scan", "--esi", str(HERE), "--format", "json",
+            "--no-cache", "--iface", veth_netns.if_a], timeout=60)
+    assert done.returncode == 0, done.stderr
+    [row] = json.loads(done.stdout)["slaves"]
+    assert row["file"] == str(project_a) and row["line"] == _device(project_a).sourceline
+    assert row["exact"]
+    assert f"took {_where(project_a)}: the only description that agrees with the SII of " \
+           "slave 0" in row["note"]
+    # vendor-build-2.xml has TxPdo 0x1A01, which the slave's SII has not.
+    assert f"{_where(HERE / 'vendor-build-2.xml')}: TxPdo 0x1A01 not in the slave's SII" \
+        in row["note"]
 
 
 def _findings(report: dict) -> list[dict]:
