@@ -228,13 +228,17 @@ class Library:
         (the ``prefer`` files first where several files have it), else (``other``) the
         highest revision of the same product, with a note saying which revisions there
         are.  Where several files describe the exact revision differently and ``prefer``
-        does not decide, ``evidence`` (the slave's SII: ``esi/evidence.py``) chooses the
-        one that agrees with it, with a note saying so, or the note says why it could
-        not (the ``prefer`` order's first is then taken, as without evidence)."""
+        does not decide, ``evidence`` (the slave's SII: ``esi/evidence.py``; without it,
+        the :meth:`guided` evidence, asked for only then) chooses the one that agrees with
+        it, with a note saying so, or the note says why it could not (the ``prefer``
+        order's first is then taken, as without evidence)."""
         same = [e for e in self.entries
                 if (e.vendor_id, e.product_code) == (vendor_id, product_code)]
         exact = min((e for e in same if e.revision == revision), key=self._rank,
                     default=None)
+        if exact is not None and evidence is None and self.evidence_for is not None \
+                and self.differs(vendor_id, product_code, revision):
+            evidence = self.evidence_for(vendor_id, product_code, revision)
         if exact is not None and evidence is not None:
             try:
                 chosen = self._one_description(Selection(exact), self.entries, evidence)

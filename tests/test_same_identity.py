@@ -269,6 +269,33 @@ def test_scan_chooses_by_the_sii_read_from_the_slave(veth_netns):
         in row["note"]
 
 
+def test_doctor_explains_a_refusal_with_the_description_the_sii_agrees_with(veth_netns):
+    """``doctor --esi``: a slave of project-a.xml's SII refuses SAFEOP with 0x0030 (invalid
+    DC SYNC configuration); the cause is compared with the ESI device: project-a.xml,
+    named with why."""
+    from rig import serving
+
+    from ecatcfg.runtime.segment.emulate import SlaveSpec, segment
+
+    lib = Library([HERE], cache=False)
+    project_a = HERE / "project-a.xml"
+    device = lib.device(lib.find(SELECTOR, within=lib.file_named(str(project_a))).entry)
+    seg = segment([SlaveSpec(device, "daq")])
+    seg.slaves[0]._set_state(AlState.PREOP, 0x0030)      # the firmware's own decision
+    with serving(veth_netns, seg):
+        done = veth_netns.run_in(veth_netns.ns_a, [
+            sys.executable, "-m", "ecatcfg", "doctor", "--esi", str(HERE), "--state",
+            "safeop", "--no-cache", "--format", "json", "--iface", veth_netns.if_a],
+            timeout=60)
+    assert "Traceback" not in done.stderr, done.stderr
+    [finding] = json.loads(done.stdout)["findings"]
+    where = finding["dc"]["esi"]["device"]
+    assert where.startswith(f"{_where(project_a)}; 0xe0000eca:0x4400:0x10000 (EXD4400) is "
+                            f"described differently by 4 ESI files; took {_where(project_a)}"
+                            ": the only description that agrees with the SII of slave 0"), \
+        where
+
+
 def _findings(report: dict) -> list[dict]:
     return list(report["findings"])
 
