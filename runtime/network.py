@@ -105,6 +105,12 @@ class Network:
             _check_supported(eni, eni_name, skip_unsupported, on_event)
             eni = _completed(eni, eni_name, on_event)
             library = _library(esi, esi_prefer, esi_cache)
+            if library is not None:
+                # Among ESI files that describe an identity differently, a cause is
+                # compared with the one the ENI's slaves agree with (eni/evidence.py).
+                from ecatcfg.eni.evidence import evidence_by_identity
+                by_identity = evidence_by_identity(eni, eni_name or "the ENI")
+                library = library.guided(lambda v, p, r: by_identity.get((v, p, r)))
         except BaseException:
             link.close()                    # the Network owns the link from the start
             raise

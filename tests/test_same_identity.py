@@ -120,6 +120,11 @@ def test_network_virtual_says_the_choice_in_an_event():
                            f"{_where(HERE / 'vendor-build-2.xml')}")
     [(esi, why)] = net.esi_sources
     assert esi == _where(HERE / "vendor-build-2.xml") and why is not None and why in said
+    # What a refusal's cause is compared with (runtime/master/diagnose.py looks the
+    # device up by the identity the slave reports): the same file, by the ENI's evidence.
+    exact, _, note = net.master.esi.entry_for_identity(0xE0000ECA, 0x4400, 0x10000)
+    assert exact is not None and exact.file == str(HERE / "vendor-build-2.xml")
+    assert note == why
 
 
 def _variant(tmp_path: Path, change) -> Path:
