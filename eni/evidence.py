@@ -104,33 +104,29 @@ def _pdos(slave: SlavePlan, device: Device) -> list[str]:
         diff = [p.index for p in changed if p.direction == direction]
         if diff:
             out.append(f"{_name(direction)} {indices_said(diff)} entries differ from the ENI's")
-    # The default assignment, where the ENI does not write the assignment object.
-    in_eni = {(p.direction, p.index) for p in listed}
-    # What the ENI assigns to each SM: the SM's Pdo list, else the PDOs whose Sm names it
-    # (the one reading of it, eni/check/network.py; imported here, not at the top: the
-    # check package imports this module).
+    # The default assignment, where the ENI does not write the assignment object.  What
+    # the ENI assigns to each SM: the SM's Pdo list, else the PDOs whose Sm names it (the
+    # one reading of it, eni/check/network.py; imported here, not at the top: the check
+    # package imports this module).
     from ecatcfg.eni.check.network import sm_pdos
+    in_eni = {p.index for p in listed}
     eni_assigned: dict[int, set[int]] = {}
     for p in listed:
         if p.sm is not None:
             eni_assigned.setdefault(p.sm, set()).add(p.index)
     for sm in pd.sms if pd is not None else []:
         eni_assigned[sm.number] = {p.index for p in sm_pdos(slave, sm)}
-    default: dict[int, list[Pdo]] = {}
-    for mine in assigned_pdos(device.pdos):
-        assert mine.sm is not None and mine.index is not None
-        default.setdefault(mine.sm, []).append(mine)
+    default: dict[int, set[int]] = {}
+    for mine in assigned_pdos(device.pdos):    # each has an Sm and an index
+        default.setdefault(mine.sm or 0, set()).add(mine.index or 0)
     for number in sorted(set(default) | set(eni_assigned)):
         if SM_PDO_ASSIGN + number in written:
             continue
-        ours = {p.index for p in default.get(number, []) if p.index is not None}
-        theirs = eni_assigned.get(number, set())
-        unlisted = sorted(i for i in ours - theirs if not any(
-            (d, i) in in_eni for d in ("rx", "tx")))
-        unassigned = sorted(i for i in ours - theirs if i not in unlisted)
-        extra = sorted(i for i in theirs - ours if (
-            "rx" if number < len(device.sms) and device.sms[number].type == "Outputs"
-            else "tx", i) in own)       # a PDO the Device lacks is said above
+        ours, theirs = default.get(number, set()), eni_assigned.get(number, set())
+        unlisted = sorted(i for i in ours - theirs if i not in in_eni)
+        unassigned = sorted(i for i in ours - theirs if i in in_eni)
+        # (a PDO the Device lacks altogether is said above)
+        extra = sorted(i for i in theirs - ours if any((d, i) in own for d in ("rx", "tx")))
         if unlisted:
             out.append(f"PDO {indices_said(unlisted)} (assigned to SM{number} by default) not "
                        "in the ENI")
