@@ -232,6 +232,21 @@ def test_check_uses_the_chosen_description():
                for m in messages), messages
 
 
+def test_simulate_eni_emulates_the_description_the_eni_agrees_with(veth_netns):
+    """``simulate --eni --esi``: the note names the file and why; the slave list says the
+    slave is emulated from its ESI."""
+    from rig import start_simulate
+
+    sim, lines = start_simulate(veth_netns, "--eni", str(HERE / "eni.xml"), "--esi",
+                                str(HERE), duration=3)
+    assert lines and lines[-1].startswith("ready:"), "".join(lines)
+    _, err = sim.communicate(timeout=30)
+    words = " ".join(err.split())
+    assert "note: slave 'Box 1 (EXD4400)': 0xe0000eca:0x4400:0x10000 (EXD4400) is " \
+           f"described differently by 4 ESI files; took {_where(HERE / 'vendor-build-2.xml')}" \
+           ": the only description that agrees with the ENI's slave" in words, err
+
+
 # -- a live line: the slave's SII ------------------------------------------------------------
 
 def test_each_fixture_description_agrees_with_its_own_sii_alone():
