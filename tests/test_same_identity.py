@@ -163,9 +163,9 @@ def test_an_eni_no_description_fits_is_refused_naming_the_differences(tmp_path: 
     [row] = json.loads(chosen.stdout)["slaves"]
     assert row["highest_state"] == "OP" and row["esi"] == _where(right)
     assert f"(--prefer {right})" in row["esi_choice"]
-    assert row["esi_choice"].endswith(f"; it does not agree with the ENI's slave 'Box 1 "
-                                      f"(EXD4400)' ({eni}): the ENI's TxPdo 0x1A03 not in it, PDO 0x1A01 "
-                                      "(assigned to SM3 by default) not in the ENI")
+    assert row["esi_choice"].endswith(
+        f"; it does not agree with the ENI's slave 'Box 1 (EXD4400)' ({eni}): the ENI's "
+        "TxPdo 0x1A03 not in it, PDO 0x1A01 (assigned to SM3 by default) not in the ENI")
 
 
 @pytest.mark.parametrize("change, said", [
