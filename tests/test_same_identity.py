@@ -232,6 +232,15 @@ def test_check_uses_the_chosen_description():
                for m in messages), messages
 
 
+def test_report_says_which_description_its_check_took(tmp_path: Path):
+    run = ecatcfg("report", HERE / "eni.xml", "--esi", HERE, "--no-cache", "-o",
+                  tmp_path / "r.html")
+    assert run.returncode == 0, run.stderr
+    assert f"ecatcfg report: note: {HERE / 'eni.xml'}: 0xe0000eca:0x4400:0x10000 (EXD4400) " \
+           f"is described differently by 4 ESI files; took " \
+           f"{_where(HERE / 'vendor-build-2.xml')}" in " ".join(run.stderr.split())
+
+
 def test_simulate_eni_emulates_the_description_the_eni_agrees_with(veth_netns):
     """``simulate --eni --esi``: the note names the file and why; the slave list says the
     slave is emulated from its ESI."""
