@@ -237,7 +237,7 @@ def test_report_says_which_description_its_check_took(tmp_path: Path):
                   tmp_path / "r.html")
     assert run.returncode == 0, run.stderr
     assert f"ecatcfg report: note: {HERE / 'eni.xml'}: 0xe0000eca:0x4400:0x10000 (EXD4400) " \
-           f"is described differently by 4 ESI files; took " \
+           "is described differently by 4 ESI files; took " \
            f"{_where(HERE / 'vendor-build-2.xml')}" in " ".join(run.stderr.split())
 
 
