@@ -210,9 +210,13 @@ class ApplyReport:
             for row in self.rows:
                 if row["passive"]:
                     row["emulated_from"] = None     # no ESC: nothing to emulate
+                    row["esi"] = row["esi_choice"] = None
             active = [row for row in self.rows if not row["passive"]]
-            for row, slave in zip(active, segment.slaves):
+            sources = getattr(net, "esi_sources", None) or [(None, None)] * len(active)
+            for row, slave, (esi, why) in zip(active, segment.slaves, sources):
                 row["emulated_from"] = "eni" if slave.eni_only is not None else "esi"
+                # The ESI file and why that one, where several describe the identity.
+                row["esi"], row["esi_choice"] = esi, why
         if self.json_output:
             if failure:
                 print(f"ecatcfg apply: {failure}", file=sys.stderr)

@@ -218,6 +218,8 @@ def _from_eni(args: argparse.Namespace, lib: Library | None
     notes = [f"note: ignored (apply would refuse it): {line_of(part, args.eni)}"
              for part in plan.unsupported]
     specs = emulate.specs_from_eni(plan, lib, args.eni)
+    # Which of differing ESI files of one identity the ENI's evidence chose, and why.
+    notes += [f"note: slave {s.name!r}: {s.esi_choice}" for s in specs if s.esi_choice]
     passive = [(p.name, "passive", p.vendor_id, p.product_code, p.revision, "ENI")
                for p in plan.passive]
     return specs, passive, notes
