@@ -71,6 +71,7 @@ class ApplyReport:
         self.rows: list[dict[str, Any]] = []
         self.summary: dict[str, Any] = {}
         self.skipped_parts: list[dict[str, Any]] = []
+        self.ignored_parts: list[dict[str, Any]] = []
         self.derived_parts: list[dict[str, Any]] = []
 
     def derived(self, derived: list[Derived]) -> None:
@@ -85,6 +86,19 @@ class ApplyReport:
         """The parts of the ENI run without (``--skip-unsupported``), for the JSON."""
         self.skipped_parts = [{"slave": p.slave, "element": p.element, "what": p.what,
                                "line": p.line, "commands": p.commands} for p in parts]
+
+    def ignored(self, parts: list[Unsupported], file: str) -> None:
+        """Unknown metadata the reader left out (``NetworkPlan.ignored``): a warning each on
+        stderr, whatever the format, and the JSON's ``ignored``."""
+        from ecatcfg.errors import location
+        self.ignored_parts = [{"slave": p.slave, "element": p.element, "what": p.what,
+                               "line": p.line} for p in parts]
+        for p in parts:
+            where = location(file, p.line)
+            owner = f"slave {p.slave!r}" if p.slave is not None else "the master"
+            text = f"warning: {where}: {owner}: ignored {p.what} [{p.element}]"
+            self.events.append(text)
+            print(text, file=sys.stderr, flush=True)
 
     def event(self, event: Event) -> None:
         if event.kind == "skipped":         # a warning: stderr, whatever the format
@@ -200,6 +214,7 @@ class ApplyReport:
             "causes": list(getattr(failure, "causes", [])),
             "derived": self.derived_parts,
             "skipped": self.skipped_parts,
+            "ignored": self.ignored_parts,
         }
         by_slave = {c["slave"]: c["cause"] for c in self.summary["causes"]}
         for row in self.rows:
@@ -284,4 +299,5 @@ def refusal_json(eni: str, target: int, error: EcatcfgError,
                             "passive": len(plan.passive) if plan else 0},
             "cycles": {"count": 0, "lost_frames": 0, "wkc_errors": 0,
                        "wkc_error_commands": {}, "jitter_us": {}},
-            "frames": {"sent": 0, "lost": 0}, "derived": [], "skipped": [], "events": []}
+            "frames": {"sent": 0, "lost": 0}, "derived": [], "skipped": [], "ignored": [],
+            "events": []}
