@@ -54,7 +54,7 @@ _ENI_READ = _words("read", "read by the ENI reader where eni/contents.py lists i
 """)
 
 # Attributes with one meaning wherever they appear (eni/contents.py ANYWHERE).
-_BY_MEANING = {
+_BY_MEANING: dict[str, tuple[Kind, str]] = {
     "@AdaptAutomatically": ("metadata", "the configurator may adapt the data to the PDO "
                             "configuration; the file holds the data it sends, as written"),
     "@CompleteAccess": ("read", "a CoE transfer of the whole object (complete access)"),
