@@ -189,3 +189,31 @@ def test_complete_access_outside_a_coe_transfer_is_refused_when_true(example_eni
     cmd.set("CompleteAccess", "1")
     [part] = eni_reader.read_bytes(etree.tostring(tree), "x.xml").unsupported
     assert part.element.endswith("/@CompleteAccess") and "only a CoE SDO" in part.what
+
+
+def _spelled_by(modules: list[str]) -> tuple[set[str], set[str]]:
+    """The names the readers' code spells: every word of a string constant, and the
+    constant heads of f-strings followed by a number (``f"Sm{number}"``)."""
+    import ast
+    import re
+    root = Path(vocabulary.__file__).resolve().parent.parent
+    words, heads = set(), set()
+    for module in modules:
+        for node in ast.walk(ast.parse((root / module).read_text())):
+            if isinstance(node, ast.Constant) and isinstance(node.value, str):
+                words.update(w for w in re.split(r"[^A-Za-z0-9_]+", node.value) if w)
+            elif isinstance(node, ast.JoinedStr) and len(node.values) >= 2 and \
+                    isinstance(node.values[0], ast.Constant):
+                heads.add(str(node.values[0].value).rsplit("/", 1)[-1])
+    return words, heads
+
+
+def test_a_word_read_into_a_model_is_one_the_readers_look_up():
+    """``read`` is a claim about the code: the ENI reader's list or the ESI reader looks
+    the name up (it is spelled in their source)."""
+    words, heads = _spelled_by(["eni/reader.py", "eni/contents.py", "eni/compare.py",
+                                "esi/reader.py", "esi/index.py", "esi/slots.py"])
+    not_spelled = [name for name, (kind, _) in vocabulary.WORDS.items() if kind == "read"
+                   and name.lstrip("@") not in words
+                   and not any(name.startswith(h) and name[len(h):].isdigit() for h in heads)]
+    assert not_spelled == []
