@@ -52,6 +52,12 @@ def compare_type(text: str) -> str | None:
     return name if name in COMPARES else None
 
 
+def compared(kind: str | None) -> str:
+    """How a compare type reads before the expected value in messages and ``show``:
+    ``>= `` for EQ_OR_G, ``LW_EQ `` for the word-wise types, nothing for equal."""
+    return "" if kind is None or kind == "EQ" else ">= " if kind == "EQ_OR_G" else f"{kind} "
+
+
 def passes(got: int, want: int, kind: str | None) -> bool:
     """``got`` compared with ``want`` as ``kind`` says (``EQ`` when ``None``)."""
     return COMPARES[kind or DEFAULT](got, want)

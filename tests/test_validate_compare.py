@@ -153,3 +153,12 @@ def test_without_a_type_the_replayed_check_wants_the_same_revision(example_eni, 
     with pytest.raises(ApplyError, match="check revision number") as caught:
         _up_with_drive_revision(eni, tmp_path, +0x10000, accept_newer=True)
     assert "expected" in str(caught.value)
+
+
+def test_show_and_messages_say_the_compare(example_eni):
+    from ecatcfg.eni.words import init_cmd_words
+    plan = eni_reader.read_bytes(etree.tostring(_with_revision_check(example_eni, "EQ_OR_G")),
+                                 "ec.xml")
+    [check] = [c for c in plan.slave(DRIVE).init_cmds if c.comment == "check revision number"]
+    revision = plan.slave(DRIVE).revision
+    assert init_cmd_words(check) == f"check SII data >= 0x{revision:08X}"

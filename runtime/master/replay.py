@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING, Any, TypeVar
 
 from ecatcfg.eni.plan import (CoeInitCmd, EoeInitCmd, FoeInitCmd, InitCmd, MailboxPlan,
                               SoeInitCmd)
-from ecatcfg.eni.compare import matches
+from ecatcfg.eni.compare import compared, matches
 from ecatcfg.eni.words import init_cmd_name
 from ecatcfg.errors import EcatcfgError
 from ecatcfg.esc import (AL_STATUS_ERROR, SM1_STATUS, SM_ACTIVATE_REPEAT, SM_PDI_REPEAT_ACK, Cmd,
@@ -107,12 +107,6 @@ def command_timeout(cmd: InitCmd) -> float:
 
 
 
-def _compared(kind: str | None) -> str:
-    """``at least `` for EQ_OR_G, ``(LW_EQ) `` for the word-wise types, nothing for EQ."""
-    return "" if kind is None or kind == "EQ" else \
-        "at least " if kind == "EQ_OR_G" else f"({kind}) "
-
-
 def init_cmd_job(cmd: InitCmd, who: str | None, data: bytes | None = None,
                  progress: SlaveProgress | None = None) -> Job:
     """Send one InitCmd until its working counter and Validate are satisfied."""
@@ -145,7 +139,7 @@ def init_cmd_job(cmd: InitCmd, who: str | None, data: bytes | None = None,
                     raise ApplyError(f"{last} ({wrong_wkc} attempts)", who, what)
             elif cmd.validate is not None and not matches(got.data, cmd.validate):
                 last = (f"read {got.data.hex()}, expected "
-                        f"{_compared(cmd.validate.compare)}{cmd.validate.data.hex()}") + (
+                        f"{compared(cmd.validate.compare)}{cmd.validate.data.hex()}") + (
                     f" under mask {cmd.validate.mask.hex()}" if cmd.validate.mask else "")
                 if _is_state_check(cmd) and len(got.data) >= 2 \
                         and got.data[0] & AL_STATUS_ERROR \
