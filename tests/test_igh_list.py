@@ -158,3 +158,20 @@ def test_devices_names_the_byte_of_an_undeclared_latin1_file(tmp_path):
     run = _cli("devices", str(path))
     assert "Traceback" not in run.stderr
     assert f"{path}:" in run.stderr and "is not UTF-8" in run.stderr
+
+
+def test_an_sm_outside_process_memory_is_a_finding_and_stops_compile_by_name(tmp_path):
+    """What an SII read back can hold (a SyncManager at 0x0000): lint's ESI203 at the Sm's
+    line, and compile names it; no crash."""
+    path = tmp_path / "odd.xml"
+    path.write_bytes(LIST.read_bytes().replace(b'StartAddress="#x1000"', b'StartAddress="#x0"'))
+    line = next(el.sourceline for el in etree.parse(str(path)).iter("Sm")
+                if el.get("StartAddress") == "#x0")
+    run = _cli("lint", str(path), "--format", "json")
+    assert "Traceback" not in run.stderr
+    assert ("ESI203", line) in {(f["rule"], f["line"]) for f in json.loads(run.stdout)["findings"]}
+    topology = tmp_path / "line.yaml"
+    topology.write_text("slaves:\n  - {name: inputs, device: EL1008}\n")
+    run = _cli("compile", str(topology), "--esi", str(path), "-o", str(tmp_path / "x.xml"))
+    assert run.returncode != 0 and "Traceback" not in run.stderr
+    assert f"{path}:{line}: ESI203" in run.stderr
