@@ -87,21 +87,14 @@ class ApplyReport:
         self.skipped_parts = [{"slave": p.slave, "element": p.element, "what": p.what,
                                "line": p.line, "commands": p.commands} for p in parts]
 
-    def ignored(self, parts: list[Unsupported], file: str) -> None:
-        """Unknown metadata the reader left out (``NetworkPlan.ignored``): a warning each on
-        stderr, whatever the format, and the JSON's ``ignored``."""
-        from ecatcfg.errors import location
+    def ignored(self, parts: list[Unsupported]) -> None:
+        """Unknown metadata the reader left out (``NetworkPlan.ignored``), for the JSON;
+        the Network warns of each (an ``ignored`` event, printed on stderr)."""
         self.ignored_parts = [{"slave": p.slave, "element": p.element, "what": p.what,
                                "line": p.line} for p in parts]
-        for p in parts:
-            where = location(file, p.line)
-            owner = f"slave {p.slave!r}" if p.slave is not None else "the master"
-            text = f"warning: {where}: {owner}: ignored {p.what} [{p.element}]"
-            self.events.append(text)
-            print(text, file=sys.stderr, flush=True)
 
     def event(self, event: Event) -> None:
-        if event.kind == "skipped":         # a warning: stderr, whatever the format
+        if event.kind in ("skipped", "ignored"):    # a warning: stderr, whatever the format
             self.events.append(event.text)
             print(event.text, file=sys.stderr, flush=True)
             return

@@ -736,6 +736,18 @@ def refuse(plan: NetworkPlan, file: str | None) -> None:
         f"written to the bus:\n{lines}\n{SKIP_HINT}", file, plan.unsupported)
 
 
+def ignored_warnings(plan: NetworkPlan, file: str | None) -> list[str]:
+    """One warning per piece of unknown metadata the reader left out
+    (``NetworkPlan.ignored``): ``eni.xml:12: slave 'Drive': ignored <DisplayName>, which
+    ecatcfg does not read here: a name ... [Slave/Info/DisplayName]``."""
+    out = []
+    for p in plan.ignored:
+        where = location(file, p.line)
+        out.append(f"{where + ': ' if where else ''}{_owner(p)}: ignored {p.what} "
+                   f"[{p.element}]")
+    return out
+
+
 def skip_warnings(plan: NetworkPlan, file: str | None) -> list[str]:
     """One warning per slave (and one for the master) naming what is skipped:
     ``eni.xml: slave 'Drive': skipped VoE InitCmds (vendor-specific mailbox messages)

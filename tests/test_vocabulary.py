@@ -217,3 +217,27 @@ def test_a_word_read_into_a_model_is_one_the_readers_look_up():
                    and name.lstrip("@") not in words
                    and not any(name.startswith(h) and name[len(h):].isdigit() for h in heads)]
     assert not_spelled == []
+
+
+def test_the_network_api_warns_of_ignored_metadata(example_eni, tmp_path):
+    import warnings
+
+    from ecatcfg.esc import AlState
+    from ecatcfg.runtime import Network
+    from ecatcfg.runtime.network import IgnoredMetadataWarning
+    tree = etree.ElementTree(etree.fromstring(example_eni))
+    tree.xpath(f"//Slave[Info/Name='{DRIVE}']/Info")[0].append(
+        etree.fromstring("<Tool>TwinCAT 3.1</Tool>"))
+    eni = _write(tree, tmp_path / "tool.xml")
+    line = _line(eni, f"//Slave[Info/Name='{DRIVE}']/Info/Tool")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        with Network.virtual(eni, esi=[ESI], esi_cache=False) as net:
+            net.up()
+            assert net.state == AlState.OP
+    [warning] = [w for w in caught if issubclass(w.category, IgnoredMetadataWarning)]
+    assert str(warning.message).startswith(f"{eni}:{line}: slave '{DRIVE}': ignored <Tool>")
+    events = []
+    with Network.virtual(eni, esi=[ESI], esi_cache=False, on_event=events.append):
+        pass
+    assert [e.kind for e in events].count("ignored") == 1
