@@ -241,3 +241,20 @@ def test_the_network_api_warns_of_ignored_metadata(example_eni, tmp_path):
     with Network.virtual(eni, esi=[ESI], esi_cache=False, on_event=events.append):
         pass
     assert [e.kind for e in events].count("ignored") == 1
+
+
+def test_a_twincat_export_with_adapt_automatically_on_coe_initcmds_reaches_op(corpus_extra):
+    """A real TwinCAT export (corpus-extra pmec-wec-bench) writes AdaptAutomatically on CoE
+    InitCmds (0x1C32:02, 0x10F3:05): read as written, nothing refused, and it runs."""
+    eni = corpus_extra / "eni" / "pmec-wec-bench" / "DriveAndDUTAndPAAndLoadXML.xml"
+    marked = etree.parse(str(eni)).xpath("//CoE/InitCmds/InitCmd[@AdaptAutomatically]")
+    assert {(int(c.findtext("Index")), int(c.findtext("SubIndex"))) for c in marked} == {
+        (0x1C32, 2), (0x10F3, 5)}
+    plan = eni_reader.read_file(eni)
+    assert plan.unsupported == []
+    run = subprocess.run([sys.executable, "-m", "ecatcfg", "apply", str(eni), "--virtual",
+                          "--cycles", "3", "--format", "json"],
+                         capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stderr[-2000:]
+    states = {s["highest_state"] for s in json.loads(run.stdout)["slaves"]}
+    assert states == {"OP", "passive"}
