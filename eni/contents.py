@@ -19,7 +19,7 @@ so is an attribute of a child that is not listed as ``Tag@Name`` (``Slave@HotPlu
 What is inside a part without a context of its own (``within`` None) is covered by that
 part, whatever it is: a description whose effect reaches the wire only through InitCmds
 (``ProcessData``, ``ProcessImage``, the master's ``Info``), a part read or accepted as a
-whole (``Validate``, ``Identification``), or refused as a whole (``VoE``).  Outside
+whole (``Identification``), or refused as a whole (``VoE``).  Outside
 ``<Config>`` is open too (:data:`OPEN`: vendor data such as Elmo Application Studio's
 ``ElmoSpecialResources``), but for :data:`ROOT`.  Every element and attribute of the
 ETG.2100 schema has its part (:func:`covering`; a test parses the schema).
@@ -198,11 +198,16 @@ CONTENTS: dict[str, dict[str, Part]] = {
     _INIT_CMD: {
         **{tag: _read(_COMMAND) for tag in (
             "Transition", "BeforeSlave", "Comment", "Requires", "Cmd", "Adp", "Ado", "Addr",
-            "Data", "DataLength", "Cnt", "Retries", "Validate", "Timeout")},
+            "Data", "DataLength", "Cnt", "Retries", "Timeout")},
+        "Validate": _read("the read's check, polled until it passes", "InitCmd/Validate"),
         "Validate@Type": _read("how the read is compared with Data: the compare types of "
                                "ETG.2000's revision check (EQ, EQ_OR_G, LW_EQ, HW_EQ, "
                                "LW_EQ_HW_EQ_OR_G, HW_EQ_LW_EQ_OR_G; eni/compare.py)"),
     },
+    # A check: what else it held could change it (a Type written as an element).
+    "InitCmd/Validate": {tag: _read("what the read is checked against, under the mask, "
+                                    "until the timeout") for tag in (
+        "Data", "DataMask", "Timeout")},
     "Config/Slave": {
         "Info": _read("identity, station and auto-increment address", "Slave/Info"),
         "ProcessData": _read("SyncManagers and PDOs, as a description: the SM and FMMU "

@@ -258,3 +258,17 @@ def test_a_twincat_export_with_adapt_automatically_on_coe_initcmds_reaches_op(co
     assert run.returncode == 0, run.stderr[-2000:]
     states = {s["highest_state"] for s in json.loads(run.stdout)["slaves"]}
     assert states == {"OP", "passive"}
+
+
+def test_an_unknown_child_of_validate_is_refused_and_metadata_in_it_is_a_warning(example_eni):
+    """A Validate is a check: a Type written as an element would change it if it meant
+    anything; a comment in it would not."""
+    tree = etree.ElementTree(etree.fromstring(example_eni))
+    validate = tree.xpath("//Slave/InitCmds/InitCmd/Validate")[0]
+    validate.append(etree.fromstring("<Type>EQ_OR_G</Type>"))
+    plan = eni_reader.read_bytes(etree.tostring(tree), "x.xml")
+    assert [p.element.rsplit("/", 2)[-2:] for p in plan.unsupported] == [["Validate", "Type"]]
+    validate.remove(validate[-1])
+    validate.append(etree.fromstring("<Comment>EC-Engineer</Comment>"))
+    plan = eni_reader.read_bytes(etree.tostring(tree), "x.xml")
+    assert plan.unsupported == [] and len(plan.ignored) == 1
