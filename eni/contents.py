@@ -623,7 +623,7 @@ def _walk(el: Element, context: str, path: str, slave: str | None,
         part = parts.get(tag)
         if part is None:
             count = _commands(child) if context == "Slave/Mailbox" else 0
-            if not count and vocabulary.is_metadata(tag) and not _commands(child):
+            if vocabulary.is_metadata(tag) and not _commands(child):   # no command lost
                 ignored.append(Unsupported(where, f"<{tag}>, which ecatcfg does not read "
                                            f"here: {vocabulary.WORDS[tag][1]}",
                                            child.sourceline, slave))

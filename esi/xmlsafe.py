@@ -62,8 +62,9 @@ def parse_bytes(data: bytes, file: str, strip: bool = True) -> etree._ElementTre
     except etree.XMLSyntaxError as exc:
         line, column = exc.position if exc.position else (exc.lineno, None)
         message = _POSITION.sub("", exc.msg)      # the location is reported separately
-        raise _not_utf8(data, file) or XmlError(f"not well-formed XML: {message}", file,
-                                                line or None, column or None) from None
+        encoding = "encoding" in message or "UTF-8" in message
+        raise (_not_utf8(data, file) if encoding else None) or XmlError(
+            f"not well-formed XML: {message}", file, line or None, column or None) from None
     tree = root.getroottree()
     if tree.docinfo.system_url or tree.docinfo.public_id:
         at = data.find(b"<!DOCTYPE")
