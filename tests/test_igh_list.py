@@ -175,3 +175,35 @@ def test_an_sm_outside_process_memory_is_a_finding_and_stops_compile_by_name(tmp
     run = _cli("compile", str(topology), "--esi", str(path), "-o", str(tmp_path / "x.xml"))
     assert run.returncode != 0 and "Traceback" not in run.stderr
     assert f"{path}:{line}: ESI203" in run.stderr
+
+
+def test_simulate_with_the_list_serves_a_line_that_apply_brings_to_op(veth_netns, tmp_path):
+    """``simulate --topology --esi LIST`` on one end of a veth pair in its namespace,
+    ``apply`` of the compiled line on the other."""
+    rig = veth_netns
+    topology = tmp_path / "line.yaml"
+    topology.write_text("master: {name: igh-line, cycle_time_us: 1000}\nslaves:\n"
+                        "  - {name: coupler, device: EK1100}\n"
+                        "  - {name: inputs, device: EL1008}\n"
+                        "  - {name: outputs, device: EL2008}\n")
+    eni = tmp_path / "line.xml"
+    assert _cli("compile", str(topology), "--esi", str(LIST), "-o", str(eni)).returncode == 0
+    sim = rig.popen_in(rig.ns_b, [
+        sys.executable, "-m", "ecatcfg", "simulate", "--esi", str(LIST), "--topology",
+        str(topology), "--iface", rig.if_b, "--duration", "60", "--no-cache"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        assert sim.stdout is not None
+        for line in sim.stdout:
+            if line.startswith("ready:"):
+                break
+        else:
+            raise AssertionError(f"simulate ended before ready: {sim.stderr.read()}")
+        done = rig.run_in(rig.ns_a, [sys.executable, "-m", "ecatcfg", "apply", str(eni),
+                                     "--iface", rig.if_a, "--cycles", "3", "--format",
+                                     "json"], timeout=120)
+        assert done.returncode == 0, done.stderr
+        assert [s["highest_state"] for s in json.loads(done.stdout)["slaves"]] == ["OP"] * 3
+    finally:
+        sim.terminate()
+        sim.communicate(timeout=10)
