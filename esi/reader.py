@@ -352,6 +352,7 @@ class _Reader:
                 dev.revision = self.int_(ch.get("RevisionNo"), ch, "Type/@RevisionNo", "error")
                 dev.module_pdo_group = self.int_(ch.get("ModulePdoGroup"), ch,
                                                  "Type/@ModulePdoGroup")
+                dev.use_lrd_lwr = self.bool_(ch.get("UseLrdLwr"), ch, "Type/@UseLrdLwr")
             elif tag == "Name":
                 self.add_name(dev.names, ch)
             elif tag == "GroupType":

@@ -82,6 +82,7 @@ _ESI_READ = _words("read", "read into the ESI model (esi/reader.py)", """
     @ProductCode @ProductRevision @ReadRestrictions @RevisionNo @RxPdo @SdoInfo
     @SegmentedSdo @SerialNo @SlotGroup @SlotIndexIncrement @SlotPdoIncrement @StartAddress
     @SubIndex @TimeStamp @TxPdo @UseFromBuildNo @VendorId @Watchdog @WriteRestrictions
+    @UseLrdLwr
 """)
 
 # -- metadata: cannot change what is sent ------------------------------------------------------
@@ -145,7 +146,7 @@ _HARDWARE = _words("metadata", "a description of the hardware or its limits; the
     SlotNo ModuleBaseType ModuleIdents Pdos PdoMapIndexOrder EnableFlag DataString
     DataUDINT DataUINT Behavior DcCycleTime SyncType SubMode OperationMode
     @MaxSlotCount @MaxSlotGroupCount @MinCycleTime @MinAfterSync @MinBeforeFrame
-    @ExternalRefClock @UnknownFRMW @Unknown64Bit @UseLrdLwr @SdoUploadWithMaxLength
+    @ExternalRefClock @UnknownFRMW @Unknown64Bit @SdoUploadWithMaxLength
     @Dynamic @RealTimeMode @TimeDistribution @TimeLoopControlOnly @InputDelayTime
     @OutputDelayTime @FrameRepeatSupport @StartToInit @StartToPreop @StartToSafeop
     @StartToSafeopNoSync

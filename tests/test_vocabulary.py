@@ -272,3 +272,37 @@ def test_an_unknown_child_of_validate_is_refused_and_metadata_in_it_is_a_warning
     validate.append(etree.fromstring("<Comment>EC-Engineer</Comment>"))
     plan = eni_reader.read_bytes(etree.tostring(tree), "x.xml")
     assert plan.unsupported == [] and len(plan.ignored) == 1
+
+
+def test_use_lrd_lwr_stops_an_lrw_layout_and_runs_with_lrd_lwr(tmp_path):
+    """ETG.2000 ``Type@UseLrdLwr``: the device takes process data by LRD and LWR only (the
+    corpora's Beckhoff EL2002 rev 0x270B0000 and Murrelektronik Impact67 say so); an LRW
+    layout would send it one.  Our IgH list fixture's EL2008 given the attribute."""
+    from conftest import FIXTURES
+    esi = tmp_path / "list.xml"
+    esi.write_bytes((FIXTURES / "igh" / "ethercat-xml-3-slaves.xml").read_bytes().replace(
+        b'RevisionNo="#x00100000">EL2008', b'RevisionNo="#x00100000" UseLrdLwr="1">EL2008'))
+    slaves = ("slaves:\n  - {name: coupler, device: EK1100}\n"
+              "  - {name: inputs, device: EL1008}\n  - {name: outputs, device: EL2008}\n")
+    lrw = tmp_path / "lrw.yaml"
+    lrw.write_text("master: {name: l, cycle_time_us: 1000}\n" + slaves)
+    run = subprocess.run([sys.executable, "-m", "ecatcfg", "compile", str(lrw), "--esi",
+                          str(esi), "-o", str(tmp_path / "x.xml")], capture_output=True,
+                         text=True, timeout=120)
+    assert run.returncode == 1
+    assert f"{lrw}:5: slave 'outputs': its ESI says UseLrdLwr" in run.stderr
+    split = tmp_path / "split.yaml"
+    split.write_text("master: {name: l, cycle_time_us: 1000, layout: lrd_lwr}\n" + slaves)
+    eni = tmp_path / "line.xml"
+    run = subprocess.run([sys.executable, "-m", "ecatcfg", "compile", str(split), "--esi",
+                          str(esi), "-o", str(eni)], capture_output=True, text=True,
+                         timeout=120)
+    assert run.returncode == 0, run.stderr
+    cmds = {int(c.findtext("Cmd")) for c in etree.parse(str(eni)).iterfind(
+        "Config/Cyclic/Frame/Cmd")}
+    assert 12 not in cmds and {10, 11} <= cmds          # LRD, LWR; no LRW (ETG.1000.4)
+    run = subprocess.run([sys.executable, "-m", "ecatcfg", "apply", str(eni), "--virtual",
+                          "--esi", str(esi), "--cycles", "3", "--format", "json"],
+                         capture_output=True, text=True, timeout=180)
+    assert run.returncode == 0, run.stderr
+    assert [s["highest_state"] for s in json.loads(run.stdout)["slaves"]] == ["OP"] * 3
