@@ -306,3 +306,20 @@ def test_use_lrd_lwr_stops_an_lrw_layout_and_runs_with_lrd_lwr(tmp_path):
                          capture_output=True, text=True, timeout=180)
     assert run.returncode == 0, run.stderr
     assert [s["highest_state"] for s in json.loads(run.stdout)["slaves"]] == ["OP"] * 3
+
+
+def test_show_lists_ignored_metadata(example_eni, tmp_path):
+    tree = etree.ElementTree(etree.fromstring(example_eni))
+    tree.xpath(f"//Slave[Info/Name='{DRIVE}']/Info")[0].append(
+        etree.fromstring("<Description>the first axis</Description>"))
+    eni = _write(tree, tmp_path / "desc.xml")
+    line = _line(eni, f"//Slave[Info/Name='{DRIVE}']/Info/Description")
+    run = subprocess.run([sys.executable, "-m", "ecatcfg", "show", str(eni), "--format",
+                          "json"], capture_output=True, text=True, timeout=120)
+    assert run.returncode == 0, run.stderr
+    [item] = json.loads(run.stdout)["ignored"]
+    assert (item["slave"], item["element"], item["line"]) == (
+        DRIVE, "Slave/Info/Description", line)
+    text = subprocess.run([sys.executable, "-m", "ecatcfg", "show", str(eni)],
+                          capture_output=True, text=True, timeout=120).stdout
+    assert "Slave/Info/Description" in text.split("Ignored:", 1)[1]
