@@ -162,3 +162,14 @@ def test_show_and_messages_say_the_compare(example_eni):
     [check] = [c for c in plan.slave(DRIVE).init_cmds if c.comment == "check revision number"]
     revision = plan.slave(DRIVE).revision
     assert init_cmd_words(check) == f"check SII data >= 0x{revision:08X}"
+
+
+def test_the_type_is_written_back_and_read_again(example_eni):
+    """A plan read from an EC-Engineer-style file and written again keeps its compare."""
+    plan = eni_reader.read_bytes(etree.tostring(_with_revision_check(example_eni,
+                                                                     "HW_EQ_LW_EQ_OR_G")),
+                                 "ec.xml")
+    again = eni_reader.read_bytes(eni_writer.to_bytes(plan), "again.xml")
+    [check] = [c for c in again.slave(DRIVE).init_cmds if c.comment == "check revision number"]
+    assert check.validate.compare == "HW_EQ_LW_EQ_OR_G"
+    assert again.slave(DRIVE).init_cmds == plan.slave(DRIVE).init_cmds
