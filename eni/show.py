@@ -79,6 +79,8 @@ class EniView:
     # dropped from what is shown.
     unsupported: list[Unsupported] = field(default_factory=list)
     master_init_cmds: dict[str, list[str]] = field(default_factory=dict)
+    # Unknown metadata the reader left out (``NetworkPlan.ignored``): shown, not applied.
+    ignored: list[Unsupported] = field(default_factory=list)
 
 
 def master_words(plan: NetworkPlan) -> dict[str, list[str]]:
@@ -139,7 +141,7 @@ def summary(plan: NetworkPlan, file: str) -> EniView:
                                        for copy in cmd.copy_infos]) for cmd in f.cmds])
         for c in plan.cyclic for f in c.frames]
     return EniView(file, slaves, image.inputs_size, image.outputs_size, variables, frames,
-                   list(plan.unsupported), master_words(plan))
+                   list(plan.unsupported), master_words(plan), list(plan.ignored))
 
 
 def _variable(v: Variable, direction: str) -> VariableView:
@@ -168,4 +170,6 @@ def as_json(view: EniView) -> dict[str, Any]:
                    for f in view.frames],
         "unsupported": [{"slave": u.slave, "element": u.element, "what": u.what,
                          "line": u.line, "commands": u.commands} for u in view.unsupported],
+        "ignored": [{"slave": u.slave, "element": u.element, "what": u.what, "line": u.line}
+                    for u in view.ignored],
     }

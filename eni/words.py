@@ -31,6 +31,7 @@ a bit no variable holds is shown as its place only.
 
 from __future__ import annotations
 
+from ecatcfg.eni.compare import compared
 from ecatcfg.eni.plan import (CoeInitCmd, CopyInfo, EoeInitCmd, FoeInitCmd, InitCmd,
                               SoeInitCmd, Variable)
 from ecatcfg.esc import (AL_ERROR_ACK, AL_ID_REQUEST, FMMU_SIZE, REGISTER_READS,
@@ -226,7 +227,7 @@ def _register_read(cmd: InitCmd) -> str | None:
     if cmd.ado == Reg.STATION_ALIAS and len(want) == 2:
         return f"check alias {_int(want)}"
     if cmd.ado == Reg.EEPROM_DATA and want:
-        return f"check SII data {_hex(want)}"
+        return f"check SII data {compared(v.compare)}{_hex(want)}"
     return None
 
 
@@ -246,7 +247,7 @@ def init_cmd_words(cmd: InitCmd) -> str:
     else:
         text += f" len {cmd.length}"
     if cmd.validate is not None:
-        text += f" expect {_hex(cmd.validate.data)}"
+        text += f" expect {compared(cmd.validate.compare)}{_hex(cmd.validate.data)}"
         if cmd.validate.mask is not None:
             text += f" mask {_hex(cmd.validate.mask)}"
     return text

@@ -181,7 +181,8 @@ class Library:
                 (self.resolve_reference(lf, ref) for ref in s.info_references) if target)
             for d in s.devices:
                 entries.append(DeviceEntry(
-                    file=lf.shown, line=d["line"], ordinal=d["ordinal"], vendor_id=s.vendor_id,
+                    file=lf.shown, line=d["line"], ordinal=d["ordinal"],
+                    vendor_id=d.get("vendor_id", s.vendor_id),
                     product_code=d["product_code"], revision=d["revision"], type=d["type"],
                     name=d["name"], group=d["group"], rx_pdos=d["rx_pdos"],
                     tx_pdos=d["tx_pdos"], rx_entries=d["rx_entries"],

@@ -103,6 +103,7 @@ class Network:
                 eni_name = eni_name or str(eni)
                 eni = eni_reader.read_file(eni)
             _check_supported(eni, eni_name, skip_unsupported, on_event)
+            _warn_ignored(eni, eni_name, on_event)
             eni = _completed(eni, eni_name, on_event)
             library = _library(esi, esi_prefer, esi_cache)
             if library is not None:
@@ -605,6 +606,26 @@ def _library(esi: list[str | Path] | Library | None, prefer: list[str | Path] | 
         return esi
     return Library([str(p) for p in esi], cache=cache,
                    prefer=list(prefer or [])) if esi else None
+
+
+class IgnoredMetadataWarning(UserWarning):
+    """Unknown metadata of an ENI (a name, a tool's data: ``esi/vocabulary.py``) that the
+    reader left out; it cannot change what is sent."""
+
+
+def _warn_ignored(plan: NetworkPlan, name: str | None,
+                  on_event: Callable[[Event], None] | None) -> None:
+    """A warning per piece of ignored metadata: an ``Event("ignored", ...)`` to
+    ``on_event``, else an :class:`IgnoredMetadataWarning`."""
+    if not plan.ignored:
+        return
+    from ecatcfg.eni import contents
+    for text in contents.ignored_warnings(plan, name):
+        if on_event is not None:
+            on_event(Event("ignored", f"warning: {text}"))
+        else:
+            import warnings
+            warnings.warn(text, IgnoredMetadataWarning, stacklevel=3)
 
 
 def _check_supported(plan: NetworkPlan, name: str | None, skip: bool,
