@@ -72,12 +72,6 @@ KNOWN: dict[str, Known] = {
         Known(r"'Term 2 \(EL6695\)' \[download pdo 0x1A04 entries\]: SDO abort 0x06020000",
               "the EL6695 bridge emulated from its ESI (corpus-extra esi/dls EL66xx) has no "
               "0x1A04 for TwinCAT's mapping of the bridge's process data", FIRST_CONTACT),
-    **{"tests/test_eni_only.py::test_corpus_eni_reaches_op_and_cycles"
-       f"[corpus-extra/pmec-wec-bench/DriveAndDUTAndPAAndLoadXML.xml-{w}]":
-       Known(r"DriveAndDUTAndPAAndLoadXML\.xml: the ENI asks for 4 things apply does not do",
-             "TwinCAT writes AdaptAutomatically='true' on four CoE <InitCmd>s (EL3751), "
-             "an attribute the reader knows only on <Data>: refused", FIRST_CONTACT)
-       for w in ("eni-only", "with-esi")},
     # -- SOEM on `simulate --eni` over veth --------------------------------------------------
     f"tests/test_eni_only.py::test_soem_reaches_op_on_an_eni_without_esi[{BEREMIZ_HIGEN}]":
         Known(r"'al': \[\[17, 22\]", _BEREMIZ + "; the emulated drive refuses PREOP with "
