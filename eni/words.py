@@ -32,8 +32,8 @@ a bit no variable holds is shown as its place only.
 from __future__ import annotations
 
 from ecatcfg.eni.compare import compared
-from ecatcfg.eni.plan import (CoeInitCmd, CopyInfo, EoeInitCmd, FoeInitCmd, InitCmd,
-                              SoeInitCmd, Variable)
+from ecatcfg.eni.plan import (CoeInitCmd, CopyInfo, CyclicCmd, EoeInitCmd, FoeInitCmd,
+                              InitCmd, SoeInitCmd, Variable)
 from ecatcfg.esc import (AL_ERROR_ACK, AL_ID_REQUEST, FMMU_SIZE, REGISTER_READS,
                          REGISTER_WRITES, RX_PDO_MAPPING, SM_DIR_ECAT_WRITES, SM_DIR_MASK,
                          SM_MODE_MAILBOX, SM_MODE_MASK, SM_PDO_ASSIGN_RANGE, SM_SIZE,
@@ -56,7 +56,7 @@ def init_cmd_name(cmd: InitCmd) -> str:
     return command_address(cmd)
 
 
-def command_address(cmd: InitCmd) -> str:
+def command_address(cmd: InitCmd | CyclicCmd) -> str:
     """``APWR 0x0120``, ``LWR logical 0x00010000``, ``command 99``."""
     name = command_name(cmd.cmd)
     if cmd.ado is not None:
