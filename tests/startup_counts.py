@@ -81,17 +81,21 @@ class SimClock:
 
 class SimLink:
     """The master's end of an emulated line that answers inside ``send``; each frame
-    moves the clock by ``FRAME_NS``.  ``frames`` counts what the master sent."""
+    moves the clock by ``FRAME_NS``.  ``frames`` counts what the master sent, ``busy_s`` the
+    time the emulation took (for the bench to take it out of the master's)."""
 
     def __init__(self, segment: Any, clock: SimClock) -> None:
         self.segment, self.clock = segment, clock
         self.replies: deque[bytes] = deque()
         self.frames = 0
+        self.busy_s = 0.0
 
     def send(self, frame: bytes | bytearray) -> None:
         self.frames += 1
         self.clock.t += FRAME_NS
+        t = time.perf_counter()
         self.replies.append(bytes(self.segment.process(frame)))
+        self.busy_s += time.perf_counter() - t
 
     def recv(self, timeout: float | None = None) -> bytes | None:
         return self.replies.popleft() if self.replies else None
@@ -197,7 +201,10 @@ def _step_name(text: str, previous: str) -> str:
 SEGMENT = r"""
 import os, select, socket, sys
 from ecatcfg.eni import reader
-from ecatcfg.runtime.segment import emulate
+try:
+    from ecatcfg.runtime.segment import emulate
+except ImportError:                 # a checkout from before runtime/segment/ (bench)
+    from ecatcfg.runtime import emulate
 sock = socket.socket(fileno=int(sys.argv[2]))
 segment = emulate.segment(emulate.specs_from_eni(reader.read_file(sys.argv[1]), None, "line"))
 print("ready", flush=True)
@@ -373,8 +380,12 @@ def cycle_allocations(n: int, dc: bool, cycles: int = 200) -> dict[str, int]:
 
 
 def env_for(cache: Path) -> dict[str, str]:
-    """The environment of the child processes: this checkout's package, a cache of its own."""
+    """The environment of the child processes: a plan cache of their own in ``cache``, and
+    a bytecode cache there too (as an installed package has .pyc files; an environment that
+    sets PYTHONDONTWRITEBYTECODE would otherwise compile every module from source)."""
     env = dict(os.environ)
     env["XDG_CACHE_HOME"] = str(cache)
+    env["PYTHONPYCACHEPREFIX"] = str(cache / "bytecode")
+    env.pop("PYTHONDONTWRITEBYTECODE", None)
     return env
 
