@@ -35,11 +35,12 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "tests"))
 
-import startup_counts as counts  # noqa: E402
+import startup_counts as counts  # noqa: E402  (from tests/, as the path above allows)
 
 SEGMENT_FILES = ("/segment/", "/runtime/virtual.py", "/runtime/slave.py", "/runtime/emulate.py",
                  "/runtime/syncman.py", "/runtime/dc_clock.py", "/runtime/mailbox_server.py",
@@ -73,9 +74,10 @@ def one_line(n: int, dc: bool, runs: int) -> dict[str, object]:
         calls = [0]
         net, link, _, undo = counts.simulated_network(plan, library)
 
-        def on_event(event: object) -> None:
-            marks.append((getattr(event, "text"), (link.frames, calls[0],
-                                                   time.perf_counter() - link.busy_s)))
+        def on_event(event: Any, marks: list[Any] = marks, link: Any = link,
+                     calls: list[int] = calls) -> None:
+            marks.append((event.text, (link.frames, calls[0],
+                                       time.perf_counter() - link.busy_s)))
         net.master.on_event = on_event
         if profile:
             sys.setprofile(_counter(calls))
@@ -141,7 +143,8 @@ def imports(n: int, runs: int) -> dict[str, object]:
     ours = [m for m in mods if m.startswith("ecatcfg")]
     return {"modules": len(mods), "ecatcfg": len(ours), "third party": counts.third_party(mods),
             "ms": round(sum(best.values()) / 1e3, 1),
-            "ecatcfg ms": round(sum(v for k, v in best.items() if k.startswith("ecatcfg")) / 1e3, 1),
+            "ecatcfg ms": round(sum(v for k, v in best.items()
+                                    if k.startswith("ecatcfg")) / 1e3, 1),
             "largest": sorted(best.items(), key=lambda kv: -kv[1])[:8],
             "frames": run["report"]["frames"]}
 
