@@ -108,12 +108,21 @@ class SimLink:
 
 
 def simulated_time(clock: SimClock) -> types.SimpleNamespace:
-    """A stand-in for the ``time`` module of runtime/master/bringup.py on the simulated
-    clock (the pacing of cyclic frames and the DC wait; ``time_ns`` only seeds the DC
-    system time offset)."""
-    return types.SimpleNamespace(monotonic=lambda: clock.t / 1e9,
-                                 time_ns=lambda: clock.t, sleep=lambda s: None,
-                                 perf_counter=time.perf_counter)
+    """A stand-in for the ``time`` module of the master's modules on the simulated clock:
+    the pacing of the cyclic frames during PS and SO, the DC wait, and every reply timeout
+    and deadline, so that a host that stalls the test for a while cannot make a frame count
+    as lost and be sent again.  ``sleep`` moves the clock on (a wait that sends nothing
+    still ends); ``time_ns`` seeds the DC system time offset; ``perf_counter`` stays the
+    host's (the cycle period statistics)."""
+    def sleep(seconds: float) -> None:
+        clock.t += int(seconds * 1e9)
+    return types.SimpleNamespace(monotonic=lambda: clock.t / 1e9, time_ns=lambda: clock.t,
+                                 sleep=sleep, perf_counter=time.perf_counter)
+
+
+# The master's modules that read the clock on the way to OP and while cycling.
+CLOCKED = ("bringup", "transport", "lockstep", "replay", "transition", "scan", "cyclic",
+           "recovery")
 
 
 def _modules() -> tuple[Any, Any]:
@@ -134,14 +143,25 @@ def simulated_network(plan: Any, library: Any) -> tuple[Any, SimLink, SimClock, 
     master's pacing on the simulated clock until ``undo()``."""
     from ecatcfg.runtime import Network
     bringup, emulate = _modules()
+    import importlib
     clock = SimClock()
     segment = emulate.segment(emulate.specs_from_eni(plan, library, "line"), clock_ns=clock)
     link = SimLink(segment, clock)
-    saved = bringup.time
-    bringup.time = simulated_time(clock)        # type: ignore[assignment]
+    package = bringup.__name__.rpartition(".")[0]   # the master's modules are its siblings
+    clocked = [bringup]
+    for name in CLOCKED:
+        try:
+            clocked.append(importlib.import_module(f"{package}.{name}"))
+        except ImportError:                 # an older checkout (bench): not there
+            pass
+    fake = simulated_time(clock)
+    saved = [(m, m.time) for m in dict.fromkeys(clocked) if getattr(m, "time", None) is time]
+    for module, _ in saved:
+        module.time = fake
 
     def undo() -> None:
-        bringup.time = saved
+        for module, real in saved:
+            module.time = real
     return Network(plan, link, on_event=None), link, clock, undo
 
 

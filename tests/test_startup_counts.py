@@ -28,10 +28,26 @@ def test_frames_to_op_within_budget(line: str) -> None:
         f"(tests/startup_budget.toml); per step: {got}")
 
 
-def test_frame_counts_do_not_depend_on_the_host() -> None:
-    """The same line twice gives the same count, step by step: nothing in it is paced by
-    the host's clock (a count that moved with the load would make the budget flaky)."""
-    assert counts.frames_to_op(8, True) == counts.frames_to_op(8, True)
+def test_frame_counts_do_not_depend_on_the_host(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The same line twice gives the same count, step by step, also when the host stalls
+    the test for longer than a reply's timeout (20 ms) while the master waits for each of
+    the first 40 replies: nothing in the count is paced by the host's clock (a count that
+    moved with the load would make the budget flaky)."""
+    import time
+    calm = counts.frames_to_op(8, True)
+    assert counts.frames_to_op(8, True) == calm
+    recv = counts.SimLink.recv
+    stalled: set[int] = set()
+
+    def stalling(self: counts.SimLink, timeout: float | None = None) -> bytes | None:
+        if self.frames <= 40 and self.frames not in stalled:
+            stalled.add(self.frames)
+            time.sleep(0.025)           # the host away; the reply not yet seen
+            return None
+        return recv(self, timeout)
+    monkeypatch.setattr(counts.SimLink, "recv", stalling)
+    assert counts.frames_to_op(8, True) == calm
+    assert len(stalled) == 40
 
 
 def test_the_frame_budget_sees_one_more_frame_per_slave(monkeypatch: pytest.MonkeyPatch
