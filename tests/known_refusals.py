@@ -27,14 +27,11 @@ class Known:
 
 # The work that removes entries, named once.
 FIRST_CONTACT = "first contact with the exporters' whole vocabulary and these files' shapes"
-SAME_IDENTITY = "same-identity ESI files chosen by the evidence of the ENI"
 CAPTURES = "every capture of both corpora replayed and its devices' timing fitted"
 
 BEREMIZ_HIGEN = "corpus-extra/beremiz-tests/wago_higen/config.xml"
 BEREMIZ_SANYO = "corpus-extra/beremiz-tests/wago_sanyo/config.xml"
 SOEM_SAMPLE = "corpus-extra/soem-sample/sample-eni.xml"
-HBM_FOUR = ("a slave whose identity 4 ESI files of corpus-extra (esi/hbm) describe "
-            "differently: apply asks which to take")
 
 _BEREMIZ = ("Beremiz's EtherLab-plugin file is a partial ENI: mailbox SMs of length 0 and "
             "CoE writes in INIT->INIT (II), which no slave can take (no mailbox in INIT)")
@@ -75,12 +72,6 @@ KNOWN: dict[str, Known] = {
         Known(r"'Term 2 \(EL6695\)' \[download pdo 0x1A04 entries\]: SDO abort 0x06020000",
               "the EL6695 bridge emulated from its ESI (corpus-extra esi/dls EL66xx) has no "
               "0x1A04 for TwinCAT's mapping of the bridge's process data", FIRST_CONTACT),
-    **{"tests/test_eni_only.py::test_corpus_eni_reaches_op_and_cycles"
-       f"[corpus-extra/{f}-with-esi]":
-       Known(r"0x11d:0xd01:0x2 \(GEN Series DAQ System\) is described differently by 4 ESI "
-             r"files", HBM_FOUR, SAME_IDENTITY)
-       for f in ("pmec-foswec2/NAVFACOSWECSxml.xml", "pmec-lupa/LUPAxml.xml",
-                 "pmec-wec-bench/Pendulum2XML.xml")},
     **{"tests/test_eni_only.py::test_corpus_eni_reaches_op_and_cycles"
        f"[corpus-extra/pmec-wec-bench/DriveAndDUTAndPAAndLoadXML.xml-{w}]":
        Known(r"DriveAndDUTAndPAAndLoadXML\.xml: the ENI asks for 4 things apply does not do",
