@@ -5,11 +5,12 @@ Used by ``tests/test_startup_counts.py`` (the guards, against ``tests/startup_bu
 and ``bench/startup_counts.py`` (the breakdown in docs/BENCHMARKS.md).
 
 Frames: the line is emulated in memory (``runtime/segment``) and answers inside ``send``
-(``SimLink``): no thread, no lost frame, no reply timeout.  The master's own clock
-(``bringup.time``, which paces the ENI's cyclic frames during PS and SO and the DC wait) and
-the slaves' clock are one simulated clock that moves ``FRAME_NS`` per frame, so the cyclic
-frames sent while the slaves change state, and the drift frames the DC wait needs, are the
-same in every run: the count is a property of the code, not of the host's load.
+(``SimLink``): no thread, no lost frame.  The master's clocks (``time`` in its modules,
+``CLOCKED``: the reply timeouts, the deadlines, the pacing of the ENI's cyclic frames during
+PS and SO, the DC wait) and the slaves' clock are one simulated clock that moves
+``FRAME_NS`` per frame, so the cyclic frames sent while the slaves change state, and the
+drift frames the DC wait needs, are the same in every run, and a host that stalls the test
+cannot make a reply late: the count is a property of the code, not of the host's load.
 
 Imports: ``apply`` runs as the console script runs it (``ecatcfg.cli.main``) in a fresh
 interpreter, on ``--iface`` with the raw socket replaced by one end of a socket pair whose
