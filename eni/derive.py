@@ -65,7 +65,7 @@ class Derived:
 
 def partial_slaves(plan: NetworkPlan) -> list[SlavePlan]:
     """The slaves the ENI gives no register InitCmds (a partial export)."""
-    return [s for s in plan.slaves if not s.init_cmds]
+    return plan.partial_slaves()
 
 
 def complete(plan: NetworkPlan, file: str | None = None

@@ -445,6 +445,12 @@ class NetworkPlan:
     def slave(self, name: str) -> SlavePlan:
         return next(s for s in self.slaves if s.name == name)
 
+    def partial_slaves(self) -> list[SlavePlan]:
+        """The slaves the ENI gives no register InitCmds (a partial export, completed by
+        ``eni/derive.py``): asked here so that a complete ENI's start-up does not import
+        the derivation."""
+        return [s for s in self.slaves if not s.init_cmds]
+
     def image_bytes(self) -> tuple[int, int]:
         """The sizes of the input and output images a master keeps: the ``ProcessImage``
         ``ByteSize``, or more where a cyclic command's data (at its offset in its frame's

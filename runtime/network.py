@@ -588,7 +588,10 @@ def _completed(plan: NetworkPlan, name: str | None,
                on_event: Callable[[Event], None] | None) -> NetworkPlan:
     """``plan`` with the standard set-up of the slaves a partial ENI gives no register
     InitCmds (``eni/derive.py``), each one said as an ``Event("derived", ...)``; raises
-    :class:`~ecatcfg.eni.derive.DeriveError` when it cannot be derived."""
+    :class:`~ecatcfg.eni.derive.DeriveError` when it cannot be derived.  The derivation
+    is imported only for a partial ENI."""
+    if not plan.partial_slaves():
+        return plan
     from ecatcfg.eni.derive import complete
     done, derived = complete(plan, name)
     if on_event is not None:
@@ -600,12 +603,15 @@ def _completed(plan: NetworkPlan, name: str | None,
 
 def _library(esi: list[str | Path] | Library | None, prefer: list[str | Path] | None,
              cache: bool = True) -> Library | None:
-    """The ESI library of ``esi`` (files or folders, or a library already built)."""
+    """The ESI library of ``esi`` (files or folders, or a library already built).  Imported
+    only when files are given: the library (lxml, the ESI reader and model) explains
+    refusals, and a start-up that goes well never needs it (tests/test_startup_counts.py)."""
+    if not isinstance(esi, (list, tuple)):
+        return esi                          # None, or a library already built
+    if not esi:
+        return None
     from ecatcfg.esi.library import Library
-    if esi is None or isinstance(esi, Library):
-        return esi
-    return Library([str(p) for p in esi], cache=cache,
-                   prefer=list(prefer or [])) if esi else None
+    return Library([str(p) for p in esi], cache=cache, prefer=list(prefer or []))
 
 
 class IgnoredMetadataWarning(UserWarning):

@@ -17,7 +17,7 @@ from ecatcfg.eni.plan import (CoeInitCmd, DcPlan, EoeInitCmd, FoeInitCmd, InitCm
                               SoeInitCmd)
 from ecatcfg.eni.sequence import transition_sequence
 from ecatcfg.eni.words import init_cmd_name
-from ecatcfg.esc import Cmd, Reg, Transition
+from ecatcfg.esc import MODULE_IDENT_LIST, Cmd, Reg, Transition
 from ecatcfg.runtime.master.lockstep import Job, Step, until_answered
 from ecatcfg.runtime.master.replay import (TIMEOUT_COMMAND, ApplyError, MailboxChannel,
                                            SlaveProgress, coe_init_cmd_job, eoe_init_cmd_job,
@@ -46,9 +46,11 @@ def slave_transition_job(slave: SlavePlan, transition: Transition,
     mailbox = slave.mailbox
     if mailbox is not None and sequence.has_mailbox:
         channel = channel or MailboxChannel(slave.phys_addr, mailbox)
-        if sequence.coe:            # a station's plugged modules, before they are configured
-            # Imported here: modules.py needs the ESI model (esi/slots.py), which apply
-            # loads only for an ENI with CoE InitCmds (tests/test_record.py).
+        if any(c.index == MODULE_IDENT_LIST for c in sequence.coe):
+            # A station's plugged modules, before they are configured.  Imported here:
+            # modules.py needs the ESI model (esi/slots.py), which apply loads only for an
+            # ENI that downloads a module ident list (tests/test_record.py,
+            # tests/test_startup_counts.py).
             from ecatcfg.runtime.master.modules import check_modules
             yield from check_modules(channel, slave, transition, who)
         for c in sequence.coe:
