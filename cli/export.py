@@ -48,7 +48,7 @@ def run(args: argparse.Namespace) -> int:
     from ecatcfg.eni.export.steps import slave_setups
     from ecatcfg.eni.reader import read_file as read_uncached
     from ecatcfg.errors import UsageError
-    from ecatcfg.fileio import write_atomic
+    from ecatcfg.fileio import read_input, write_atomic
 
     found = kind(args.eni)
     if found != "eni":
@@ -59,7 +59,7 @@ def run(args: argparse.Namespace) -> int:
     plan = read_uncached(args.eni) if args.no_cache else \
         read_file(args.eni, cache=PlanCache())
     setups = slave_setups(plan, args.eni)
-    digest = hashlib.sha256(Path(args.eni).read_bytes()).hexdigest()
+    digest = hashlib.sha256(read_input(args.eni)).hexdigest()
     outputs: list[tuple[Path, bytes]]
     if args.format == "pysoem":
         pysoem_module.check(setups, args.eni)

@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Literal
 
 from ecatcfg.errors import EcatcfgError, UsageError
+from ecatcfg.fileio import check_input
 
 # The root element's name after the XML declaration, comments and processing instructions
 # (a namespace prefix allowed).
@@ -19,6 +20,7 @@ _ENI_ROOTS = ("EtherCATConfig", "EncryptedEtherCATConfig")
 def root_tag(path: str) -> str | None:
     """The root element's local name, or None for a file that does not start as XML."""
     p = Path(path)
+    check_input(p, path)                # a device node or FIFO: refused as such
     if not p.is_file():
         raise UsageError(f"{path}: no such file")
     try:

@@ -68,6 +68,7 @@ def run(args: argparse.Namespace) -> int:
     from ecatcfg.errors import UsageError
     from ecatcfg.esi.lint import config as lint_config
     from ecatcfg.esi.lint.rules import all_rules, select_rules
+    from ecatcfg.fileio import check_input
 
     rules = all_rules()
     if args.explain:
@@ -88,6 +89,8 @@ def run(args: argparse.Namespace) -> int:
     if args.no_config:
         cfg = lint_config.LintConfig()
     else:
+        if args.config:
+            check_input(args.config, f"--config {args.config}")
         if args.config and not Path(args.config).is_file():
             raise UsageError(f"--config {args.config}: no such file")
         source = Path(args.config) if args.config else lint_config.find_pyproject(Path.cwd())

@@ -146,11 +146,13 @@ def _write(args: argparse.Namespace) -> int:
     from ecatcfg.errors import EcatcfgError, UsageError
     from ecatcfg.esi.sii import decode
 
+    from ecatcfg.fileio import read_input
+
     path = Path(args.image)
-    if not path.is_file():
+    if not path.exists():
         raise UsageError(f"{args.image}: no such file")
     try:
-        image = path.read_bytes()
+        image = read_input(path, args.image)
     except OSError as exc:
         raise EcatcfgError(f"cannot read: {exc.strerror}", args.image) from None
     if len(image) % 2:
@@ -200,14 +202,13 @@ def _show(args: argparse.Namespace) -> int:
 
     from ecatcfg.errors import EcatcfgError, UsageError
     from ecatcfg.esi import sii
+    from ecatcfg.fileio import read_input
 
     path = Path(args.image)
     if not path.exists():
         raise UsageError(f"{args.image}: no such file")
-    if path.is_dir():
-        raise UsageError(f"{args.image}: is a folder, not an SII image")
     try:
-        data = path.read_bytes()
+        data = read_input(path, args.image)
     except OSError as exc:
         raise EcatcfgError(f"cannot read: {exc.strerror}", args.image) from None
     img = sii.decode(data, source=args.image)
