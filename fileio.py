@@ -115,7 +115,8 @@ def output_kind(path: str | Path) -> Literal["stdout", "stream", "file"]:
 class OutputFile:
     """A file being written to ``path``: ``file`` takes the bytes, :meth:`commit` publishes
     them (the rename of a regular file), :meth:`discard` drops them (a device node or FIFO
-    has had what was written).  ``mode``: a new regular file's permissions (default: those
+    has had what was written).  ``name`` is what ``file`` writes to (the temporary file, or
+    ``path`` itself), for a writer that opens its file by name.  ``mode``: a new regular file's permissions (default: those
     of the file it replaces, or what a plain ``open()`` would give).  Standard output is not
     an ``OutputFile`` (:func:`write_atomic` writes it)."""
 
@@ -129,9 +130,11 @@ class OutputFile:
             # No O_CREAT: if the node went away since the check, nothing is created.
             fd = os.open(path, os.O_WRONLY | os.O_CLOEXEC | getattr(os, "O_NOCTTY", 0))
             self.file: BinaryIO = os.fdopen(fd, "wb")
+            self.name = str(path)
             return
         fd, self._tmp = tempfile.mkstemp(dir=self.path.parent, prefix=f".{self.path.name}.",
                                          suffix=".tmp")
+        self.name = self._tmp
         try:
             # mkstemp makes the file 0600; give it the mode a plain open() would (or keep
             # the mode of the file it replaces).

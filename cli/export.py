@@ -30,8 +30,8 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
     p.add_argument("eni", metavar="ENI", help="ENI file")
     p.add_argument("--format", required=True, choices=FORMATS, help="what to write")
     p.add_argument("-o", "--output", required=True, metavar="FILE",
-                   help="the file to write (atomically); soem-c: the C source, its header "
-                        "beside it with the suffix .h")
+                   help="the file to write (atomically; pysoem: '-' for standard output); "
+                        "soem-c: the C source, its header beside it with the suffix .h")
     p.add_argument("--no-cache", action="store_true", help="do not use the ENI plan cache")
     p.set_defaults(run=run)
 
@@ -48,7 +48,7 @@ def run(args: argparse.Namespace) -> int:
     from ecatcfg.eni.export.steps import slave_setups
     from ecatcfg.eni.reader import read_file as read_uncached
     from ecatcfg.errors import UsageError
-    from ecatcfg.fileio import read_input, write_atomic
+    from ecatcfg.fileio import STDOUT, read_input, write_atomic
 
     found = kind(args.eni)
     if found != "eni":
@@ -66,6 +66,9 @@ def run(args: argparse.Namespace) -> int:
         outputs = [(out, pysoem_module.render(setups, Path(args.eni).name, digest,
                                               __version__))]
     else:
+        if str(out) == STDOUT:
+            raise UsageError("-o -: soem-c writes two files (the C source and its header); "
+                             "give a file name")
         header = out.with_suffix(".h")
         if header == out:
             raise UsageError(f"-o {args.output}: the C source needs another suffix than .h")

@@ -83,7 +83,7 @@ def run(args: argparse.Namespace) -> int:
         except OSError as exc:
             raise UsageError(f"{args.file}: cannot read: {exc.strerror}") from None
     else:
-        output_file(path)
+        output_file(path, stdout=False)       # stdout has the transfer's report
     name = args.name if args.name is not None else path.name
     if not name:
         raise UsageError("--name: the file needs a name on the slave")

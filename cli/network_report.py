@@ -23,7 +23,7 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                                    "it offline.")
     p.add_argument("eni", metavar="ENI", help="ENI file")
     p.add_argument("-o", "--output", required=True, metavar="HTML",
-                   help="the page to write (atomically)")
+                   help="the page to write (atomically; '-': standard output)")
     p.add_argument("--esi", action="append", default=[], metavar="PATH",
                    help="ESI file or folder (repeatable) for the check findings: each slave "
                         "against its device, as `ecatcfg check --esi` does; without it the "

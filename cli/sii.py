@@ -121,7 +121,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _read(args: argparse.Namespace) -> int:
-    from ecatcfg.cli.paths import output_file
+    from ecatcfg.cli.paths import messages, output_file
     from ecatcfg.errors import UsageError
     from ecatcfg.fileio import write_atomic
 
@@ -135,7 +135,7 @@ def _read(args: argparse.Namespace) -> int:
         raise UsageError(f"cannot write {args.output}: {exc.strerror}") from None
     from ecatcfg.cli.sii_program import describe
     print(f"position {args.slave}: {describe(data)}; {len(data)} bytes written to {out} "
-          f"({eeprom.reads} EEPROM reads)")
+          f"({eeprom.reads} EEPROM reads)", file=messages(args.output))
     return 0
 
 
@@ -164,7 +164,7 @@ def _write(args: argparse.Namespace) -> int:
 
 
 def _build(args: argparse.Namespace) -> int:
-    from ecatcfg.cli.paths import output_file
+    from ecatcfg.cli.paths import messages, output_file
     from ecatcfg.errors import EcatcfgError, UsageError
     from ecatcfg.esi import sii
     from ecatcfg.esi.library import Library
@@ -193,7 +193,7 @@ def _build(args: argparse.Namespace) -> int:
     img = sii.decode(result.data)
     print(f"wrote {args.output}: {len(result.data)} bytes, {device.selector} "
           f"{device.type_name!r}, {len(img.categories)} categories, "
-          f"{len(img.txpdos)} TxPDO / {len(img.rxpdos)} RxPDO")
+          f"{len(img.txpdos)} TxPDO / {len(img.rxpdos)} RxPDO", file=messages(args.output))
     return 0
 
 
