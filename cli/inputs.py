@@ -1,5 +1,6 @@
 """What kind of file a command was given: an ESI, an ENI or a topology (shared by ``show``
-and ``diff``, which take any of them)."""
+and ``diff``, which take any of them, and by ``report`` and ``export``), and what is said
+when paths hold no ESI file at all (``lint``, ``devices``)."""
 
 from __future__ import annotations
 
@@ -45,3 +46,10 @@ def kind(path: str) -> Literal["eni", "esi", "topology"]:
         raise EcatcfgError(f"root element <{tag}> is neither an ENI (EtherCATConfig) nor "
                            "an ESI (EtherCATInfo)", path, 1)
     return "topology"
+
+
+def no_esi_files(paths: list[str]) -> str:
+    """The refusal of ``lint`` and ``devices`` when their paths hold no ESI file at all: in
+    CI a mistyped path would otherwise pass as "0 files checked"."""
+    return (f"no ESI file in {', '.join(paths)}: nothing was read (a mistyped path?); "
+            "--allow-empty accepts that")
