@@ -41,7 +41,7 @@ def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from ecatcfg import __version__
-    from ecatcfg.cli.inputs import kind
+    from ecatcfg.cli.inputs import require_eni
     from ecatcfg.cli.paths import output_file
     from ecatcfg.eni.cache import PlanCache, read_file
     from ecatcfg.eni.export import pysoem_module, soem_c
@@ -50,9 +50,7 @@ def run(args: argparse.Namespace) -> int:
     from ecatcfg.errors import UsageError
     from ecatcfg.fileio import STDOUT, read_input, write_atomic
 
-    found = kind(args.eni)
-    if found != "eni":
-        raise UsageError(f"{args.eni} is not an ENI ({found})")
+    require_eni(args.eni)
     out = output_file(args.output)
     if out.resolve() == Path(args.eni).resolve():
         raise UsageError(f"-o {args.output}: would replace the ENI it exports")

@@ -129,3 +129,45 @@ def test_a_missing_file_is_still_the_readers_own_error(tmp_path):
     done = ecatcfg("compile", str(tmp_path / "none.yaml"), "--esi", ESI, "-o",
                    str(tmp_path / "o.xml"))
     assert done.returncode == 2 and "none.yaml: no such file" in done.stderr
+
+
+# -- a file that is not XML given where an ENI is expected ----------------------------------
+
+NOT_XML = {
+    "a topology": b"slaves:\n  - {name: a, device: EX1100}\n",
+    "binary": b"\x00\x01\x02\xff\xfe garbage",
+    "text after blank lines": b"\n\n   plain text, no markup\n",
+}
+
+
+@pytest.mark.parametrize("what", list(NOT_XML))
+@pytest.mark.parametrize("command", ["report", "export", "show"])
+def test_a_file_that_is_not_xml_is_called_what_it_is(command, what, tmp_path):
+    """report and export said "not an ENI (topology)" of anything that was not XML; now
+    they say what apply and check say: the XML parser's reason, at its line and column.
+    The reference is lxml itself, parsing the same bytes."""
+    from lxml import etree
+    data = NOT_XML[what]
+    path = write(tmp_path, "input.xml", data)
+    with pytest.raises(etree.XMLSyntaxError) as parsed:
+        etree.fromstring(data)
+    line, column = parsed.value.position
+    reason = parsed.value.msg.split(", line ")[0]
+    done = ecatcfg(*_commands(str(path), tmp_path)[command])
+    assert done.returncode == 2 and "Traceback" not in done.stderr, done.stderr
+    assert f"{path}:{line}:{column}: not an ENI: not well-formed XML: {reason}" \
+        in done.stderr, done.stderr
+    assert "(topology)" not in done.stderr
+    # apply says the same of the same file (its reader's words, exit 1)
+    applied = ecatcfg("apply", str(path), "--virtual", "--cycles", "1")
+    assert f"{path}:{line}:{column}: not well-formed XML: {reason}" in applied.stderr
+
+
+@pytest.mark.parametrize("command", ["report", "export"])
+def test_an_esi_is_called_an_esi_at_its_root_element(command, tmp_path):
+    esi = write(tmp_path, "device.xml", b"<?xml version='1.0'?>\n<!-- a device -->\n"
+                                        b"<EtherCATInfo/>\n")
+    done = ecatcfg(*_commands(str(esi), tmp_path)[command])
+    assert done.returncode == 2
+    assert f"{esi}:3: not an ENI: the root element is <EtherCATInfo> (an ESI), expected " \
+        "<EtherCATConfig>" in done.stderr
