@@ -120,6 +120,11 @@ def test_the_bound_holds_at_exactly_its_size(tmp_path):
     past = write(tmp_path, "past.bin", b"x" * 11)
     with pytest.raises(UsageError, match=r"past\.bin: larger than"):
         fileio.read_input(past, limit=10)
+    # A regular file whose size says 0 but that has more (procfs): the bound holds on what
+    # is read, not only on the size the file system reports.
+    assert os.stat("/proc/self/maps").st_size == 0
+    with pytest.raises(UsageError, match="larger than"):
+        fileio.read_input("/proc/self/maps", limit=10)
 
 
 def test_a_missing_file_is_still_the_readers_own_error(tmp_path):
