@@ -116,13 +116,18 @@ class OutputFile:
     """A file being written to ``path``: ``file`` takes the bytes, :meth:`commit` publishes
     them (the rename of a regular file), :meth:`discard` drops them (a device node or FIFO
     has had what was written).  ``name`` is what ``file`` writes to (the temporary file, or
-    ``path`` itself), for a writer that opens its file by name.  ``mode``: a new regular file's permissions (default: those
-    of the file it replaces, or what a plain ``open()`` would give).  Standard output is not
-    an ``OutputFile`` (:func:`write_atomic` writes it)."""
+    ``path`` itself), for a writer that opens its file by name.  ``replace``: always a new
+    file renamed over ``path``, whatever is there (a cache's own files, where a FIFO or a
+    device node is damage to replace, not a place to write to).  ``mode``: a new regular
+    file's permissions (default: those of the file it replaces, or what a plain ``open()``
+    would give).  Standard output is not an ``OutputFile`` (:func:`write_atomic` writes
+    it)."""
 
-    def __init__(self, path: str | Path, mode: int | None = None) -> None:
+    def __init__(self, path: str | Path, mode: int | None = None, *,
+                 replace: bool = False) -> None:
         self.path = Path(path)
-        kind = output_kind(path)
+        self._replace = replace
+        kind = "file" if replace else output_kind(path)
         if kind == "stdout":
             raise UsageError(f"{path}: standard output cannot take this output")
         self._tmp: str | None = None
@@ -154,7 +159,7 @@ class OutputFile:
         try:
             self.file.close()
             if self._tmp is not None:
-                if output_kind(self.path) != "file":
+                if not self._replace and output_kind(self.path) != "file":
                     # Became a device node or FIFO while we wrote: never rename over it.
                     raise UsageError(f"{self.path}: is no longer a regular file; not "
                                      "replaced")
@@ -174,16 +179,17 @@ class OutputFile:
             self._tmp = None
 
 
-def write_atomic(path: str | Path, data: bytes, mode: int | None = None) -> None:
+def write_atomic(path: str | Path, data: bytes, mode: int | None = None, *,
+                 replace: bool = False) -> None:
     """Write ``data`` to ``path`` (see :class:`OutputFile`): a regular file so that readers
     see the old file or the new one, never a torn one; a character device or FIFO directly;
-    ``-`` to standard output."""
-    if output_kind(path) == "stdout":
+    ``-`` to standard output.  ``replace``: always renamed over (a cache's own files)."""
+    if not replace and output_kind(path) == "stdout":
         sys.stdout.flush()
         sys.stdout.buffer.write(data)
         sys.stdout.buffer.flush()
         return
-    out = OutputFile(path, mode)
+    out = OutputFile(path, mode, replace=replace)
     try:
         out.file.write(data)
     except BaseException:

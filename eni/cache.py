@@ -90,9 +90,13 @@ class PlanCache:
         if not self._trusted_dir():
             return None
         try:
-            with open(path, "rb") as f:
+            # O_NONBLOCK: a FIFO in the cache's place is not waited on; only a regular file
+            # of ours is read.
+            with os.fdopen(os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_CLOEXEC),
+                           "rb") as f:
                 st = os.fstat(f.fileno())
-                if st.st_uid != os.geteuid() or st.st_mode & 0o022:
+                if (not stat.S_ISREG(st.st_mode) or st.st_uid != os.geteuid()
+                        or st.st_mode & 0o022):
                     return None
                 stored, plan = _PlanUnpickler(f).load()
         except FileNotFoundError:
@@ -117,7 +121,7 @@ class PlanCache:
                 return
             write_atomic(self.dir / f"{key}.pickle",
                          pickle.dumps((data, plan), protocol=pickle.HIGHEST_PROTOCOL),
-                         mode=0o600)
+                         mode=0o600, replace=True)
             self._prune()
         except OSError:
             pass

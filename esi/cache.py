@@ -88,7 +88,7 @@ class IndexCache:
         # A cache that cannot be written (read-only home, full disk) only costs speed.
         try:
             self.dir.mkdir(parents=True, exist_ok=True)
-            write_atomic(path, json.dumps(data, separators=(",", ":")).encode())
+            write_atomic(path, json.dumps(data, separators=(",", ":")).encode(), replace=True)
         except OSError:
             pass
 

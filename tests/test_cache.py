@@ -4,7 +4,7 @@ import os
 
 import pytest
 
-from conftest import device_xml, esi_xml, write
+from conftest import FifoUnblock, device_xml, esi_xml, write
 from ecatcfg.esi import index, library
 from ecatcfg.esi.cache import IndexCache
 from ecatcfg.esi.library import Library
@@ -157,3 +157,19 @@ def test_a_damaged_index_cache_does_not_break_a_command(tmp_path):
         done = devices()
         assert done.returncode == 0 and "Traceback" not in done.stderr, done.stderr
         assert "A name" in done.stdout
+
+
+def test_a_summary_that_is_a_fifo_is_a_miss_and_replaced(tmp_path, parses):
+    """Neither waited on (no writer) nor written into: a new summary is renamed over it."""
+    esi = write(tmp_path, "a.xml", esi_xml(device_xml("A")))
+    Library([esi], cache=IndexCache(tmp_path / "c"))
+    stored = _summary_file(tmp_path / "c")
+    stored.unlink()
+    os.mkfifo(stored)
+    with FifoUnblock(stored) as unblock:
+        assert Library([esi], cache=IndexCache(tmp_path / "c")).entries[0].name == "A name"
+    assert not unblock.needed, "the cache waited on the FIFO"
+    assert stored.is_file()
+    assert Library([esi], cache=IndexCache(tmp_path / "c")).entries[0].name == "A name"
+    assert len(parses) == 2
+
