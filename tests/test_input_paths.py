@@ -1,5 +1,5 @@
-"""Inputs that are not what they seem (issue 41 §4): a path that is not a regular file, one
-too large to be an EtherCAT description, a file that is not XML.
+"""Inputs that are not what they seem: a path that is not a regular file, one too large to
+be an EtherCAT description, a file that is not XML.
 
 Every command reads its files through ``fileio.read_input``; a device node, a FIFO or a pipe
 has no end, and read whole it grew memory until a ``MemoryError`` or the OOM killer.  Each

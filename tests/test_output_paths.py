@@ -1,6 +1,6 @@
-"""Outputs that are not regular files (issue 41 §4): a character device or a FIFO given as an
-output is written directly and stays what it was, ``-`` is standard output, anything else is
-refused; only a regular file (or a new path) is written beside and renamed over.
+"""Outputs that are not regular files: a character device or a FIFO given as an output is
+written directly and stays what it was, ``-`` is standard output, anything else is refused;
+only a regular file (or a new path) is written beside and renamed over.
 
 Renaming over ``-o /dev/null`` as root replaced the machine's ``/dev/null`` with a regular
 file.  These tests make their own node in a temporary folder (``mknod``: a character device
