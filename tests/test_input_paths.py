@@ -176,3 +176,16 @@ def test_an_esi_is_called_an_esi_at_its_root_element(command, tmp_path):
     assert done.returncode == 2
     assert f"{esi}:3: not an ENI: the root element is <EtherCATInfo> (an ESI), expected " \
         "<EtherCATConfig>" in done.stderr
+
+
+@pytest.mark.parametrize("command", ["lint", "devices", "compile --esi"])
+def test_a_fifo_met_in_a_folder_is_refused_by_name(command, tmp_path):
+    """A folder is searched for *.xml; a FIFO among them (no writer) is named and refused,
+    not waited on."""
+    import shutil
+    folder = tmp_path / "esi"
+    shutil.copytree(ESI, folder)
+    fifo = folder / "zz.xml"
+    os.mkfifo(fifo)
+    done = ecatcfg(*_commands(str(folder), tmp_path)[command], timeout=30)
+    _refused(done, str(fifo), "a FIFO or pipe")
