@@ -75,18 +75,32 @@ def read_input(path: str | Path, shown_as: str | None = None,
     raise ``OSError`` for the caller to word.
     """
     shown = shown_as or str(path)
-    check_input(path, shown)
-    fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_CLOEXEC | getattr(os, "O_NOCTTY", 0))
-    with os.fdopen(fd, "rb") as f:
-        st = os.fstat(fd)                   # the file opened, not the name checked above
-        if not stat.S_ISREG(st.st_mode):
-            raise _not_regular(shown, st)
-        if st.st_size > limit:
+    with _open_regular(path, shown) as f:
+        if os.fstat(f.fileno()).st_size > limit:
             raise _too_large(shown, limit)
         data = f.read(limit + 1)            # a file still growing stops at the bound too
     if len(data) > limit:
         raise _too_large(shown, limit)
     return data
+
+
+def read_head(path: str | Path, shown_as: str | None = None, size: int = 65536) -> bytes:
+    """The first ``size`` bytes of the regular file ``path`` (what kind of file it is),
+    refused as :func:`read_input` refuses."""
+    with _open_regular(path, shown_as or str(path)) as f:
+        return f.read(size)
+
+
+def _open_regular(path: str | Path, shown: str) -> BinaryIO:
+    """``path`` opened for reading if it is a regular file, else a :class:`UsageError`."""
+    check_input(path, shown)
+    fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_CLOEXEC | getattr(os, "O_NOCTTY", 0))
+    f = os.fdopen(fd, "rb")
+    st = os.fstat(fd)                       # the file opened, not the name checked before
+    if not stat.S_ISREG(st.st_mode):
+        f.close()
+        raise _not_regular(shown, st)
+    return f
 
 
 def _too_large(shown: str, limit: int) -> UsageError:

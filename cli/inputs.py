@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import Literal
 
 from ecatcfg.errors import EcatcfgError, UsageError
-from ecatcfg.fileio import check_input
+from ecatcfg.fileio import check_input, read_head
 
 # The root element's name after the XML declaration, comments and processing instructions
 # (a namespace prefix allowed).
@@ -32,8 +32,7 @@ def _root(path: str) -> tuple[str, int] | None:
     if not p.is_file():
         raise UsageError(f"{path}: no such file")
     try:
-        with p.open("rb") as f:
-            head = f.read(65536)
+        head = read_head(p, path)
     except OSError as exc:
         raise EcatcfgError(f"cannot read: {exc.strerror}", path) from None
     if head.startswith(b"\xef\xbb\xbf"):

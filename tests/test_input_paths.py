@@ -189,3 +189,18 @@ def test_a_fifo_met_in_a_folder_is_refused_by_name(command, tmp_path):
     os.mkfifo(fifo)
     done = ecatcfg(*_commands(str(folder), tmp_path)[command], timeout=30)
     _refused(done, str(fifo), "a FIFO or pipe")
+
+
+def test_the_file_opened_is_checked_not_only_its_name(tmp_path, monkeypatch):
+    """A name that passed the check and was then swapped for a FIFO: the opened file is
+    refused too, and opening it did not wait for a writer (O_NONBLOCK)."""
+    from conftest import FifoUnblock
+    fifo = tmp_path / "swapped.xml"
+    os.mkfifo(fifo)
+    monkeypatch.setattr(fileio, "check_input", lambda *args: None)
+    with FifoUnblock(fifo, seconds=10) as unblock:
+        with pytest.raises(UsageError, match=r"swapped\.xml: is a FIFO or pipe"):
+            fileio.read_input(fifo)
+        with pytest.raises(UsageError, match=r"swapped\.xml: is a FIFO or pipe"):
+            fileio.read_head(fifo)
+    assert not unblock.needed
