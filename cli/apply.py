@@ -193,7 +193,7 @@ def _checked_options(args: argparse.Namespace
         from ecatcfg.runtime.master.realtime import apply as apply_realtime
         apply_realtime(realtime)()
     if args.pcap:
-        output_file(args.pcap)
+        output_file(args.pcap, stdout=False)
     return dc_threshold, dc_timeout, realtime
 
 

@@ -51,6 +51,7 @@ def run(args: argparse.Namespace) -> int:
     from ecatcfg.errors import UsageError
     from ecatcfg.esi.lint.config import split_ids
     from ecatcfg.esi.lint.rules import select_rules
+    from ecatcfg.fileio import check_input
 
     rules = all_rules()
     if args.explain:
@@ -68,6 +69,7 @@ def run(args: argparse.Namespace) -> int:
     if not args.enis:
         raise UsageError("give at least one ENI file (or --explain ID)")
     for eni in args.enis:
+        check_input(eni)                    # a device node or FIFO: refused as such
         if not Path(eni).is_file():
             raise UsageError(f"{eni}: no such file" + (" (a folder: give ENI files)"
                                                         if Path(eni).is_dir() else ""))

@@ -64,6 +64,8 @@ def run(args: argparse.Namespace) -> int:
 
         from ecatcfg.eni import reader as eni_reader
         from ecatcfg.errors import UsageError
+        from ecatcfg.fileio import check_input
+        check_input(args.eni)
         if not Path(args.eni).is_file():
             raise UsageError(f"{args.eni}: no such file")
         plan = eni_reader.read_file(args.eni)

@@ -43,10 +43,11 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
     p.add_argument("eni", metavar="ENI", help="ENI file")
     p.add_argument("--format", required=True, choices=FORMATS, help="what to write")
     p.add_argument("-o", "--output", required=True, metavar="FILE",
-                   help="the file to write (atomically); soem-c, igh-c: the C source, its "
-                        "header beside it with the suffix .h; lcec: ethercat.xml, an "
-                        "initCmds file per slave with SoE writes beside it; ros2: the "
-                        "ros2_control fragment, a YAML per slave beside it")
+                   help="the file to write (atomically; pysoem: '-' for standard output); "
+                        "soem-c, igh-c: the C source, its header beside it with the suffix "
+                        ".h; lcec: ethercat.xml, an initCmds file per slave with SoE writes "
+                        "beside it; ros2: the ros2_control fragment, a YAML per slave "
+                        "beside it")
     p.add_argument("--no-cache", action="store_true", help="do not use the ENI plan cache")
     p.set_defaults(run=run)
 
@@ -57,26 +58,26 @@ def run(args: argparse.Namespace) -> int:
 
     from ecatcfg import __version__
     from ecatcfg.cli import export_igh
-    from ecatcfg.cli.inputs import kind
+    from ecatcfg.cli.inputs import require_eni
     from ecatcfg.cli.paths import output_file
     from ecatcfg.eni.cache import PlanCache, read_file
     from ecatcfg.eni.export import pysoem_module, soem_c
     from ecatcfg.eni.export.steps import slave_setups
     from ecatcfg.eni.reader import read_file as read_uncached
     from ecatcfg.errors import UsageError
-    from ecatcfg.fileio import write_atomic
+    from ecatcfg.fileio import STDOUT, read_input, write_atomic
 
-    found = kind(args.eni)
-    if found != "eni":
-        raise UsageError(f"{args.eni} is not an ENI ({found})")
+    require_eni(args.eni)
     out = output_file(args.output)
     if out.resolve() == Path(args.eni).resolve():
         raise UsageError(f"-o {args.output}: would replace the ENI it exports")
     plan = read_uncached(args.eni) if args.no_cache else \
         read_file(args.eni, cache=PlanCache())
-    digest = hashlib.sha256(Path(args.eni).read_bytes()).hexdigest()
+    digest = hashlib.sha256(read_input(args.eni)).hexdigest()
     outputs: list[tuple[Path, bytes]]
     if args.format in export_igh.WRITERS:
+        if str(out) == STDOUT:
+            raise UsageError(f"-o -: {args.format} writes several files; give a file name")
         return export_igh.WRITERS[args.format](args, plan, out, digest)
     setups = slave_setups(plan, args.eni)
     if args.format == "pysoem":
@@ -84,6 +85,9 @@ def run(args: argparse.Namespace) -> int:
         outputs = [(out, pysoem_module.render(setups, Path(args.eni).name, digest,
                                               __version__))]
     else:
+        if str(out) == STDOUT:
+            raise UsageError("-o -: soem-c writes two files (the C source and its header); "
+                             "give a file name")
         header = out.with_suffix(".h")
         if header == out:
             raise UsageError(f"-o {args.output}: the C source needs another suffix than .h")

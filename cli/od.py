@@ -65,7 +65,7 @@ def run(args: argparse.Namespace) -> int:
     if args.pcap:
         from ecatcfg.cli.paths import output_file
         from ecatcfg.runtime.pcap import PcapRecorder
-        output_file(args.pcap)
+        output_file(args.pcap, stdout=False)
         recorder = PcapRecorder(args.pcap)
     device = None
     esi_where = None

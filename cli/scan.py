@@ -83,7 +83,7 @@ def run(args: argparse.Namespace) -> int:
     from ecatcfg.cli.paths import output_file
 
     if args.topology_out:
-        output_file(args.topology_out)
+        output_file(args.topology_out, stdout=False)     # stdout has the table
     lib = None
     if args.esi:
         from ecatcfg.esi.library import Library

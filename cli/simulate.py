@@ -177,6 +177,7 @@ def _check_args(args: argparse.Namespace) -> None:
     from pathlib import Path
 
     from ecatcfg.errors import UsageError
+    from ecatcfg.fileio import check_input
 
     if not 0.0 <= args.drop <= 1.0:
         raise UsageError(f"--drop {args.drop}: a share between 0 and 1")
@@ -185,6 +186,11 @@ def _check_args(args: argparse.Namespace) -> None:
     source = args.topology or args.eni
     if not Path(source).exists():
         raise UsageError(f"{source}: no such file")
+    # A device node or FIFO is refused before the interface is opened (the readers refuse it
+    # too: fileio.read_input).
+    check_input(source)
+    if args.timing:
+        check_input(args.timing, f"--timing {args.timing}")
     if args.topology and not args.esi:
         raise UsageError("--topology needs --esi (the ESI files of the slaves to emulate)")
     if args.prefer and not args.esi:

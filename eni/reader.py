@@ -56,6 +56,7 @@ from ecatcfg.esc import FRAME_PAYLOAD, MAX_DATAGRAM_DATA, Transition, frame_byte
 from ecatcfg.esi import xmlsafe
 from ecatcfg.esi.idn import MAX_DRIVE
 from ecatcfg.esi.values import SPELLABLE, parse_bool, parse_hex_bytes, parse_int
+from ecatcfg.fileio import read_input
 
 Element = etree._Element
 
@@ -137,7 +138,7 @@ def read_file(path: str | Path, shown_as: str | None = None) -> NetworkPlan:
     """Read the ENI at ``path``; errors name ``shown_as`` (the path as the user gave it)."""
     name = shown_as or str(path)
     try:
-        data = Path(path).read_bytes()
+        data = read_input(path, name)
     except OSError as exc:
         raise EniReadError(f"cannot read: {exc.strerror}", name) from None
     return read_bytes(data, name)

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
-from typing import Any
+from typing import Any, Literal
 
 from lxml import etree
 
@@ -68,10 +68,60 @@ class FileSummary:
         return asdict(self)
 
     @classmethod
-    def from_json(cls, data: dict[str, Any]) -> FileSummary:
+    def from_json(cls, data: object) -> FileSummary:
+        """The summary :meth:`to_json` gave, read back from a cache file.  Anything else (a
+        field missing or of another type, a device record without its ``name``: a damaged
+        or foreign file) is a ``ValueError``, so the cache treats it as absent and the file
+        is summarized again, instead of a ``KeyError`` in every later run."""
+        if not isinstance(data, dict) or set(data) != _SUMMARY_FIELDS:
+            raise ValueError("not a file summary of this layout")
+        _check(data, _SUMMARY_VALUES, "summary")
+        for d in data["devices"]:
+            if not isinstance(d, dict) or set(d) != set(DEVICE_VALUES):
+                raise ValueError("a device record of another layout")
+            _check(d, DEVICE_VALUES, "device")
+        for e in data["errors"]:
+            if not (isinstance(e, list) and len(e) == 2 and _is(e[0], "int")
+                    and _is(e[1], "str")):
+                raise ValueError("an error record is not [line, message]")
         summary = cls(**data)
         summary.errors = [(line, msg) for line, msg in summary.errors]
         return summary
+
+
+# What each value of a summary and of its device records (``_device``) is, checked when a
+# cached summary is read back (``FileSummary.from_json``).  JSON's true/false are Python
+# bools, which are ints too: a bool is never an "int" here.
+_Kind = Literal["int", "int?", "str", "strs", "list"]
+DEVICE_VALUES: dict[str, _Kind] = {
+    "line": "int", "ordinal": "int", "product_code": "int?", "revision": "int?",
+    "type": "str", "name": "str", "group": "str", "rx_pdos": "int", "tx_pdos": "int",
+    "rx_entries": "int", "tx_entries": "int", "mailbox": "strs", "dc_opmodes": "strs",
+    "slots": "int",
+}
+_SUMMARY_VALUES: dict[str, _Kind] = {
+    "root": "str", "vendor_id": "int?", "vendor_name": "str", "devices": "list",
+    "modules": "int", "info_references": "strs", "errors": "list",
+}
+_SUMMARY_FIELDS = set(_SUMMARY_VALUES)
+
+
+def _is(value: object, kind: _Kind) -> bool:
+    if kind == "int?" and value is None:
+        return True
+    if kind in ("int", "int?"):
+        return isinstance(value, int) and not isinstance(value, bool)
+    if kind == "str":
+        return isinstance(value, str)
+    if kind == "strs":
+        return isinstance(value, list) and all(isinstance(v, str) for v in value)
+    return isinstance(value, list)
+
+
+def _check(record: dict[str, Any], kinds: dict[str, _Kind], what: str) -> None:
+    for key, kind in kinds.items():
+        if not _is(record[key], kind):
+            raise ValueError(f"{what} field {key!r} is not {kind}")
 
 
 def summarize(tree: etree._ElementTree, file: str) -> FileSummary:

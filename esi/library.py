@@ -39,6 +39,7 @@ from ecatcfg.esi.evidence import Evidence, in_brief
 from ecatcfg.esi.index import DeviceEntry, FileSummary, summarize
 from ecatcfg.esi.model import Device, EsiFile, Module, format_selector
 from ecatcfg.esi.values import parse_int
+from ecatcfg.fileio import check_input, read_input
 
 
 class SelectorError(EcatcfgError):
@@ -159,7 +160,7 @@ class Library:
             if summary is not None:
                 return summary
         try:
-            data = path.read_bytes()
+            data = read_input(path, shown)
         except OSError as exc:
             raise xmlsafe.XmlError(f"cannot read: {exc.strerror}", shown) from None
         if cache is None:
@@ -602,4 +603,5 @@ def expand_paths(given: str | Path) -> list[tuple[Path, str, bool]]:
                     found.append((full, os.path.join(str(given), os.path.relpath(full, path)),
                                   False))
         return found
+    check_input(path, str(given))           # a device node or FIFO: refused as such
     raise UsageError(f"{given}: no such file or folder")

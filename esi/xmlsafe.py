@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING
 from lxml import etree
 
 from ecatcfg.errors import EcatcfgError
+from ecatcfg.fileio import read_input
 
 if TYPE_CHECKING:                   # the opaque result of resolve_*(), named only in the stubs
     from lxml.etree._docloader import _InputDocument
@@ -114,7 +115,7 @@ def parse_file(path: str | Path, shown_as: str | None = None) -> etree._ElementT
     """Read and parse ``path``; errors name ``shown_as`` (the path as the user gave it)."""
     name = shown_as or str(path)
     try:
-        data = Path(path).read_bytes()
+        data = read_input(path, name)
     except OSError as exc:
         raise XmlError(f"cannot read: {exc.strerror}", name) from None
     return parse_bytes(data, name)

@@ -3,7 +3,8 @@ reading captures back.
 
 scapy writes the file (its pcapng writer, fed the raw frame bytes: nothing is dissected on
 the way).  The file is written beside its final name and renamed when the recording closes,
-so a reader never sees half a capture under that name.
+so a reader never sees half a capture under that name; a FIFO (Wireshark reading live) or a
+character device is written directly (``fileio.OutputFile``).
 
 :func:`read_capture` reads what tcpdump, Wireshark and dumpcap write: pcapng (any number of
 interface blocks, each with its own ``if_tsresol``: microseconds by default, nanoseconds
@@ -15,11 +16,12 @@ both; this function gives each frame its number and time in nanoseconds.
 from __future__ import annotations
 
 import os
-import tempfile
 import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
+
+from ecatcfg.fileio import OutputFile
 
 if TYPE_CHECKING:                   # scapy is imported when a recording starts
     from scapy.utils import RawPcapNgWriter
@@ -70,11 +72,10 @@ class PcapRecorder:
         from scapy.utils import RawPcapNgWriter
 
         self.path = Path(path)
-        fd, tmp = tempfile.mkstemp(dir=self.path.parent, prefix=f".{self.path.name}.",
-                                   suffix=".tmp")
-        os.close(fd)
-        self._tmp = Path(tmp)
-        writer = RawPcapNgWriter(str(self._tmp))
+        self._out = OutputFile(self.path, mode=0o644)
+        # scapy's pcapng writer opens its file by name (no file object): the temporary file,
+        # or the device node or FIFO itself.
+        writer = RawPcapNgWriter(self._out.name)
         writer.linktype = LINKTYPE_ETHERNET
         writer.write_header(None)                # section and interface blocks
         self._writer: RawPcapNgWriter | None = writer
@@ -95,14 +96,13 @@ class PcapRecorder:
             return
         self._writer.close()
         self._writer = None
-        os.chmod(self._tmp, 0o644)
-        os.replace(self._tmp, self.path)
+        self._out.commit()
 
     def discard(self) -> None:
         if self._writer is not None:
             self._writer.close()
             self._writer = None
-        self._tmp.unlink(missing_ok=True)
+        self._out.discard()
 
     def __enter__(self) -> PcapRecorder:
         return self

@@ -160,6 +160,36 @@ MAILBOX_PD_SMS = (
     f'{_pdo_entry(0x6000, 8, "USINT")}</TxPdo>')
 
 
+class FifoUnblock:
+    """Opens ``fifo`` from both ends after ``seconds`` if the code under test still waits on
+    it (a regression would otherwise hang the suite): ``needed`` says it had to."""
+
+    def __init__(self, fifo: Path, seconds: float = 20) -> None:
+        import threading
+        self.needed = False
+        self._done = threading.Event()
+        self._fifo = fifo
+        self._thread = threading.Thread(target=self._run, args=(seconds,), daemon=True)
+        self._thread.start()
+
+    def _run(self, seconds: float) -> None:
+        wait = seconds
+        while not self._done.wait(wait):
+            self.needed = True
+            wait = 0.5          # and again, for as long as it goes on opening it
+            try:                # O_RDWR on a FIFO never blocks (Linux) and wakes both ends
+                os.close(os.open(self._fifo, os.O_RDWR | os.O_NONBLOCK))
+            except OSError:
+                pass
+
+    def __enter__(self) -> FifoUnblock:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._done.set()
+        self._thread.join()
+
+
 # -- known refusals of the corpus sweeps (tests/known_refusals.py) ----------------------------
 # A listed case runs as any other; it must fail with the failure its entry names, and then
 # counts as an expected failure with the entry's reason.  A listed case that passes, or

@@ -127,3 +127,18 @@ def test_demo_compiles_the_embedded_example(tmp_path):
     assert "axis1" in out.stdout and "LRW (WKC 7)" in out.stdout
     assert (tmp_path / "ecatcfg-demo" / "demo.eni.xml").read_bytes().startswith(b"<?xml")
     assert b"#define ECAT_OUT_AXIS1" in (tmp_path / "ecatcfg-demo" / "demo.h").read_bytes()
+
+
+def test_devices_of_a_folder_without_esi_files_exits_2_unless_allowed(tmp_path):
+    """``devices`` of a folder with no ESI file (empty, or only an ENI) used to list "0
+    devices in 0 files" and exit 0; --allow-empty keeps that."""
+    write(tmp_path, "plan.xml", "<EtherCATConfig><Config/></EtherCATConfig>")
+    out = ecatcfg("devices", str(tmp_path))
+    assert out.returncode == 2 and out.stdout == ""
+    assert f"ecatcfg devices: no ESI file in {tmp_path}: nothing was read" in out.stderr
+    allowed = ecatcfg("devices", "--allow-empty", str(tmp_path))
+    assert allowed.returncode == 0 and "0 devices in 0 files" in allowed.stdout
+    # a broken ESI file is an input: its error, exit 1, not "no ESI file"
+    write(tmp_path, "broken.xml", "<EtherCATInfo><Vendor>")
+    broken = ecatcfg("devices", str(tmp_path / "broken.xml"))
+    assert broken.returncode == 1 and "no ESI file" not in broken.stderr

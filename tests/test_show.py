@@ -291,7 +291,8 @@ def test_show_marks_passive_slaves(tmp_path, capsys):
 
 def test_show_errors_name_the_file(tmp_path, corpus, capsys):
     assert main(["show", str(corpus / ELMO_ESI)]) == 2
-    assert "is not an ENI: name the device with --device" in capsys.readouterr().err
+    assert "not an ENI: the root element is <EtherCATInfo> (an ESI: name the device with " \
+        "--device), expected <EtherCATConfig>" in capsys.readouterr().err
     broken = write(tmp_path, "broken.xml", "<?xml version='1.0'?>\n<EtherCATConfig>\n<Config>")
     assert main(["show", str(broken), "--no-cache"]) == 1
     err = capsys.readouterr().err

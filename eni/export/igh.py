@@ -211,8 +211,9 @@ def slave_line(file: str, position: int) -> int | None:
     """The line of the ``position``-th ``Config/Slave`` element of ``file`` that has an ESC
     (a ``PhysAddr`` or ``AutoIncAddr``: the reader's passive slaves have neither)."""
     from ecatcfg.esi import xmlsafe
+    from ecatcfg.fileio import read_input
     try:
-        root = xmlsafe.parse_bytes(Path(file).read_bytes(), file).getroot()
+        root = xmlsafe.parse_bytes(read_input(file), file).getroot()
     except (OSError, EcatcfgError):
         return None
     slaves = [s for s in root.iterfind("Config/Slave")

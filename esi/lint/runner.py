@@ -24,6 +24,7 @@ from ecatcfg.esi.lint.context import FileContext
 from ecatcfg.esi.lint.finding import DeviceRef, FileResult, Finding
 from ecatcfg.esi.lint.rules import RULES, iter_checks
 from ecatcfg.esi.lint.schema import SchemaSet
+from ecatcfg.fileio import read_input
 
 
 @dataclass(frozen=True, slots=True)
@@ -82,7 +83,7 @@ def lint_file(target: Target, options: LintOptions, others: list[Path]) -> FileR
     result = FileResult(target.shown)
     out = _Emitter(target.shown, options.active)
     try:
-        data = target.path.read_bytes()
+        data = read_input(target.path, target.shown)
         tree = xmlsafe.parse_bytes(data, target.shown, strip=False)
     except (OSError, xmlsafe.XmlError) as exc:
         if isinstance(exc, OSError):
