@@ -43,7 +43,7 @@ def run(args: argparse.Namespace) -> int:
 
     from ecatcfg.cli.inputs import kind
     from ecatcfg.cli.paths import output_file
-    from ecatcfg.eni import report
+    from ecatcfg.eni import report, report_devices
     from ecatcfg.eni.cache import PlanCache, read_file
     from ecatcfg.eni.check import check_eni
     from ecatcfg.eni.reader import read_file as read_uncached
@@ -58,24 +58,29 @@ def run(args: argparse.Namespace) -> int:
     plan = read_uncached(args.eni) if args.no_cache else \
         read_file(args.eni, cache=PlanCache())
     findings = None
+    library = None
+    if args.esi:
+        from ecatcfg.esi.library import Library
+        library = Library(args.esi, cache=not args.no_cache, prefer=args.prefer)
+        for problem in library.problems:
+            print(f"ecatcfg report: note: {problem} (its devices are not in the library)",
+                  file=sys.stderr)
+    labels = report_devices.labels(plan, report_devices.product_revisions(args.eni), library)
+    coverage = None
     if not args.no_check:
-        library = None
-        if args.esi:
-            from ecatcfg.esi.library import Library
-            library = Library(args.esi, cache=not args.no_cache, prefer=args.prefer)
-            for problem in library.problems:
-                print(f"ecatcfg report: note: {problem} (its devices are not in the library)",
-                      file=sys.stderr)
+        coverage = report_devices.coverage(plan, labels, library is not None)
         notes: list[str] = []
         findings = check_eni(args.eni, library, use_cache=not args.no_cache,
                              notes=notes).findings
         for note in notes:      # which of differing ESI files the ENI's evidence chose
             print(f"ecatcfg report: note: {note}", file=sys.stderr)
     try:
-        report.write(plan, out, args.eni, findings=findings)
+        report.write(plan, out, args.eni, findings=findings, labels=labels,
+                     coverage=coverage)
     except OSError as exc:
         raise UsageError(f"-o {args.output}: cannot write: {exc.strerror}") from None
-    checked = "" if findings is None else f", {len(findings)} check findings"
+    checked = "" if findings is None or coverage is None else \
+        f", {len(findings)} check findings ({coverage.sentence()})"
     print(f"wrote {args.output}: {len(plan.slaves) + len(plan.passive)} slaves, "
           f"{len(plan.process_image.inputs) + len(plan.process_image.outputs)} variables"
           f"{checked}", file=sys.stderr)

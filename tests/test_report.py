@@ -35,7 +35,8 @@ CHROMIUM_ARGS = ["--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-
 CORPUS_ENIS = ["corpus/jn-ec-master/mega_master_eni.xml",     # TwinCAT-style, frame image
                "corpus/acontis-doc/acontis-TrainingSlaves-ENI.xml",   # EC-Engineer
                "corpus/rocos-ethercat/eni_tech6.xml",                 # 6 drives
-               "corpus-extra/hydra/hydra_wholebody_20160108_DC.xml"]  # 16 slaves, 2 MB page
+               "corpus-extra/hydra/hydra_wholebody_20160108_DC.xml",  # 16 slaves, 2 MB page
+               "corpus-extra/pmec-wec-bench/DriveAndDUTAndPAAndLoadXML.xml"]  # 20, couplers
 
 
 def chromium_path() -> str:
@@ -147,6 +148,29 @@ def _on_edge(point: list[float], box: list[float]) -> bool:
     return inside and edge
 
 
+def xml_ebus_links(eni: Path) -> set[tuple[str, str, str]]:
+    """The links of :func:`expected_links` on the parent's E-bus: the port's letter in the
+    parent's ``Info/Physics`` (ETG.2100: one letter per port A-D) is ``K``."""
+    slaves = etree.parse(str(eni)).getroot().findall("Config/Slave")
+    physics = {s.findtext("Info/Name"): s.findtext("Info/Physics") or "" for s in slaves}
+    return {(parent, child, port) for parent, child, port in expected_links(eni)
+            if "ABCD".index(port) < len(physics[parent])
+            and physics[parent]["ABCD".index(port)] == "K"}
+
+
+def check_rails(links: list[dict[str, Any]], ebus: set[tuple[str, str, str]]) -> None:
+    """E-bus neighbours side by side (the child right of the parent on the same row, or
+    on a row below when the rail wraps); what leaves over Ethernet is below its parent."""
+    for x in links:
+        parent, child = x["parentBox"], x["childBox"]
+        if (x["parent"], x["child"], x["port"]) in ebus:
+            beside = abs(child[1] - parent[1]) < 1 and child[0] >= parent[2]
+            wrapped = child[1] >= parent[3]
+            assert beside or wrapped, x
+        else:
+            assert child[1] >= parent[3], x
+
+
 def drawn_links(opened: Opened) -> list[dict[str, Any]]:
     return opened.page.eval_on_selector("#topology-svg", _LINKS_JS)
 
@@ -239,12 +263,16 @@ def test_tree_with_a_junction_shows_its_branches(browser, tmp_path):
     drawn = {(x["parent"], x["child"], x["port"]) for x in links}
     expected = expected_links(eni)
     assert drawn == expected | {("example-tree", slaves[0], "")}
-    # The junction's three ports each lead to a branch, drawn beside the line it leaves.
+    # The junction's three ports each lead on: its E-bus port (a K in its Physics, read by
+    # lxml) to the terminal beside it on the rail, its Ethernet ports to branches below.
     from_junction = [x for x in links if x["parent"] == "junction"]
     assert sorted(x["port"] for x in from_junction) == sorted(
         p for parent, _, p in expected if parent == "junction") == ["B", "C", "D"]
-    junction_left = from_junction[0]["parentBox"][0]
-    assert all(x["childBox"][0] > junction_left for x in from_junction)
+    ebus = xml_ebus_links(eni)
+    assert ("junction", "outputs", "C") in ebus and ("junction", "axis1", "D") not in ebus
+    check_rails(links, ebus)
+    rail = [x for x in links if (x["parent"], x["child"], x["port"]) in ebus]
+    assert len(rail) == 3 and all(abs(x["childBox"][1] - x["parentBox"][1]) < 1 for x in rail)
     # The port letters are drawn as text in the SVG.
     assert sorted(opened.texts("#topology-svg text.port")) == sorted(p for *_, p in expected)
     # Hovering a slave's box marks its bits in the map (the page's script), and only its.
@@ -410,3 +438,115 @@ def test_the_command_shows_what_check_finds(tmp_path):
     assert done.returncode == 0, done.stderr
     page = html.fromstring(out.read_text())
     assert page.get_element_by_id("not-checked") is not None
+
+
+# ------------------------------------------------------------------ a plant-sized page
+
+def plant_topology(segments: int) -> str:
+    """A line of ``segments`` couplers (the next on each one's Ethernet port C), each with
+    twelve E-bus terminals, a junction whose Ethernet ports D and B hold two drives, and
+    two output terminals on its E-bus port C: 18 slaves per segment."""
+    lines = ["master: {name: plant, cycle_time_us: 2000}", "slaves:"]
+    for s in range(segments):
+        lines.append(f"  - {{name: 'Coupler {s}', device: EXB1100"
+                     + (f", parent: 'Coupler {s - 1}', port: C}}" if s else "}"))
+        lines += [f"  - {{name: 'Term {s}.{t}', device: {'EXB1018' if t % 2 else 'EXB2018'}}}"
+                  for t in range(12)]
+        lines += [f"  - {{name: 'Junction {s}', device: EXB1122}}",
+                  f"  - {{name: 'Axis {s}a', device: EXD-402, parent: 'Junction {s}', port: D}}",
+                  f"  - {{name: 'Axis {s}b', device: EXD-402, parent: 'Junction {s}', port: B}}",
+                  f"  - {{name: 'Out {s}.0', device: EXB2018, parent: 'Junction {s}', port: C}}",
+                  f"  - {{name: 'Out {s}.1', device: EXB2018}}"]
+    return "\n".join(lines) + "\n"
+
+
+@pytest.fixture(scope="module")
+def plant(tmp_path_factory) -> Path:
+    """A compiled 216-slave tree (12 segments) from the example devices."""
+    folder = tmp_path_factory.mktemp("plant")
+    topology = folder / "plant.yaml"
+    topology.write_text(plant_topology(12))
+    eni = folder / "plant.eni.xml"
+    done = subprocess.run([sys.executable, "-m", "ecatcfg", "compile", str(topology), "--esi",
+                           str(EXAMPLES / "tree" / "esi"), "--esi", str(EXAMPLES / "esi"),
+                           "-o", str(eni), "--no-cache"], capture_output=True, text=True,
+                          timeout=300, cwd=ROOT)
+    assert done.returncode == 0, done.stderr
+    return eni
+
+
+# Type a name into the search box; where the row it selects (and, after following its link
+# to the drawing, the slave's box) is, against the viewport, and what is at its centre.
+_FOUND_JS = """() => {
+  const row = document.querySelector('#slave-table tbody tr.current');
+  if (!row) { return null; }
+  const r = row.getBoundingClientRect(), cx = (r.left + r.right) / 2,
+        cy = (r.top + r.bottom) / 2, hit = document.elementFromPoint(cx, cy);
+  return {name: row.querySelector('.row-name').textContent, id: row.dataset.slave,
+          rect: [r.left, r.top, r.right, r.bottom], w: innerWidth, h: innerHeight,
+          onTop: !!hit && row.contains(hit)};
+}"""
+_BOX_JS = """id => {
+  const r = document.querySelector(`#topology-svg g.node[data-slave="${id}"] rect`)
+    .getBoundingClientRect();
+  return [r.left, r.top, r.right, r.bottom, innerWidth, innerHeight];
+}"""
+
+
+def _inside(rect: list[float], width: float, height: float) -> bool:
+    return rect[0] >= -0.5 and rect[1] >= -0.5 and rect[2] <= width + 0.5 \
+        and rect[3] <= height + 0.5 and rect[2] > rect[0] and rect[3] > rect[1]
+
+
+def check_fits_and_finds(browser: Any, page_file: Path, names: list[str],
+                         boxes: bool) -> None:
+    """No horizontal overflow of the page; every slave, its name typed into the search
+    box, is the selected row, inside the viewport and not covered; with ``boxes``, the
+    row's link to the drawing brings the slave's box into the viewport."""
+    page = browser.new_page(viewport={"width": 1280, "height": 800})
+    page.goto(page_file.resolve().as_uri(), wait_until="load")
+    for width in (1280, 900):
+        page.set_viewport_size({"width": width, "height": 800})
+        assert page.evaluate("document.documentElement.scrollWidth") <= width
+        assert page.evaluate("document.body.scrollWidth") <= width
+    for name in names:
+        page.fill("#slave-search", name)
+        found = page.evaluate(_FOUND_JS)
+        # The page's search ignores whitespace (an input drops line breaks in names).
+        assert found is not None and found["name"].split() == name.split(), (name, found)
+        assert _inside(found["rect"], found["w"], found["h"]) and found["onTop"], found
+        if boxes:
+            page.click(f'#slave-table tr[data-slave="{found["id"]}"] a.to-box')
+            *box, w, h = page.evaluate(_BOX_JS, found["id"])
+            assert _inside(box, w, h), (name, box)
+    page.close()
+
+
+def test_plant_of_200_slaves_fits_and_every_slave_is_found(browser, tmp_path, plant):
+    out = tmp_path / "plant.html"
+    done = write_report(plant, out)
+    assert done.returncode == 0, done.stderr
+    slaves, _ = xml_names(plant)
+    assert len(slaves) == 216
+    opened = Opened(browser, out)
+    opened.clean()
+    check_drawing(opened, slaves)
+    links = drawn_links(opened)
+    check_rails(links, xml_ebus_links(plant))
+    # Compact: the drawing's height per slave is well under the old one-row-per-slave's 38.
+    height = opened.page.eval_on_selector("#topology-svg",
+                                          "s => s.getBoundingClientRect().height")
+    assert height < 24 * len(slaves)
+    opened.page.close()
+    check_fits_and_finds(browser, out, slaves, boxes=True)
+
+
+@pytest.mark.parametrize("name", CORPUS_ENIS)
+def test_corpus_page_fits_and_every_slave_is_found(request, browser, tmp_path, name):
+    eni = corpus_eni(request, name)
+    out = tmp_path / "network.html"
+    assert write_report(eni, out).returncode == 0
+    slaves, _ = xml_names(eni)
+    # Names the ENI gives twice (a search selects the first) are looked for once.
+    check_fits_and_finds(browser, out, [n for n in slaves if slaves.count(n) == 1],
+                         boxes=True)
