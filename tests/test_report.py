@@ -80,9 +80,9 @@ class Opened:
         assert self.requests == [self.url]          # nothing fetched: self-contained
 
 
-def write_report(eni: Path, out: Path) -> subprocess.CompletedProcess[str]:
+def write_report(eni: Path, out: Path, *more: str) -> subprocess.CompletedProcess[str]:
     return subprocess.run([sys.executable, "-m", "ecatcfg", "report", str(eni), "-o",
-                           str(out), "--no-cache"], capture_output=True, text=True,
+                           str(out), "--no-cache", *more], capture_output=True, text=True,
                           timeout=120, cwd=ROOT)
 
 
@@ -550,3 +550,142 @@ def test_corpus_page_fits_and_every_slave_is_found(request, browser, tmp_path, n
     # Names the ENI gives twice (a search selects the first) are looked for once.
     check_fits_and_finds(browser, out, [n for n in slaves if slaves.count(n) == 1],
                          boxes=True)
+
+
+# ------------------------------------------- working-counter shares, device types, checks
+
+SHARE_ENIS = CORPUS_ENIS + ["corpus-extra/pmec-lupa/LUPA1kHz_DC.xml",
+                            "corpus/acontis-ecmaster-demo-motion/Yaskawa_SGDV_1ms.xml"]
+
+
+def _shares(page: Any) -> list[tuple[int, list[tuple[str, int]], str]]:
+    """Per datagram row: the sum, (slave, +n) of each share, the summary's words."""
+    out = []
+    for td in page.xpath("//table[@class='frame']//td[contains(@class, 'shares')]"):
+        items = [(li.xpath("string(.//span[@class='share-name'])"),
+                  int(li.xpath("string(.//b[@class='share-adds'])"))) for li in td.xpath(".//li")]
+        out.append((int(td.get("data-sum")), items, td.xpath("string(.//summary)")))
+    return out
+
+
+@pytest.mark.parametrize("name", SHARE_ENIS)
+def test_shares_add_up_to_the_tools_working_counter(request, name):
+    """The slaves each datagram serves add up to the Cnt the tool that wrote the ENI
+    (TwinCAT, EC-Engineer) computed, for every cyclic command that has one."""
+    eni = corpus_eni(request, name)
+    page = html.fromstring(report.render(read_file(eni), str(eni), None))
+    root = etree.parse(str(eni)).getroot()
+    cnts = [c.findtext("Cnt") for c in root.findall("Config/Cyclic/Frame/Cmd")]
+    shares = _shares(page)
+    assert len(shares) == len(cnts) and any(cnts)
+    for (total, items, words), cnt in zip(shares, cnts):
+        assert total == sum(n for _, n in items)
+        if cnt is not None:
+            assert total == int(cnt) and "equal to the ENI's Cnt" in words, (cnt, words)
+        else:
+            assert "gives no expected working counter" in words
+
+
+def test_shares_per_slave_follow_the_process_data(tmp_path):
+    """In the compiled tree, the LRW serves each slave whose ProcessData Send (outputs:
+    +2) or Recv (inputs: +1) range it covers (ETG.1000.4; read by lxml); the BRD every
+    slave (+1).  A Cnt made wrong: the page says the sum differs."""
+    tree = etree.parse(str(compiled_tree(tmp_path)))
+    root = tree.getroot()
+    want: dict[str, int] = {}
+    for slave in root.findall("Config/Slave"):
+        adds = sum(2 if tag == "Send" else 1 for tag in ("Send", "Recv")
+                   if any(int(r.findtext("BitLength")) for r in slave.findall(f"ProcessData/{tag}")))
+        if adds:
+            want[slave.findtext("Info/Name")] = adds
+    cmds = root.findall("Config/Cyclic/Frame/Cmd")
+    lrw = next(k for k, c in enumerate(cmds) if c.findtext("Cmd") == "12")
+    brd = next(k for k, c in enumerate(cmds) if c.findtext("Cmd") == "7")
+    cmds[lrw].find("Cnt").text = str(int(cmds[lrw].findtext("Cnt")) + 1)
+    eni = tmp_path / "wkc.eni.xml"
+    tree.write(str(eni), xml_declaration=True, encoding="UTF-8")
+    shares = _shares(html.fromstring(report.render(read_file(eni), str(eni), None)))
+    assert dict(shares[lrw][1]) == want
+    assert f"differs from the ENI's Cnt {sum(want.values()) + 1}" in shares[lrw][2]
+    names = [s.findtext("Info/Name") for s in root.findall("Config/Slave")]
+    assert shares[brd][1] == [(n, 1) for n in names]
+
+
+def test_boxes_show_the_enis_device_types(request, browser, tmp_path):
+    """TwinCAT's ProductRevision (lxml) is the type in each box that has one; a slave
+    without it shows its product code; the vendor is its id without an ESI."""
+    eni = corpus_eni(request, "corpus-extra/pmec-wec-bench/DriveAndDUTAndPAAndLoadXML.xml")
+    out = tmp_path / "pmec.html"
+    assert write_report(eni, out).returncode == 0
+    opened = Opened(browser, out)
+    shown = opened.page.eval_on_selector_all(
+        "#topology-svg g.node[data-slave]",
+        "gs => gs.map(g => [+g.dataset.slave, g.querySelector('text.type').textContent, "
+        "g.querySelector('text.where').textContent])")
+    slaves = etree.parse(str(eni)).getroot().findall("Config/Slave")
+    assert len(shown) == len(slaves)
+    for index, kind, where in shown:
+        info = slaves[index].find("Info")
+        revision = info.findtext("ProductRevision")
+        expected = revision or f"product 0x{int(info.findtext('ProductCode')):X}"
+        # A line longer than the box shows is cut, with an ellipsis.
+        assert kind and expected.startswith(kind.removesuffix("\u2026")), (kind, expected)
+        at = "passive" if info.find("PhysAddr") is None else \
+            f"#{-int(info.findtext('AutoIncAddr')) & 0xFFFF} @{info.findtext('PhysAddr')}"
+        full = f"{at} vendor 0x{int(info.findtext('VendorId')):X}"
+        assert full.startswith(where.removesuffix("\u2026")) and len(where) > len(at), \
+            (where, full)
+    assert any(info.findtext("ProductRevision") for info in
+               (s.find("Info") for s in slaves))
+    opened.page.close()
+
+
+def _esi_device(product_code: int) -> tuple[str, str]:
+    """(Type, Vendor/Name) of the example ESI device with that product code, by lxml."""
+    for path in sorted((EXAMPLES / "tree" / "esi").glob("*.xml")) + sorted(
+            (EXAMPLES / "esi").glob("*.xml")):
+        root = etree.parse(str(path)).getroot()
+        for dev in root.iter("Device"):
+            code = dev.find("Type").get("ProductCode")
+            if code and int(code.replace("#x", "0x"), 0) == product_code:
+                return dev.findtext("Type").strip(), root.findtext("Vendor/Name").strip()
+    raise AssertionError(product_code)
+
+
+ESI_ARGS = ("--esi", str(EXAMPLES / "tree" / "esi"), "--esi", str(EXAMPLES / "esi"))
+
+
+def test_with_esi_the_boxes_and_the_checks_line_name_the_devices(tmp_path):
+    """With --esi: each slave's type and vendor name from its ESI device (read by lxml),
+    and 'device rules ran for all 7 slaves'; a slave whose revision no ESI describes is
+    named as skipped; without --esi the line says the device rules were skipped."""
+    eni = compiled_tree(tmp_path)
+    out = tmp_path / "tree.html"
+    done = write_report(eni, out, *ESI_ARGS)
+    assert done.returncode == 0, done.stderr
+    page = html.fromstring(out.read_text())
+    slaves = etree.parse(str(eni)).getroot().findall("Config/Slave")
+    for row in page.xpath("//table[@id='slave-table']/tbody/tr"):
+        info = slaves[int(row.get("data-slave"))].find("Info")
+        kind, vendor = _esi_device(int(info.findtext("ProductCode")))
+        cells = [td.text_content() for td in row.findall("td")]
+        assert cells[3:5] == [kind, vendor], cells
+    line = page.get_element_by_id("checks-ran").text_content()
+    assert f"device rules ran for all {len(slaves)} slaves" in line
+    assert "found nothing." in page.get_element_by_id("no-findings").text_content()
+    # One slave's revision changed: no ESI describes it.
+    tree = etree.parse(str(eni))
+    axis3 = next(s for s in tree.getroot().findall("Config/Slave")
+                 if s.findtext("Info/Name") == "axis3")
+    axis3.find("Info/RevisionNo").text = "4242"
+    other = tmp_path / "other.eni.xml"
+    tree.write(str(other), xml_declaration=True, encoding="UTF-8")
+    assert write_report(other, out, *ESI_ARGS).returncode == 0
+    page = html.fromstring(out.read_text())
+    line = page.get_element_by_id("checks-ran").text_content()
+    assert (f"device rules ran for {len(slaves) - 1} of {len(slaves)} slaves; skipped: "
+            f"no ESI for 1 of {len(slaves)} slaves") in line
+    assert "axis3" in page.xpath("string(//details[summary[starts-with(., 'Slaves without')]])")
+    assert write_report(eni, out).returncode == 0
+    line = html.fromstring(out.read_text()).get_element_by_id("checks-ran").text_content()
+    assert "device rules skipped: no ESI given" in line
