@@ -15,19 +15,23 @@ import sys
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser("report", help="an ENI's network as one self-contained HTML page",
                        description="Write an HTML page of an ENI (ours or any tool's): the "
-                                   "topology drawn as SVG, a table per slave, the process "
-                                   "image as a map of bytes and bits coloured by slave, the "
-                                   "cyclic frames with their expected working counters, the "
-                                   "InitCmds per transition and the check findings.  The page "
+                                   "topology drawn as SVG (terminals side by side as on the "
+                                   "DIN rail, each box with its device type and vendor), a "
+                                   "searchable slave table, the process image as a map of "
+                                   "bytes and bits coloured by slave, the cyclic frames with "
+                                   "the slaves each datagram serves and what each adds to "
+                                   "its working counter, the InitCmds per transition, which "
+                                   "check rules ran and the check findings.  The page "
                                    "loads nothing from anywhere: attach it to a ticket, open "
                                    "it offline.")
     p.add_argument("eni", metavar="ENI", help="ENI file")
     p.add_argument("-o", "--output", required=True, metavar="HTML",
                    help="the page to write (atomically)")
     p.add_argument("--esi", action="append", default=[], metavar="PATH",
-                   help="ESI file or folder (repeatable) for the check findings: each slave "
-                        "against its device, as `ecatcfg check --esi` does; without it the "
-                        "ENI is checked against itself")
+                   help="ESI file or folder (repeatable): device types and vendor names "
+                        "for the boxes, and for the check findings each slave against its "
+                        "device, as `ecatcfg check --esi` does; without it the ENI is "
+                        "checked against itself")
     p.add_argument("--prefer", action="append", default=[], metavar="PATH",
                    help="where several ESI files describe one identity differently, take "
                         "the description from this file or folder (repeatable, first first)")

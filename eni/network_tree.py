@@ -107,12 +107,6 @@ def _port_rank(port: str | None) -> int:
     return len(PORT_PROCESSING_ORDER)
 
 
-def _port_rank(port: str | None) -> int:
-    if port is not None and port in PORT_LETTERS:
-        return PORT_PROCESSING_ORDER.index(PORT_LETTERS.index(port))
-    return len(PORT_PROCESSING_ORDER)
-
-
 def _on_ebus(order: list[SlavePlan | PassiveSlave], parent: int, child: int,
              port: str | None) -> bool:
     """Whether ``child`` hangs on ``parent``'s E-bus: the parent's port is ``K`` in its

@@ -1,12 +1,14 @@
 """``ecatcfg report``: an ENI's network as one self-contained HTML page.
 
 Everything on the page comes from the ENI as read into a :class:`NetworkPlan` (any tool's
-file): the topology drawn as SVG (:mod:`.network_tree`), a table per slave, the process
-image as a map of bytes and bits coloured by slave (:mod:`.image_map`), the cyclic frames
-with their expected working counters and slave-to-slave copies, each slave's InitCmds per
-transition in the words of ``show`` (:mod:`.show`, :mod:`.words`), what ``apply`` does not
-do, and the findings of
-``check`` (lint's :class:`~ecatcfg.esi.lint.finding.Finding`).
+file): the topology drawn as SVG, E-bus terminals side by side as on the DIN rail
+(:mod:`.network_tree`), each box with its device type and vendor (:mod:`.report_devices`),
+a searchable slave table and a table per slave, the process image as a map of bytes and
+bits coloured by slave (:mod:`.image_map`), the cyclic frames with their expected working
+counters, the slaves each datagram serves and what each adds (:mod:`.wkc_shares`), and
+slave-to-slave copies, each slave's InitCmds per transition in the words of ``show``
+(:mod:`.show`, :mod:`.words`), what ``apply`` does not do, which check rules ran and the
+findings of ``check`` (lint's :class:`~ecatcfg.esi.lint.finding.Finding`).
 
 The page loads nothing: CSS, the SVG and a few lines of script are inline, and its
 Content-Security-Policy forbids any fetch, so it opens the same from a ticket attachment on

@@ -89,11 +89,12 @@ def coverage(plan: NetworkPlan, found: list[DeviceLabel] | None,
     """``found``: the labels of :func:`labels` (a slave has an ESI device when its
     ``esi`` is set), for ``plan.in_file_order()``."""
     order = plan.in_file_order()
-    active = [(s, lab) for s, lab in zip(order, found or [None] * len(order))
-              if isinstance(s, SlavePlan)]
-    checked = [f"{s.name} ({lab.type}, {lab.esi})" for s, lab in active
-               if esi_given and lab is not None and lab.esi is not None]
-    unchecked = [s.name for s, lab in active
-                 if not (esi_given and lab is not None and lab.esi is not None)]
+    esi = [lab.esi if esi_given and lab is not None else None
+           for lab in (found or [])] + [None] * len(order)
+    active = [(s, esi[k]) for k, s in enumerate(order) if isinstance(s, SlavePlan)]
+    labels_by = dict(enumerate(found or []))
+    checked = [f"{s.name} ({labels_by[k].type}, {esi[k]})" for k, s in enumerate(order)
+               if isinstance(s, SlavePlan) and esi[k] is not None]
+    unchecked = [s.name for s, where in active if where is None]
     return CheckCoverage(len(active), esi_given, checked, unchecked)
 

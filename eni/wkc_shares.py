@@ -2,7 +2,8 @@
 
 A slave takes part in a datagram when the datagram addresses it: a broadcast (BRD, BWR,
 BRW) every slave with an ESC, an auto-increment command (AP**) the slave at its position, a
-configured-address one (FP**) the slave with that station address, a logical one (LRD, LWR,
+configured-address one (FP**) the slave with that station address, a read-multiple-write
+(ARMW, FRMW) every slave (the addressed one reads, the others write), a logical one (LRD, LWR,
 LRW) each slave with an FMMU whose logical range meets the datagram's, read or written as
 the FMMU's type says (ETG.1000.4 "FMMU").  What the slave adds is ETG.1000.4's working
 counter rule (``esc.wkc_increment``): +1 for a read, +1 for a write, LRW +1 read and +2
@@ -84,8 +85,14 @@ def command_shares(plan: NetworkPlan, cmd: CyclicCmd) -> CommandShares:
                          or (cmd.cmd in CONFIGURED_ADDRESS_CMDS and cmd.adp == slave.phys_addr))
             read = addressed and cmd.cmd in REGISTER_READS
             written = addressed and cmd.cmd in REGISTER_WRITES
-            if addressed and cmd.cmd in (Cmd.ARMW, Cmd.FRMW):
-                read = True                   # every slave adds 1 (esc.wkc_increment)
+            if cmd.cmd in (Cmd.ARMW, Cmd.FRMW):
+                # Read multiple write (DC system time): the addressed slave reads, every
+                # other one writes what it read; each adds 1 (esc.wkc_increment).
+                if cmd.cmd == Cmd.ARMW:
+                    addressed = cmd.adp is not None and (-cmd.adp) & 0xFFFF == slave.position
+                else:
+                    addressed = cmd.adp == slave.phys_addr
+                read, written = addressed, not addressed
         adds = wkc_increment(cmd.cmd, read, written)
         if adds:
             shares.append(Share(index[id(slave)], slave.name, read, written, adds))

@@ -595,7 +595,8 @@ def test_shares_per_slave_follow_the_process_data(tmp_path):
     want: dict[str, int] = {}
     for slave in root.findall("Config/Slave"):
         adds = sum(2 if tag == "Send" else 1 for tag in ("Send", "Recv")
-                   if any(int(r.findtext("BitLength")) for r in slave.findall(f"ProcessData/{tag}")))
+                   if any(int(r.findtext("BitLength"))
+                          for r in slave.findall(f"ProcessData/{tag}")))
         if adds:
             want[slave.findtext("Info/Name")] = adds
     cmds = root.findall("Config/Cyclic/Frame/Cmd")
