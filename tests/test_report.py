@@ -690,3 +690,26 @@ def test_with_esi_the_boxes_and_the_checks_line_name_the_devices(tmp_path):
     assert write_report(eni, out).returncode == 0
     line = html.fromstring(out.read_text()).get_element_by_id("checks-ran").text_content()
     assert "device rules skipped: no ESI given" in line
+
+
+def test_shares_are_what_the_emulated_slaves_count(tmp_path):
+    """The compiled tree cycling in OP on the virtual segment (slaves emulated from the
+    example ESIs): each cyclic command's working counter as the emulated ESCs returned it
+    equals the page's sum of shares, the ARMW of the DC system time and the broadcasts
+    included."""
+    from ecatcfg.runtime.network import Network
+    eni = compiled_tree(tmp_path)
+    plan = read_file(eni)
+    page = html.fromstring(report.render(plan, str(eni), None))
+    sums = [total for total, _, _ in _shares(page)]
+    cmds = [c for cy in plan.cyclic for f in cy.frames for c in f.cmds]
+    assert any(c.cmd == 13 for c in cmds)                     # ARMW
+    with Network.virtual(plan, [EXAMPLES / "tree" / "esi", EXAMPLES / "esi"],
+                         esi_cache=False) as net:
+        net.up()
+        assert net.cycle() and net.cycle()
+        returned = {id(s.cmd): s.wkc for slots in net.master.cyclic.frames for s in slots}
+    compared = [(c, total) for c, total in zip(cmds, sums) if id(c) in returned]
+    assert len(compared) >= len(cmds) - 1 and any(c.cmd == 13 for c, _ in compared)
+    for c, total in compared:
+        assert returned[id(c)] == total, (c.cmd, c.adp, c.ado, c.addr)
