@@ -15,19 +15,23 @@ import sys
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser("report", help="an ENI's network as one self-contained HTML page",
                        description="Write an HTML page of an ENI (ours or any tool's): the "
-                                   "topology drawn as SVG, a table per slave, the process "
-                                   "image as a map of bytes and bits coloured by slave, the "
-                                   "cyclic frames with their expected working counters, the "
-                                   "InitCmds per transition and the check findings.  The page "
+                                   "topology drawn as SVG (terminals side by side as on the "
+                                   "DIN rail, each box with its device type and vendor), a "
+                                   "searchable slave table, the process image as a map of "
+                                   "bytes and bits coloured by slave, the cyclic frames with "
+                                   "the slaves each datagram serves and what each adds to "
+                                   "its working counter, the InitCmds per transition, which "
+                                   "check rules ran and the check findings.  The page "
                                    "loads nothing from anywhere: attach it to a ticket, open "
                                    "it offline.")
     p.add_argument("eni", metavar="ENI", help="ENI file")
     p.add_argument("-o", "--output", required=True, metavar="HTML",
                    help="the page to write (atomically; '-': standard output)")
     p.add_argument("--esi", action="append", default=[], metavar="PATH",
-                   help="ESI file or folder (repeatable) for the check findings: each slave "
-                        "against its device, as `ecatcfg check --esi` does; without it the "
-                        "ENI is checked against itself")
+                   help="ESI file or folder (repeatable): device types and vendor names "
+                        "for the boxes, and for the check findings each slave against its "
+                        "device, as `ecatcfg check --esi` does; without it the ENI is "
+                        "checked against itself")
     p.add_argument("--prefer", action="append", default=[], metavar="PATH",
                    help="where several ESI files describe one identity differently, take "
                         "the description from this file or folder (repeatable, first first)")
@@ -43,7 +47,7 @@ def run(args: argparse.Namespace) -> int:
 
     from ecatcfg.cli.inputs import require_eni
     from ecatcfg.cli.paths import output_file
-    from ecatcfg.eni import report
+    from ecatcfg.eni import report, report_devices
     from ecatcfg.eni.cache import PlanCache, read_file
     from ecatcfg.eni.check import check_eni
     from ecatcfg.eni.reader import read_file as read_uncached
@@ -56,24 +60,29 @@ def run(args: argparse.Namespace) -> int:
     plan = read_uncached(args.eni) if args.no_cache else \
         read_file(args.eni, cache=PlanCache())
     findings = None
+    library = None
+    if args.esi:
+        from ecatcfg.esi.library import Library
+        library = Library(args.esi, cache=not args.no_cache, prefer=args.prefer)
+        for problem in library.problems:
+            print(f"ecatcfg report: note: {problem} (its devices are not in the library)",
+                  file=sys.stderr)
+    labels = report_devices.labels(plan, report_devices.product_revisions(args.eni), library)
+    coverage = None
     if not args.no_check:
-        library = None
-        if args.esi:
-            from ecatcfg.esi.library import Library
-            library = Library(args.esi, cache=not args.no_cache, prefer=args.prefer)
-            for problem in library.problems:
-                print(f"ecatcfg report: note: {problem} (its devices are not in the library)",
-                      file=sys.stderr)
+        coverage = report_devices.coverage(plan, labels, library is not None)
         notes: list[str] = []
         findings = check_eni(args.eni, library, use_cache=not args.no_cache,
                              notes=notes).findings
         for note in notes:      # which of differing ESI files the ENI's evidence chose
             print(f"ecatcfg report: note: {note}", file=sys.stderr)
     try:
-        report.write(plan, out, args.eni, findings=findings)
+        report.write(plan, out, args.eni, findings=findings, labels=labels,
+                     coverage=coverage)
     except OSError as exc:
         raise UsageError(f"-o {args.output}: cannot write: {exc.strerror}") from None
-    checked = "" if findings is None else f", {len(findings)} check findings"
+    checked = "" if findings is None or coverage is None else \
+        f", {len(findings)} check findings ({coverage.sentence()})"
     print(f"wrote {args.output}: {len(plan.slaves) + len(plan.passive)} slaves, "
           f"{len(plan.process_image.inputs) + len(plan.process_image.outputs)} variables"
           f"{checked}", file=sys.stderr)

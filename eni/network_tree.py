@@ -8,11 +8,15 @@ Passive terminals (no ESC: no ``PhysAddr``, so nothing can name one as its previ
 pass the E-bus on: TwinCAT writes both the passive terminal and the slave after it behind
 the same port of the same slave, and the slave listed later is behind the passive one.
 
-The drawing is a tree in the frame's order: each ESC forwards a frame through its ports in
-the order A, D, B, C (``esc.PORT_PROCESSING_ORDER``), so children are walked in that order
-and the rows are the slaves depth first, the master on top.  A slave with one child
-continues straight down; a slave with several (a junction, a coupler with an Ethernet out)
-opens one indented branch per port, as a file tree does.
+The drawing is laid out as the plant is built.  Slaves joined by the E-bus (the parent's
+port is a ``K`` in its ``Physics``, ETG.2100 ``Info/Physics``: one letter per port A-D; a
+passive terminal sits on the E-bus) stand side by side in a row, as terminals on a DIN rail
+beside their coupler; a long rail wraps onto further rows, indented.  What leaves a rail
+over Ethernet (a coupler's or a junction's ``Y`` port) is drawn below the rail, indented,
+one branch after another in the frame's order (ports A, D, B, C:
+``esc.PORT_PROCESSING_ORDER``); the last branch out of the rail's first box (a coupler's
+Ethernet out to the next coupler, the next drive of a line) continues straight down in the
+same column, so a long line does not drift right.
 """
 
 from __future__ import annotations
@@ -23,13 +27,15 @@ from ecatcfg.record import record
 
 MASTER = -1                                  # the parent of the first slave(s)
 
-# Drawing units (px): a row per slave, an indent per branch level.
-ROW = 38
-BOX_W, BOX_H = 96, 24
-INDENT = 40
+# Drawing units (px).  A box holds three lines: name, device type, position/address/vendor.
+BOX_W, BOX_H = 172, 50
+GAP_X = 22                                   # between boxes on a rail (the port letter)
+GAP_Y = 24                                   # between rows
+INDENT = 40                                  # a branch, and a rail's wrapped rows
 MARGIN = 12
-TRUNK = 14                                   # the down line leaves a box this far from its left
-CHAR_W = 7.2                                 # estimated width of a label character
+TRUNK = 14                                   # a branch's line runs this far right of a rail
+RAIL_MAX = 6                                 # boxes per row of a rail before it wraps
+LINE_CHARS = 25                              # characters of a box's 11 px lines
 
 
 @record
@@ -41,16 +47,9 @@ class TreeNode:
     phys_addr: int | None
     parent: int | None                       # index of the parent; None for the master
     port: str | None                         # the parent's port (A-D) when the ENI says
-    row: int = 0
-    column: int = 0
-
-    @property
-    def x(self) -> int:
-        return MARGIN + self.column * INDENT
-
-    @property
-    def y(self) -> int:
-        return MARGIN + self.row * ROW
+    x: int = 0
+    y: int = 0
+    ebus: bool = False                       # joined to its parent by the E-bus
 
 
 @record
@@ -61,11 +60,12 @@ class Link:
     path: str                                # SVG path data, parent box -> child box
     label_x: float
     label_y: float
+    ebus: bool = False
 
 
 @record
 class Drawing:
-    nodes: list[TreeNode]                    # master first, then the rows in order
+    nodes: list[TreeNode]                    # master first, then in drawing order
     links: list[Link]
     width: int
     height: int
@@ -107,6 +107,24 @@ def _port_rank(port: str | None) -> int:
     return len(PORT_PROCESSING_ORDER)
 
 
+def _on_ebus(order: list[SlavePlan | PassiveSlave], parent: int, child: int,
+             port: str | None) -> bool:
+    """Whether ``child`` hangs on ``parent``'s E-bus: the parent's port is ``K`` in its
+    Physics; without a port (a line, or behind a passive terminal) the child's own port A
+    says, and a passive terminal (no ESC: an E-bus terminal) is on the E-bus."""
+    if parent == MASTER:
+        return False
+    up, down = order[parent], order[child]
+    if isinstance(down, PassiveSlave):
+        return True
+    if port is not None and port in PORT_LETTERS and isinstance(up, SlavePlan):
+        physics = up.physics or ""
+        k = PORT_LETTERS.index(port)
+        if k < len(physics):
+            return physics[k] == "K"
+    return (down.physics or "Y")[:1] == "K"
+
+
 def layout(plan: NetworkPlan) -> Drawing:
     order = plan.in_file_order()
     links = parents(order)
@@ -117,52 +135,124 @@ def layout(plan: NetworkPlan) -> Drawing:
         nodes[k] = TreeNode(k, s.name, passive,
                             None if isinstance(s, PassiveSlave) else s.position,
                             None if isinstance(s, PassiveSlave) else s.phys_addr,
-                            links[k][0], links[k][1])
+                            links[k][0], links[k][1],
+                            ebus=_on_ebus(order, links[k][0], k, links[k][1]))
     children: dict[int, list[int]] = {n: [] for n in nodes}
     for k, (parent, _) in enumerate(links):
         children[parent].append(k)
-    rows: list[TreeNode] = []
+    for kids in children.values():
+        kids.sort(key=lambda c: (_port_rank(nodes[c].port), c))
+    drawn: list[TreeNode] = []
+    paths: list[Link] = []
     seen: set[int] = set()
 
-    def walk(index: int, column: int) -> None:
-        # Iterative on the line (one child: same column) so a long line does not recurse.
-        while True:
-            node = nodes[index]
-            seen.add(index)
-            node.row, node.column = len(rows), column
-            rows.append(node)
-            kids = sorted((c for c in children[index] if c not in seen),
-                          key=lambda c: (_port_rank(nodes[c].port), c))
-            if len(kids) == 1:
-                index = kids[0]
-                continue
-            for kid in kids:
-                walk(kid, column + 1)
-            return
+    def rail_of(first: int) -> tuple[list[int], list[int]]:
+        """The rail ``first`` starts (it, then E-bus neighbours) and its Ethernet branches
+        (in the order of the rail, each member's in port order)."""
+        rail, branches = [first], []
+        later: list[list[int]] = []           # ports the frame takes after the rail's
+        seen.add(first)
+        k = 0
+        while k < len(rail):
+            kids = [c for c in children[rail[k]] if c not in seen]
+            ebus = [c for c in kids if nodes[c].ebus]
+            on = ebus[0] if ebus else None    # the rail goes on; a second E-bus out branches
+            before = kids if on is None else kids[:kids.index(on)]
+            after = [] if on is None else kids[kids.index(on) + 1:]
+            branches += before
+            later.append(after)
+            seen.update(kids)
+            if on is not None:
+                rail.append(on)
+            k += 1
+        # The frame comes back along the rail: a port after the E-bus one (a coupler's
+        # Ethernet out, C after B) is taken once everything behind the rail is done.
+        for after in reversed(later):
+            branches += after
+        return rail, branches
 
-    walk(MASTER, 0)
+    def place(first: int, x: int, y: int) -> tuple[int, int]:
+        """Draw the rail from ``first`` at (x, y) and everything behind it; the bottom
+        and the right edge it took."""
+        rail, branches = rail_of(first)
+        right = x
+        rows = 0
+        for k, index in enumerate(rail):
+            node = nodes[index]
+            row, col = divmod(k, RAIL_MAX)
+            node.x = x + (INDENT if row else 0) + col * (BOX_W + GAP_X)
+            node.y = y + row * (BOX_H + GAP_Y)
+            right = max(right, node.x + BOX_W)
+            rows = row + 1
+            drawn.append(node)
+            if k:
+                paths.append(_rail_link(nodes[rail[k - 1]], node, wrapped=col == 0))
+        bottom = y + rows * BOX_H + (rows - 1) * GAP_Y
+        for n, index in enumerate(branches):
+            node = nodes[index]
+            # The last branch out of the rail's first box (a coupler's Ethernet out, the
+            # next drive of a line) goes on in the same column: the line continues.
+            straight = n == len(branches) - 1 and node.parent == first
+            bx = x if straight else x + INDENT
+            top = bottom + GAP_Y
+            end, far = place(index, bx, top)
+            paths.append(_branch_link(nodes[node.parent if node.parent is not None
+                                            else MASTER], node, x + TRUNK, straight))
+            bottom, right = end, max(right, far)
+        return bottom, right
+
+    master.x, master.y = MARGIN, MARGIN
+    drawn.append(master)
+    bottom, right = MARGIN + BOX_H, MARGIN + BOX_W
+    first = list(children[MASTER])
+    seen.update(first)
+    straight = len(first) == 1
+    for c in first:
+        seen.discard(c)
+        end, far = place(c, MARGIN if straight else MARGIN + INDENT, bottom + GAP_Y)
+        paths.append(_branch_link(master, nodes[c], MARGIN + TRUNK, straight))
+        bottom, right = end, max(right, far)
     # A PreviousPort that names a slave behind this one makes a loop the walk never enters:
     # such slaves hang off the master, so none is left out of the drawing.
     for k in range(len(order)):
         if k not in seen:
-            nodes[k].parent, nodes[k].port = MASTER, None
-            walk(k, 1)
-    return Drawing(rows, [_link(nodes[n.parent], n) for n in rows if n.parent is not None],
-                   _width(rows), MARGIN * 2 + len(rows) * ROW)
+            nodes[k].parent, nodes[k].port, nodes[k].ebus = MASTER, None, False
+            end, far = place(k, MARGIN + INDENT, bottom + GAP_Y)
+            paths.append(_branch_link(master, nodes[k], MARGIN + TRUNK, False))
+            bottom, right = end, max(right, far)
+    return Drawing(drawn, paths, _width(drawn, right), bottom + MARGIN)
 
 
-def _link(parent: TreeNode, child: TreeNode) -> Link:
-    x = parent.x + TRUNK
-    top = parent.y + BOX_H
+def _rail_link(left: TreeNode, right: TreeNode, wrapped: bool) -> Link:
+    """E-bus neighbours: right edge to left edge; onto a wrapped row: down from the
+    bottom edge, along the gap, into the top edge."""
+    mid = left.y + BOX_H / 2
+    if not wrapped:
+        return Link(left.index, right.index, right.port,
+                    f"M{left.x + BOX_W},{mid} H{right.x}", left.x + BOX_W + 6, mid - 4, True)
+    lane = left.y + BOX_H + GAP_Y / 2
+    sx, ex = left.x + BOX_W / 2, right.x + BOX_W / 2
+    return Link(left.index, right.index, right.port,
+                f"M{sx},{left.y + BOX_H} V{lane} H{ex} V{right.y}", sx + 4, lane - 3, True)
+
+
+def _branch_link(parent: TreeNode, child: TreeNode, trunk: float, straight: bool) -> Link:
+    """Over Ethernet, below: down from the parent's bottom edge to the lane under its row,
+    along to the rail's trunk, down to the child (its top edge when it is straight below,
+    else across into its left edge)."""
+    bottom = parent.y + BOX_H
+    start = trunk if parent.x + TRUNK == trunk else parent.x + BOX_W / 2
     mid = child.y + BOX_H / 2
-    if child.column == parent.column:           # straight down the line
-        return Link(parent.index, child.index, child.port, f"M{x},{top} V{child.y}",
-                    x + 5, child.y - 2)
-    # A branch: down the parent's trunk, then across to the child's box.
-    return Link(parent.index, child.index, child.port, f"M{x},{top} V{mid} H{child.x}",
-                x + 4, mid - 4)
+    head = f"M{start},{bottom}"
+    if start != trunk:
+        lane = bottom + GAP_Y / 2
+        head += f" V{lane} H{trunk}"
+    if straight and child.x <= trunk <= child.x + BOX_W:
+        return Link(parent.index, child.index, child.port, f"{head} V{child.y}",
+                    trunk + 5, child.y - 3)
+    return Link(parent.index, child.index, child.port, f"{head} V{mid} H{child.x}",
+                trunk + 4, mid - 4)
 
 
-def _width(rows: list[TreeNode]) -> int:
-    right = max(n.x + BOX_W + 8 + CHAR_W * (len(n.name) + 2) for n in rows)
-    return int(right) + MARGIN
+def _width(nodes: list[TreeNode], right: int) -> int:
+    return max([right] + [n.x + BOX_W for n in nodes]) + MARGIN

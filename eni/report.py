@@ -1,12 +1,14 @@
 """``ecatcfg report``: an ENI's network as one self-contained HTML page.
 
 Everything on the page comes from the ENI as read into a :class:`NetworkPlan` (any tool's
-file): the topology drawn as SVG (:mod:`.network_tree`), a table per slave, the process
-image as a map of bytes and bits coloured by slave (:mod:`.image_map`), the cyclic frames
-with their expected working counters and slave-to-slave copies, each slave's InitCmds per
-transition in the words of ``show`` (:mod:`.show`, :mod:`.words`), what ``apply`` does not
-do, and the findings of
-``check`` (lint's :class:`~ecatcfg.esi.lint.finding.Finding`).
+file): the topology drawn as SVG, E-bus terminals side by side as on the DIN rail
+(:mod:`.network_tree`), each box with its device type and vendor (:mod:`.report_devices`),
+a searchable slave table and a table per slave, the process image as a map of bytes and
+bits coloured by slave (:mod:`.image_map`), the cyclic frames with their expected working
+counters, the slaves each datagram serves and what each adds (:mod:`.wkc_shares`), and
+slave-to-slave copies, each slave's InitCmds per transition in the words of ``show``
+(:mod:`.show`, :mod:`.words`), what ``apply`` does not do, which check rules ran and the
+findings of ``check`` (lint's :class:`~ecatcfg.esi.lint.finding.Finding`).
 
 The page loads nothing: CSS, the SVG and a few lines of script are inline, and its
 Content-Security-Policy forbids any fetch, so it opens the same from a ticket attachment on
@@ -22,9 +24,11 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from ecatcfg.eni.image_map import ImageMap, bit_owners, image_map
-from ecatcfg.eni.network_tree import BOX_H, BOX_W, Drawing, layout
-from ecatcfg.eni.plan import NetworkPlan, PassiveSlave, SlavePlan
+from ecatcfg.eni.network_tree import BOX_H, BOX_W, LINE_CHARS, Drawing, layout
+from ecatcfg.eni.plan import BitRange, NetworkPlan, PassiveSlave, SlavePlan
+from ecatcfg.eni.report_devices import CheckCoverage, DeviceLabel
 from ecatcfg.eni.show import EniView, summary
+from ecatcfg.eni.wkc_shares import CommandShares, frame_shares
 from ecatcfg.fileio import write_atomic
 from ecatcfg.record import record
 
@@ -50,6 +54,35 @@ class SlaveCard:
 
 
 @record
+class SlaveRow:
+    """A row of the searchable slave table (and the lines of the slave's box)."""
+
+    index: int
+    name: str
+    colour: str
+    passive: bool
+    position: str
+    station: str
+    identity: str
+    type: str
+    vendor: str
+    in_bytes: int
+    out_bytes: int
+    variables: list[str]
+
+    @property
+    def box_lines(self) -> tuple[str, str]:
+        """The box's second and third lines, cut to what a box shows."""
+        where = "passive" if self.passive else f"#{self.position} @{self.station}"
+        return (_cut(self.type or f"product 0x{int(self.identity.split(':')[1], 16):X}"),
+                _cut(f"{where} {self.vendor}"))
+
+
+def _cut(text: str) -> str:
+    return text if len(text) <= LINE_CHARS else text[:LINE_CHARS - 1] + "\u2026"
+
+
+@record
 class VariableRow:
     name: str
     direction: str
@@ -62,7 +95,7 @@ class VariableRow:
 def colour(index: int) -> str:
     """A slave's colour: hues a golden angle apart, so neighbours never look alike, and
     three lightnesses in turn, so that hues that come round close again still differ."""
-    return f"hsl({index * 137.508 % 360:.1f}, 65%, {(72, 60, 84)[index % 3]}%)"
+    return f"hsl({index * 137.508 % 360:.1f}, 70%, {(78, 68, 87)[index % 3]}%)"
 
 
 def transition_title(code: str) -> str:
@@ -127,6 +160,31 @@ def _cards(plan: NetworkPlan, view: EniView) -> list[SlaveCard]:
     return cards
 
 
+def _bytes(ranges: Sequence[BitRange]) -> int:
+    return (sum(r.bit_length for r in ranges) + 7) // 8
+
+
+def _slave_table(plan: NetworkPlan, variables: list[VariableRow],
+                 labels: list[DeviceLabel]) -> list[SlaveRow]:
+    owned: dict[int, list[str]] = {}
+    for v in variables:
+        if v.owner is not None:
+            owned.setdefault(v.owner, []).append(v.name)
+    rows = []
+    for k, s in enumerate(plan.in_file_order()):
+        label = labels[k] if k < len(labels) else DeviceLabel("", f"vendor 0x{s.vendor_id:X}", None)
+        pd = s.process_data if isinstance(s, SlavePlan) else None
+        rows.append(SlaveRow(
+            k, s.name, colour(k), isinstance(s, PassiveSlave),
+            "" if isinstance(s, PassiveSlave) else str(s.position),
+            "" if isinstance(s, PassiveSlave) else str(s.phys_addr),
+            f"{_hex(s.vendor_id, 8)}:{_hex(s.product_code, 8)}:{_hex(s.revision, 8)}",
+            label.type, label.vendor,
+            _bytes(pd.recv) if pd is not None else 0, _bytes(pd.send) if pd is not None else 0,
+            owned.get(k, [])))
+    return rows
+
+
 def _variables(plan: NetworkPlan, view: EniView) -> list[VariableRow]:
     owners = {d: bit_owners(plan, d) for d in ("in", "out")}
     return [VariableRow(v.name, v.direction, v.offset, v.bit_size, v.data_type or "",
@@ -145,23 +203,31 @@ def _template() -> jinja2.Template:
     return env.get_template(TEMPLATE)
 
 
-def render(plan: NetworkPlan, file: str, findings: Sequence[Finding] | None) -> bytes:
+def render(plan: NetworkPlan, file: str, findings: Sequence[Finding] | None,
+           labels: list[DeviceLabel] | None = None,
+           coverage: CheckCoverage | None = None) -> bytes:
     """The page for ``plan`` read from ``file``.  ``findings``: what ``check`` found in
     it, shown in their own section; ``None`` when check was not run (the page says so
-    rather than show an empty list as a clean result)."""
+    rather than show an empty list as a clean result).  ``labels``: each slave's device
+    type and vendor (``report_devices.labels``); ``coverage``: which check rules ran."""
     view = summary(plan, file)
     drawing: Drawing = layout(plan)
     maps: list[ImageMap] = [image_map(plan, "in"), image_map(plan, "out")]
     order = plan.in_file_order()
+    variables = _variables(plan, view)
+    table = _slave_table(plan, variables, labels or [])
+    shares: list[list[CommandShares]] = frame_shares(plan)
     text = _template().render(
         file=file, plan=plan, view=view, drawing=drawing, box_w=BOX_W, box_h=BOX_H,
-        cards=_cards(plan, view), maps=maps, variables=_variables(plan, view),
+        cards=_cards(plan, view), maps=maps, variables=variables, table=table,
+        shares=shares, coverage=coverage,
         names=[s.name for s in order], colours=[colour(k) for k in range(len(order))],
         findings=None if findings is None else sorted(findings, key=lambda f: f.sort_key()))
     return text.encode("utf-8")
 
 
 def write(plan: NetworkPlan, path: str | Path, file: str,
-          findings: Sequence[Finding] | None) -> None:
+          findings: Sequence[Finding] | None, labels: list[DeviceLabel] | None = None,
+          coverage: CheckCoverage | None = None) -> None:
     """Render and write atomically (``fileio.write_atomic``)."""
-    write_atomic(path, render(plan, file, findings))
+    write_atomic(path, render(plan, file, findings, labels, coverage))

@@ -35,7 +35,8 @@ CHROMIUM_ARGS = ["--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-
 CORPUS_ENIS = ["corpus/jn-ec-master/mega_master_eni.xml",     # TwinCAT-style, frame image
                "corpus/acontis-doc/acontis-TrainingSlaves-ENI.xml",   # EC-Engineer
                "corpus/rocos-ethercat/eni_tech6.xml",                 # 6 drives
-               "corpus-extra/hydra/hydra_wholebody_20160108_DC.xml"]  # 16 slaves, 2 MB page
+               "corpus-extra/hydra/hydra_wholebody_20160108_DC.xml",  # 16 slaves, 2 MB page
+               "corpus-extra/pmec-wec-bench/DriveAndDUTAndPAAndLoadXML.xml"]  # 20, couplers
 
 
 def chromium_path() -> str:
@@ -79,9 +80,9 @@ class Opened:
         assert self.requests == [self.url]          # nothing fetched: self-contained
 
 
-def write_report(eni: Path, out: Path) -> subprocess.CompletedProcess[str]:
+def write_report(eni: Path, out: Path, *more: str) -> subprocess.CompletedProcess[str]:
     return subprocess.run([sys.executable, "-m", "ecatcfg", "report", str(eni), "-o",
-                           str(out), "--no-cache"], capture_output=True, text=True,
+                           str(out), "--no-cache", *more], capture_output=True, text=True,
                           timeout=120, cwd=ROOT)
 
 
@@ -145,6 +146,29 @@ def _on_edge(point: list[float], box: list[float]) -> bool:
     inside = left - 1.5 <= x <= right + 1.5 and top - 1.5 <= y <= bottom + 1.5
     edge = min(abs(x - left), abs(x - right), abs(y - top), abs(y - bottom)) <= 1.5
     return inside and edge
+
+
+def xml_ebus_links(eni: Path) -> set[tuple[str, str, str]]:
+    """The links of :func:`expected_links` on the parent's E-bus: the port's letter in the
+    parent's ``Info/Physics`` (ETG.2100: one letter per port A-D) is ``K``."""
+    slaves = etree.parse(str(eni)).getroot().findall("Config/Slave")
+    physics = {s.findtext("Info/Name"): s.findtext("Info/Physics") or "" for s in slaves}
+    return {(parent, child, port) for parent, child, port in expected_links(eni)
+            if "ABCD".index(port) < len(physics[parent])
+            and physics[parent]["ABCD".index(port)] == "K"}
+
+
+def check_rails(links: list[dict[str, Any]], ebus: set[tuple[str, str, str]]) -> None:
+    """E-bus neighbours side by side (the child right of the parent on the same row, or
+    on a row below when the rail wraps); what leaves over Ethernet is below its parent."""
+    for x in links:
+        parent, child = x["parentBox"], x["childBox"]
+        if (x["parent"], x["child"], x["port"]) in ebus:
+            beside = abs(child[1] - parent[1]) < 1 and child[0] >= parent[2]
+            wrapped = child[1] >= parent[3]
+            assert beside or wrapped, x
+        else:
+            assert child[1] >= parent[3], x
 
 
 def drawn_links(opened: Opened) -> list[dict[str, Any]]:
@@ -239,12 +263,16 @@ def test_tree_with_a_junction_shows_its_branches(browser, tmp_path):
     drawn = {(x["parent"], x["child"], x["port"]) for x in links}
     expected = expected_links(eni)
     assert drawn == expected | {("example-tree", slaves[0], "")}
-    # The junction's three ports each lead to a branch, drawn beside the line it leaves.
+    # The junction's three ports each lead on: its E-bus port (a K in its Physics, read by
+    # lxml) to the terminal beside it on the rail, its Ethernet ports to branches below.
     from_junction = [x for x in links if x["parent"] == "junction"]
     assert sorted(x["port"] for x in from_junction) == sorted(
         p for parent, _, p in expected if parent == "junction") == ["B", "C", "D"]
-    junction_left = from_junction[0]["parentBox"][0]
-    assert all(x["childBox"][0] > junction_left for x in from_junction)
+    ebus = xml_ebus_links(eni)
+    assert ("junction", "outputs", "C") in ebus and ("junction", "axis1", "D") not in ebus
+    check_rails(links, ebus)
+    rail = [x for x in links if (x["parent"], x["child"], x["port"]) in ebus]
+    assert len(rail) == 3 and all(abs(x["childBox"][1] - x["parentBox"][1]) < 1 for x in rail)
     # The port letters are drawn as text in the SVG.
     assert sorted(opened.texts("#topology-svg text.port")) == sorted(p for *_, p in expected)
     # Hovering a slave's box marks its bits in the map (the page's script), and only its.
@@ -410,3 +438,278 @@ def test_the_command_shows_what_check_finds(tmp_path):
     assert done.returncode == 0, done.stderr
     page = html.fromstring(out.read_text())
     assert page.get_element_by_id("not-checked") is not None
+
+
+# ------------------------------------------------------------------ a plant-sized page
+
+def plant_topology(segments: int) -> str:
+    """A line of ``segments`` couplers (the next on each one's Ethernet port C), each with
+    twelve E-bus terminals, a junction whose Ethernet ports D and B hold two drives, and
+    two output terminals on its E-bus port C: 18 slaves per segment."""
+    lines = ["master: {name: plant, cycle_time_us: 2000}", "slaves:"]
+    for s in range(segments):
+        lines.append(f"  - {{name: 'Coupler {s}', device: EXB1100"
+                     + (f", parent: 'Coupler {s - 1}', port: C}}" if s else "}"))
+        lines += [f"  - {{name: 'Term {s}.{t}', device: {'EXB1018' if t % 2 else 'EXB2018'}}}"
+                  for t in range(12)]
+        lines += [f"  - {{name: 'Junction {s}', device: EXB1122}}",
+                  f"  - {{name: 'Axis {s}a', device: EXD-402, parent: 'Junction {s}', port: D}}",
+                  f"  - {{name: 'Axis {s}b', device: EXD-402, parent: 'Junction {s}', port: B}}",
+                  f"  - {{name: 'Out {s}.0', device: EXB2018, parent: 'Junction {s}', port: C}}",
+                  f"  - {{name: 'Out {s}.1', device: EXB2018}}"]
+    return "\n".join(lines) + "\n"
+
+
+@pytest.fixture(scope="module")
+def plant(tmp_path_factory) -> Path:
+    """A compiled 216-slave tree (12 segments) from the example devices."""
+    folder = tmp_path_factory.mktemp("plant")
+    topology = folder / "plant.yaml"
+    topology.write_text(plant_topology(12))
+    eni = folder / "plant.eni.xml"
+    done = subprocess.run([sys.executable, "-m", "ecatcfg", "compile", str(topology), "--esi",
+                           str(EXAMPLES / "tree" / "esi"), "--esi", str(EXAMPLES / "esi"),
+                           "-o", str(eni), "--no-cache"], capture_output=True, text=True,
+                          timeout=300, cwd=ROOT)
+    assert done.returncode == 0, done.stderr
+    return eni
+
+
+# Type a name into the search box; where the row it selects (and, after following its link
+# to the drawing, the slave's box) is, against the viewport, and what is at its centre.
+_FOUND_JS = """() => {
+  const row = document.querySelector('#slave-table tbody tr.current');
+  if (!row) { return null; }
+  const r = row.getBoundingClientRect(), cx = (r.left + r.right) / 2,
+        cy = (r.top + r.bottom) / 2, hit = document.elementFromPoint(cx, cy);
+  return {name: row.querySelector('.row-name').textContent, id: row.dataset.slave,
+          rect: [r.left, r.top, r.right, r.bottom], w: innerWidth, h: innerHeight,
+          onTop: !!hit && row.contains(hit)};
+}"""
+_BOX_JS = """id => {
+  const r = document.querySelector(`#topology-svg g.node[data-slave="${id}"] rect`)
+    .getBoundingClientRect();
+  return [r.left, r.top, r.right, r.bottom, innerWidth, innerHeight];
+}"""
+
+
+def _inside(rect: list[float], width: float, height: float) -> bool:
+    return rect[0] >= -0.5 and rect[1] >= -0.5 and rect[2] <= width + 0.5 \
+        and rect[3] <= height + 0.5 and rect[2] > rect[0] and rect[3] > rect[1]
+
+
+def check_fits_and_finds(browser: Any, page_file: Path, names: list[str],
+                         boxes: bool) -> None:
+    """No horizontal overflow of the page; every slave, its name typed into the search
+    box, is the selected row, inside the viewport and not covered; with ``boxes``, the
+    row's link to the drawing brings the slave's box into the viewport."""
+    page = browser.new_page(viewport={"width": 1280, "height": 800})
+    page.goto(page_file.resolve().as_uri(), wait_until="load")
+    for width in (1280, 900):
+        page.set_viewport_size({"width": width, "height": 800})
+        assert page.evaluate("document.documentElement.scrollWidth") <= width
+        assert page.evaluate("document.body.scrollWidth") <= width
+    for name in names:
+        page.fill("#slave-search", name)
+        found = page.evaluate(_FOUND_JS)
+        # The page's search ignores whitespace (an input drops line breaks in names).
+        assert found is not None and found["name"].split() == name.split(), (name, found)
+        assert _inside(found["rect"], found["w"], found["h"]) and found["onTop"], found
+        if boxes:
+            page.click(f'#slave-table tr[data-slave="{found["id"]}"] a.to-box')
+            *box, w, h = page.evaluate(_BOX_JS, found["id"])
+            assert _inside(box, w, h), (name, box)
+    page.close()
+
+
+def test_plant_of_200_slaves_fits_and_every_slave_is_found(browser, tmp_path, plant):
+    out = tmp_path / "plant.html"
+    done = write_report(plant, out)
+    assert done.returncode == 0, done.stderr
+    slaves, _ = xml_names(plant)
+    assert len(slaves) == 216
+    opened = Opened(browser, out)
+    opened.clean()
+    check_drawing(opened, slaves)
+    links = drawn_links(opened)
+    check_rails(links, xml_ebus_links(plant))
+    # Compact: the drawing's height per slave is well under the old one-row-per-slave's 38.
+    height = opened.page.eval_on_selector("#topology-svg",
+                                          "s => s.getBoundingClientRect().height")
+    assert height < 24 * len(slaves)
+    opened.page.close()
+    check_fits_and_finds(browser, out, slaves, boxes=True)
+
+
+@pytest.mark.parametrize("name", CORPUS_ENIS)
+def test_corpus_page_fits_and_every_slave_is_found(request, browser, tmp_path, name):
+    eni = corpus_eni(request, name)
+    out = tmp_path / "network.html"
+    assert write_report(eni, out).returncode == 0
+    slaves, _ = xml_names(eni)
+    # Names the ENI gives twice (a search selects the first) are looked for once.
+    check_fits_and_finds(browser, out, [n for n in slaves if slaves.count(n) == 1],
+                         boxes=True)
+
+
+# ------------------------------------------- working-counter shares, device types, checks
+
+SHARE_ENIS = CORPUS_ENIS + ["corpus-extra/pmec-lupa/LUPA1kHz_DC.xml",
+                            "corpus/acontis-ecmaster-demo-motion/Yaskawa_SGDV_1ms.xml"]
+
+
+def _shares(page: Any) -> list[tuple[int, list[tuple[str, int]], str]]:
+    """Per datagram row: the sum, (slave, +n) of each share, the summary's words."""
+    out = []
+    for td in page.xpath("//table[@class='frame']//td[contains(@class, 'shares')]"):
+        items = [(li.xpath("string(.//span[@class='share-name'])"),
+                  int(li.xpath("string(.//b[@class='share-adds'])"))) for li in td.xpath(".//li")]
+        out.append((int(td.get("data-sum")), items, td.xpath("string(.//summary)")))
+    return out
+
+
+@pytest.mark.parametrize("name", SHARE_ENIS)
+def test_shares_add_up_to_the_tools_working_counter(request, name):
+    """The slaves each datagram serves add up to the Cnt the tool that wrote the ENI
+    (TwinCAT, EC-Engineer) computed, for every cyclic command that has one."""
+    eni = corpus_eni(request, name)
+    page = html.fromstring(report.render(read_file(eni), str(eni), None))
+    root = etree.parse(str(eni)).getroot()
+    cnts = [c.findtext("Cnt") for c in root.findall("Config/Cyclic/Frame/Cmd")]
+    shares = _shares(page)
+    assert len(shares) == len(cnts) and any(cnts)
+    for (total, items, words), cnt in zip(shares, cnts):
+        assert total == sum(n for _, n in items)
+        if cnt is not None:
+            assert total == int(cnt) and "equal to the ENI's Cnt" in words, (cnt, words)
+        else:
+            assert "gives no expected working counter" in words
+
+
+def test_shares_per_slave_follow_the_process_data(tmp_path):
+    """In the compiled tree, the LRW serves each slave whose ProcessData Send (outputs:
+    +2) or Recv (inputs: +1) range it covers (ETG.1000.4; read by lxml); the BRD every
+    slave (+1).  A Cnt made wrong: the page says the sum differs."""
+    tree = etree.parse(str(compiled_tree(tmp_path)))
+    root = tree.getroot()
+    want: dict[str, int] = {}
+    for slave in root.findall("Config/Slave"):
+        adds = sum(2 if tag == "Send" else 1 for tag in ("Send", "Recv")
+                   if any(int(r.findtext("BitLength"))
+                          for r in slave.findall(f"ProcessData/{tag}")))
+        if adds:
+            want[slave.findtext("Info/Name")] = adds
+    cmds = root.findall("Config/Cyclic/Frame/Cmd")
+    lrw = next(k for k, c in enumerate(cmds) if c.findtext("Cmd") == "12")
+    brd = next(k for k, c in enumerate(cmds) if c.findtext("Cmd") == "7")
+    cmds[lrw].find("Cnt").text = str(int(cmds[lrw].findtext("Cnt")) + 1)
+    eni = tmp_path / "wkc.eni.xml"
+    tree.write(str(eni), xml_declaration=True, encoding="UTF-8")
+    shares = _shares(html.fromstring(report.render(read_file(eni), str(eni), None)))
+    assert dict(shares[lrw][1]) == want
+    assert f"differs from the ENI's Cnt {sum(want.values()) + 1}" in shares[lrw][2]
+    names = [s.findtext("Info/Name") for s in root.findall("Config/Slave")]
+    assert shares[brd][1] == [(n, 1) for n in names]
+
+
+def test_boxes_show_the_enis_device_types(request, browser, tmp_path):
+    """TwinCAT's ProductRevision (lxml) is the type in each box that has one; a slave
+    without it shows its product code; the vendor is its id without an ESI."""
+    eni = corpus_eni(request, "corpus-extra/pmec-wec-bench/DriveAndDUTAndPAAndLoadXML.xml")
+    out = tmp_path / "pmec.html"
+    assert write_report(eni, out).returncode == 0
+    opened = Opened(browser, out)
+    shown = opened.page.eval_on_selector_all(
+        "#topology-svg g.node[data-slave]",
+        "gs => gs.map(g => [+g.dataset.slave, g.querySelector('text.type').textContent, "
+        "g.querySelector('text.where').textContent])")
+    slaves = etree.parse(str(eni)).getroot().findall("Config/Slave")
+    assert len(shown) == len(slaves)
+    for index, kind, where in shown:
+        info = slaves[index].find("Info")
+        revision = info.findtext("ProductRevision")
+        expected = revision or f"product 0x{int(info.findtext('ProductCode')):X}"
+        # A line longer than the box shows is cut, with an ellipsis.
+        assert kind and expected.startswith(kind.removesuffix("\u2026")), (kind, expected)
+        at = "passive" if info.find("PhysAddr") is None else \
+            f"#{-int(info.findtext('AutoIncAddr')) & 0xFFFF} @{info.findtext('PhysAddr')}"
+        full = f"{at} vendor 0x{int(info.findtext('VendorId')):X}"
+        assert full.startswith(where.removesuffix("\u2026")) and len(where) > len(at), \
+            (where, full)
+    assert any(info.findtext("ProductRevision") for info in
+               (s.find("Info") for s in slaves))
+    opened.page.close()
+
+
+def _esi_device(product_code: int) -> tuple[str, str]:
+    """(Type, Vendor/Name) of the example ESI device with that product code, by lxml."""
+    for path in sorted((EXAMPLES / "tree" / "esi").glob("*.xml")) + sorted(
+            (EXAMPLES / "esi").glob("*.xml")):
+        root = etree.parse(str(path)).getroot()
+        for dev in root.iter("Device"):
+            code = dev.find("Type").get("ProductCode")
+            if code and int(code.replace("#x", "0x"), 0) == product_code:
+                return dev.findtext("Type").strip(), root.findtext("Vendor/Name").strip()
+    raise AssertionError(product_code)
+
+
+ESI_ARGS = ("--esi", str(EXAMPLES / "tree" / "esi"), "--esi", str(EXAMPLES / "esi"))
+
+
+def test_with_esi_the_boxes_and_the_checks_line_name_the_devices(tmp_path):
+    """With --esi: each slave's type and vendor name from its ESI device (read by lxml),
+    and 'device rules ran for all 7 slaves'; a slave whose revision no ESI describes is
+    named as skipped; without --esi the line says the device rules were skipped."""
+    eni = compiled_tree(tmp_path)
+    out = tmp_path / "tree.html"
+    done = write_report(eni, out, *ESI_ARGS)
+    assert done.returncode == 0, done.stderr
+    page = html.fromstring(out.read_text())
+    slaves = etree.parse(str(eni)).getroot().findall("Config/Slave")
+    for row in page.xpath("//table[@id='slave-table']/tbody/tr"):
+        info = slaves[int(row.get("data-slave"))].find("Info")
+        kind, vendor = _esi_device(int(info.findtext("ProductCode")))
+        cells = [td.text_content() for td in row.findall("td")]
+        assert cells[3:5] == [kind, vendor], cells
+    line = page.get_element_by_id("checks-ran").text_content()
+    assert f"device rules ran for all {len(slaves)} slaves" in line
+    assert "found nothing." in page.get_element_by_id("no-findings").text_content()
+    # One slave's revision changed: no ESI describes it.
+    tree = etree.parse(str(eni))
+    axis3 = next(s for s in tree.getroot().findall("Config/Slave")
+                 if s.findtext("Info/Name") == "axis3")
+    axis3.find("Info/RevisionNo").text = "4242"
+    other = tmp_path / "other.eni.xml"
+    tree.write(str(other), xml_declaration=True, encoding="UTF-8")
+    assert write_report(other, out, *ESI_ARGS).returncode == 0
+    page = html.fromstring(out.read_text())
+    line = page.get_element_by_id("checks-ran").text_content()
+    assert (f"device rules ran for {len(slaves) - 1} of {len(slaves)} slaves; skipped: "
+            f"no ESI for 1 of {len(slaves)} slaves") in line
+    assert "axis3" in page.xpath("string(//details[summary[starts-with(., 'Slaves without')]])")
+    assert write_report(eni, out).returncode == 0
+    line = html.fromstring(out.read_text()).get_element_by_id("checks-ran").text_content()
+    assert "device rules skipped: no ESI given" in line
+
+
+def test_shares_are_what_the_emulated_slaves_count(tmp_path):
+    """The compiled tree cycling in OP on the virtual segment (slaves emulated from the
+    example ESIs): each cyclic command's working counter as the emulated ESCs returned it
+    equals the page's sum of shares, the ARMW of the DC system time and the broadcasts
+    included."""
+    from ecatcfg.runtime.network import Network
+    eni = compiled_tree(tmp_path)
+    plan = read_file(eni)
+    page = html.fromstring(report.render(plan, str(eni), None))
+    sums = [total for total, _, _ in _shares(page)]
+    cmds = [c for cy in plan.cyclic for f in cy.frames for c in f.cmds]
+    assert any(c.cmd == 13 for c in cmds)                     # ARMW
+    with Network.virtual(plan, [EXAMPLES / "tree" / "esi", EXAMPLES / "esi"],
+                         esi_cache=False) as net:
+        net.up()
+        assert net.cycle() and net.cycle()
+        returned = {id(s.cmd): s.wkc for slots in net.master.cyclic.frames for s in slots}
+    compared = [(c, total) for c, total in zip(cmds, sums) if id(c) in returned]
+    assert len(compared) >= len(cmds) - 1 and any(c.cmd == 13 for c, _ in compared)
+    for c, total in compared:
+        assert returned[id(c)] == total, (c.cmd, c.adp, c.ado, c.addr)
