@@ -97,7 +97,7 @@ DEVICE_VALUES: dict[str, _Kind] = {
     "line": "int", "ordinal": "int", "product_code": "int?", "revision": "int?",
     "type": "str", "name": "str", "group": "str", "rx_pdos": "int", "tx_pdos": "int",
     "rx_entries": "int", "tx_entries": "int", "mailbox": "strs", "dc_opmodes": "strs",
-    "slots": "int",
+    "slots": "int", "vendor_id": "int?",     # a device's own vendor (EtherCATInfoList)
 }
 _SUMMARY_VALUES: dict[str, _Kind] = {
     "root": "str", "vendor_id": "int?", "vendor_name": "str", "devices": "list",
