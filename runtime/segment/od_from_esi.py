@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from ecatcfg.esc import MAX_PDO_ENTRIES, SM_COMM_TYPE, SM_PDO_ASSIGN, SM_TYPE_CODES, AlState
 from ecatcfg.esi.coe import device_dictionary, match_infos
-from ecatcfg.esi.datatypes import bit_size as base_bit_size
+from ecatcfg.esi.coe import resolve_type as _resolve_type
 from ecatcfg.esi.datatypes import canonical
 from ecatcfg.esi.model import (
     Device, DictObject, Dictionary, ObjectFlags, ObjectInfo, Pdo, pick_name,
@@ -27,30 +27,6 @@ PREOP_ONLY = frozenset((AlState.PREOP,))
 # entry): our choice, large enough for the mappings seen in the corpus ENIs (EC-murr maps
 # 32 entries with one complete-access download, docs/eni-exports.md §5).
 CONFIGURABLE_MAPPING_CAPACITY = 32
-
-
-def _resolve_type(dic: Dictionary | None, name: str) -> tuple[str, int | None]:
-    """(type name, bit size) of an ESI type: a base type by its canonical name, a
-    dictionary type that only renames a base type (enums, ``DT0800EN03``) by that base type
-    and its own BitSize, anything else by the dictionary's BitSize."""
-    seen: set[str] = set()
-    current = name
-    size: int | None = None
-    while current and current not in seen:
-        seen.add(current)
-        base = canonical(current)
-        if base is not None:
-            return base, size if size is not None else base_bit_size(base)
-        dt = dic.data_types.get(current) if dic is not None else None
-        if dt is None:
-            break
-        if size is None:
-            size = dt.bit_size
-        if dt.base_type and not dt.sub_items and not dt.array_info:
-            current = dt.base_type
-            continue
-        break
-    return name, size
 
 
 def _int_bytes(value: int, nbytes: int) -> bytes:
