@@ -218,3 +218,33 @@ def test_od_values_over_the_wire(veth_netns):
         "Modes of operation = 8") or "Modes of operation = 8 " in ln)
     assert "SINT" in line
     assert "ecatcfg sdo write" in text.stdout
+
+
+def test_od_esi_of_the_elmo_drive_over_the_wire(veth_netns, corpus, tmp_path):
+    # As a user runs it: the device found in the Elmo file (four devices) by the identity
+    # in the slave's SII; nothing differs, and in a copy with one access changed, one line.
+    path = corpus / ELMO
+    text = path.read_text()
+    head, device_text = text.split(ELMO_TYPE)
+    copy = tmp_path / "elmo-copy.xml"
+    copy.write_text(head + ELMO_TYPE + device_text.replace(
+        ELMO_MODES, ELMO_MODES.replace(">rw<", ">ro<"), 1))
+    seg = segment([SlaveSpec(_elmo_device(path), "drive")])
+    argv = [sys.executable, "-m", "ecatcfg", "od", "--slave", "0", "--no-cache",
+            "--iface", veth_netns.if_a, "--esi"]
+    with serving(veth_netns, seg):
+        same = veth_netns.run_in(veth_netns.ns_a, argv + [str(path)], timeout=300, cwd=ROOT)
+        other = veth_netns.run_in(veth_netns.ns_a, argv + [str(copy)], timeout=300, cwd=ROOT)
+    for done in (same, other):
+        assert "Traceback" not in done.stderr, done.stderr
+    assert same.returncode == 0, same.stdout[-2000:] + same.stderr
+    tail = same.stdout[same.stdout.index("compared with"):].splitlines()
+    assert tail[0].endswith(": no differences"), tail[0]
+    # The Device element of product 0x00030924, revision 0x00010420 (the file's third).
+    line = text[:text.index(ELMO_TYPE)].count("\n")          # the line before its Type
+    assert f"{path}:{line} (Elmo Drive)" in tail[0], tail[0]
+    assert other.returncode == 1
+    tail = other.stdout[other.stdout.index("compared with"):].splitlines()
+    assert tail[0].endswith(": 1 difference"), tail[0]
+    assert tail[1] == "  0x6060:00 Modes of operation: access rw on the slave, ro in the ESI"
+    assert not [ln for ln in tail[2:] if not ln.startswith(("  (more) ", "  (ESI) "))]
