@@ -139,7 +139,7 @@ def _esi_device(lib: Any, transport: Any, position: int) -> tuple[Any, str]:
 
 def _print_text(objects: Any, values: bool) -> None:
     from ecatcfg.esi.datatypes import coe_type_name
-    from ecatcfg.runtime.mailbox import OBJECT_CODE_NAMES
+    from ecatcfg.runtime.mailbox import OBJECT_CODE_NAMES, abort_name
     from ecatcfg.runtime.master.od_tool import access_short, value_text
 
     print(f"{len(objects)} object{'s' if len(objects) != 1 else ''}")
@@ -153,7 +153,8 @@ def _print_text(objects: Any, values: bool) -> None:
             if e.subindex in obj.values:
                 value = f" = {value_text(e, obj.values[e.subindex])}"
             elif e.subindex in obj.value_aborts:
-                value = f" = (upload aborted 0x{obj.value_aborts[e.subindex]:08X})"
+                code = obj.value_aborts[e.subindex]
+                value = f" = (upload aborted 0x{code:08X} {abort_name(code)})"
             print(f"  :{e.subindex:02X}  {coe_type_name(e.data_type):12} "
                   f"{e.bit_length:>4} bit  {access_short(e.access):12} {pdo:2} {e.name}"
                   f"{value}")

@@ -248,3 +248,26 @@ def test_od_esi_of_the_elmo_drive_over_the_wire(veth_netns, corpus, tmp_path):
     assert tail[0].endswith(": 1 difference"), tail[0]
     assert tail[1] == "  0x6060:00 Modes of operation: access rw on the slave, ro in the ESI"
     assert not [ln for ln in tail[2:] if not ln.startswith(("  (more) ", "  (ESI) "))]
+
+
+@pytest.mark.parametrize("code, later_whole", [(0x06060000, True), (0x06010000, False)])
+def test_an_aborted_upload_is_shown_and_complete_access_falls_back(code, later_whole):
+    # 0x1018:02 aborts (also the complete access covering it): the identity is read entry
+    # by entry, :02 keeps the abort code.  A hardware error leaves complete access to the
+    # objects after it; "unsupported access" says the slave takes none, and it is not
+    # asked again.
+    lib = Library([DRIVE_ESI], cache=False)
+    seg = segment([SlaveSpec(lib.device(lib.find("EXD-402").entry), "drive")])
+    seg.slaves[0].od.inject_abort(0x1018, 2, code)
+    link, close = serve_in_memory(seg)
+    try:
+        objects = od_tool.upload_dictionary(Transport(link), 0, values=True)
+    finally:
+        close()
+    ident = next(o for o in objects if o.description.index == 0x1018)
+    assert not ident.complete_access
+    assert ident.value_aborts == {2: code} and sorted(ident.values) == [0, 1, 3, 4]
+    later = [o for o in objects if o.description.index > 0x1018 and len(o.entries) > 1]
+    assert later and all(o.complete_access == later_whole for o in later)
+    js = {o["index"]: o for o in od_tool.as_json(objects)}[0x1018]
+    assert {e["subindex"]: e.get("abort_code") for e in js["entries"]}[2] == code
