@@ -82,8 +82,11 @@ def run(args: argparse.Namespace) -> int:
             transport = Transport(link, recorder=recorder)
             if lib is not None:
                 device, esi_where = _esi_device(lib, transport, args.slave)
-            objects = od_tool.upload_dictionary(transport, args.slave, timeout=args.timeout,
-                                                values=args.values)
+            # The ESI's CoE@CompleteAccess, where it is at hand, says whether to try it.
+            coe = device.mailbox.coe if device is not None and device.mailbox else None
+            objects = od_tool.upload_dictionary(
+                transport, args.slave, timeout=args.timeout, values=args.values,
+                complete_access=coe is None or coe.complete_access)
     finally:
         if recorder is not None:
             recorder.close()

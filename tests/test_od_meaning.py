@@ -271,3 +271,28 @@ def test_an_aborted_upload_is_shown_and_complete_access_falls_back(code, later_w
     assert later and all(o.complete_access == later_whole for o in later)
     js = {o["index"]: o for o in od_tool.as_json(objects)}[0x1018]
     assert {e["subindex"]: e.get("abort_code") for e in js["entries"]}[2] == code
+
+
+def test_complete_access_follows_the_esi_when_one_is_given(veth_netns, tmp_path):
+    # The same slave, compared with its ESI and with a copy that says CompleteAccess="false":
+    # records read whole with the first, entry by entry with the second.
+    text = DRIVE_ESI.read_text()
+    assert text.count('CompleteAccess="true"') == 1
+    copy = tmp_path / "drive-no-ca.xml"
+    copy.write_text(text.replace('CompleteAccess="true"', 'CompleteAccess="false"'))
+    lib = Library([DRIVE_ESI], cache=False)
+    seg = segment([SlaveSpec(lib.device(lib.find("EXD-402").entry), "drive")])
+    argv = [sys.executable, "-m", "ecatcfg", "od", "--slave", "0", "--values", "--no-cache",
+            "--format", "json", "--iface", veth_netns.if_a, "--esi"]
+    with serving(veth_netns, seg):
+        whole = veth_netns.run_in(veth_netns.ns_a, argv + [str(DRIVE_ESI)], timeout=120,
+                                  cwd=ROOT)
+        parts = veth_netns.run_in(veth_netns.ns_a, argv + [str(copy)], timeout=120, cwd=ROOT)
+    for done in (whole, parts):
+        assert "Traceback" not in done.stderr and done.returncode == 0, done.stderr
+    records = [[o["complete_access"] for o in json.loads(d.stdout)["objects"]
+                if len(o["entries"]) > 1] for d in (whole, parts)]
+    assert records[0] and all(records[0]) and not any(records[1])
+    assert [[e["raw"] for o in json.loads(d.stdout)["objects"] for e in o["entries"]]
+            for d in (whole, parts)] == [[e["raw"] for o in json.loads(whole.stdout)["objects"]
+                                          for e in o["entries"]]] * 2
