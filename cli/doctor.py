@@ -26,9 +26,9 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                     "op modes and ESI minimum cycle time, the newest 0x10F3 "
                     "diagnosis message where the slave has one.  With an ENI, slaves "
                     "whose SII identity is not the ENI's are reported too, and the DC "
-                    "cycle time the ENI asks for is shown; without one, each slave is named by "
-                    "the identity in its SII (and its device type with --esi).  Nothing is configured; a "
-                    "mailbox is set up from the SII only for a slave below PREOP whose "
+                    "cycle time the ENI asks for is shown; without one, each slave is "
+                    "named by the identity in its SII (and its device type with --esi).  "
+                    "Nothing is configured; a mailbox is set up from the SII only for a slave below PREOP whose "
                     "CoE objects are read (as 'ecatcfg sdo' does).",
         epilog="Exit 0 when every slave is in the target state, 1 otherwise.")
     p.add_argument("eni", nargs="?", metavar="ENI", help="the ENI the line should match")

@@ -18,8 +18,9 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                     "plugged into (A-D) to the slave: from an ENI (PreviousPort), or with "
                     "--iface from the slaves on the line (their DL statuses, as scan "
                     "reads them), each named by its SII's order number and device name, "
-                    "or by the ESI device of its identity with --esi.  Prints DOT, or writes FILE with -o: FILE.svg is drawn "
-                    "by Graphviz 'dot', any other name gets the DOT text.",
+                    "or by the ESI device of its identity with --esi.  Prints DOT, or "
+                    "writes FILE with -o: FILE.svg is drawn by Graphviz 'dot', any other "
+                    "name gets the DOT text.",
         epilog="Exit 1 when the ENI cannot be read, no frame comes back, or -o FILE.svg "
                "is asked for without 'dot' installed.")
     p.add_argument("eni", nargs="?", metavar="ENI", help="the ENI file (or --iface)")

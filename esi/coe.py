@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ecatcfg.esc import SM_COMM_TYPE, SM_PDO_ASSIGN_RANGE, is_pdo_object, pdo_mapping_range
+from ecatcfg.esc import SM_COMM_TYPE, SM_PDO_ASSIGN_RANGE, pdo_mapping_range
 from ecatcfg.esi.datatypes import bit_size as base_bit_size
 from ecatcfg.esi.datatypes import canonical
 from ecatcfg.esi.model import Device, DictObject, Dictionary, ObjectFlags, ObjectInfo
@@ -178,9 +178,10 @@ def resolve_type(dic: Dictionary | None, name: str) -> tuple[str, int | None]:
 # -- the communication area as ETG.1000.6 fixes it ------------------------------------------------
 
 # The AL states in which a PDO mapping (0x16xx/0x1Axx) or assignment (0x1C1n) may be written:
-# the process data layout is fixed at PREOP->SAFEOP (ETG.1000.6 §5.6.7.4, the SM lengths are
-# checked against it then), so writes in SAFEOP or OP are refused whatever an ESI's plain
-# ``rw`` spells (SOES gives these objects ATYPE_RWpre; the emulated slave likewise).
+# the process data layout is taken at PREOP->SAFEOP (the slave checks its SM2/SM3 lengths
+# against it then, AL status codes 0x001D/0x001E), so a change after PREOP has no effect
+# whatever an ESI's plain ``rw`` spells (SOES gives these objects ATYPE_RWpre, read in every
+# state and written in PREOP; the emulated slave likewise).
 PDO_CONFIG_WRITE_STATES = frozenset(("PreOp",))
 
 

@@ -190,7 +190,8 @@ def test_values_are_what_the_esi_gives_the_slave(complete_access):
     # Every entry has its value or an abort code, none neither.
     for obj in objects.values():
         for sub in obj.entries:
-            assert (sub in obj.values) != (sub in obj.value_aborts), (hex(obj.description.index), sub)
+            assert (sub in obj.values) != (sub in obj.value_aborts), \
+                (hex(obj.description.index), sub)
     # Complete access was used where asked (records and arrays read whole).
     assert any(o.complete_access for o in objects.values()) == complete_access
 

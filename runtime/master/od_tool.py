@@ -10,10 +10,11 @@ description and the description of each subindex 0 .. max subindex, the way SOEM
 
 With values (``od --values``, what TwinCAT's CoE-Online shows beside each entry), each
 object's entries are uploaded in the same session: a record or array with one complete
-access from subindex 0 where the slave takes it (ETG.1000.6 §5.6.2.1; a slave that refuses
-it is asked entry by entry from then on), split with the layout SOES and the SSC upload
-(subindex 0 in 16 bits, bit-sized entries packed, the others on byte boundaries); where the
-bytes do not come to that layout's length (a record with reserved gaps), entry by entry.
+access from subindex 0 where the slave takes it (ETG.1000.6 SDO complete access; a slave
+that refuses it is asked entry by entry from then on), split with the layout SOES and the
+SSC upload (subindex 0 in 16 bits, bit-sized entries packed, the others on byte
+boundaries); where the bytes do not come to that layout's length (a record with reserved
+gaps), entry by entry.
 Writing stays with ``ecatcfg sdo write``.
 """
 
@@ -180,15 +181,15 @@ def value_text(entry: EntryDescription, data: bytes) -> str:
     maps), a quoted string, or hex bytes."""
     value = value_of(entry, data)
     type_name = coe_type_name(entry.data_type)
-    if isinstance(value, bool) or isinstance(value, float):
+    if isinstance(value, (bool, float)):
         return str(value)
     if isinstance(value, int):
         if entry.bit_length >= 16 and type_name.startswith("U"):
             text = f"0x{value:0{(entry.bit_length + 3) // 4}X} ({value})"
-            if entry.index in RX_PDO_MAPPING or entry.index in TX_PDO_MAPPING:
-                if entry.subindex and value:     # index << 16 | sub << 8 | bits
-                    text = f"0x{value:08X} (0x{value >> 16:04X}:{value >> 8 & 0xFF:02X}, " \
-                           f"{value & 0xFF} bit)"
+            mapping = entry.index in RX_PDO_MAPPING or entry.index in TX_PDO_MAPPING
+            if mapping and entry.subindex and value:     # index << 16 | sub << 8 | bits
+                text = f"0x{value:08X} (0x{value >> 16:04X}:{value >> 8 & 0xFF:02X}, " \
+                       f"{value & 0xFF} bit)"
             return text
         return str(value)
     if canonical(type_name) is not None and "STRING" in type_name \
