@@ -26,8 +26,9 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                     "op modes and ESI minimum cycle time, the newest 0x10F3 "
                     "diagnosis message where the slave has one.  With an ENI, slaves "
                     "whose SII identity is not the ENI's are reported too, and the DC "
-                    "cycle time the ENI asks for is shown.  Nothing is configured; a "
-                    "mailbox is set up from the SII only for a slave below PREOP whose "
+                    "cycle time the ENI asks for is shown; without one, each slave is "
+                    "named by the identity in its SII (and its device type with --esi).  "
+                    "Nothing is configured; a mailbox is set up from the SII only for a slave below PREOP whose "
                     "CoE objects are read (as 'ecatcfg sdo' does).",
         epilog="Exit 0 when every slave is in the target state, 1 otherwise.")
     p.add_argument("eni", nargs="?", metavar="ENI", help="the ENI the line should match")
@@ -52,6 +53,7 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
 def run(args: argparse.Namespace) -> int:
     import json
 
+    from ecatcfg.cli.identity import slave_identities
     from ecatcfg.esc import AlState
     from ecatcfg.runtime.link import RawLink
     from ecatcfg.runtime.master.diagnose import doctor
@@ -81,18 +83,26 @@ def run(args: argparse.Namespace) -> int:
         if library is not None:
             library = library.guided(_line_evidence(transport, plan, args.eni))
         count, findings = doctor(transport, target, plan, library)
+        # Without an ENI a slave has no name: it is shown by the identity in its SII (and
+        # the device of that identity in --esi).
+        who = slave_identities(transport, [f.position for f in findings], library) \
+            if plan is None and findings else {}
     out: dict[str, Any] = {"iface": args.iface, "eni": args.eni, "target": target.name,
                            "slaves": count, "ok": not findings,
-                           "findings": [f.as_json() for f in findings]}
+                           "findings": [{**f.as_json(), **(who[f.position].as_json()
+                                                            if f.position in who else {})}
+                                        for f in findings]}
     if args.format == "json":
         print(json.dumps(out, indent=2))
     else:
         if not findings:
             print(f"all {count} slaves in {target.name}")
         for f in findings:
-            who = f"slave {f.position}" + (f" ({f.name})" if f.name else "")
-            print(f"{who}: {f.state}, not {target.name}" if f.state != target.name
-                  else f"{who}: {f.state}")
+            name = f.name if f.name else who[f.position].text() if f.position in who \
+                else None
+            shown = f"slave {f.position}" + (f" ({name})" if name else "")
+            print(f"{shown}: {f.state}, not {target.name}" if f.state != target.name
+                  else f"{shown}: {f.state}")
             for line in f.identity:
                 print(f"  identity: {line}")
             if f.cause is not None:

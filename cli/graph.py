@@ -8,6 +8,7 @@ from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     from ecatcfg.eni.graph import GraphNode
+    from ecatcfg.esi.library import Library
 
 
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -16,8 +17,10 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
         description="Draw the master and the slaves, an edge from the port a slave is "
                     "plugged into (A-D) to the slave: from an ENI (PreviousPort), or with "
                     "--iface from the slaves on the line (their DL statuses, as scan "
-                    "reads them).  Prints DOT, or writes FILE with -o: FILE.svg is drawn "
-                    "by Graphviz 'dot', any other name gets the DOT text.",
+                    "reads them), each named by its SII's order number and device name, "
+                    "or by the ESI device of its identity with --esi.  Prints DOT, or "
+                    "writes FILE with -o: FILE.svg is drawn by Graphviz 'dot', any other "
+                    "name gets the DOT text.",
         epilog="Exit 1 when the ENI cannot be read, no frame comes back, or -o FILE.svg "
                "is asked for without 'dot' installed.")
     p.add_argument("eni", nargs="?", metavar="ENI", help="the ENI file (or --iface)")
@@ -25,7 +28,12 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
     p.add_argument("-o", "--output", metavar="FILE", help="write DOT or (FILE.svg) SVG here")
     p.add_argument("--format", choices=["text", "json"], default="text",
                    help="text: DOT; json: the nodes and edges")
-    p.add_argument("--no-cache", action="store_true", help="do not use the ENI plan cache")
+    p.add_argument("--esi", action="append", default=[], metavar="PATH",
+                   help="with --iface: ESI file or folder (repeatable) naming each slave by "
+                        "the device of its SII identity (without it, by the name in its "
+                        "SII)")
+    p.add_argument("--no-cache", action="store_true",
+                   help="do not use the ENI plan cache or the ESI index cache")
     p.set_defaults(run=run)
 
 
@@ -39,6 +47,9 @@ def run(args: argparse.Namespace) -> int:
 
     if (args.eni is None) == (args.iface is None):
         raise UsageError("give an ENI file or --iface IF (one of them)")
+    if args.esi and args.iface is None:
+        raise UsageError("--esi names the slaves of a live line: give it with --iface "
+                         "(an ENI names its slaves itself)")
     out = output_file(args.output) if args.output else None
     if args.eni is not None:
         if not Path(args.eni).exists():
@@ -50,7 +61,15 @@ def run(args: argparse.Namespace) -> int:
         nodes = graph.from_plan(plan)
         title = plan.master.name or Path(args.eni).name
     else:
-        nodes = _live(args.iface)
+        library = None
+        if args.esi:
+            import sys
+
+            from ecatcfg.esi.library import Library
+            library = Library(args.esi, cache=not args.no_cache)
+            for problem in library.problems:
+                print(f"warning: {problem}", file=sys.stderr)
+        nodes = _live(args.iface, library)
         title = args.iface
     if args.format == "json":
         text = json.dumps({"title": title, "nodes": [
@@ -69,8 +88,9 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _live(iface: str) -> list[GraphNode]:
-    from ecatcfg.eni.graph import GraphNode
+def _live(iface: str, library: Library | None) -> list[GraphNode]:
+    from ecatcfg.cli.identity import slave_identities
+    from ecatcfg.eni.graph import GraphNode, slave_label
     from ecatcfg.eni.network_tree import MASTER
     from ecatcfg.esc import PORT_LETTERS
     from ecatcfg.runtime.link import RawLink
@@ -78,11 +98,15 @@ def _live(iface: str) -> list[GraphNode]:
     from ecatcfg.runtime.master.transport import Transport
 
     with RawLink(iface) as link:
-        found = scan(Transport(link))
+        transport = Transport(link)
+        found = scan(transport)
+        who = slave_identities(transport, [s.position for s in found], library,
+                               sii_names=True, found=found)
     nodes = [GraphNode(MASTER, "master", None, None)]
     for s in found:
-        nodes.append(GraphNode(s.position, f"#{s.position}\n0x{s.vendor_id:08X}:"
-                                           f"0x{s.product_code:08X}",
+        ident = who[s.position]
+        nodes.append(GraphNode(s.position, slave_label(s.position, ident.type, ident.name,
+                                                       s.vendor_id, s.product_code),
                                s.plug.parent if s.plug is not None else None,
                                PORT_LETTERS[s.plug.port] if s.plug is not None else None))
     return nodes

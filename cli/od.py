@@ -10,7 +10,11 @@ EPILOG = ("Use it on a line no other master is driving: the slave is brought to 
           "(mailbox from its SII) if it is below PREOP, and stays there.  With --esi the "
           "device is found by the identity in the slave's SII, and every object missing on "
           "the slave or differing in data type, bit length or access is listed (objects "
-          "only the slave has are listed apart and do not fail).  Exit 1 on "
+          "only the slave has are listed apart and do not fail); types are compared by "
+          "their ETG.1020 meaning, access by the states it allows, and communication "
+          "entries an ESI types otherwise than ETG.1000.6 are noted as the ESI's "
+          "(ESI).  With --values each entry's value is uploaded and shown beside it "
+          "(CoE-Online); write one with 'ecatcfg sdo write'.  Exit 1 on "
           "an SDO information error of the list or an object, no answer, or (with --esi) a "
           "difference.")
 
@@ -32,6 +36,10 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
     p.add_argument("--esi", action="append", default=[], metavar="PATH",
                    help="ESI file or folder (searched recursively) to compare with; "
                         "repeatable")
+    p.add_argument("--values", action="store_true",
+                   help="upload each entry's value too (a record or array with one complete "
+                        "access where the slave takes it) and show it beside the entry; "
+                        "write a value with 'ecatcfg sdo write'")
     p.add_argument("--timeout", type=float, default=3.0, metavar="S",
                    help="seconds the slave may take to answer each request (default 3)")
     p.add_argument("--pcap", metavar="FILE",
@@ -74,21 +82,28 @@ def run(args: argparse.Namespace) -> int:
             transport = Transport(link, recorder=recorder)
             if lib is not None:
                 device, esi_where = _esi_device(lib, transport, args.slave)
-            objects = od_tool.upload_dictionary(transport, args.slave, timeout=args.timeout)
+            # The ESI's CoE@CompleteAccess, where it is at hand, says whether to try it.
+            coe = device.mailbox.coe if device is not None and device.mailbox else None
+            objects = od_tool.upload_dictionary(
+                transport, args.slave, timeout=args.timeout, values=args.values,
+                complete_access=coe is None or coe.complete_access)
     finally:
         if recorder is not None:
             recorder.close()
     differences: list[str] | None = None
     extras: list[str] = []
+    notes: list[str] = []
     if device is not None:
-        differences, extras = od_tool.compare_with_esi(objects, device)
+        found = od_tool.compare_with_esi(objects, device)
+        differences, extras, notes = found.differences, found.extras, found.esi_notes
     if args.format == "json":
         out: dict[str, Any] = {"slave": args.slave, "objects": od_tool.as_json(objects)}
         if differences is not None:
-            out.update(esi=esi_where, differences=differences, extras=extras)
+            out.update(esi=esi_where, differences=differences, extras=extras,
+                       esi_notes=notes)
         print(json.dumps(out, indent=2))
     else:
-        _print_text(objects)
+        _print_text(objects, args.values)
         if differences is not None:
             print(f"compared with {esi_where}: "
                   + ("no differences" if not differences
@@ -98,6 +113,8 @@ def run(args: argparse.Namespace) -> int:
                 print(f"  {line}")
             for line in extras:
                 print(f"  (more) {line}")
+            for line in notes:
+                print(f"  (ESI) {line}")
     return 1 if differences else 0
 
 
@@ -123,10 +140,10 @@ def _esi_device(lib: Any, transport: Any, position: int) -> tuple[Any, str]:
     return lib.device(entry), where
 
 
-def _print_text(objects: Any) -> None:
+def _print_text(objects: Any, values: bool) -> None:
     from ecatcfg.esi.datatypes import coe_type_name
-    from ecatcfg.runtime.mailbox import OBJECT_CODE_NAMES
-    from ecatcfg.runtime.master.od_tool import access_short
+    from ecatcfg.runtime.mailbox import OBJECT_CODE_NAMES, abort_name
+    from ecatcfg.runtime.master.od_tool import access_short, value_text
 
     print(f"{len(objects)} object{'s' if len(objects) != 1 else ''}")
     for obj in objects:
@@ -135,7 +152,16 @@ def _print_text(objects: Any) -> None:
         print(f"0x{d.index:04X}  {kind:6} {d.name}")
         for e in obj.entries.values():
             pdo = "".join(c for c, bit in (("R", 0x40), ("T", 0x80)) if e.access & bit)
+            value = ""
+            if e.subindex in obj.values:
+                value = f" = {value_text(e, obj.values[e.subindex])}"
+            elif e.subindex in obj.value_aborts:
+                code = obj.value_aborts[e.subindex]
+                value = f" = (upload aborted 0x{code:08X} {abort_name(code)})"
             print(f"  :{e.subindex:02X}  {coe_type_name(e.data_type):12} "
-                  f"{e.bit_length:>4} bit  {access_short(e.access):12} {pdo:2} {e.name}")
+                  f"{e.bit_length:>4} bit  {access_short(e.access):12} {pdo:2} {e.name}"
+                  f"{value}")
         for sub, code in obj.missing.items():
             print(f"  :{sub:02X}  (SDO information error 0x{code:08X})")
+    if values:
+        print("write a value with: ecatcfg sdo write --iface IF --slave POS INDEX:SUB VALUE")

@@ -35,6 +35,16 @@ def from_plan(plan: NetworkPlan) -> list[GraphNode]:
     return nodes
 
 
+def slave_label(position: int, type_name: str | None, name: str | None, vendor_id: int,
+                product_code: int) -> str:
+    """The label of a slave found on a live line: ``#3 EL1004`` over its device name, as
+    its SII or ESI names it; the hex identity where neither does."""
+    first = f"#{position} {type_name}" if type_name else f"#{position}"
+    second = name if name and name != type_name else \
+        f"0x{vendor_id:08X}:0x{product_code:08X}" if not type_name else ""
+    return f"{first}\n{second}" if second else first
+
+
 def _quote(text: str) -> str:
     return '"' + text.replace("\\", "\\\\").replace('"', '\\"').replace("\n", "\\n") + '"'
 
@@ -58,4 +68,4 @@ def dot(nodes: list[GraphNode], title: str) -> str:
     return "\n".join(lines) + "\n"
 
 
-__all__ = ["GraphNode", "dot", "from_plan"]
+__all__ = ["GraphNode", "dot", "from_plan", "slave_label"]

@@ -8,6 +8,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from ecatcfg.esc import SM_COMM_TYPE, SM_PDO_ASSIGN_RANGE, pdo_mapping_range
+from ecatcfg.esi.datatypes import bit_size as base_bit_size
+from ecatcfg.esi.datatypes import canonical
 from ecatcfg.esi.model import Device, DictObject, Dictionary, ObjectFlags, ObjectInfo
 
 # The AL state an InitCmd's SDO runs in: a transition's commands are sent from its source
@@ -146,3 +149,58 @@ def write_refusal(found: DictEntry | DictObject | None, state: str) -> str | Non
     if "w" not in access.value:
         return f"access {access.value!r}"
     return "writes allowed only in " + (", ".join(sorted(access.write_states)) or "no state")
+
+
+def resolve_type(dic: Dictionary | None, name: str) -> tuple[str, int | None]:
+    """(type name, bit size) of an ESI type: a base type by its canonical name, a
+    dictionary type that only renames a base type (enums, ``DT0800EN03``) by that base type
+    and its own BitSize, anything else by the dictionary's BitSize."""
+    seen: set[str] = set()
+    current = name
+    size: int | None = None
+    while current and current not in seen:
+        seen.add(current)
+        base = canonical(current)
+        if base is not None:
+            return base, size if size is not None else base_bit_size(base)
+        dt = dic.data_types.get(current) if dic is not None else None
+        if dt is None:
+            break
+        if size is None:
+            size = dt.bit_size
+        if dt.base_type and not dt.sub_items and not dt.array_info:
+            current = dt.base_type
+            continue
+        break
+    return name, size
+
+
+# -- the communication area as ETG.1000.6 fixes it ------------------------------------------------
+
+# The AL states in which a PDO mapping (0x16xx/0x1Axx) or assignment (0x1C1n) may be written:
+# the process data layout is taken at PREOP->SAFEOP (the slave checks its SM2/SM3 lengths
+# against it then, AL status codes 0x001D/0x001E), so a change after PREOP has no effect
+# whatever an ESI's plain ``rw`` spells (SOES gives these objects ATYPE_RWpre, read in every
+# state and written in PREOP; the emulated slave likewise).
+PDO_CONFIG_WRITE_STATES = frozenset(("PreOp",))
+
+
+def standard_entry_type(index: int, subindex: int) -> tuple[str, int] | None:
+    """(base type, bits) that ETG.1000.6 fixes for a communication-area entry, or ``None``
+    where the device chooses: subindex 0 of the PDO mapping, assignment, SM type and
+    identity objects counts entries (USINT); a mapping entry is index<<16 | sub<<8 | bits
+    (UDINT); an assignment entry a PDO index (UINT); an SM type entry a code 0..4
+    (USINT); the identity's entries and the device type are UDINT."""
+    mapping = index in pdo_mapping_range("rx") or index in pdo_mapping_range("tx")
+    if index == 0x1000 and subindex == 0:
+        return "UDINT", 32
+    if mapping or index in SM_PDO_ASSIGN_RANGE or index in (SM_COMM_TYPE, 0x1018):
+        if subindex == 0:
+            return "USINT", 8
+        if mapping or (index == 0x1018 and subindex <= 4):
+            return "UDINT", 32
+        if index in SM_PDO_ASSIGN_RANGE:
+            return "UINT", 16
+        if index == SM_COMM_TYPE:
+            return "USINT", 8
+    return None

@@ -269,7 +269,9 @@ def test_apply_and_doctor_say_the_cause_over_veth(veth_netns, plan, tmp_path):
             sys.executable, "-m", "ecatcfg", "doctor", "--iface", veth_netns.if_a],
             timeout=60, cwd=ROOT)
         assert done.returncode == 1, done.stderr
-        assert "slave 4: INIT, not OP\n  no error flag (AL status code 0x0000)" in done.stdout
+        # Without an ENI the slave is named by the identity in its SII (the EXD-402's).
+        assert ("slave 4 (0xe0000eca:0x00007201:0x00020000): INIT, not OP\n"
+                "  no error flag (AL status code 0x0000)") in done.stdout
     finally:
         proc.send_signal(2)
         proc.wait(10)

@@ -70,12 +70,15 @@ def test_states_shows_requests_and_acknowledges_a_refusal(veth_netns, lib):
         assert seg.slaves[DRIVE].error
         assert [s.state for s in seg.slaves] == [AlState.PREOP, AlState.PREOP, AlState.INIT]
         text = ecatcfg_in(veth_netns, "states", "--slave", str(DRIVE))
-        assert text.stdout.strip() == "2  INIT+ERR 0x0016 invalid mailbox configuration (PREOP)"
+        # The drive is shown by the identity in its SII (its ESI's Vendor/Id, ProductCode
+        # and RevisionNo: E0000ECA, 7201, 00020000).
+        assert text.stdout.strip() == ("2  0xe0000eca:0x00007201:0x00020000  INIT+ERR 0x0016 "
+                                       "invalid mailbox configuration (PREOP)")
 
         # INIT of the drive alone, acknowledging its error: the flag goes.
         back = ecatcfg_in(veth_netns, "states", "--slave", str(DRIVE), "INIT")
         assert back.returncode == 0, back.stdout + back.stderr
-        assert back.stdout.strip() == "2  INIT"
+        assert back.stdout.strip() == "2  0xe0000eca:0x00007201:0x00020000  INIT"
         assert not seg.slaves[DRIVE].error and seg.slaves[DRIVE].state == AlState.INIT
         assert seg.slaves[0].state == AlState.PREOP          # the others were left alone
 

@@ -122,6 +122,68 @@ def scan(transport: Transport) -> list[FoundSlave]:
                        s.dl_status, plug) for s, plug in zip(slaves, plugs)]
 
 
+def identities(transport: Transport, positions: list[int]) -> dict[int, FoundSlave]:
+    """The SII identity and DL status of each slave in ``positions`` (no plug: that needs
+    the whole line); a slave whose SII does not answer is left out, so that one dead
+    EEPROM does not hide the others (``states``, ``doctor``)."""
+    out: dict[int, FoundSlave] = {}
+    run_jobs(transport, [_or_nothing(identity_job(p, out)) for p in positions])
+    return out
+
+
+def _or_nothing(job: Job) -> Job:
+    try:
+        yield from job
+    except ApplyError:
+        return
+
+
+# The SII categories are read one after the other from this word on (ETG.2010: after the
+# 64-word header); a bound on how far to look for GENERAL (the largest SII is 64 KiB).
+SII_FIRST_CATEGORY = 0x0040
+_SII_WORDS_MAX = 0x8000
+
+
+def sii_head_job(position: int, out: dict[int, bytes]) -> Job:
+    """The SII from word 0 through its GENERAL category (the device's name, order number,
+    group, CoE details), STRINGS included where it comes first as ETG.2010 has it: the
+    header, then category by category (type, length in words, data) until GENERAL or the
+    end marker.  Not the whole EEPROM: a scan of names reads a few hundred bytes."""
+    from ecatcfg.esi.sii import CAT_END, CAT_GENERAL, CATEGORY_HEADER
+
+    deadline = time.monotonic() + EEPROM_TIMEOUT
+    adp = -position & 0xFFFF
+    owner = Datagram.physical(Cmd.APWR, adp, Reg.EEPROM_CONFIG, b"\x00")
+    yield from until_answered([owner], deadline, ApplyError(f"position {position}: no answer"))
+    data = b""
+
+    def upto(words: int) -> Step[None]:
+        nonlocal data, deadline
+        while len(data) < 2 * words:
+            deadline = time.monotonic() + EEPROM_TIMEOUT
+            data += yield from sii_words(position, len(data) // 2, deadline)
+
+    word = SII_FIRST_CATEGORY
+    while word < _SII_WORDS_MAX:
+        yield from upto(word + 2)
+        kind, length = CATEGORY_HEADER.unpack_from(data, 2 * word)
+        if kind == CAT_END:
+            break
+        yield from upto(word + 2 + length)
+        word += 2 + length
+        if kind == CAT_GENERAL:
+            break
+    out[position] = data[:2 * word]
+
+
+def sii_heads(transport: Transport, positions: list[int]) -> dict[int, bytes]:
+    """:func:`sii_head_job` of each slave in ``positions``, all at once; a slave whose SII
+    does not answer is left out."""
+    out: dict[int, bytes] = {}
+    run_jobs(transport, [_or_nothing(sii_head_job(p, out)) for p in positions])
+    return out
+
+
 @record(frozen=True)
 class Mismatch:
     position: int

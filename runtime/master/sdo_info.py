@@ -135,3 +135,9 @@ class DescribedObject:
     # Subindexes the slave answered with an SDO information error (abort code), e.g. the
     # gaps of a record numbered 0, 4, 5.
     missing: dict[int, int] = field(default_factory=dict)
+    # With values uploaded (``od --values``): subindex -> the bytes the slave gave, or the
+    # abort code it answered that entry's upload with; whether the values came by one
+    # complete access.
+    values: dict[int, bytes] = field(default_factory=dict)
+    value_aborts: dict[int, int] = field(default_factory=dict)
+    complete_access: bool = False

@@ -10,8 +10,10 @@ the dictionary does with SDO requests is ``objects.py``.
 from __future__ import annotations
 
 from ecatcfg.esc import MAX_PDO_ENTRIES, SM_COMM_TYPE, SM_PDO_ASSIGN, SM_TYPE_CODES, AlState
-from ecatcfg.esi.coe import device_dictionary, match_infos
-from ecatcfg.esi.datatypes import bit_size as base_bit_size
+from ecatcfg.esi.coe import (
+    PDO_CONFIG_WRITE_STATES, device_dictionary, match_infos, standard_entry_type,
+)
+from ecatcfg.esi.coe import resolve_type as _resolve_type
 from ecatcfg.esi.datatypes import canonical
 from ecatcfg.esi.model import (
     Device, DictObject, Dictionary, ObjectFlags, ObjectInfo, Pdo, pick_name,
@@ -20,37 +22,14 @@ from ecatcfg.runtime.segment.od_entries import MAILBOX_STATES, OdEntry, OdObject
 
 # ETG.2000 access restriction names -> AL states (esi.model.STATES).
 _STATE_BY_NAME = {"PreOp": AlState.PREOP, "SafeOp": AlState.SAFEOP, "Op": AlState.OP}
-PREOP_ONLY = frozenset((AlState.PREOP,))
+# Where a PDO mapping or assignment takes writes (esi.coe: PREOP only).
+PREOP_ONLY = frozenset(_STATE_BY_NAME[s] for s in PDO_CONFIG_WRITE_STATES)
 
 
 # Capacity of a configurable mapping object the ESI does not describe (no dictionary
 # entry): our choice, large enough for the mappings seen in the corpus ENIs (EC-murr maps
 # 32 entries with one complete-access download, docs/eni-exports.md §5).
 CONFIGURABLE_MAPPING_CAPACITY = 32
-
-
-def _resolve_type(dic: Dictionary | None, name: str) -> tuple[str, int | None]:
-    """(type name, bit size) of an ESI type: a base type by its canonical name, a
-    dictionary type that only renames a base type (enums, ``DT0800EN03``) by that base type
-    and its own BitSize, anything else by the dictionary's BitSize."""
-    seen: set[str] = set()
-    current = name
-    size: int | None = None
-    while current and current not in seen:
-        seen.add(current)
-        base = canonical(current)
-        if base is not None:
-            return base, size if size is not None else base_bit_size(base)
-        dt = dic.data_types.get(current) if dic is not None else None
-        if dt is None:
-            break
-        if size is None:
-            size = dt.bit_size
-        if dt.base_type and not dt.sub_items and not dt.array_info:
-            current = dt.base_type
-            continue
-        break
-    return name, size
 
 
 def _int_bytes(value: int, nbytes: int) -> bytes:
@@ -216,6 +195,13 @@ def _entry_from_spec(spec: _EntrySpec, info: ObjectInfo | None,
     return entry
 
 
+def _fixed(index: int, subindex: int) -> tuple[str, int]:
+    """The type ETG.1000.6 fixes for a communication-area entry (esi.coe)."""
+    fixed = standard_entry_type(index, subindex)
+    assert fixed is not None, f"0x{index:04X}:{subindex:02X} has no fixed type"
+    return fixed
+
+
 def _standard(entry: OdEntry, type_: str, bits: int) -> None:
     """Give a communication-area entry its ETG.1000.6 type, whatever the ESI declares:
     masters read these into fixed-size buffers (SOEM reads 0x1C00:n into one byte and fails
@@ -340,7 +326,7 @@ class _Builder:
             capacity = max(len(values), obj.max_subindex,
                            CONFIGURABLE_MAPPING_CAPACITY
                            if configurable and not obj.entries else 0)
-            self._array(obj, values, capacity, "UDINT", 32, writes)
+            self._array(obj, values, capacity, *_fixed(pdo.index, 1), writes)
 
     def virtual_mapping_objects(self, pdos: list[Pdo], taken: set[int | None]) -> None:
         """0x16xx / 0x1Axx of the virtual PDOs (where no fixed PDO has the index): the
@@ -360,7 +346,7 @@ class _Builder:
                        | (pe.bit_len or 0) & 0xFF) for pe in pdo.entries]
             capacity = max(len(values), obj.max_subindex,
                            MAX_PDO_ENTRIES if configurable and not obj.entries else 0)
-            self._array(obj, values, capacity, "UDINT", 32, writes)
+            self._array(obj, values, capacity, *_fixed(pdo.index, 1), writes)
 
     def sm_objects(self, pdos: list[Pdo], virtual: list[Pdo]) -> None:
         """0x1C00 (SM communication types) and 0x1C10+n (PDO assignment of each
@@ -376,7 +362,7 @@ class _Builder:
             entry = obj.entries.get(sub)
             if entry is None:
                 entry = obj.add(OdEntry(sub, f"SubIndex {sub:03d}", "USINT", 8, b"\0", "ro"))
-            _standard(entry, "USINT", 8)
+            _standard(entry, *_fixed(SM_COMM_TYPE, sub))
             if (SM_COMM_TYPE, sub) not in self.esi_defaults:
                 entry.value = _int_bytes(code, entry.byte_size)
         writes = PREOP_ONLY if self.pdo_assign else frozenset()
@@ -396,7 +382,7 @@ class _Builder:
                 # Room for every PDO that could go to this SM (our choice).
                 candidates = {p.index for p in pdos + virtual if p.direction == direction}
                 capacity = max(len(assigned), len(candidates), 1)
-            self._array(obj, assigned, capacity, "UINT", 16, writes)
+            self._array(obj, assigned, capacity, *_fixed(obj.index, 1), writes)
 
     def _array(self, obj: OdObject, values: list[int], capacity: int, data_type: str,
                bits: int, writes: frozenset[AlState]) -> None:
@@ -428,7 +414,7 @@ class _Builder:
             obj = self.objects[0x1000] = OdObject(0x1000, "Device type", variable=True)
             obj.add(OdEntry(0, "Device type", "UDINT", 32, bytes(4), "ro"))
         if 0 in obj.entries:
-            _standard(obj.entries[0], "UDINT", 32)
+            _standard(obj.entries[0], *_fixed(0x1000, 0))
             if (0x1000, 0) not in self.esi_defaults:
                 obj.entries[0].value = _int_bytes(device_type, 4)
         obj = self._object(0x1018, "Identity")
@@ -439,7 +425,7 @@ class _Builder:
             entry = obj.entries.get(sub)
             if entry is None:
                 entry = obj.add(OdEntry(sub, name, "UDINT", 32, bytes(4), "ro"))
-            _standard(entry, "UDINT", 32)
+            _standard(entry, *_fixed(0x1018, sub))
             entry.value = _int_bytes(value, 4)
 
 
