@@ -31,6 +31,9 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
         a.add_argument("address", metavar="ADDR[:LEN]", help="register, e.g. 0x0130:6")
         if action == "write":
             a.add_argument("data", metavar="DATA", help="a number, or hex:BYTES")
+            a.add_argument("--force", action="store_true",
+                           help="write although another master is cycling on the line (the "
+                                "write races its frames; by default it is refused)")
         a.add_argument("--format", choices=["text", "json"], default="text")
         a.set_defaults(run=run)
 
@@ -70,6 +73,7 @@ def encode(data: str, length: int | None) -> bytes:
 
 def run(args: argparse.Namespace) -> int:
     import json
+    import sys
 
     from ecatcfg.errors import UsageError
     from ecatcfg.runtime.link import RawLink
@@ -93,6 +97,18 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as exc:
         raise UsageError(str(exc)) from None
     with RawLink(args.iface) as link:
+        if data is not None:
+            # A write beside a master that cycles the line races it (it may rewrite the
+            # register, or be thrown off by the change): listen first, refuse unless told.
+            seen = reg_tool.frames_of_another_master(link)
+            if seen and not args.force:
+                raise UsageError(
+                    f"another master is running the line on {args.iface} ({seen} frames in "
+                    f"{reg_tool.LISTEN_S * 1000:.0f} ms that this command did not send): a "
+                    "register write now races it; stop it first, or give --force")
+            if seen:
+                print(f"warning: another master is running the line on {args.iface} ({seen} "
+                      "frames); writing anyway (--force)", file=sys.stderr)
         transport = Transport(link)
         if data is None:
             assert length is not None

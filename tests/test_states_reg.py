@@ -225,3 +225,52 @@ def test_reg_decodes_fmmu_sm_and_dc_registers_apply_wrote(veth_netns, tmp_path):
                                               "sync1": bool(activation & 4)}
     assert dc["DC activation"]["fields"]["sync0"]
     assert dc["DC SYNC0 cycle time"]["value"] == cycle0
+
+
+def test_reg_write_beside_a_cycling_master_is_refused_unless_forced(veth_netns, tmp_path):
+    """``apply`` cycling the line in namespace A, and ``reg write`` on the same interface:
+    its frames come back through that interface while reg sends nothing, so the write is
+    refused (exit 2, naming the interface) and the register keeps its value; ``--force``
+    writes with a warning.  Once apply has stopped, the same write goes through without a
+    word."""
+    import time
+
+    from rig import start_simulate
+
+    eni = tmp_path / "line.eni.xml"
+    done = subprocess.run([sys.executable, "-m", "ecatcfg", "compile", "examples/topology.yaml",
+                           "--esi", "examples/esi", "-o", str(eni)], capture_output=True,
+                          text=True, cwd=ROOT, timeout=120)
+    assert done.returncode == 0, done.stderr
+    sim, lines = start_simulate(veth_netns, "--esi", str(ESI), "--topology",
+                                str(ROOT / "examples" / "topology.yaml"))
+    apply = veth_netns.popen_in(veth_netns.ns_a, [sys.executable, "-m", "ecatcfg", "apply",
+                                                  str(eni), "--iface", veth_netns.if_a],
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                cwd=ROOT)
+    try:
+        assert lines and lines[-1].startswith("ready:"), lines
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline:          # until apply cycles in OP
+            if reg(veth_netns, "read", 1, "0x0130")["registers"][0]["fields"][
+                    "state"] == "OP":
+                break
+            time.sleep(0.2)
+        refused = ecatcfg_in(veth_netns, "reg", "write", "--slave", "1", "0x0012", "0x0007")
+        assert refused.returncode == 2, refused.stdout + refused.stderr
+        assert f"another master is running the line on {veth_netns.if_a}" in refused.stderr
+        assert reg(veth_netns, "read", 1, "0x0012")["registers"][0]["value"] == 0
+        forced = ecatcfg_in(veth_netns, "reg", "write", "--slave", "1", "0x0012", "0x0007",
+                            "--force", "--format", "json")
+        assert forced.returncode == 0, forced.stderr
+        assert "warning: another master is running the line" in forced.stderr
+        assert as_json(forced)["hex"] == "0700"
+    finally:
+        apply.send_signal(signal.SIGINT)
+        apply.communicate(timeout=60)
+    try:
+        quiet = ecatcfg_in(veth_netns, "reg", "write", "--slave", "1", "0x0012", "0x0008")
+        assert quiet.returncode == 0 and "another master" not in quiet.stderr, quiet.stderr
+    finally:
+        sim.send_signal(signal.SIGINT)
+        sim.wait(10)

@@ -10,6 +10,7 @@ import time
 from ecatcfg.esc import MAX_DATAGRAM_DATA, Cmd
 from ecatcfg.runtime.master.al_tool import StatesError, positions_on_line
 from ecatcfg.runtime.master.replay import TIMEOUT_COMMAND
+from ecatcfg.runtime.link import Link
 from ecatcfg.runtime.master.transport import Transport
 from ecatcfg.runtime.wire import Datagram
 
@@ -18,6 +19,23 @@ MEMORY_END = 0x10000
 
 class RegisterError(StatesError):
     """A register access the slave did not answer or refused."""
+
+
+# How long ``frames_of_another_master`` listens before a write: several cycles of any master
+# that cycles at 1 to 10 ms (TwinCAT's, IgH's and SOEM's usual 1 ms, a 10 ms task).
+LISTEN_S = 0.05
+
+
+def frames_of_another_master(link: Link, seconds: float = LISTEN_S) -> int:
+    """EtherCAT frames that arrive on ``link`` while this process sends nothing: another
+    master is running the line (its frames come back through the same interface).  On an
+    EtherCAT line nothing else sends frames, so any frame at all is one."""
+    end = time.monotonic() + seconds
+    seen = 0
+    while (left := end - time.monotonic()) > 0:
+        if link.recv(left) is not None:
+            seen += 1
+    return seen
 
 
 def check_range(address: int, length: int) -> None:
