@@ -13,7 +13,7 @@ import argparse
 
 
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    from ecatcfg.cli.sii import _number, add_backup, add_target
+    from ecatcfg.cli.options import add_backup, add_line, number
 
     p = sub.add_parser("alias", help="set a slave's station alias in its EEPROM",
                        description="A slave's configured station alias (SII word 4).")
@@ -26,8 +26,8 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                     "(word 7) are written and read back.  The ESC loads the alias into "
                     "register 0x0012 at power-on: it takes effect after a power cycle.",
         epilog="Exit 1 when the write stops or the read-back differs.")
-    add_target(s)
-    s.add_argument("alias", type=_number(0xFFFF), metavar="N",
+    add_line(s)
+    s.add_argument("alias", type=number(0xFFFF), metavar="N",
                    help="the alias, 0-65535 (decimal or 0x..); 0 = no alias")
     add_backup(s)
     s.set_defaults(run=run)

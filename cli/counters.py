@@ -10,6 +10,8 @@ if TYPE_CHECKING:
 
 
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    from ecatcfg.cli.options import add_iface, add_slave
+
     p = sub.add_parser(
         "counters", help="the ESC error counters (0x0300-0x0313) per slave and port",
         description="Read each slave's error counters by position: per port A-D invalid "
@@ -19,10 +21,8 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                     "is where a cable or connector is bad.  --watch reads them again every "
                     "--interval and prints what changed.",
         epilog="Exit 1 when no frame comes back or a slave does not answer.")
-    p.add_argument("--iface", required=True, metavar="IF",
-                   help="network interface of the EtherCAT line")
-    p.add_argument("--slave", type=int, metavar="POS",
-                   help="only the slave at this position (0 = first); default all")
+    add_iface(p)
+    add_slave(p, required=False)
     p.add_argument("--clear", action="store_true",
                    help="clear the counters after reading them (with --watch: at the start)")
     p.add_argument("--watch", action="store_true",
@@ -46,8 +46,6 @@ def run(args: argparse.Namespace) -> int:
     from ecatcfg.runtime.master.al_tool import positions_on_line
     from ecatcfg.runtime.master.transport import Transport
 
-    if args.slave is not None and args.slave < 0:
-        raise UsageError(f"--slave {args.slave}: positions count from 0")
     if args.interval <= 0:
         raise UsageError(f"--interval {args.interval}: must be positive")
     if args.rounds is not None and (args.rounds < 1 or not args.watch):

@@ -15,6 +15,8 @@ STATES = {"init": 1, "preop": 2, "safeop": 4, "op": 8}
 
 
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    from ecatcfg.cli.options import add_iface
+
     p = sub.add_parser(
         "doctor", help="why slaves on a line are not in their target state",
         description="Read every slave's AL status on the line (by position) and, for each "
@@ -32,8 +34,7 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                     "CoE objects are read (as 'ecatcfg sdo' does).",
         epilog="Exit 0 when every slave is in the target state, 1 otherwise.")
     p.add_argument("eni", nargs="?", metavar="ENI", help="the ENI the line should match")
-    p.add_argument("--iface", required=True, metavar="IF",
-                   help="network interface of the EtherCAT line")
+    add_iface(p)
     p.add_argument("--state", choices=list(STATES), default="op",
                    help="the target state of every slave (default op)")
     p.add_argument("--esi", action="append", default=[], metavar="PATH",
@@ -118,7 +119,7 @@ def _line_evidence(transport: Transport, plan: NetworkPlan | None, eni: str | No
     """Evidence for choosing among ESI files that describe one identity differently (asked
     for only then): the SII of the first slave on the line with that identity, read from
     its EEPROM; where it cannot be read, what the ENI says of its slaves of that identity."""
-    from ecatcfg.cli.scan import sii_evidence
+    from ecatcfg.cli.identity import sii_evidence
     from ecatcfg.eni.evidence import evidence_by_identity
     from ecatcfg.runtime.master.scan import scan
 

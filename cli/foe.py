@@ -16,6 +16,8 @@ EPILOG = ("The slave is taken to INIT, its mailbox SyncManagers are written from
 
 
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    from ecatcfg.cli.options import add_line
+
     p = sub.add_parser(
         "foe", help="write or read a file of one slave over FoE (firmware updates)",
         description="One FoE transfer with the slave at position --slave (0 = the first "
@@ -27,10 +29,7 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                          ("read", "read the slave's file into FILE")):
         a = actions.add_parser(action, help=text, description=f"FoE {action}: {text}.",
                                epilog=EPILOG)
-        a.add_argument("--iface", required=True, metavar="IF",
-                       help="network interface of the EtherCAT line")
-        a.add_argument("--slave", required=True, type=int, metavar="POS",
-                       help="position of the slave on the line (0 = first)")
+        add_line(a)
         a.add_argument("file", metavar="FILE",
                        help="the file to send" if action == "write"
                        else "where to store the file read")
@@ -63,8 +62,6 @@ def run(args: argparse.Namespace) -> int:
     from ecatcfg.runtime.master import foe_tool
     from ecatcfg.runtime.master.transport import Transport
 
-    if args.slave < 0:
-        raise UsageError(f"--slave {args.slave}: positions count from 0")
     if args.timeout <= 0:
         raise UsageError(f"--timeout {args.timeout}: must be positive")
     if getattr(args, "max_size", 0) < 0:

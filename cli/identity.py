@@ -1,7 +1,8 @@
 """Who a slave on a live line is, for the online commands that work without an ENI
-(``states``, ``doctor``, ``graph --iface``): the identity in its SII (vendor, product,
-revision) and a device name, from the ESI files given (the library's entry of that
-identity: its Type and Name) or, where asked, from the SII itself (GENERAL: order number
+(``states``, ``doctor``, ``graph --iface``, ``scan``, ``od``, ``pdos``): the identity in its
+SII (vendor, product, revision) and a device name, from the ESI files given (the library's
+entry of that identity: its Type and Name; where several files describe it differently,
+the one its SII agrees with) or, where asked, from the SII itself (GENERAL: order number
 and name strings, as TwinCAT shows a slave it has no ESI for)."""
 
 from __future__ import annotations
@@ -10,6 +11,8 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
+    from ecatcfg.esi.evidence import SiiEvidence
+    from ecatcfg.esi.index import DeviceEntry
     from ecatcfg.esi.library import Library
     from ecatcfg.runtime.master.scan import FoundSlave
     from ecatcfg.runtime.master.transport import Transport
@@ -75,3 +78,56 @@ def slave_identities(transport: Transport, positions: list[int],
                 ident = out[position]
                 ident.type, ident.name, ident.source = general.order, general.name, "SII"
     return out
+
+
+def esi_entry(lib: Library, s: FoundSlave, transport: Transport
+               ) -> tuple[DeviceEntry | None, DeviceEntry | None, str | None]:
+    """The library's entry of a found slave (``Library.entry_for_identity``).  Where
+    several ESI files describe its identity differently, its SII is read from its EEPROM
+    and the description that agrees with it is taken (``esi/evidence.py``), said in the
+    note; one that cannot be read leaves the choice to the files' order, said too."""
+    evidence = None
+    if lib.differs(s.vendor_id, s.product_code, s.revision):
+        evidence, why = sii_evidence(transport, s.position)
+        if evidence is None:
+            exact, other, note = lib.entry_for_identity(s.vendor_id, s.product_code,
+                                                        s.revision)
+            return exact, other, f"several ESI files describe it differently; {why}"
+    return lib.entry_for_identity(s.vendor_id, s.product_code, s.revision, evidence)
+
+
+def sii_evidence(transport: Transport, position: int) -> tuple[SiiEvidence | None, str]:
+    """The SII of the slave at ``position``, read from its EEPROM, as evidence; else None
+    and why not."""
+    from ecatcfg.errors import EcatcfgError
+    from ecatcfg.esi.evidence import SiiEvidence
+    from ecatcfg.esi.sii import decode
+    from ecatcfg.runtime.master.eeprom import Eeprom
+
+    shown = f"slave {position}"
+    try:
+        image = decode(Eeprom(transport, position).read(), source=shown)
+    except EcatcfgError as exc:
+        return None, f"its SII could not be read to choose ({exc.message})"
+    return SiiEvidence(image, shown), ""
+
+
+def esi_device(lib: Library, transport: Transport, position: int) -> tuple[Any, str]:
+    """The ESI device of the slave at ``position``, by the identity in its SII."""
+    from ecatcfg.errors import EcatcfgError
+    from ecatcfg.runtime.master.scan import scan
+
+    found = [s for s in scan(transport) if s.position == position]
+    if not found:
+        raise EcatcfgError(f"no slave at position {position}")
+    s = found[0]
+    exact, other, note = esi_entry(lib, s, transport)
+    entry = exact or other
+    if entry is None:
+        raise EcatcfgError(f"slave {position} (vendor 0x{s.vendor_id:08x}, product "
+                           f"0x{s.product_code:08x}, revision 0x{s.revision:08x}): no "
+                           "device of that identity in the ESI files given")
+    where = f"{entry.file}:{entry.line} ({entry.type.strip()})"
+    if note:
+        where += f"; {note}"
+    return lib.device(entry), where

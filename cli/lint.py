@@ -10,7 +10,6 @@ import argparse
 import io
 import os
 import sys
-import textwrap
 from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING, TextIO
@@ -22,6 +21,8 @@ FORMATS = ("text", "json", "junit", "sarif")
 
 
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    from ecatcfg.cli.options import add_rule_options
+
     p = sub.add_parser(
         "lint", help="validate ESI files: ETG.2000 schema and semantic rules",
         description="Validate ESI files and folders (searched recursively for *.xml) against "
@@ -36,10 +37,7 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
     p.add_argument("--format", choices=FORMATS, default="text")
     p.add_argument("-o", "--output", metavar="FILE",
                    help="write the report to FILE (atomically) instead of stdout")
-    p.add_argument("--select", action="append", metavar="IDS",
-                   help="only these rules (comma-separated ids or prefixes; repeatable)")
-    p.add_argument("--ignore", action="append", metavar="IDS",
-                   help="skip these rules (comma-separated ids or prefixes; repeatable)")
+    add_rule_options(p)
     p.add_argument("--jobs", type=_positive, metavar="N",
                    help="files linted in parallel (default: the number of CPUs)")
     p.add_argument("--config", metavar="PYPROJECT",
@@ -52,8 +50,6 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
     p.add_argument("--allow-empty", action="store_true",
                    help="exit 0 when the paths hold no ESI file to check (default: exit 2, "
                         "as a mistyped path would pass silently)")
-    p.add_argument("--explain", metavar="ID", help="explain one rule and exit")
-    p.add_argument("--list-rules", action="store_true", help="list every rule and exit")
     p.set_defaults(run=run)
 
 
@@ -70,21 +66,12 @@ def _positive(text: str) -> int:
 def run(args: argparse.Namespace) -> int:
     from ecatcfg.errors import UsageError
     from ecatcfg.esi.lint import config as lint_config
+    from ecatcfg.cli.options import rule_help
     from ecatcfg.esi.lint.rules import all_rules, select_rules
     from ecatcfg.fileio import check_input
 
     rules = all_rules()
-    if args.explain:
-        rule = rules.get(args.explain.strip().upper())
-        if rule is None:
-            raise UsageError(f"unknown rule {args.explain!r}; `ecatcfg lint --list-rules` "
-                             "lists them")
-        print(f"{rule.id} ({rule.severity}): {rule.summary}\n")
-        print(textwrap.fill(" ".join(rule.explanation.split()), width=88))
-        return 0
-    if args.list_rules:
-        for rule in sorted(rules.values(), key=lambda r: r.id):
-            print(f"{rule.id}  {rule.severity:<7}  {rule.summary}")
+    if rule_help(args, rules, "lint"):
         return 0
     if not args.paths:
         raise UsageError("give at least one ESI file or folder (or --explain ID)")

@@ -20,6 +20,8 @@ EPILOG = ("Use it on a line no other master is driving: the slave is brought to 
 
 
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    from ecatcfg.cli.options import add_line
+
     p = sub.add_parser(
         "od", help="upload a slave's object dictionary (SDO Information), compare with "
                    "its ESI",
@@ -29,10 +31,7 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                     "data type, max subindex, name) and each entry's (data type, bit "
                     "length, access per state, PDO mapping, name).",
         epilog=EPILOG)
-    p.add_argument("--iface", required=True, metavar="IF",
-                   help="network interface of the EtherCAT line")
-    p.add_argument("--slave", required=True, type=int, metavar="POS",
-                   help="position of the slave on the line (0 = first)")
+    add_line(p)
     p.add_argument("--esi", action="append", default=[], metavar="PATH",
                    help="ESI file or folder (searched recursively) to compare with; "
                         "repeatable")
@@ -54,13 +53,12 @@ def run(args: argparse.Namespace) -> int:
     import json
     import sys
 
+    from ecatcfg.cli.identity import esi_device
     from ecatcfg.errors import UsageError
     from ecatcfg.runtime.link import RawLink
     from ecatcfg.runtime.master import od_tool
     from ecatcfg.runtime.master.transport import Transport
 
-    if args.slave < 0:
-        raise UsageError(f"--slave {args.slave}: positions count from 0")
     if args.timeout <= 0:
         raise UsageError(f"--timeout {args.timeout}: must be positive")
     lib = None
@@ -81,7 +79,7 @@ def run(args: argparse.Namespace) -> int:
         with RawLink(args.iface) as link:
             transport = Transport(link, recorder=recorder)
             if lib is not None:
-                device, esi_where = _esi_device(lib, transport, args.slave)
+                device, esi_where = esi_device(lib, transport, args.slave)
             # The ESI's CoE@CompleteAccess, where it is at hand, says whether to try it.
             coe = device.mailbox.coe if device is not None and device.mailbox else None
             objects = od_tool.upload_dictionary(
@@ -116,28 +114,6 @@ def run(args: argparse.Namespace) -> int:
             for line in notes:
                 print(f"  (ESI) {line}")
     return 1 if differences else 0
-
-
-def _esi_device(lib: Any, transport: Any, position: int) -> tuple[Any, str]:
-    """The ESI device of the slave at ``position``, by the identity in its SII."""
-    from ecatcfg.cli.scan import _esi_entry
-    from ecatcfg.errors import EcatcfgError
-    from ecatcfg.runtime.master.scan import scan
-
-    found = [s for s in scan(transport) if s.position == position]
-    if not found:
-        raise EcatcfgError(f"no slave at position {position}")
-    s = found[0]
-    exact, other, note = _esi_entry(lib, s, transport)
-    entry = exact or other
-    if entry is None:
-        raise EcatcfgError(f"slave {position} (vendor 0x{s.vendor_id:08x}, product "
-                           f"0x{s.product_code:08x}, revision 0x{s.revision:08x}): no "
-                           "device of that identity in the ESI files given")
-    where = f"{entry.file}:{entry.line} ({entry.type.strip()})"
-    if note:
-        where += f"; {note}"
-    return lib.device(entry), where
 
 
 def _print_text(objects: Any, values: bool) -> None:

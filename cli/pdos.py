@@ -7,6 +7,8 @@ from typing import Any
 
 
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    from ecatcfg.cli.options import add_line
+
     p = sub.add_parser(
         "pdos", help="the PDO assignment and mapping a slave holds now (CoE)",
         description="The PDO assignment (0x1C10 + SM) of each process-data SyncManager of "
@@ -17,10 +19,7 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
         epilog="Use it on a line no other master is driving: a slave below PREOP is "
                "brought to PREOP (mailbox from its SII) and stays there; one in PREOP, "
                "SAFEOP or OP is read in that state.  Exit 1 on an SDO abort or no answer.")
-    p.add_argument("--iface", required=True, metavar="IF",
-                   help="network interface of the EtherCAT line")
-    p.add_argument("--slave", required=True, type=int, metavar="POS",
-                   help="position of the slave on the line (0 = first)")
+    add_line(p)
     p.add_argument("--esi", action="append", default=[], metavar="PATH",
                    help="ESI file or folder (searched recursively) to name PDOs and entries; "
                         "repeatable")
@@ -36,14 +35,12 @@ def run(args: argparse.Namespace) -> int:
     import json
     import sys
 
-    from ecatcfg.cli.od import _esi_device
+    from ecatcfg.cli.identity import esi_device
     from ecatcfg.errors import UsageError
     from ecatcfg.runtime.link import RawLink
     from ecatcfg.runtime.master import pdo_tool
     from ecatcfg.runtime.master.transport import Transport
 
-    if args.slave < 0:
-        raise UsageError(f"--slave {args.slave}: positions count from 0")
     if args.timeout <= 0:
         raise UsageError(f"--timeout {args.timeout}: must be positive")
     lib = None
@@ -56,7 +53,7 @@ def run(args: argparse.Namespace) -> int:
     with RawLink(args.iface) as link:
         transport = Transport(link)
         if lib is not None:
-            device, _where = _esi_device(lib, transport, args.slave)
+            device, _where = esi_device(lib, transport, args.slave)
         held = pdo_tool.read_pdos(transport, args.slave, timeout=args.timeout)
     names = _Names(device)
     if args.format == "json":

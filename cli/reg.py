@@ -15,6 +15,8 @@ EPILOG = ("ADDR is hexadecimal ('0x' optional), LEN decimal bytes: 0x0130:6, 0x0
 
 
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    from ecatcfg.cli.options import add_line
+
     p = sub.add_parser("reg", help="read or write ESC registers of one slave",
                        description="Read (APRD) or write (APWR, then read back) registers "
                                    "of the slave at position --slave; no ENI needed.",
@@ -24,10 +26,7 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                          ("write", "write DATA at ADDR[:LEN] and read it back")):
         a = actions.add_parser(action, help=text, description=f"reg {action}: {text}.",
                                epilog=EPILOG)
-        a.add_argument("--iface", required=True, metavar="IF",
-                       help="network interface of the EtherCAT line")
-        a.add_argument("--slave", required=True, type=int, metavar="POS",
-                       help="position of the slave on the line (0 = first)")
+        add_line(a)
         a.add_argument("address", metavar="ADDR[:LEN]", help="register, e.g. 0x0130:6")
         if action == "write":
             a.add_argument("data", metavar="DATA", help="a number, or hex:BYTES")
@@ -81,8 +80,6 @@ def run(args: argparse.Namespace) -> int:
     from ecatcfg.runtime.master import reg_tool
     from ecatcfg.runtime.master.transport import Transport
 
-    if args.slave < 0:
-        raise UsageError(f"--slave {args.slave}: positions count from 0")
     try:
         address, length = parse_address(args.address, None)
         if length is None:

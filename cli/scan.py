@@ -7,15 +7,12 @@ import re
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from ecatcfg.esi.evidence import SiiEvidence
-    from ecatcfg.esi.index import DeviceEntry
-    from ecatcfg.esi.library import Library
-    from ecatcfg.runtime.master.scan import FoundSlave
-    from ecatcfg.runtime.master.transport import Transport
     from ecatcfg.runtime.wiring import Plug
 
 
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    from ecatcfg.cli.options import add_iface
+
     p = sub.add_parser(
         "scan", help="list the slaves on a line (SII identity, ESI names)",
         description="Count the slaves on the line and read each one's identity (vendor, "
@@ -27,8 +24,7 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                     "the slaves found, with parent and port where the network branches.",
         epilog="Exit 1 when no frame comes back (nothing on the interface, or not an "
                "EtherCAT line).")
-    p.add_argument("--iface", required=True, metavar="IF",
-                   help="network interface of the EtherCAT line")
+    add_iface(p)
     p.add_argument("--esi", action="append", default=[], metavar="PATH",
                    help="ESI file or folder (searched recursively) to name the devices; "
                         "repeatable")
@@ -91,6 +87,7 @@ def run(args: argparse.Namespace) -> int:
         for problem in lib.problems:
             print(f"warning: {problem}", file=sys.stderr)
 
+    from ecatcfg.cli.identity import esi_entry
     from ecatcfg.runtime.link import RawLink
     from ecatcfg.runtime.master.scan import scan
     from ecatcfg.runtime.master.transport import Transport
@@ -99,7 +96,7 @@ def run(args: argparse.Namespace) -> int:
     with RawLink(args.iface) as link:
         transport = Transport(link)
         found = scan(transport)
-        chosen = {s.position: _esi_entry(lib, s, transport) for s in found} \
+        chosen = {s.position: esi_entry(lib, s, transport) for s in found} \
             if lib is not None else {}
 
     used: dict[str, int] = {}
@@ -143,38 +140,6 @@ def run(args: argparse.Namespace) -> int:
     if args.topology_out:
         print(f"topology written to {args.topology_out}")
     return 0
-
-
-def _esi_entry(lib: Library, s: FoundSlave, transport: Transport
-               ) -> tuple[DeviceEntry | None, DeviceEntry | None, str | None]:
-    """The library's entry of a found slave (``Library.entry_for_identity``).  Where
-    several ESI files describe its identity differently, its SII is read from its EEPROM
-    and the description that agrees with it is taken (``esi/evidence.py``), said in the
-    note; one that cannot be read leaves the choice to the files' order, said too."""
-    evidence = None
-    if lib.differs(s.vendor_id, s.product_code, s.revision):
-        evidence, why = sii_evidence(transport, s.position)
-        if evidence is None:
-            exact, other, note = lib.entry_for_identity(s.vendor_id, s.product_code,
-                                                        s.revision)
-            return exact, other, f"several ESI files describe it differently; {why}"
-    return lib.entry_for_identity(s.vendor_id, s.product_code, s.revision, evidence)
-
-
-def sii_evidence(transport: Transport, position: int) -> tuple[SiiEvidence | None, str]:
-    """The SII of the slave at ``position``, read from its EEPROM, as evidence; else None
-    and why not."""
-    from ecatcfg.errors import EcatcfgError
-    from ecatcfg.esi.evidence import SiiEvidence
-    from ecatcfg.esi.sii import decode
-    from ecatcfg.runtime.master.eeprom import Eeprom
-
-    shown = f"slave {position}"
-    try:
-        image = decode(Eeprom(transport, position).read(), source=shown)
-    except EcatcfgError as exc:
-        return None, f"its SII could not be read to choose ({exc.message})"
-    return SiiEvidence(image, shown), ""
 
 
 def _print_table(rows: list[dict[str, Any]], iface: str) -> None:

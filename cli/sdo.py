@@ -14,6 +14,8 @@ EPILOG = ("INDEX:SUB is hexadecimal, '0x' optional: 0x1018:01, 0x6060:0, 1C12:0.
 
 
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    from ecatcfg.cli.options import add_line
+
     p = sub.add_parser(
         "sdo", help="read or write one CoE object of one slave (SDO upload/download)",
         description="One SDO transfer with the slave at position --slave (0 = the first "
@@ -25,10 +27,7 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                          ("write", "download VALUE to INDEX:SUB")):
         a = actions.add_parser(action, help=text, description=f"SDO {action}: {text}.",
                                epilog=EPILOG)
-        a.add_argument("--iface", required=True, metavar="IF",
-                       help="network interface of the EtherCAT line")
-        a.add_argument("--slave", required=True, type=int, metavar="POS",
-                       help="position of the slave on the line (0 = first)")
+        add_line(a)
         a.add_argument("address", metavar="INDEX:SUB", help="object, e.g. 0x1018:01")
         if action == "write":
             a.add_argument("value", metavar="VALUE",
@@ -99,8 +98,6 @@ def _checked(args: argparse.Namespace) -> tuple[int, int, str | None]:
         index, sub = sdo_tool.parse_address(args.address)
     except ValueError as exc:
         raise UsageError(str(exc)) from None
-    if args.slave < 0:
-        raise UsageError(f"--slave {args.slave}: positions count from 0")
     if args.timeout <= 0:
         raise UsageError(f"--timeout {args.timeout}: must be positive")
     if args.complete_access and sub > 1:

@@ -12,7 +12,6 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from collections.abc import Callable
 from typing import TYPE_CHECKING, TextIO
 
 if TYPE_CHECKING:
@@ -20,6 +19,8 @@ if TYPE_CHECKING:
 
 
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    from ecatcfg.cli.options import add_backup, add_line, number
+
     p = sub.add_parser("sii", help="build an SII (EEPROM) image from an ESI device, or "
                                    "decode one",
                        description="SII (slave EEPROM) images: build the image an ESI device "
@@ -41,9 +42,9 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                    help="an ESI file or folder of --esi whose description wins where files describe one device (vendor, product, revision) differently; repeatable, first wins (default: such a device is an error naming the files)")
     b.add_argument("-o", "--output", required=True, metavar="FILE.bin",
                    help="image file to write")
-    b.add_argument("--serial", type=_number(0xFFFFFFFF), default=0, metavar="N",
+    b.add_argument("--serial", type=number(0xFFFFFFFF), default=0, metavar="N",
                    help="serial number, SII words 0x0E-0x0F (default 0)")
-    b.add_argument("--alias", type=_number(0xFFFF), default=0, metavar="N",
+    b.add_argument("--alias", type=number(0xFFFF), default=0, metavar="N",
                    help="configured station alias, SII word 4 (default 0)")
     b.add_argument("--no-cache", action="store_true",
                    help="do not read or write the ESI index cache")
@@ -61,7 +62,7 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                            description="Read the whole SII EEPROM of the slave at a position "
                                        "(its size from SII word 0x3E) through the ESC's "
                                        "EEPROM interface; nothing else is written.")
-    add_target(r)
+    add_line(r)
     r.add_argument("-o", "--output", required=True, metavar="FILE.bin",
                    help="image file to write")
     r.set_defaults(run=run)
@@ -76,38 +77,12 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                     "compared.  A write that stops part-way names the words written and "
                     "the backup to restore.",
         epilog="Exit 1 when the image is refused, the write stops or the read-back differs.")
-    add_target(w)
+    add_line(w)
     w.add_argument("image", metavar="FILE.bin", help="SII image (raw binary)")
     w.add_argument("--force", action="store_true",
                    help="write an image whose identity differs from the slave's")
     add_backup(w)
     w.set_defaults(run=run)
-
-
-def add_target(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--iface", required=True, metavar="IF",
-                   help="network interface of the EtherCAT line")
-    p.add_argument("--slave", required=True, type=_number(0xFFFF), metavar="POS",
-                   help="the slave's position on the line (0 = first)")
-
-
-def add_backup(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--backup", metavar="FILE.bin",
-                   help="where to save the current image before writing (default "
-                        "sii-backup-posPOS-DATE-TIME.bin in the current folder)")
-
-
-def _number(maximum: int) -> Callable[[str], int]:
-    def parse(text: str) -> int:
-        try:
-            value = int(text, 0)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"not a number: {text!r} (decimal or 0x..)") \
-                from None
-        if not 0 <= value <= maximum:
-            raise argparse.ArgumentTypeError(f"{text} is not between 0 and 0x{maximum:X}")
-        return value
-    return parse
 
 
 def run(args: argparse.Namespace) -> int:

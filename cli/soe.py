@@ -17,6 +17,8 @@ EPILOG = ("IDN as drive manuals write it (S-0-0001, P-0-0010) or as a 16-bit num
 
 
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    from ecatcfg.cli.options import add_line
+
     p = sub.add_parser(
         "soe", help="read or write one IDN of a drive over SoE (servo drive profile)",
         description="One SoE transfer with drive --drive of the slave at position --slave "
@@ -28,10 +30,7 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                          ("write", "write VALUE to IDN")):
         a = actions.add_parser(action, help=text, description=f"SoE {action}: {text}.",
                                epilog=EPILOG)
-        a.add_argument("--iface", required=True, metavar="IF",
-                       help="network interface of the EtherCAT line")
-        a.add_argument("--slave", required=True, type=int, metavar="POS",
-                       help="position of the slave on the line (0 = first)")
+        add_line(a)
         a.add_argument("--drive", type=int, default=0, metavar="N",
                        help="drive number behind the slave, 0..7 (default 0)")
         a.add_argument("idn", metavar="IDN", help="S-0-0001, P-0-0010 or a number")
@@ -135,8 +134,6 @@ def _checked(args: argparse.Namespace) -> tuple[int, str | None]:
         idn = parse_idn(args.idn, numbers=True)
     except ValueError as exc:
         raise UsageError(str(exc)) from None
-    if args.slave < 0:
-        raise UsageError(f"--slave {args.slave}: positions count from 0")
     if not 0 <= args.drive <= MAX_DRIVE:
         raise UsageError(f"--drive {args.drive}: the SoE header numbers drives 0..{MAX_DRIVE}")
     if args.timeout <= 0:

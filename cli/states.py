@@ -9,6 +9,8 @@ STATES = ("init", "preop", "boot", "safeop", "op")
 
 
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    from ecatcfg.cli.options import add_iface, add_slave
+
     p = sub.add_parser(
         "states", help="show or request the AL states of the slaves on a line",
         description="Without STATE: each slave's AL status (0x0130) and AL status code "
@@ -19,10 +21,8 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                     "(vendor:product:revision) and, with --esi, its device type.",
         epilog="Exit 1 when a slave refuses the state (its AL status code is shown) or "
                "does not reach it within --timeout, or no frame comes back.")
-    p.add_argument("--iface", required=True, metavar="IF",
-                   help="network interface of the EtherCAT line")
-    p.add_argument("--slave", type=int, metavar="POS",
-                   help="only the slave at this position (0 = first); default all")
+    add_iface(p)
+    add_slave(p, required=False)
     p.add_argument("state", nargs="?", type=str.lower, choices=STATES, metavar="STATE",
                    help="request this state: init, preop, boot, safeop or op")
     p.add_argument("--timeout", type=float, default=5.0, metavar="S",
@@ -46,8 +46,6 @@ def run(args: argparse.Namespace) -> int:
     from ecatcfg.runtime.master import al_tool
     from ecatcfg.runtime.master.transport import Transport
 
-    if args.slave is not None and args.slave < 0:
-        raise UsageError(f"--slave {args.slave}: positions count from 0")
     if args.timeout <= 0:
         raise UsageError(f"--timeout {args.timeout}: must be positive")
     target = AlState[args.state.upper()] if args.state else None
