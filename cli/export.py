@@ -44,7 +44,7 @@ def run(args: argparse.Namespace) -> int:
     from ecatcfg.cli.inputs import kind
     from ecatcfg.cli.paths import output_file
     from ecatcfg.eni.cache import PlanCache, read_file
-    from ecatcfg.eni.export import pysoem_module, soem_c
+    from ecatcfg.eni.export import pysoem_module, soem_c, soem_image
     from ecatcfg.eni.export.steps import slave_setups
     from ecatcfg.eni.reader import read_file as read_uncached
     from ecatcfg.errors import UsageError
@@ -66,6 +66,7 @@ def run(args: argparse.Namespace) -> int:
         outputs = [(out, pysoem_module.render(setups, Path(args.eni).name, digest,
                                               __version__))]
     else:
+        soem_image.check(setups, args.eni)     # what SOEM would not map: refused by name
         header = out.with_suffix(".h")
         if header == out:
             raise UsageError(f"-o {args.output}: the C source needs another suffix than .h")
