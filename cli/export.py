@@ -23,10 +23,12 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                                    "each slave's identity and installs a config_func per "
                                    "slave that writes the ENI's PDO assignment, mapping and "
                                    "start-up SDOs and programs DC; the process image is "
-                                   "listed by variable name.  soem-c: a C source and header "
-                                   "with the same hooks for SOEM (PO2SOconfigx), the process "
-                                   "data as packed structs with compile-time offset checks, "
-                                   "and a minimal main (-DECATCFG_MAIN).")
+                                   "listed by variable name where SOEM's config_map puts "
+                                   "it.  soem-c: a C source and header whose "
+                                   "ecatcfg_config_map makes the same start-up writes, "
+                                   "returns the first failure and checks SOEM's mapping; the "
+                                   "process data as packed structs with compile-time offset "
+                                   "checks, and a minimal main (-DECATCFG_MAIN).")
     p.add_argument("eni", metavar="ENI", help="ENI file")
     p.add_argument("--format", required=True, choices=FORMATS, help="what to write")
     p.add_argument("-o", "--output", required=True, metavar="FILE",

@@ -25,10 +25,13 @@ Used by ``test_export_agreement.py`` (a fixed sample, in CI) and
 from __future__ import annotations
 
 import json
+import os
+import queue
 import random
-import select
+import signal
 import subprocess
 import sys
+import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -52,9 +55,12 @@ class EniVar:
 @dataclass
 class Result:
     eni: str
-    outcome: str = "agree"                    # agree / refused / no-op / disagree / error
+    # agree / partial (a slave below OP: its data not compared) / refused / no-op (SOEM did
+    # not map the line) / disagree / error
+    outcome: str = "agree"
     detail: str = ""
     variables: int = 0
+    places: int = 0                           # variables compared with SOEM's FMMUs
     bits_read: int = 0
     bits_written: int = 0
     disagreements: list[str] = field(default_factory=list)
@@ -64,10 +70,18 @@ def eni_variables(eni: Path) -> tuple[list[EniVar], list[tuple[int, int]]]:
     """Each variable's slave and bit within that slave's data, read from the ENI file; and
     each slave's (Send, Recv) bit lengths."""
     root = etree.parse(str(eni)).getroot()
-    slaves = root.findall("Config/Slave")
+    # The slaves with an ESC (PhysAddr or AutoIncAddr; the rest are passive terminals) at
+    # their bus position, the negated auto-increment address.
+    slaves = {}
+    for s in root.findall("Config/Slave"):
+        auto_inc = s.findtext("Info/AutoIncAddr")
+        if auto_inc is not None:
+            slaves[-int(auto_inc) & 0xFFFF] = s
+        elif s.findtext("Info/PhysAddr") is not None:
+            slaves[len(slaves)] = s
     ranges: list[dict[str, list[tuple[int, int]]]] = []
     bits = []
-    for s in slaves:
+    for _, s in sorted(slaves.items()):
         r = {}
         for direction, tag in (("output", "Send"), ("input", "Recv")):
             r[direction] = [(int(x.findtext("BitStart")), int(x.findtext("BitLength")))
@@ -100,12 +114,18 @@ def soem_starts(fmmus: list[list[str]]) -> dict[tuple[int, str], int]:
     starts: dict[tuple[int, str], int] = {}
     for k, regs in enumerate(fmmus):
         for text in regs:
+            if not text:                      # never answered: the slave counts as unmapped
+                continue
             f = FmmuConfig.from_bytes(bytes.fromhex(text))
             if not f.active or f.type not in (FmmuType.READ, FmmuType.WRITE):
                 continue
             direction = "input" if f.type == FmmuType.READ else "output"
             starts.setdefault((k, direction), f.logical_start * 8 + f.logical_start_bit)
     return starts
+
+
+class ProbeSilent(RuntimeError):
+    """The probe ended or hung without its next line."""
 
 
 class Probe:
@@ -116,14 +136,31 @@ class Probe:
                                             str(module)],
                                  stdin=subprocess.PIPE, stdout=subprocess.PIPE,
                                  stderr=subprocess.PIPE, text=True)
+        # Lines through a thread: select() on a buffered pipe misses a second line that
+        # arrived with the first (it is in the buffer, not the pipe).
+        self.lines: queue.Queue[str] = queue.Queue()
+        threading.Thread(target=self._read, daemon=True).start()
+
+    def _read(self) -> None:
+        assert self.proc.stdout is not None
+        for text in self.proc.stdout:
+            self.lines.put(text)
+        self.lines.put("")
 
     def line(self) -> dict:
-        assert self.proc.stdout is not None
-        ready, _, _ = select.select([self.proc.stdout], [], [], REPLY_S)
-        text = self.proc.stdout.readline() if ready else ""
+        try:
+            text = self.lines.get(timeout=REPLY_S)
+        except queue.Empty:
+            text = ""
         if not text:
+            if self.proc.poll() is None:     # its Python stack on stderr, then the end
+                os.killpg(self.proc.pid, signal.SIGUSR1)
+                time.sleep(1)
             self.proc.kill()
-            raise RuntimeError(f"the probe said nothing: {self.proc.communicate()[1][-2000:]}")
+            self.proc.wait()
+            assert self.proc.stderr is not None
+            err = self.proc.stderr.read()[-2000:]
+            raise ProbeSilent(f"the probe said nothing (exit {self.proc.returncode}): {err}")
         return json.loads(text)
 
     def ask(self, command: dict) -> dict:
@@ -161,6 +198,7 @@ def agree(rig, eni: Path, tmp: Path, library=None, sample: int = 4, seed: int = 
     from ecatcfg.runtime.segment import emulate
 
     result = Result(str(eni))
+    tmp.mkdir(parents=True, exist_ok=True)
     module = tmp / "agreement_setup.py"
     done = subprocess.run([sys.executable, "-m", "ecatcfg", "export", str(eni), "--format",
                            "pysoem", "-o", str(module), "--no-cache"], capture_output=True,
@@ -184,10 +222,20 @@ def agree(rig, eni: Path, tmp: Path, library=None, sample: int = 4, seed: int = 
             op = probe.line()
             if not check_io:
                 return result
+            # A slave the emulation keeps below OP (refusing the ENI's configuration: a
+            # matter of check/apply, issue 39 part 2-3) does not stop the others: inputs
+            # are compared for the slaves in SAFEOP or OP, outputs for those in OP.
+            reached = {k: int(s.state) for k, s in enumerate(seg.slaves)}
             if op["op"] != 8:
-                result.outcome, result.detail = "no-op", f"state {op['op']} instead of OP"
-                return result
-            _compare_io(result, probe, seg, variables, bits, sample, rng)
+                below = [f"{seg.slaves[k].name} ({state})" for k, state in reached.items()
+                         if state != 8]
+                result.outcome = "partial"
+                result.detail = f"state {op['op']} instead of OP; not in OP: " + \
+                    ", ".join(below)
+            _compare_io(result, probe, seg, variables, bits, sample, rng, reached)
+        except ProbeSilent as exc:
+            result.outcome, result.detail = "error", str(exc)
+            return result
         finally:
             probe.close()
     if result.disagreements:
@@ -218,6 +266,7 @@ def _compare_places(result: Result, module: Path, mapped: dict,
             result.disagreements.append(f"{v.name}: in the table {entry is not None}, "
                                         f"SOEM mapped slave {v.slave} {start is not None}")
             continue
+        result.places += 1
         at = start % 8 + v.offset              # from the byte slave.<direction> points at
         want = (v.slave, v.direction, at // 8, at % 8, start // 8 + at // 8)
         got = (entry.slave, entry.direction, entry.byte, entry.bit, entry.iomap_byte)
@@ -227,10 +276,13 @@ def _compare_places(result: Result, module: Path, mapped: dict,
 
 
 def _compare_io(result: Result, probe: Probe, seg, variables: list[EniVar],
-                bits: list[tuple[int, int]], sample: int, rng: random.Random) -> None:
+                bits: list[tuple[int, int]], sample: int, rng: random.Random,
+                reached: dict[int, int]) -> None:
     chosen: list[EniVar] = []
     for k, (o, i) in enumerate(bits):
         for direction, n in (("output", o), ("input", i)):
+            if reached.get(k, 0) < (8 if direction == "output" else 4):
+                continue
             mine = [v for v in variables if v.slave == k and v.direction == direction
                     and v.bit_size <= 64]
             chosen += mine if n < 8 else mine[:sample]
@@ -270,3 +322,19 @@ def _compare_io(result: Result, probe: Probe, seg, variables: list[EniVar],
                         f"{v.name}: wrote {values[v.name]}, the emulated slave got "
                         f"{_value(have, v.offset, v.bit_size)}")
                 result.bits_written += v.bit_size
+
+
+def agree_in_ci(rig, eni: Path, tmp: Path, library=None) -> Result:
+    """:func:`agree`, once more when pysoem did not map the line or the probe went silent
+    (never after a disagreement).  SOEM takes a mailbox or EEPROM read that times out as
+    data (a PDO mapping cut short, a revision of 0), and on a loaded machine the emulated
+    line, a Python process, sometimes answers after SOEM stopped waiting: the module's
+    checks then raise, as they should, and nothing was compared."""
+    result = agree(rig, eni, tmp, library)
+    if result.outcome in ("no-op", "error"):
+        first = result.detail
+        result = agree(rig, eni, tmp / "again", library)
+        if result.outcome in ("no-op", "error"):
+            result.detail = f"twice: {first} / {result.detail}"
+    return result
+

@@ -21,14 +21,18 @@ JSON command read from stdin:
 
 from __future__ import annotations
 
+import faulthandler
 import importlib.util
 import json
+import signal
 import sys
 
 import pysoem
 
 STATE_TIMEOUT_US = 10_000_000      # a loaded 2-core machine: margin over the ~0.1 s needed
 CYCLES = 10
+SETTLE_CYCLES = 200
+REPLY_US = 100_000
 
 
 def say(obj: dict) -> None:
@@ -39,6 +43,21 @@ def cycles(master: pysoem.Master, n: int = CYCLES) -> None:
     for _ in range(n):
         master.send_processdata()
         master.receive_processdata(20_000)
+
+
+def settle(master: pysoem.Master) -> None:
+    """Cycles until three in a row bring the same working counter (not 0) and the same
+    inputs: the emulated line is a Python process on a loaded machine, a reply can come
+    after SOEM stopped waiting for it, and the data set before must have gone round."""
+    last, same = None, 0
+    for _ in range(SETTLE_CYCLES):
+        master.send_processdata()
+        wkc = master.receive_processdata(REPLY_US)
+        now = (wkc, [bytes(s.input) for s in master.slaves])
+        same = same + 1 if wkc > 0 and now == last else 0
+        if same >= 3:
+            return
+        last = now
 
 
 def window(master: pysoem.Master, entry) -> bytes:
@@ -66,13 +85,27 @@ def table_write(master: pysoem.Master, entry, value: int) -> bool:
     return True
 
 
+def register(slave, address: int, size: int) -> bytes | None:
+    """A register read with room for a slow emulated line (pysoem waits 2 ms by default),
+    tried three times; None when it never answers."""
+    for _ in range(3):
+        try:
+            return bytes(slave._fprd(address, size, REPLY_US))
+        except pysoem.WkcError:
+            continue
+    return None
+
+
 def fmmus(slave) -> list[str]:
-    """The slave's FMMU registers (0x0600 + 16 n, as many as register 0x0004 says it has)."""
-    count = bytes(slave._fprd(0x0004, 1))[0]
-    return [bytes(slave._fprd(0x0600 + 16 * k, 16)).hex() for k in range(min(count, 16))]
+    """The slave's FMMU registers (0x0600 + 16 n, as many as register 0x0004 says it has;
+    one that never answers is given as an empty string)."""
+    count = register(slave, 0x0004, 1)
+    return [(register(slave, 0x0600 + 16 * k, 16) or b"").hex()
+            for k in range(min(count[0] if count else 16, 16))]
 
 
 def main() -> None:
+    faulthandler.register(signal.SIGUSR1)     # where it waits, when the test gives up
     iface, module_path = sys.argv[1], sys.argv[2]
     spec = importlib.util.spec_from_file_location("exported", module_path)
     assert spec is not None and spec.loader is not None
@@ -109,10 +142,10 @@ def main() -> None:
             if "write" in command:
                 done = {name: table_write(master, exported.VARIABLES[name], value)
                         for name, value in command["write"].items()}
-                cycles(master)
+                settle(master)
                 say({"written": done})
                 continue
-            cycles(master)
+            settle(master)
             values, module = {}, {}
             for name in command["read"]:
                 values[name] = table_read(master, exported.VARIABLES[name])

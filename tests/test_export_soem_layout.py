@@ -18,7 +18,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from export_agreement import agree
+from export_agreement import agree_in_ci
 
 from ecatcfg.esi.library import Library
 
@@ -57,7 +57,7 @@ def small_eni(beckhoff: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
 def test_small_terminals_read_and_write_where_soem_packs_them(veth_netns, pysoem_module,
                                                               beckhoff, small_eni,
                                                               tmp_path):
-    result = agree(veth_netns, small_eni, tmp_path, Library([beckhoff], cache=False))
+    result = agree_in_ci(veth_netns, small_eni, tmp_path, Library([beckhoff], cache=False))
     assert result.outcome == "agree", "\n".join([result.detail, *result.disagreements])
     # Every input bit of the three small input terminals but the two of `more` that lie in
     # a byte pysoem gives to no slave (bits 0-1 of IOmap byte 3; `wide` starts at byte 4),
