@@ -18,9 +18,8 @@ import sys
 from pathlib import Path
 
 import pytest
-from export_agreement import agree_in_ci
-
 from ecatcfg.esi.library import Library
+from export_agreement import agree_in_ci
 
 SMALL_LINE = """
 master: {name: small, cycle_time_us: 1000}

@@ -37,6 +37,7 @@ from ecatcfg.eni.export.steps import ExportError, ImageEntry, SlaveSetup
 from ecatcfg.record import field, record
 
 Direction = Literal["output", "input"]
+DIRECTIONS: tuple[Direction, Direction] = ("output", "input")
 
 
 @record
@@ -133,8 +134,8 @@ def soem_image(setups: list[SlaveSetup]) -> SoemImage:
     image.output_bytes = _place(setups, "output", 0, image)
     image.input_bytes = _place(setups, "input", image.output_bytes, image) - image.output_bytes
     for s in setups:
-        for direction, entries in (("output", s.outputs), ("input", s.inputs)):
-            area = image.area(s.position, direction)        # type: ignore[arg-type]
+        for direction, entries in zip(DIRECTIONS, (s.outputs, s.inputs)):
+            area = image.area(s.position, direction)
             for e in entries:
                 assert area is not None
                 at = area.start_bit + e.bit_offs
@@ -160,8 +161,8 @@ def check(setups: list[SlaveSetup], file: str) -> None:
     """Refuse an ENI whose variables SOEM would not map (:func:`_outside`): the export
     would name bytes SOEM never exchanges."""
     for s in setups:
-        for direction in ("output", "input"):
-            e = _outside(s, direction)               # type: ignore[arg-type]
+        for direction in DIRECTIONS:
+            e = _outside(s, direction)
             if e is not None:
                 bits = s.output_bits if direction == "output" else s.input_bits
                 raise ExportError(f"slave {s.position} ({s.name!r}): {e.name}: SOEM maps "
