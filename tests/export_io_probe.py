@@ -13,10 +13,13 @@ JSON command read from stdin:
 - ``{"read": [NAME, ...]}``: a few cycles, then ``values``: each variable read through
   the module's ``VARIABLES`` from pysoem's ``slave.input``/``slave.output`` bytes (null when
   the table's byte is outside them), ``module``: the module's ``read(master, NAME)`` (or
-  the text of its exception), and ``raw``: every slave's input bytes (hex);
+  the text of its exception), ``raw``: every slave's input bytes (hex), and ``settled``:
+  whether the working counter and inputs came back steady before (:func:`settle`);
 - ``{"write": {NAME: VALUE}}``: each written through ``VARIABLES`` into ``slave.output``
-  (read-modify-write of the bytes pysoem gives), then a few cycles;
-- ``{"stop": true}``: INIT, close.
+  (read-modify-write of the bytes pysoem gives), then cycles until steady (``settled``);
+- ``{"stop": true}`` (or the end of stdin): INIT, close.
+
+Between commands the process data cycle goes on (every 5 ms and the reply's time).
 """
 
 from __future__ import annotations
@@ -24,8 +27,11 @@ from __future__ import annotations
 import faulthandler
 import importlib.util
 import json
+import queue
 import signal
 import sys
+import threading
+import time
 
 import pysoem
 
@@ -33,6 +39,8 @@ STATE_TIMEOUT_US = 10_000_000      # a loaded 2-core machine: margin over the ~0
 CYCLES = 10
 SETTLE_CYCLES = 200
 REPLY_US = 100_000
+IDLE_S = 0.005                     # between cycles while no command waits: well inside the
+                                   # SyncManager watchdogs of the corpus (100 ms)
 
 
 def say(obj: dict) -> None:
@@ -40,12 +48,15 @@ def say(obj: dict) -> None:
 
 
 def cycles(master: pysoem.Master, n: int = CYCLES) -> None:
+    """``n`` cycles, each waiting for its frame up to REPLY_US: a shorter wait on a loaded
+    machine sends frames faster than the emulated line answers them, and the backlog
+    grows until nothing answers in time."""
     for _ in range(n):
         master.send_processdata()
-        master.receive_processdata(20_000)
+        master.receive_processdata(REPLY_US)
 
 
-def settle(master: pysoem.Master) -> None:
+def settle(master: pysoem.Master) -> bool:
     """Cycles until three in a row bring the same working counter (not 0) and the same
     inputs: the emulated line is a Python process on a loaded machine, a reply can come
     after SOEM stopped waiting for it, and the data set before must have gone round."""
@@ -56,8 +67,9 @@ def settle(master: pysoem.Master) -> None:
         now = (wkc, [bytes(s.input) for s in master.slaves])
         same = same + 1 if wkc > 0 and now == last else 0
         if same >= 3:
-            return
+            return True
         last = now
+    return False
 
 
 def window(master: pysoem.Master, entry) -> bytes:
@@ -135,17 +147,27 @@ def main() -> None:
             if master.state_check(pysoem.OP_STATE, 5_000) == pysoem.OP_STATE:
                 break
         say({"op": master.read_state()})
-        for line in sys.stdin:
-            command = json.loads(line)
+        # Commands through a thread; between them the cycle goes on, as an application's
+        # would (a pause longer than the SyncManager watchdog takes the slaves out of OP).
+        commands: queue.Queue[str] = queue.Queue()
+        threading.Thread(target=lambda: [commands.put(x) for x in sys.stdin] and None
+                         or commands.put(""), daemon=True).start()
+        while True:
+            try:
+                line = commands.get_nowait()
+            except queue.Empty:
+                cycles(master, 1)
+                time.sleep(IDLE_S)
+                continue
+            command = json.loads(line) if line else {"stop": True}
             if command.get("stop"):
                 break
             if "write" in command:
                 done = {name: table_write(master, exported.VARIABLES[name], value)
                         for name, value in command["write"].items()}
-                settle(master)
-                say({"written": done})
+                say({"written": done, "settled": settle(master)})
                 continue
-            settle(master)
+            settled = settle(master)
             values, module = {}, {}
             for name in command["read"]:
                 values[name] = table_read(master, exported.VARIABLES[name])
@@ -153,7 +175,7 @@ def main() -> None:
                     module[name] = exported.read(master, name)
                 except Exception as exc:
                     module[name] = f"{type(exc).__name__}: {exc}"
-            say({"values": values, "module": module,
+            say({"values": values, "module": module, "settled": settled,
                  "raw": [bytes(s.input).hex() for s in master.slaves]})
         master.state = pysoem.INIT_STATE
         master.write_state()
