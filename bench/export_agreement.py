@@ -1,4 +1,4 @@
-"""Agreement 3 of issue 39 over every corpus ENI: the pysoem export against SOEM itself.
+"""The pysoem export against SOEM itself, over every corpus ENI.
 
 Run from the checkout, as root (network namespaces, AF_PACKET):
     python3 bench/export_agreement.py [--esi] [--sample N] [ENI ...]

@@ -1,4 +1,4 @@
-"""Agreement 3 of issue 39: the pysoem export against SOEM itself, for one ENI.
+"""The pysoem export against SOEM itself, for one ENI.
 
 ``agree(rig, eni, tmp)``: the ENI's slaves emulated in this process (as ``ecatcfg simulate
 --eni`` builds them, with an ESI library where given) answer on the rig's namespace B;
@@ -196,7 +196,7 @@ def _value(data: bytes, offset: int, size: int) -> int:
 
 def agree(rig, eni: Path, tmp: Path, library=None, sample: int = 4, seed: int = 39,
           check_io: bool = True) -> Result:
-    """Agreement 3 for ``eni`` (see the module docstring)."""
+    """The comparison for ``eni`` (see the module docstring)."""
     from rig import serving
 
     from ecatcfg.eni.reader import read_file
@@ -228,7 +228,7 @@ def agree(rig, eni: Path, tmp: Path, library=None, sample: int = 4, seed: int = 
             if not check_io:
                 return result
             # A slave the emulation keeps below OP (refusing the ENI's configuration: a
-            # matter of check/apply, issue 39 part 2-3) does not stop the others: inputs
+            # matter of check and apply, not of the export) does not stop the others: inputs
             # are compared for the slaves in SAFEOP or OP, outputs for those in OP.
             reached = {k: int(s.state) for k, s in enumerate(seg.slaves)}
             if op["op"] == 0:

@@ -1,6 +1,6 @@
-"""Agreement 3 of issue 39 on a fixed sample of the corpus ENIs: the pysoem export against
-SOEM itself (``export_agreement.py`` says how); ``bench/export_agreement.py`` runs every
-corpus ENI (figures in docs/BENCHMARKS.md).
+"""The pysoem export against SOEM itself on a fixed sample of the corpus ENIs
+(``export_agreement.py`` says how); ``bench/export_agreement.py`` runs every corpus ENI
+(figures in docs/BENCHMARKS.md).
 
 The sample: the ENIs of the corpora with slaves of fewer than 8 bits (LUPA: two 2-bit
 input terminals after byte-oriented ones; NAVFAC: a 2-bit terminal, and an EL3692 the

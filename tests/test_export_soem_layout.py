@@ -1,4 +1,4 @@
-"""The pysoem export places small terminals' bits where SOEM packs them (issue 39, part 1).
+"""The pysoem export places small terminals' bits where SOEM packs them.
 
 A line of Beckhoff terminals from the corpus ESIs: 2-, 4- and 4-bit inputs (the third runs
 from bit 6 of one byte into the next), 4-, 2- and 4-bit outputs (likewise), and a 16-bit
