@@ -127,6 +127,7 @@ def _run(args: argparse.Namespace, ctx: _Run) -> int:
     report = ApplyReport(plan, args.eni, json_output=args.format == "json")
     report.derived(derived)
     report.skipped(plan.unsupported)
+    report.ignored(plan.ignored)
     notify = Notifier.from_env()
 
     def on_event(event: Event) -> None:

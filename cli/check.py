@@ -95,8 +95,11 @@ def _check(args: argparse.Namespace, active: frozenset[str]) -> int:
     else:
         print("ecatcfg check: note: no --esi given; the slaves were checked against the "
               "ENI alone", file=sys.stderr)
-    results = [check_eni(eni, library, active, use_cache=not args.no_cache)
+    notes: list[str] = []
+    results = [check_eni(eni, library, active, use_cache=not args.no_cache, notes=notes)
                for eni in args.enis]
+    for note in notes:          # which of differing ESI files the ENI's evidence chose
+        print(f"ecatcfg check: note: {note}", file=sys.stderr)
     rules = all_rules()
     in_effect = {rid: rules[rid] for rid in sorted(active)}
     buffer = io.StringIO()

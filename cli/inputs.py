@@ -37,7 +37,7 @@ def kind(path: str) -> Literal["eni", "esi", "topology"]:
     tag = root_tag(path)
     if tag in _ENI_ROOTS:
         return "eni"
-    if tag == "EtherCATInfo":
+    if tag in ("EtherCATInfo", "EtherCATInfoList"):
         return "esi"
     if tag is not None:
         raise EcatcfgError(f"root element <{tag}> is neither an ENI (EtherCATConfig) nor "

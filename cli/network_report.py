@@ -66,7 +66,11 @@ def run(args: argparse.Namespace) -> int:
             for problem in library.problems:
                 print(f"ecatcfg report: note: {problem} (its devices are not in the library)",
                       file=sys.stderr)
-        findings = check_eni(args.eni, library, use_cache=not args.no_cache).findings
+        notes: list[str] = []
+        findings = check_eni(args.eni, library, use_cache=not args.no_cache,
+                             notes=notes).findings
+        for note in notes:      # which of differing ESI files the ENI's evidence chose
+            print(f"ecatcfg report: note: {note}", file=sys.stderr)
     try:
         report.write(plan, out, args.eni, findings=findings)
     except OSError as exc:

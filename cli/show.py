@@ -203,6 +203,10 @@ def _eni_text(view: EniView, out: _Out) -> None:
         out.heading("Not applied by ecatcfg (apply refuses them unless --skip-unsupported)")
         for u in view.unsupported:
             out.line(f"  {repr(u.slave) + ': ' if u.slave else ''}{u.element}: {u.describe()}")
+    if view.ignored:
+        out.heading("Ignored: metadata ecatcfg does not read there (it changes nothing sent)")
+        for u in view.ignored:
+            out.line(f"  {repr(u.slave) + ': ' if u.slave else ''}{u.element}: {u.describe()}")
     out.heading("InitCmds")
     if view.master_init_cmds:
         out.line("  master")

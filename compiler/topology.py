@@ -783,6 +783,7 @@ def _drop(raw: Any, path: list[str | int]) -> None:
 XML_HEAD = 1 << 20
 # The root elements of the ETG's XML formats (ETG.2000 ESI, ETG.2100 ENI).
 _XML_ROOTS = {"EtherCATInfo": "an ESI (device description)",
+              "EtherCATInfoList": "a list of ESI documents (IgH's ethercat xml)",
               "EtherCATConfig": "an ENI (network configuration)"}
 _XML_START = re.compile(r"<\?xml\b|<!--|<!DOCTYPE|<[A-Za-z_]")
 _XML_ROOT = re.compile(r"<([A-Za-z_][\w.:-]*)")

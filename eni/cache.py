@@ -42,8 +42,9 @@ KEEP = 32                                   # entries; the oldest go when a new 
 # idn.py: an SoE drive number's bounds and the OpCode apply sends; record.py: how the
 # plan's classes are built).  Every module the reader imports is here but errors.py
 # (tests/test_eni_cache.py).
-_FINGERPRINTED = ("eni/reader.py", "eni/contents.py", "eni/plan.py", "eoe.py", "esc.py",
-                  "esi/xmlsafe.py", "esi/values.py", "esi/idn.py", "record.py")
+_FINGERPRINTED = ("eni/reader.py", "eni/contents.py", "eni/plan.py", "eni/compare.py",
+                  "eoe.py", "esc.py", "esi/xmlsafe.py", "esi/values.py", "esi/idn.py",
+                  "esi/vocabulary.py", "record.py")
 
 
 def _fingerprint() -> int:

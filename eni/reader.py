@@ -300,6 +300,7 @@ class _Reader:
         image = config.find("ProcessImage")
         from ecatcfg.eni.contents import audit, dropped_init_cmds
         self._dropped = dropped_init_cmds(config)
+        ignored: list[Unsupported] = []
         slave_els, slaves, passive = [], [], []
         for el in config.iterchildren("Slave"):
             if self.has_esc(el):
@@ -315,7 +316,8 @@ class _Reader:
             cyclic=[self.cyclic(el) for el in config.iterchildren("Cyclic")],
             process_image=ProcessImage() if image is None else self.process_image(image),
             version=root.get("Version"),
-            unsupported=audit(config),
+            unsupported=audit(config, ignored),
+            ignored=ignored,
             passive=[p for _, p in passive],
         )
         plan.unsupported += self.copies_outside(plan)
@@ -370,9 +372,16 @@ class _Reader:
         )
 
     def validate(self, el: Element) -> Validate:
+        from ecatcfg.eni.compare import NAMES, compare_type
+        kind = el.get("Type")
+        compare = None if kind is None else compare_type(kind)
+        if kind is not None and compare is None:
+            raise self.error(f"<Validate Type={kind!r}>: not a compare type of ETG.2000 "
+                             f"({NAMES})", el)
         return Validate(data=self.hex_bytes(self.child(el, "Data")),
                         mask=self.opt_hex(el, "DataMask"),
-                        timeout=self.int_or(el, "Timeout", 0, COUNT))
+                        timeout=self.int_or(el, "Timeout", 0, COUNT),
+                        compare=None if compare == "EQ" else compare)
 
     def init_cmds(self, parent: Element) -> list[InitCmd]:
         cmds = parent.find("InitCmds")

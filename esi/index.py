@@ -17,11 +17,11 @@ from typing import Any
 from lxml import etree
 
 from ecatcfg.esi.model import ENGLISH, MAILBOX_PROTOCOLS
-from ecatcfg.esi.reader import check_root
+from ecatcfg.esi.reader import LIST_ROOT, check_root, documents
 from ecatcfg.esi.values import parse_int
 
 # Bump when the summary's fields change: old cache entries are then ignored.
-SUMMARY_VERSION = 1
+SUMMARY_VERSION = 2      # 2: a device's own vendor_id (EtherCATInfoList)
 
 
 @dataclass(slots=True)
@@ -88,22 +88,33 @@ def summarize(tree: etree._ElementTree, file: str) -> FileSummary:
             errors.append((el.sourceline or 0, f"{what}: {exc}"))
             return None
 
-    vendor_el = root.find("Vendor")
-    vendor_id = None
-    vendor_name = ""
-    if vendor_el is not None:
-        id_el = vendor_el.find("Id")
-        if id_el is not None:
-            vendor_id = number(id_el.text, id_el, "Vendor/Id")
-        vendor_name = _english(vendor_el.findall("Name"))
+    def vendor(doc: etree._Element) -> tuple[int | None, str]:
+        vendor_el = doc.find("Vendor")
+        vendor_id, vendor_name = None, ""
+        if vendor_el is not None:
+            id_el = vendor_el.find("Id")
+            if id_el is not None:
+                vendor_id = number(id_el.text, id_el, "Vendor/Id")
+            vendor_name = _english(vendor_el.findall("Name"))
+        return vendor_id, vendor_name
+
+    docs = documents(root)
+    vendor_id, vendor_name = vendor(docs[0]) if docs else (None, "")
     summary = FileSummary(str(root.tag), vendor_id, vendor_name, errors=errors)
-    summary.info_references = [(el.text or "").strip() for el in root.iterfind("InfoReference")]
+    summary.info_references = [(el.text or "").strip() for doc in docs
+                               for el in doc.iterfind("InfoReference")]
     if root.tag == "EtherCATModule":
         summary.modules = len(root.findall("Modules/Module"))
         return summary
-    summary.modules = len(root.findall("Descriptions/Modules/Module"))
-    for ordinal, dev in enumerate(root.iterfind("Descriptions/Devices/Device")):
-        summary.devices.append(_device(dev, ordinal, number))
+    ordinal = 0
+    for doc in docs:
+        summary.modules += len(doc.findall("Descriptions/Modules/Module"))
+        own = vendor(doc)[0] if root.tag == LIST_ROOT else vendor_id
+        for dev in doc.iterfind("Descriptions/Devices/Device"):
+            device = _device(dev, ordinal, number)
+            device["vendor_id"] = own
+            summary.devices.append(device)
+            ordinal += 1
     return summary
 
 

@@ -5,9 +5,9 @@ from __future__ import annotations
 
 import json
 import subprocess
-import sys
 
 from conftest import EXAMPLES, ROOT, device_xml, esi_xml, write
+from installed import ECATCFG, PYTHON
 from ecatcfg.cli import SUBCOMMANDS
 
 CONTRACT_KEYS = {"file", "line", "vendor_id", "product_code", "revision", "type", "name",
@@ -16,7 +16,7 @@ CONTRACT_KEYS = {"file", "line", "vendor_id", "product_code", "revision", "type"
 
 
 def ecatcfg(*args: str, cwd=ROOT) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "ecatcfg", *args], capture_output=True,
+    return subprocess.run([*ECATCFG, *args], capture_output=True,
                           text=True, cwd=cwd)
 
 
@@ -78,7 +78,7 @@ def test_console_flushes_everything_before_its_fast_exit(tmp_path):
     assert len(json.loads(out.stdout)["devices"]) == 400     # complete JSON document
     assert ecatcfg("devices", "no/such/dir").returncode == 2
     # A reader that goes away early (`| head`): exit 0, nothing on stderr, as before.
-    proc = subprocess.Popen([sys.executable, "-m", "ecatcfg", "devices", "--format", "json",
+    proc = subprocess.Popen([*ECATCFG, "devices", "--format", "json",
                              "--no-cache", str(tmp_path)], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, cwd=ROOT)
     proc.stdout.read(10)
@@ -116,7 +116,7 @@ def test_help_and_devices_do_not_import_scapy_or_the_runtime():
         "    main(['devices', 'examples'])\n"
         "bad = [m for m in sys.modules if m.startswith(('scapy', 'ecatcfg.runtime', 'pysoem'))]\n"
         "print(heavy_after_help, bad)\n")
-    out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True,
+    out = subprocess.run([*PYTHON, "-c", probe], capture_output=True, text=True,
                          cwd=ROOT, check=True)
     assert out.stdout.strip() == "[] []"
 

@@ -96,8 +96,8 @@ def lint_file(target: Target, options: LintOptions, others: list[Path]) -> FileR
         if not target.named_directly:
             return None
         out.add("ESI001", tree.getroot().sourceline, None,
-                f"root element is <{root_name}>, expected <EtherCATInfo> or <EtherCATModule>: "
-                "not an ESI file")
+                f"root element is <{root_name}>, expected <EtherCATInfo>, <EtherCATModule> or "
+                "<EtherCATInfoList>: not an ESI file")
         return _done(result, out, start)
 
     schema_errors = None
@@ -109,8 +109,9 @@ def lint_file(target: Target, options: LintOptions, others: list[Path]) -> FileR
             result.schema_missing = str(schemas.path_for(root_name))
 
     xmlsafe.strip_namespaces(tree)
-    spans = element_spans(tree, "Descriptions/Devices/Device")
-    result.module_spans = (element_spans(tree, "Descriptions/Modules/Module")
+    within = "EtherCATInfo/" if tree.getroot().tag == reader.LIST_ROOT else ""
+    spans = element_spans(tree, f"{within}Descriptions/Devices/Device")
+    result.module_spans = (element_spans(tree, f"{within}Descriptions/Modules/Module")
                            + element_spans(tree, "Modules/Module"))
     esi = reader.read_tree(tree, target.shown)
     devices = [DeviceRef(d.vendor.id, d.product_code, d.revision, d.type_name, d.source.line)
