@@ -146,7 +146,12 @@ def main() -> None:
             cycles(master, 1)
             if master.state_check(pysoem.OP_STATE, 5_000) == pysoem.OP_STATE:
                 break
-        say({"op": master.read_state()})
+        state = 0
+        for _ in range(3):                # a read the loaded line answers late gives 0
+            state = master.read_state()
+            if state:
+                break
+        say({"op": state})
         # Commands through a thread; between them the cycle goes on, as an application's
         # would (a pause longer than the SyncManager watchdog takes the slaves out of OP).
         commands: queue.Queue[str] = queue.Queue()
