@@ -15,13 +15,15 @@ Method:
      SOEM).  ``ecatcfg simulate`` of the line serves namespace B.
   2. Each program runs in namespace A to completion; its CPU time (user + system) comes
      from ``wait4``'s resource usage.  The export runs twice per round: with 0 cycles (the
-     set-up alone: config_init, the hooks, config_map, SAFEOP, OP, INIT) and with
+     set-up alone: config_init, ecatcfg_config_map with the start-up writes, SAFEOP, OP,
+     INIT) and with
      ``--cycles`` cycles of 1 ms (each waiting up to 50 ms for its frame, so that a late
      reply of the emulated line is not a lost frame; the working-counter errors are
      reported); its CPU per cycle is the difference over the cycles.
      simple_ng runs its fixed 10,000 iterations (send, receive, print a line, sleep 5 ms);
      its CPU per cycle is its CPU less the export's set-up CPU of the round, over 10,000
-     (its own set-up is the same SOEM calls without the hooks: an estimate, said so).
+     (its own set-up is the same SOEM calls without the start-up writes: an estimate, said
+     so).
   3. Min and median over ``--rounds`` rounds, printed as a table and as JSON.
 """
 

@@ -25,11 +25,13 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                                    "each slave's identity and installs a config_func per "
                                    "slave that writes the ENI's PDO assignment, mapping and "
                                    "start-up SDOs and programs DC; the process image is "
-                                   "listed by variable name.  soem-c: a C source and header "
-                                   "with the same hooks for SOEM (PO2SOconfigx), the process "
-                                   "data as packed structs with compile-time offset checks, "
-                                   "and a minimal main (-DECATCFG_MAIN).  igh-c: a C source "
-                                   "and header for the IgH master (ecrt.h): slave "
+                                   "listed by variable name where SOEM's config_map puts "
+                                   "it.  soem-c: a C source and header whose "
+                                   "ecatcfg_config_map makes the same start-up writes, "
+                                   "returns the first failure and checks SOEM's mapping; the "
+                                   "process data as packed structs with compile-time offset "
+                                   "checks, and a minimal main (-DECATCFG_MAIN).  igh-c: a C "
+                                   "source and header for the IgH master (ecrt.h): slave "
                                    "configurations with PDO tables, start-up SDOs, SoE IDNs, "
                                    "DC and watchdogs, the variables registered in a domain "
                                    "by name, and a minimal cyclic task (-DECATCFG_MAIN).  "
@@ -61,7 +63,7 @@ def run(args: argparse.Namespace) -> int:
     from ecatcfg.cli.inputs import require_eni
     from ecatcfg.cli.paths import output_file
     from ecatcfg.eni.cache import PlanCache, read_file
-    from ecatcfg.eni.export import pysoem_module, soem_c
+    from ecatcfg.eni.export import pysoem_module, soem_c, soem_image
     from ecatcfg.eni.export.steps import slave_setups
     from ecatcfg.eni.reader import read_file as read_uncached
     from ecatcfg.errors import UsageError
@@ -88,6 +90,7 @@ def run(args: argparse.Namespace) -> int:
         if str(out) == STDOUT:
             raise UsageError("-o -: soem-c writes two files (the C source and its header); "
                              "give a file name")
+        soem_image.check(setups, args.eni)     # what SOEM would not map: refused by name
         header = out.with_suffix(".h")
         if header == out:
             raise UsageError(f"-o {args.output}: the C source needs another suffix than .h")

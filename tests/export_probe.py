@@ -3,10 +3,11 @@ inside the test's network namespace: ``python export_probe.py IFACE MODULE.py JS
 one JSON object.
 
 The user's sequence from the module's docstring: config_init, the module's setup, then
-config_map; then SAFEOP, OP, ``cycles`` process data cycles (the working counters seen
+config_map (the module's, which checks SOEM's sizes); then SAFEOP, OP, ``cycles`` process data cycles (the working counters seen
 in ``wkcs``), SDO uploads of ``read``
 ([[slave, index, subindex], ...]) as hex, and each slave's DC activation and SYNC0
-cycle registers in ``dc``.  ``setup_error`` holds the module's SetupError.
+cycle registers in ``dc``.  ``setup_error`` holds the module's SetupError from ``setup``, ``map_error`` from
+``config_map`` (a refused step, or SOEM's sizes not the ENI's).
 """
 
 from __future__ import annotations
@@ -37,7 +38,11 @@ def main() -> None:
         except exported.SetupError as exc:
             result["setup_error"] = str(exc)
             return
-        result["iomap"] = master.config_map()
+        try:
+            result["iomap"] = exported.config_map(master)
+        except exported.SetupError as exc:
+            result["map_error"] = str(exc)
+            return
         result["sizes"] = [(len(s.output), len(s.input)) for s in master.slaves]
         master.state = pysoem.SAFEOP_STATE
         master.write_state()

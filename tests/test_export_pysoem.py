@@ -193,3 +193,45 @@ def test_ec_engineer_elmo_eni_gives_what_our_eni_gives(veth_netns, pysoem_module
     assert reports[0]["read"][:3] == ["05", "0a16", "1c16"]
     assert reports[0]["read"][5:] == ["08", "01"]
     assert reports[0]["dc"] == [["03", f"{1_000_000:08x}"]]    # SYNC0 every 1 ms
+
+
+def test_a_refused_sdo_raises_with_slave_object_and_abort_code(veth_netns, pysoem_module,
+                                                               example_eni, tmp_path):
+    """The start-up SDO moved to an object the drive does not have: the emulated drive
+    aborts (0x06020000, ETG.1000.6 Table 41: object does not exist) and the module's
+    config_map raises naming the slave, the object and the code, before any SAFEOP."""
+    tree = etree.parse(str(example_eni))
+    cmd = tree.xpath("//CoE/InitCmds/InitCmd[Index='24672']")[0]
+    cmd.find("Index").text = str(0x2FFF)
+    eni = tmp_path / "refused.xml"
+    tree.write(str(eni), xml_declaration=True, encoding="utf-8")
+    module = tmp_path / "refused_setup.py"
+    assert export(eni, module).returncode == 0
+    sim, lines = start_simulate(veth_netns, "--esi", str(EXAMPLES / "esi"), "--topology",
+                                str(EXAMPLES / "topology.yaml"))
+    assert lines and lines[-1].startswith("ready: 5 slaves"), "".join(lines)
+    report = probe(veth_netns, module, {})
+    assert report["map_error"] == ("slave 4 (axis1): SDO 0x2FFF:00 = 9: refused, abort "
+                                   "code 0x06020000"), report
+    assert "safeop" not in report
+
+
+def test_soem_sizes_unlike_the_eni_s_raise_after_config_map(veth_netns, pysoem_module,
+                                                            example_eni, tmp_path):
+    """An ENI that gives the 4-input terminal 16 bits (ProcessData Recv) where the slave
+    maps 4: after config_map the module compares len(slave.input) with the ENI and
+    raises."""
+    tree = etree.parse(str(example_eni))
+    recv = tree.xpath("//Config/Slave[Info/Name='buttons']/ProcessData/Recv/BitLength")[0]
+    recv.text = "16"
+    eni = tmp_path / "sizes.xml"
+    tree.write(str(eni), xml_declaration=True, encoding="utf-8")
+    module = tmp_path / "sizes_setup.py"
+    done = export(eni, module)
+    assert done.returncode == 0, done.stderr
+    sim, lines = start_simulate(veth_netns, "--esi", str(EXAMPLES / "esi"), "--topology",
+                                str(EXAMPLES / "topology.yaml"))
+    assert lines and lines[-1].startswith("ready: 5 slaves"), "".join(lines)
+    report = probe(veth_netns, module, {})
+    assert report["map_error"] == ("slave 1 (buttons): SOEM mapped 0 output and 1 input "
+                                   "byte(s), sizes.xml has 0 and 2 (0 and 16 bits)"), report

@@ -156,6 +156,114 @@ def test_ec_engineer_elmo_eni_gives_soem_what_our_eni_gives(veth_netns, soem_sou
     assert results[0] == results[1]
 
 
+def test_small_terminals_in_c_where_soem_packs_them(veth_netns, soem_sources, corpus,
+                                                    tmp_path):
+    """The small-terminal line of test_export_soem_layout.py through the C export: SOEM's
+    mapping agrees with the header (ecatcfg_config_map checks each slave's bits, IOmap
+    place and start bit and returns 0), and every variable read through ECATCFG_VARIABLES
+    is what the emulated slave holds, every output written through it what the slave
+    gets.  A header number changed by hand makes ecatcfg_config_map fail naming the
+    slave."""
+    from export_agreement import eni_variables
+    from rig import serving
+    from test_export_soem_layout import SMALL_LINE
+
+    from ecatcfg.eni.reader import read_file
+    from ecatcfg.esi.library import Library
+    from ecatcfg.runtime.segment import emulate
+
+    beckhoff = corpus / "esi" / "beckhoff"
+    topo = tmp_path / "small.yaml"
+    topo.write_text(SMALL_LINE)
+    eni = tmp_path / "small.eni.xml"
+    done = subprocess.run([sys.executable, "-m", "ecatcfg", "compile", str(topo), "--esi",
+                           str(beckhoff), "-o", str(eni), "--no-cache"], capture_output=True,
+                          text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    source = tmp_path / "small.c"
+    assert export_c(eni, source).returncode == 0
+    program = build(soem_sources, source)
+    seg = emulate.segment(emulate.specs_from_eni(read_file(eni),
+                                                 Library([beckhoff], cache=False), str(eni)))
+    variables, _ = eni_variables(eni)
+    pattern = bytes.fromhex("a5c3")            # each slave's inputs; 0x5A for the outputs
+    outputs: dict[int, bytes] = {}
+
+    def keep(k: int, slave):
+        original = slave.outputs_written
+
+        def written(now: float | None = None) -> None:
+            original(now)
+            if slave.state == 8:                # the program leaves OP (outputs zero) last
+                outputs[k] = slave.outputs()
+        return written
+    for k, s in enumerate(seg.slaves):
+        s.outputs_written = keep(k, s)
+    with serving(veth_netns, seg):
+        for s in seg.slaves:
+            s.set_inputs(pattern[:sum(n for _, n in s.input_areas())])
+        run = veth_netns.run_in(veth_netns.ns_a, [str(program), veth_netns.if_a, "50",
+                                                  REPLY_US, "5a"], timeout=240)
+    assert run.returncode == 0, run.stdout + run.stderr
+    assert "state 8\n" in run.stdout, run.stdout
+    printed = re.findall(r"^var (\d+) (\d+) (.*)$", run.stdout, re.M)
+    values = {name: (int(i), int(v)) for i, v, name in printed}
+    assert len(values) == len(variables) == 36
+    checked = 0
+    for v in variables:
+        index, value = values[v.name]
+        if v.direction == "input":
+            assert value == pattern[v.offset // 8] >> v.offset % 8 & 1, v.name
+        else:
+            # the program set it to 0x5A.. >> index % 8; the emulated slave has it
+            assert value == 0x5A >> index % 8 & 1, v.name
+            got = outputs[v.slave][v.offset // 8] >> v.offset % 8 & 1
+            assert got == value, v.name
+        checked += 1
+    assert checked == 36
+    # A start bit in the C table changed by hand: the mapping check names the slave.
+    text = source.read_text()
+    row = "{ 0, 0, 0, 4, 2, 2 },    /* sensors */"
+    assert row in text, text
+    source.write_text(text.replace(row, "{ 0, 0, 0, 4, 2, 0 },    /* sensors */"))
+    program = build(soem_sources, source)
+    seg = emulate.segment(emulate.specs_from_eni(read_file(eni),
+                                                 Library([beckhoff], cache=False), str(eni)))
+    with serving(veth_netns, seg):
+        run = veth_netns.run_in(veth_netns.ns_a, [str(program), veth_netns.if_a, "5",
+                                                  REPLY_US], timeout=240)
+    assert run.returncode == 1
+    assert "slave 2: SOEM mapped inputs: 4 bit(s) at IOmap byte 2 bit 2, the header has 4 " \
+           "at byte 2 bit 0" in run.stderr, run.stderr
+
+
+def test_a_refused_sdo_is_returned_with_slave_object_and_abort_code(veth_netns,
+                                                                    soem_sources,
+                                                                    example_eni, tmp_path):
+    """The start-up SDO moved to an object the drive does not have: ecatcfg_config_map
+    returns non-zero with the slave, the object and the abort code (0x06020000, object
+    does not exist), and the program stops before SAFEOP."""
+    from lxml import etree
+    tree = etree.parse(str(example_eni))
+    cmd = tree.xpath("//CoE/InitCmds/InitCmd[Index='24672']")[0]
+    cmd.find("Index").text = str(0x2FFF)
+    eni = tmp_path / "refused.xml"
+    tree.write(str(eni), xml_declaration=True, encoding="utf-8")
+    source = tmp_path / "refused.c"
+    assert export_c(eni, source).returncode == 0
+    program = build(soem_sources, source)
+    sim, lines = start_simulate(veth_netns, "--esi", str(EXAMPLES / "esi"), "--topology",
+                                str(EXAMPLES / "topology.yaml"), duration=300)
+    assert lines and lines[-1].startswith("ready: 5 slaves"), "".join(lines)
+    run = veth_netns.run_in(veth_netns.ns_a, [str(program), veth_netns.if_a, "5", REPLY_US],
+                            timeout=240)
+    assert run.returncode == 1, run.stdout + run.stderr
+    assert "slave 4: SDO 0x2FFF:00 = 9: refused, abort code 0x06020000\n" in run.stderr
+    assert "ecatcfg_config_map: slave 4: SDO 0x2FFF:00 = 9: abort code 0x06020000" in \
+        run.stderr
+    assert "state" not in run.stdout
+
+
 def test_the_c_export_of_every_corpus_eni_compiles(soem_sources, corpus, corpus_extra,
                                                    tmp_path):
     """Every real ENI the export accepts gives C that gcc takes with -Wall -Wextra -Werror,

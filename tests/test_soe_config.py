@@ -476,10 +476,10 @@ def test_soem_export_makes_them_with_ecx_soewrite(
                           text=True, timeout=60)
     assert done.returncode == 0, done.stderr
     text = source.read_text()
-    calls = [line.strip() for line in text.splitlines() if line.strip().startswith(
-        "ecatcfg_soe(")]
+    calls = [line.strip()[len("if ("):] for line in text.splitlines()
+             if line.strip().startswith("if (ecatcfg_soe(")]
     assert calls[0] == ('ecatcfg_soe(context, slave, 0, 0x40, 32778, sizeof data, data, '
-                        '"SoE write P-0-0010 (drive 0) = fe 7f 00 00 00 00 00 00");')
+                        '"SoE write P-0-0010 (drive 0) = fe 7f 00 00 00 00 00 00", error))')
     assert [c.split(", ")[2:5] for c in calls] == [
         ["0", "0x40", "32778"], ["1", "0x40", "32778"], ["0", "0x40", "1"],
         ["0", "0x40", "2"], ["0", "0x40", "32"], ["1", "0x40", "32"]]

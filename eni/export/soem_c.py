@@ -1,11 +1,14 @@
-"""The SOEM export: a C source and header with a ``PO2SOconfigx`` hook per slave, an
-identity check, the DC set-up, each slave's process data as a packed struct whose offsets
-are asserted at compile time, and (with ``-DECATCFG_MAIN``) a minimal ``main`` that runs
-the cycle.
+"""The SOEM export: a C source and header with an identity check, the start-up writes of
+each slave made by ``ecatcfg_config_map`` before SOEM's own mapping (every failure returned
+to the caller, slave, object and abort code named), SOEM's mapping checked against the
+header, each slave's process data as a packed struct whose offsets are asserted at compile
+time, a table of every variable where SOEM puts it, and (with ``-DECATCFG_MAIN``) a
+minimal ``main`` that runs the cycle.
 
-What each hook does comes from :func:`ecatcfg.eni.export.steps.slave_setups`; this module
-decides the C names and the struct layout, ``templates/soem_setup.c.j2`` and
-``soem_setup.h.j2`` lay them out.  The code uses SOEM's context API (``ecx_*``), the one
+What each slave's start-up does comes from :func:`ecatcfg.eni.export.steps.slave_setups`,
+where SOEM puts its data from :mod:`ecatcfg.eni.export.soem_image`; this module decides the
+C names and the struct layout, ``templates/soem_setup.c.j2`` and ``soem_setup.h.j2`` lay
+them out.  The code uses SOEM's context API (``ecx_*``), the one
 pysoem builds SOEM for (``EC_VER2``).
 """
 
@@ -15,6 +18,7 @@ import functools
 from importlib import resources
 from typing import TYPE_CHECKING
 
+from ecatcfg.eni.export import soem_image
 from ecatcfg.eni.export.steps import ImageEntry, SlaveSetup
 from ecatcfg.esc import DC_ACTIVATE_SYNC1
 from ecatcfg.esi import datatypes
@@ -52,11 +56,16 @@ def _typed(e: ImageEntry) -> str | None:
     return C_TYPES[iec][0]
 
 
-def layout(type_name: str, entries: list[ImageEntry], bits: int) -> Struct | None:
-    """A slave's outputs or inputs (``bits`` long, as SOEM maps them) as a packed struct:
-    typed fields where an entry starts on a byte with its type's size, byte arrays for
-    the rest (bit entries, gaps; the bits are named in the field's note)."""
-    size = (bits + 7) // 8
+def layout(type_name: str, entries: list[ImageEntry], bits: int,
+           start_bit: int = 0) -> Struct | None:
+    """A slave's outputs or inputs (``bits`` long, from bit ``start_bit`` of the byte SOEM's
+    ``outputs``/``inputs`` pointer gives: its ``Ostartbit``/``Istartbit``) as a packed
+    struct: typed fields where an entry starts on a byte with its type's size, byte arrays
+    for the rest (bit entries, gaps; the bits are named in the field's note, at SOEM's
+    bit)."""
+    size = (start_bit + bits + 7) // 8
+    entries = [ImageEntry(e.name, start_bit + e.bit_offs, e.bit_size, e.data_type)
+               for e in entries]
     if not size:
         return None
     names = identifiers([e.name for e in entries])
@@ -68,7 +77,7 @@ def layout(type_name: str, entries: list[ImageEntry], bits: int) -> Struct | Non
             typed[e.bit_offs // 8] = (e, ctype, name.lower())
         else:
             notes.setdefault(e.bit_offs // 8, []).append(
-                f"{e.name} bit {e.bit_offs % 8}, {e.bit_size} bit")
+                f"{e.name} byte {e.bit_offs // 8} bit {e.bit_offs % 8}, {e.bit_size} bit")
     fields: list[Field] = []
     byte = 0
     while byte < size:
@@ -94,14 +103,30 @@ class SlaveCode:
     sync1: bool
     outputs: Struct | None
     inputs: Struct | None
+    out_area: soem_image.SoemArea | None
+    in_area: soem_image.SoemArea | None
+    notes: list[str]
 
 
-def _slave_code(s: SlaveSetup) -> SlaveCode:
+def _slave_code(s: SlaveSetup, image: soem_image.SoemImage) -> SlaveCode:
     ident = f"{identifier(s.name).lower()}_{s.position}"
+    out, inp = image.area(s.position, "output"), image.area(s.position, "input")
     return SlaveCode(s, ident, bool(s.registers or s.sdos or s.soe or s.sync_activation),
                      bool(s.sync_activation & DC_ACTIVATE_SYNC1),
-                     layout(f"ecatcfg_{ident}_out_t", s.outputs, s.output_bits),
-                     layout(f"ecatcfg_{ident}_in_t", s.inputs, s.input_bits))
+                     layout(f"ecatcfg_{ident}_out_t", s.outputs, s.output_bits,
+                            out.start_bit if out else 0),
+                     layout(f"ecatcfg_{ident}_in_t", s.inputs, s.input_bits,
+                            inp.start_bit if inp else 0),
+                     out, inp,
+                     [n for a in (out, inp) if a
+                      for n in [soem_image.eni_note(s, a, image)] if n])
+
+
+def _c_string(text: str) -> str:
+    """``text`` as the inside of a C string literal (UTF-8; quotes, backslashes and bytes
+    outside printable ASCII as octal escapes, so no escape runs into the next char)."""
+    return "".join(chr(b) if 0x20 <= b < 0x7F and chr(b) not in '"\\?' else f"\\{b:03o}"
+                   for b in text.encode("utf-8"))
 
 
 def _bytes(data: bytes) -> str:
@@ -118,6 +143,7 @@ def _env() -> jinja2.Environment:
         undefined=jinja2.StrictUndefined)
     env.filters["comment"] = comment
     env.filters["c_bytes"] = _bytes
+    env.filters["c_string"] = _c_string
     return env
 
 
@@ -130,9 +156,10 @@ def expected_wkc(setups: list[SlaveSetup]) -> int:
 def render(setups: list[SlaveSetup], header_name: str, eni_name: str, eni_sha256: str,
            version: str) -> tuple[bytes, bytes]:
     """(the C source, the header named ``header_name``) for the slaves' ``setups``."""
-    slaves = [_slave_code(s) for s in setups]
+    image = soem_image.soem_image(setups)
+    slaves = [_slave_code(s, image) for s in setups]
     guard = "ECATCFG_" + identifier(header_name)
-    values = dict(slaves=slaves, header=comment(header_name), guard=guard,
+    values = dict(slaves=slaves, header=comment(header_name), guard=guard, image=image,
                   eni_name=comment(eni_name), eni_sha256=eni_sha256, version=version,
                   expected_wkc=expected_wkc(setups),
                   any_dc=any(s.sync_activation for s in setups))

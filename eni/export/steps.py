@@ -93,8 +93,10 @@ class RegisterStep:
 
 @record
 class ImageEntry:
-    """A variable of the process image at its place in its slave's data, as SOEM lays it out
-    (each slave's outputs, then inputs, in whole bytes: ``slave.output`` / ``slave.input``)."""
+    """A variable of the process image at its place in its slave's own data: the bits of
+    the slave's Send (or Recv) ranges, each range from a whole byte (its SyncManager's
+    data).  Where a master puts those bytes is the master's layout (SOEM's:
+    :mod:`.soem_image`)."""
 
     name: str
     bit_offs: int                             # within the slave's own bytes
@@ -118,6 +120,8 @@ class SlaveSetup:
     outputs: list[ImageEntry] = field(default_factory=list)
     inputs: list[ImageEntry] = field(default_factory=list)
     soe: list[SoeStep] = field(default_factory=list)
+    send: list[BitRange] = field(default_factory=list)      # the ENI's ProcessData Send
+    recv: list[BitRange] = field(default_factory=list)      # and Recv, in its own image
 
 
 def soem_register(ado: int, length: int) -> bool:
@@ -273,5 +277,6 @@ def slave_setups(plan: NetworkPlan, file: str | Path) -> list[SlaveSetup]:
             _sync_activation(slave),
             sum(r.bit_length for r in send), sum(r.bit_length for r in recv),
             _entries(plan.process_image.outputs, send),
-            _entries(plan.process_image.inputs, recv), _soe_steps(name, plan, slave)))
+            _entries(plan.process_image.inputs, recv), _soe_steps(name, plan, slave),
+            list(send), list(recv)))
     return out
