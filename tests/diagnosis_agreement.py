@@ -199,9 +199,12 @@ def faults(plan: NetworkPlan, seed: int) -> list[Fault]:
 
 # -- running a case ----------------------------------------------------------------------------
 
-def run_case(case: str, original: NetworkPlan, plan: NetworkPlan, library: Any) -> Outcome:
+def run_case(case: str, original: NetworkPlan, plan: NetworkPlan, library: Any, *,
+             master_esi: bool = True) -> Outcome:
     """Bring ``plan`` up on a segment that emulates ``original``'s slaves (from ``library``,
-    or from the ENI alone when None) and compare every refusal with its diagnosis."""
+    or from the ENI alone when None) and compare every refusal with its diagnosis
+    (``master_esi``: the master's diagnosis compares with the same ESI files; False: it
+    has none, as ``doctor`` without ``--esi``)."""
     from ecatcfg.runtime import Network
     from ecatcfg.runtime.link import MemoryLink
     from ecatcfg.runtime.master.replay import ApplyError
@@ -221,7 +224,8 @@ def run_case(case: str, original: NetworkPlan, plan: NetworkPlan, library: Any) 
         theirs.close()
 
     causes: list[dict[str, Any]] = []
-    net = Network(plan, ours, skip_unsupported=True, esi=library, recovery=False,
+    net = Network(plan, ours, skip_unsupported=True, esi=library if master_esi else None,
+                  recovery=False,
                   dc_threshold_ns=0, _closers=[close])
     try:
         net.up()

@@ -73,3 +73,67 @@ def test_corpus_sample_refusals_are_diagnosed_with_the_emulators_rule(request, e
                                  fault.plan, library))
     _check(outcomes)
     assert any(o.refusals for o in outcomes[1:])
+
+
+# -- the cases of issue 39 -----------------------------------------------------------------------
+
+def _elmo_with_digital_outputs(corpus):
+    """The rocos Elmo ENI as a configurator re-exports it with the drive's digital outputs
+    added to its mapping: the configurable RxPDO 0x1607 gets 0x60FE:01 (digital outputs,
+    PdoMapping R in the vendor's ESI) and 0x60FE:02 (the outputs' bit mask, Flags without
+    PdoMapping), and 0x1C12 assigns it in place of 0x161C."""
+    from ecatcfg.eni import reader
+    from ecatcfg.eni.plan import CoeInitCmd
+    from ecatcfg.esc import Transition
+    plan = reader.read_file(corpus / "eni" / "rocos-ethercat" / "eni.xml")
+    slave = plan.slaves[0]
+    assert slave.mailbox is not None
+    cmds = slave.mailbox.coe_init_cmds
+    last = max(k for k, c in enumerate(cmds) if c.index == 0x1C12)
+    for c in cmds:
+        if c.index == 0x1C12 and c.subindex == 5:
+            c.data = (0x1607).to_bytes(2, "little")
+    added = [CoeInitCmd([Transition.PS], "digital outputs", 0x1607, sub, data)
+             for sub, data in ((1, bytes.fromhex("2001fe60")), (2, bytes.fromhex("2002fe60")),
+                               (0, b"\x02"))]
+    cmds[last:last] = added
+    return plan
+
+
+@pytest.mark.parametrize("master_esi", [True, False], ids=["esi", "sdo-info"])
+def test_elmo_with_a_non_mappable_digital_output_entry_names_the_entry(corpus, master_esi):
+    from ecatcfg.esi.library import Library
+    from ecatcfg.eni import reader
+    original = reader.read_file(corpus / "eni" / "rocos-ethercat" / "eni.xml")
+    library = Library([corpus / "esi" / "drives"], cache=False)
+    # Without ESI files the master reads the same rule from the slave's SDO Information
+    # (the entry's access word has no RxPDO bit, ETG.1000.6 Get Entry Description).
+    outcome = run_case("elmo + digital outputs", original, _elmo_with_digital_outputs(corpus),
+                       library, master_esi=master_esi)
+    assert outcome.refusals == [("Slave_1001 [Elmo Drive ]", 0x001D, "entry-not-mappable")]
+    assert not outcome.disagreements, outcome.disagreements
+
+
+def test_a_pdo_takes_its_direction_from_its_sm_not_its_index_range(corpus_extra):
+    """The FB1111 SPI-Slave's ESI lists RxPdo 0x1A00 on SM2 (outputs) and TxPdo 0x1600 on
+    SM3: a TwinCAT export maps the user's variables into them.  The emulated firmware takes
+    a PDO's direction from the SM it is assigned to (0x1C00), so the output variables of
+    0x1A00 count for SM2; it used to take "T" from the index and refuse (0x001D) what its
+    diagnosis then called consistent."""
+    from dataclasses import replace
+
+    from ecatcfg.esi.library import Library
+    from ecatcfg.esi.model import PdoEntry
+    from ecatcfg.runtime.segment.objects import ObjectDictionary
+    library = Library([corpus_extra / "esi" / "dls" / "Beckhoff FB1XXX.xml"], cache=False)
+    device = library.device(library.find("0x2:0x04570862:0x0258008D").entry)
+    [rx] = device.rx_pdos
+    [tx] = device.tx_pdos
+    assert (rx.index, rx.sm, tx.index, tx.sm) == (0x1A00, 2, 0x1600, 3)
+    variables = {"rx": [PdoEntry(0x7000, 1, 16, "UINT", {1033: "Out"}, rx.source)],
+                 "tx": [PdoEntry(0x6000, 1, 8, "USINT", {1033: "In"}, tx.source)]}
+    device = replace(device, rx_pdos=[replace(rx, entries=variables["rx"])],
+                     tx_pdos=[replace(tx, entries=variables["tx"])])
+    od = ObjectDictionary.from_device(device)
+    assert od.assignment(2) == ([(0x7000, 1, 16)], None)
+    assert od.assignment(3) == ([(0x6000, 1, 8)], None)

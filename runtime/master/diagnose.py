@@ -5,10 +5,14 @@ value made it fail.  For the codes below the master reads what that check looks 
 says it in one or two lines (``docs/diagnostics.md`` has the table):
 
 - 0x001D / 0x001E invalid output / input configuration: the process-data SyncManagers of
-  that direction (0x0800 + 8·n: start, length, control, activate), the PDO assignment and
-  mapping the slave holds over CoE (0x1C10 + n, 0x1600-0x17FF / 0x1A00-0x1BFF) and the FMMUs
-  (0x0600 + 16·n) over them: a length that differs from the assigned PDOs' bits, an SM not
-  enabled, or no FMMU of that direction over it (SOES ``ESC_checkSM23`` checks the same);
+  that direction as the slave's SII places them (its SyncM category) against the ESC's
+  (0x0800 + 8·n: start, length, control, activate), the PDO assignment and mappings the
+  slave holds over CoE (0x1C10 + n, 0x1600-0x17FF / 0x1A00-0x1BFF, each mapped entry
+  uploaded and its mappability taken from the ESI or SDO Information; without CoE the
+  SII's fixed PDOs) and the FMMUs (0x0600 + 16·n) over them (SOES ``ESC_checkSM23`` checks
+  the same);
+- 0x0016 / 0x0015 invalid mailbox configuration: SM0/SM1 against the SII's (bootstrap)
+  mailbox words; 0x0011 / 0x0012 / 0x0013: AL control against the AL state machine;
 - 0x001B SM watchdog: the watchdog time (0x0420 in the base of 0x0400), its status
   (0x0440) and counter (0x0442): outputs stopped arriving for longer than that time;
 - 0x0030 / 0x0035 / 0x0036 / 0x0037 DC SYNC: the activation (0x0981), SYNC0/SYNC1 cycle times
@@ -24,13 +28,15 @@ says it in one or two lines (``docs/diagnostics.md`` has the table):
   DiagCode u32, Flags u16, TextId u16, time stamp u64, parameters).
 
 Everything is read by auto-increment position, so it works with or without an ENI and
-before station addresses are set (``ecatcfg doctor``).  The diagnosis is a lockstep job
+before station addresses are set (``ecatcfg doctor``).  Each cause names the rules it found
+broken (``Cause.fields["rules"]``, the names of ``runtime/refusals.py``), the same names the
+emulated firmware refuses by.  The diagnosis is a lockstep job
 (``lockstep.py``): :func:`explain` runs it to the end, and the recovery
 (``recovery.py``) runs :func:`explain_step` between cycles while the others' data goes on.
 CoE goes through one mailbox per diagnosis: the master's own channel where it configured the
 slave (the ENI's mailbox), else the one ``sdo_tool.open_mailbox`` prepares once from the
 slave's SII and SyncManagers, used for every upload that follows.  Nothing here writes a
-register except what an SDO upload needs.
+register except what an SDO upload and an SII read (0x0502) need.
 
 With the device's ESI (``esi``: a :class:`~ecatcfg.esi.library.Library`, the device found by
 the slave's identity), a DC refusal is compared with what the ESI says of the SYNC0 cycle
@@ -200,7 +206,7 @@ class _Mailbox:
 
     def entry_access(self, index: int, sub: int) -> Step[int | None]:
         """The object access word of ``index:sub`` from SDO Information (Get Entry
-        Description, ETG.1000.6 §5.6.3.6: bit 6 RxPDO mappable, bit 7 TxPDO mappable);
+        Description, ETG.1000.6: bit 6 RxPDO mappable, bit 7 TxPDO mappable);
         None where the slave does not describe it."""
         from ecatcfg.runtime.mailbox import EntryDescription, SdoInfoOpcode
         from ecatcfg.runtime.master.sdo_info import SdoInfoRequest
