@@ -389,6 +389,12 @@ def _sii(position: int) -> Step[_SiiLayout]:
     from ecatcfg.esi.sii import (CAT_END, CAT_RXPDO, CAT_SYNCM, CAT_TXPDO, HEADER_SIZE,
                                  SiiError, decode)
     from ecatcfg.runtime.master.scan import sii_words
+    owner = (yield from _registers(position, [(Reg.EEPROM_CONFIG, 1)])).get(Reg.EEPROM_CONFIG)
+    if owner is None or owner[0] & 1:
+        # 0x0500 bit 0: the EEPROM is assigned to the PDI (ESC Section II); taking it back
+        # would change the slave, and its ECAT interface does not answer meanwhile.
+        raise _Unreadable("the SII is not read: its EEPROM is assigned to the PDI "
+                          "(0x0500 bit 0)" if owner else "0x0500 not read")
     deadline = time.monotonic() + SII_TIMEOUT
     image = bytearray(HEADER_SIZE)
     image[0] = 1                       # not an erased header (decode refuses those)
