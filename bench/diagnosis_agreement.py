@@ -34,6 +34,8 @@ def main() -> int:
     ap.add_argument("--seed", type=int, default=39)
     ap.add_argument("--limit", type=int, default=None)
     args = ap.parse_args()
+    import warnings
+    warnings.simplefilter("ignore")      # each skipped part of an ENI, once per case
     from diagnosis_agreement import faults, run_case
 
     from ecatcfg.eni import reader
@@ -57,6 +59,7 @@ def main() -> int:
             skipped.append(f"{name}: {exc.message.splitlines()[0][:120]}")
             continue
         planted = faults(plan, args.seed)[:args.limit]
+        began, before = time.monotonic(), (cases, refusals, len(bad))
         for with_esi in (True, False):
             lib = library if with_esi else None
             mode = "esi" if with_esi else "eni-only"
@@ -72,6 +75,9 @@ def main() -> int:
                 refusals += len(outcome.refusals)
                 per_rule.update(f"0x{code:04X} {rule}" for _, code, rule in outcome.refusals)
                 bad += outcome.disagreements
+        print(f"{name}: {cases - before[0]} cases, {refusals - before[1]} refusals, "
+              f"{len(bad) - before[2]} disagreements, {time.monotonic() - began:.1f} s",
+              flush=True)
     elapsed = time.monotonic() - start
     for line in bad:
         print("DISAGREE", line)

@@ -17,6 +17,7 @@ SEED = 39
 # A sample that covers ESI devices with a dictionary (Elmo Gold; Beckhoff terminals and a
 # coupler without CoE), ENI-only slaves of two exporters and a DC line, small enough for CI.
 SAMPLE = ["corpus/rocos-ethercat/eni.xml", "corpus/jn-ec-master/mega_master_eni.xml",
+          "corpus/rocos-ethercat/eni1.xml",
           "corpus-extra/marcelgehrig-ethercattest/01_ENI_1Elmo_1000ms.xml",
           "corpus-extra/pmec-linear-actuator/linear_actuator.xml"]
 
