@@ -45,6 +45,8 @@ class Outcome:
     refusals: list[tuple[str, int, str]] = field(default_factory=list)  # slave, code, rule
     disagreements: list[str] = field(default_factory=list)
     error: str = ""              # the ApplyError's first line, when the bring-up failed
+    # Each emulated slave's 0x0500 after the diagnosis (who has its EEPROM).
+    eeprom_config: dict[str, int] = field(default_factory=dict)
 
 
 # -- planting faults ---------------------------------------------------------------------------
@@ -235,6 +237,7 @@ def run_case(case: str, original: NetworkPlan, plan: NetworkPlan, library: Any, 
     finally:
         net.close()
     by_position = {c.get("position"): c for c in causes}
+    out.eeprom_config = {s.name: s.mem[Reg.EEPROM_CONFIG] for s in segment.slaves}
     for slave in segment.slaves:
         refusal = slave.refusal
         if refusal is None:

@@ -138,3 +138,23 @@ def test_a_pdo_takes_its_direction_from_its_sm_not_its_index_range(corpus_extra)
     od = ObjectDictionary.from_device(device)
     assert od.assignment(2) == ([(0x7000, 1, 16)], None)
     assert od.assignment(3) == ([(0x6000, 1, 8)], None)
+
+
+def test_an_eeprom_the_pdi_holds_is_read_and_given_back(example_plan, example_library):
+    """An ENI that assigns the EEPROM to the PDI (0x0500 = 1, as the hydra ENIs do): the
+    diagnosis takes it for its SII reads and gives it back (SOEM ecx_eeprom2master /
+    ecx_eeprom2pdi), so an SM moved from where the SII puts it is still named."""
+    import copy
+
+    from ecatcfg.eni.plan import InitCmd
+    from ecatcfg.esc import Cmd, Reg, Transition
+    fault = next(f for f in faults(example_plan, SEED)
+                 if f.name == "sm-start" and f.slave == "axis1")
+    plan = copy.deepcopy(fault.plan)
+    axis = plan.slave("axis1")
+    axis.init_cmds.insert(0, InitCmd([Transition.PS], "EEPROM to PDI", int(Cmd.FPWR), 1,
+                                     adp=axis.phys_addr, ado=Reg.EEPROM_CONFIG, data=b"\x01"))
+    outcome = run_case("sm-start, EEPROM at the PDI", example_plan, plan, example_library)
+    assert [r for _, _, r in outcome.refusals] == ["sm-start"]
+    assert not outcome.disagreements, outcome.disagreements
+    assert outcome.eeprom_config["axis1"] == 0x01

@@ -36,7 +36,7 @@ emulated firmware refuses by.  The diagnosis is a lockstep job
 CoE goes through one mailbox per diagnosis: the master's own channel where it configured the
 slave (the ENI's mailbox), else the one ``sdo_tool.open_mailbox`` prepares once from the
 slave's SII and SyncManagers, used for every upload that follows.  Nothing here writes a
-register except what an SDO upload and an SII read (0x0502) need.
+register except what an SDO upload and an SII read (0x0500-0x0504) need.
 
 With the device's ESI (``esi``: a :class:`~ecatcfg.esi.library.Library`, the device found by
 the slave's identity), a DC refusal is compared with what the ESI says of the SYNC0 cycle
@@ -370,6 +370,8 @@ def _sms(position: int) -> Step[tuple[list[SmConfig], list[FmmuConfig]]]:
 # SDO aborts that say an object or subindex is not there (ETG.1000.6 Table 41).
 _MISSING = (0x06020000, 0x06090011)
 SII_TIMEOUT = 2.0              # s for the SII reads of one diagnosis
+EEPROM_TO_PDI = 0x01           # 0x0500 bit 0: the EEPROM is assigned to the PDI
+EEPROM_FORCE_ECAT = 0x02       # 0x0500 bit 1: reset the PDI's access (ESC Section II)
 _SII_LAST_WORD = 0x4000        # an SII category walk stops here (a 32 KiB EEPROM)
 
 
@@ -385,16 +387,41 @@ class _SiiLayout:
 def _sii(position: int) -> Step[_SiiLayout]:
     """The slave's SII SyncManager and PDO categories, walked category by category from
     word 0x40 (only those bodies are read); :class:`_Unreadable` when the EEPROM does not
-    answer (it belongs to the PDI, or there is none)."""
+    answer."""
+    owner = (yield from _registers(position, [(Reg.EEPROM_CONFIG, 1)])).get(Reg.EEPROM_CONFIG)
+    if owner is None:
+        raise _Unreadable(f"the SII is not read: 0x{Reg.EEPROM_CONFIG:04X} does not answer")
+    pdi = bool(owner[0] & EEPROM_TO_PDI)
+    if pdi:
+        # The EEPROM is assigned to the PDI (0x0500 bit 0): taken for the master and given
+        # back after, as SOEM does around its SII reads (ecx_eeprom2master writes 2, "force
+        # EEPROM from PDI", then 0; ecx_eeprom2pdi writes 1).
+        for value in (EEPROM_FORCE_ECAT, 0):
+            yield from _write(position, Reg.EEPROM_CONFIG, bytes([value]))
+    try:
+        return (yield from _sii_categories(position))
+    finally:
+        if pdi:
+            yield from _write(position, Reg.EEPROM_CONFIG, bytes([EEPROM_TO_PDI]))
+
+
+def _write(position: int, ado: int, data: bytes) -> Step[None]:
+    """One register write to the slave at ``position``, again until it is answered;
+    :class:`_Unreadable` after the command timeout."""
+    dg = Datagram.physical(Cmd.APWR, -position & 0xFFFF, ado, data)
+    deadline = time.monotonic() + TIMEOUT_COMMAND
+    while True:
+        reply = yield [dg]
+        if reply is not None and reply[0].wkc == 1:
+            return
+        if time.monotonic() > deadline:
+            raise _Unreadable(f"0x{ado:04X} not written (no answer)")
+
+
+def _sii_categories(position: int) -> Step[_SiiLayout]:
     from ecatcfg.esi.sii import (CAT_END, CAT_RXPDO, CAT_SYNCM, CAT_TXPDO, HEADER_SIZE,
                                  SiiError, decode)
     from ecatcfg.runtime.master.scan import sii_words
-    owner = (yield from _registers(position, [(Reg.EEPROM_CONFIG, 1)])).get(Reg.EEPROM_CONFIG)
-    if owner is None or owner[0] & 1:
-        # 0x0500 bit 0: the EEPROM is assigned to the PDI (ESC Section II); taking it back
-        # would change the slave, and its ECAT interface does not answer meanwhile.
-        raise _Unreadable("the SII is not read: its EEPROM is assigned to the PDI "
-                          "(0x0500 bit 0)" if owner else "0x0500 not read")
     deadline = time.monotonic() + SII_TIMEOUT
     image = bytearray(HEADER_SIZE)
     image[0] = 1                       # not an erased header (decode refuses those)
