@@ -645,7 +645,7 @@ def _process_data(position: int, outputs: bool, fields: dict[str, Any],
             problems.append((Rule.SM_CONTROL, f"SM{n} control 0x{sm.control:02X} "
                              f"(0x{sm_register(n) + 4:04X}): mode and direction (bits 0-3) "
                              f"differ from the SII's 0x{ssm.control:02X}"))
-        elif ssm is None and not sm.enable:
+        elif ssm is None and bits is None and not sm.enable:
             problems.append((Rule.SM_DISABLED,
                              f"SM{n} not enabled (0x{sm_register(n) + 6:04X} bit 0 = 0)"))
         covered = fmmus_cover([f for f in fmmus if f.active], sm.start, sm.length, kind)
