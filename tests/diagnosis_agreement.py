@@ -176,6 +176,14 @@ def _planters(slave: SlavePlan, rng: random.Random
             def sync0(s: SlavePlan, k: int = k, ns: int = ns) -> None:
                 _set(s.init_cmds[k], 0, "<I", ns)
             yield name, f"SYNC0 cycle {ns} ns", sync0
+    watchdog = _reg_writes(slave, Reg.WATCHDOG_SM, Transition.IP)
+    if watchdog and _process_sms(slave):
+        k = slave.init_cmds.index(watchdog[0])
+
+        def short_watchdog(s: SlavePlan, k: int = k) -> None:
+            _set(s.init_cmds[k], 0, "<H", 1)
+        yield "watchdog", "SM watchdog time 1 (one base tick, 100 µs by default)", \
+            short_watchdog
     mailbox = _reg_writes(slave, Reg.SM0, Transition.IP)
     if mailbox:
         k = slave.init_cmds.index(mailbox[0])
@@ -202,11 +210,12 @@ def faults(plan: NetworkPlan, seed: int) -> list[Fault]:
 # -- running a case ----------------------------------------------------------------------------
 
 def run_case(case: str, original: NetworkPlan, plan: NetworkPlan, library: Any, *,
-             master_esi: bool = True) -> Outcome:
+             master_esi: bool = True, cycles: int = 5) -> Outcome:
     """Bring ``plan`` up on a segment that emulates ``original``'s slaves (from ``library``,
     or from the ENI alone when None) and compare every refusal with its diagnosis
     (``master_esi``: the master's diagnosis compares with the same ESI files; False: it
-    has none, as ``doctor`` without ``--esi``)."""
+    has none, as ``doctor`` without ``--esi``); ``cycles`` in OP after it is reached, the
+    refusals then diagnosed by ``doctor``)."""
     from ecatcfg.runtime import Network
     from ecatcfg.runtime.link import MemoryLink
     from ecatcfg.runtime.master.replay import ApplyError
@@ -226,11 +235,19 @@ def run_case(case: str, original: NetworkPlan, plan: NetworkPlan, library: Any, 
         theirs.close()
 
     causes: list[dict[str, Any]] = []
-    net = Network(plan, ours, skip_unsupported=True, esi=library if master_esi else None,
-                  recovery=False,
+    esi = library if master_esi else None
+    net = Network(plan, ours, skip_unsupported=True, esi=esi, recovery=False,
                   dc_threshold_ns=0, _closers=[close])
     try:
         net.up()
+        # A few cycles in OP: a slave that leaves it (its SM watchdog) is found by the
+        # master's doctor, which diagnoses every slave not in OP.
+        net.run(cycles)
+        if any(s.refusal is not None for s in segment.slaves):
+            from ecatcfg.esc import AlState
+            from ecatcfg.runtime.master.diagnose import doctor
+            _count, findings = doctor(net.master.transport, AlState.OP, net.plan, esi)
+            causes = [f.cause.as_json() for f in findings if f.cause is not None]
     except ApplyError as exc:
         causes = exc.causes
         out.error = exc.message.splitlines()[0]
