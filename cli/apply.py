@@ -127,6 +127,7 @@ def _run(args: argparse.Namespace, ctx: _Run) -> int:
     report = ApplyReport(plan, args.eni, json_output=args.format == "json")
     report.derived(derived)
     report.skipped(plan.unsupported)
+    report.ignored(plan.ignored)
     notify = Notifier.from_env()
 
     def on_event(event: Event) -> None:
@@ -192,7 +193,7 @@ def _checked_options(args: argparse.Namespace
         from ecatcfg.runtime.master.realtime import apply as apply_realtime
         apply_realtime(realtime)()
     if args.pcap:
-        output_file(args.pcap)
+        output_file(args.pcap, stdout=False)
     return dc_threshold, dc_timeout, realtime
 
 
@@ -201,7 +202,6 @@ def _plan(args: argparse.Namespace, ctx: _Run) -> tuple[NetworkPlan, list[Derive
     apply does not do (unless --skip-unsupported), completed where it is partial, and
     checked to request every state up to the target, all before a link is opened."""
     from ecatcfg.eni import cache as eni_cache
-    from ecatcfg.eni.derive import complete
     from ecatcfg.esc import AlState
     from ecatcfg.runtime.master.bringup import check_requests
 
@@ -215,8 +215,12 @@ def _plan(args: argparse.Namespace, ctx: _Run) -> tuple[NetworkPlan, list[Derive
     if plan.unsupported and not args.skip_unsupported:
         from ecatcfg.eni.contents import refuse
         refuse(plan, args.eni)              # before a link is opened or a frame sent
-    # A partial ENI: the standard set-up of slaves without register InitCmds.
-    plan, derived = complete(plan, args.eni)
+    # A partial ENI: the standard set-up of slaves without register InitCmds (the
+    # derivation imported only then: tests/test_startup_counts.py).
+    derived: list[Derived] = []
+    if plan.partial_slaves():
+        from ecatcfg.eni.derive import complete
+        plan, derived = complete(plan, args.eni)
     check_requests(plan, target, args.eni)
     return plan, derived, target
 

@@ -51,6 +51,7 @@ def run(args: argparse.Namespace) -> int:
     from ecatcfg.errors import UsageError
     from ecatcfg.esi.lint.config import split_ids
     from ecatcfg.esi.lint.rules import select_rules
+    from ecatcfg.fileio import check_input
 
     rules = all_rules()
     if args.explain:
@@ -68,6 +69,7 @@ def run(args: argparse.Namespace) -> int:
     if not args.enis:
         raise UsageError("give at least one ENI file (or --explain ID)")
     for eni in args.enis:
+        check_input(eni)                    # a device node or FIFO: refused as such
         if not Path(eni).is_file():
             raise UsageError(f"{eni}: no such file" + (" (a folder: give ENI files)"
                                                         if Path(eni).is_dir() else ""))
@@ -95,8 +97,11 @@ def _check(args: argparse.Namespace, active: frozenset[str]) -> int:
     else:
         print("ecatcfg check: note: no --esi given; the slaves were checked against the "
               "ENI alone", file=sys.stderr)
-    results = [check_eni(eni, library, active, use_cache=not args.no_cache)
+    notes: list[str] = []
+    results = [check_eni(eni, library, active, use_cache=not args.no_cache, notes=notes)
                for eni in args.enis]
+    for note in notes:          # which of differing ESI files the ENI's evidence chose
+        print(f"ecatcfg check: note: {note}", file=sys.stderr)
     rules = all_rules()
     in_effect = {rid: rules[rid] for rid in sorted(active)}
     buffer = io.StringIO()

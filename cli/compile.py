@@ -18,9 +18,10 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                    help="ESI file or folder (searched recursively); repeatable")
     p.add_argument("--prefer", action="append", default=[], metavar="PATH",
                    help="an ESI file or folder of --esi whose description wins where files describe one device (vendor, product, revision) differently; repeatable, first wins (default: such a device is an error naming the files)")
-    p.add_argument("-o", "--output", required=True, metavar="ENI", help="ENI file to write")
+    p.add_argument("-o", "--output", required=True, metavar="ENI",
+                   help="ENI file to write ('-': standard output)")
     p.add_argument("--header", metavar="FILE.h",
-                   help="also write a C header of the process image")
+                   help="also write a C header of the process image ('-': standard output)")
     p.add_argument("--no-cache", action="store_true",
                    help="do not read or write the ESI index cache")
     p.add_argument("--allow-esi-errors", action="store_true",
@@ -34,7 +35,7 @@ def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from ecatcfg import __version__
-    from ecatcfg.cli.paths import output_file
+    from ecatcfg.cli.paths import messages, output_file
     from ecatcfg.compiler import build, header, topology
     from ecatcfg.eni import writer as eni_writer
     from ecatcfg.errors import EcatcfgError, UsageError
@@ -78,5 +79,6 @@ def run(args: argparse.Namespace) -> int:
     passive = f" and {len(plan.passive)} passive" if plan.passive else ""
     print(f"wrote {args.output}: {len(plan.slaves)} slaves{passive}, {frames} cyclic frame"
           f"{'s' if frames != 1 else ''}, process image {plan.process_image.outputs_size} "
-          f"bytes" + (f"; header {args.header}" if h is not None else ""))
+          f"bytes" + (f"; header {args.header}" if h is not None else ""),
+          file=messages(args.output, args.header))
     return 0

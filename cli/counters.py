@@ -89,21 +89,19 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _row(c: SlaveCounters) -> dict[str, Any]:
-    from ecatcfg.esc import PORT_LETTERS
     return {"position": c.position,
-            "ports": {PORT_LETTERS[n]: p for n, p in enumerate(c.ports)},
+            "ports": dict(c.present_ports()),
             "processing_unit_errors": c.processing_unit_errors, "pdi_errors": c.pdi_errors,
             "first_errors": c.first_errors()}
 
 
 def _print_table(found: list[SlaveCounters], cleared: bool) -> None:
-    from ecatcfg.esc import PORT_LETTERS
     print(f"{'pos':>3} port {'invalid':>7} {'rx err':>7} {'forward':>7} {'lost':>5}   "
           "processing unit, PDI errors")
     for c in found:
-        for n, p in enumerate(c.ports):
+        for n, (letter, p) in enumerate(c.present_ports()):
             tail = f"   {c.processing_unit_errors}, {c.pdi_errors}" if n == 0 else ""
-            print(f"{c.position:>3} {PORT_LETTERS[n]:>4} {p['invalid_frames']:>7} "
+            print(f"{c.position:>3} {letter:>4} {p['invalid_frames']:>7} "
                   f"{p['rx_errors']:>7} {p['forwarded_rx_errors']:>7} {p['lost_links']:>5}"
                   + tail)
     for c in found:

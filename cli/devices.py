@@ -19,15 +19,21 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                                    "(searched recursively for *.xml).")
     p.add_argument("paths", nargs="+", metavar="PATH", help="ESI file or folder")
     p.add_argument("--format", choices=("text", "json"), default="text")
+    p.add_argument("--allow-empty", action="store_true",
+                   help="exit 0 when the paths hold no ESI file (default: exit 2)")
     p.add_argument("--no-cache", action="store_true",
                    help="do not read or write the index cache ($XDG_CACHE_HOME/ecatcfg)")
     p.set_defaults(run=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    from ecatcfg.cli.inputs import no_esi_files
+    from ecatcfg.errors import UsageError
     from ecatcfg.esi.library import Library
 
     lib = Library(args.paths, cache=not args.no_cache)
+    if not lib.files and not lib.problems and not args.allow_empty:
+        raise UsageError(no_esi_files(args.paths))
     report(lib, args.format, sys.stdout)
     return 1 if lib.problems else 0
 

@@ -3,7 +3,13 @@
 from __future__ import annotations
 
 import argparse
-from typing import Any
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from ecatcfg.eni.plan import NetworkPlan
+    from ecatcfg.esi.evidence import Evidence
+    from ecatcfg.runtime.master.transport import Transport
 
 STATES = {"init": 1, "preop": 2, "safeop": 4, "op": 8}
 
@@ -58,6 +64,8 @@ def run(args: argparse.Namespace) -> int:
 
         from ecatcfg.eni import reader as eni_reader
         from ecatcfg.errors import UsageError
+        from ecatcfg.fileio import check_input
+        check_input(args.eni)
         if not Path(args.eni).is_file():
             raise UsageError(f"{args.eni}: no such file")
         plan = eni_reader.read_file(args.eni)
@@ -69,7 +77,10 @@ def run(args: argparse.Namespace) -> int:
         from ecatcfg.errors import UsageError
         raise UsageError("--prefer ranks files of --esi: give them with --esi")
     with RawLink(args.iface) as link:
-        count, findings = doctor(Transport(link), target, plan, library)
+        transport = Transport(link)
+        if library is not None:
+            library = library.guided(_line_evidence(transport, plan, args.eni))
+        count, findings = doctor(transport, target, plan, library)
     out: dict[str, Any] = {"iface": args.iface, "eni": args.eni, "target": target.name,
                            "slaves": count, "ok": not findings,
                            "findings": [f.as_json() for f in findings]}
@@ -90,3 +101,26 @@ def run(args: argparse.Namespace) -> int:
                 print(f"  no error flag (AL status code 0x0000): nothing refused "
                       f"{target.name}; no request for it reached the slave")
     return 0 if not findings else 1
+
+
+def _line_evidence(transport: Transport, plan: NetworkPlan | None, eni: str | None
+                   ) -> Callable[[int, int, int], Evidence | None]:
+    """Evidence for choosing among ESI files that describe one identity differently (asked
+    for only then): the SII of the first slave on the line with that identity, read from
+    its EEPROM; where it cannot be read, what the ENI says of its slaves of that identity."""
+    from ecatcfg.cli.scan import sii_evidence
+    from ecatcfg.eni.evidence import evidence_by_identity
+    from ecatcfg.runtime.master.scan import scan
+
+    by_eni = evidence_by_identity(plan, eni or "the ENI") if plan is not None else {}
+    known: dict[tuple[int, int, int], Evidence | None] = {}
+
+    def evidence_for(vendor: int, product: int, revision: int) -> Evidence | None:
+        key = (vendor, product, revision)
+        if key not in known:
+            found = [s.position for s in scan(transport)
+                     if (s.vendor_id, s.product_code, s.revision) == key]
+            sii = sii_evidence(transport, found[0])[0] if found else None
+            known[key] = sii if sii is not None else by_eni.get(key)
+        return known[key]
+    return evidence_for

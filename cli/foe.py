@@ -58,7 +58,7 @@ def run(args: argparse.Namespace) -> int:
     from ecatcfg.cli.paths import output_file
     from ecatcfg.errors import UsageError
     from ecatcfg.esc import AlState
-    from ecatcfg.fileio import write_atomic
+    from ecatcfg.fileio import read_input, write_atomic
     from ecatcfg.runtime.link import RawLink
     from ecatcfg.runtime.master import foe_tool
     from ecatcfg.runtime.master.transport import Transport
@@ -76,14 +76,14 @@ def run(args: argparse.Namespace) -> int:
     path = Path(args.file)
     data: bytes | None = None
     if args.action == "write":
-        if not path.is_file():
+        if not path.exists():
             raise UsageError(f"{args.file}: no such file")
         try:
-            data = path.read_bytes()
+            data = read_input(path, args.file)
         except OSError as exc:
             raise UsageError(f"{args.file}: cannot read: {exc.strerror}") from None
     else:
-        output_file(path)
+        output_file(path, stdout=False)       # stdout has the transfer's report
     name = args.name if args.name is not None else path.name
     if not name:
         raise UsageError("--name: the file needs a name on the slave")

@@ -49,6 +49,9 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
     p.add_argument("--skip-non-esi", action="store_true",
                    help="skip XML files that are not ESI files even when named directly "
                         "(as pre-commit passes every changed *.xml)")
+    p.add_argument("--allow-empty", action="store_true",
+                   help="exit 0 when the paths hold no ESI file to check (default: exit 2, "
+                        "as a mistyped path would pass silently)")
     p.add_argument("--explain", metavar="ID", help="explain one rule and exit")
     p.add_argument("--list-rules", action="store_true", help="list every rule and exit")
     p.set_defaults(run=run)
@@ -68,6 +71,7 @@ def run(args: argparse.Namespace) -> int:
     from ecatcfg.errors import UsageError
     from ecatcfg.esi.lint import config as lint_config
     from ecatcfg.esi.lint.rules import all_rules, select_rules
+    from ecatcfg.fileio import check_input
 
     rules = all_rules()
     if args.explain:
@@ -88,6 +92,8 @@ def run(args: argparse.Namespace) -> int:
     if args.no_config:
         cfg = lint_config.LintConfig()
     else:
+        if args.config:
+            check_input(args.config, f"--config {args.config}")
         if args.config and not Path(args.config).is_file():
             raise UsageError(f"--config {args.config}: no such file")
         source = Path(args.config) if args.config else lint_config.find_pyproject(Path.cwd())
@@ -123,6 +129,9 @@ def _lint(args: argparse.Namespace, active: frozenset[str], schema_dir: Path | N
     results = lint_paths(targets, LintOptions(active, schema_dir), jobs, progress)
     if progress:
         progress.clear()
+    if not results and not args.allow_empty:
+        from ecatcfg.cli.inputs import no_esi_files
+        raise UsageError(no_esi_files(args.paths))
 
     if "XSD001" in active and schema_dir is None:
         print("ecatcfg lint: note: no --schema-dir given; the ETG.2000 schema was not checked",

@@ -23,7 +23,7 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                                    "it offline.")
     p.add_argument("eni", metavar="ENI", help="ENI file")
     p.add_argument("-o", "--output", required=True, metavar="HTML",
-                   help="the page to write (atomically)")
+                   help="the page to write (atomically; '-': standard output)")
     p.add_argument("--esi", action="append", default=[], metavar="PATH",
                    help="ESI file or folder (repeatable) for the check findings: each slave "
                         "against its device, as `ecatcfg check --esi` does; without it the "
@@ -41,7 +41,7 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
 def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    from ecatcfg.cli.inputs import kind
+    from ecatcfg.cli.inputs import require_eni
     from ecatcfg.cli.paths import output_file
     from ecatcfg.eni import report
     from ecatcfg.eni.cache import PlanCache, read_file
@@ -49,9 +49,7 @@ def run(args: argparse.Namespace) -> int:
     from ecatcfg.eni.reader import read_file as read_uncached
     from ecatcfg.errors import UsageError
 
-    found = kind(args.eni)
-    if found != "eni":
-        raise UsageError(f"{args.eni} is not an ENI ({found})")
+    require_eni(args.eni)
     out = output_file(args.output)
     if out.resolve() == Path(args.eni).resolve():
         raise UsageError(f"-o {args.output}: would replace the ENI it reports on")
@@ -66,7 +64,11 @@ def run(args: argparse.Namespace) -> int:
             for problem in library.problems:
                 print(f"ecatcfg report: note: {problem} (its devices are not in the library)",
                       file=sys.stderr)
-        findings = check_eni(args.eni, library, use_cache=not args.no_cache).findings
+        notes: list[str] = []
+        findings = check_eni(args.eni, library, use_cache=not args.no_cache,
+                             notes=notes).findings
+        for note in notes:      # which of differing ESI files the ENI's evidence chose
+            print(f"ecatcfg report: note: {note}", file=sys.stderr)
     try:
         report.write(plan, out, args.eni, findings=findings)
     except OSError as exc:

@@ -65,7 +65,7 @@ def run(args: argparse.Namespace) -> int:
     if args.pcap:
         from ecatcfg.cli.paths import output_file
         from ecatcfg.runtime.pcap import PcapRecorder
-        output_file(args.pcap)
+        output_file(args.pcap, stdout=False)
         recorder = PcapRecorder(args.pcap)
     device = None
     esi_where = None
@@ -111,7 +111,7 @@ def _esi_device(lib: Any, transport: Any, position: int) -> tuple[Any, str]:
     if not found:
         raise EcatcfgError(f"no slave at position {position}")
     s = found[0]
-    exact, other, note = _esi_entry(lib, s)
+    exact, other, note = _esi_entry(lib, s, transport)
     entry = exact or other
     if entry is None:
         raise EcatcfgError(f"slave {position} (vendor 0x{s.vendor_id:08x}, product "

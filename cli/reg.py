@@ -73,7 +73,8 @@ def run(args: argparse.Namespace) -> int:
 
     from ecatcfg.errors import UsageError
     from ecatcfg.runtime.link import RawLink
-    from ecatcfg.runtime.master import reg_tool, register_fields
+    from ecatcfg import registers as register_fields
+    from ecatcfg.runtime.master import reg_tool
     from ecatcfg.runtime.master.transport import Transport
 
     if args.slave < 0:

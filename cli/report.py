@@ -71,6 +71,7 @@ class ApplyReport:
         self.rows: list[dict[str, Any]] = []
         self.summary: dict[str, Any] = {}
         self.skipped_parts: list[dict[str, Any]] = []
+        self.ignored_parts: list[dict[str, Any]] = []
         self.derived_parts: list[dict[str, Any]] = []
 
     def derived(self, derived: list[Derived]) -> None:
@@ -86,8 +87,14 @@ class ApplyReport:
         self.skipped_parts = [{"slave": p.slave, "element": p.element, "what": p.what,
                                "line": p.line, "commands": p.commands} for p in parts]
 
+    def ignored(self, parts: list[Unsupported]) -> None:
+        """Unknown metadata the reader left out (``NetworkPlan.ignored``), for the JSON;
+        the Network warns of each (an ``ignored`` event, printed on stderr)."""
+        self.ignored_parts = [{"slave": p.slave, "element": p.element, "what": p.what,
+                               "line": p.line} for p in parts]
+
     def event(self, event: Event) -> None:
-        if event.kind == "skipped":         # a warning: stderr, whatever the format
+        if event.kind in ("skipped", "ignored"):    # a warning: stderr, whatever the format
             self.events.append(event.text)
             print(event.text, file=sys.stderr, flush=True)
             return
@@ -200,6 +207,7 @@ class ApplyReport:
             "causes": list(getattr(failure, "causes", [])),
             "derived": self.derived_parts,
             "skipped": self.skipped_parts,
+            "ignored": self.ignored_parts,
         }
         by_slave = {c["slave"]: c["cause"] for c in self.summary["causes"]}
         for row in self.rows:
@@ -210,9 +218,13 @@ class ApplyReport:
             for row in self.rows:
                 if row["passive"]:
                     row["emulated_from"] = None     # no ESC: nothing to emulate
+                    row["esi"] = row["esi_choice"] = None
             active = [row for row in self.rows if not row["passive"]]
-            for row, slave in zip(active, segment.slaves):
+            sources = getattr(net, "esi_sources", None) or [(None, None)] * len(active)
+            for row, slave, (esi, why) in zip(active, segment.slaves, sources):
                 row["emulated_from"] = "eni" if slave.eni_only is not None else "esi"
+                # The ESI file and why that one, where several describe the identity.
+                row["esi"], row["esi_choice"] = esi, why
         if self.json_output:
             if failure:
                 print(f"ecatcfg apply: {failure}", file=sys.stderr)
@@ -284,4 +296,5 @@ def refusal_json(eni: str, target: int, error: EcatcfgError,
                             "passive": len(plan.passive) if plan else 0},
             "cycles": {"count": 0, "lost_frames": 0, "wkc_errors": 0,
                        "wkc_error_commands": {}, "jitter_us": {}},
-            "frames": {"sent": 0, "lost": 0}, "derived": [], "skipped": [], "events": []}
+            "frames": {"sent": 0, "lost": 0}, "derived": [], "skipped": [], "ignored": [],
+            "events": []}

@@ -7,9 +7,11 @@ import re
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
+    from ecatcfg.esi.evidence import SiiEvidence
     from ecatcfg.esi.index import DeviceEntry
     from ecatcfg.esi.library import Library
     from ecatcfg.runtime.master.scan import FoundSlave
+    from ecatcfg.runtime.master.transport import Transport
     from ecatcfg.runtime.wiring import Plug
 
 
@@ -81,7 +83,7 @@ def run(args: argparse.Namespace) -> int:
     from ecatcfg.cli.paths import output_file
 
     if args.topology_out:
-        output_file(args.topology_out)
+        output_file(args.topology_out, stdout=False)     # stdout has the table
     lib = None
     if args.esi:
         from ecatcfg.esi.library import Library
@@ -95,13 +97,16 @@ def run(args: argparse.Namespace) -> int:
     from ecatcfg.esc import PORT_LETTERS
 
     with RawLink(args.iface) as link:
-        found = scan(Transport(link))
+        transport = Transport(link)
+        found = scan(transport)
+        chosen = {s.position: _esi_entry(lib, s, transport) for s in found} \
+            if lib is not None else {}
 
     used: dict[str, int] = {}
     rows: list[dict[str, Any]] = []          # the JSON output's slaves
     physics: list[str | None] = []
     for s in found:
-        exact, other, note = _esi_entry(lib, s) if lib is not None else (None, None, None)
+        exact, other, note = chosen.get(s.position, (None, None, None))
         entry = exact or other
         physics.append(lib.device(entry).physics if lib is not None and entry else None)
         parent = rows[s.plug.parent] if s.plug is not None else None
@@ -140,10 +145,36 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _esi_entry(lib: Library, s: FoundSlave
+def _esi_entry(lib: Library, s: FoundSlave, transport: Transport
                ) -> tuple[DeviceEntry | None, DeviceEntry | None, str | None]:
-    """The library's entry of a found slave (``Library.entry_for_identity``)."""
-    return lib.entry_for_identity(s.vendor_id, s.product_code, s.revision)
+    """The library's entry of a found slave (``Library.entry_for_identity``).  Where
+    several ESI files describe its identity differently, its SII is read from its EEPROM
+    and the description that agrees with it is taken (``esi/evidence.py``), said in the
+    note; one that cannot be read leaves the choice to the files' order, said too."""
+    evidence = None
+    if lib.differs(s.vendor_id, s.product_code, s.revision):
+        evidence, why = sii_evidence(transport, s.position)
+        if evidence is None:
+            exact, other, note = lib.entry_for_identity(s.vendor_id, s.product_code,
+                                                        s.revision)
+            return exact, other, f"several ESI files describe it differently; {why}"
+    return lib.entry_for_identity(s.vendor_id, s.product_code, s.revision, evidence)
+
+
+def sii_evidence(transport: Transport, position: int) -> tuple[SiiEvidence | None, str]:
+    """The SII of the slave at ``position``, read from its EEPROM, as evidence; else None
+    and why not."""
+    from ecatcfg.errors import EcatcfgError
+    from ecatcfg.esi.evidence import SiiEvidence
+    from ecatcfg.esi.sii import decode
+    from ecatcfg.runtime.master.eeprom import Eeprom
+
+    shown = f"slave {position}"
+    try:
+        image = decode(Eeprom(transport, position).read(), source=shown)
+    except EcatcfgError as exc:
+        return None, f"its SII could not be read to choose ({exc.message})"
+    return SiiEvidence(image, shown), ""
 
 
 def _print_table(rows: list[dict[str, Any]], iface: str) -> None:

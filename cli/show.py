@@ -39,17 +39,14 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
 
 
 def run(args: argparse.Namespace) -> int:
-    from ecatcfg.cli.inputs import kind
+    from ecatcfg.cli.inputs import require_eni
     from ecatcfg.errors import UsageError
 
     if args.device is not None:
         return _show_esi(args)
     if len(args.paths) != 1:
         raise UsageError("show takes one ENI file (or ESI files with --device)")
-    found = kind(args.paths[0])
-    if found != "eni":
-        raise UsageError(f"{args.paths[0]} is not an ENI" + (
-            ": name the device with --device" if found == "esi" else ""))
+    require_eni(args.paths[0], esi_hint="name the device with --device")
     return _show_eni(args)
 
 
@@ -202,6 +199,10 @@ def _eni_text(view: EniView, out: _Out) -> None:
     if view.unsupported:
         out.heading("Not applied by ecatcfg (apply refuses them unless --skip-unsupported)")
         for u in view.unsupported:
+            out.line(f"  {repr(u.slave) + ': ' if u.slave else ''}{u.element}: {u.describe()}")
+    if view.ignored:
+        out.heading("Ignored: metadata ecatcfg does not read there (it changes nothing sent)")
+        for u in view.ignored:
             out.line(f"  {repr(u.slave) + ': ' if u.slave else ''}{u.element}: {u.describe()}")
     out.heading("InitCmds")
     if view.master_init_cmds:

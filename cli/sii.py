@@ -121,7 +121,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _read(args: argparse.Namespace) -> int:
-    from ecatcfg.cli.paths import output_file
+    from ecatcfg.cli.paths import messages, output_file
     from ecatcfg.errors import UsageError
     from ecatcfg.fileio import write_atomic
 
@@ -135,7 +135,7 @@ def _read(args: argparse.Namespace) -> int:
         raise UsageError(f"cannot write {args.output}: {exc.strerror}") from None
     from ecatcfg.cli.sii_program import describe
     print(f"position {args.slave}: {describe(data)}; {len(data)} bytes written to {out} "
-          f"({eeprom.reads} EEPROM reads)")
+          f"({eeprom.reads} EEPROM reads)", file=messages(args.output))
     return 0
 
 
@@ -146,11 +146,13 @@ def _write(args: argparse.Namespace) -> int:
     from ecatcfg.errors import EcatcfgError, UsageError
     from ecatcfg.esi.sii import decode
 
+    from ecatcfg.fileio import read_input
+
     path = Path(args.image)
-    if not path.is_file():
+    if not path.exists():
         raise UsageError(f"{args.image}: no such file")
     try:
-        image = path.read_bytes()
+        image = read_input(path, args.image)
     except OSError as exc:
         raise EcatcfgError(f"cannot read: {exc.strerror}", args.image) from None
     if len(image) % 2:
@@ -162,7 +164,7 @@ def _write(args: argparse.Namespace) -> int:
 
 
 def _build(args: argparse.Namespace) -> int:
-    from ecatcfg.cli.paths import output_file
+    from ecatcfg.cli.paths import messages, output_file
     from ecatcfg.errors import EcatcfgError, UsageError
     from ecatcfg.esi import sii
     from ecatcfg.esi.library import Library
@@ -191,7 +193,7 @@ def _build(args: argparse.Namespace) -> int:
     img = sii.decode(result.data)
     print(f"wrote {args.output}: {len(result.data)} bytes, {device.selector} "
           f"{device.type_name!r}, {len(img.categories)} categories, "
-          f"{len(img.txpdos)} TxPDO / {len(img.rxpdos)} RxPDO")
+          f"{len(img.txpdos)} TxPDO / {len(img.rxpdos)} RxPDO", file=messages(args.output))
     return 0
 
 
@@ -200,14 +202,13 @@ def _show(args: argparse.Namespace) -> int:
 
     from ecatcfg.errors import EcatcfgError, UsageError
     from ecatcfg.esi import sii
+    from ecatcfg.fileio import read_input
 
     path = Path(args.image)
     if not path.exists():
         raise UsageError(f"{args.image}: no such file")
-    if path.is_dir():
-        raise UsageError(f"{args.image}: is a folder, not an SII image")
     try:
-        data = path.read_bytes()
+        data = read_input(path, args.image)
     except OSError as exc:
         raise EcatcfgError(f"cannot read: {exc.strerror}", args.image) from None
     img = sii.decode(data, source=args.image)

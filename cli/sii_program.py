@@ -60,7 +60,7 @@ def backup_path(given: str | None, position: int) -> Path:
         while path.exists():
             n += 1
             path = Path(f"sii-backup-pos{position}-{stamp}-{n}.bin")
-    return output_file(path)
+    return output_file(path, stdout=False)
 
 
 def _words(words: list[int]) -> str:

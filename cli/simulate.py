@@ -72,6 +72,16 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                         "position with every cable in place): it and the slaves behind it "
                         "are not on the frame, the port it was plugged into has no link; "
                         "repeatable")
+    p.add_argument("--input", action="append", default=[], metavar="NAME=VALUE",
+                   help="hold an input of an emulated slave at VALUE, named as the process "
+                        "image names it ('buttons.Channel 1.Input=1', "
+                        "'axis1.TxPDO 1 (CSP).Position actual value=-200') or by index "
+                        "('axis1.0x6064:00=5'); it follows the slave's PDO mapping; "
+                        "repeatable")
+    p.add_argument("--control", action="store_true",
+                   help="read commands from standard input while serving, one a line, each "
+                        "answered 'ok: ...' or 'error: ...': set NAME VALUE, release NAME, "
+                        "cut SLAVE, plug SLAVE, power SLAVE|all, inputs [SLAVE], help")
     p.add_argument("--allow-esi-errors", action="store_true",
                    help="with --topology: emulate a device although its ESI has an error that "
                         "stops compile (a warning per finding instead)")
@@ -109,6 +119,7 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as exc:
         raise EcatcfgError(f"{source}: {exc}") from None
     removed = _cut_cables(seg, args.cut)
+    held = _hold_inputs(seg, args.input)
     # The interface is opened before anything is printed: a missing one is the only
     # thing the user reads, not a table of slaves that will never answer.
     link = RawLink(args.iface)
@@ -118,8 +129,24 @@ def run(args: argparse.Namespace) -> int:
         print(f"cable into {name} removed: "
               + ", ".join(s.name for s in gone) + " not on the frame", flush=True)
     _print_slaves(seg, passive, timing is not None)
+    for text in held:
+        print(f"input {text}", flush=True)
     _serve(seg, link, args, passive)
     return 0
+
+
+def _hold_inputs(seg: VirtualSegment, assignments: list[str]) -> list[str]:
+    """``--input NAME=VALUE``: each held; a wrong name or value is a usage error."""
+    from ecatcfg.cli.simulate_control import hold
+    from ecatcfg.errors import UsageError
+
+    done = []
+    for assignment in assignments:
+        try:
+            done.append(hold(seg, assignment))
+        except ValueError as exc:
+            raise UsageError(f"--input {exc}") from None
+    return done
 
 
 def _lossy_ports(specs: list[str]) -> tuple[LossyPort, ...]:
@@ -150,6 +177,7 @@ def _check_args(args: argparse.Namespace) -> None:
     from pathlib import Path
 
     from ecatcfg.errors import UsageError
+    from ecatcfg.fileio import check_input
 
     if not 0.0 <= args.drop <= 1.0:
         raise UsageError(f"--drop {args.drop}: a share between 0 and 1")
@@ -158,6 +186,11 @@ def _check_args(args: argparse.Namespace) -> None:
     source = args.topology or args.eni
     if not Path(source).exists():
         raise UsageError(f"{source}: no such file")
+    # A device node or FIFO is refused before the interface is opened (the readers refuse it
+    # too: fileio.read_input).
+    check_input(source)
+    if args.timing:
+        check_input(args.timing, f"--timing {args.timing}")
     if args.topology and not args.esi:
         raise UsageError("--topology needs --esi (the ESI files of the slaves to emulate)")
     if args.prefer and not args.esi:
@@ -218,6 +251,8 @@ def _from_eni(args: argparse.Namespace, lib: Library | None
     notes = [f"note: ignored (apply would refuse it): {line_of(part, args.eni)}"
              for part in plan.unsupported]
     specs = emulate.specs_from_eni(plan, lib, args.eni)
+    # Which of differing ESI files of one identity the ENI's evidence chose, and why.
+    notes += [f"note: slave {s.name!r}: {s.esi_choice}" for s in specs if s.esi_choice]
     passive = [(p.name, "passive", p.vendor_id, p.product_code, p.revision, "ENI")
                for p in plan.passive]
     return specs, passive, notes
@@ -322,12 +357,22 @@ def _serve(seg: VirtualSegment, link: RawLink, args: argparse.Namespace,
     power = threading.Event()
     signal.signal(signal.SIGUSR1, lambda _n, _f: power.set())
 
+    control = None
+    if args.control:
+        from ecatcfg.cli.simulate_control import Control
+        control = Control(seg)
+
     def on_tick() -> None:
         if power.is_set():
             power.clear()
             for slave in list(seg.wired):
                 seg.power_cycle(slave)
             print(f"power cycle: {len(seg.wired)} slaves switched off and on", flush=True)
+        if control is not None:
+            control.tick()
+        else:
+            for s in seg.wired:         # held inputs where the current mapping puts them
+                s.apply_held_inputs()
     with link:
         seg.serve(link, duration=args.duration, stop=stop, on_tick=on_tick,
                   on_ready=lambda: print(f"ready: {len(seg.slaves)} slaves on "

@@ -97,12 +97,20 @@ def run(args: argparse.Namespace) -> int:
         commands = Commands(watch)
         stdin = _stdin_fd()
         keyboard = live and stdin is not None and os.isatty(stdin) and foreground(stdin)
+        if stdin is not None and os.isatty(stdin) and not foreground(stdin):
+            # A job in a background process group (under `timeout`, or started with `&`)
+            # may not read the terminal: say so instead of ignoring every key.
+            print("note: the terminal's keys cannot be read: watch runs in a background "
+                  "process group (under timeout, use timeout --foreground); typed "
+                  "commands are not seen, --force still works", file=sys.stderr, flush=True)
+            stdin = None
         reader: Keyboard | Lines = (Keyboard(stdin, commands) if keyboard and stdin is not None
                                     else Lines(-1 if stdin is None else stdin, commands))
         net.up()
         start = time.monotonic()
-        show = (_Live(watch, commands, reader if isinstance(reader, Keyboard) else None)
-                if live else _Lines(watch, args.format == "json", start))
+        show: _Live | _Lines = (
+            _Live(watch, commands, reader if isinstance(reader, Keyboard) else None)
+            if live else _Lines(watch, args.format == "json", start))
         if isinstance(reader, Lines):
             reader.after = show.refresh
         due = [0.0, 0.0]                        # next refresh, next look at stdin
@@ -129,6 +137,7 @@ def run(args: argparse.Namespace) -> int:
             with reader, show, stop:
                 net.run(args.cycles, each_cycle)
                 show.refresh()
+                show.final_status()
         except KeyboardInterrupt:
             pass
     if isinstance(reader, Lines) and reader.refused:
@@ -174,6 +183,9 @@ class StopOnSignal:
         self.asked = name
 
 
+# How often a pipe gets the status line (a terminal has it on screen all the time).
+STATUS_EVERY_S = 5.0
+
 # How often stdin is looked at: often enough that typing shows at once, seldom enough that
 # a 1 kHz cycle does not make a system call per cycle for it.
 KEY_POLL_S = 0.02
@@ -195,6 +207,7 @@ class _Lines:
         self.watch = watch
         self.as_json = as_json
         self.start = start
+        self.next_status = start + STATUS_EVERY_S
 
     def __enter__(self) -> _Lines:
         return self
@@ -218,6 +231,24 @@ class _Lines:
             else:
                 print(f"{t:9.3f}  {'out' if output else 'in '}  {name} = {value_text(value)}"
                       f"{' (forced)' if forced else ''}", flush=True)
+        if time.monotonic() >= self.next_status:
+            self.next_status = time.monotonic() + STATUS_EVERY_S
+            self.final_status()
+
+    def final_status(self) -> None:
+        """The status line (states, working counters, lost frames, jitter, cycles): every
+        STATUS_EVERY_S seconds and at the end; in JSON an object ``{"t", "status"}``."""
+        import json
+        import time
+
+        from ecatcfg.runtime.watch import status, status_text
+
+        t = round(time.monotonic() - self.start, 3)
+        now = status(self.watch.net)
+        if self.as_json:
+            print(json.dumps({"t": t, "status": now}), flush=True)
+        else:
+            print(f"{t:9.3f}  status: {status_text(now)}", flush=True)
 
 
 class _Live:
@@ -243,19 +274,24 @@ class _Live:
     def refresh(self) -> None:
         self.live.update(self._view(), refresh=True)
 
+    def final_status(self) -> None:
+        return None             # the live table's status line is already on screen
+
     def _view(self) -> Any:
         from rich.console import Group
         from rich.table import Table
         from rich.text import Text
 
         from ecatcfg.cli.watch_commands import USAGE, value_text
+        from ecatcfg.runtime.watch import status, status_text
 
         table = Table("variable", "dir", "value")
         for name, value in self.watch.values().items():
             direction = "out" if name in self.watch.outputs else "in"
             shown = value_text(value) + (" (forced)" if name in self.watch.forced else "")
             table.add_row(name, direction, shown)
-        lines = [Text(self.commands.status())]
+        lines = [Text(status_text(status(self.watch.net)), style="cyan"),
+                 Text(self.commands.status())]
         keys = self.keyboard
         if keys is not None:
             last = keys.last

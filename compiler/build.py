@@ -123,7 +123,9 @@ def compile_topology(loaded: LoadedTopology, library: Library,
     notes = wiring_notes + _notes(resolved)
     line = passive.in_line([(s.name, s.device, parts.file_index[s.index]) for s in resolved],
                            parts.passive)
-    warnings = (defects if allow_esi_errors else []) + ebus_warnings(whole, line)
+    parents = {parts.file_index[s.index]: None if s.parent is None
+               else parts.file_index[resolved[s.parent].index] for s in resolved}
+    warnings = (defects if allow_esi_errors else []) + ebus_warnings(whole, line, parents)
     return CompileResult(plan, warnings, notes)
 
 
@@ -297,30 +299,60 @@ def _unique(variables: list[Variable]) -> list[Variable]:
     return variables
 
 
-def ebus_warnings(loaded: LoadedTopology,
-                  line: list[tuple[str, Device, int]]) -> list[EcatcfgError]:
+def ebus_warnings(loaded: LoadedTopology, line: list[tuple[str, Device, int]],
+                  parents: dict[int, int | None]) -> list[EcatcfgError]:
     """E-bus budget (ESI ``Electrical/EBusCurrent``, mA): a negative value supplies current
     (a coupler: -2000; also a passive power feed, e.g. Beckhoff's EL9400), positive values
-    draw it; warn when the terminals after a supplier draw more than it gives.  ``line``:
-    ``(name, device, index in the topology file)`` of every slave, passive ones included,
-    in the order of the line."""
+    draw it; warn when the terminals a supplier feeds draw more than it gives.
+
+    ``line``: ``(name, device, index in the topology file)`` of every slave, passive ones
+    included, in the order of the line; ``parents``: the file index of the slave each slave
+    with an ESC is plugged into (None: the first).  A terminal draws from the supplier its
+    E-bus leads back to, not from the last supplier in bus order: the frame visits a
+    junction's Ethernet branches (a second coupler and its terminals) before the junction's
+    own E-bus goes on, so the terminals after a branch still hang on the first coupler."""
+    at = {index: k for k, (_, _, index) in enumerate(line)}
+
+    def current(k: int) -> int | None:
+        device = line[k][1]
+        return device.info.ebus_current if device.info else None
+
+    def feeder(k: int) -> int | None:
+        """The slave line[k] is plugged into (its E-bus neighbour towards the master): the
+        parent, or a passive terminal between them.  Not ``Physics``: the E-bus current a
+        device draws says it is on an E-bus, whatever letters its ESI gives its ports."""
+        index = line[k][2]
+        if index not in parents:                # passive: the terminal before it in the row
+            return k - 1 if k else None
+        parent = parents[index]
+        if parent is None:
+            return None
+        before = k - 1                          # passive terminals in the row between them
+        while before >= 0 and line[before][2] not in parents:
+            before -= 1
+        return k - 1 if before == at[parent] and before < k - 1 else at[parent]
+
+    def supplier(k: int) -> int | None:
+        up = feeder(k)
+        while up is not None and not (current(up) or 0) < 0:
+            up = feeder(up)
+        return up
+
     warnings: list[EcatcfgError] = []
-    supplier: tuple[str, Device, int] | None = None
-    budget = drawn = 0
-    warned = False
-    for name, device, index in line:
-        current = device.info.ebus_current if device.info else None
-        if current is None:
+    drawn: dict[int, int] = {}
+    for k, (name, _, index) in enumerate(line):
+        draw = current(k)
+        source = supplier(k) if draw is not None and draw > 0 else None
+        if draw is None or source is None:
             continue
-        if current < 0:
-            supplier, budget, drawn, warned = (name, device, index), -current, 0, False
-            continue
-        drawn += current
-        if supplier is not None and drawn > budget and not warned:
-            warned = True
+        budget = -(current(source) or 0)
+        before = drawn.get(source, 0)
+        drawn[source] = before + draw
+        if before <= budget < drawn[source]:
+            feeder_name, feeder_device, _ = line[source]
             warnings.append(loaded.error(
-                f"E-bus current: the terminals after {supplier[0]!r} "
-                f"({supplier[1].type_name}) draw "
-                f"{drawn} mA up to slave {name!r}, more than the {budget} mA it supplies; "
-                "add a power feed terminal", "slaves", index))
+                f"E-bus current: the terminals on the E-bus of {feeder_name!r} "
+                f"({feeder_device.type_name}) draw {drawn[source]} mA up to slave {name!r}, "
+                f"more than the {budget} mA it supplies; add a power feed terminal",
+                "slaves", index))
     return warnings

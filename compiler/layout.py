@@ -138,6 +138,15 @@ def build(slaves: list[ResolvedSlave], layout: str, uses_dc: bool,
     """Lay out the process data of ``slaves`` (bus order).  ``mailbox_state`` lists the
     indices of slaves polled through the mailbox-state bit."""
     sizes = [pd_bits(s) for s in slaves]
+    if layout == "lrw":
+        for slave, (out, inp) in zip(slaves, sizes):
+            if slave.device.use_lrd_lwr and (out or inp):
+                # ETG.2000 Type/@UseLrdLwr: an LRW would reach the device, which does not
+                # take one (Beckhoff EL2002 rev 0x270B0000, Murrelektronik Impact67).
+                raise LayoutError(f"slave {slave.name!r}: its ESI says UseLrdLwr (device "
+                                  f"{slave.device.type_name} takes process data by LRD and "
+                                  "LWR, not LRW); set the master's `layout: lrd_lwr`",
+                                  slave.index)
     status_len = (len(mailbox_state) + 7) // 8
     misc = [2] + ([status_len] if mailbox_state else []) + ([4] if uses_dc else [])
     kinds = [Cmd.LRW] if layout == "lrw" else [Cmd.LWR, Cmd.LRD]

@@ -31,6 +31,7 @@ from ecatcfg.esc import PORT_LETTERS, Transition
 from ecatcfg.esi.datatypes import bit_size as type_bits
 from ecatcfg.esi.idn import MAX_DRIVE, NOTATION_PATTERN, parse_idn
 from ecatcfg.esi.values import parse_int
+from ecatcfg.fileio import read_input
 
 Path_ = tuple[str | int, ...]
 
@@ -673,7 +674,7 @@ def load(path: str | Path, shown_as: str | None = None,
          unknown_keys: Literal["error", "defer"] = "error") -> LoadedTopology:
     shown = shown_as or str(path)
     try:
-        text = Path(path).read_bytes()
+        text = read_input(path, shown)
     except OSError as exc:
         raise EcatcfgError(f"cannot read: {exc.strerror}", shown) from None
     return loads(text, shown, unknown_keys)
@@ -783,6 +784,7 @@ def _drop(raw: Any, path: list[str | int]) -> None:
 XML_HEAD = 1 << 20
 # The root elements of the ETG's XML formats (ETG.2000 ESI, ETG.2100 ENI).
 _XML_ROOTS = {"EtherCATInfo": "an ESI (device description)",
+              "EtherCATInfoList": "a list of ESI documents (IgH's ethercat xml)",
               "EtherCATConfig": "an ENI (network configuration)"}
 _XML_START = re.compile(r"<\?xml\b|<!--|<!DOCTYPE|<[A-Za-z_]")
 _XML_ROOT = re.compile(r"<([A-Za-z_][\w.:-]*)")

@@ -32,18 +32,20 @@ from ecatcfg import __version__
 from ecatcfg.eni import plan as plan_model
 from ecatcfg.eni.plan import NetworkPlan
 from ecatcfg.esc import Transition
-from ecatcfg.fileio import cache_dir, write_atomic
+from ecatcfg.fileio import cache_dir, read_input, write_atomic
 
 FORMAT_VERSION = 1
 KEEP = 32                                   # entries; the oldest go when a new one is written
 # A change to any of these changes every key (contents.py: what is refused; eoe.py: which
 # EoE data decodes; esc.py: the Transition values; xmlsafe.py:
 # how the XML is parsed and its namespaces stripped; values.py: number and boolean syntax;
-# idn.py: an SoE drive number's bounds and the OpCode apply sends; record.py: how the
+# idn.py: an SoE drive number's bounds and the OpCode apply sends; fileio.py: which
+# files are read at all; record.py: how the
 # plan's classes are built).  Every module the reader imports is here but errors.py
 # (tests/test_eni_cache.py).
-_FINGERPRINTED = ("eni/reader.py", "eni/contents.py", "eni/plan.py", "eoe.py", "esc.py",
-                  "esi/xmlsafe.py", "esi/values.py", "esi/idn.py", "record.py")
+_FINGERPRINTED = ("eni/reader.py", "eni/contents.py", "eni/plan.py", "eni/compare.py",
+                  "eoe.py", "esc.py", "fileio.py", "esi/xmlsafe.py", "esi/values.py",
+                  "esi/idn.py", "esi/vocabulary.py", "record.py")
 
 
 def _fingerprint() -> int:
@@ -88,9 +90,13 @@ class PlanCache:
         if not self._trusted_dir():
             return None
         try:
-            with open(path, "rb") as f:
+            # O_NONBLOCK: a FIFO in the cache's place is not waited on; only a regular file
+            # of ours is read.
+            with os.fdopen(os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_CLOEXEC),
+                           "rb") as f:
                 st = os.fstat(f.fileno())
-                if st.st_uid != os.geteuid() or st.st_mode & 0o022:
+                if (not stat.S_ISREG(st.st_mode) or st.st_uid != os.geteuid()
+                        or st.st_mode & 0o022):
                     return None
                 stored, plan = _PlanUnpickler(f).load()
         except FileNotFoundError:
@@ -115,7 +121,7 @@ class PlanCache:
                 return
             write_atomic(self.dir / f"{key}.pickle",
                          pickle.dumps((data, plan), protocol=pickle.HIGHEST_PROTOCOL),
-                         mode=0o600)
+                         mode=0o600, replace=True)
             self._prune()
         except OSError:
             pass
@@ -140,7 +146,7 @@ def read_file(path: str | Path, shown_as: str | None = None,
     ``None``).  lxml and the reader are imported only on a miss."""
     name = shown_as or str(path)
     try:
-        data = Path(path).read_bytes()
+        data = read_input(path, name)
     except OSError as exc:
         from ecatcfg.eni.reader import EniReadError
         raise EniReadError(f"cannot read: {exc.strerror}", name) from None

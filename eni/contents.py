@@ -19,7 +19,7 @@ so is an attribute of a child that is not listed as ``Tag@Name`` (``Slave@HotPlu
 What is inside a part without a context of its own (``within`` None) is covered by that
 part, whatever it is: a description whose effect reaches the wire only through InitCmds
 (``ProcessData``, ``ProcessImage``, the master's ``Info``), a part read or accepted as a
-whole (``Validate``, ``Identification``), or refused as a whole (``VoE``).  Outside
+whole (``Identification``), or refused as a whole (``VoE``).  Outside
 ``<Config>`` is open too (:data:`OPEN`: vendor data such as Elmo Application Studio's
 ``ElmoSpecialResources``), but for :data:`ROOT`.  Every element and attribute of the
 ETG.2100 schema has its part (:func:`covering`; a test parses the schema).
@@ -36,6 +36,7 @@ from lxml import etree
 from ecatcfg.eni.plan import NetworkPlan, Unsupported
 from ecatcfg.errors import EcatcfgError, location
 from ecatcfg.esc import FOE_HEADER, LOGICAL_CMDS, TRANSITION_RULES, FoeOpCode, Transition
+from ecatcfg.esi import vocabulary
 from ecatcfg.esi.idn import WRITE_REQUEST
 from ecatcfg.esi.values import SPELLABLE, parse_bool, parse_int
 from ecatcfg.record import record
@@ -194,9 +195,19 @@ CONTENTS: dict[str, dict[str, Part]] = {
     "InitCmds": {
         "InitCmd": _read("a register command", _INIT_CMD),
     },
-    _INIT_CMD: {tag: _read(_COMMAND) for tag in (
-        "Transition", "BeforeSlave", "Comment", "Requires", "Cmd", "Adp", "Ado", "Addr",
-        "Data", "DataLength", "Cnt", "Retries", "Validate", "Timeout")},
+    _INIT_CMD: {
+        **{tag: _read(_COMMAND) for tag in (
+            "Transition", "BeforeSlave", "Comment", "Requires", "Cmd", "Adp", "Ado", "Addr",
+            "Data", "DataLength", "Cnt", "Retries", "Timeout")},
+        "Validate": _read("the read's check, polled until it passes", "InitCmd/Validate"),
+        "Validate@Type": _read("how the read is compared with Data: the compare types of "
+                               "ETG.2000's revision check (EQ, EQ_OR_G, LW_EQ, HW_EQ, "
+                               "LW_EQ_HW_EQ_OR_G, HW_EQ_LW_EQ_OR_G; eni/compare.py)"),
+    },
+    # A check: what else it held could change it (a Type written as an element).
+    "InitCmd/Validate": {tag: _read("what the read is checked against, under the mask, "
+                                    "until the timeout") for tag in (
+        "Data", "DataMask", "Timeout")},
     "Config/Slave": {
         "Info": _read("identity, station and auto-increment address", "Slave/Info"),
         "ProcessData": _read("SyncManagers and PDOs, as a description: the SM and FMMU "
@@ -350,6 +361,28 @@ CONTENTS: dict[str, dict[str, Part]] = {
                            for tag in ("SrcBitOffs", "DstBitOffs", "BitSize")},
 }
 
+def _complete_access_elsewhere(el: Element) -> str:
+    value = el.get("CompleteAccess")
+    return "" if _zero_or_absent(value) else (
+        f"complete access on <{el.tag!s}> (<{el.tag!s} CompleteAccess={value!r}>): only a "
+        "CoE SDO transfer can be one")
+
+
+# Attributes with one meaning wherever they appear (ETG.2000/ETG.2100 use them on more
+# elements than the 1.3 schema shows: TwinCAT writes AdaptAutomatically on a CoE InitCmd,
+# ETG.2000 on its Data).  A context's own ``Tag@Name`` comes first (``InitCmd@CompleteAccess``
+# of a CoE InitCmd is read there); these answer for the attribute anywhere else.
+ANYWHERE: dict[str, Part] = {
+    "AdaptAutomatically": _accepted("the configurator may adapt the data to the PDO "
+                                    "configuration; the file holds the adapted data, sent "
+                                    "as written"),
+    "Fixed": _accepted(_FIXED),
+    "Selected": _accepted("which of several alternatives is in use: the file holds the "
+                          "chosen one"),
+    "CompleteAccess": _accepted("when false: an ordinary access",
+                                _complete_access_elsewhere),
+}
+
 # Open contexts: what is inside is accepted whatever it is (with this reason).
 OPEN = {
     "EtherCATConfig": "elements outside <Config> (ElmoSpecialResources, ResID, Manufacturer "
@@ -373,8 +406,9 @@ def covering(path: list[str]) -> Part | None:
     parts = ROOT
     for i, step in enumerate(path):
         if step.startswith("@"):
-            return parts.get(f"{path[i - 1]}{step}" if i else step) \
-                if i == len(path) - 1 else None
+            if i != len(path) - 1:
+                return None
+            return parts.get(f"{path[i - 1]}{step}" if i else step) or ANYWHERE.get(step[1:])
         part = parts.get(step)
         if part is None or i == len(path) - 1:
             return part
@@ -406,10 +440,11 @@ def _commands(el: Element) -> int:
                if _zero_or_absent(c.findtext("Disabled")))
 
 
-def audit(config: Element) -> list[Unsupported]:
-    """Every refused or unknown part below ``config`` (the ``<Config>`` element)."""
+def audit(config: Element, ignored: list[Unsupported] | None = None) -> list[Unsupported]:
+    """Every refused or unknown part below ``config`` (the ``<Config>`` element); unknown
+    metadata (``esi/vocabulary.py``: names, comments, tool data) goes to ``ignored``."""
     found: list[Unsupported] = []
-    _walk(config, ROOT_CONTEXT, "", None, found)
+    _walk(config, ROOT_CONTEXT, "", None, found, [] if ignored is None else ignored)
     cycle_times = {_number(c.findtext("CycleTime", "")) for c in config.iterchildren("Cyclic")}
     cycle_times.discard(None)
     if len(cycle_times) > 1:
@@ -578,7 +613,7 @@ def _hex_length(text: str | None) -> int | None:
 
 
 def _walk(el: Element, context: str, path: str, slave: str | None,
-          found: list[Unsupported]) -> None:
+          found: list[Unsupported], ignored: list[Unsupported]) -> None:
     parts = CONTENTS[context]
     for child in el:
         tag = child.tag
@@ -588,7 +623,11 @@ def _walk(el: Element, context: str, path: str, slave: str | None,
         part = parts.get(tag)
         if part is None:
             count = _commands(child) if context == "Slave/Mailbox" else 0
-            if count:
+            if vocabulary.is_metadata(tag) and not _commands(child):   # no command lost
+                ignored.append(Unsupported(where, f"<{tag}>, which ecatcfg does not read "
+                                           f"here: {vocabulary.WORDS[tag][1]}",
+                                           child.sourceline, slave))
+            elif count:
                 found.append(Unsupported(where, f"{tag} InitCmds (a mailbox protocol "
                                          "ecatcfg does not know)", child.sourceline, slave,
                                          count))
@@ -610,21 +649,31 @@ def _walk(el: Element, context: str, path: str, slave: str | None,
             if problem:
                 found.append(Unsupported(where, problem, child.sourceline, slave))
                 continue
-        if _attributes(child, parts, where, name, found) and part.within is not None:
-            _walk(child, part.within, where, name, found)
+        if _attributes(child, parts, where, name, found, ignored) and part.within is not None:
+            _walk(child, part.within, where, name, found, ignored)
 
 
 def _attributes(el: Element, parts: dict[str, Part], where: str, slave: str | None,
-                found: list[Unsupported]) -> bool:
+                found: list[Unsupported], ignored: list[Unsupported]) -> bool:
     """Each attribute of ``el`` must be listed as ``Tag@Name`` in its context, like an
-    element: an attribute can change what the master does (``HotPlug``,
-    ``CycleTimeFactor``) as much as an element can.  ``False`` when one is refused."""
+    element, or be one with a meaning of its own (:data:`ANYWHERE`): an attribute can change
+    what the master does (``HotPlug``, ``CycleTimeFactor``) as much as an element can.  One
+    that is neither is ignored with a warning when it is metadata (a name, a tool's data:
+    ``esi/vocabulary.py``), refused otherwise.  ``False`` when one is refused; the element
+    itself stays in the plan (a skipping apply still sends an InitCmd whose attribute it
+    refused: it skips what it does not know, never the command)."""
     ok = True
     for name, value in el.attrib.items():
         if name.startswith("{"):
             continue                          # xsi:... and other namespaces: schema hints
-        part = parts.get(f"{el.tag!s}@{name}")
+        part = parts.get(f"{el.tag!s}@{name}") or ANYWHERE.get(name)
         at = f"{where}/@{name}"
+        if part is None and vocabulary.is_metadata(name, attribute=True):
+            ignored.append(Unsupported(at, f"the attribute {name}={value!r} of <{el.tag!s}>, "
+                                       "which ecatcfg does not read here: "
+                                       f"{vocabulary.WORDS['@' + name][1]}",
+                                       el.sourceline, slave))
+            continue
         if part is None:
             found.append(Unsupported(at, f"the attribute {name}={value!r} of <{el.tag!s}>, "
                                      "which ecatcfg does not know", el.sourceline, slave))
@@ -648,6 +697,8 @@ def table() -> list[tuple[str, str, str]]:
     for context, parts in CONTENTS.items():
         for tag, part in parts.items():
             rows.setdefault((context, part.kind, part.text), []).append(tag)
+    for name, part in ANYWHERE.items():
+        rows.setdefault(("*", part.kind, part.text), []).append(f"@{name}")
     return [(f"{context}{'' if tags[0][0] == '@' else '/'}{tags[0]}" if len(tags) == 1
              else f"{context}/{{{', '.join(tags)}}}",
              kind, text) for (context, kind, text), tags in rows.items()]
@@ -688,6 +739,18 @@ def refuse(plan: NetworkPlan, file: str | None) -> None:
     raise UnsupportedEniError(
         f"the ENI asks for {n} thing{'s' if n != 1 else ''} apply does not do; nothing was "
         f"written to the bus:\n{lines}\n{SKIP_HINT}", file, plan.unsupported)
+
+
+def ignored_warnings(plan: NetworkPlan, file: str | None) -> list[str]:
+    """One warning per piece of unknown metadata the reader left out
+    (``NetworkPlan.ignored``): ``eni.xml:12: slave 'Drive': ignored <DisplayName>, which
+    ecatcfg does not read here: a name ... [Slave/Info/DisplayName]``."""
+    out = []
+    for p in plan.ignored:
+        where = location(file, p.line)
+        out.append(f"{where + ': ' if where else ''}{_owner(p)}: ignored {p.what} "
+                   f"[{p.element}]")
+    return out
 
 
 def skip_warnings(plan: NetworkPlan, file: str | None) -> list[str]:

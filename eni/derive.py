@@ -65,7 +65,7 @@ class Derived:
 
 def partial_slaves(plan: NetworkPlan) -> list[SlavePlan]:
     """The slaves the ENI gives no register InitCmds (a partial export)."""
-    return [s for s in plan.slaves if not s.init_cmds]
+    return plan.partial_slaves()
 
 
 def complete(plan: NetworkPlan, file: str | None = None
@@ -149,6 +149,13 @@ def _pd_sms(pd: ProcessData) -> list[tuple[PdSm, int]]:
             known = [pdos[i] for i in sm.pdos if i in pdos]
             if len(known) == len(sm.pdos) and known:
                 bits = sum(e.bit_len for p in known for e in p.entries)
+            elif known:
+                # Some of its PDOs described, some not: the length is not known, and the
+                # DefaultSize is the default assignment's, not necessarily this one's.
+                missing = [i for i in sm.pdos if i not in pdos]
+                raise _Missing(f"ProcessData/Sm{sm.number} assigns PDOs that are not all "
+                               f"described ({', '.join(f'0x{i:04X}' for i in missing)} "
+                               "missing): its length is not known")
             elif sm.default_size is not None:
                 bits = 8 * sm.default_size
             else:

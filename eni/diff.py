@@ -7,7 +7,8 @@ and compared as what they make the master do:
 - each slave's PDO assignment (the PDOs per SyncManager) and the mapping of the PDOs it
   assigns (entries ``index:sub``, bit length);
 - process-image variables by name: moved (old and new ``byte.bit``: the change that
-  silently breaks a PLC program), resized, retyped, added, removed;
+  silently breaks a PLC program), resized, retyped, added, removed; a shift of the whole
+  image, or of every variable of one slave, is one line, followed by what moved otherwise;
 - InitCmds per slave and transition, in words (:mod:`ecatcfg.eni.words`): added, removed,
   changed;
 - DC (reference clock, cycle and shift times) and the bus cycle time; the process-data
@@ -50,7 +51,8 @@ from ecatcfg.record import record
 @record
 class Change:
     """One difference.  ``kind`` (for JSON and tests): slave-added, slave-removed,
-    slave-moved, identity, pdo-assignment, pdo-mapping, variable-moved, variable-changed,
+    slave-moved, identity, pdo-assignment, pdo-mapping, image-moved, variables-moved,
+    variable-moved, variable-changed,
     variable-added, variable-removed, initcmd-added, initcmd-removed, initcmd-changed, dc,
     cycle-time, frames, copies, unsupported-added, unsupported-removed, and for topologies
     slave-setting and master-setting."""
@@ -329,8 +331,72 @@ def _offset(v: Variable) -> str:
     return f"{v.bit_offs // 8}.{v.bit_offs % 8}"
 
 
+def _shift(bits: int) -> str:
+    """A move in the process image, in bytes and bits: ``+56 bytes``, ``-3 bits``."""
+    sign, size = ("+" if bits > 0 else "-"), abs(bits)
+    parts = [f"{size // 8} byte{'s' * (size // 8 != 1)}"] if size // 8 else []
+    parts += [f"{size % 8} bit{'s' * (size % 8 != 1)}"] if size % 8 else []
+    return sign + " ".join(parts)
+
+
+def _owners(a: NetworkPlan, b: NetworkPlan) -> list[str]:
+    """Slave names, longest first: a variable belongs to the slave whose name it starts with
+    followed by a dot (``Term 2 (EL2008).Channel 1.Output``), as TwinCAT, EC-Engineer and
+    compile name them."""
+    names = {s.name for plan in (a, b) for s in plan.in_file_order()}
+    return sorted(names, key=len, reverse=True)
+
+
+def _owner(name: str, owners: list[str]) -> str | None:
+    return next((s for s in owners if name.startswith(s + ".")), None)
+
+
+Move = tuple[str, Variable, Variable]
+
+
+def _moves(direction: str, moved: list[Move], common: list[str],
+           owners: list[str]) -> list[Change]:
+    """The moved variables of one direction, summarised where they moved together.
+
+    A shift of the whole image (a slave added in front, another tool's image base) moves
+    hundreds of variables by one amount: that is one ``image-moved`` line, saying how many
+    of the variables both files have moved by how much; a slave whose every variable moved
+    by one amount is one ``variables-moved`` line.  What moved otherwise follows, a
+    ``variable-moved`` line each: the differences a reader must look at."""
+    out: list[Change] = []
+
+    def shift(m: Move) -> int:
+        return m[2].bit_offs - m[1].bit_offs
+
+    rest = moved
+    if moved:
+        delta, count = Counter(shift(m) for m in moved).most_common(1)[0]
+        if count >= 2 and 2 * count > len(common):
+            what = (f"{direction}: all {count} variables" if count == len(common)
+                    else f"{direction}: {count} of {len(common)} variables")
+            out.append(Change("image-moved", None, what, new=f"moved by {_shift(delta)}"))
+            rest = [m for m in moved if shift(m) != delta]
+    per_slave = Counter(_owner(name, owners) for name in common)
+    groups: dict[str | None, list[Move]] = {}
+    for m in rest:
+        groups.setdefault(_owner(m[0], owners), []).append(m)
+    summarised = {slave for slave, ms in groups.items()
+                  if slave is not None and len(ms) >= 2 and len(ms) == per_slave[slave]
+                  and len({shift(m) for m in ms}) == 1}
+    for slave in sorted(summarised, key=lambda s: [m[0] for m in rest].index(groups[s][0][0])):
+        ms = groups[slave]
+        out.append(Change("variables-moved", slave, f"{direction}: all {len(ms)} variables",
+                          new=f"moved by {_shift(shift(ms[0]))}"))
+    for name, o, v in rest:
+        if _owner(name, owners) not in summarised:
+            out.append(Change("variable-moved", None, f"{direction} {name}",
+                              _offset(o), _offset(v)))
+    return out
+
+
 def _variables(a: NetworkPlan, b: NetworkPlan) -> list[Change]:
     out: list[Change] = []
+    owners = _owners(a, b)
     for direction, va, vb in (("in", a.process_image.inputs, b.process_image.inputs),
                               ("out", a.process_image.outputs, b.process_image.outputs)):
         old, new = {v.name: v for v in va}, {v.name: v for v in vb}
@@ -338,6 +404,8 @@ def _variables(a: NetworkPlan, b: NetworkPlan) -> list[Change]:
             if name not in new:
                 out.append(Change("variable-removed", None, f"{direction} {name}",
                                   old=_offset(v)))
+        moved: list[Move] = []
+        changed: list[Change] = []
         for name, v in new.items():
             if name not in old:
                 out.append(Change("variable-added", None, f"{direction} {name}",
@@ -345,12 +413,13 @@ def _variables(a: NetworkPlan, b: NetworkPlan) -> list[Change]:
                 continue
             o = old[name]
             if o.bit_offs != v.bit_offs:
-                out.append(Change("variable-moved", None, f"{direction} {name}",
-                                  _offset(o), _offset(v)))
+                moved.append((name, o, v))
             if (o.bit_size, _type(o)) != (v.bit_size, _type(v)):
-                out.append(Change("variable-changed", None, f"{direction} {name}",
-                                  f"{o.bit_size} bit {o.data_type}",
-                                  f"{v.bit_size} bit {v.data_type}"))
+                changed.append(Change("variable-changed", None, f"{direction} {name}",
+                                      f"{o.bit_size} bit {o.data_type}",
+                                      f"{v.bit_size} bit {v.data_type}"))
+        common = [name for name in new if name in old]
+        out += _moves(direction, moved, common, owners) + changed
     return out
 
 

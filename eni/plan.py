@@ -25,11 +25,13 @@ if TYPE_CHECKING:         # imported where used: only ENIs with EoE InitCmds nee
 @record
 class Validate:
     """An InitCmd read's expected data: ``(read & mask) == data & mask``, polled until
-    ``timeout`` ms."""
+    ``timeout`` ms; ``compare``: another compare type (``Validate@Type``, ``eni/compare.py``:
+    ``EQ_OR_G`` passes a greater value), ``None`` for equal."""
 
     data: bytes
     mask: bytes | None = None
     timeout: int = 0
+    compare: str | None = None
 
 
 @record
@@ -437,9 +439,17 @@ class NetworkPlan:
     version: str | None = "1.3"
     unsupported: list[Unsupported] = field(default_factory=list)
     passive: list[PassiveSlave] = field(default_factory=list)  # without an ESC, file order
+    # Unknown metadata the reader left out (esi/vocabulary.py): warned about, not refused.
+    ignored: list[Unsupported] = field(default_factory=list)
 
     def slave(self, name: str) -> SlavePlan:
         return next(s for s in self.slaves if s.name == name)
+
+    def partial_slaves(self) -> list[SlavePlan]:
+        """The slaves the ENI gives no register InitCmds (a partial export, completed by
+        ``eni/derive.py``): asked here so that a complete ENI's start-up does not import
+        the derivation."""
+        return [s for s in self.slaves if not s.init_cmds]
 
     def image_bytes(self) -> tuple[int, int]:
         """The sizes of the input and output images a master keeps: the ``ProcessImage``

@@ -56,6 +56,7 @@ from ecatcfg.esc import FRAME_PAYLOAD, MAX_DATAGRAM_DATA, Transition, frame_byte
 from ecatcfg.esi import xmlsafe
 from ecatcfg.esi.idn import MAX_DRIVE
 from ecatcfg.esi.values import SPELLABLE, parse_bool, parse_hex_bytes, parse_int
+from ecatcfg.fileio import read_input
 
 Element = etree._Element
 
@@ -137,7 +138,7 @@ def read_file(path: str | Path, shown_as: str | None = None) -> NetworkPlan:
     """Read the ENI at ``path``; errors name ``shown_as`` (the path as the user gave it)."""
     name = shown_as or str(path)
     try:
-        data = Path(path).read_bytes()
+        data = read_input(path, name)
     except OSError as exc:
         raise EniReadError(f"cannot read: {exc.strerror}", name) from None
     return read_bytes(data, name)
@@ -300,6 +301,7 @@ class _Reader:
         image = config.find("ProcessImage")
         from ecatcfg.eni.contents import audit, dropped_init_cmds
         self._dropped = dropped_init_cmds(config)
+        ignored: list[Unsupported] = []
         slave_els, slaves, passive = [], [], []
         for el in config.iterchildren("Slave"):
             if self.has_esc(el):
@@ -315,7 +317,8 @@ class _Reader:
             cyclic=[self.cyclic(el) for el in config.iterchildren("Cyclic")],
             process_image=ProcessImage() if image is None else self.process_image(image),
             version=root.get("Version"),
-            unsupported=audit(config),
+            unsupported=audit(config, ignored),
+            ignored=ignored,
             passive=[p for _, p in passive],
         )
         plan.unsupported += self.copies_outside(plan)
@@ -370,9 +373,16 @@ class _Reader:
         )
 
     def validate(self, el: Element) -> Validate:
+        from ecatcfg.eni.compare import NAMES, compare_type
+        kind = el.get("Type")
+        compare = None if kind is None else compare_type(kind)
+        if kind is not None and compare is None:
+            raise self.error(f"<Validate Type={kind!r}>: not a compare type of ETG.2000 "
+                             f"({NAMES})", el)
         return Validate(data=self.hex_bytes(self.child(el, "Data")),
                         mask=self.opt_hex(el, "DataMask"),
-                        timeout=self.int_or(el, "Timeout", 0, COUNT))
+                        timeout=self.int_or(el, "Timeout", 0, COUNT),
+                        compare=None if compare == "EQ" else compare)
 
     def init_cmds(self, parent: Element) -> list[InitCmd]:
         cmds = parent.find("InitCmds")

@@ -4,7 +4,8 @@
 :func:`as_json`): the slaves with identity, position, parent and port (passive terminals
 marked), the process image's variables at ``byte.bit``, the cyclic frames with each
 command's expected working counter, and each slave's InitCmds per transition in words
-(:mod:`ecatcfg.eni.words`).  The command line only formats it.
+(:mod:`ecatcfg.eni.words`), in the order ``apply`` sends them (:mod:`ecatcfg.eni.sequence`).
+The command line only formats it.
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ from typing import Any
 
 from ecatcfg.eni.network_tree import previous_port
 from ecatcfg.eni.plan import NetworkPlan, PassiveSlave, SlavePlan, Unsupported, Variable
+from ecatcfg.eni.sequence import transition_sequence
 from ecatcfg.eni.words import (coe_words, command_name, copy_words, eoe_words, foe_words,
                                init_cmd_words, soe_words)
 from ecatcfg.esc import Transition
@@ -77,6 +79,8 @@ class EniView:
     # dropped from what is shown.
     unsupported: list[Unsupported] = field(default_factory=list)
     master_init_cmds: dict[str, list[str]] = field(default_factory=dict)
+    # Unknown metadata the reader left out (``NetworkPlan.ignored``): shown, not applied.
+    ignored: list[Unsupported] = field(default_factory=list)
 
 
 def master_words(plan: NetworkPlan) -> dict[str, list[str]]:
@@ -89,28 +93,21 @@ def master_words(plan: NetworkPlan) -> dict[str, list[str]]:
 
 
 def transition_words(slave: SlavePlan) -> dict[str, list[str]]:
-    """Each transition's InitCmds in words: the register commands in file order, then the
-    CoE, the SoE, then the EoE and FoE ones (the ENI keeps them apart, ``Mailbox/CoE/InitCmds``);
-    transitions in the order of ``esc.Transition``."""
-    out: dict[str, list[str]] = {t.value: [] for t in Transition}
-    for cmd in slave.init_cmds:
-        for t in cmd.transitions:
-            out[t.value].append(init_cmd_words(cmd))
-    mailbox = slave.mailbox
-    if mailbox is not None:
-        for coe in mailbox.coe_init_cmds:
-            for t in coe.transitions:
-                out[t.value].append(coe_words(coe))
-        for soe in mailbox.soe_init_cmds:
-            for t in soe.transitions:
-                out[t.value].append(soe_words(soe))
-        for eoe in mailbox.eoe_init_cmds:
-            for t in eoe.transitions:
-                out[t.value].append(eoe_words(eoe))
-        for foe in mailbox.foe_init_cmds:
-            for t in foe.transitions:
-                out[t.value].append(foe_words(foe))
-    return {t: words for t, words in out.items() if words}
+    """Each transition's InitCmds in words, in the order ``apply`` sends them
+    (``eni/sequence.py``, the one definition both use): the register commands up to the
+    state request, the CoE, SoE, EoE and FoE commands, then the request and the rest; the
+    disabled mailbox commands where they would stand, marked so.  Transitions in the order
+    of ``esc.Transition``."""
+    out: dict[str, list[str]] = {}
+    for t in Transition:
+        sequence = transition_sequence(slave, t, with_disabled=True)
+        words = [init_cmd_words(c) for c in sequence.before]
+        words += [coe_words(c) for c in sequence.coe] + [soe_words(c) for c in sequence.soe]
+        words += [eoe_words(c) for c in sequence.eoe] + [foe_words(c) for c in sequence.foe]
+        words += [init_cmd_words(c) for c in sequence.after]
+        if words:
+            out[t.value] = words
+    return out
 
 
 def _parent(plan: NetworkPlan, index: int, slave: SlavePlan | PassiveSlave,
@@ -144,7 +141,7 @@ def summary(plan: NetworkPlan, file: str) -> EniView:
                                        for copy in cmd.copy_infos]) for cmd in f.cmds])
         for c in plan.cyclic for f in c.frames]
     return EniView(file, slaves, image.inputs_size, image.outputs_size, variables, frames,
-                   list(plan.unsupported), master_words(plan))
+                   list(plan.unsupported), master_words(plan), list(plan.ignored))
 
 
 def _variable(v: Variable, direction: str) -> VariableView:
@@ -173,4 +170,6 @@ def as_json(view: EniView) -> dict[str, Any]:
                    for f in view.frames],
         "unsupported": [{"slave": u.slave, "element": u.element, "what": u.what,
                          "line": u.line, "commands": u.commands} for u in view.unsupported],
+        "ignored": [{"slave": u.slave, "element": u.element, "what": u.what, "line": u.line}
+                    for u in view.ignored],
     }

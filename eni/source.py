@@ -19,6 +19,7 @@ from ecatcfg.eni.plan import (CoeInitCmd, CopyInfo, EoeInitCmd, FoeInitCmd, Init
                              NetworkPlan, SoeInitCmd)
 from ecatcfg.errors import EcatcfgError
 from ecatcfg.esi import xmlsafe
+from ecatcfg.fileio import read_input
 
 
 def init_cmd_line(path: str | Path, plan: NetworkPlan,
@@ -46,7 +47,7 @@ def init_cmd_line(path: str | Path, plan: NetworkPlan,
 def _element_line(path: str | Path, slave: int, where: str, index: int,
                   count: int) -> int | None:
     try:
-        root = xmlsafe.parse_bytes(Path(path).read_bytes(), str(path)).getroot()
+        root = xmlsafe.parse_bytes(read_input(path), str(path)).getroot()
     except (OSError, EcatcfgError):
         return None
     config = root.find("Config")
@@ -69,7 +70,7 @@ def copy_info_line(path: str | Path, plan: NetworkPlan, copy: CopyInfo) -> int |
               for c in cmd.copy_infos]
     index = next((i for i, c in enumerate(copies) if c is copy), None)
     try:
-        root = xmlsafe.parse_bytes(Path(path).read_bytes(), str(path)).getroot()
+        root = xmlsafe.parse_bytes(read_input(path), str(path)).getroot()
     except (OSError, EcatcfgError):
         return None
     elements = list(root.iterfind("Config/Cyclic/Frame/Cmd/CopyInfos/CopyInfo"))

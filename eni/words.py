@@ -18,7 +18,11 @@ from the file's ``Comment`` (free text a tool may write in any language, or leav
 - ``SoE write S-0-0001 (drive 0) = d0 07``: an SoE write request of an IDN's value
   (ETG.1000.6 SoE, IDN notation of ``esi/idn.py``), its data in wire order.
 - ``FoE read 'cal.bin' (password 0x0000002A)``: an FoE read request (ETG.1000.6 FoE).
-- Any other command: its name, register and data (``FPWR 0x0103 = 0x00``).
+- Any other register write or read by the names of ``registers.py``, the one register table:
+  ``set DL control byte 3 = 0x00``, ``set ECAT event mask = 0x0004``, ``clear DC latch0
+  control, DC latch1 control``, ``read AL status``; watchdog times with their time at the
+  default divider (``set SM watchdog 10000 (1000 ms at the default divider)``).
+- Any other command: its name, register and data (``FPWR 0x0F00 = 0x00``).
 
 A slave-to-slave copy (``CopyInfo``) in words names the variables its bits are in:
 ``copy 4 bits: sensors.Channel 1.Input (in 0.4) -> lamps.Channel 1-8.Output 3 (out 1.2)``;
@@ -27,15 +31,17 @@ a bit no variable holds is shown as its place only.
 
 from __future__ import annotations
 
-from ecatcfg.eni.plan import (CoeInitCmd, CopyInfo, EoeInitCmd, FoeInitCmd, InitCmd,
-                              SoeInitCmd, Variable)
+from ecatcfg.eni.compare import compared
+from ecatcfg.eni.plan import (CoeInitCmd, CopyInfo, CyclicCmd, EoeInitCmd, FoeInitCmd,
+                              InitCmd, SoeInitCmd, Variable)
 from ecatcfg.esc import (AL_ERROR_ACK, AL_ID_REQUEST, FMMU_SIZE, REGISTER_READS,
                          REGISTER_WRITES, RX_PDO_MAPPING, SM_DIR_ECAT_WRITES, SM_DIR_MASK,
                          SM_MODE_MAILBOX, SM_MODE_MASK, SM_PDO_ASSIGN_RANGE, SM_SIZE,
                          TX_PDO_MAPPING, Cmd, FmmuConfig, FmmuType, FoeOpCode, Reg, SmConfig,
-                         al_state_name, fmmu_register, sm_register,
-                         watchdog_base_ns)
+                         WATCHDOG_DIVIDER_DEFAULT, al_state_name, fmmu_register,
+                         sm_register, watchdog_base_ns)
 from ecatcfg.esi.idn import VALUE_ELEMENT, WRITE_REQUEST, idn_text
+from ecatcfg.registers import containing, covered
 
 _SM_AREA = range(sm_register(0), sm_register(32))          # 32 SyncManagers
 _FMMU_AREA = range(fmmu_register(0), fmmu_register(16))    # 16 FMMUs
@@ -50,7 +56,7 @@ def init_cmd_name(cmd: InitCmd) -> str:
     return command_address(cmd)
 
 
-def command_address(cmd: InitCmd) -> str:
+def command_address(cmd: InitCmd | CyclicCmd) -> str:
     """``APWR 0x0120``, ``LWR logical 0x00010000``, ``command 99``."""
     name = command_name(cmd.cmd)
     if cmd.ado is not None:
@@ -116,6 +122,11 @@ def _fmmu_words(n: int, image: bytes) -> str:
     f = FmmuConfig.from_bytes(image)
     kind = {FmmuType.READ: "inputs", FmmuType.WRITE: "outputs",
             FmmuType.READ_WRITE: "inputs+outputs"}.get(f.type, "unused")
+    status = f.physical_start - sm_register(0) - 5      # SM n status: 0x0805 + 8n
+    if f.physical_start in _SM_AREA and status % SM_SIZE == 0:
+        # An FMMU onto a SyncManager's status byte: the mailbox-state bit TwinCAT and
+        # EC-Engineer poll in the cyclic frame (SM1 status bit 3, mailbox full).
+        kind = f"mailbox state of sm {status // SM_SIZE}"
     end = f.logical_start + f.length - 1
     text = (f"set fmmu {n} ({kind}) logical 0x{f.logical_start:08X}.{f.logical_start_bit}"
             f"-0x{end:08X}.{f.logical_stop_bit} -> 0x{f.physical_start:04X}."
@@ -153,8 +164,11 @@ def _register_write(ado: int, data: bytes) -> str | None:
     if ado == Reg.WATCHDOG_DIVIDER and len(data) == 2:
         return f"set watchdog divider {_int(data)} ({watchdog_base_ns(_int(data))} ns)"
     if ado in (Reg.WATCHDOG_PDI, Reg.WATCHDOG_SM) and len(data) == 2:
+        # In steps of the divider's time base (0x0400; 100 us at its default 2498): the
+        # count alone says nothing a reader can use.
         which = "PDI" if ado == Reg.WATCHDOG_PDI else "SM"
-        return f"set {which} watchdog {_int(data)}"
+        ms = _int(data) * watchdog_base_ns(WATCHDOG_DIVIDER_DEFAULT) / 1e6
+        return f"set {which} watchdog {_int(data)} ({ms:g} ms at the default divider)"
     if ado == Reg.DC_CYCLIC_UNIT_CONTROL and len(data) >= 2:
         return f"set DC activation 0x{_int(data[:2]):04X}" if any(data) else "clear DC activation"
     if ado == Reg.DC_SYNC0_CYCLE_TIME and len(data) in (4, 8):
@@ -162,20 +176,58 @@ def _register_write(ado: int, data: bytes) -> str | None:
         return text + (f", SYNC1 cycle {_int(data[4:])} ns" if len(data) == 8 else "")
     if ado == Reg.DC_START_TIME_CYCLIC:
         return "set DC start time (the master's)"
-    return None
+    return _named_write(ado, data)
+
+
+def _named(ado: int, length: int) -> str | None:
+    """The registers a command of ``length`` bytes at ``ado`` covers, by name: one
+    register (or a byte of one: ``DL control byte 3``) or a list of them."""
+    regs = covered(ado, length)
+    if not regs:
+        return None
+    if len(regs) == 1:
+        found = containing(ado)
+        assert found is not None
+        reg, offset = found
+        part = f" byte {offset}" if offset or length < reg.size else ""
+        return reg.name + part
+    return ", ".join(r.name for r in regs)
+
+
+def _named_write(ado: int, data: bytes) -> str | None:
+    """``set ECAT event mask = 0x0004``; zeros over several registers: ``clear ...``."""
+    names = _named(ado, len(data))
+    if names is None or not data:
+        return None
+    regs = covered(ado, len(data))
+    if len(regs) == 1:
+        return f"set {names} = {_value(regs[0].unit, data)}"
+    if not any(data):
+        return f"clear {names}"
+    inside = all(ado <= r.address and r.address + r.size <= ado + len(data) for r in regs)
+    if not inside:
+        return f"write {names} = {_hex(data)}"
+    return "set " + ", ".join(
+        f"{r.name} = {_value(r.unit, data[r.address - ado:r.address - ado + r.size])}"
+        for r in regs)
+
+
+def _value(unit: str | None, data: bytes) -> str:
+    return f"{_int(data)} ns" if unit == "ns" else _hex(data)
 
 
 def _register_read(cmd: InitCmd) -> str | None:
     v = cmd.validate
     if v is None:
-        return None
+        names = None if cmd.ado is None else _named(cmd.ado, cmd.length)
+        return None if names is None else f"read {names}"
     want = v.data if v.mask is None else bytes(d & m for d, m in zip(v.data, v.mask))
     if cmd.ado == Reg.AL_STATUS and want:
         return f"check state {al_state_name(want[0])}"
     if cmd.ado == Reg.STATION_ALIAS and len(want) == 2:
         return f"check alias {_int(want)}"
     if cmd.ado == Reg.EEPROM_DATA and want:
-        return f"check SII data {_hex(want)}"
+        return f"check SII data {compared(v.compare)}{_hex(want)}"
     return None
 
 
@@ -195,7 +247,7 @@ def init_cmd_words(cmd: InitCmd) -> str:
     else:
         text += f" len {cmd.length}"
     if cmd.validate is not None:
-        text += f" expect {_hex(cmd.validate.data)}"
+        text += f" expect {compared(cmd.validate.compare)}{_hex(cmd.validate.data)}"
         if cmd.validate.mask is not None:
             text += f" mask {_hex(cmd.validate.mask)}"
     return text

@@ -180,6 +180,9 @@ def _init_cmd(parent: Element, cmd: InitCmd, tag: str = "InitCmd") -> None:
     _opt_int(el, "Retries", cmd.retries)
     if cmd.validate is not None:
         validate = _sub(el, "Validate")
+        if cmd.validate.compare is not None:
+            # Beyond the 1.3 schema, as exporters write it (eni/compare.py): kept, not lost.
+            validate.set("Type", cmd.validate.compare)
         _hex(validate, "Data", cmd.validate.data)
         if cmd.validate.mask is not None:
             _hex(validate, "DataMask", cmd.validate.mask)

@@ -19,12 +19,17 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import re
 from pathlib import Path
 from typing import Any
 
+from ecatcfg.errors import UsageError
 from ecatcfg.esi.index import SUMMARY_VERSION, FileSummary
 from ecatcfg.fileio import cache_dir as default_cache_dir
-from ecatcfg.fileio import write_atomic
+from ecatcfg.fileio import read_input, write_atomic
+
+
+_DIGEST = re.compile(r"[0-9a-f]{32}")       # content_digest's: BLAKE2b-128 in hex
 
 
 def content_digest(data: bytes) -> str:
@@ -53,7 +58,7 @@ class IndexCache:
         """The content digest recorded for ``path`` if the file is provably unchanged."""
         rec = self._stats().get(str(path))
         if isinstance(rec, list) and len(rec) == 6 and rec[:5] == stat_key(st) \
-                and isinstance(rec[5], str):
+                and isinstance(rec[5], str) and _DIGEST.fullmatch(rec[5]):
             return rec[5]
         return None
 
@@ -64,13 +69,12 @@ class IndexCache:
     # -- summaries ------------------------------------------------------------------------
 
     def get(self, digest: str) -> FileSummary | None:
-        data = _read_json(self.dir / f"{digest}.json")
-        if not isinstance(data, dict):
+        if not _DIGEST.fullmatch(digest):       # a damaged stat record: never a path
             return None
         try:
-            return FileSummary.from_json(data)
-        except TypeError:        # written by another summary layout: ignore
-            return None
+            return FileSummary.from_json(_read_json(self.dir / f"{digest}.json"))
+        except ValueError:      # damaged, or written by another summary layout: summarized
+            return None         # again, and put() replaces it
 
     def put(self, digest: str, summary: FileSummary) -> None:
         self._write(self.dir / f"{digest}.json", summary.to_json())
@@ -84,13 +88,13 @@ class IndexCache:
         # A cache that cannot be written (read-only home, full disk) only costs speed.
         try:
             self.dir.mkdir(parents=True, exist_ok=True)
-            write_atomic(path, json.dumps(data, separators=(",", ":")).encode())
+            write_atomic(path, json.dumps(data, separators=(",", ":")).encode(), replace=True)
         except OSError:
             pass
 
 
 def _read_json(path: Path) -> Any:
     try:
-        return json.loads(path.read_bytes())
-    except (OSError, ValueError):
+        return json.loads(read_input(path))
+    except (OSError, ValueError, UsageError):    # UsageError: not a regular file
         return None

@@ -28,6 +28,7 @@ from dataclasses import dataclass
 
 from lxml import etree
 
+from ecatcfg.esi import reader
 from ecatcfg.esi.values import parse_int
 
 # Display-only elements, anywhere in a Device (ETG.2000 EtherCATInfo.xsd, EtherCATBase.xsd).
@@ -100,7 +101,7 @@ def describe(device: etree._Element) -> Description:
 
 def device_elements(tree: etree._ElementTree) -> list[etree._Element]:
     """The Device elements of a file, in the order the library numbers them (``ordinal``)."""
-    return list(tree.getroot().iterfind("Descriptions/Devices/Device"))
+    return reader.device_elements(tree.getroot())
 
 
 # -- what differs ------------------------------------------------------------------------------

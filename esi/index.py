@@ -12,16 +12,16 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
-from typing import Any
+from typing import Any, Literal
 
 from lxml import etree
 
 from ecatcfg.esi.model import ENGLISH, MAILBOX_PROTOCOLS
-from ecatcfg.esi.reader import check_root
+from ecatcfg.esi.reader import LIST_ROOT, check_root, documents
 from ecatcfg.esi.values import parse_int
 
 # Bump when the summary's fields change: old cache entries are then ignored.
-SUMMARY_VERSION = 1
+SUMMARY_VERSION = 2      # 2: a device's own vendor_id (EtherCATInfoList)
 
 
 @dataclass(slots=True)
@@ -68,10 +68,60 @@ class FileSummary:
         return asdict(self)
 
     @classmethod
-    def from_json(cls, data: dict[str, Any]) -> FileSummary:
+    def from_json(cls, data: object) -> FileSummary:
+        """The summary :meth:`to_json` gave, read back from a cache file.  Anything else (a
+        field missing or of another type, a device record without its ``name``: a damaged
+        or foreign file) is a ``ValueError``, so the cache treats it as absent and the file
+        is summarized again, instead of a ``KeyError`` in every later run."""
+        if not isinstance(data, dict) or set(data) != _SUMMARY_FIELDS:
+            raise ValueError("not a file summary of this layout")
+        _check(data, _SUMMARY_VALUES, "summary")
+        for d in data["devices"]:
+            if not isinstance(d, dict) or set(d) != set(DEVICE_VALUES):
+                raise ValueError("a device record of another layout")
+            _check(d, DEVICE_VALUES, "device")
+        for e in data["errors"]:
+            if not (isinstance(e, list) and len(e) == 2 and _is(e[0], "int")
+                    and _is(e[1], "str")):
+                raise ValueError("an error record is not [line, message]")
         summary = cls(**data)
         summary.errors = [(line, msg) for line, msg in summary.errors]
         return summary
+
+
+# What each value of a summary and of its device records (``_device``) is, checked when a
+# cached summary is read back (``FileSummary.from_json``).  JSON's true/false are Python
+# bools, which are ints too: a bool is never an "int" here.
+_Kind = Literal["int", "int?", "str", "strs", "list"]
+DEVICE_VALUES: dict[str, _Kind] = {
+    "line": "int", "ordinal": "int", "product_code": "int?", "revision": "int?",
+    "type": "str", "name": "str", "group": "str", "rx_pdos": "int", "tx_pdos": "int",
+    "rx_entries": "int", "tx_entries": "int", "mailbox": "strs", "dc_opmodes": "strs",
+    "slots": "int",
+}
+_SUMMARY_VALUES: dict[str, _Kind] = {
+    "root": "str", "vendor_id": "int?", "vendor_name": "str", "devices": "list",
+    "modules": "int", "info_references": "strs", "errors": "list",
+}
+_SUMMARY_FIELDS = set(_SUMMARY_VALUES)
+
+
+def _is(value: object, kind: _Kind) -> bool:
+    if kind == "int?" and value is None:
+        return True
+    if kind in ("int", "int?"):
+        return isinstance(value, int) and not isinstance(value, bool)
+    if kind == "str":
+        return isinstance(value, str)
+    if kind == "strs":
+        return isinstance(value, list) and all(isinstance(v, str) for v in value)
+    return isinstance(value, list)
+
+
+def _check(record: dict[str, Any], kinds: dict[str, _Kind], what: str) -> None:
+    for key, kind in kinds.items():
+        if not _is(record[key], kind):
+            raise ValueError(f"{what} field {key!r} is not {kind}")
 
 
 def summarize(tree: etree._ElementTree, file: str) -> FileSummary:
@@ -88,22 +138,33 @@ def summarize(tree: etree._ElementTree, file: str) -> FileSummary:
             errors.append((el.sourceline or 0, f"{what}: {exc}"))
             return None
 
-    vendor_el = root.find("Vendor")
-    vendor_id = None
-    vendor_name = ""
-    if vendor_el is not None:
-        id_el = vendor_el.find("Id")
-        if id_el is not None:
-            vendor_id = number(id_el.text, id_el, "Vendor/Id")
-        vendor_name = _english(vendor_el.findall("Name"))
+    def vendor(doc: etree._Element) -> tuple[int | None, str]:
+        vendor_el = doc.find("Vendor")
+        vendor_id, vendor_name = None, ""
+        if vendor_el is not None:
+            id_el = vendor_el.find("Id")
+            if id_el is not None:
+                vendor_id = number(id_el.text, id_el, "Vendor/Id")
+            vendor_name = _english(vendor_el.findall("Name"))
+        return vendor_id, vendor_name
+
+    docs = documents(root)
+    vendor_id, vendor_name = vendor(docs[0]) if docs else (None, "")
     summary = FileSummary(str(root.tag), vendor_id, vendor_name, errors=errors)
-    summary.info_references = [(el.text or "").strip() for el in root.iterfind("InfoReference")]
+    summary.info_references = [(el.text or "").strip() for doc in docs
+                               for el in doc.iterfind("InfoReference")]
     if root.tag == "EtherCATModule":
         summary.modules = len(root.findall("Modules/Module"))
         return summary
-    summary.modules = len(root.findall("Descriptions/Modules/Module"))
-    for ordinal, dev in enumerate(root.iterfind("Descriptions/Devices/Device")):
-        summary.devices.append(_device(dev, ordinal, number))
+    ordinal = 0
+    for doc in docs:
+        summary.modules += len(doc.findall("Descriptions/Modules/Module"))
+        own = vendor(doc)[0] if root.tag == LIST_ROOT else vendor_id
+        for dev in doc.iterfind("Descriptions/Devices/Device"):
+            device = _device(dev, ordinal, number)
+            device["vendor_id"] = own
+            summary.devices.append(device)
+            ordinal += 1
     return summary
 
 

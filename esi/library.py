@@ -13,17 +13,20 @@ One identity (vendor, product, revision) described by several Device elements (t
 of a family file, a vendor's own builds of one product) is one device when the descriptions
 are the same (``esi/duplicates.py``: what changes what a master does, not the bytes); when
 they differ, a selector naming it is an error listing each file and what differs, unless the
-caller names the file (``within``: a topology's ``esi:``) or the library was given an order
-of precedence (``prefer``: the command line's ``--prefer``).  Descriptions are compared only
-for identities that occur more than once, when one is selected.
+caller names the file (``within``: a topology's ``esi:``), the library was given an order
+of precedence (``prefer``: the command line's ``--prefer``), or the caller brings evidence
+that exactly one description agrees with (``evidence``: what an ENI says of the slave, or its
+SII read on a line; ``esi/evidence.py``).  Descriptions are compared only for identities that
+occur more than once, when one is selected.
 """
 
 from __future__ import annotations
 
+import copy
 import difflib
 import os
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
-from typing import Iterable
 from pathlib import Path, PureWindowsPath
 
 from lxml import etree
@@ -32,9 +35,11 @@ from ecatcfg.errors import EcatcfgError, UsageError
 from ecatcfg.esi import reader, xmlsafe
 from ecatcfg.esi.cache import IndexCache, content_digest
 from ecatcfg.esi.duplicates import Description, describe, device_elements, differences
+from ecatcfg.esi.evidence import Evidence, in_brief
 from ecatcfg.esi.index import DeviceEntry, FileSummary, summarize
 from ecatcfg.esi.model import Device, EsiFile, Module, format_selector
 from ecatcfg.esi.values import parse_int
+from ecatcfg.fileio import check_input, read_input
 
 
 class SelectorError(EcatcfgError):
@@ -110,6 +115,10 @@ class Library:
         self.prefer: list[Path] = [self._preferred(p) for p in prefer or []]
         self._descriptions: dict[tuple[str, int], Description] = {}
         self._trees: dict[str, etree._ElementTree] = {}
+        self.evidence_for: Callable[[int, int, int], Evidence | None] | None = None
+        # What the evidence chose (the notes of :meth:`find`), in order: a caller that
+        # selects through code it does not own (a check's rules) reports them.
+        self.decisions: list[str] = []
 
     def _preferred(self, given: str | Path) -> Path:
         path = Path(given)
@@ -151,7 +160,7 @@ class Library:
             if summary is not None:
                 return summary
         try:
-            data = path.read_bytes()
+            data = read_input(path, shown)
         except OSError as exc:
             raise xmlsafe.XmlError(f"cannot read: {exc.strerror}", shown) from None
         if cache is None:
@@ -173,7 +182,8 @@ class Library:
                 (self.resolve_reference(lf, ref) for ref in s.info_references) if target)
             for d in s.devices:
                 entries.append(DeviceEntry(
-                    file=lf.shown, line=d["line"], ordinal=d["ordinal"], vendor_id=s.vendor_id,
+                    file=lf.shown, line=d["line"], ordinal=d["ordinal"],
+                    vendor_id=d.get("vendor_id", s.vendor_id),
                     product_code=d["product_code"], revision=d["revision"], type=d["type"],
                     name=d["name"], group=d["group"], rx_pdos=d["rx_pdos"],
                     tx_pdos=d["tx_pdos"], rx_entries=d["rx_entries"],
@@ -213,16 +223,30 @@ class Library:
 
     # -- lookup ---------------------------------------------------------------------------
 
-    def entry_for_identity(self, vendor_id: int, product_code: int, revision: int
+    def entry_for_identity(self, vendor_id: int, product_code: int, revision: int,
+                           evidence: Evidence | None = None
                            ) -> tuple[DeviceEntry | None, DeviceEntry | None, str | None]:
         """The entry of a slave found on a line by its SII identity: the exact revision
         (the ``prefer`` files first where several files have it), else (``other``) the
         highest revision of the same product, with a note saying which revisions there
-        are."""
+        are.  Where several files describe the exact revision differently and ``prefer``
+        does not decide, ``evidence`` (the slave's SII: ``esi/evidence.py``; without it,
+        the :meth:`guided` evidence, asked for only then) chooses the one that agrees with
+        it, with a note saying so, or the note says why it could not (the ``prefer``
+        order's first is then taken, as without evidence)."""
         same = [e for e in self.entries
                 if (e.vendor_id, e.product_code) == (vendor_id, product_code)]
         exact = min((e for e in same if e.revision == revision), key=self._rank,
                     default=None)
+        if exact is not None and evidence is None and self.evidence_for is not None \
+                and self.differs(vendor_id, product_code, revision):
+            evidence = self.evidence_for(vendor_id, product_code, revision)
+        if exact is not None and evidence is not None:
+            try:
+                chosen = self._one_description(Selection(exact), self.entries, evidence)
+            except DuplicateError as exc:
+                return exact, None, f"took {_where(exact)}, the first: {exc.message}"
+            return chosen.entry, None, chosen.preferred
         other = None
         if exact is None and same:
             other = max(same, key=lambda e: e.revision if e.revision is not None else -1)
@@ -233,13 +257,25 @@ class Library:
                                         if e.revision is not None})))
         return exact, other, note
 
-    def find(self, selector: str, within: LibraryFile | None = None) -> Selection:
+    def differs(self, vendor_id: int, product_code: int, revision: int) -> bool:
+        """Whether several descriptions give this identity differently (a caller that must
+        read evidence from a slave to choose, its SII, reads it only then)."""
+        same = [e for e in self.entries
+                if (e.vendor_id, e.product_code, e.revision)
+                == (vendor_id, product_code, revision)]
+        return len(same) > 1 and bool(self.differing(same))
+
+    def find(self, selector: str, within: LibraryFile | None = None,
+             evidence: Evidence | None = None) -> Selection:
         """The one device ``selector`` names, or :class:`SelectorError` saying why not.
 
         ``within``: look only at the devices of that file (a topology's ``esi:``); a file
         that does not describe the device is an :class:`EsiChoiceError`.  An identity that
         several descriptions give differently, with no ``within`` and no ``prefer`` to
-        choose, is a :class:`DuplicateError` naming each file and what differs.
+        choose, is chosen by ``evidence`` (what is known of the slave: its ENI, its SII;
+        ``esi/evidence.py``) when exactly one of the descriptions agrees with it, else
+        (and without evidence) a :class:`DuplicateError` naming each file and what
+        differs.  Without ``evidence``, the library's own :meth:`guided` evidence is used.
         """
         scope = self.entries if within is None else [
             e for e in self.entries if e.file == within.shown]
@@ -250,7 +286,21 @@ class Library:
                 raise
             raise EsiChoiceError(f"{within.shown} does not describe {selector!r}: "
                                  f"{exc.message}") from None
-        return self._one_description(found, scope)
+        if evidence is None and self.evidence_for is not None:
+            e = found.entry
+            if e.product_code is not None and e.revision is not None:
+                evidence = self.evidence_for(e.vendor_id or 0, e.product_code, e.revision)
+        return self._one_description(found, scope, evidence)
+
+    def guided(self, evidence_for: Callable[[int, int, int], Evidence | None]) -> Library:
+        """This library (its files, models and caches shared) where :meth:`find` takes the
+        evidence ``evidence_for(vendor, product, revision)`` gives when the caller gives
+        none: a check of an ENI passes its slaves' evidence to code that selects by
+        identity."""
+        view = copy.copy(self)
+        view.evidence_for = evidence_for
+        view.decisions = []
+        return view
 
     def select(self, selector: str, esi: str | None = None, base: Path | None = None
                ) -> Selection:
@@ -384,7 +434,8 @@ class Library:
         return [(e, differences(first, self.description(e), _short(group[0]), _short(e)))
                 for e in group[1:] if self.description(e).digest != first.digest]
 
-    def _one_description(self, found: Selection, scope: list[DeviceEntry]) -> Selection:
+    def _one_description(self, found: Selection, scope: list[DeviceEntry],
+                         evidence: Evidence | None = None) -> Selection:
         chosen = found.entry
         if chosen.product_code is None:
             return found
@@ -402,8 +453,50 @@ class Library:
             note = (f"{_selector(chosen)} ({chosen.type}) is described differently by "
                     f"{len({e.file for e in same})} ESI files; took {_where(top[0])} "
                     f"(--prefer {self.prefer[best]}); differs: {said}")
+            against = evidence.disagreements(self.device(top[0])) if evidence else []
+            if evidence is not None and against:
+                note += (f"; it does not agree with {evidence.what}: "
+                         + in_brief(against))
             return Selection(top[0], found.note, note)
+        if evidence is not None:
+            return self._by_evidence(found, same, evidence)
         raise DuplicateError(duplicate_message(chosen, same, self.differing(same)))
+
+    def _by_evidence(self, found: Selection, same: list[DeviceEntry], evidence: Evidence
+                     ) -> Selection:
+        """The one description of ``same`` (differing descriptions of one identity) that
+        agrees with ``evidence``, with a note saying why; else a :class:`DuplicateError`
+        naming what disagrees, or, where several agree, what differs between them (what
+        would decide)."""
+        chosen = found.entry
+        against = {id(e): evidence.disagreements(self.device(e)) for e in same}
+        fits = [e for e in same if not against[id(e)]]
+        files = len({e.file for e in same})
+        head = (f"{_selector(chosen)} ({chosen.type}) is described differently by "
+                + (f"{files} ESI files" if files > 1 else
+                   f"{len(same)} Device elements of one file"))
+        others = "; ".join(f"{_where(e)}: {in_brief(against[id(e)], 3)}" for e in same
+                           if against[id(e)])
+        if fits and not self.differing(fits):
+            note = (f"{head}; took {_where(fits[0])}: the only description that agrees with "
+                    f"{evidence.what}" + (f" (the others differ from it: {others})"
+                                          if others else ""))
+            self.decisions.append(note)
+            return Selection(fits[0], found.note, note)
+        if not fits:
+            raise DuplicateError(
+                f"{head}: {', '.join(_where(e) for e in same)}, and none agrees with "
+                f"{evidence.what} ({others}); choose one: 'esi: FILE' on the slave in the "
+                "topology, or --prefer FILE_OR_FOLDER")
+        between = "; ".join(f"{_where(e)} vs {_where(fits[0])}: {', '.join(d)}"
+                            for e, d in self.differing(fits))
+        raise DuplicateError(
+            f"{head}: {', '.join(_where(e) for e in same)}; {len(fits)} of them agree with "
+            f"{evidence.what}: {', '.join(_where(e) for e in fits)}, which differ in what it "
+            f"does not say ({between})"
+            + (f"; the others do not agree ({others})" if others else "")
+            + "; choose one: 'esi: FILE' on the slave in the topology, or --prefer "
+            "FILE_OR_FOLDER")
 
     def _rank(self, entry: DeviceEntry) -> int:
         path = self._file(entry.file).path
@@ -510,4 +603,5 @@ def expand_paths(given: str | Path) -> list[tuple[Path, str, bool]]:
                     found.append((full, os.path.join(str(given), os.path.relpath(full, path)),
                                   False))
         return found
+    check_input(path, str(given))           # a device node or FIFO: refused as such
     raise UsageError(f"{given}: no such file or folder")

@@ -597,6 +597,9 @@ class Device:
     profiles: list[Profile] = field(default_factory=list)
     slots: Slots | None = None
     module_pdo_group: int | None = None     # Type/@ModulePdoGroup: the group of its own PDOs
+    # Type/@UseLrdLwr (ETG.2000): the device takes its process data by LRD and LWR, not by
+    # LRW (compile's layout must be lrd_lwr for it).
+    use_lrd_lwr: bool = False
     # Not from the ESI: the idents of the modules plugged, by position (0: an empty slot),
     # for a device put together with its modules (esi/slots.py ``with_modules``).
     plugged: tuple[int, ...] = ()

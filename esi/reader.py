@@ -26,7 +26,23 @@ from ecatcfg.esi.model import (
 )
 from ecatcfg.esi.values import INT64_MIN, UINT64_MAX, parse_bool, parse_hex_bytes, parse_int
 
-ROOTS = ("EtherCATInfo", "EtherCATModule")
+ROOTS = ("EtherCATInfo", "EtherCATModule", "EtherCATInfoList")
+# IgH's ``ethercat xml`` writes what it reads from the slaves' SII as one EtherCATInfo per
+# slave, inside <EtherCATInfoList> when there are several (tool/CommandXml.cpp): the file is
+# read as the list of its documents.
+LIST_ROOT = "EtherCATInfoList"
+
+
+def documents(root: etree._Element) -> list[etree._Element]:
+    """The ESI documents of a file: the root, or a list's EtherCATInfo children."""
+    if root.tag == LIST_ROOT:
+        return [el for el in root.iterchildren("EtherCATInfo")]
+    return [root]
+
+
+def device_elements(root: etree._Element) -> list[etree._Element]:
+    """Every Device of the file's documents, in file order (the ``ordinal`` of the index)."""
+    return [dev for doc in documents(root) for dev in doc.iterfind("Descriptions/Devices/Device")]
 
 # Children that ETG.2000 (EtherCATInfo.xsd / EtherCATBase.xsd, version 1.17) allows at each
 # place but that this reader does not model.  A child in neither this set nor the reader's own
@@ -142,16 +158,39 @@ def read_tree(tree: etree._ElementTree, file: str) -> EsiFile:
     was_enabled = gc.isenabled()
     gc.disable()
     try:
-        return _Reader(file).read_root(root)
+        if root.tag != LIST_ROOT:
+            return _Reader(file).read_root(root)
+        return _read_list(root, file)
     finally:
         if was_enabled:
             gc.enable()
 
 
+def _read_list(root: etree._Element, file: str) -> EsiFile:
+    """An EtherCATInfoList as one file of all its documents' devices, each with its own
+    vendor (``Device.vendor``); the file's vendor is the first document's."""
+    docs = [_Reader(file).read_root(doc) for doc in documents(root)]
+    first = docs[0].vendor if docs else Vendor(None, {}, _new_source(Source, (file, 1)))
+    esi = EsiFile(file, LIST_ROOT, first, version=root.get("Version"))
+    for doc in docs:
+        esi.groups += doc.groups
+        esi.devices += doc.devices
+        esi.info_references += doc.info_references
+        esi.problems += doc.problems
+        esi.ignored += doc.ignored
+    return esi
+
+
 def check_root(root: etree._Element, file: str) -> None:
     if root.tag not in ROOTS:
-        raise EsiReadError(f"root element is <{root.tag!s}>, expected <EtherCATInfo> or "
-                           "<EtherCATModule>: not an ESI file", file, root.sourceline)
+        raise EsiReadError(f"root element is <{root.tag!s}>, expected <EtherCATInfo>, "
+                           "<EtherCATModule> or <EtherCATInfoList>: not an ESI file", file,
+                           root.sourceline)
+    if root.tag == LIST_ROOT:
+        for el in root:
+            if isinstance(el.tag, str) and el.tag != "EtherCATInfo":
+                raise EsiReadError(f"<{el.tag}> in an <EtherCATInfoList>: a list holds "
+                                   "<EtherCATInfo> documents", file, el.sourceline)
 
 
 def text_of(el: etree._Element) -> str:
@@ -313,6 +352,7 @@ class _Reader:
                 dev.revision = self.int_(ch.get("RevisionNo"), ch, "Type/@RevisionNo", "error")
                 dev.module_pdo_group = self.int_(ch.get("ModulePdoGroup"), ch,
                                                  "Type/@ModulePdoGroup")
+                dev.use_lrd_lwr = self.bool_(ch.get("UseLrdLwr"), ch, "Type/@UseLrdLwr")
             elif tag == "Name":
                 self.add_name(dev.names, ch)
             elif tag == "GroupType":

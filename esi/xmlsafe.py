@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING
 from lxml import etree
 
 from ecatcfg.errors import EcatcfgError
+from ecatcfg.fileio import read_input
 
 if TYPE_CHECKING:                   # the opaque result of resolve_*(), named only in the stubs
     from lxml.etree._docloader import _InputDocument
@@ -62,8 +63,9 @@ def parse_bytes(data: bytes, file: str, strip: bool = True) -> etree._ElementTre
     except etree.XMLSyntaxError as exc:
         line, column = exc.position if exc.position else (exc.lineno, None)
         message = _POSITION.sub("", exc.msg)      # the location is reported separately
-        raise XmlError(f"not well-formed XML: {message}", file, line or None, column or None) \
-            from None
+        encoding = "encoding" in message or "UTF-8" in message
+        raise (_not_utf8(data, file) if encoding else None) or XmlError(
+            f"not well-formed XML: {message}", file, line or None, column or None) from None
     tree = root.getroottree()
     if tree.docinfo.system_url or tree.docinfo.public_id:
         at = data.find(b"<!DOCTYPE")
@@ -83,11 +85,37 @@ def parse_bytes(data: bytes, file: str, strip: bool = True) -> etree._ElementTre
     return tree
 
 
+_DECLARED_ENCODING = re.compile(rb"^\s*<\?xml[^>]*\bencoding\s*=", re.S)
+_BOMS = (b"\xef\xbb\xbf", b"\xff\xfe", b"\xfe\xff")
+
+
+def _not_utf8(data: bytes, file: str) -> XmlError | None:
+    """A document that declares no encoding is UTF-8 (XML 1.0 §4.3.3); one that is not,
+    such as IgH's ``ethercat xml`` output with a raw Latin-1 "µ" from a slave's SII, is
+    refused at the first byte that is not UTF-8, with its line and column and the fix.
+    ``None`` when the file declares an encoding or is UTF-8 (another error)."""
+    if _DECLARED_ENCODING.match(data) or data.startswith(_BOMS):
+        return None
+    try:
+        data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        at = exc.start
+        line = data.count(b"\n", 0, at) + 1
+        column = at - (data.rfind(b"\n", 0, at) + 1) + 1
+        latin = data[at:at + 1].decode("latin-1")
+        return XmlError(
+            f"byte 0x{data[at]:02X} is not UTF-8, and the file declares no encoding "
+            f"(in Latin-1 it would be {latin!r}); if the file is Latin-1, as IgH's ethercat "
+            "xml writes a slave's names, declare it: <?xml version=\"1.0\" "
+            "encoding=\"ISO-8859-1\"?>", file, line, column)
+    return None
+
+
 def parse_file(path: str | Path, shown_as: str | None = None) -> etree._ElementTree:
     """Read and parse ``path``; errors name ``shown_as`` (the path as the user gave it)."""
     name = shown_as or str(path)
     try:
-        data = Path(path).read_bytes()
+        data = read_input(path, name)
     except OSError as exc:
         raise XmlError(f"cannot read: {exc.strerror}", name) from None
     return parse_bytes(data, name)

@@ -66,6 +66,9 @@ class Network:
     """An ENI running on a link (see the module docstring)."""
 
     segment: VirtualSegment     # the emulated slaves, set by Network.virtual only
+    # Network.virtual only: the ESI file each emulated slave's device is from (None: the
+    # ENI alone), and why, where several files describe its identity differently.
+    esi_sources: list[tuple[str | None, str | None]]
 
     def __init__(self, eni: NetworkPlan | str | Path, link: Link, *,
                  pcap: str | Path | None = None,
@@ -100,8 +103,15 @@ class Network:
                 eni_name = eni_name or str(eni)
                 eni = eni_reader.read_file(eni)
             _check_supported(eni, eni_name, skip_unsupported, on_event)
+            _warn_ignored(eni, eni_name, on_event)
             eni = _completed(eni, eni_name, on_event)
             library = _library(esi, esi_prefer, esi_cache)
+            if library is not None:
+                # Among ESI files that describe an identity differently, a cause is
+                # compared with the one the ENI's slaves agree with (eni/evidence.py).
+                from ecatcfg.eni.evidence import evidence_by_identity
+                by_identity = evidence_by_identity(eni, eni_name or "the ENI")
+                library = library.guided(lambda v, p, r: by_identity.get((v, p, r)))
         except BaseException:
             link.close()                    # the Network owns the link from the start
             raise
@@ -151,8 +161,10 @@ class Network:
         ``Timing()`` for the table); instantaneous slaves by default.  ``dc``: the emulated
         clocks and line timing (``runtime/segment/dc_clock.py``; seeded ±100 ppm drift by
         default).  ``esi_prefer``: the ESI files or folders whose description wins where
-        several describe one device differently (``Library``'s ``prefer``); without it such
-        a device is an error naming the files."""
+        several describe one device differently (``Library``'s ``prefer``); without it the
+        description that agrees with the ENI's slave is taken, said in an
+        ``Event("esi", ...)``, and where none or several agree the device is an error
+        naming the files and what differs."""
         from ecatcfg.eni import reader as eni_reader
         from ecatcfg.runtime.segment import emulate
         from ecatcfg.runtime.link import MemoryLink
@@ -166,9 +178,13 @@ class Network:
         plan = _completed(plan, eni_name or (None if isinstance(eni, NetworkPlan)
                                              else str(eni)), on_event)
         library = _library(esi, esi_prefer, esi_cache)
-        segment = emulate.segment(emulate.specs_from_eni(plan, library, shown), faults,
-                                  timing, dc=dc)
+        specs = emulate.specs_from_eni(plan, library, shown)
+        segment = emulate.segment(specs, faults, timing, dc=dc)
         if on_event is not None:
+            for spec, slave in zip(specs, segment.slaves):
+                if spec.esi_choice is not None:
+                    on_event(Event("esi", f"slave {slave.name!r} (position {slave.position})"
+                                          f": {spec.esi_choice}"))
             for slave in segment.slaves:
                 if slave.eni_only is not None:
                     on_event(Event("emulated", f"slave {slave.name!r} (position "
@@ -190,6 +206,9 @@ class Network:
                   dc_threshold_ns=dc_threshold_ns, dc_timeout_s=dc_timeout_s,
                   recovery=recovery, esi=library, _closers=[close_segment])
         net.segment = segment
+        net.esi_sources = [(None if spec.eni_only is not None else
+                            f"{spec.device.source.file}:{spec.device.source.line}",
+                            spec.esi_choice) for spec in specs]
         return net
 
     # -- state ------------------------------------------------------------------------------
@@ -576,7 +595,10 @@ def _completed(plan: NetworkPlan, name: str | None,
                on_event: Callable[[Event], None] | None) -> NetworkPlan:
     """``plan`` with the standard set-up of the slaves a partial ENI gives no register
     InitCmds (``eni/derive.py``), each one said as an ``Event("derived", ...)``; raises
-    :class:`~ecatcfg.eni.derive.DeriveError` when it cannot be derived."""
+    :class:`~ecatcfg.eni.derive.DeriveError` when it cannot be derived.  The derivation
+    is imported only for a partial ENI."""
+    if not plan.partial_slaves():
+        return plan
     from ecatcfg.eni.derive import complete
     done, derived = complete(plan, name)
     if on_event is not None:
@@ -588,12 +610,35 @@ def _completed(plan: NetworkPlan, name: str | None,
 
 def _library(esi: list[str | Path] | Library | None, prefer: list[str | Path] | None,
              cache: bool = True) -> Library | None:
-    """The ESI library of ``esi`` (files or folders, or a library already built)."""
+    """The ESI library of ``esi`` (files or folders, or a library already built).  Imported
+    only when files are given: the library (lxml, the ESI reader and model) explains
+    refusals, and a start-up that goes well never needs it (tests/test_startup_counts.py)."""
+    if not isinstance(esi, (list, tuple)):
+        return esi                          # None, or a library already built
+    if not esi:
+        return None
     from ecatcfg.esi.library import Library
-    if esi is None or isinstance(esi, Library):
-        return esi
-    return Library([str(p) for p in esi], cache=cache,
-                   prefer=list(prefer or [])) if esi else None
+    return Library([str(p) for p in esi], cache=cache, prefer=list(prefer or []))
+
+
+class IgnoredMetadataWarning(UserWarning):
+    """Unknown metadata of an ENI (a name, a tool's data: ``esi/vocabulary.py``) that the
+    reader left out; it cannot change what is sent."""
+
+
+def _warn_ignored(plan: NetworkPlan, name: str | None,
+                  on_event: Callable[[Event], None] | None) -> None:
+    """A warning per piece of ignored metadata: an ``Event("ignored", ...)`` to
+    ``on_event``, else an :class:`IgnoredMetadataWarning`."""
+    if not plan.ignored:
+        return
+    from ecatcfg.eni import contents
+    for text in contents.ignored_warnings(plan, name):
+        if on_event is not None:
+            on_event(Event("ignored", f"warning: {text}"))
+        else:
+            import warnings
+            warnings.warn(text, IgnoredMetadataWarning, stacklevel=3)
 
 
 def _check_supported(plan: NetworkPlan, name: str | None, skip: bool,

@@ -30,11 +30,10 @@ from collections.abc import Iterator
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-from scapy.utils import RawPcapNgReader
-
 from ecatcfg.esc import Cmd
 from ecatcfg.esi.library import Library, SelectorError
 from ecatcfg.runtime import wire
+from ecatcfg.runtime.pcap import read_capture
 from ecatcfg.runtime.segment.dc_clock import DcModel
 from ecatcfg.runtime.segment.emulate import SlaveSpec, emulated_slave
 from ecatcfg.runtime.segment.virtual import VirtualSegment
@@ -65,11 +64,10 @@ class Exchange:
 
 
 def _frames(path: Path) -> Iterator[tuple[int, int, bytes]]:
-    for number, (pkt, meta) in enumerate(RawPcapNgReader(str(path)), 1):
-        frame = bytes(pkt)
+    """The EtherCAT frames of a pcapng or classic libpcap capture (``runtime/pcap.py``)."""
+    for number, time_ns, frame in read_capture(path):
         if frame[12:14] == ETHERTYPE:
-            ticks = (meta.tshigh << 32) | meta.tslow
-            yield number, ticks * 1_000_000_000 // meta.tsresol, frame
+            yield number, time_ns, frame
 
 
 def _shape(frame: bytes) -> tuple[tuple[int, int, int | None, int, int], ...] | None:
@@ -568,8 +566,10 @@ def classify(rp: Replay, e: Exchange, i: int, sent: Datagram, real: Datagram,
 # -- the table -------------------------------------------------------------------------------
 
 def captures(corpus: Path) -> list[Path]:
-    """Every wire capture of the corpus, in name order."""
-    return sorted((corpus / "pcap").rglob("*.pcapng"))
+    """Every wire capture of the corpus (pcapng, or classic libpcap: ``.pcap``, ``.cap``),
+    in name order."""
+    return sorted(p for p in (corpus / "pcap").rglob("*")
+                  if p.is_file() and p.suffix.lower() in (".pcapng", ".pcap", ".cap"))
 
 
 def table(reports: list[Report]) -> str:

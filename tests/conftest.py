@@ -158,3 +158,79 @@ MAILBOX_PD_SMS = (
     f'{_pdo_entry(0x7000, 8, "USINT")}</RxPdo>'
     '<TxPdo Fixed="1" Mandatory="1" Sm="3"><Index>#x1A00</Index><Name>In</Name>'
     f'{_pdo_entry(0x6000, 8, "USINT")}</TxPdo>')
+
+
+class FifoUnblock:
+    """Opens ``fifo`` from both ends after ``seconds`` if the code under test still waits on
+    it (a regression would otherwise hang the suite): ``needed`` says it had to."""
+
+    def __init__(self, fifo: Path, seconds: float = 20) -> None:
+        import threading
+        self.needed = False
+        self._done = threading.Event()
+        self._fifo = fifo
+        self._thread = threading.Thread(target=self._run, args=(seconds,), daemon=True)
+        self._thread.start()
+
+    def _run(self, seconds: float) -> None:
+        wait = seconds
+        while not self._done.wait(wait):
+            self.needed = True
+            wait = 0.5          # and again, for as long as it goes on opening it
+            try:                # O_RDWR on a FIFO never blocks (Linux) and wakes both ends
+                os.close(os.open(self._fifo, os.O_RDWR | os.O_NONBLOCK))
+            except OSError:
+                pass
+
+    def __enter__(self) -> FifoUnblock:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._done.set()
+        self._thread.join()
+
+
+# -- known refusals of the corpus sweeps (tests/known_refusals.py) ----------------------------
+# A listed case runs as any other; it must fail with the failure its entry names, and then
+# counts as an expected failure with the entry's reason.  A listed case that passes, or
+# fails otherwise, fails the run.
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo[None]):
+    outcome = yield
+    report = outcome.get_result()
+    if call.when != "call":
+        return
+    from known_refusals import KNOWN
+    known = KNOWN.get(item.nodeid)
+    if known is None:
+        return
+    import re
+    where = "tests/known_refusals.py"
+    if report.passed:
+        report.outcome = "failed"
+        report.longrepr = (f"{item.nodeid} passes now: take its entry out of {where} "
+                           f"(it was: {known.reason}; removed by {known.until})")
+    elif report.failed and call.excinfo is not None:
+        text = f"{call.excinfo.typename}: {call.excinfo.value}"
+        if re.search(known.failure, text, re.S):
+            report.outcome = "skipped"
+            report.wasxfail = f"known refusal: {known.reason} (until {known.until})"
+        else:
+            report.longrepr = (f"{report.longrepr}\n\n{item.nodeid} is listed in {where} as "
+                               f"failing with /{known.failure}/ ({known.reason}), "
+                               "but failed otherwise")
+
+
+def pytest_collection_finish(session: pytest.Session) -> None:
+    """Every entry of known_refusals.py names a case that exists (when its file was
+    collected whole): a renamed test or a removed corpus file must take its entry along."""
+    from known_refusals import KNOWN
+    ids = {item.nodeid for item in session.items}
+    files = {nodeid.split("::", 1)[0] for nodeid in ids}
+    stale = [k for k in KNOWN if k.split("::", 1)[0] in files and k not in ids
+             and not session.config.option.keyword and not session.config.option.markexpr
+             and all("::" not in str(a) for a in session.config.args)]
+    if stale:
+        raise pytest.UsageError("tests/known_refusals.py names cases that do not exist: "
+                                + ", ".join(stale))

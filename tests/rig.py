@@ -400,9 +400,9 @@ def start_simulate(rig: VethRig, *args: str, duration: float = 60) -> tuple[
     prints ``ready:``: (the process, the lines it printed up to that one).  The last line
     is not ``ready:`` when simulate ended first; callers assert on it (and may read
     ``stderr``).  The rig stops the process when it goes away."""
-    import sys
+    from installed import ECATCFG
 
-    sim = rig.popen_in(rig.ns_b, [sys.executable, "-m", "ecatcfg", "simulate", *args,
+    sim = rig.popen_in(rig.ns_b, [*ECATCFG, "simulate", *args,
                                   "--iface", rig.if_b, "--duration", str(duration),
                                   "--no-cache"],
                        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)

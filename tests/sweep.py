@@ -245,7 +245,10 @@ class Worker:
         needed = _required_modules(device, lib.modules_for(entry))
         if needed:
             slave["modules"] = needed
-        text = json.dumps({"master": {"name": "sweep"}, "slaves": [slave]})
+        master: dict[str, Any] = {"name": "sweep"}
+        if device.use_lrd_lwr:
+            master["layout"] = "lrd_lwr"      # what the ESI asks for (compile says so)
+        text = json.dumps({"master": master, "slaves": [slave]})
         try:
             chosen = lib.find(case.selector).entry
         except EcatcfgError:

@@ -5,9 +5,9 @@ from __future__ import annotations
 
 import json
 import subprocess
-import sys
 
 from conftest import EXAMPLES, ROOT, device_xml, esi_xml, write
+from installed import ECATCFG, PYTHON
 from ecatcfg.cli import SUBCOMMANDS
 
 CONTRACT_KEYS = {"file", "line", "vendor_id", "product_code", "revision", "type", "name",
@@ -16,7 +16,7 @@ CONTRACT_KEYS = {"file", "line", "vendor_id", "product_code", "revision", "type"
 
 
 def ecatcfg(*args: str, cwd=ROOT) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "ecatcfg", *args], capture_output=True,
+    return subprocess.run([*ECATCFG, *args], capture_output=True,
                           text=True, cwd=cwd)
 
 
@@ -78,7 +78,7 @@ def test_console_flushes_everything_before_its_fast_exit(tmp_path):
     assert len(json.loads(out.stdout)["devices"]) == 400     # complete JSON document
     assert ecatcfg("devices", "no/such/dir").returncode == 2
     # A reader that goes away early (`| head`): exit 0, nothing on stderr, as before.
-    proc = subprocess.Popen([sys.executable, "-m", "ecatcfg", "devices", "--format", "json",
+    proc = subprocess.Popen([*ECATCFG, "devices", "--format", "json",
                              "--no-cache", str(tmp_path)], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, cwd=ROOT)
     proc.stdout.read(10)
@@ -116,7 +116,7 @@ def test_help_and_devices_do_not_import_scapy_or_the_runtime():
         "    main(['devices', 'examples'])\n"
         "bad = [m for m in sys.modules if m.startswith(('scapy', 'ecatcfg.runtime', 'pysoem'))]\n"
         "print(heavy_after_help, bad)\n")
-    out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True,
+    out = subprocess.run([*PYTHON, "-c", probe], capture_output=True, text=True,
                          cwd=ROOT, check=True)
     assert out.stdout.strip() == "[] []"
 
@@ -127,3 +127,18 @@ def test_demo_compiles_the_embedded_example(tmp_path):
     assert "axis1" in out.stdout and "LRW (WKC 7)" in out.stdout
     assert (tmp_path / "ecatcfg-demo" / "demo.eni.xml").read_bytes().startswith(b"<?xml")
     assert b"#define ECAT_OUT_AXIS1" in (tmp_path / "ecatcfg-demo" / "demo.h").read_bytes()
+
+
+def test_devices_of_a_folder_without_esi_files_exits_2_unless_allowed(tmp_path):
+    """``devices`` of a folder with no ESI file (empty, or only an ENI) used to list "0
+    devices in 0 files" and exit 0; --allow-empty keeps that."""
+    write(tmp_path, "plan.xml", "<EtherCATConfig><Config/></EtherCATConfig>")
+    out = ecatcfg("devices", str(tmp_path))
+    assert out.returncode == 2 and out.stdout == ""
+    assert f"ecatcfg devices: no ESI file in {tmp_path}: nothing was read" in out.stderr
+    allowed = ecatcfg("devices", "--allow-empty", str(tmp_path))
+    assert allowed.returncode == 0 and "0 devices in 0 files" in allowed.stdout
+    # a broken ESI file is an input: its error, exit 1, not "no ESI file"
+    write(tmp_path, "broken.xml", "<EtherCATInfo><Vendor>")
+    broken = ecatcfg("devices", str(tmp_path / "broken.xml"))
+    assert broken.returncode == 1 and "no ESI file" not in broken.stderr

@@ -211,6 +211,30 @@ def test_ebus_current_warning(tmp_path):
     assert result.warnings == []
 
 
+def test_ebus_current_follows_the_ebus_not_the_bus_order(tmp_path):
+    """A junction in the first coupler's row sends the frame through its Ethernet port D
+    (a second coupler and its row) before its E-bus port C goes on with the first row
+    (ESC port order A, D, B, C).  The terminals on port C draw from the first coupler:
+    900 mA of inputs + 220 mA of the junction + 110 mA per output exceed its 2000 mA at
+    the 9th output (2110 mA).  Summed in bus order, they were charged to the second
+    coupler, which feeds only its own 5 inputs, and no warning came."""
+    tree = EXAMPLES / "tree" / "esi"
+    rows = ["slaves:", "  - {name: c1, device: EXB1100}"]
+    rows += [f"  - {{name: in{i}, device: EXB1018}}" for i in range(10)]
+    rows += ["  - {name: junction, device: EXB1122}",
+             "  - {name: c2, device: EXB1100, parent: junction, port: D}"]
+    rows += [f"  - {{name: u{i}, device: EXB1018}}" for i in range(5)]
+    rows += ["  - {name: out0, device: EXB2018, parent: junction, port: C}"]
+    rows += [f"  - {{name: out{i}, device: EXB2018}}" for i in range(1, 12)]
+    result = compile_text(tmp_path, "\n".join(rows) + "\n", [tree])
+    order = [s.name for s in result.plan.slaves]
+    assert order.index("u4") < order.index("out0")     # the branch comes first on the wire
+    [warning] = result.warnings
+    assert warning.line == 1 + rows.index("  - {name: out8, device: EXB2018}")
+    assert "E-bus of 'c1'" in warning.message and "2110 mA" in warning.message
+    assert "up to slave 'out8'" in warning.message and "2000 mA" in warning.message
+
+
 def test_schema_command_prints_the_topology_schema(capsys):
     assert main(["schema", "topology"]) == 0
     schema = json.loads(capsys.readouterr().out)

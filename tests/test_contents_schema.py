@@ -174,7 +174,7 @@ def test_what_exporters_write_beyond_the_schema_is_listed(corpus, corpus_extra):
 
 @pytest.mark.parametrize("fragment, element", [
     ('<Info Extra="1"/>', "Slave/Info/@Extra"),
-    ("<Mailbox AdaptAutomatically='1'/>", "Slave/Mailbox/@AdaptAutomatically")])
+    ("<Mailbox RepeatCount='1'/>", "Slave/Mailbox/@RepeatCount")])
 def test_an_unknown_attribute_is_refused_by_name(fragment, element):
     """An attribute nobody listed may change what the master does: refused, with its line
     and slave."""

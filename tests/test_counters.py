@@ -19,6 +19,7 @@ from pathlib import Path
 
 import pytest
 import rig
+from lxml import etree
 
 from ecatcfg.esc import Cmd
 from ecatcfg.esi.library import Library
@@ -132,6 +133,12 @@ def test_counters_over_veth_against_simulate_with_a_lossy_port(veth_netns):
         rows = json.loads(first.stdout)["slaves"]
         assert len(rows) == 5
         sensors = rows[2]
+        # Only the ports each ESC has (0x0007): the ESI's Physics gives one letter per
+        # port (read here with lxml), "YY" two MII ports, so A and B and no C or D.
+        physics = {d.get("Physics") for f in ESI.glob("*.xml")
+                   for d in etree.parse(str(f)).iter("Device")}
+        assert physics == {"YY"}
+        assert [sorted(r["ports"]) for r in rows] == [["A", "B"]] * 5
         assert sensors["ports"]["A"]["invalid_frames"] > 0
         assert sensors["first_errors"] == ["A"]
         # Behind the bad port the errors arrive marked; before it, only on the way back.
@@ -142,6 +149,9 @@ def test_counters_over_veth_against_simulate_with_a_lossy_port(veth_netns):
 
         text = ecatcfg_in(veth_netns, "counters", "--slave", "2", "--clear")
         assert text.returncode == 0, text.stderr
+        assert [line.split()[1] for line in text.stdout.splitlines()[1:3]] == ["A", "B"]
+        assert not any(line.split()[:2] in (["2", "C"], ["2", "D"])
+                       for line in text.stdout.splitlines())
         assert ("slave 2 port A received frames with errors first: check the cable and "
                 "connectors into that port") in text.stdout
         assert "counters cleared" in text.stdout
@@ -160,6 +170,24 @@ def test_counters_over_veth_against_simulate_with_a_lossy_port(veth_netns):
     finally:
         sim.send_signal(signal.SIGINT)
         sim.wait(10)
+
+
+def test_only_the_ports_the_port_descriptor_names_are_listed():
+    """0x0007 (ESC Section II): two bits per port, 0 not implemented, 1 not configured,
+    2 E-bus, 3 MII.  A 2-port E-bus terminal (0x0A), a 3-port junction (0x3F), an ESC with
+    port C not configured (0x1F)."""
+    from ecatcfg.runtime.master.counters import SlaveCounters
+    block = bytes(range(1, 0x15))
+    two = SlaveCounters.from_block(0, block, 0b00_00_10_10)
+    assert [letter for letter, _ in two.present_ports()] == ["A", "B"]
+    assert sorted({k.split(".")[0] for k in two.flat() if "." in k}) == ["A", "B"]
+    assert [letter for letter, _ in SlaveCounters.from_block(0, block, 0b00_11_11_11)
+            .present_ports()] == ["A", "B", "C"]
+    assert [letter for letter, _ in SlaveCounters.from_block(0, block, 0b00_01_11_11)
+            .present_ports()] == ["A", "B"]
+    # port B's counters are the block's bytes 0x02/0x03, 0x09 and 0x11 (+1 from range(1))
+    assert two.ports[1] == {"invalid_frames": 3, "rx_errors": 4, "forwarded_rx_errors": 10,
+                            "lost_links": 18}
 
 
 def test_simulate_faults_usage(tmp_path):

@@ -75,8 +75,10 @@ def test_compiled_elmo_against_ec_engineer_has_only_the_watchdogs(tmp_path, caps
     assert sorted((c["kind"], c["slave"], c["transition"], c["what"], c["old"])
                   for c in changes) == [
         ("initcmd-removed", DRIVE, "IP", "0x0400", "set watchdog divider 2498 (100000 ns)"),
-        ("initcmd-removed", DRIVE, "IP", "0x0410", "set PDI watchdog 1000"),
-        ("initcmd-removed", DRIVE, "IP", "0x0420", "set SM watchdog 10000"),
+        ("initcmd-removed", DRIVE, "IP", "0x0410",
+         "set PDI watchdog 1000 (100 ms at the default divider)"),
+        ("initcmd-removed", DRIVE, "IP", "0x0420",
+         "set SM watchdog 10000 (1000 ms at the default divider)"),
     ]
 
 
@@ -99,7 +101,7 @@ def test_compiled_beckhoff_line_against_twincat_names_each_difference(tmp_path, 
         kinds.setdefault(c["kind"], []).append(c)
     assert set(kinds) == {"slave-removed", "slave-moved", "initcmd-removed",
                           "initcmd-changed", "variable-removed", "variable-added",
-                          "variable-moved", "cycle-time", "frames"}
+                          "image-moved", "cycle-time", "frames"}
     assert [(c["slave"]) for c in kinds["slave-removed"]] == ["Term 3 (EL4002)"]
     assert [(c["slave"], c["old"], c["new"]) for c in kinds["slave-moved"]] == [
         ("Term 4 (EL1809)", "position 3", "position 2")]
@@ -116,13 +118,59 @@ def test_compiled_beckhoff_line_against_twincat_names_each_difference(tmp_path, 
     added = {c["what"].split(" ", 1)[1] for c in kinds["variable-added"]}
     assert added == set(ours_vars) - set(theirs) == {
         "Term 4 (EL1809).Channel 1.Input", "Term 2 (EL2008).Channel 1.Output"}
-    for c in kinds["variable-moved"]:
-        name = c["what"].split(" ", 1)[1]
-        assert (c["old"], c["new"]) == (f"{theirs[name] // 8}.{theirs[name] % 8}",
-                                        f"{ours_vars[name] // 8}.{ours_vars[name] % 8}")
-    assert len(kinds["variable-moved"]) == len(
-        [n for n in set(theirs) & set(ours_vars) if theirs[n] != ours_vars[n]]) == 22
+    # Every variable both files have sits at another place, each direction shifted as one
+    # (TwinCAT's frame-shaped image against our compact one): one line per direction, with
+    # the count and the shift the files give, instead of 22 variable-moved lines.
+    shifts = {}
+    for direction, tag in (("in", "Inputs"), ("out", "Outputs")):
+        def offsets(tree: etree._ElementTree) -> dict[str, int]:
+            return {v.findtext("Name"): int(v.findtext("BitOffs"))
+                    for v in tree.iterfind(f".//ProcessImage/{tag}/Variable")}
+        a, b = offsets(ref), offsets(_tree(ours))
+        moved = {(b[n] - a[n]) for n in set(a) & set(b)}
+        assert len(moved) == 1 and 0 not in moved
+        shifts[direction] = (len(set(a) & set(b)), moved.pop())
+    assert sum(n for n, _ in shifts.values()) == 22
+    assert [(c["what"], c["new"]) for c in kinds["image-moved"]] == [
+        (f"{d}: all {n} variables", f"moved by -{-bits // 8} bytes")
+        for d, (n, bits) in shifts.items()]
     assert [(c["old"], c["new"]) for c in kinds["cycle-time"]] == [("none", "1000")]
+
+
+def test_a_shifted_image_is_one_line_and_the_real_moves_follow(tmp_path, capsys, corpus):
+    """The whole output image moved by 56 bytes (another tool's image base), and one of its
+    variables by 2 bytes more: one ``image-moved`` line for all but one, then that one with
+    both offsets.  Then one slave's inputs moved together: one ``variables-moved`` line."""
+    tree = _tree(corpus / MEGA_ENI)
+    size = tree.find(".//ProcessImage/Outputs/ByteSize")
+    size.text = str(int(size.text) + 58)              # room for the moved variables
+    outputs = tree.findall(".//ProcessImage/Outputs/Variable")
+    for v in outputs:
+        v.find("BitOffs").text = str(int(v.findtext("BitOffs")) + 56 * 8)
+    odd = outputs[1]
+    old = int(odd.findtext("BitOffs")) - 56 * 8
+    odd.find("BitOffs").text = str(old + 58 * 8)
+    code, changes = _diff(capsys, corpus / MEGA_ENI, _save(tree, tmp_path / "shifted.xml"))
+    assert code == 1
+    assert changes == [
+        {"kind": "image-moved", "slave": None, "transition": None,
+         "what": f"out: {len(outputs) - 1} of {len(outputs)} variables", "old": None,
+         "new": "moved by +56 bytes"},
+        {"kind": "variable-moved", "slave": None, "transition": None,
+         "what": f"out {odd.findtext('Name')}", "old": f"{old // 8}.{old % 8}",
+         "new": f"{old // 8 + 58}.{old % 8}"}]
+    # One slave's inputs, each moved by 3 bits: the slave's line, nothing else.
+    tree = _tree(corpus / MEGA_ENI)
+    slave = "Term 4 (EL1809)"
+    mine = [v for v in tree.iterfind(".//ProcessImage/Inputs/Variable")
+            if v.findtext("Name").startswith(slave + ".")]
+    assert len(mine) >= 2
+    for v in mine:
+        v.find("BitOffs").text = str(int(v.findtext("BitOffs")) + 3)
+    code, changes = _diff(capsys, corpus / MEGA_ENI, _save(tree, tmp_path / "slave.xml"))
+    assert changes == [{"kind": "variables-moved", "slave": slave, "transition": None,
+                        "what": f"in: all {len(mine)} variables", "old": None,
+                        "new": "moved by +3 bits"}]
 
 
 def test_an_identical_copy_and_a_reworded_one_are_equal(tmp_path, capsys, corpus):
@@ -364,8 +412,9 @@ def test_the_masters_own_init_cmds_are_compared(tmp_path, capsys, corpus):
     assert code == 1
     value = int.from_bytes(bytes.fromhex(old), "little")
     assert changes == [{"kind": "initcmd-changed", "slave": None, "transition": "IP",
-                        "what": "master 0x0200", "old": f"BWR 0x0200 = 0x{value:04X}",
-                        "new": "BWR 0x0200 = 0x0000"}]
+                        "what": "master 0x0200",
+                        "old": f"set ECAT event mask = 0x{value:04X}",
+                        "new": "set ECAT event mask = 0x0000"}]
 
 
 def test_topologies_with_esi_compare_the_devices_selected(tmp_path, capsys):

@@ -26,7 +26,6 @@ import re
 import shlex
 import signal
 import subprocess
-import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -34,6 +33,7 @@ import pytest
 
 import rig
 from conftest import ROOT
+from installed import ECATCFG, PYTHON
 
 DOCS = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
 FENCE = re.compile(r"^```(\w*)[^\n]*\n(.*?)^```", re.S | re.M)
@@ -95,9 +95,9 @@ def commands(text: str) -> list[list[str]]:
 
 def _argv(words: list[str]) -> list[str]:
     if words[0] == "ecatcfg":
-        return [sys.executable, "-m", "ecatcfg", *words[1:]]
+        return [*ECATCFG, *words[1:]]
     if words[0] in ("python3", "python"):
-        return [sys.executable, *words[1:]]
+        return [*PYTHON, *words[1:]]
     return words
 
 
@@ -194,7 +194,7 @@ def run_example(example: Example, bench: Bench) -> None:
         return
     script = bench.folder / "example.py"
     script.write_text(text)
-    argv = [sys.executable, str(script)]
+    argv = [*PYTHON, str(script)]
     if "RawLink(" in text:
         bus = bench.bus()
         script.write_text(text.replace(f'"{IFACE}"', f'"{bus.if_a}"'))

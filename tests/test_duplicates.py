@@ -252,15 +252,27 @@ def test_lint_reports_differing_and_identical_duplicates_across_files(pair: Path
     assert done.returncode == 0 and "info ESI007" in done.stdout, done.stdout
 
 
-def test_apply_virtual_refuses_differing_esis_unless_preferred(pair: Path):
+def test_apply_virtual_takes_the_description_the_eni_has_unless_preferred(pair: Path):
+    """The ENI compiled with b.xml has b's two input entries: of the differing pair, b
+    agrees with it and is taken, said with both files (tests/test_same_identity.py has
+    the rules); an ENI that neither fits is refused naming both."""
     topo = write(pair, "t.yaml", TOPOLOGY + "    esi: b.xml\n")
     eni = pair / "out.xml"
     assert ecatcfg("compile", topo, "--esi", pair / "esi", "-o", eni,
                    "--no-cache").returncode == 0
     done = ecatcfg("apply", eni, "--virtual", "--esi", pair / "esi", "--cycles", "3",
                    "--no-cache")
+    assert done.returncode == 0, done.stderr
+    b, a = pair / "esi" / "b.xml", pair / "esi" / "a.xml"
+    words = " ".join((done.stdout + done.stderr).split())
+    assert f"took {b}:{_device_line(b)}: the only description that agrees" in words
+    assert f"{a}:{_device_line(a)}: TxPdo 0x1A00 entries differ from the ENI's" in words
+    eni.write_text(eni.read_text().replace("<BitLen>16</BitLen>", "<BitLen>32</BitLen>"))
+    done = ecatcfg("apply", eni, "--virtual", "--esi", pair / "esi", "--cycles", "3",
+                   "--no-cache")
     assert done.returncode == 1
     assert "a.xml" in done.stderr and "b.xml" in done.stderr and "Traceback" not in done.stderr
+    assert "none agrees with the ENI's slave 'io'" in " ".join(done.stderr.split())
     done = ecatcfg("apply", eni, "--virtual", "--esi", pair / "esi", "--prefer",
                    pair / "esi" / "b.xml", "--cycles", "3", "--no-cache")
     assert done.returncode == 0, done.stderr + done.stdout

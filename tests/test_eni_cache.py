@@ -9,6 +9,7 @@ from pathlib import Path
 
 import pytest
 
+from conftest import FifoUnblock
 from ecatcfg.eni import cache as eni_cache
 from ecatcfg.eni import reader as eni_reader
 from ecatcfg.eni.cache import PlanCache
@@ -196,3 +197,26 @@ def test_default_folder_follows_xdg(tmp_path, monkeypatch):
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
     eni_cache.read_file(_eni(tmp_path))
     assert list((tmp_path / "xdg" / "ecatcfg").glob("eni-plan-v*/*.pickle"))
+
+
+@pytest.mark.parametrize("damage", ["fifo", "folder"])
+def test_an_entry_that_is_not_a_regular_file_is_a_miss_and_replaced(tmp_path, parses, damage):
+    """A FIFO in an entry's place is neither waited on when read (it has no writer) nor
+    written into when the entry is stored again: the new entry is renamed over it."""
+    eni, cache = _eni(tmp_path), PlanCache(tmp_path / "cache")
+    eni_cache.read_file(eni, cache=cache)
+    entry = _entries(cache)[0]
+    entry.unlink()
+    if damage == "fifo":
+        os.mkfifo(entry, 0o600)
+    else:
+        entry.mkdir(0o700)
+    with FifoUnblock(entry) as unblock:
+        assert eni_cache.read_file(eni, cache=cache) == rich_plan()
+    assert not unblock.needed, "the cache waited on the FIFO"
+    assert len(parses) == 2
+    if damage == "fifo":                    # replaced by a good entry: the next read hits
+        assert entry.is_file()
+        assert eni_cache.read_file(eni, cache=cache) == rich_plan()
+        assert len(parses) == 2
+

@@ -240,9 +240,12 @@ def _config(path: Path) -> etree._Element:
 def xpath_facts(path: Path) -> dict:
     """What the raw XML says, counted with plain XPath (independent of the reader)."""
     config = _config(path)
-    slaves = config.xpath("Slave")
+    # A slave without PhysAddr and AutoIncAddr has no ESC (a passive end cap, as TwinCAT
+    # writes the EL9011): counted apart.
+    slaves = config.xpath("Slave[Info/PhysAddr or Info/AutoIncAddr]")
     return {
         "master_cmds": int(config.xpath("count(Master/InitCmds/InitCmd)")),
+        "passive": int(config.xpath("count(Slave[not(Info/PhysAddr) and not(Info/AutoIncAddr)])")),
         "slaves": [(int(s.xpath("string(Info/PhysAddr)")), int(s.xpath("string(Info/VendorId)")),
                     int(s.xpath("string(Info/ProductCode)")),
                     int(s.xpath("count(InitCmds/InitCmd)")),
@@ -263,6 +266,7 @@ def plan_facts(plan: NetworkPlan) -> dict:
 
     return {
         "master_cmds": len(plan.master.init_cmds),
+        "passive": len(plan.passive),
         "slaves": [(s.phys_addr, s.vendor_id, s.product_code,
                     len(s.init_cmds) + dropped(s.name),
                     len(s.mailbox.coe_init_cmds) if s.mailbox else 0,
@@ -279,11 +283,14 @@ def test_corpus_has_the_eni_files(corpus, corpus_extra):
     assert {"corpus/rocos-ethercat/eni.xml", "corpus/rocos-ethercat/eni1.xml",
             "corpus/jn-ec-master/mega_master_eni.xml",
             "corpus/murrelektronik-variox/eni.xml"} <= names
-    # corpus-extra's MANIFEST.md: 16 ENIs from 5 repositories' folders.
+    # corpus-extra's MANIFEST.md: 16 ENIs from 5 repositories' folders, and 17 more from 10
+    # folders of 8 repositories (its section of files added 2026-11-29).
     extra = {n.split("/")[1] for n in names if n.startswith("corpus-extra/")}
-    assert len([n for n in names if n.startswith("corpus-extra/")]) == 16
+    assert len([n for n in names if n.startswith("corpus-extra/")]) == 33
     assert extra == {"hydra", "altinay-networkdata", "altinay-moobot", "rocos-ecm-history",
-                     "marcelgehrig-ethercattest"}
+                     "marcelgehrig-ethercattest", "pmec-wec-bench", "pmec-fostwin",
+                     "pmec-lupa", "pmec-foswec2", "pmec-linear-actuator", "minzesun-speedgoat",
+                     "marcelgehrig-ectest", "beremiz-tests", "soem-sample"}
     assert {"corpus-extra/hydra/hydra_wholebody_20160108_DC.xml",
             "corpus-extra/rocos-ecm-history/eni_sea.xml"} <= names
 

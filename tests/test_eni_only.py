@@ -28,6 +28,7 @@ from ecatcfg.eni import reader as eni_reader
 from ecatcfg.eni.contents import UnsupportedEniError
 from ecatcfg.esc import AlState, Transition
 from ecatcfg.esi import sii
+from ecatcfg.errors import EcatcfgError
 from ecatcfg.esi.library import Library
 from ecatcfg.runtime import Network
 from ecatcfg.runtime.segment import emulate
@@ -38,6 +39,7 @@ from ecatcfg.runtime.master.replay import ApplyError
 # cause).  A refusal belongs here only if a real device would refuse the file too, or the
 # file cannot be read (``None``: with and without ESI files).
 ENCRYPTED = "corpus/murrelektronik-variox/eni.xml"     # encrypted FMMU settings (TwinCAT)
+PENDULUM = "corpus-extra/pmec-wec-bench/Pendulum2XML.xml"
 REFUSED = {
     (ENCRYPTED, None): "FMMU settings encrypted (EncryptedEtherCATConfig)",
     # Synapticon's ESI of this revision (0x0A000002) marks 0x1C12 read-only; its EC-Engineer
@@ -46,6 +48,10 @@ REFUSED = {
     # writable (nothing says otherwise) and the file reaches OP.
     ("corpus-extra/rocos-ecm-history/eni_sea.xml", True):
         "SDO abort 0x06010002: 0x1C12 is read-only in its ESI",
+    # Four files of corpus-extra esi/hbm describe the HBM GEN DAQ (0x11D:0xD01 rev 2)
+    # differently and none has the 113 TxPdos of this ENI (its MANIFEST): apply cannot tell
+    # which the device was configured with and says what differs.
+    (PENDULUM, True): "no ESI description of the GEN DAQ agrees with the ENI's PDOs",
 }
 # Slaves whose device the ESI files of both corpora hold (each MANIFEST.md, "paired ESI",
 # and the identities checked by hand against the ESI files); all others have none there.
@@ -68,7 +74,37 @@ WITH_ESI = {"corpus/jn-ec-master/mega_master_eni.xml": {"Term 1 (EK1100)", "Term
             "corpus-extra/marcelgehrig-ethercattest/01_ENI_1Elmo_1000ms.xml":
                 {"Slave_1001 [Elmo Drive ]"},
             "corpus-extra/marcelgehrig-ethercattest/10_ENI_2Elmo_1000ms_extended.xml": ELMO_2,
-            "corpus-extra/marcelgehrig-ethercattest/30_ENI_2Elmo_1Maxpos505_1000ms.xml": ELMO_2}
+            "corpus-extra/marcelgehrig-ethercattest/30_ENI_2Elmo_1Maxpos505_1000ms.xml": ELMO_2,
+            "corpus-extra/rocos-ecm-history/eni_elmox2.xml": ELMO_2,
+            "corpus-extra/marcelgehrig-ectest/eni_1ELMO_PTP1.xml": {"Slave_1001 [Elmo Drive ]"},
+            # Inovance SV660N (corpus esi/drives), Mitsubishi MR-J4-TM (corpus-extra
+            # esi/mitsubishi), the EL6695-0002 bridge (corpus-extra esi/dls EL66xx)
+            "corpus-extra/minzesun-speedgoat/ENI2.xml": {"Drive 1 (InoSV660N)"},
+            "corpus-extra/pmec-linear-actuator/linear_actuator.xml": {"Drive 1 (MR-J4-TM)"},
+            "corpus-extra/pmec-fostwin/FOSTWIN_Secondary1.xml": {"Box 1 (EL6695-0002)"},
+            # Elmo Gold, EK1100 (corpus), EL9510 rev 0x110000 (corpus-extra esi/dls EL9xxx;
+            # not its other revision), EL1002 (corpus), EL3692 (corpus-extra beckhoff-vera)
+            "corpus-extra/pmec-wec-bench/DriveMotorXML.xml": {"Drive 4 (Elmo Drive )",
+                                                              "Term 1 (EK1100)"},
+            "corpus-extra/pmec-lupa/LUPA1kHz_DC.xml": {"Drive 12 (Elmo Drive )", "Term 1 (EK1100)",
+                                                       "Term 3 (EK1100)", "Term 6 (EL9510)"},
+            # HBM GEN DAQ 0x11D:0xD01 rev 2: four files of corpus-extra esi/hbm describe it
+            # differently; the one whose PDO set the ENI has (the MANIFEST's pairing) is
+            # taken.  EK1100 (corpus), EL3692 (corpus-extra beckhoff-vera)
+            "corpus-extra/pmec-foswec2/NAVFACOSWECSxml.xml": {
+                "Box 1 (GEN Series DAQ System)", "Term 2 (EK1100)", "Term 5 (EK1100)",
+                "Term 7 (EL3692)"},
+            # (refused today for AdaptAutomatically on InitCmds; with the ESI files these
+            # slaves are emulated from them: Elmo Gold and EK1100 of the corpus, the GEN DAQ
+            # from 20260305_mCDR.xml, the one with the ENI's 18 TxPdos)
+            "corpus-extra/pmec-wec-bench/DriveAndDUTAndPAAndLoadXML.xml": {
+                "Box 13 (GEN Series DAQ System)", "Drive 1 (Elmo Drive )", "Term 2 (EK1100)",
+                "Term 4 (EK1100)", "Term 7 (EK1100)", "Term 30 (EK1100)"},
+            "corpus-extra/pmec-lupa/LUPAxml.xml": {
+                "Box 1 (GEN Series DAQ System)", "Term 2 (EK1100)", "Term 5 (EK1100)",
+                "Term 8 (EK1100)"},
+            "corpus-extra/pmec-foswec2/FOSWEC2_MD_20230314.xml": {
+                "Term 1 (EK1100)", "Term 5 (EK1100)", "Term 6 (EL1002)", "Term 14 (EL3692)"}}
 
 
 @pytest.fixture(scope="session")
@@ -85,7 +121,10 @@ def esi_index(corpus, corpus_extra, tmp_path_factory) -> tuple[list[Path], Path]
 def prefer(esi: list[Path] | None) -> list[Path]:
     """Both corpora together describe the SOMANET drive 0x22D2:0x201:0x0A000002 twice, and
     differently (a siitool test file beside the vendor's): apply refuses it unless told which.
-    The ENIs of that drive pair with the vendor's file (the corpus MANIFEST), in esi/drives."""
+    The ENI's evidence does not decide here: its slave (eni_sea.xml) has PDOs neither file
+    has (TxPdo 0x1A01-0x1A03, RxPdo 0x1601-0x1602) and an SM3 at 0x1C00 where both have
+    another, so neither agrees with it.  The ENIs of that drive pair with the vendor's file
+    (the corpus MANIFEST), in esi/drives."""
     return [esi[0] / "drives"] if esi else []
 
 
@@ -95,10 +134,16 @@ def _line(path: Path, xpath: str) -> int:
 
 
 def xml_slaves(path: Path) -> list[dict]:
-    """Identity and process-data bits of each slave, straight from the XML."""
+    """Identity and process-data bits of each slave with an ESC, straight from the XML.
+
+    A passive slave (an end cap such as the EL9011: no ESC, so nothing answers a datagram)
+    is written by TwinCAT as a ``<Slave>`` without ``Info/PhysAddr`` and
+    ``Info/AutoIncAddr``; no master finds it on the wire and no segment emulates it."""
     config = etree.parse(str(path)).getroot().find("Config")
     out = []
     for s in config.iterfind("Slave"):
+        if s.find("Info/PhysAddr") is None and s.find("Info/AutoIncAddr") is None:
+            continue
         def bits(kind: str) -> int:
             return sum(int(b.findtext("BitLength")) for b in s.iterfind(f"ProcessData/{kind}"))
         out.append({"name": s.findtext("Info/Name").strip(),
@@ -172,6 +217,9 @@ def _assert_refused(path: Path, esi: list[Path] | None, eni: str) -> None:
         assert "(encrypted: EncryptedEtherCATConfig, ecatcfg cannot decrypt it)" in str(
             refused.value)
         return
+    if eni == PENDULUM:
+        _assert_no_description_agrees(path, esi)
+        return
     assert eni == "corpus-extra/rocos-ecm-history/eni_sea.xml" and esi is not None
     # The reason, from the ESI the library pairs with this identity (0x22D2:0x201 rev
     # 0x0A000002): object 0x1C12 read-only.
@@ -192,6 +240,35 @@ def _assert_refused(path: Path, esi: list[Path] | None, eni: str) -> None:
         f"{path}:{line}: slave 'Slave_1001 [CiA402 Motor Control Device]' [clear sm pdos "
         "(0x1C12)]: SDO abort 0x06010002 (attempt to write a read-only object) at 0x1C12:00")
     assert refused.value.abort_code == 0x06010002
+
+
+def _tx_pdos(element: etree._Element) -> set[int]:
+    return {int(i.replace("#x", "0x"), 0) for i in element.xpath("TxPdo/Index/text()")}
+
+
+def _assert_no_description_agrees(path: Path, esi: list[Path] | None) -> None:
+    """The GEN DAQ's four descriptions (corpus-extra esi/hbm), read with lxml: each is named
+    with its Device line, and the one closest to the ENI (IPK2400603.xml) with TxPdos of
+    the ENI it lacks."""
+    assert esi is not None
+    [slave] = etree.parse(str(path)).xpath("//Config/Slave[Info/ProductCode='3329']")
+    wanted = _tx_pdos(slave.find("ProcessData"))
+    hbm = sorted((esi[1] / "hbm").glob("*.xml"))
+    assert len(hbm) == 4
+    with pytest.raises(EcatcfgError) as refused:
+        Network.virtual(path, esi, esi_cache=True, esi_prefer=prefer(esi))
+    text = str(refused.value)
+    name = slave.findtext("Info/Name")
+    assert text.startswith(f"{path}: slave {name!r}: 0x11d:0xd01:0x2 (GEN Series DAQ System) "
+                           "is described differently by 4 ESI files: "), text
+    assert f"none agrees with the ENI's slave {name!r}" in text
+    for f in hbm:
+        [device] = etree.parse(str(f)).xpath("//Descriptions/Devices/Device")
+        assert f"{f}:{device.sourceline}" in text
+        assert _tx_pdos(device) != wanted
+    [closest] = etree.parse(str(esi[1] / "hbm" / "IPK2400603.xml")).xpath("//Device")
+    lacking = sorted(wanted - _tx_pdos(closest))
+    assert f"the ENI's TxPdo 0x{lacking[0]:04X}" in text
 
 
 def test_apply_reports_which_slaves_come_from_the_eni(corpus):

@@ -20,8 +20,11 @@ def test_every_corpus_eni_exports_or_is_refused_by_name(request, eni):
     path = corpus_eni(request, eni)
     try:
         plan = read_file(path)
-    except EcatcfgError:
-        pytest.skip("the reader refuses it (tests/test_eni_io.py says why)")
+    except EcatcfgError as exc:
+        # An ENI the reader refuses (tests/test_eni_io.py says why) is refused by name: the
+        # export reads it the same way, so its message names the file too.
+        assert str(path) in str(exc), exc
+        return
     try:
         setups = slave_setups(plan, path)
     except ExportError as exc:

@@ -363,3 +363,36 @@ def test_text_lines_have_the_documented_form_with_a_column_only_where_known(mixe
     assert by_file["cut.xml"]["id"] == "ESI001"
     assert (by_file["cut.xml"]["line"], by_file["cut.xml"]["col"]) == (
         str(parser_line), str(parser_col))
+
+
+@pytest.mark.parametrize("content", [None, "<EtherCATConfig><Config/></EtherCATConfig>"],
+                         ids=["empty folder", "only an ENI"])
+def test_no_esi_file_at_all_is_an_error_unless_allowed(tmp_path, content):
+    """A folder that holds no ESI file (a mistyped path in CI, a folder of ENIs) is exit 2,
+    not "0 files checked" and a pass; --allow-empty accepts it."""
+    folder = tmp_path / "esi"
+    folder.mkdir()
+    if content is not None:
+        write(folder, "config.xml", content)
+    for fmt in ("text", "json"):
+        out = lint(str(folder), "--no-config", "--format", fmt)
+        assert out.returncode == 2 and out.stdout == "", out.stdout
+        assert f"ecatcfg lint: no ESI file in {folder}: nothing was read" in out.stderr
+        assert "--allow-empty" in out.stderr
+    allowed = lint(str(folder), "--no-config", "--allow-empty")
+    assert allowed.returncode == 0 and allowed.stdout.startswith("0 files checked")
+
+
+def test_the_pre_commit_hook_passes_a_commit_of_other_xml_files(mixed):
+    """pre-commit runs the hook's entry with the changed *.xml files: when none is an ESI
+    file the commit must pass; lint without --allow-empty refuses the same call."""
+    import shlex
+
+    import yaml
+    [hook] = yaml.safe_load((ROOT / ".pre-commit-hooks.yaml").read_text())
+    entry_args = shlex.split(hook["entry"])[2:]
+    config = str(mixed / "config.xml")
+    assert lint(*entry_args, config, "--no-config").returncode == 0
+    assert lint("--skip-non-esi", config, "--no-config").returncode == 2
+    # and a changed ESI file among them is still linted
+    assert lint(*entry_args, config, str(mixed / "broken.xml"), "--no-config").returncode == 1

@@ -268,3 +268,62 @@ def test_json_for_an_unsupported_part(compiled, tmp_path):
         "axis1", "Slave/Mailbox/VoE", 1)
     assert part["line"] == etree.parse(str(eni)).xpath(
         "Config/Slave[Info/Name='axis1']/Mailbox/VoE")[0].sourceline
+
+
+# -- survivors of the mutation pass: each a fault a user would meet --------------------------
+
+def test_a_slave_read_back_in_the_target_state_with_its_error_flag_set_has_not_reached_it():
+    """AL status 0x14 (SAFEOP with the error flag, ETG.1000.6 "AL status"): the slave is in
+    SAFEOP but refused something (here 0x001B); read back after a SAFEOP request, it has
+    not reached SAFEOP, as with 0x0130 = 0x12 it would not."""
+    from ecatcfg.runtime.master.reached import SlaveState, not_reached
+    slave = SlavePlan("drive", 1001, 0, 0x9A, 0x30924, 0x10420)
+    assert not_reached([slave], [SlaveState(AlState.SAFEOP, False, 0)], AlState.SAFEOP) == []
+    [line] = not_reached([slave], [SlaveState(AlState.SAFEOP, True, 0x001B)], AlState.SAFEOP)
+    assert line.startswith("slave 'drive' (position 0) is in SAFEOP+ERR, not SAFEOP")
+    assert "0x001B" in line
+
+
+def test_a_partial_eni_with_sync1_activates_sync0_and_sync1(compiled, tmp_path):
+    """Slave/DC with a CycleTime1 (SYNC1 running): the derived activation is 0x0700
+    (cyclic unit, SYNC0 and SYNC1: 0x0981 bits 0-2, ETG.1000.4), not 0x0300."""
+    eni = partial(compiled, tmp_path / "partial.xml")
+    tree = etree.parse(str(eni))
+    [dc] = [s.find("DC") for s in tree.iterfind("Config/Slave") if s.find("DC") is not None]
+    assert dc.findtext("CycleTime0")
+    cycle1 = dc.find("CycleTime1")
+    if cycle1 is None:
+        cycle1 = etree.SubElement(dc, "CycleTime1")
+        dc.insert(list(dc).index(dc.find("CycleTime0")) + 1, cycle1)
+    cycle1.text = "500000"
+    tree.write(str(eni))
+    done, _ = complete(eni_reader.read_file(eni))
+    drive = next(s for s in done.slaves if s.dc is not None and s.dc.cycle_time0)
+    activation = [c.payload for c in drive.init_cmds
+                  if c.ado == Reg.DC_CYCLIC_UNIT_CONTROL and any(c.payload)]
+    assert activation == [bytes.fromhex("0007")], activation
+
+
+def test_an_sm_whose_pdos_are_partly_described_cannot_be_derived(compiled, tmp_path):
+    """ProcessData/Sm3 of the drive assigns two PDOs and only one is described: its length
+    is not known (DefaultSize is the default assignment's, not this one's), so the set-up
+    cannot be derived: refused naming the SM, not a wrong length written."""
+    eni = partial(compiled, tmp_path / "partial.xml")
+    tree = etree.parse(str(eni))
+    drive = next(s for s in tree.iterfind("Config/Slave") if s.findtext("Info/Name") == "axis1")
+    sm3 = drive.find("ProcessData/Sm3")
+    assigned = [p.text for p in sm3.iterfind("Pdo")]
+    assert len(assigned) >= 2
+    def number(text: str) -> int:
+        text = text.strip()
+        return int(text[2:], 16) if text.lower().startswith("#x") else int(text)
+    dropped = [tx for tx in drive.iterfind("ProcessData/TxPdo")
+               if number(tx.findtext("Index")) == number(assigned[-1])]
+    assert len(dropped) == 1
+    dropped[0].getparent().remove(dropped[0])
+    tree.write(str(eni))
+    rc, report, err = apply_json(eni)
+    assert rc == 1 and report["frames"]["sent"] == 0
+    refused = {r["slave"]: r["what"] for r in report["refused"]}
+    assert refused["axis1"].startswith("ProcessData/Sm3 assigns PDOs that are not all "
+                                       "described"), refused

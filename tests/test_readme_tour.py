@@ -7,11 +7,11 @@ import os
 import re
 import shlex
 import subprocess
-import sys
 
 import pytest
 
 from conftest import ROOT
+from installed import ECATCFG
 
 # The options of ecatcfg's commands that name a file to write, and the shell's redirection.
 WRITES = ("-o", "--output", "--header", "--pcap", "--topology-out", ">")
@@ -57,7 +57,7 @@ def test_the_tours_file_commands_write_only_into_tour(tmp_path):
         out_file = None
         if ">" in words:
             words, out_file = words[:words.index(">")], words[words.index(">") + 1]
-        argv = ([sys.executable, "-m", "ecatcfg", *words[1:]] if words[0] == "ecatcfg"
+        argv = ([*ECATCFG, *words[1:]] if words[0] == "ecatcfg"
                 else words)
         done = subprocess.run(argv, cwd=tmp_path, env=env, capture_output=True, timeout=120)
         assert done.returncode == 0, done.stderr

@@ -184,7 +184,7 @@ def test_show_eni_decodes_fmmu_writes(corpus, capsys):
     eni = "eni/jn-ec-master/mega_master_eni.xml"
     tree = etree.parse(str(corpus / eni))
     shown = _json(capsys, str(corpus / eni))
-    found = 0
+    found = mailbox_state = 0
     for s, el in zip(shown["slaves"], tree.findall("Config/Slave")):
         for ic in el.findall("InitCmds/InitCmd"):
             ado = _num(ic.findtext("Ado"))
@@ -194,13 +194,56 @@ def test_show_eni_decodes_fmmu_writes(corpus, capsys):
             start = int.from_bytes(data[0:4], "little")
             end = start + int.from_bytes(data[4:6], "little") - 1
             kind = {1: "inputs", 2: "outputs"}[data[11]]
+            physical = int.from_bytes(data[8:10], "little")
+            if 0x0800 <= physical < 0x0900 and physical % 8 == 5:
+                # onto SM n's status byte (0x0805 + 8n): the mailbox-state bit
+                kind = f"mailbox state of sm {(physical - 0x0805) // 8}"
+                mailbox_state += 1
             words = (f"set fmmu {(ado - 0x600) // 16} ({kind}) logical 0x{start:08X}.{data[6]}"
                      f"-0x{end:08X}.{data[7]} -> 0x{int.from_bytes(data[8:10], 'little'):04X}"
                      f".{data[10]}")
             for t in ic.findall("Transition"):
                 assert words in s["init_cmds"][t.text], (words, s["init_cmds"][t.text])
             found += 1
-    assert found >= 4
+    assert found >= 4 and mailbox_state >= 1
+
+
+def test_show_names_every_register_and_gives_watchdogs_a_time(corpus, capsys):
+    """A register command ``show`` has no words of its own for is named from the register
+    table (``registers.py``), never left as ``BWR 0x0200``: every command with an Ado in
+    the InitCmds of every ENI of both corpora (read here with lxml), and the master's of a
+    TwinCAT file in words (ESC Section II names).  The SM watchdog, a count of the
+    divider's steps (2498 + 2) x 40 ns = 100 us, with its time."""
+    from conftest import corpus_enis, CORPORA
+    from ecatcfg.registers import covered
+    unnamed = set()
+    for name in corpus_enis():
+        root, below = name.split("/", 1)
+        tree = etree.parse(str(CORPORA[root] / "eni" / below))
+        for ic in tree.iter("InitCmd"):
+            if ic.findtext("Ado") is None or ic.findtext("Cmd") is None:
+                continue
+            length = len(bytes.fromhex(ic.findtext("Data") or "")) or int(
+                ic.findtext("DataLength") or ic.findtext("Len") or 1)
+            if not covered(_num(ic.findtext("Ado")), length):
+                unnamed.add((name, ic.findtext("Ado"), length))
+    assert not unnamed, sorted(unnamed)[:20]
+    eni = corpus / "eni/jn-ec-master/mega_master_eni.xml"
+    master = _json(capsys, str(eni))["master_init_cmds"]["IP"]
+    assert {"set ECAT event mask = 0x0004", "set DL control byte 3 = 0x00",
+            "set DC system time difference filter depth = 0x00, DC speed counter filter "
+            "depth = 0x0C", "read AL status"} <= set(master), master
+    assert main(["show", str(eni), "--no-cache"]) == 0
+    text = capsys.readouterr().out.split("InitCmds", 1)[1]
+    import re
+    raw = re.findall(r"\b(?:AP|FP|B)(?:RD|WR|RW)\b 0x[0-9A-F]{4}", text)
+    assert raw == []
+    from ecatcfg.eni.plan import InitCmd
+    from ecatcfg.eni.words import init_cmd_words
+    from ecatcfg.esc import Transition
+    watchdog = InitCmd(transitions=[Transition.PS], comment="", cmd=5, length=2, adp=1001,
+                       ado=0x0420, data=(10000).to_bytes(2, "little"))
+    assert init_cmd_words(watchdog) == "set SM watchdog 10000 (1000 ms at the default divider)"
 
 
 def test_show_eni_text(corpus, capsys):
@@ -248,9 +291,58 @@ def test_show_marks_passive_slaves(tmp_path, capsys):
 
 def test_show_errors_name_the_file(tmp_path, corpus, capsys):
     assert main(["show", str(corpus / ELMO_ESI)]) == 2
-    assert "is not an ENI: name the device with --device" in capsys.readouterr().err
+    assert "not an ENI: the root element is <EtherCATInfo> (an ESI: name the device with " \
+        "--device), expected <EtherCATConfig>" in capsys.readouterr().err
     broken = write(tmp_path, "broken.xml", "<?xml version='1.0'?>\n<EtherCATConfig>\n<Config>")
     assert main(["show", str(broken), "--no-cache"]) == 1
     err = capsys.readouterr().err
     assert f"{broken}:" in err and "Traceback" not in err
     assert main(["show", str(tmp_path / "missing.xml")]) == 2
+
+
+def test_show_lists_a_transition_in_the_order_apply_sends_it(tmp_path, capsys):
+    """``show`` and ``apply`` take the order from one definition (``eni/sequence.py``); this
+    checks them against each other on the wire.  The example drive's PS transition: its SDO
+    downloads (PDO assignment and mapping) are on the wire before the AL control write that
+    requests SAFEOP (tshark reads the pcap of ``apply --virtual``), in the order ``show``
+    lists them, and ``show`` lists the request after them."""
+    import subprocess
+    import re
+
+    from conftest import EXAMPLES, compile_example
+    from rig import require_tshark
+    from test_apply import _datagram_trees, _walk, sdo_requests
+
+    eni = compile_example(tmp_path / "line.xml")
+    shown = _json(capsys, str(eni))
+    [drive] = [s for s in shown["slaves"] if s["name"] == "axis1"]
+    ps = drive["init_cmds"]["PS"]
+    sdos = [m.group(1, 2) for w in ps if (m := re.match(r"SDO 0x([0-9A-F]{4}):([0-9A-F]{2})", w))]
+    assert len(sdos) >= 4
+    last_sdo = max(i for i, w in enumerate(ps) if w.startswith("SDO "))
+    assert ps.index("request SAFEOP") > last_sdo
+
+    pcap = tmp_path / "line.pcapng"
+    assert main(["apply", str(eni), "--virtual", "--esi", str(EXAMPLES / "esi"), "--cycles",
+                 "2", "--pcap", str(pcap)]) == 0
+    capsys.readouterr()
+    station = drive["phys_addr"]
+    # The outbound frame that requests SAFEOP of the drive: FPWR 0x0120 = 0x0004.
+    proc = subprocess.run([require_tshark(), "-n", "-r", str(pcap), "-T", "json",
+                           "--no-duplicate-keys", "-Y",
+                           "frame.packet_flags_direction == 2 && ecat.ado == 0x0120"],
+                          capture_output=True, text=True, timeout=120)
+    requests = []
+    for packet in json.loads(proc.stdout):
+        layers = packet["_source"]["layers"]
+        for ecat in layers["ecat"] if isinstance(layers["ecat"], list) else [layers["ecat"]]:
+            for dg in _datagram_trees(ecat):
+                if (int(_walk(dg, "ecat.adp"), 16), int(_walk(dg, "ecat.ado"), 16)) == (
+                        station, 0x0120) and _walk(dg, "ecat.reg.alctrl.ctrl") == "0x0004":
+                    requests.append(int(_walk(layers["frame"], "frame.number")))
+    safeop = min(requests)
+    sent = [(r["sdoidx"], r["sdosub"], r["frame"]) for r in sdo_requests(pcap)[station]]
+    before = [(f"{int(i, 16):04X}", f"{int(s, 16):02X}") for i, s, f in sent if f < safeop]
+    # Resends of a lost frame repeat a request; the wire order, once each, is show's order.
+    once = [x for k, x in enumerate(before) if k == 0 or before[k - 1] != x]
+    assert once == sdos

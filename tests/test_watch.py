@@ -27,6 +27,7 @@ import time
 from pathlib import Path
 
 import pytest
+from lxml import etree
 from rig import serving
 
 from ecatcfg.esc import AlState
@@ -105,8 +106,17 @@ def test_forced_outputs_reach_the_emulated_slaves(veth_netns, eni):
     assert "Traceback" not in done.stderr, done.stderr
     assert done.returncode == 0, done.stderr
     assert seen == {"lamp": 1, "velocity": -1234}
-    lines = [json.loads(line) for line in done.stdout.splitlines()]
+    objects = [json.loads(line) for line in done.stdout.splitlines()]
+    lines = [o for o in objects if "name" in o]
     first = {line["name"]: line for line in lines}
+    # The status at the end: every slave in OP, the LRW's working counter as the ENI's Cnt
+    # (read here with lxml) expects.
+    final = objects[-1]["status"]
+    cnt = [int(c.findtext("Cnt")) for c in etree.parse(str(eni)).iterfind(
+        "Config/Cyclic/Frame/Cmd") if c.findtext("Cmd") == "12"]
+    assert (final["state"], final["online"], final["slaves"]) == ("OP", 5, 5)
+    assert [(c["wkc"], c["expected"]) for c in final["working_counters"]] == \
+        [(n, n) for n in cnt]
     assert first[LAMP]["value"] is True and first[LAMP]["output"] and first[LAMP]["forced"]
     assert first[VELOCITY]["value"] == -1234
     assert not first["buttons.Channel 1.Input"]["output"]
@@ -118,11 +128,39 @@ def test_a_pipe_gets_lines_and_a_terminal_a_table(eni):
     done = watch(*args)
     assert done.returncode == 0, done.stderr
     rows = [line.split(None, 2) for line in done.stdout.splitlines()]
+    status = [r[2] for r in rows if r[1] == "status:"]
+    assert status and status[-1].startswith("cycle 20 | 5/5 slaves in OP | LRW logical "
+                                            "0x10000000 wkc 7/7 | lost 0 | late "), status
+    rows = [r for r in rows if r[1] != "status:"]
     assert [(r[1], r[2]) for r in rows] == \
         [("out", f"{LAMP} = 1 (forced)")] + \
         [("out", f"lamps.Channel 1-8.Output {n} = 0") for n in range(2, 9)]
     table = watch(*args, tty=True)
     assert "variable" in table and f"{LAMP}" in table and "1 (forced)" in table
+
+
+def test_twincats_diagnostic_variables_are_what_the_master_knows(corpus):
+    """TwinCAT's ENI puts InfoData.State and WcState.WcState of each slave in the input
+    image (its master fills them; the slaves never send them): watch shows the slaves'
+    state (8 = OP, Beckhoff's InfoData.State table) and a valid working counter (0), not
+    the 0 the image holds, and the slave counts."""
+    eni = corpus / "eni" / "jn-ec-master" / "mega_master_eni.xml"
+    names = [v.findtext("Name") for v in etree.parse(str(eni)).iterfind(
+        "Config/ProcessImage/Inputs/Variable")]
+    states = [n for n in names if n.endswith(".InfoData.State") and n.startswith("Term ")]
+    wc = [n for n in names if n.endswith(".WcState.WcState") and n.startswith("Term ")]
+    assert len(states) == 4 and len(wc) >= 2
+    done = watch(str(eni), "--virtual", "--cycles", "30", "--format", "json", "--match",
+                 "*InfoData.State", "--match", "*WcState*", "--match", "*SlaveCount")
+    assert done.returncode == 0, done.stderr
+    last = {}
+    for o in map(json.loads, done.stdout.splitlines()):
+        if "name" in o:
+            last[o["name"]] = o["value"]
+    assert {n: last[n] for n in states} == {n: 8 for n in states}
+    assert {n: last[n] for n in wc} == {n: 0 for n in wc}
+    assert last["InfoData.CfgSlaveCount"] == last["Inputs.SlaveCount"] == 4
+    assert last["Inputs.Frm0WcState"] == 0
 
 
 def test_usage_errors_exit_2(eni):

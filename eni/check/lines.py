@@ -15,13 +15,14 @@ from lxml import etree
 
 from ecatcfg.eni.plan import NetworkPlan, SlavePlan
 from ecatcfg.esi import xmlsafe
+from ecatcfg.fileio import read_input
 
 
 class EniLines:
     """Lines of a plan's slaves, their commands and the cyclic commands in its file."""
 
     def __init__(self, path: Path, shown: str, plan: NetworkPlan) -> None:
-        root = xmlsafe.parse_bytes(path.read_bytes(), shown).getroot()
+        root = xmlsafe.parse_bytes(read_input(path, shown), shown).getroot()
         config = root.find("Config")
         elements = [] if config is None else list(config.iterchildren("Slave"))
         ordered = plan.in_file_order()

@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ecatcfg.errors import UsageError
+from ecatcfg.fileio import read_input
 
 KEYS = ("select", "ignore", "schema-dir", "jobs")
 
@@ -42,7 +43,7 @@ def load(path: Path | None) -> LintConfig:
     if path is None:
         return LintConfig()
     try:
-        doc = tomllib.loads(path.read_text(encoding="utf-8"))
+        doc = tomllib.loads(read_input(path).decode("utf-8"))
     except OSError as exc:
         raise UsageError(f"cannot read: {exc.strerror}", str(path)) from None
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:

@@ -18,6 +18,7 @@ from pathlib import Path
 
 from ecatcfg.esi.lint.finding import FileResult, Finding
 from ecatcfg.esi.lint.runner import LintOptions, Target, lint_file
+from ecatcfg.fileio import read_input
 
 STOPS_COMPILE: frozenset[str] = frozenset({
     "ESI002",                   # a number left unset: the compiler writes a default instead
@@ -70,7 +71,7 @@ def file_findings(path: Path, shown: str, others: list[Path]) -> FileResult:
     granularity (a clock tick) lets a file rewritten at once with the same size look
     unchanged."""
     try:
-        digest = hashlib.blake2b(path.read_bytes(), digest_size=16).digest()
+        digest = hashlib.blake2b(read_input(path, shown), digest_size=16).digest()
     except OSError:
         digest = b""                        # lint reports the unreadable file (ESI001)
     key = (path, shown, digest)

@@ -24,6 +24,7 @@ from ecatcfg.esi.lint.context import FileContext
 from ecatcfg.esi.lint.finding import DeviceRef, FileResult, Finding
 from ecatcfg.esi.lint.rules import RULES, iter_checks
 from ecatcfg.esi.lint.schema import SchemaSet
+from ecatcfg.fileio import read_input
 
 
 @dataclass(frozen=True, slots=True)
@@ -82,7 +83,7 @@ def lint_file(target: Target, options: LintOptions, others: list[Path]) -> FileR
     result = FileResult(target.shown)
     out = _Emitter(target.shown, options.active)
     try:
-        data = target.path.read_bytes()
+        data = read_input(target.path, target.shown)
         tree = xmlsafe.parse_bytes(data, target.shown, strip=False)
     except (OSError, xmlsafe.XmlError) as exc:
         if isinstance(exc, OSError):
@@ -96,8 +97,8 @@ def lint_file(target: Target, options: LintOptions, others: list[Path]) -> FileR
         if not target.named_directly:
             return None
         out.add("ESI001", tree.getroot().sourceline, None,
-                f"root element is <{root_name}>, expected <EtherCATInfo> or <EtherCATModule>: "
-                "not an ESI file")
+                f"root element is <{root_name}>, expected <EtherCATInfo>, <EtherCATModule> or "
+                "<EtherCATInfoList>: not an ESI file")
         return _done(result, out, start)
 
     schema_errors = None
@@ -109,8 +110,9 @@ def lint_file(target: Target, options: LintOptions, others: list[Path]) -> FileR
             result.schema_missing = str(schemas.path_for(root_name))
 
     xmlsafe.strip_namespaces(tree)
-    spans = element_spans(tree, "Descriptions/Devices/Device")
-    result.module_spans = (element_spans(tree, "Descriptions/Modules/Module")
+    within = "EtherCATInfo/" if tree.getroot().tag == reader.LIST_ROOT else ""
+    spans = element_spans(tree, f"{within}Descriptions/Devices/Device")
+    result.module_spans = (element_spans(tree, f"{within}Descriptions/Modules/Module")
                            + element_spans(tree, "Modules/Module"))
     esi = reader.read_tree(tree, target.shown)
     devices = [DeviceRef(d.vendor.id, d.product_code, d.revision, d.type_name, d.source.line)

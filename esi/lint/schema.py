@@ -7,6 +7,7 @@ root element: ``EtherCATInfo.xsd`` or ``EtherCATModule.xsd`` in that folder (the
 
 from __future__ import annotations
 
+import copy
 import re
 from pathlib import Path
 
@@ -47,6 +48,19 @@ class SchemaSet:
     def validate(self, tree: etree._ElementTree) -> list[tuple[int, int | None, str]] | None:
         """``(line, column, message)`` per schema error; ``None`` when no schema applies."""
         root = etree.QName(tree.getroot()).localname
+        if root == "EtherCATInfoList":
+            # IgH's list: each EtherCATInfo document against the ESI schema (a copy keeps
+            # the element's lines, so errors point into the file).
+            found: list[tuple[int, int | None, str]] = []
+            schema = self.schema_for("EtherCATInfo")
+            if schema is None:
+                return None
+            for doc in tree.getroot():
+                if isinstance(doc.tag, str) and not schema.validate(
+                        etree.ElementTree(copy.deepcopy(doc))):
+                    found += [(e.line, e.column or None, readable(e.message))
+                              for e in schema.error_log]
+            return found
         schema = self.schema_for(root)
         if schema is None:
             return None

@@ -83,7 +83,7 @@ class Event:
     """Progress for the reporter: a step that starts or ends."""
 
     kind: str                  # "scan", "transition", "dc", "eoe", "done"; from the
-                               # Network: "skipped", "emulated"; while cycling
+                               # Network: "skipped", "ignored", "emulated"; while cycling
                                # (runtime/master/recovery.py): "offline", "online", "retry",
                                # "refused"
     text: str

@@ -53,6 +53,21 @@ class _Slot:
     wkc: int = -1               # what the last cycle brought back; -1: its frame was lost
 
 
+@record(frozen=True)
+class CommandCount:
+    """One cyclic command after a cycle (:meth:`CyclicFrames.working_counters`)."""
+
+    cmd: CyclicCmd
+    wkc: int                    # -1: its frame was lost (or it was not sent)
+    expected: int | None        # None: not checked
+    in_at: int                  # its data's offset in the input image
+    out_at: int                 # ... and in the output image
+
+    @property
+    def ok(self) -> bool:
+        return self.expected is None or self.wkc == self.expected
+
+
 class CycleStats:
     """What the cycles run since the last reset counted.  A plain class, not a ``@record``:
     its repr is a summary (``print(net.run_stats)``), not the 65,536 periods it keeps."""
@@ -278,6 +293,14 @@ class CyclicFrames:
         self._last_start: float | None = None
         self._prepared: dict[AlState, tuple[_Prepared, ...]] = {}
         self._reply = bytearray(REPLY_BUFFER)
+
+    def working_counters(self) -> list[list[CommandCount]]:
+        """Per frame, each command with the working counter the last cycle brought back
+        (-1: its frame was lost, or the command is not sent in this state) and the one it
+        expects, and where its data lies in the images: for ``ecatcfg watch``'s status line
+        and TwinCAT's diagnostic variables.  Read between cycles."""
+        return [[CommandCount(s.cmd, s.wkc, s.expected, s.in_at, s.out_at) for s in slots]
+                for slots in self.frames]
 
     def prepared(self, state: AlState) -> tuple[_Prepared, ...]:
         """The frames of ``state``, encoded (once per state)."""

@@ -64,19 +64,22 @@ def _requested_state(cmd: InitCmd, transition: Transition) -> int | None:
 
 def requests(cmds: list[InitCmd], transition: Transition, kinds: tuple[Cmd, ...]) -> bool:
     """Whether a command of ``kinds`` among ``cmds`` requests ``transition``'s target."""
-    return any(c.cmd in kinds and _requested_state(c, transition) == transition.target
-               for c in cmds)
+    target = transition.target          # an enum property: looked up once, not per command
+    return any(c.cmd in kinds and _requested_state(c, transition) == target for c in cmds)
 
 
 def missing_requests(plan: NetworkPlan, slaves: list[SlavePlan],
                      transitions: list[Transition]) -> dict[str, list[Transition]]:
     """The transitions among ``transitions`` whose target no command requests, per slave
     (only slaves with some)."""
+    # The master's broadcasts request a state of every slave: asked once, not per slave
+    # (apply checks before anything is sent, on the success path too).
+    by_master = {t for t in transitions
+                 if requests(plan.master.init_cmds, t, _BROADCAST_WRITES)}
     missing = {}
     for slave in slaves:
         steps = [t for t in transitions
-                 if not requests(slave.init_cmds, t, _OWN_WRITES)
-                 and not requests(plan.master.init_cmds, t, _BROADCAST_WRITES)]
+                 if t not in by_master and not requests(slave.init_cmds, t, _OWN_WRITES)]
         if steps:
             missing[slave.name] = steps
     return missing

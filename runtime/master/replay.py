@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Any, TypeVar
 
 from ecatcfg.eni.plan import (CoeInitCmd, EoeInitCmd, FoeInitCmd, InitCmd, MailboxPlan,
                               SoeInitCmd)
+from ecatcfg.eni.compare import compared, matches
 from ecatcfg.eni.words import init_cmd_name
 from ecatcfg.errors import EcatcfgError
 from ecatcfg.esc import (AL_STATUS_ERROR, SM1_STATUS, SM_ACTIVATE_REPEAT, SM_PDI_REPEAT_ACK, Cmd,
@@ -104,12 +105,6 @@ def command_timeout(cmd: InitCmd) -> float:
     return TIMEOUT_COMMAND
 
 
-def _matches(data: bytes | bytearray, want: bytes, mask: bytes | None) -> bool:
-    n = len(want)
-    got = data[:n]
-    if mask is None:
-        return got == want
-    return all(g & m == w & m for g, w, m in zip(got, want, mask[:n].ljust(n, b"\xff")))
 
 
 def init_cmd_job(cmd: InitCmd, who: str | None, data: bytes | None = None,
@@ -142,9 +137,9 @@ def init_cmd_job(cmd: InitCmd, who: str | None, data: bytes | None = None,
                 last = f"working counter {got.wkc}, expected {cmd.cnt}"
                 if wrong_wkc > retries:
                     raise ApplyError(f"{last} ({wrong_wkc} attempts)", who, what)
-            elif cmd.validate is not None and not _matches(got.data, cmd.validate.data,
-                                                           cmd.validate.mask):
-                last = f"read {got.data.hex()}, expected {cmd.validate.data.hex()}" + (
+            elif cmd.validate is not None and not matches(got.data, cmd.validate):
+                last = (f"read {got.data.hex()}, expected "
+                        f"{compared(cmd.validate.compare)}{cmd.validate.data.hex()}") + (
                     f" under mask {cmd.validate.mask.hex()}" if cmd.validate.mask else "")
                 if _is_state_check(cmd) and len(got.data) >= 2 \
                         and got.data[0] & AL_STATUS_ERROR \

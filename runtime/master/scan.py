@@ -12,6 +12,7 @@ from __future__ import annotations
 import struct
 import time
 
+from ecatcfg.eni.compare import revision_check
 from ecatcfg.eni.plan import NetworkPlan, SlavePlan
 from ecatcfg.esc import (EEPROM_BUSY, EEPROM_ERROR_ACKNOWLEDGE, EEPROM_ERRORS, EEPROM_R64,
                          PORT_LETTERS, SII_REVISION, SII_VENDOR_ID, Cmd, Reg,
@@ -232,7 +233,11 @@ def compare(expected: list[SlavePlan], want: SlavePlan, got: FoundSlave,
                   (got.vendor_id, got.product_code)]
         return "other device" + (
             f" (the ENI has it at position {others[0]}: swapped?)" if others else "")
-    if got.revision != want.revision and not (
+    check = revision_check(want)      # the ENI's own revision check, with its compare type
+    if check is not None:
+        if not check(got.revision, want.revision):
+            return "other revision (the ENI's revision check refuses it)"
+    elif got.revision != want.revision and not (
             accept_newer_revision and got.revision > want.revision):
         return "other revision" + (" (newer: --accept-newer-revision takes it)"
                                    if got.revision > want.revision else "")

@@ -1,12 +1,10 @@
 """A slave's InitCmds of one transition, chained into one job; the master's own.
 
-Within a transition each slave runs its register commands in file order; its mailbox
-InitCmds for that transition run after the SyncManager/FMMU writes and before the
-AL-control request (ETG.2100; PDO assignment needs the mailbox up and must precede SAFEOP),
-in INIT->PREOP once the slave is in PREOP: first the CoE ones, then the SoE ones, then the
-EoE ones, as IgH ``fsm_slave_config.c`` writes the SoE configuration after the SDO
-configuration and sets the IP parameters last, then the FoE ones (``foe_init.py``).  A station's
-plugged modules are checked before its CoE InitCmds configure them (``modules.py``).
+Within a transition each slave runs its commands in the order ``eni/sequence.py`` gives
+(one definition, which ``show`` prints too): register commands up to the AL-control
+request, then CoE, SoE, EoE and FoE mailbox commands (FoE: ``foe_init.py``), then the
+request and the rest.  A station's plugged modules are checked before its CoE InitCmds
+configure them (``modules.py``).
 One command's job is ``replay.py``.
 """
 
@@ -17,8 +15,9 @@ import time
 
 from ecatcfg.eni.plan import (CoeInitCmd, DcPlan, EoeInitCmd, FoeInitCmd, InitCmd, SlavePlan,
                               SoeInitCmd)
+from ecatcfg.eni.sequence import transition_sequence
 from ecatcfg.eni.words import init_cmd_name
-from ecatcfg.esc import Cmd, Reg, Transition
+from ecatcfg.esc import MODULE_IDENT_LIST, Cmd, Reg, Transition
 from ecatcfg.runtime.master.lockstep import Job, Step, until_answered
 from ecatcfg.runtime.master.replay import (TIMEOUT_COMMAND, ApplyError, MailboxChannel,
                                            SlaveProgress, coe_init_cmd_job, eoe_init_cmd_job,
@@ -31,32 +30,8 @@ DC_START_DELAY_NS = 100_000_000    # SYNC start this far ahead of the reference 
 def mailbox_init_cmds(slave: SlavePlan, transition: Transition
                       ) -> tuple[list[CoeInitCmd], list[EoeInitCmd]]:
     """The slave's enabled CoE and EoE InitCmds of ``transition``, in file order."""
-    mailbox = slave.mailbox
-    if mailbox is None:
-        return [], []
-    return ([c for c in mailbox.coe_init_cmds if transition in c.transitions and not c.disabled],
-            [c for c in mailbox.eoe_init_cmds if transition in c.transitions and not c.disabled])
-
-
-def soe_init_cmds(slave: SlavePlan, transition: Transition) -> list[SoeInitCmd]:
-    """The slave's enabled SoE InitCmds of ``transition``, in file order."""
-    mailbox = slave.mailbox
-    if mailbox is None:
-        return []
-    return [c for c in mailbox.soe_init_cmds if transition in c.transitions and not c.disabled]
-
-
-def foe_init_cmds(slave: SlavePlan, transition: Transition) -> list[FoeInitCmd]:
-    """The slave's enabled FoE InitCmds of ``transition``, in file order: they run after
-    the EoE ones, last of the mailbox commands."""
-    if slave.mailbox is None:
-        return []
-    return [c for c in slave.mailbox.foe_init_cmds
-            if transition in c.transitions and not c.disabled]
-
-
-def _writes_al_control(cmd: InitCmd) -> bool:
-    return cmd.cmd in (Cmd.APWR, Cmd.FPWR, Cmd.BWR) and cmd.ado == Reg.AL_CONTROL
+    sequence = transition_sequence(slave, transition)
+    return sequence.coe, sequence.eoe
 
 
 def slave_transition_job(slave: SlavePlan, transition: Transition,
@@ -65,37 +40,33 @@ def slave_transition_job(slave: SlavePlan, transition: Transition,
     """``channel``: the slave's mailbox, kept from one transition to the next so message
     counters go on 1..7 (a slave drops a message whose counter equals the previous one)."""
     who = slave.name
-    cmds = [c for c in slave.init_cmds if transition in c.transitions]
-    mailbox = slave.mailbox
-    coe, eoe = mailbox_init_cmds(slave, transition)
-    soe = soe_init_cmds(slave, transition)
-    foe = foe_init_cmds(slave, transition)
-    split = len(cmds)
-    if (coe or eoe or soe or foe) and transition != Transition.IP:
-        split = next((i for i, c in enumerate(cmds) if _writes_al_control(c)), len(cmds))
-    for cmd in cmds[:split]:
+    sequence = transition_sequence(slave, transition)      # the order: eni/sequence.py
+    for cmd in sequence.before:
         yield from _failing(cmd, _register_cmd(slave, cmd, who, progress))
-    if mailbox is not None and (coe or eoe or soe or foe):
+    mailbox = slave.mailbox
+    if mailbox is not None and sequence.has_mailbox:
         channel = channel or MailboxChannel(slave.phys_addr, mailbox)
-        if coe:                     # a station's plugged modules, before they are configured
-            # Imported here: modules.py needs the ESI model (esi/slots.py), which apply
-            # loads only for an ENI with CoE InitCmds (tests/test_record.py).
+        if any(c.index == MODULE_IDENT_LIST for c in sequence.coe):
+            # A station's plugged modules, before they are configured.  Imported here:
+            # modules.py needs the ESI model (esi/slots.py), which apply loads only for an
+            # ENI that downloads a module ident list (tests/test_record.py,
+            # tests/test_startup_counts.py).
             from ecatcfg.runtime.master.modules import check_modules
             yield from check_modules(channel, slave, transition, who)
-        for c in coe:
+        for c in sequence.coe:
             yield from _failing(c, coe_init_cmd_job(channel, c, who, progress))
-        if soe:                     # imported here: only SoE drives need the client
+        if sequence.soe:            # imported here: only SoE drives need the client
             from ecatcfg.runtime.master.soe_client import soe_init_cmd_job
-            for s in soe:
+            for s in sequence.soe:
                 yield from _failing(s, soe_init_cmd_job(channel, s, who, transition.name,
                                                         progress))
-        for e in eoe:
+        for e in sequence.eoe:
             yield from _failing(e, eoe_init_cmd_job(channel, e, who, progress))
-        if foe:
+        if sequence.foe:
             from ecatcfg.runtime.master.foe_init import foe_init_cmd_job
-            for f in foe:
+            for f in sequence.foe:
                 yield from _failing(f, foe_init_cmd_job(channel, f, who, progress))
-    for cmd in cmds[split:]:
+    for cmd in sequence.after:
         yield from _failing(cmd, _register_cmd(slave, cmd, who, progress))
 
 

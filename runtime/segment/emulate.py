@@ -54,6 +54,10 @@ class SlaveSpec:
     # Where its port 0 is plugged: a port of an earlier slave (index into the list of
     # specs).  None: port 1 of the slave before it (a line), the master for the first.
     plug: Plug | None = None
+    # Which of several ESI descriptions of its identity it behaves as, and why (the one that
+    # agrees with the ENI: esi/library.py ``find(..., evidence=...)``); None when its
+    # identity has one description.
+    esi_choice: str | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -240,9 +244,14 @@ def specs_from_eni(plan: NetworkPlan, library: Library | None, shown: str) -> li
     vendor objects), the objects its startup SDOs write are accepted as they are.  Any
     other slave (and every slave without a library) is emulated from the ENI alone
     (``runtime/segment/eni_device.py``), with the objects its CoE InitCmds write; its spec says why
-    (``eni_only``).  ``shown`` names the ENI in the model's sources.  The plan's passive
+    (``eni_only``).  Where several ESI files describe a slave's identity differently, the
+    one whose PDOs, SyncManagers and mailbox agree with the ENI's slave is taken
+    (``eni/evidence.py``; ``esi_choice`` says which and why), and none or several agreeing
+    is an error naming the files and what differs.  ``shown`` names the ENI in the model's
+    sources.  The plan's passive
     slaves (``NetworkPlan.passive``: no ESC) are not among ``plan.slaves``: nothing answers
     for them on the wire, so nothing emulates them."""
+    from ecatcfg.eni.evidence import EniSlaveEvidence
     from ecatcfg.esi.library import DuplicateError, SelectorError
     from ecatcfg.runtime.segment.eni_device import device_from_eni
 
@@ -256,10 +265,12 @@ def specs_from_eni(plan: NetworkPlan, library: Library | None, shown: str) -> li
         try:
             if library is None:
                 raise SelectorError("no ESI files given")
-            entry = library.find(selector).entry
+            found = library.find(selector, evidence=EniSlaveEvidence(s, shown))
+            entry = found.entry
         except DuplicateError as exc:
-            # Files that describe the device differently: emulating either, or the ENI
-            # alone, would hide the choice.
+            # Files that describe the device differently, and the ENI does not tell which
+            # it was configured with: emulating either, or the ENI alone, would hide the
+            # choice.
             from ecatcfg.errors import EcatcfgError
             raise EcatcfgError(f"slave {s.name!r}: {exc.message}", shown) from None
         except SelectorError as exc:
@@ -285,7 +296,7 @@ def specs_from_eni(plan: NetworkPlan, library: Library | None, shown: str) -> li
                           if not c.disabled and c.ccs == 1 and not is_pdo_object(c.index))
         specs.append(SlaveSpec(device, s.name, serial=s.serial_no, alias=alias,
                                device_id=device_id, extra_writes=extra,
-                               plug=plugs[len(specs)]))
+                               plug=plugs[len(specs)], esi_choice=found.preferred))
     try:
         wiring(specs)
     except ValueError as exc:

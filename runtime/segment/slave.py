@@ -177,6 +177,9 @@ class EmulatedSlave:
         self._replies: deque[tuple[int, list[bytes]]] = deque()
         self.eeprom = bytearray(sii_image)
         self.od = od
+        # Input values the user holds (simulate --input, its control channel): (index,
+        # subindex) -> (bit length, value), put where the current mapping places them.
+        self.held_inputs: dict[tuple[int, int], tuple[int, int]] = {}
         # What the dictionary holds at power-on (power_cycle restores it).
         self._od_power_on = {} if od is None else {
             (obj.index, entry.subindex): entry.value for obj in od for entry in
@@ -246,7 +249,7 @@ class EmulatedSlave:
         local time counts from power-on); its quartz keeps its drift.  The segment's clock,
         timing, callbacks and the slave's place (position, port times) stay."""
         keep = (self.clock_ns, self.timing, self.on_state_change, self.on_mapping_change,
-                self.position, self.eni_only, self.refuse)
+                self.position, self.eni_only, self.refuse, self.held_inputs)
         drift, ports = self.dc.drift, self.dc.ports
         # The firmware starts afresh too: the object dictionary holds its power-on values
         # again (what the master downloaded, a PDO assignment or mapping, is gone until it
@@ -266,8 +269,9 @@ class EmulatedSlave:
         self.__init__(self.device, bytes(self.eeprom),   # type: ignore[misc]
                       name=self.name, od=self.od, mailbox=self.mailbox, chip=self.chip,
                       device_id=self.device_id)
+        # A held input is a button still pressed: the power cycle does not release it.
         (self.clock_ns, self.timing, self.on_state_change, self.on_mapping_change,
-         self.position, self.eni_only, self.refuse) = keep
+         self.position, self.eni_only, self.refuse, self.held_inputs) = keep
         self.dc = DcClock(drift, 0, self.clock_ns(), ports)
 
     def _install_firmware(self, revision: int | None) -> None:
@@ -718,6 +722,56 @@ class EmulatedSlave:
             chunk = data[pos:pos + sm[1]]
             self.mem[sm[0]:sm[0] + len(chunk)] = chunk
             pos += sm[1]
+
+    def input_layout(self) -> list[tuple[int, int, int, int]]:
+        """(bit address in ESC memory, index, subindex, bit length) of each entry in the
+        input SMs as the slave lays them out now: from its current assignment and mapping
+        (0x1C1n, 0x1Axx) where its dictionary holds valid ones, else from the ESI's default
+        PDOs; the SM where the master configured it, else where the ESI places it.
+        Padding has index 0."""
+        configured = {sm.number: sm.start for sm in self.process_sms(SmKind.INPUTS)}
+        out: list[tuple[int, int, int, int]] = []
+        for sm in self.device.sms:
+            if sm.type != "Inputs" or sm.virtual:
+                continue
+            entries = self.od.sm_entries(sm.number) if self.od is not None else None
+            if entries is None:
+                entries = [(e.index or 0, e.subindex or 0, e.bit_len or 0)
+                           for p in self.device.tx_pdos if p.sm == sm.number and not p.virtual
+                           for e in p.entries]
+            bit = 8 * configured.get(sm.number, sm.start_address or 0)
+            for index, sub, bits in entries:
+                out.append((bit, index, sub, bits))
+                bit += bits
+        return out
+
+    def hold_input(self, index: int, sub: int, bits: int, value: int) -> None:
+        """Hold an input entry at ``value`` (``bits`` wide, two's complement when negative),
+        as the device's application would set it (a button pressed), and put it in place."""
+        self.held_inputs[(index, sub)] = (bits, value & ((1 << bits) - 1))
+        self.apply_held_inputs()
+
+    def release_input(self, index: int, sub: int) -> None:
+        self.held_inputs.pop((index, sub), None)
+
+    def apply_held_inputs(self) -> None:
+        """Write each held input where the current mapping places it (a master that maps
+        other PDOs moves it, as firmware would); an entry not mapped now is not written."""
+        if not self.held_inputs:
+            return
+        for bit, index, sub, bits in self.input_layout():
+            held = self.held_inputs.get((index, sub))
+            if held is None or index == 0:
+                continue
+            value = held[1] & ((1 << bits) - 1)
+            for k in range(bits):
+                byte, mask = (bit + k) >> 3, 1 << ((bit + k) & 7)
+                if byte >= len(self.mem):
+                    break
+                if value >> k & 1:
+                    self.mem[byte] |= mask
+                else:
+                    self.mem[byte] &= ~mask & 0xFF
 
     def input_areas(self) -> list[tuple[int, int]]:
         """(start, length) of each input SM: configured ones, or the ESI's before that."""

@@ -27,6 +27,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Protocol
 
 from ecatcfg.errors import EcatcfgError
+from ecatcfg.fileio import read_input
 
 if TYPE_CHECKING:
     from ecatcfg.esi.model import Device
@@ -134,7 +135,7 @@ def kind_of(slave: EmulatedDevice) -> str:
 def load(path: str | Path) -> Timing:
     """The table with the overrides of a JSON file (module docstring)."""
     try:
-        raw = json.loads(Path(path).read_text(encoding="utf-8"))
+        raw = json.loads(read_input(path).decode("utf-8"))
     except OSError as exc:
         raise EcatcfgError(f"{path}: {exc.strerror or exc}") from None
     except json.JSONDecodeError as exc:

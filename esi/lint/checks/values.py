@@ -91,9 +91,19 @@ ESI008 = declare("ESI008", "error", "another file describes the same device diff
     ETG.2000 names are given per language (Name/@LcId); 1033 (English) is the default and the
     one configurators fall back to, and a Name without LcId counts as 1033.  This element has
     names, but none in 1033, so tools show another language or nothing.  Add a
-    <Name LcId="1033">.""")
+    <Name LcId="1033">.  A Device or Vendor with no Name at all (IgH's ethercat xml leaves it
+    out when the slave's SII has none, and never writes a vendor's) is shown by its Type or
+    number only.""")
 def missing_default_name(ctx: FileContext) -> Iterator[Hit]:
     esi = ctx.esi
+    vendors = {id(d.vendor): d.vendor for d in esi.devices} or {0: esi.vendor}
+    for vendor in vendors.values():
+        if not vendor.names:
+            number = "" if vendor.id is None else f" {vendor.id}"
+            yield Hit(vendor.source, f"Vendor{number} has no Name")
+    for dev in esi.devices:
+        if not dev.names:
+            yield Hit(dev.source, f"Device {dev.type_name!r} has no Name")
     owners = [("Vendor", esi.vendor.names, esi.vendor.source)]
     owners += [("Group", g.names, g.source) for g in esi.groups]
     owners += [("Module", m.names, m.source) for m in esi.modules]

@@ -1,8 +1,10 @@
-"""Names and decoded fields of the ESC registers the online tools show (``ecatcfg reg``,
-``ecatcfg counters``): ETG.1000.4 and the Beckhoff ESC datasheet Section II register
-descriptions.  Layouts that configuration also writes are esc.py's (``SmConfig``,
-``FmmuConfig``, the SyncManager, AL and watchdog bits); this module only puts names on
-what a read returns."""
+"""The ESC register table: name, size, unit and decoded fields of each register, one
+definition for every tool that names a register (``ecatcfg reg`` and ``counters``, the words
+of ``show``, ``diff``, ``report`` and apply's messages in ``eni/words.py``): ETG.1000.4 and
+the Beckhoff ESC datasheet Section II register descriptions.  Every register an ENI of the
+corpora writes or reads is here (``tests/test_registers.py`` sweeps them).  Layouts that
+configuration also writes are esc.py's (``SmConfig``, ``FmmuConfig``, the SyncManager, AL
+and watchdog bits); this module only puts names on them."""
 
 from __future__ import annotations
 
@@ -15,7 +17,7 @@ from ecatcfg.esc import (AL_ERROR_ACK, AL_ID_REQUEST, AL_STATE_MASK, AL_STATUS_E
                          SM_MODE_MAILBOX, SM_MODE_MASK, SM_PDI_EVENT, SM_SIZE,
                          SM_STATUS_MAILBOX_FULL, SM_WATCHDOG_ENABLE, FmmuConfig, Reg,
                          SmConfig, al_state_name, al_status_name, fmmu_register,
-                         sm_register)
+                         sm_register, watchdog_base_ns)
 from ecatcfg.record import record
 
 Fields = dict[str, Any]
@@ -29,6 +31,7 @@ class Register:
     size: int
     name: str
     decode: Callable[[bytes], Fields]
+    unit: str | None = None        # of the value: "ns", "watchdog steps", ...
 
 
 @record(frozen=True)
@@ -122,23 +125,51 @@ def _counter_pair(data: bytes) -> Fields:
     return {"invalid_frames": data[0], "rx_errors": data[1]}
 
 
+def _dl_control(data: bytes) -> Fields:
+    # 0x0100-0x0103 (ESC Section II): bit 0 forwarding rule (1: non-EtherCAT frames
+    # destroyed), bit 1 temporary loop control, bits 8+2n loop port n (0 auto, 1 auto
+    # close, 2 open, 3 closed), bits 16-18 RX FIFO size, bit 24 station alias (1: the
+    # alias 0x0012 is also a configured address for FPxx commands).
+    v = _u(data)
+    fields: Fields = {"forward_non_ethercat": not v & 1, "temporary_loop": bool(v & 2)}
+    for n in range(4):
+        fields[f"loop_port_{PORT_LETTERS[n]}"] = ("auto", "auto close", "open", "closed")[
+            v >> (8 + 2 * n) & 3]
+    if len(data) >= 3:
+        fields["rx_fifo_size"] = v >> 16 & 7
+    if len(data) >= 4:
+        fields["station_alias_for_fp_commands"] = bool(v >> 24 & 1)
+    return fields
+
+
+def _watchdog_divider(data: bytes) -> Fields:
+    return {"step_ns": watchdog_base_ns(_u(data))}
+
+
+WATCHDOG_STEPS = "watchdog steps (100 us each at the default divider)"
+
 REGISTERS: tuple[Register, ...] = (
     Register(0x0000, 1, "ESC type", _plain),
     Register(0x0001, 1, "ESC revision", _plain),
     Register(0x0002, 2, "ESC build", _plain),
     Register(0x0004, 1, "FMMUs supported", _plain),
     Register(0x0005, 1, "SyncManagers supported", _plain),
-    Register(0x0006, 1, "RAM size (KiB)", _plain),
+    Register(0x0006, 1, "RAM size", _plain, "KiB"),
     Register(Reg.PORT_DESCRIPTOR, 1, "port descriptor", _plain),
     Register(Reg.ESC_FEATURES, 2, "ESC features", _plain),
     Register(Reg.STATION_ADDRESS, 2, "configured station address", _plain),
     Register(Reg.STATION_ALIAS, 2, "configured station alias", _plain),
+    Register(0x0100, 4, "DL control", _dl_control),
     Register(Reg.DL_STATUS, 2, "DL status", _dl_status),
     Register(Reg.AL_CONTROL, 2, "AL control", _al_control),
     Register(Reg.AL_STATUS, 2, "AL status", _al_status),
     Register(Reg.AL_STATUS_CODE, 2, "AL status code", _al_code),
     Register(Reg.PDI_CONTROL, 1, "PDI control", _plain),
     Register(Reg.ESC_CONFIG, 1, "ESC configuration", _plain),
+    Register(Reg.ECAT_EVENT_MASK, 2, "ECAT event mask", _plain),
+    Register(0x0204, 4, "AL event mask", _plain),
+    Register(Reg.ECAT_EVENT_REQUEST, 2, "ECAT event request", _plain),
+    Register(0x0220, 4, "AL event request", _plain),
     *(Register(Reg.RX_ERROR_COUNTER + 2 * n, 2, f"RX error counter port {PORT_LETTERS[n]}",
                _counter_pair) for n in range(4)),
     *(Register(0x0308 + n, 1, f"forwarded RX error counter port {PORT_LETTERS[n]}", _plain)
@@ -147,26 +178,36 @@ REGISTERS: tuple[Register, ...] = (
     Register(0x030D, 1, "PDI error counter", _plain),
     *(Register(0x0310 + n, 1, f"lost link counter port {PORT_LETTERS[n]}", _plain)
       for n in range(4)),
-    Register(Reg.WATCHDOG_DIVIDER, 2, "watchdog divider", _plain),
-    Register(Reg.WATCHDOG_PDI, 2, "PDI watchdog time", _plain),
-    Register(Reg.WATCHDOG_SM, 2, "SM watchdog time", _plain),
+    Register(Reg.WATCHDOG_DIVIDER, 2, "watchdog divider", _watchdog_divider,
+             "40 ns steps, plus 2"),
+    Register(Reg.WATCHDOG_PDI, 2, "PDI watchdog time", _plain, WATCHDOG_STEPS),
+    Register(Reg.WATCHDOG_SM, 2, "SM watchdog time", _plain, WATCHDOG_STEPS),
     Register(Reg.WATCHDOG_STATUS, 2, "SM watchdog status", _plain),
     Register(Reg.EEPROM_CONFIG, 1, "EEPROM configuration", _plain),
+    Register(Reg.EEPROM_CONTROL, 2, "EEPROM control/status", _plain),
+    Register(Reg.EEPROM_ADDRESS, 4, "EEPROM address", _plain, "words"),
+    Register(Reg.EEPROM_DATA, 8, "EEPROM data", _plain),
     *(Register(fmmu_register(n), FMMU_SIZE, f"FMMU{n}", _fmmu) for n in range(N_FMMU)),
     *(Register(sm_register(n), SM_SIZE, f"SM{n}", _sm) for n in range(N_SM)),
     *(Register(Reg.DC_RECEIVE_TIME_PORT0 + 4 * n, 4,
-               f"DC receive time port {PORT_LETTERS[n]}", _plain) for n in range(4)),
-    Register(Reg.DC_SYSTEM_TIME, 8, "DC system time", _plain),
-    Register(0x0918, 8, "DC receive time ECAT processing unit", _plain),
-    Register(0x0920, 8, "DC system time offset", _plain),
-    Register(0x0928, 4, "DC system time delay", _plain),
+               f"DC receive time port {PORT_LETTERS[n]}", _plain, "ns") for n in range(4)),
+    Register(Reg.DC_SYSTEM_TIME, 8, "DC system time", _plain, "ns"),
+    Register(0x0918, 8, "DC receive time ECAT processing unit", _plain, "ns"),
+    Register(0x0920, 8, "DC system time offset", _plain, "ns"),
+    Register(0x0928, 4, "DC system time delay", _plain, "ns"),
     Register(Reg.DC_SYSTEM_TIME_DIFFERENCE, 4, "DC system time difference",
-             _time_difference),
+             _time_difference, "ns"),
+    Register(Reg.DC_SPEED_COUNTER_START, 2, "DC speed counter start", _plain),
+    Register(0x0932, 2, "DC speed counter difference", _plain),
+    Register(Reg.DC_TIME_FILTER, 1, "DC system time difference filter depth", _plain),
+    Register(Reg.DC_TIME_FILTER + 1, 1, "DC speed counter filter depth", _plain),
     Register(Reg.DC_CYCLIC_UNIT_CONTROL, 1, "DC cyclic unit control", _plain),
     Register(Reg.DC_CYCLIC_UNIT_CONTROL + 1, 1, "DC activation", _activation),
-    Register(Reg.DC_START_TIME_CYCLIC, 8, "DC start time cyclic operation", _plain),
-    Register(Reg.DC_SYNC0_CYCLE_TIME, 4, "DC SYNC0 cycle time", _plain),
-    Register(Reg.DC_SYNC0_CYCLE_TIME + 4, 4, "DC SYNC1 cycle time", _plain),
+    Register(Reg.DC_START_TIME_CYCLIC, 8, "DC start time cyclic operation", _plain, "ns"),
+    Register(Reg.DC_SYNC0_CYCLE_TIME, 4, "DC SYNC0 cycle time", _plain, "ns"),
+    Register(Reg.DC_SYNC0_CYCLE_TIME + 4, 4, "DC SYNC1 cycle time", _plain, "ns"),
+    Register(Reg.DC_LATCH0_CONTROL, 1, "DC latch0 control", _plain),
+    Register(Reg.DC_LATCH0_CONTROL + 1, 1, "DC latch1 control", _plain),
 )
 _BY_ADDRESS = {r.address: r for r in REGISTERS}
 
@@ -174,6 +215,23 @@ _BY_ADDRESS = {r.address: r for r in REGISTERS}
 def known(address: int) -> Register | None:
     """The register that starts at ``address``, if it is one of ours."""
     return _BY_ADDRESS.get(address)
+
+
+def containing(address: int) -> tuple[Register, int] | None:
+    """The register ``address`` lies in and the byte offset inside it, if it is one of
+    ours (a write of 0x0103 is byte 3 of DL control)."""
+    for r in REGISTERS:
+        if r.address <= address < r.address + r.size:
+            return r, address - r.address
+    return None
+
+
+def covered(address: int, size: int) -> list[Register]:
+    """The registers of ours a write or read of ``size`` bytes at ``address`` touches, in
+    address order."""
+    return sorted((r for r in REGISTERS
+                   if r.address < address + size and address < r.address + r.size),
+                  key=lambda r: r.address)
 
 
 def decode(address: int, data: bytes) -> list[Decoded]:
@@ -204,4 +262,5 @@ def fields_text(fields: Fields) -> str:
 _DECIMAL = {"length", "ns", "invalid_frames", "rx_errors"}
 
 
-__all__ = ["Decoded", "REGISTERS", "Register", "decode", "fields_text", "known"]
+__all__ = ["Decoded", "REGISTERS", "Register", "containing", "covered", "decode",
+           "fields_text", "known"]
