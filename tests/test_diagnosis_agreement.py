@@ -103,8 +103,8 @@ def _elmo_with_digital_outputs(corpus):
 
 @pytest.mark.parametrize("master_esi", [True, False], ids=["esi", "sdo-info"])
 def test_elmo_with_a_non_mappable_digital_output_entry_names_the_entry(corpus, master_esi):
-    from ecatcfg.esi.library import Library
     from ecatcfg.eni import reader
+    from ecatcfg.esi.library import Library
     original = reader.read_file(corpus / "eni" / "rocos-ethercat" / "eni.xml")
     library = Library([corpus / "esi" / "drives"], cache=False)
     # Without ESI files the master reads the same rule from the slave's SDO Information

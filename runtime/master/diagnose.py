@@ -881,7 +881,8 @@ def _state_request(position: int, code: int, fields: dict[str, Any],
     asked = regs[Reg.AL_CONTROL][0] & AL_STATE_MASK
     held = regs[Reg.AL_STATUS][0] & AL_STATE_MASK
     fields["requested_state"] = al_state_name(asked)
-    text = f"AL control 0x0120 asks for {al_state_name(asked)}, the slave is in "            f"{al_state_name(held)}"
+    text = (f"AL control 0x0120 asks for {al_state_name(asked)}, the slave is in "
+            f"{al_state_name(held)}")
     if code == AlStatusCode.UNKNOWN_STATE:
         rules.append(Rule.UNKNOWN_STATE)
         return [f"{text}: 0x{asked:X} is no AL state"]

@@ -389,7 +389,7 @@ class ObjectDictionary:
         FB1111 SPI-Slave does) and the device then takes it.  An entry the ESI does not
         describe (no dictionary, an object without Flags, a device from the ENI alone) is
         taken as it is: the ESI does not say the device checks it (docs/diagnostics.md,
-        "What the emulated firmware checks")."""
+        "Where the ESI does not say the device checks")."""
         index = SM_PDO_ASSIGN + sm
         assign = self.objects.get(index)
         if assign is None or assign.variable:
