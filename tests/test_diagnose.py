@@ -468,7 +468,8 @@ def test_a_diagnosis_prepares_the_mailbox_once_for_all_its_uploads(plan):
     diagnosis, not once per upload.  Counted on the wire: the SII read commands (a write
     of the read command 0x0100 to 0x0502) against the SDO upload requests (CoE SDO
     service, command specifier 2: "initiate upload")."""
-    from ecatcfg.esc import EEPROM_CMD_READ, Cmd, Reg
+    from ecatcfg.esc import (EEPROM_CMD_READ, SII_MAILBOX_PROTOCOLS, SII_STD_MAILBOX, Cmd,
+                             Reg)
     from ecatcfg.runtime.wire import decode
     with Network.virtual(patched(plan, "axis1", "set sm 2 (outputs)", 2, 5),
                          esi=[ESI]) as net:
@@ -485,7 +486,11 @@ def test_a_diagnosis_prepares_the_mailbox_once_for_all_its_uploads(plan):
             uploads.extend(upload_requests(frame, sm0.start_address))
             for dg in decode(frame).datagrams:
                 if dg.cmd in (Cmd.APWR, Cmd.FPWR) and dg.address >> 16 == Reg.EEPROM_CONTROL \
-                        and int.from_bytes(dg.data[:2], "little") & EEPROM_CMD_READ:
+                        and int.from_bytes(dg.data[:2], "little") & EEPROM_CMD_READ \
+                        and SII_STD_MAILBOX <= int.from_bytes(dg.data[2:6], "little") \
+                        <= SII_MAILBOX_PROTOCOLS:
+                    # The reads of the mailbox words (the SyncManager and PDO categories
+                    # the 0x001D cause compares with are read once, from word 0x0040 on).
                     sii_reads.append(dg.address)
         transport.recorder = record
         count, findings = doctor(transport, AlState.OP)

@@ -16,7 +16,8 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Iterator
 
-from ecatcfg.esc import RX_PDO_MAPPING, SM_PDO_ASSIGN, TX_PDO_MAPPING, AlState, is_pdo_object
+from ecatcfg.esc import (RX_PDO_MAPPING, SM_COMM_TYPE, SM_PDO_ASSIGN, SM_TYPE_CODES,
+                         TX_PDO_MAPPING, AlState, is_pdo_object)
 from ecatcfg.esi.datatypes import download_fits
 from ecatcfg.esi.model import Device
 from ecatcfg.runtime.mailbox import (
@@ -25,6 +26,7 @@ from ecatcfg.runtime.mailbox import (
     ABORT_UNSUPPORTED_ACCESS, ABORT_VALUE_RANGE, ABORT_VALUE_TOO_HIGH, ABORT_VALUE_TOO_LOW,
     ABORT_WRITE_ONLY, ABORT_WRONG_STATE, SdoAbort,
 )
+from ecatcfg.runtime.refusals import Rule
 from ecatcfg.runtime.segment import od_from_esi
 from ecatcfg.runtime.segment.od_entries import OdEntry, OdObject, fit_bytes
 
@@ -41,11 +43,17 @@ class ObjectDictionary:
 
     def __init__(self, objects: Iterable[OdObject] = ()) -> None:
         self.objects: dict[int, OdObject] = {o.index: o for o in objects}
+        # Whether an ESI dictionary describes the device's objects: only then is an object
+        # it does not list one the device lacks (assignment()).
+        self.described = False
         self._injected: dict[tuple[int, int], int] = {}
 
     @classmethod
     def from_device(cls, device: Device) -> ObjectDictionary:
-        return cls(od_from_esi.build(device))
+        from ecatcfg.esi.coe import dictionary_with_objects
+        od = cls(od_from_esi.build(device))
+        od.described = dictionary_with_objects(device) is not None
+        return od
 
     def __contains__(self, index: object) -> bool:
         return index in self.objects
@@ -359,42 +367,95 @@ class ObjectDictionary:
     def sm_entries(self, sm: int) -> list[tuple[int, int, int]] | None:
         """(index, subindex, bit length) of every mapped entry of SM ``sm``, in process
         image order (padding gaps have index 0); ``None`` when the current assignment
-        (0x1C10+sm) or a mapping it names is invalid."""
-        assign = self.objects.get(SM_PDO_ASSIGN + sm)
+        (0x1C10+sm) or a mapping it names cannot be used (:meth:`assignment_problem`)."""
+        entries, _problem = self.assignment(sm)
+        return entries
+
+    def assignment(self, sm: int) -> tuple[list[tuple[int, int, int]] | None,
+                                            tuple[Rule, str] | None]:
+        """:meth:`sm_entries` and, where they cannot be used, the rule and the values that
+        break it (``runtime/refusals.py``), as the firmware finds them walking the
+        assignment in order:
+
+        - the assignment object 0x1C10+sm must exist (``NO_ASSIGNMENT``);
+        - each PDO it assigns must be a mapping object the slave has (``PDO_MISSING``);
+        - each entry a mapping holds must be an object and subindex the slave has, where
+          its ESI describes its objects (``ENTRY_MISSING``), and mappable in the SM's
+          direction where the ESI gives the entry's Flags (``ENTRY_NOT_MAPPABLE``:
+          PdoMapping without R for an output SM, without T for an input SM).
+
+        The direction is the SM's (its 0x1C00 communication type: 3 outputs, 4 inputs),
+        not the PDO index range: an ESI may put an RxPdo 0x1A00 on an output SM (the
+        FB1111 SPI-Slave does) and the device then takes it.  An entry the ESI does not
+        describe (no dictionary, an object without Flags, a device from the ENI alone) is
+        taken as it is: the ESI does not say the device checks it (docs/diagnostics.md,
+        "Where the ESI does not say the device checks")."""
+        index = SM_PDO_ASSIGN + sm
+        assign = self.objects.get(index)
         if assign is None or assign.variable:
-            return None
+            return None, (Rule.NO_ASSIGNMENT, f"0x{index:04X} does not exist")
+        direction = self._sm_direction(sm)
         out: list[tuple[int, int, int]] = []
         for n in range(1, assign.count + 1):
             slot = assign.entries.get(n)
             if slot is None:
-                return None
+                return None, (Rule.NO_ASSIGNMENT,
+                              f"0x{index:04X}:00 = {assign.count}, but 0x{index:04X} has "
+                              f"no subindex {n}")
             pdo_index = slot.as_int() & 0xFFFF
-            if pdo_index in RX_PDO_MAPPING:
-                direction = "R"
-            elif pdo_index in TX_PDO_MAPPING:
-                direction = "T"
-            else:
-                return None
+            pdo_dir = direction or ("R" if pdo_index in RX_PDO_MAPPING else
+                                    "T" if pdo_index in TX_PDO_MAPPING else None)
             mapping = self.objects.get(pdo_index)
-            if mapping is None or mapping.variable:
-                return None
+            if pdo_dir is None or mapping is None or mapping.variable or (
+                    pdo_index not in RX_PDO_MAPPING and pdo_index not in TX_PDO_MAPPING):
+                return None, (Rule.PDO_MISSING,
+                              f"0x{index:04X}:{n:02X} = 0x{pdo_index:04X}, which is no PDO "
+                              "mapping object of the slave")
             for k in range(1, mapping.count + 1):
                 item = mapping.entries.get(k)
                 if item is None:
-                    return None
+                    return None, (Rule.PDO_MISSING,
+                                  f"0x{pdo_index:04X}:00 = {mapping.count}, but "
+                                  f"0x{pdo_index:04X} has no subindex {k}")
                 word = item.as_int() & 0xFFFFFFFF
-                index, sub, bits = word >> 16, (word >> 8) & 0xFF, word & 0xFF
-                if index != 0:
-                    target = self.objects.get(index)
-                    entry = target.entries.get(sub) if target is not None else None
-                    # The mapping's bit length is taken as given (not compared with the
-                    # object's size), as SOES sizes PDOs from the mapping alone.  A
-                    # virtual PDO's variable need not be an object (OdObject.virtual_pdo).
-                    variable = target is None and mapping.virtual_pdo
-                    if not variable and (entry is None or direction not in entry.mappable):
-                        return None
-                out.append((index, sub, bits))
-        return out
+                obj_index, sub, bits = word >> 16, (word >> 8) & 0xFF, word & 0xFF
+                where = f"0x{pdo_index:04X}:{k:02X} maps 0x{obj_index:04X}:{sub:02X}"
+                if obj_index != 0:
+                    problem = self._mapped_problem(mapping, obj_index, sub, pdo_dir, where)
+                    if problem is not None:
+                        return None, problem
+                out.append((obj_index, sub, bits))
+        return out, None
+
+    def _sm_direction(self, sm: int) -> str | None:
+        """"R" for an output SM, "T" for an input SM, as 0x1C00:(sm+1) gives its
+        communication type (ETG.1000.6: 3 process data output, 4 process data input);
+        None where the slave has no such entry."""
+        types = self.objects.get(SM_COMM_TYPE)
+        entry = types.entries.get(sm + 1) if types is not None else None
+        kind = entry.as_int() if entry is not None else None
+        return ("R" if kind == SM_TYPE_CODES["Outputs"] else "T"
+                if kind == SM_TYPE_CODES["Inputs"] else None)
+
+    def _mapped_problem(self, mapping: OdObject, index: int, sub: int, direction: str,
+                        where: str) -> tuple[Rule, str] | None:
+        target = self.objects.get(index)
+        entry = target.entries.get(sub) if target is not None else None
+        if entry is None:
+            # A virtual PDO's variable need not be an object (OdObject.virtual_pdo); an
+            # object the ESI does not describe is the device's to have.
+            described = self.described and (target is not None or not mapping.virtual_pdo)
+            if not described:
+                return None
+            return Rule.ENTRY_MISSING, (f"{where}: the slave has no "
+                                        + (f"subindex {sub} in 0x{index:04X}" if target
+                                           else f"object 0x{index:04X}"))
+        if entry.mapping_said and direction not in entry.mappable:
+            said = "/".join(entry.mappable) or "none"
+            kind = "an RxPDO (outputs)" if direction == "R" else "a TxPDO (inputs)"
+            return Rule.ENTRY_NOT_MAPPABLE, (f"{where}, which may not be mapped into {kind}: "
+                                             f"its PdoMapping is {said}")
+        return None
 
     def sm_bits(self, sm: int) -> int | None:
         """Process-data size of SM ``sm`` in bits from the current 0x1C1n assignment and

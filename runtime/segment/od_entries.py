@@ -46,6 +46,10 @@ class OdEntry:
     read_states: frozenset[AlState] = MAILBOX_STATES
     write_states: frozenset[AlState] = MAILBOX_STATES
     mappable: str = ""            # "R" (RxPDO), "T" (TxPDO) or both
+    # Whether the ESI gives the entry's Flags, so that ``mappable`` is its word on PDO
+    # mapping (PdoMapping absent: not mappable); False: the ESI says nothing, and the
+    # emulated firmware takes the entry into any PDO (objects.py, sm_entries).
+    mapping_said: bool = False
     min_value: int | None = None
     max_value: int | None = None
     # Where the entry sits in the object's complete-access image (ESI DataType SubItem

@@ -183,7 +183,8 @@ def _entry_from_spec(spec: _EntrySpec, info: ObjectInfo | None,
                      defaults: set[int]) -> OdEntry:
     mode, reads, writes = _access(spec.flags)
     entry = OdEntry(spec.subindex, spec.name, spec.type, max(spec.bit_size or 0, 0), b"",
-                    mode, reads, writes, _mappable(spec.flags), bit_offset=spec.bit_offset)
+                    mode, reads, writes, _mappable(spec.flags), bit_offset=spec.bit_offset,
+                    mapping_said=spec.flags is not None)
     raw = _default(info, entry.kind, entry.byte_size)
     if raw is not None:
         defaults.add(spec.subindex)

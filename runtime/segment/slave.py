@@ -36,6 +36,7 @@ from ecatcfg.esc import (AL_ERROR_ACK, AL_ID_REQUEST, AL_STATE_MASK, AL_STATUS_E
                          sm_register)
 from ecatcfg.esc import WATCHDOG_DIVIDER_DEFAULT, WATCHDOG_TIME_DEFAULT, watchdog_base_ns
 from ecatcfg.esi.model import Device
+from ecatcfg.runtime.refusals import Refusal, Rule
 from ecatcfg.runtime.segment import al_checks
 from ecatcfg.runtime.segment.dc_clock import (SPEED_COUNTER_START, SPEED_FILTER_DEPTH,
                                               TIME_FILTER_DEPTH, DcClock)
@@ -191,6 +192,9 @@ class EmulatedSlave:
         self.mailbox_queue: deque[bytes] = deque()
         self.last_mailbox: bytes | None = None
         self.refuse: dict[str, int] = {}       # fault injection: transition ("PS") -> code
+        # The last state change the firmware refused, with the rule it applied
+        # (runtime/refusals.py); None until one is refused.
+        self.refusal: Refusal | None = None
         self.on_state_change: Callable[[StateChange], None] | None = None
         self.on_mapping_change: Callable[[], None] | None = None
         self.outputs_valid = False
@@ -595,14 +599,14 @@ class EmulatedSlave:
         sm.load(self.mem)
         request = bool(self.mem[reg + 6] & SM_ACTIVATE_REPEAT)
         refusal = (self._check_mailbox() if not self.device_emulation
-                   and self._mailbox_running() else 0)
-        if refusal:
+                   and self._mailbox_running() else None)
+        if refusal is not None:
             # The mailbox SMs no longer as the firmware set them up: it stops the mailbox
             # and falls back to INIT with 0x0016, 0x0015 in BOOT (SOES ESC_sm_act_event,
             # ESC_checkmbx).  It never writes a reply into an area the master moved (over
             # registers, past the end of memory).
             self._stop_mailbox()
-            self._set_state(AlState.INIT, refusal)
+            self._refuse(AlState.INIT, refusal)
         elif sm.number == self._mbx_in and request != was_repeat:
             # Repeat: post the last message again (the master lost it) and acknowledge.
             # Before PREOP the mailbox is not running: the bit is only taken over
@@ -800,7 +804,8 @@ class EmulatedSlave:
             for sm in self.process_sms(SmKind.OUTPUTS):
                 self.mem[sm.start:sm.end] = bytes(sm.length)
             if not self.device_emulation:
-                self._set_state(AlState.SAFEOP, AlStatusCode.SM_WATCHDOG)
+                self._refuse(AlState.SAFEOP, Refusal(AlStatusCode.SM_WATCHDOG,
+                                                     Rule.SM_WATCHDOG, "outputs stopped"))
 
     def _arm_watchdog(self) -> None:
         """The SM watchdog time (0x0420 x (0x0400 + 2) x 40 ns), or None when no output SM
@@ -853,7 +858,8 @@ class EmulatedSlave:
             # AL status is read-only from EtherCAT (any command, FMMUs included) and the
             # firmware only ever sets states; should it hold none, the firmware starts
             # over from INIT, as after a reset, and says the state is unknown.
-            self._set_state(AlState.INIT, AlStatusCode.UNKNOWN_STATE)
+            self._refuse(AlState.INIT, Refusal(AlStatusCode.UNKNOWN_STATE,
+                                               Rule.UNKNOWN_STATE, "AL status held no state"))
             return
         if self.error:
             if not ack and requested != AlState.INIT:
@@ -861,23 +867,30 @@ class EmulatedSlave:
             if ack:
                 self.mem[Reg.AL_STATUS] &= ~AL_STATUS_ERROR & 0xFF
         if requested not in AlState.__members__.values():
-            self._set_state(AlState.SAFEOP if current == AlState.OP else current,
-                            AlStatusCode.UNKNOWN_STATE)
+            self._refuse(AlState.SAFEOP if current == AlState.OP else current,
+                         Refusal(AlStatusCode.UNKNOWN_STATE, Rule.UNKNOWN_STATE,
+                                 f"0x{requested:X} requested"))
             return
         target = AlState(requested)
         if target == current:
             return
+        moving = f"{current.name}->{target.name}"
         if target == AlState.BOOT and not self.boot_supported:
-            self._set_state(current, AlStatusCode.BOOT_NOT_SUPPORTED if current == AlState.INIT
-                            else AlStatusCode.INVALID_STATE_CHANGE)
+            self._refuse(current, Refusal(AlStatusCode.BOOT_NOT_SUPPORTED, Rule.BOOT_UNSUPPORTED,
+                                          moving) if current == AlState.INIT
+                         else Refusal(AlStatusCode.INVALID_STATE_CHANGE, Rule.STATE_CHANGE,
+                                      moving))
             return
         if target != AlState.INIT and (current, target) not in _ALLOWED:
-            self._set_state(current, AlStatusCode.INVALID_STATE_CHANGE)
+            self._refuse(current, Refusal(AlStatusCode.INVALID_STATE_CHANGE,
+                                          Rule.STATE_CHANGE, moving))
             return
         transition = _LETTER[current] + _LETTER[target]
-        code = self.refuse.get(transition) or self._check(current, target)
-        if code:
-            self._set_state(current if target > current else target, code)
+        injected = self.refuse.get(transition)
+        refusal = (Refusal(injected, Rule.INJECTED, transition) if injected
+                   else self._check(current, target))
+        if refusal is not None:
+            self._refuse(current if target > current else target, refusal)
             return
         delay = self.timing.transition_ns(transition) if self.timing else 0
         if delay:
@@ -886,8 +899,12 @@ class EmulatedSlave:
             return
         self._enter(target)
 
-    def _check(self, current: AlState, target: AlState) -> int:
-        """The AL status code that refuses ``current`` -> ``target``, or 0."""
+    def _refuse(self, state: AlState, refusal: Refusal) -> None:
+        self.refusal = refusal
+        self._set_state(state, refusal.code)
+
+    def _check(self, current: AlState, target: AlState) -> Refusal | None:
+        """The refusal of ``current`` -> ``target``, or None."""
         if current == AlState.INIT and target == AlState.PREOP:
             return self._check_mailbox()
         if current == AlState.INIT and target == AlState.BOOT:
@@ -897,9 +914,9 @@ class EmulatedSlave:
                     or self._check_soe())
         if current == AlState.SAFEOP and target == AlState.OP:
             return self._check_process_data(op=True)
-        return 0
+        return None
 
-    def _check_mailbox(self) -> int:
+    def _check_mailbox(self) -> Refusal | None:
         if self.state == AlState.BOOT:
             return al_checks.bootstrap_refusal(self.bootstrap_mailbox, self.sms)
         return al_checks.mailbox_refusal(self.device, self.sms)
@@ -921,17 +938,26 @@ class EmulatedSlave:
         return (self.mailbox is not None and self.mailbox.foe is not None
                 and self.mailbox.boot_sizes is not None)
 
-    def _pd_bits(self) -> dict[int, int | None]:
-        """Process-data bits per SM that the slave's current PDO assignment needs."""
+    def _pd_bits(self, why: dict[int, tuple[Rule, str]] | None = None
+                 ) -> dict[int, int | None]:
+        """Process-data bits per SM that the slave's current PDO assignment needs (None
+        where it cannot be used: ``why`` gets the rule and the values)."""
         if self.od is None:
             return dict(self._expected_pd)
-        return {n: self.od.sm_bits(n) for n in self._expected_pd}
+        out: dict[int, int | None] = {}
+        for n in self._expected_pd:
+            entries, problem = self.od.assignment(n)
+            out[n] = None if entries is None else sum(bits for _, _, bits in entries)
+            if problem is not None and why is not None:
+                why[n] = problem
+        return out
 
-    def _check_process_data(self, op: bool) -> int:
+    def _check_process_data(self, op: bool) -> Refusal | None:
+        why: dict[int, tuple[Rule, str]] = {}
         return al_checks.process_data_refusal(self.device, self.sms, self.fmmus,
-                                              self._pd_bits(), self._internal_sms, op)
+                                              self._pd_bits(why), self._internal_sms, op, why)
 
-    def _check_dc(self) -> int:
+    def _check_dc(self) -> Refusal | None:
         return al_checks.dc_refusal(self.mem, self._min_cycle_ns())
 
     def _min_cycle_ns(self) -> int:
@@ -944,9 +970,9 @@ class EmulatedSlave:
                 found.append(self.od.int_value(index, SM_PARAMETER_MIN_CYCLE))
         return max(found)
 
-    def _check_soe(self) -> int:
+    def _check_soe(self) -> Refusal | None:
         soe = self.mailbox.soe if self.mailbox is not None else None
-        return al_checks.soe_refusal(soe) if soe is not None else 0
+        return al_checks.soe_refusal(soe) if soe is not None else None
 
     def _mirror_al_control(self, control: int) -> None:
         """Device emulation: the ESC copies the AL control word into AL status, every bit
@@ -960,10 +986,12 @@ class EmulatedSlave:
         old = self.mem[Reg.AL_STATUS] & AL_STATE_MASK
         new = control & AL_STATE_MASK
         if old in _STATES and new in _STATES and old != new:
-            code = self.refuse.get(_LETTER[_STATES[old]] + _LETTER[_STATES[new]])
+            transition = _LETTER[_STATES[old]] + _LETTER[_STATES[new]]
+            code = self.refuse.get(transition)
             if code:
                 target = _STATES[new]
-                self._set_state(_STATES[old] if target > old else target, code)
+                self._refuse(_STATES[old] if target > old else target,
+                             Refusal(code, Rule.INJECTED, transition))
                 return
         before = self.al_status
         self._state_effects(old, new)
