@@ -22,6 +22,8 @@ STATES = {"init": 1, "preop": 2, "safeop": 4, "op": 8}
 
 
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    from ecatcfg.cli.options import add_prefer
+
     p = sub.add_parser(
         "apply", help="bring a network up from an ENI over raw Ethernet",
         description="Check that the slaves on the line are the ones the ENI describes (no "
@@ -41,8 +43,7 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                         "compared with the device found by its identity (a DC refusal: its "
                         "DC op modes and minimum cycle time).  Nothing is configured from "
                         "them")
-    p.add_argument("--prefer", action="append", default=[], metavar="PATH",
-                   help="an ESI file or folder of --esi whose description wins where files describe one device (vendor, product, revision) differently; repeatable, first wins (default: such a device is an error naming the files)")
+    add_prefer(p)
     p.add_argument("--state", choices=list(STATES), default="op",
                    help="state to bring the slaves to (default: op)")
     p.add_argument("--cycles", type=int, metavar="N",

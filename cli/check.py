@@ -18,6 +18,8 @@ FORMATS = ("text", "json", "junit", "sarif")
 
 
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    from ecatcfg.cli.options import add_prefer
+
     p = sub.add_parser(
         "check", help="check an ENI against itself and the ESI files of its devices",
         description="Check ENI files (ours or any tool's): SyncManagers, FMMUs, frames and "
@@ -29,9 +31,7 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
     p.add_argument("enis", nargs="*", metavar="ENI", help="ENI file")
     p.add_argument("--esi", action="append", default=[], metavar="PATH",
                    help="ESI file or folder (repeatable; folders searched for *.xml)")
-    p.add_argument("--prefer", action="append", default=[], metavar="PATH",
-                   help="where several ESI files describe one identity differently, take "
-                        "the description from this file or folder (repeatable, first first)")
+    add_prefer(p)
     p.add_argument("--format", choices=FORMATS, default="text")
     p.add_argument("-o", "--output", metavar="FILE",
                    help="write the report to FILE (atomically) instead of stdout")

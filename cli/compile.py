@@ -7,6 +7,8 @@ import sys
 
 
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    from ecatcfg.cli.options import add_prefer
+
     p = sub.add_parser("compile", help="compile a topology and ESI files into an ENI",
                        description="Compile a topology (YAML or JSON: slaves in bus order) "
                                    "with the vendor ESI files into an ENI (ETG.2100). "
@@ -16,8 +18,7 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
     p.add_argument("topology", metavar="TOPOLOGY", help="topology file (.yaml, .yml, .json)")
     p.add_argument("--esi", action="append", required=True, metavar="PATH",
                    help="ESI file or folder (searched recursively); repeatable")
-    p.add_argument("--prefer", action="append", default=[], metavar="PATH",
-                   help="an ESI file or folder of --esi whose description wins where files describe one device (vendor, product, revision) differently; repeatable, first wins (default: such a device is an error naming the files)")
+    add_prefer(p)
     p.add_argument("-o", "--output", required=True, metavar="ENI",
                    help="ENI file to write ('-': standard output)")
     p.add_argument("--header", metavar="FILE.h",

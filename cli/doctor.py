@@ -15,7 +15,7 @@ STATES = {"init": 1, "preop": 2, "safeop": 4, "op": 8}
 
 
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    from ecatcfg.cli.options import add_iface
+    from ecatcfg.cli.options import add_iface, add_prefer
 
     p = sub.add_parser(
         "doctor", help="why slaves on a line are not in their target state",
@@ -42,9 +42,7 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                         "slave's device, found by the identity in its SII, for the causes "
                         "that compare with it (a DC refusal: the device's DC op modes and "
                         "minimum cycle time)")
-    p.add_argument("--prefer", action="append", default=[], metavar="PATH",
-                   help="where several ESI files describe one identity differently, take "
-                        "the description from this file or folder (repeatable, first first)")
+    add_prefer(p)
     p.add_argument("--no-cache", action="store_true",
                    help="read the ESI files without the index cache")
     p.add_argument("--format", choices=["text", "json"], default="text")

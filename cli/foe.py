@@ -16,7 +16,7 @@ EPILOG = ("The slave is taken to INIT, its mailbox SyncManagers are written from
 
 
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    from ecatcfg.cli.options import add_line
+    from ecatcfg.cli.options import add_line, add_timeout
 
     p = sub.add_parser(
         "foe", help="write or read a file of one slave over FoE (firmware updates)",
@@ -40,8 +40,7 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
         a.add_argument("--state", choices=["boot", "preop"],
                        help="the state the transfer runs in (default: boot when the "
                             "slave has a bootstrap mailbox, else preop)")
-        a.add_argument("--timeout", type=float, default=10.0, metavar="S",
-                       help="seconds the slave may take for one reply (default 10)")
+        add_timeout(a, 10.0, "one reply of the slave")
         if action == "read":
             a.add_argument("--max-size", type=int, default=64 * 1024 * 1024, metavar="BYTES",
                            help="refuse a file longer than this (default 64 MiB)")

@@ -13,6 +13,8 @@ import sys
 
 
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    from ecatcfg.cli.options import add_prefer
+
     p = sub.add_parser("report", help="an ENI's network as one self-contained HTML page",
                        description="Write an HTML page of an ENI (ours or any tool's): the "
                                    "topology drawn as SVG (terminals side by side as on the "
@@ -32,9 +34,7 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                         "for the boxes, and for the check findings each slave against its "
                         "device, as `ecatcfg check --esi` does; without it the ENI is "
                         "checked against itself")
-    p.add_argument("--prefer", action="append", default=[], metavar="PATH",
-                   help="where several ESI files describe one identity differently, take "
-                        "the description from this file or folder (repeatable, first first)")
+    add_prefer(p)
     p.add_argument("--no-check", action="store_true",
                    help="leave the check findings out (the page says check was not run)")
     p.add_argument("--no-cache", action="store_true",

@@ -20,7 +20,7 @@ EPILOG = ("Use it on a line no other master is driving: the slave is brought to 
 
 
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    from ecatcfg.cli.options import add_line
+    from ecatcfg.cli.options import add_line, add_timeout
 
     p = sub.add_parser(
         "od", help="upload a slave's object dictionary (SDO Information), compare with "
@@ -39,8 +39,7 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                    help="upload each entry's value too (a record or array with one complete "
                         "access where the slave takes it) and show it beside the entry; "
                         "write a value with 'ecatcfg sdo write'")
-    p.add_argument("--timeout", type=float, default=3.0, metavar="S",
-                   help="seconds the slave may take to answer each request (default 3)")
+    add_timeout(p, 3.0)
     p.add_argument("--pcap", metavar="FILE",
                    help="record every frame sent and received as pcapng (Wireshark)")
     p.add_argument("--format", choices=["text", "json"], default="text")

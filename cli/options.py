@@ -57,6 +57,23 @@ def add_backup(p: argparse.ArgumentParser) -> None:
                         "sii-backup-posPOS-DATE-TIME.bin in the current folder)")
 
 
+def add_prefer(p: argparse.ArgumentParser) -> None:
+    """``--prefer PATH``: which of several ESI files that describe one identity differently
+    wins (the choice by evidence comes first where a command has an ENI or a live line)."""
+    p.add_argument("--prefer", action="append", default=[], metavar="PATH",
+                   help="an ESI file or folder of --esi whose description wins where files "
+                        "describe one device (vendor, product, revision) differently; "
+                        "repeatable, first wins (default: the one the ENI or the slave's "
+                        "SII agrees with, where there is one; else an error naming the files)")
+
+
+def add_timeout(p: argparse.ArgumentParser, default: float,
+                waits_for: str = "each answer of the slave") -> None:
+    """``--timeout S`` of a command that waits for a slave."""
+    p.add_argument("--timeout", type=float, default=default, metavar="S",
+                   help=f"seconds to wait for {waits_for} (default {default:g})")
+
+
 def add_rule_options(p: argparse.ArgumentParser) -> None:
     """The rule options of ``lint`` and ``check``."""
     p.add_argument("--select", action="append", metavar="IDS",
@@ -87,5 +104,5 @@ def rule_help(args: argparse.Namespace, rules: Mapping[str, Any], command: str) 
     return False
 
 
-__all__ = ["MAX_POSITION", "add_backup", "add_iface", "add_line", "add_rule_options",
-           "add_slave", "number", "rule_help"]
+__all__ = ["MAX_POSITION", "add_backup", "add_iface", "add_line", "add_prefer",
+           "add_rule_options", "add_slave", "add_timeout", "number", "rule_help"]

@@ -7,7 +7,7 @@ from typing import Any
 
 
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    from ecatcfg.cli.options import add_line
+    from ecatcfg.cli.options import add_line, add_timeout
 
     p = sub.add_parser(
         "pdos", help="the PDO assignment and mapping a slave holds now (CoE)",
@@ -23,8 +23,7 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
     p.add_argument("--esi", action="append", default=[], metavar="PATH",
                    help="ESI file or folder (searched recursively) to name PDOs and entries; "
                         "repeatable")
-    p.add_argument("--timeout", type=float, default=3.0, metavar="S",
-                   help="seconds the slave may take to answer each SDO (default 3)")
+    add_timeout(p, 3.0)
     p.add_argument("--format", choices=["text", "json"], default="text")
     p.add_argument("--no-cache", action="store_true",
                    help="do not read or write the ESI index cache")

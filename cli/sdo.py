@@ -14,7 +14,7 @@ EPILOG = ("INDEX:SUB is hexadecimal, '0x' optional: 0x1018:01, 0x6060:0, 1C12:0.
 
 
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    from ecatcfg.cli.options import add_line
+    from ecatcfg.cli.options import add_line, add_timeout
 
     p = sub.add_parser(
         "sdo", help="read or write one CoE object of one slave (SDO upload/download)",
@@ -38,8 +38,7 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                                else ""))
         a.add_argument("--complete-access", action="store_true",
                        help="the whole object from SUB (0 or 1) on, in one transfer")
-        a.add_argument("--timeout", type=float, default=3.0, metavar="S",
-                       help="seconds the slave may take to answer the SDO (default 3)")
+        add_timeout(a, 3.0)
         a.add_argument("--format", choices=["text", "json"], default="text")
         a.set_defaults(run=run)
 

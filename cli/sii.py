@@ -19,7 +19,7 @@ if TYPE_CHECKING:
 
 
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    from ecatcfg.cli.options import add_backup, add_line, number
+    from ecatcfg.cli.options import add_backup, add_line, add_prefer, number
 
     p = sub.add_parser("sii", help="build an SII (EEPROM) image from an ESI device, or "
                                    "decode one",
@@ -38,8 +38,7 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                                                          "recursively)")
     b.add_argument("--device", required=True, metavar="SELECTOR",
                    help="Type name or VENDOR:PRODUCT[:REVISION] (hex 0x.. or decimal)")
-    b.add_argument("--prefer", action="append", default=[], metavar="PATH",
-                   help="an ESI file or folder of --esi whose description wins where files describe one device (vendor, product, revision) differently; repeatable, first wins (default: such a device is an error naming the files)")
+    add_prefer(b)
     b.add_argument("-o", "--output", required=True, metavar="FILE.bin",
                    help="image file to write")
     b.add_argument("--serial", type=number(0xFFFFFFFF), default=0, metavar="N",

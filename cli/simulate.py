@@ -28,6 +28,8 @@ def cut_to(text: str, width: int) -> str:
 
 
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    from ecatcfg.cli.options import add_prefer
+
     p = sub.add_parser(
         "simulate", help="run a virtual EtherCAT segment on a network interface",
         description="Emulate a line or tree of slaves from their ESI files (or, with "
@@ -43,8 +45,7 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                    help="ESI file or folder (searched recursively); repeatable.  Needed for "
                         "--topology; with --eni a slave whose device is not there is "
                         "emulated from the ENI alone")
-    p.add_argument("--prefer", action="append", default=[], metavar="PATH",
-                   help="an ESI file or folder of --esi whose description wins where files describe one device (vendor, product, revision) differently; repeatable, first wins (default: such a device is an error naming the files)")
+    add_prefer(p)
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--topology", metavar="T",
                      help="the slaves of a topology file, plugged as it says")

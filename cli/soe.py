@@ -17,7 +17,7 @@ EPILOG = ("IDN as drive manuals write it (S-0-0001, P-0-0010) or as a 16-bit num
 
 
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    from ecatcfg.cli.options import add_line
+    from ecatcfg.cli.options import add_line, add_timeout
 
     p = sub.add_parser(
         "soe", help="read or write one IDN of a drive over SoE (servo drive profile)",
@@ -43,8 +43,7 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                                 "the name")
         a.add_argument("--type", metavar="T",
                        help="data type to decode (read) or encode (write) the value with")
-        a.add_argument("--timeout", type=float, default=3.0, metavar="S",
-                       help="seconds the drive may take to answer (default 3)")
+        add_timeout(a, 3.0)
         a.add_argument("--format", choices=["text", "json"], default="text")
         a.set_defaults(run=run)
 

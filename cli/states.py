@@ -9,7 +9,7 @@ STATES = ("init", "preop", "boot", "safeop", "op")
 
 
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    from ecatcfg.cli.options import add_iface, add_slave
+    from ecatcfg.cli.options import add_iface, add_slave, add_timeout
 
     p = sub.add_parser(
         "states", help="show or request the AL states of the slaves on a line",
@@ -25,8 +25,7 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
     add_slave(p, required=False)
     p.add_argument("state", nargs="?", type=str.lower, choices=STATES, metavar="STATE",
                    help="request this state: init, preop, boot, safeop or op")
-    p.add_argument("--timeout", type=float, default=5.0, metavar="S",
-                   help="seconds each slave may take to reach STATE (default 5)")
+    add_timeout(p, 5.0, "each slave to reach STATE")
     p.add_argument("--esi", action="append", default=[], metavar="PATH",
                    help="ESI file or folder (repeatable): name each slave by the device "
                         "of its SII identity")
