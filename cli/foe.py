@@ -61,8 +61,6 @@ def run(args: argparse.Namespace) -> int:
     from ecatcfg.runtime.master import foe_tool
     from ecatcfg.runtime.master.transport import Transport
 
-    if args.timeout <= 0:
-        raise UsageError(f"--timeout {args.timeout}: must be positive")
     if getattr(args, "max_size", 0) < 0:
         raise UsageError(f"--max-size {args.max_size}: a file has 0 bytes or more")
     try:

@@ -67,10 +67,21 @@ def add_prefer(p: argparse.ArgumentParser) -> None:
                         "SII agrees with, where there is one; else an error naming the files)")
 
 
+def seconds(text: str) -> float:
+    """An argparse type: a positive number of seconds."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number of seconds: {text!r}") from None
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f"{text}: must be positive")
+    return value
+
+
 def add_timeout(p: argparse.ArgumentParser, default: float,
                 waits_for: str = "each answer of the slave") -> None:
     """``--timeout S`` of a command that waits for a slave."""
-    p.add_argument("--timeout", type=float, default=default, metavar="S",
+    p.add_argument("--timeout", type=seconds, default=default, metavar="S",
                    help=f"seconds to wait for {waits_for} (default {default:g})")
 
 
@@ -105,4 +116,4 @@ def rule_help(args: argparse.Namespace, rules: Mapping[str, Any], command: str) 
 
 
 __all__ = ["MAX_POSITION", "add_backup", "add_iface", "add_line", "add_prefer",
-           "add_rule_options", "add_slave", "add_timeout", "number", "rule_help"]
+           "add_rule_options", "add_slave", "add_timeout", "number", "rule_help", "seconds"]

@@ -35,13 +35,10 @@ def run(args: argparse.Namespace) -> int:
     import sys
 
     from ecatcfg.cli.identity import esi_device
-    from ecatcfg.errors import UsageError
     from ecatcfg.runtime.link import RawLink
     from ecatcfg.runtime.master import pdo_tool
     from ecatcfg.runtime.master.transport import Transport
 
-    if args.timeout <= 0:
-        raise UsageError(f"--timeout {args.timeout}: must be positive")
     lib = None
     if args.esi:
         from ecatcfg.esi.library import Library

@@ -97,8 +97,6 @@ def _checked(args: argparse.Namespace) -> tuple[int, int, str | None]:
         index, sub = sdo_tool.parse_address(args.address)
     except ValueError as exc:
         raise UsageError(str(exc)) from None
-    if args.timeout <= 0:
-        raise UsageError(f"--timeout {args.timeout}: must be positive")
     if args.complete_access and sub > 1:
         raise UsageError(f"--complete-access reads or writes from subindex 0 or 1, not "
                          f"0x{sub:02X}")

@@ -135,8 +135,6 @@ def _checked(args: argparse.Namespace) -> tuple[int, str | None]:
         raise UsageError(str(exc)) from None
     if not 0 <= args.drive <= MAX_DRIVE:
         raise UsageError(f"--drive {args.drive}: the SoE header numbers drives 0..{MAX_DRIVE}")
-    if args.timeout <= 0:
-        raise UsageError(f"--timeout {args.timeout}: must be positive")
     type_name = None
     if args.type:
         from ecatcfg.esi import datatypes

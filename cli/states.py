@@ -39,14 +39,11 @@ def run(args: argparse.Namespace) -> int:
     import json
 
     from ecatcfg.cli.identity import slave_identities
-    from ecatcfg.errors import UsageError
     from ecatcfg.esc import AlState, al_state_name, al_status_name
     from ecatcfg.runtime.link import RawLink
     from ecatcfg.runtime.master import al_tool
     from ecatcfg.runtime.master.transport import Transport
 
-    if args.timeout <= 0:
-        raise UsageError(f"--timeout {args.timeout}: must be positive")
     target = AlState[args.state.upper()] if args.state else None
     library = None
     if args.esi:
