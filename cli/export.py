@@ -60,21 +60,13 @@ def run(args: argparse.Namespace) -> int:
 
     from ecatcfg import __version__
     from ecatcfg.cli import export_igh
-    from ecatcfg.cli.inputs import require_eni
-    from ecatcfg.cli.paths import output_file
-    from ecatcfg.eni.cache import PlanCache, read_file
+    from ecatcfg.cli.inputs import eni_for_output
     from ecatcfg.eni.export import pysoem_module, soem_c, soem_image
     from ecatcfg.eni.export.steps import slave_setups
-    from ecatcfg.eni.reader import read_file as read_uncached
     from ecatcfg.errors import UsageError
     from ecatcfg.fileio import STDOUT, read_input, write_atomic
 
-    require_eni(args.eni)
-    out = output_file(args.output)
-    if out.resolve() == Path(args.eni).resolve():
-        raise UsageError(f"-o {args.output}: would replace the ENI it exports")
-    plan = read_uncached(args.eni) if args.no_cache else \
-        read_file(args.eni, cache=PlanCache())
+    plan, out = eni_for_output(args.eni, args.output, args.no_cache, "exports")
     digest = hashlib.sha256(read_input(args.eni)).hexdigest()
     outputs: list[tuple[Path, bytes]]
     if args.format in export_igh.WRITERS:

@@ -6,10 +6,13 @@ from __future__ import annotations
 
 import re
 from pathlib import Path
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 from ecatcfg.errors import EcatcfgError, UsageError
 from ecatcfg.fileio import check_input, read_head
+
+if TYPE_CHECKING:
+    from ecatcfg.eni.plan import NetworkPlan
 
 # The root element's name after the XML declaration, comments and processing instructions
 # (a namespace prefix allowed).
@@ -77,6 +80,23 @@ def require_eni(path: str, esi_hint: str = "") -> None:
         if tag == "EtherCATInfo" else ""
     raise UsageError(f"not an ENI: the root element is <{tag}>{what}, expected "
                      "<EtherCATConfig>", path, line)
+
+
+def eni_for_output(eni: str, output: str, no_cache: bool, does: str
+                   ) -> tuple[NetworkPlan, Path]:
+    """What ``export`` and ``report`` start from: the ENI checked to be one (what else it
+    is, at which line, otherwise), the output path (``-``: standard output), never the ENI
+    itself, and the ENI's plan (through the plan cache unless ``no_cache``).  ``does``: what
+    the command does with the ENI, for the message ("exports", "reports on")."""
+    from ecatcfg.cli.paths import output_file
+    from ecatcfg.eni.cache import PlanCache, read_file
+    from ecatcfg.eni.reader import read_file as read_uncached
+
+    require_eni(eni)
+    out = output_file(output)
+    if out.resolve() == Path(eni).resolve():
+        raise UsageError(f"-o {output}: would replace the ENI it {does}")
+    return (read_uncached(eni) if no_cache else read_file(eni, cache=PlanCache())), out
 
 
 def no_esi_files(paths: list[str]) -> str:

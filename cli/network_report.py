@@ -43,22 +43,13 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
 
 
 def run(args: argparse.Namespace) -> int:
-    from pathlib import Path
 
-    from ecatcfg.cli.inputs import require_eni
-    from ecatcfg.cli.paths import output_file
+    from ecatcfg.cli.inputs import eni_for_output
     from ecatcfg.eni import report, report_devices
-    from ecatcfg.eni.cache import PlanCache, read_file
     from ecatcfg.eni.check import check_eni
-    from ecatcfg.eni.reader import read_file as read_uncached
     from ecatcfg.errors import UsageError
 
-    require_eni(args.eni)
-    out = output_file(args.output)
-    if out.resolve() == Path(args.eni).resolve():
-        raise UsageError(f"-o {args.output}: would replace the ENI it reports on")
-    plan = read_uncached(args.eni) if args.no_cache else \
-        read_file(args.eni, cache=PlanCache())
+    plan, out = eni_for_output(args.eni, args.output, args.no_cache, "reports on")
     findings = None
     library = None
     if args.esi:
