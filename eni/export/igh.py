@@ -42,11 +42,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ecatcfg.eni.export.steps import ExportError, SdoStep, soem_register
+from ecatcfg.eni.export.steps import ExportError, SdoStep, refuse_unexported, soem_register
 from ecatcfg.eni.plan import (CoeInitCmd, EoeInitCmd, FoeInitCmd, InitCmd, NetworkPlan,
                               PdoDesc, SlavePlan, SoeInitCmd, Variable)
-from ecatcfg.eni.source import copy_info_line, init_cmd_line
-from ecatcfg.eni.words import (coe_words, copy_words, eoe_words, foe_words, init_cmd_words,
+from ecatcfg.eni.source import init_cmd_line
+from ecatcfg.eni.words import (coe_words, eoe_words, foe_words, init_cmd_words,
                                soe_words)
 from ecatcfg.eoe import IpParameters
 from ecatcfg.errors import EcatcfgError
@@ -541,23 +541,9 @@ def igh_config(plan: NetworkPlan, file: str | Path) -> IghConfig:
     """The IgH configuration of the plan read from ``file``; raises :class:`ExportError`
     for what IgH cannot be told."""
     name = str(file)
-    if plan.unsupported:
-        u = plan.unsupported[0]
-        who = f"slave {u.slave!r}" if u.slave else "the master"
-        raise ExportError(f"{who}: {u.describe()} ({u.element}) is not implemented; "
-                          f"{len(plan.unsupported)} such part(s) in all", name, u.line)
-    for cyclic in plan.cyclic:
-        for frame in cyclic.frames:
-            for c in frame.cmds:
-                if c.copy_infos:
-                    # IgH's domains exchange process data with the slaves only: a copy from
-                    # one slave's inputs to another's outputs is the application's job.
-                    copy = c.copy_infos[0]
-                    words = copy_words(copy, plan.process_image.inputs,
-                                       plan.process_image.outputs)
-                    raise ExportError(f"the master: slave-to-slave copies (CopyInfos) are "
-                                      f"not exported for IgH: {words}", name,
-                                      copy_info_line(name, plan, copy))
+    # IgH's domains exchange process data with the slaves only: a copy from one slave's
+    # inputs to another's outputs is the application's job.
+    refuse_unexported(plan, name, "not exported for IgH")
     for cmd in plan.master.init_cmds:
         if cmd.ado is not None and not soem_register(cmd.ado, cmd.length) and \
                 cmd.cmd in REGISTER_WRITES:

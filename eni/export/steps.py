@@ -239,10 +239,10 @@ def _entries(variables: list[Variable], ranges: list[BitRange]) -> list[ImageEnt
     return out
 
 
-def slave_setups(plan: NetworkPlan, file: str | Path) -> list[SlaveSetup]:
-    """Each slave's set-up for a SOEM hook, from the plan read from ``file``; raises
-    :class:`ExportError` for what no hook can carry."""
-    name = str(file)
+def refuse_unexported(plan: NetworkPlan, name: str, copies: str) -> None:
+    """What no export carries, refused by name before anything is written: a part of the
+    ENI the reader kept as unsupported, and slave-to-slave copies (``copies``: how the
+    refusal words them for the target).  Each target's own limits come after."""
     if plan.unsupported:
         u = plan.unsupported[0]
         who = f"slave {u.slave!r}" if u.slave else "the master"
@@ -252,15 +252,22 @@ def slave_setups(plan: NetworkPlan, file: str | Path) -> list[SlaveSetup]:
         for frame in cyclic.frames:
             for c in frame.cmds:
                 if c.copy_infos:
-                    # SOEM's cycle (send/receive_processdata over its own IOmap) has no
-                    # place for them, and its working counter is the group's, not the
-                    # command's: the export would copy data the ENI calls invalid.
                     copy = c.copy_infos[0]
                     words = copy_words(copy, plan.process_image.inputs,
                                        plan.process_image.outputs)
                     raise ExportError(f"the master: slave-to-slave copies (CopyInfos) are "
-                                      f"not exported: {words}", name,
+                                      f"{copies}: {words}", name,
                                       copy_info_line(name, plan, copy))
+
+
+def slave_setups(plan: NetworkPlan, file: str | Path) -> list[SlaveSetup]:
+    """Each slave's set-up for a SOEM hook, from the plan read from ``file``; raises
+    :class:`ExportError` for what no hook can carry."""
+    name = str(file)
+    # Copies: SOEM's cycle (send/receive_processdata over its own IOmap) has no place for
+    # them, and its working counter is the group's, not the command's: the export would
+    # copy data the ENI calls invalid.
+    refuse_unexported(plan, name, "not exported")
     for cmd in plan.master.init_cmds:
         if cmd.ado is not None and not soem_register(cmd.ado, cmd.length) and \
                 cmd.cmd in REGISTER_WRITES:
