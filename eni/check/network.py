@@ -9,6 +9,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 from ecatcfg.eni.check.context import CheckContext
+from ecatcfg.eni.contents import ENCRYPTED_FMMU, UNMAPPED_FMMU
 from ecatcfg.eni.check.rules import declare
 from ecatcfg.eni.plan import (COPY_ELEMENT, BitRange, CoeInitCmd, EoeInitCmd, FoeInitCmd,
                               PdoDesc, SlavePlan, SmSettings, SoeInitCmd, register_writes)
@@ -75,8 +76,8 @@ SOE_TRANSITION = declare("ENI107", "warning", "an SoE InitCmd in a transition th
 
 def check(ctx: CheckContext) -> None:
     for item in ctx.plan.unsupported:
-        if item.element == COPY_ELEMENT:
-            continue                          # its own rule: ENI111 (eni/check/copies.py)
+        if item.element == COPY_ELEMENT or is_unmapped_fmmu(item.what):
+            continue           # their own rules: ENI111 (copies.py), ENI108 (fmmus.py)
         slave = next((s for s in ctx.plan.slaves if s.name == item.slave), None)
         ctx.add(UNSUPPORTED, item.line, item.describe(), slave)
     for slave in ctx.plan.slaves:
@@ -86,6 +87,12 @@ def check(ctx: CheckContext) -> None:
         _soe(ctx, slave)
     _overlaps(ctx)
     _frames(ctx)
+
+
+def is_unmapped_fmmu(what: str) -> bool:
+    """An unsupported item that is an FMMU setting outside every cyclic command: a fault
+    of the file (ENI108, eni/check/fmmus.py), not a part ecatcfg cannot do (ENI003)."""
+    return UNMAPPED_FMMU in what and ENCRYPTED_FMMU not in what
 
 
 def sm_records(slave: SlavePlan) -> dict[int, list[tuple[SmConfig, frozenset[Transition]]]]:

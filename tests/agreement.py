@@ -1,0 +1,128 @@
+"""Agreement 1 of issue 39: ``check`` reports an error if and only if ``apply --virtual`` of
+the same file fails, with the ESI files (the slaves emulated from their devices) and without
+(every slave emulated from the ENI alone).  Both run in this process: ``check_eni`` and
+``Network.virtual`` on an in-memory segment, each given the same :class:`Library`.
+
+A case is (ENI, fault class or None, seed); its verdict is ``agree`` or a disagreement, which
+is allowed only where the fault class says a slave takes it (``faults.Fault.slave_refuses``
+False, or "esi" without ESI): a fault in the master's process image that no slave can see
+(docs/show-diff-check.md, "What apply cannot see").
+"""
+
+from __future__ import annotations
+
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+from faults import FAULTS, plant
+
+from ecatcfg.eni.check import check_eni
+from ecatcfg.esc import AlState
+from ecatcfg.esi.library import Library
+
+CYCLES = 30
+
+
+@dataclass(frozen=True)
+class Outcome:
+    eni: str
+    fault: str | None
+    seed: int
+    with_esi: bool
+    check_errors: list[str]          # "line: RULE message"
+    apply_failure: str | None
+    expected_line: int | None = None
+    firmware: bool = True            # the planted slave has firmware (a mailbox)
+
+    @property
+    def check_says(self) -> bool:
+        return bool(self.check_errors)
+
+    @property
+    def apply_says(self) -> bool:
+        return self.apply_failure is not None
+
+    @property
+    def allowed_disagreement(self) -> bool:
+        """check errs where apply passes because no slave refuses this fault class."""
+        if self.fault is None or not self.check_says or self.apply_says:
+            return False
+        refuses = FAULTS[self.fault].slave_refuses
+        return (refuses is False or (refuses == "esi" and not self.with_esi)
+                or (refuses == "firmware" and not self.firmware))
+
+    @property
+    def agree(self) -> bool:
+        return self.check_says == self.apply_says or self.allowed_disagreement
+
+    @property
+    def at_line(self) -> bool:
+        """A planted fault's error names the planted element's line."""
+        return self.expected_line is None or any(
+            e.startswith(f"{self.expected_line}:") for e in self.check_errors)
+
+    def describe(self) -> str:
+        what = f"{self.eni} [{self.fault or 'unmodified'} seed {self.seed}, " \
+               f"{'with ESI' if self.with_esi else 'ENI only'}]"
+        return (f"{what}: check {'errors' if self.check_says else 'clean'}"
+                f"{' (' + '; '.join(self.check_errors[:3]) + ')' if self.check_errors else ''}"
+                f", apply {'fails: ' + str(self.apply_failure) if self.apply_says else 'reaches OP'}"
+                + (f"; expected an error at line {self.expected_line}"
+                   if not self.at_line else ""))
+
+
+def apply_failure(path: Path, library: Library | None) -> str | None:
+    """How ``apply --virtual`` of the file fails (None: it reached OP and cycled without a
+    working-counter error)."""
+    from ecatcfg.errors import EcatcfgError
+    from ecatcfg.runtime import Network
+    try:
+        net = Network.virtual(path, library, recovery=False)
+    except EcatcfgError as exc:
+        return str(exc).splitlines()[0]
+    try:
+        net.up(AlState.OP)
+        net.run(CYCLES)
+        stats = net.run_stats
+        if stats is not None and (stats.wkc_errors or stats.lost_frames):
+            return f"{stats.wkc_errors} working-counter error(s) in {stats.cycles} cycles"
+        return None
+    except EcatcfgError as exc:
+        return str(exc).splitlines()[0]
+    finally:
+        net.close()
+
+
+def run_case(data: bytes, eni: str, fault: str | None, seed: int,
+             library: Library | None, work: Path) -> Outcome | None:
+    """One case; None when the fault has no place in this file."""
+    from faults import line_of
+    expected, firmware = None, True
+    if fault is not None:
+        planted = plant(data, fault, seed)
+        if planted is None:
+            return None
+        data, where = planted
+        expected, firmware = line_of(data, where.path), where.firmware
+    path = work / "case.xml"
+    path.write_bytes(data)
+    result = check_eni(path, library, use_cache=False, shown="case.xml")
+    errors = [f"{f.line}: {f.rule} {f.message}" for f in result.findings
+              if f.severity == "error"]
+    return Outcome(eni, fault, seed, library is not None, errors,
+                   apply_failure(path, library), expected, firmware)
+
+
+def run_matrix(enis: dict[str, bytes], faults: list[str | None], seeds: list[int],
+               libraries: dict[bool, Library | None]) -> list[Outcome]:
+    out = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for eni, data in enis.items():
+            for fault in faults:
+                for seed in (seeds if fault is not None else [0]):
+                    for with_esi, library in libraries.items():
+                        case = run_case(data, eni, fault, seed, library, Path(tmp))
+                        if case is not None:
+                            out.append(case)
+    return out
