@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import random
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Literal
 
 from lxml import etree
@@ -41,9 +41,11 @@ LOGICAL = {10, 11, 12}                       # LRD, LWR, LRW (ETG.1000.4)
 @dataclass(frozen=True)
 class Planted:
     slave: str | None          # the slave's Info/Name (None: a cyclic command)
-    path: str                  # tree.getpath() of the element check must name
+    path: str                  # tree.getpath() of the element check must name ...
     what: str                  # in words, for messages
     firmware: bool = True      # the slave has a mailbox (else: ESC device emulation)
+    also: tuple[str, ...] = ()  # ... or of one of these (one fault, several elements)
+    identity: tuple[int, int, int] | None = None     # the slave's vendor, product, revision
 
 
 @dataclass(frozen=True)
@@ -168,12 +170,28 @@ def assign_missing(root: Root, rng: random.Random) -> Planted | None:
     return Planted(_name(slave), _path(cmd), f"assigns 0x{bogus:04X}")
 
 
+def _assigned(slave: Root) -> set[int]:
+    """The PDOs ProcessData/Sm lists or the CoE assignment downloads name."""
+    found = {number(p.text) for p in slave.iterfind("ProcessData/*/Pdo")}
+    for cmd in _coe(slave):
+        if number(cmd.findtext("Index")) in SM_ASSIGN:
+            data = _data(cmd)
+            start = 2 if _complete(cmd) and number(cmd.findtext("SubIndex")) == 0 else 0
+            if _complete(cmd) or number(cmd.findtext("SubIndex")) >= 1:
+                found |= {int.from_bytes(data[k:k + 2], "little")
+                          for k in range(start, len(data) - 1, 2)}
+    return found
+
+
 def _mapping_writes(root: Root) -> list[tuple[Root, Root]]:
+    """Downloads of one entry of an assigned PDO's mapping object."""
     found = []
     for slave in _slaves(root):
+        assigned = _assigned(slave)
         for cmd in _coe(slave):
             index, data = number(cmd.findtext("Index")), _data(cmd)
-            if (index in RX_MAPPING or index in TX_MAPPING) and not _complete(cmd) \
+            if (index in RX_MAPPING or index in TX_MAPPING) and index in assigned \
+                    and not _complete(cmd) \
                     and number(cmd.findtext("SubIndex")) >= 1 and len(data) == 4 \
                     and data[3] | data[2] and data[0] in (8, 16, 32):
                 found.append((slave, cmd))
@@ -397,7 +415,8 @@ def mailbox_size(root: Root, rng: random.Random) -> Planted | None:
     length = slave.find("Mailbox/Send/Length")
     assert length is not None
     length.text = "1000"
-    return Planted(_name(slave), _path(slave.find("Mailbox/Send")), "mailbox 1000 bytes")
+    return Planted(_name(slave), _path(slave.find("Mailbox/Send")), "mailbox 1000 bytes",
+                   also=tuple(_path(c) for c in sm0))
 
 
 FAULTS: dict[str, Fault] = {f.name: f for f in (
@@ -427,13 +446,15 @@ def plant(data: bytes, fault: str, seed: int) -> tuple[bytes, Planted] | None:
     if planted is None:
         return None
     owner = [s for s in _slaves(tree.getroot()) if _name(s) == planted.slave]
-    if owner and owner[0].find("Mailbox") is None:
-        planted = Planted(planted.slave, planted.path, planted.what, firmware=False)
+    if owner:
+        identity = tuple(number(owner[0].findtext(f"Info/{t}"))
+                         for t in ("VendorId", "ProductCode", "RevisionNo"))
+        planted = replace(planted, firmware=owner[0].find("Mailbox") is not None,
+                          identity=(identity[0], identity[1], identity[2]))
     return etree.tostring(tree, xml_declaration=True, encoding="UTF-8"), planted
 
 
-def line_of(data: bytes, path: str) -> int:
-    """The line of the element at ``path`` in the file ``data``."""
+def lines_of(data: bytes, planted: Planted) -> set[int]:
+    """The lines of the planted fault's elements in the file ``data``."""
     tree = etree.ElementTree(etree.fromstring(data))
-    [el] = tree.xpath(path)
-    return int(el.sourceline)
+    return {int(tree.xpath(p)[0].sourceline) for p in (planted.path, *planted.also)}

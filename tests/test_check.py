@@ -518,6 +518,11 @@ def test_cli_explain_list_and_usage_errors(tmp_path: Path) -> None:
 # PDOs and the PDO assignment that the exact-revision ESI (corpus esi/drives) marks
 # read-only and Fixed: the slave answers those downloads with abort 0x06010002.
 REAL_DEFECTS: dict[str, set[tuple[str, str]]] = {
+    # A Beremiz test ENI that lists the slaves only: no Mailbox for the Sanyo Denki RS2
+    # drive, whose ESI has SM0/SM1 mailboxes (MBoxOut at 0x1800): apply --virtual --esi of
+    # the file stops in INIT+ERR 0x0016, as the agreement test shows.
+    "corpus-extra/beremiz-tests/wago_sanyo/config.xml": {
+        ("ENI504", "the ENI sets up no mailbox, the device has one (SM0, ")},
     "corpus-extra/rocos-ecm-history/eni_sea.xml": {
         ("ENI302", "0x1C12:00, read-only"), ("ENI302", "0x1C12:01, read-only"),
         ("ENI302", "0x1C13:00, read-only"), ("ENI302", "0x1C13:01, read-only"),

@@ -6,8 +6,9 @@ once and checked against the ENI alone (``network.py``)."""
 
 from __future__ import annotations
 
+from ecatcfg.eni.check import pdo_state
 from ecatcfg.eni.check.context import CheckContext
-from ecatcfg.eni.check.network import sm_pdos
+from ecatcfg.eni.check.network import sm_pdos, sm_records
 from ecatcfg.eni.check.rules import declare
 from ecatcfg.eni.plan import CoeInitCmd, PdoDesc, SlavePlan
 from ecatcfg.eni.words import foe_words, soe_words
@@ -83,6 +84,14 @@ FOE = declare("ENI503", "error", "an FoE InitCmd for a device without FoE", """
     (unsupported protocol), and the transition fails.""")
 
 
+NO_MAILBOX = declare("ENI504", "error", "no mailbox for a device that has one", """
+    The slave has no Mailbox element and its InitCmds set neither SM0 nor SM1, but its
+    device's ESI has a mailbox (MBoxOut/MBoxIn SyncManagers).  A slave with a mailbox
+    checks its mailbox SyncManagers before PREOP and refuses it with AL status code 0x0016
+    (invalid mailbox configuration; SOES ESC_checkmbx); a partial ENI is completed from its
+    own Mailbox element only (eni/derive.py), never from the ESI.""")
+
+
 SOE_DRIVE = declare("ENI502", "error", "an SoE InitCmd the device cannot take", """
     The slave's ESI has no SoE in its mailbox (Mailbox/SoE), or the InitCmd's DriveNo is
     beyond the drives the ESI gives (Mailbox/SoE@ChannelCount; one drive, 0, without it).
@@ -98,6 +107,7 @@ def check(ctx: CheckContext, library: Library) -> None:
         if device.slots is None:      # modular devices: the PDOs come from their modules
             _pdos(ctx, slave, device)
         _coe(ctx, slave, device)
+        pdo_state.check_held_sizes(ctx, slave, lambda index: _esi_mapping(device, index))
         _dc(ctx, slave, device)
         _mailbox(ctx, slave, device)
         _soe(ctx, slave, device)
@@ -132,6 +142,15 @@ def _device(ctx: CheckContext, library: Library, slave: SlavePlan) -> Device | N
         ctx.add(IDENTITY, line, exc.message, slave)
         return None
     return library.device(entry)
+
+
+def _esi_mapping(device: Device, index: int) -> list[int] | None:
+    """PDO ``index`` of the device as mapping values, None when it has none."""
+    pdo = next((p for p in device.pdos if p.index == index), None)
+    if pdo is None:
+        return None
+    return [((e.index or 0) << 16 | ((e.subindex or 0) if e.index else 0) << 8
+             | (e.bit_len or 0)) for e in pdo.entries]
 
 
 def _esi_pdo(device: Device, pdo: PdoDesc) -> Pdo | None:
@@ -309,6 +328,12 @@ def _dc(ctx: CheckContext, slave: SlavePlan, device: Device) -> None:
 def _mailbox(ctx: CheckContext, slave: SlavePlan, device: Device) -> None:
     mb = slave.mailbox
     if mb is None:
+        boxes = [sm for sm in device.sms if sm.is_mailbox]
+        if boxes and not {0, 1} & set(sm_records(slave)):
+            ctx.add(NO_MAILBOX, ctx.lines.slave(slave),
+                    f"the ENI sets up no mailbox, the device has one (SM{boxes[0].number}, "
+                    f"{boxes[0].source.file}:{boxes[0].source.line}): the slave refuses "
+                    "PREOP with AL status code 0x0016", slave)
         return
     if device.mailbox is None or "FoE" not in device.mailbox.protocols:
         cmds = mb.foe_init_cmds

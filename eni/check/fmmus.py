@@ -185,8 +185,9 @@ def _sync_managers(ctx: CheckContext, slave: SlavePlan) -> None:
                     f"SM{n} ({kind}) is set with control byte 0x{sm.control:02X}: the master "
                     f"{said} it; a slave refuses SAFEOP with AL status code {code}", slave)
     areas = sorted((sm.start, sm.start + sm.length, n, p) for n, (sm, p) in enabled.items())
-    for (s0, e0, n0, _), (s1, e1, n1, p1) in zip(areas, areas[1:]):
+    for (s0, e0, n0, p0), (s1, e1, n1, _) in zip(areas, areas[1:]):
         if s1 < e0:
-            ctx.add(SM_OVERLAP, _line(ctx, slave, p1),
-                    f"SM{n1} (0x{s1:04X}..0x{e1 - 1:04X}) overlaps SM{n0} (0x{s0:04X}.."
-                    f"0x{e0 - 1:04X})", slave)
+            # Named at the one that reaches into the next: its length is the usual fault.
+            ctx.add(SM_OVERLAP, _line(ctx, slave, p0),
+                    f"SM{n0} (0x{s0:04X}..0x{e0 - 1:04X}) reaches into SM{n1} (0x{s1:04X}.."
+                    f"0x{e1 - 1:04X})", slave)

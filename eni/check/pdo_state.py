@@ -7,13 +7,15 @@ reads as a variable.  No ESI file is needed: the file is compared with itself.""
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 from ecatcfg.eni.check.context import CheckContext
 from ecatcfg.eni.check.network import sm_pdos, sm_records
 from ecatcfg.eni.check.rules import declare
-from ecatcfg.eni.pdo_held import HeldObject, pdo_objects_held
+from ecatcfg.eni.pdo_held import HeldObject, entry_size, pdo_objects_held
 from ecatcfg.eni.plan import PdoDesc, SlavePlan, SmSettings
 from ecatcfg.eni.words import mapping_entry
-from ecatcfg.esc import SM_PDO_ASSIGN, Transition
+from ecatcfg.esc import RX_PDO_MAPPING, SM_PDO_ASSIGN, SM_PDO_ASSIGN_RANGE, Transition
 
 ASSIGNMENT = declare("ENI205", "error", "the PDO assignment the CoE InitCmds leave is not "
                      "ProcessData's", """
@@ -35,13 +37,95 @@ MAPPING = declare("ENI206", "error", "a PDO mapping the CoE InitCmds leave is no
     differing entry.""")
 
 
+COUNT = declare("ENI207", "error", "a complete-access download's count is not its "
+                "entries", """
+    A CompleteAccess download of a PDO assignment or mapping object from subindex 0 carries
+    the count (subindex 0, in a 16-bit slot) and then the entries (ETG.1000.6 SDO complete
+    access).  A count larger than the entries it carries leaves the slave with entries the
+    download did not write; non-zero entries past the count are written but not used (a
+    count one short: the slave holds one PDO less than the SM length needs and refuses
+    SAFEOP, or aborts the download with 0x06070012 where the object has no room).""")
+HELD_SIZE = declare("ENI208", "error", "an SM length the PDOs the slave holds do not "
+                    "fill", """
+    The PDOs the slave's assignment object holds after the CoE InitCmds up to SAFEOP, with
+    their mappings (as downloaded, else as the ENI's ProcessData describes them, else as the
+    device's ESI does), take another number of bytes than the SyncManager's length the
+    InitCmds write: the slave refuses SAFEOP (AL status code 0x001D for outputs, 0x001E
+    for inputs; SOES ESC_checkSM23).  Judged where ProcessData names no PDO of that SM
+    (otherwise ENI205/ENI206 say it), with the device's ESI; an assigned PDO the ESI does not
+    have either is named as such.""")
+
+
 def check(ctx: CheckContext) -> None:
     for slave in ctx.plan.slaves:
-        if slave.mailbox is None or slave.process_data is None:
+        if slave.mailbox is None:
+            continue
+        _complete_counts(ctx, slave)
+        if slave.process_data is None:
             continue
         held = pdo_objects_held(slave.mailbox.coe_init_cmds)
         if held:
             _check_slave(ctx, slave, held)
+
+
+def _complete_counts(ctx: CheckContext, slave: SlavePlan) -> None:
+    cmds = slave.mailbox.coe_init_cmds if slave.mailbox is not None else []
+    for position, cmd in enumerate(cmds):
+        size = entry_size(cmd.index)
+        if cmd.disabled or cmd.ccs != 1 or not size or not cmd.complete_access \
+                or cmd.subindex != 0 or len(cmd.data) < 2:
+            continue
+        count = cmd.data[0]
+        carried = [int.from_bytes(cmd.data[k:k + size], "little")
+                   for k in range(2, len(cmd.data) - size + 1, size)]
+        if count > len(carried) or any(carried[count:]):
+            ctx.add(COUNT, _line(ctx, slave, (position, Transition.PS)),
+                    f"CompleteAccess download of 0x{cmd.index:04X} sets the count to {count}"
+                    f" and carries {len(carried)} entries", slave)
+
+
+def check_held_sizes(ctx: CheckContext, slave: SlavePlan,
+                     esi_entries: Callable[[int], list[int] | None]) -> None:
+    """With the device's ESI (``esi_entries``: a PDO's mapping values, None where the
+    device has no such PDO): each SM whose assignment the downloads write and whose PDOs
+    ProcessData does not name, against the SM length the InitCmds write (ENI208)."""
+    pd = slave.process_data
+    if slave.mailbox is None or pd is None:
+        return
+    held = pdo_objects_held(slave.mailbox.coe_init_cmds)
+    described = {p.index: p for p in pd.pdos}
+    lengths = {n: images[-1][0].length for n, images in sm_records(slave).items()}
+    named = {sm.number for sm in pd.sms if sm.pdos} | {p.sm for p in pd.pdos if p.sm is not None}
+    for index, obj in sorted(held.items()):
+        n = index - SM_PDO_ASSIGN
+        values = obj.values()
+        if index not in SM_PDO_ASSIGN_RANGE or values is None or n in named \
+                or None in values or n not in lengths:
+            continue
+        bits, unknown = 0, []
+        for pdo in values:
+            if not pdo:
+                continue
+            size = _bits(pdo, held, described)
+            if size is None:
+                mapping = esi_entries(pdo)
+                if mapping is None:
+                    unknown.append(pdo)
+                    continue
+                size = sum(v & 0xFF for v in mapping)
+            bits += size
+        where = obj.command(0)
+        if unknown:
+            ctx.add(HELD_SIZE, _line(ctx, slave, where),
+                    f"0x{index:04X} holds {_pdo_list(list(unknown))} after "
+                    f"{where[1].value if where else 'PS'}, which neither the ENI nor the "
+                    "device's ESI describes: the slave refuses SAFEOP", slave)
+        elif (bits + 7) // 8 != lengths[n]:
+            ctx.add(HELD_SIZE, _line(ctx, slave, where),
+                    f"0x{index:04X} holds {len(values)} PDO(s) after "
+                    f"{where[1].value if where else 'PS'} ({_pdo_list(list(values))}), "
+                    f"{(bits + 7) // 8} byte(s); SM{n} is set to {lengths[n]}: the slave "
+                    f"refuses SAFEOP", slave)
 
 
 def _line(ctx: CheckContext, slave: SlavePlan, written: tuple[int, Transition] | None
@@ -80,9 +164,17 @@ def _check_slave(ctx: CheckContext, slave: SlavePlan, held: dict[int, HeldObject
     described = {p.index: p for p in pd.pdos}
     lengths = {n: images[-1][0].length for n, images in sm_records(slave).items()}
     assigned: list[int] = []
-    for sm in pd.sms:
-        if sm.type not in ("Outputs", "Inputs"):
-            continue
+    sms = [sm for sm in pd.sms if sm.type in ("Outputs", "Inputs")]
+    known = {sm.number for sm in sms}
+    for index, obj in sorted(held.items()):
+        # An assignment the downloads write for an SM ProcessData has no Sm element for
+        # (the PDOs' Sm attribute says which are its): its type is its PDOs' direction.
+        values = obj.values() or []
+        n = index - SM_PDO_ASSIGN
+        if index in SM_PDO_ASSIGN_RANGE and n not in known and any(values):
+            rx = all(v in RX_PDO_MAPPING for v in values if v)
+            sms.append(SmSettings(n, "Outputs" if rx else "Inputs", 0, 0, True))
+    for sm in sms:
         listed = [p.index for p in sm_pdos(slave, sm)] or list(sm.pdos)
         obj = held.get(SM_PDO_ASSIGN + sm.number)
         values = obj.values() if obj is not None else None
@@ -90,8 +182,8 @@ def _check_slave(ctx: CheckContext, slave: SlavePlan, held: dict[int, HeldObject
             assigned += listed
             continue
         assigned += [v for v in values if v]
-        if values == listed:
-            continue
+        if values == listed or not listed:
+            continue                 # (ProcessData names no PDO of this SM: with ESI below)
         _assignment_differs(ctx, slave, sm, obj, values, listed, held, described,
                             lengths.get(sm.number))
     for index in assigned:
