@@ -12,7 +12,8 @@ from ecatcfg.eni.check.context import CheckContext
 from ecatcfg.eni.contents import ENCRYPTED_FMMU, UNMAPPED_FMMU
 from ecatcfg.eni.check.rules import declare
 from ecatcfg.eni.plan import (COPY_ELEMENT, BitRange, CoeInitCmd, EoeInitCmd, FoeInitCmd,
-                              PdoDesc, SlavePlan, SmSettings, SoeInitCmd, register_writes)
+                              PdoDesc, SlavePlan, SmSettings, SoeInitCmd, register_writes,
+                              register_writes_at)
 from ecatcfg.eni.words import soe_words
 from ecatcfg.esi.idn import ENI_TRANSITIONS
 from ecatcfg.esc import (FMMU_SIZE, LOGICAL_CMDS, SM_SIZE, AlState, Cmd, FmmuConfig,
@@ -239,16 +240,19 @@ def _overlaps(ctx: CheckContext) -> None:
                         f"ProcessData/{what} bits {b.bit_start}..{b.bit_start + b.bit_length - 1}"
                         f" overlap slave {sa.name!r}'s {a.bit_start}.."
                         f"{a.bit_start + a.bit_length - 1}", sb)
-    reads: list[tuple[int, int, SlavePlan]] = []
+    reads: list[tuple[int, int, SlavePlan, int]] = []
     for slave in ctx.plan.slaves:
-        for fmmu, _ in fmmu_records(slave):
-            if fmmu.type in (FmmuType.READ, FmmuType.READ_WRITE):
+        for _, record, _, position in register_writes_at(slave, Reg.FMMU0, FMMU_SIZE, 16):
+            fmmu = FmmuConfig.from_bytes(record)
+            if fmmu.active and fmmu.length and fmmu.type in (FmmuType.READ,
+                                                             FmmuType.READ_WRITE):
                 start = fmmu.logical_start * 8 + fmmu.logical_start_bit
-                reads.append((start, start + fmmu.bit_length, slave))
+                reads.append((start, start + fmmu.bit_length, slave, position))
     reads.sort(key=lambda r: r[0])
-    for (_, end0, first), (start1, _, second) in zip(reads, reads[1:]):
+    for (_, end0, first, _), (start1, _, second, position) in zip(reads, reads[1:]):
         if first is not second and start1 < end0:
-            ctx.add(OVERLAP, ctx.lines.slave(second),
+            ctx.add(OVERLAP, ctx.lines.listed(second, "InitCmds", position,
+                                              len(second.init_cmds)),
                     f"a read FMMU maps logical 0x{start1 // 8:08X}.{start1 % 8}, which slave "
                     f"{first.name!r}'s read FMMU maps too", second)
 
