@@ -24,6 +24,32 @@ from ecatcfg.esc import AlState
 from ecatcfg.esi.library import Library
 
 CYCLES = 30
+UNSUPPORTED_WORDS = "apply does not do"     # how apply refuses a part it does not do
+
+
+def _dictionary_gap(o: Outcome) -> bool:
+    return (o.with_esi and not o.check_says and any(" ENI301 " in w for w in o.check_warnings)
+            and any(code in str(o.apply_failure) for code in ("0x06020000", "0x06090011")))
+
+
+def _mailbox_default_size(o: Outcome) -> bool:
+    return (o.with_esi and not o.check_says and o.fault in (None, "mailbox-size")
+            and "0x0016" in str(o.apply_failure))
+
+
+# The disagreements that are limits, not bugs: (does it apply to the outcome, the reason).
+# docs/show-diff-check.md, "check and apply --virtual", names each with its reason.
+LIMITS: dict[str, tuple[Callable[[Outcome], bool], str]] = {
+    "esi-dictionary": (_dictionary_gap, """
+        A CoE InitCmd writes an object the device's ESI dictionary does not list: check warns
+        (ENI301; vendors' dictionaries are partial, the real slave's decides), the slave
+        emulated from that ESI has only the ESI's objects and aborts the download."""),
+    "mailbox-default-size": (_mailbox_default_size, """
+        A mailbox SyncManager length inside the ESI's MinSize..MaxSize but not its
+        DefaultSize: check accepts it as the Slave Stack Code does (ENI501 checks the
+        bounds), the emulated slave takes only the size its SII gives (al_checks.py,
+        SOES ESC_checkmbx) and refuses PREOP with 0x0016."""),
+}
 
 
 @dataclass(frozen=True)
@@ -34,6 +60,7 @@ class Outcome:
     with_esi: bool
     check_errors: list[str]          # "line: RULE message"
     check_unsupported: list[str]     # ENI003: parts apply does not do (warnings)
+    check_warnings: list[str]        # every other warning
     apply_failure: str | None
     expected_lines: frozenset[int] = frozenset()
     firmware: bool = True            # the planted slave has firmware (a mailbox)
@@ -60,16 +87,33 @@ class Outcome:
 
     @property
     def must_err(self) -> bool:
-        """check must report this planted fault: every class a slave refuses, every fault
-        of the image, and those only the ESI tells where the slave's device was given."""
-        if self.fault is None:
+        """check must report this planted fault at its line: every class a slave refuses,
+        every fault of the image, and those only the ESI tells where the slave refused.  A
+        file apply refuses as a whole (ENI003: encrypted FMMUs) is not judged further."""
+        if self.fault is None or (self.check_unsupported and self.apply_says
+                                  and UNSUPPORTED_WORDS in str(self.apply_failure)):
             return False
         refuses = FAULTS[self.fault].slave_refuses
-        return refuses != "esi" or self.device
+        return refuses != "esi" or self.apply_says
+
+    @property
+    def limit(self) -> str | None:
+        """The documented limit (LIMITS) that explains a disagreement, if one does."""
+        if self.agree:
+            return None
+        for name, (applies, _) in LIMITS.items():
+            if applies(self):
+                return name
+        return None
 
     @property
     def agree(self) -> bool:
         return self.check_says == self.apply_says or self.allowed_disagreement
+
+    @property
+    def explained(self) -> bool:
+        """Agrees, with the planted fault's error at its line, or is a documented limit."""
+        return (self.agree and self.at_line) or self.limit is not None
 
     @property
     def at_line(self) -> bool:
@@ -143,7 +187,9 @@ def run_case(data: bytes, eni: str, fault: str | None, seed: int,
               if f.severity == "error"]
     unsupported = [f"{f.line}: {f.rule} {f.message}" for f in result.findings
                    if f.rule == UNSUPPORTED]
-    return Outcome(eni, fault, seed, library is not None, errors, unsupported,
+    warnings = [f"{f.line}: {f.rule} {f.message}" for f in result.findings
+                if f.severity != "error" and f.rule != UNSUPPORTED]
+    return Outcome(eni, fault, seed, library is not None, errors, unsupported, warnings,
                    apply_failure(path, library), expected, firmware, device)
 
 

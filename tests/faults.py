@@ -183,19 +183,35 @@ def _assigned(slave: Root) -> set[int]:
     return found
 
 
-def _mapping_writes(root: Root) -> list[tuple[Root, Root]]:
-    """Downloads of one entry of an assigned PDO's mapping object."""
+def _mapping_writes(root: Root) -> list[tuple[Root, Root, int]]:
+    """(slave, download, byte offset) of each entry of an assigned PDO's mapping object a
+    download writes: one entry's own download (offset 0), or an entry inside a
+    CompleteAccess download from subindex 0 (2 bytes of count, then 4 per entry)."""
     found = []
     for slave in _slaves(root):
         assigned = _assigned(slave)
         for cmd in _coe(slave):
             index, data = number(cmd.findtext("Index")), _data(cmd)
-            if (index in RX_MAPPING or index in TX_MAPPING) and index in assigned \
-                    and not _complete(cmd) \
-                    and number(cmd.findtext("SubIndex")) >= 1 and len(data) == 4 \
-                    and data[3] | data[2] and data[0] in (8, 16, 32):
-                found.append((slave, cmd))
+            if not (index in RX_MAPPING or index in TX_MAPPING) or index not in assigned:
+                continue
+            sub = number(cmd.findtext("SubIndex"))
+            if not _complete(cmd) and sub >= 1 and len(data) == 4:
+                offsets = [0]
+            elif _complete(cmd) and sub == 0 and data:
+                offsets = [2 + 4 * k for k in range(data[0]) if 2 + 4 * k + 4 <= len(data)]
+            else:
+                continue
+            for off in offsets:
+                entry = data[off:off + 4]
+                if entry[3] | entry[2] and entry[0] in (8, 16, 32):
+                    found.append((slave, cmd, off))
     return found
+
+
+def _change_entry(cmd: Root, offset: int, entry: bytes) -> None:
+    data = bytearray(_data(cmd))
+    data[offset:offset + 4] = entry
+    _set_data(cmd, bytes(data))
 
 
 def mapping_size(root: Root, rng: random.Random) -> Planted | None:
@@ -205,36 +221,37 @@ def mapping_size(root: Root, rng: random.Random) -> Planted | None:
     found = _mapping_writes(root)
     if not found:
         return None
-    slave, cmd = rng.choice(found)
-    data = bytearray(_data(cmd))
-    data[0] = 16 if data[0] == 32 else data[0] * 2
-    _set_data(cmd, bytes(data))
-    return Planted(_name(slave), _path(cmd), f"maps {data[0]} bits")
+    slave, cmd, off = rng.choice(found)
+    entry = bytearray(_data(cmd)[off:off + 4])
+    entry[0] = 16 if entry[0] == 32 else entry[0] * 2
+    _change_entry(cmd, off, bytes(entry))
+    return Planted(_name(slave), _path(cmd), f"maps {entry[0]} bits")
 
 
 def mapping_names_other(root: Root, rng: random.Random) -> Planted | None:
-    """A CoE mapping download of another object of the same size than ProcessData names:
-    the slave takes it (the sizes fit), the master reads one variable where the slave puts
-    another."""
+    """A CoE mapping download of another subindex of the same object, of the same size, than
+    ProcessData names: the slave takes it (the sizes fit), the master reads one variable
+    where the slave puts another."""
     found = _mapping_writes(root)
     if not found:
         return None
-    slave, cmd = rng.choice(found)
-    data = bytearray(_data(cmd))
-    data[1] ^= 0x01                    # another subindex of the same object
-    _set_data(cmd, bytes(data))
-    return Planted(_name(slave), _path(cmd), f"maps subindex {data[1]}")
+    slave, cmd, off = rng.choice(found)
+    entry = bytearray(_data(cmd)[off:off + 4])
+    entry[1] ^= 0x01
+    _change_entry(cmd, off, bytes(entry))
+    return Planted(_name(slave), _path(cmd), f"maps subindex {entry[1]}")
 
 
 def not_mappable(root: Root, rng: random.Random) -> Planted | None:
     """A CoE mapping download that maps 0x1018:01 (identity: vendor id), which no
     dictionary lets a PDO map (ETG.1000.6 0x1018 is a constant); the slave aborts the
-    download (0x06040041) or refuses SAFEOP."""
-    found = [(s, c) for s, c in _mapping_writes(root) if _data(c)[0] == 32]
+    download (0x06040041) or refuses SAFEOP.  From the ENI alone the object is whatever
+    the ENI says: only a device known from its ESI refuses it."""
+    found = [(s, c, o) for s, c, o in _mapping_writes(root) if _data(c)[o] == 32]
     if not found:
         return None
-    slave, cmd = rng.choice(found)
-    _set_data(cmd, bytes([32, 1, 0x18, 0x10]))
+    slave, cmd, off = rng.choice(found)
+    _change_entry(cmd, off, bytes([32, 1, 0x18, 0x10]))
     return Planted(_name(slave), _path(cmd), "maps 0x1018:01")
 
 
@@ -393,7 +410,8 @@ def sync0_fast(root: Root, rng: random.Random) -> Planted | None:
     cycle = slave.find("DC/CycleTime0")
     assert cycle is not None
     cycle.text = "20000"
-    return Planted(_name(slave), _path(cycle), "SYNC0 20 µs")
+    return Planted(_name(slave), _path(cycle), "SYNC0 20 µs",
+                   also=(_path(slave.find("DC")), *map(_path, writes)))
 
 
 def mailbox_size(root: Root, rng: random.Random) -> Planted | None:
