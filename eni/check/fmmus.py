@@ -50,6 +50,9 @@ SM_OVERLAP = declare("ENI120", "error", "two SyncManagers' areas overlap", """
 # The ESC's process data RAM starts at 0x1000 (ESC Section I, address space); an FMMU below
 # maps a register (a mailbox FMMU over SM1's status byte 0x080D), not process data.
 _PROCESS_MEMORY = 0x1000
+# A logical cyclic command: logical start, length, image offset of its input data, reads?,
+# image offset of its output data, writes? (offsets in bytes of the image).
+Window = tuple[int, int, int, bool, int, bool]
 _UP = (Transition.IP, Transition.PS, Transition.SO)
 _INPUT_CMDS = (Cmd.LRD, Cmd.LRW)
 _OUTPUT_CMDS = (Cmd.LWR, Cmd.LRW)
@@ -74,7 +77,7 @@ def _going_up(transitions: frozenset[Transition]) -> bool:
     return any(t in _UP for t in transitions)
 
 
-def _windows(ctx: CheckContext) -> list[tuple[int, int, int, bool, int, int]]:
+def _windows(ctx: CheckContext) -> list[Window]:
     """(logical start, length, image offset of the inputs, reads?, image offset of the
     outputs, writes?) of each logical cyclic command, the offsets in bytes of the image."""
     out = []
@@ -91,7 +94,7 @@ def _windows(ctx: CheckContext) -> list[tuple[int, int, int, bool, int, int]]:
 
 
 def _image_bits(fmmu: FmmuConfig, reads: bool,
-                windows: list[tuple[int, int, int, bool, int, int]]) -> set[int] | None:
+                windows: list[Window]) -> set[int] | None:
     """The image bits (inputs for a read FMMU, outputs for a write one) the FMMU maps; None
     when a byte of it is in no command of that direction (ENI108 says so)."""
     bits: set[int] = set()
@@ -109,7 +112,7 @@ def _image_bits(fmmu: FmmuConfig, reads: bool,
 
 
 def _bits(ctx: CheckContext, slave: SlavePlan,
-          windows: list[tuple[int, int, int, bool, int, int]]) -> None:
+          windows: list[Window]) -> None:
     pd = slave.process_data
     if pd is None or not windows:
         return

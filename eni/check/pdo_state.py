@@ -169,33 +169,33 @@ def _check_slave(ctx: CheckContext, slave: SlavePlan, held: dict[int, HeldObject
     for index, obj in sorted(held.items()):
         # An assignment the downloads write for an SM ProcessData has no Sm element for
         # (the PDOs' Sm attribute says which are its): its type is its PDOs' direction.
-        values = obj.values() or []
+        written = obj.values() or []
         n = index - SM_PDO_ASSIGN
-        if index in SM_PDO_ASSIGN_RANGE and n not in known and any(values):
-            rx = all(v in RX_PDO_MAPPING for v in values if v)
+        if index in SM_PDO_ASSIGN_RANGE and n not in known and any(written):
+            rx = all(v in RX_PDO_MAPPING for v in written if v)
             sms.append(SmSettings(n, "Outputs" if rx else "Inputs", 0, 0, True))
     for sm in sms:
         listed = [p.index for p in sm_pdos(slave, sm)] or list(sm.pdos)
-        obj = held.get(SM_PDO_ASSIGN + sm.number)
-        values = obj.values() if obj is not None else None
-        if obj is None or values is None:
+        assignment = held.get(SM_PDO_ASSIGN + sm.number)
+        pdos = assignment.values() if assignment is not None else None
+        if assignment is None or pdos is None:
             assigned += listed
             continue
-        assigned += [v for v in values if v]
-        if values == listed or not listed:
+        assigned += [v for v in pdos if v]
+        if pdos == listed or not listed:
             continue                 # (ProcessData names no PDO of this SM: with ESI below)
-        _assignment_differs(ctx, slave, sm, obj, values, listed, held, described,
+        _assignment_differs(ctx, slave, sm, assignment, pdos, listed, held, described,
                             lengths.get(sm.number))
     for index in assigned:
         desc = described.get(index)
-        obj = held.get(index)
-        values = obj.values() if obj is not None else None
-        if desc is None or obj is None or values is None:
+        mapping = held.get(index)
+        entries = mapping.values() if mapping is not None else None
+        if desc is None or mapping is None or entries is None:
             continue
         want = _entries(desc)
-        if values == want:
+        if entries == want:
             continue
-        _mapping_differs(ctx, slave, obj, values, want, desc)
+        _mapping_differs(ctx, slave, mapping, entries, want, desc)
 
 
 def _assignment_differs(ctx: CheckContext, slave: SlavePlan, sm: SmSettings,
