@@ -94,7 +94,7 @@ class Outcome:
                                   and UNSUPPORTED_WORDS in str(self.apply_failure)):
             return False
         refuses = FAULTS[self.fault].slave_refuses
-        return refuses != "esi" or self.apply_says
+        return refuses != "esi" or (self.device and self.apply_says)
 
     @property
     def limit(self) -> str | None:

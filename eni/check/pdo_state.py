@@ -184,6 +184,12 @@ def _check_slave(ctx: CheckContext, slave: SlavePlan, held: dict[int, HeldObject
         assigned += [v for v in pdos if v]
         if pdos == listed or not listed:
             continue                 # (ProcessData names no PDO of this SM: with ESI below)
+
+        def carrying(indices: list[int | None]) -> list[int | None]:
+            # A PDO without entries moves no bit: neither the slave nor the image sees it.
+            return [i for i in indices if i is None or _bits(i, held, described) != 0]
+        if carrying(pdos) == carrying(list(listed)):
+            continue
         _assignment_differs(ctx, slave, sm, assignment, pdos, listed, held, described,
                             lengths.get(sm.number))
     for index in assigned:
