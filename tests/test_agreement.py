@@ -104,3 +104,15 @@ def test_an_outcome_is_judged_by_its_class() -> None:
     elsewhere = Outcome("x.xml", "assign-short", 1, True, ["7: ENI205 m"], [], [], "0x001D",
                         frozenset({5}))
     assert elsewhere.agree and not elsewhere.explained
+
+
+def test_a_refusal_read_without_its_code_is_not_called_no_error() -> None:
+    """The apply side of the matrix found it: an ENI whose state check reads AL status
+    0x0130 alone (2 bytes; rocos-ethercat eni1.xml) made a refusal read "AL status code
+    0x0000 (no error)".  The code register (0x0134) was not read: nothing is guessed."""
+    from ecatcfg.runtime.master.replay import _refused
+    short = _refused(bytes([0x12, 0x00]), "drive", "check device state for SAFEOP")
+    assert "0x0000" not in str(short) and "does not read the AL status code" in str(short)
+    assert short.al_code is None
+    full = _refused(bytes([0x12, 0, 0, 0, 0x35, 0]), "drive", "check device state for SAFEOP")
+    assert "AL status code 0x0035" in str(full) and full.al_code == 0x35
