@@ -437,6 +437,26 @@ def mailbox_size(root: Root, rng: random.Random) -> Planted | None:
                    also=tuple(_path(c) for c in sm0))
 
 
+def watchdog(root: Root, rng: random.Random) -> Planted | None:
+    """The SM watchdog time (0x0420) set to 1 unit (100 µs with the default divider) on a
+    slave whose output SM has its watchdog on: it expires between two frames of any
+    cycle of the corpus, and a slave with firmware leaves OP with 0x001B (ESC Section II;
+    a device without firmware only clears its output pins)."""
+    found = []
+    for slave in _slaves(root):
+        watched = any(n >= 2 and _data(c)[4] & 0x4C == 0x44 and _data(c)[6] & 1
+                      for c, n in _registers(slave, SM_ADO, 8))
+        writes = [c for c in slave.iterfind("InitCmds/InitCmd")
+                  if number(c.findtext("Ado")) == 0x0420 and len(_data(c)) == 2]
+        if watched and writes:
+            found.append((slave, writes[-1]))
+    if not found:
+        return None
+    slave, cmd = rng.choice(found)
+    _set_data(cmd, (1).to_bytes(2, "little"))
+    return Planted(_name(slave), _path(cmd), "SM watchdog 1 unit")
+
+
 FAULTS: dict[str, Fault] = {f.name: f for f in (
     Fault("assign-short", assign_short, True),
     Fault("assign-missing", assign_missing, True),
@@ -452,6 +472,7 @@ FAULTS: dict[str, Fault] = {f.name: f for f in (
     Fault("wrong-cnt", wrong_cnt, False),
     Fault("sync0-fast", sync0_fast, "esi"),
     Fault("mailbox-size", mailbox_size, "esi"),
+    Fault("watchdog", watchdog, "firmware"),
 )}
 
 

@@ -272,6 +272,18 @@ def _axis1_sm3_from_the_esi(root: Root) -> None:
     cmd.find("Data").text = data.hex()
 
 
+def _axis1_watchdog_1(root: Root) -> None:
+    """An InitCmd that sets axis1's SM watchdog (0x0420) to 1 unit: 100 µs with the divider
+    after reset (0x09C2: 2500 × 40 ns), under the example's 1000 µs cycle; its SM2 control
+    byte 0x64 has the watchdog on (bit 6)."""
+    before = _init_cmd(_slave(root, "axis1"), "set sm 2 (outputs)")
+    cmd = etree.fromstring(
+        "<InitCmd><Transition>IP</Transition><Comment>set SM watchdog</Comment>"
+        "<Requires>cycle</Requires><Cmd>5</Cmd><Adp>1005</Adp><Ado>1056</Ado>"
+        "<Data>0100</Data><Retries>3</Retries></InitCmd>")
+    before.addprevious(cmd)
+
+
 def _axis1_without_mailbox(root: Root) -> None:
     axis = _slave(root, "axis1")
     axis.remove(axis.find("Mailbox"))
@@ -316,6 +328,8 @@ DEFECTS: list[tuple[str, Callable[[Root], None], list[str]]] = [
                                     "logical 0x10000002.4"]),
     ("ENI110", _axis1_sm2_read, ["axis1", "SM2 (Outputs) is set with control byte 0x60",
                                  "the master reads it", "0x001D"]),
+    ("ENI121", _axis1_watchdog_1,
+     ["axis1", "SM watchdog 100 µs (1 × 100000 ns)", "the cycle 1000 µs", "0x001B"]),
     ("ENI120", _mailbox_512, ["axis1", "SM0 (0x1000..0x11FF) reaches into SM1 "
                                        "(0x1080..0x10FF)"]),
     ("ENI205", _1c13_count_1, ["0x1C13 holds 1 PDO(s) after PS (0x1A00)",

@@ -13,8 +13,9 @@ from ecatcfg.eni.check.rules import declare
 from ecatcfg.eni.check.network import is_unmapped_fmmu
 from ecatcfg.eni.plan import SlavePlan, register_writes_at
 from ecatcfg.esc import (FMMU_SIZE, SM_DIR_ECAT_READS, SM_DIR_ECAT_WRITES, SM_DIR_MASK,
-                         SM_MODE_MAILBOX, SM_MODE_MASK, SM_SIZE, Cmd, FmmuConfig, FmmuType,
-                         Reg, SmConfig, Transition)
+                         SM_MODE_MAILBOX, SM_MODE_MASK, SM_SIZE, SM_WATCHDOG_ENABLE,
+                         WATCHDOG_DIVIDER_DEFAULT, Cmd, FmmuConfig, FmmuType, Reg, SmConfig,
+                         Transition, watchdog_base_ns)
 
 OUTSIDE = declare("ENI108", "error", "an FMMU outside every cyclic command", """
     An FMMU the slave's InitCmds set maps logical addresses (start + length) that no
@@ -58,15 +59,57 @@ _INPUT_CMDS = (Cmd.LRD, Cmd.LRW)
 _OUTPUT_CMDS = (Cmd.LWR, Cmd.LRW)
 
 
+WATCHDOG = declare("ENI121", "error", "an SM watchdog shorter than the cycle", """
+    A slave's output SyncManager has its watchdog on (control byte bit 6) and the SM
+    watchdog time the InitCmds set (0x0420 × (divider 0x0400 + 2) × 40 ns; ESC Section II)
+    is not longer than the shortest cycle of the ENI (Cyclic/CycleTime, else the slave's
+    DC CycleTime0): the watchdog
+    expires between two output frames.  A slave with firmware then leaves OP for
+    SAFEOP+ERR with AL status code 0x001B (sync manager watchdog) and clears its outputs;
+    one without firmware clears its output pins.""")
+
+
 def check(ctx: CheckContext) -> None:
     for item in ctx.plan.unsupported:
         if is_unmapped_fmmu(item.what):
             slave = next((s for s in ctx.plan.slaves if s.name == item.slave), None)
             ctx.add(OUTSIDE, item.line, item.what, slave)
     windows = _windows(ctx)
+    cycles = [c.cycle_time for c in ctx.plan.cyclic if c.cycle_time]
     for slave in ctx.plan.slaves:
         _bits(ctx, slave, windows)
         _sync_managers(ctx, slave)
+        # The cycle: the ENI's Cyclic/CycleTime, else the slave's DC SYNC0 cycle.
+        dc = slave.dc.cycle_time0 // 1000 if slave.dc is not None else 0
+        if cycles or dc:
+            _watchdog(ctx, slave, min(cycles) if cycles else dc)
+
+
+def _last_word(slave: SlavePlan, register: int) -> tuple[int, int] | None:
+    """The last value (and command position) the InitCmds write to a 16-bit register."""
+    found = None
+    for _, record, _, position in register_writes_at(slave, register, 2, 1):
+        found = (int.from_bytes(record, "little"), position)
+    return found
+
+
+def _watchdog(ctx: CheckContext, slave: SlavePlan, cycle_us: int) -> None:
+    watched = [SmConfig.from_bytes(r) for n, r, t, _ in
+               register_writes_at(slave, Reg.SM0, SM_SIZE, 16) if n >= 2 and _going_up(t)]
+    if not any(sm.enable and sm.length and sm.control & SM_WATCHDOG_ENABLE
+               and sm.control & SM_DIR_MASK == SM_DIR_ECAT_WRITES for sm in watched):
+        return
+    units = _last_word(slave, Reg.WATCHDOG_SM)
+    if units is None:
+        return                       # the ESC's own 100 ms: not set by this file
+    divider = _last_word(slave, Reg.WATCHDOG_DIVIDER)
+    base = watchdog_base_ns(divider[0] if divider else WATCHDOG_DIVIDER_DEFAULT)
+    limit_ns = units[0] * base
+    if units[0] and limit_ns <= cycle_us * 1000:
+        ctx.add(WATCHDOG, _line(ctx, slave, units[1]),
+                f"SM watchdog {limit_ns / 1000:g} µs ({units[0]} × {base} ns), the cycle "
+                f"{cycle_us} µs: it expires between two output frames; the slave leaves "
+                "OP with AL status code 0x001B", slave)
 
 
 def _line(ctx: CheckContext, slave: SlavePlan, position: int) -> int | None:
