@@ -130,6 +130,30 @@ def _pick(rng: random.Random, items: list[Root]) -> Root | None:
 
 # -- PDO assignment and mapping over CoE -------------------------------------------------
 
+def _last_assigned(slave: Root, count_cmd: Root) -> int | None:
+    """The PDO a count download's last entry names (the one a count one short drops)."""
+    index, data = number(count_cmd.findtext("Index")), _data(count_cmd)
+    if _complete(count_cmd):
+        k = 2 + 2 * (data[0] - 1)
+        return int.from_bytes(data[k:k + 2], "little") if k + 2 <= len(data) else None
+    for cmd in _coe(slave):
+        if number(cmd.findtext("Index")) == index \
+                and number(cmd.findtext("SubIndex")) == data[0] and len(_data(cmd)) == 2:
+            return int.from_bytes(_data(cmd), "little")
+    return None
+
+
+def _carries(slave: Root, pdo: int | None) -> bool:
+    """Whether PDO ``pdo`` moves data, as far as the ENI says (a PDO it does not describe
+    is taken to): dropping an empty one changes nothing a slave or check could see."""
+    if pdo is None:
+        return True
+    for desc in slave.iterfind("ProcessData/*"):
+        if desc.tag in ("RxPdo", "TxPdo") and number(desc.findtext("Index")) == pdo:
+            return any(number(e.findtext("BitLen")) for e in desc.iterfind("Entry"))
+    return True
+
+
 def assign_short(root: Root, rng: random.Random) -> Planted | None:
     """The PDO assignment's count one short (4 PDOs where SM2's length needs 5): the slave
     checks the SM length against the PDOs assigned and refuses SAFEOP with 0x001D/0x001E
@@ -139,7 +163,7 @@ def assign_short(root: Root, rng: random.Random) -> Planted | None:
         for cmd in _coe(slave):
             index, data = number(cmd.findtext("Index")), _data(cmd)
             if index in SM_ASSIGN and number(cmd.findtext("SubIndex")) == 0 and data \
-                    and data[0] >= 2:
+                    and data[0] >= 2 and _carries(slave, _last_assigned(slave, cmd)):
                 found.append((slave, cmd))
     if not found:
         return None
