@@ -472,8 +472,8 @@ def register_writes(slave: SlavePlan, first: int, size: int,
     FMMUs) the slave's InitCmds write, in ENI order, with the transitions of the write:
     one write of several records (SM0 and SM1 in 16 bytes) counts for each."""
     out: dict[int, list[tuple[bytes, frozenset[Transition]]]] = {}
-    for n, record, transitions, _ in register_writes_at(slave, first, size, count):
-        out.setdefault(n, []).append((record, transitions))
+    for n, data, transitions, _ in register_writes_at(slave, first, size, count):
+        out.setdefault(n, []).append((data, transitions))
     return out
 
 
@@ -488,6 +488,6 @@ def register_writes_at(slave: SlavePlan, first: int, size: int, count: int
         for n in range(count):
             start = first + size * n
             if cmd.ado <= start and start + size <= cmd.ado + len(cmd.data):
-                record = cmd.data[start - cmd.ado:start - cmd.ado + size]
-                out.append((n, record, frozenset(cmd.transitions), position))
+                data = cmd.data[start - cmd.ado:start - cmd.ado + size]
+                out.append((n, data, frozenset(cmd.transitions), position))
     return out
