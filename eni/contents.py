@@ -565,6 +565,11 @@ def _foe_not_read_requests(config: Element) -> list[tuple[Element, Unsupported]]
 
 # Logical commands (ETG.1000.4): the windows an FMMU's logical range must fall in.
 _FMMU_FIRST, _FMMU_END, _FMMU_SIZE = 0x0600, 0x0700, 16
+# The words of an FMMU setting outside every cyclic command, and of one EC-Engineer
+# encrypted (``check`` tells the first, a fault of the file, from the second, which ecatcfg
+# cannot read: eni/check/fmmus.py).
+UNMAPPED_FMMU = "which no cyclic command covers"
+ENCRYPTED_FMMU = "(encrypted: EncryptedEtherCATConfig, ecatcfg cannot decrypt it)"
 
 
 def _unmapped_fmmus(config: Element) -> list[tuple[Element, Unsupported]]:

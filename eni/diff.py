@@ -43,8 +43,8 @@ from ecatcfg.eni.words import (coe_words, command_name, copy_words, eoe_words, f
                                init_cmd_words, mapping_entry, soe_words)
 from ecatcfg.esi.idn import idn_text
 from ecatcfg.esi.datatypes import canonical
-from ecatcfg.esc import (LOGICAL_CMDS, RX_PDO_MAPPING, SM_PDO_ASSIGN_RANGE, TX_PDO_MAPPING,
-                         Transition, array_downloads)
+from ecatcfg.eni.pdo_held import entry_size
+from ecatcfg.esc import LOGICAL_CMDS, Transition, array_downloads
 from ecatcfg.record import record
 
 
@@ -148,11 +148,7 @@ def _process_data(name: str, a: SlavePlan, b: SlavePlan) -> list[Change]:
     return out
 
 
-def _is_array_object(index: int) -> int:
-    """The entry size of a PDO assignment (2) or mapping (4) object, 0 for any other."""
-    if index in SM_PDO_ASSIGN_RANGE:
-        return 2
-    return 4 if index in RX_PDO_MAPPING or index in TX_PDO_MAPPING else 0
+_is_array_object = entry_size      # the entry size of a PDO object (eni/pdo_held.py)
 
 
 def _coe_state(cmds: Iterable[CoeInitCmd]) -> dict[tuple[int, int | None], str]:

@@ -482,12 +482,22 @@ def register_writes(slave: SlavePlan, first: int, size: int,
     FMMUs) the slave's InitCmds write, in ENI order, with the transitions of the write:
     one write of several records (SM0 and SM1 in 16 bytes) counts for each."""
     out: dict[int, list[tuple[bytes, frozenset[Transition]]]] = {}
-    for cmd in slave.init_cmds:
+    for n, data, transitions, _ in register_writes_at(slave, first, size, count):
+        out.setdefault(n, []).append((data, transitions))
+    return out
+
+
+def register_writes_at(slave: SlavePlan, first: int, size: int, count: int
+                       ) -> list[tuple[int, bytes, frozenset[Transition], int]]:
+    """:func:`register_writes` in ENI order as (n, record, transitions, position of the
+    command in ``slave.init_cmds``): where a finding about the record points."""
+    out: list[tuple[int, bytes, frozenset[Transition], int]] = []
+    for position, cmd in enumerate(slave.init_cmds):
         if cmd.cmd not in REGISTER_WRITES or cmd.ado is None or not cmd.data:
             continue
         for n in range(count):
             start = first + size * n
             if cmd.ado <= start and start + size <= cmd.ado + len(cmd.data):
-                record = cmd.data[start - cmd.ado:start - cmd.ado + size]
-                out.setdefault(n, []).append((record, frozenset(cmd.transitions)))
+                data = cmd.data[start - cmd.ado:start - cmd.ado + size]
+                out.append((n, data, frozenset(cmd.transitions), position))
     return out

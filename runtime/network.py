@@ -273,10 +273,10 @@ class Network:
                        if st is not None and st.error]
         elif exc.al_code and exc.slave is not None:
             refused = [(s, exc.al_code) for s in master.slaves if s.name == exc.slave]
-        elif exc.al_code == 0 and exc.slave is not None:
-            # A refusal whose code the ENI's state check did not read (it reads 0x0130
-            # alone, or a broadcast whose answer is another slave's): the codes are read
-            # now, as for slaves that did not reach their state.
+        elif exc.al_code in (0, None) and exc.slave is not None:
+            # A refusal whose code the ENI's state check did not read (None: it reads
+            # 0x0130 alone) or read as 0 (a broadcast whose answer is another slave's):
+            # the codes are read now, as for slaves that did not reach their state.
             states = master.read_states()
             refused = [(s, st.code) for s, st in zip(master.slaves, states)
                        if st is not None and st.error and st.code]

@@ -209,6 +209,90 @@ def _unreadable_fmmu(root: Root) -> None:
     cmd.find("Data").text = data.hex()
 
 
+def _encrypted_fmmu(root: Root) -> None:
+    """As EC-Engineer writes an encrypted configuration: the root is
+    EncryptedEtherCATConfig, the FMMU's logical address unreadable."""
+    _unreadable_fmmu(root)
+    root.tag = "EncryptedEtherCATConfig"
+
+
+def _ca_data(slave: str, comment: str, data: str) -> Callable[[Root], None]:
+    """The Data of one of ``slave``'s CoE InitCmds (by its Comment) replaced."""
+    def change(root: Root) -> None:
+        [cmd] = _slave(root, slave).xpath(f"Mailbox/CoE/InitCmds/InitCmd[Comment='{comment}']")
+        cmd.find("Data").text = data
+    change.__name__ = f"_{comment.replace(' ', '_')}"
+    return change
+
+
+# axis1's CompleteAccess downloads: 0x1C13 = 2: 0x1A00, 0x1A01 with a count of 1; 0x1C12 =
+# 1: 0x16FF (no such PDO); 0x1A01's third entry 0x606C:00 with 16 bits instead of 32.
+_1c13_count_1 = _ca_data("axis1", "download pdo 0x1C13 index", "0100001a011a")
+_1c12_16ff = _ca_data("axis1", "download pdo 0x1C12 index", "0100ff16")
+_1a01_606c_16_bit = _ca_data("axis1", "download pdo 0x1A01 entries",
+                             "0300100041602000646010006c60")
+
+
+def _register(slave: str, comment: str, change: Callable[[bytearray], None]
+              ) -> Callable[[Root], None]:
+    def apply(root: Root) -> None:
+        cmd = _init_cmd(_slave(root, slave), comment)
+        data = bytearray.fromhex(cmd.find("Data").text)
+        change(data)
+        cmd.find("Data").text = data.hex()
+    apply.__name__ = f"_{slave}_{comment.replace(' ', '_')}"
+    return apply
+
+
+def _set(offset: int, value: int) -> Callable[[bytearray], None]:
+    def change(data: bytearray) -> None:
+        data[offset] = value
+    return change
+
+
+# The sensors' inputs are bits 4..7 of input byte 0 (FMMU 0: logical 0x10000000.4 to bit
+# 7): an end bit 5 leaves bits 6..7 out.  axis1's inputs start at input bit 16 (its read
+# FMMU at logical 0x10000002.0): a start bit 4 leaves bits 16..19 out.  axis1's SM2
+# control byte 0x64 (buffered, the master writes) made 0x60 (the master reads).
+_sensors_end_bit_5 = _register("sensors", "set fmmu 0 (inputs)", _set(7, 5))
+_axis1_start_bit_4 = _register("axis1", "set fmmu 1 (inputs)", _set(6, 4))
+_axis1_sm2_read = _register("axis1", "set sm 2 (outputs)", _set(4, 0x60))
+
+
+def _axis1_sm3_from_the_esi(root: Root) -> None:
+    """ProcessData names no PDO of SM3 (no Pdo in Sm3, no TxPdo); SM3 is set to 20 bytes,
+    the PDOs 0x1C13 holds (0x1A00 from the ESI: 6 bytes, 0x1A01 as downloaded: 10) take 16."""
+    axis = _slave(root, "axis1")
+    pd = axis.find("ProcessData")
+    for el in pd.xpath("Sm3/Pdo | TxPdo"):
+        el.getparent().remove(el)
+    cmd = _init_cmd(axis, "set sm 3 (inputs)")
+    data = bytearray.fromhex(cmd.find("Data").text)
+    data[2:4] = (20).to_bytes(2, "little")
+    cmd.find("Data").text = data.hex()
+
+
+def _axis1_watchdog_1(root: Root) -> None:
+    """An InitCmd that sets axis1's SM watchdog (0x0420) to 1 unit: 100 µs with the divider
+    after reset (0x09C2: 2500 × 40 ns), under the example's 1000 µs cycle; its SM2 control
+    byte 0x64 has the watchdog on (bit 6)."""
+    before = _init_cmd(_slave(root, "axis1"), "set sm 2 (outputs)")
+    cmd = etree.fromstring(
+        "<InitCmd><Transition>IP</Transition><Comment>set SM watchdog</Comment>"
+        "<Requires>cycle</Requires><Cmd>5</Cmd><Adp>1005</Adp><Ado>1056</Ado>"
+        "<Data>0100</Data><Retries>3</Retries></InitCmd>")
+    before.addprevious(cmd)
+
+
+def _axis1_without_mailbox(root: Root) -> None:
+    axis = _slave(root, "axis1")
+    axis.remove(axis.find("Mailbox"))
+    for comment in ("set sm 0 (mailbox out)", "set sm 1 (mailbox in)",
+                    "set sm 0 (bootstrap out)", "set sm 1 (bootstrap in)"):
+        cmd = _init_cmd(axis, comment)
+        cmd.getparent().remove(cmd)
+
+
 def _copies(cmd: str, *copies: tuple[int, int, int]) -> Callable[[Root], None]:
     """CopyInfos (source bit, destination bit, bits) on the cyclic command ``cmd``."""
     def add(root: Root) -> None:
@@ -236,7 +320,32 @@ def _revision_9(root: Root) -> None:
 # rule, defect, words the message must hold (written here, not taken from the code)
 DEFECTS: list[tuple[str, Callable[[Root], None], list[str]]] = [
     ("ENI001", _revision_9, ["lamps", "revision 0x9", "available"]),
-    ("ENI003", _unreadable_fmmu, ["FMMU 0", "0xEB030B5F", "no cyclic command"]),
+    ("ENI003", _encrypted_fmmu, ["FMMU 0", "0xEB030B5F", "encrypted"]),
+    ("ENI108", _unreadable_fmmu, ["lamps", "FMMU 0", "0xEB030B5F", "no cyclic command"]),
+    ("ENI109", _sensors_end_bit_5, ["sensors", "ProcessData/Recv bit(s) 6..7 (2 of 4)",
+                                    "no read FMMU", "to bit 5"]),
+    ("ENI109", _axis1_start_bit_4, ["axis1", "ProcessData/Recv bit(s) 16..19 (4 of 128)",
+                                    "logical 0x10000002.4"]),
+    ("ENI110", _axis1_sm2_read, ["axis1", "SM2 (Outputs) is set with control byte 0x60",
+                                 "the master reads it", "0x001D"]),
+    ("ENI121", _axis1_watchdog_1,
+     ["axis1", "SM watchdog 100 µs (1 × 100000 ns)", "the cycle 1000 µs", "0x001B"]),
+    ("ENI120", _mailbox_512, ["axis1", "SM0 (0x1000..0x11FF) reaches into SM1 "
+                                       "(0x1080..0x10FF)"]),
+    ("ENI205", _1c13_count_1, ["0x1C13 holds 1 PDO(s) after PS (0x1A00)",
+                               "ProcessData/Sm3 assigns 2 (0x1A00, 0x1A01)",
+                               "SM3 is set to 16 byte(s)", "take 6", "0x001E"]),
+    ("ENI205", _1c12_16ff, ["0x1C12 holds 1 PDO(s) after PS (0x16FF)", "assigns 1 (0x1601)",
+                            "describes no PDO 0x16FF"]),
+    ("ENI206", _1a01_606c_16_bit, ["0x1A01:03 maps 0x606C:00 16 bit after PS",
+                                   "TxPdo 0x1A01 has 0x606C:00 32 bit there",
+                                   "64 bit(s) where the ENI lays out 80"]),
+    ("ENI207", _1c13_count_1, ["CompleteAccess download of 0x1C13 sets the count to 1 "
+                               "and carries 2 entries"]),
+    ("ENI208", _axis1_sm3_from_the_esi, ["0x1C13 holds 2 PDO(s) after PS (0x1A00, 0x1A01)",
+                                         "16 byte(s); SM3 is set to 20"]),
+    ("ENI504", _axis1_without_mailbox, ["axis1", "the ENI sets up no mailbox, the device "
+                                                 "has one (SM0", "0x0016"]),
     ("ENI101", _sm2_length_8, ["SM2 (Outputs) is set to 8 byte(s)", "0x1601", "take 6"]),
     ("ENI101", _sm3_never_set, ["SM3 (Inputs) has PDOs of 16 byte(s)", "no InitCmd"]),
     ("ENI102", _lamps_fmmu_inactive, ["lamps", "SM0 (Outputs, 0x0F00", "no write FMMU"]),
@@ -262,7 +371,7 @@ DEFECTS: list[tuple[str, Callable[[Root], None], list[str]]] = [
     ("ENI204", _rx_object_in_txpdo, ["0x60FF:00", "TxPDO", "'R'"]),
     ("ENI301", _coe_cmd(0x2000, 0, "01"), ["0x2000:00", "no such object"]),
     ("ENI302", _coe_cmd(0x1018, 1, "01000000"), ["0x1018:01", "read-only", "'ro'"]),
-    ("ENI302", _coe_cmd(0x1C12, 0, "00", "SO"), ["0x1C12:00", "SO, runs in SafeOp",
+    ("ENI302", _coe_cmd(0x1C12, 0, "00", "SO"), ["0x1C12:00", "SO, in SafeOp",
                                                  "not writable then", "PreOp"]),
     ("ENI303", _coe_cmd(0x6060, 0, "0900"), ["2 byte(s) to 0x6060:00", "SINT of 1"]),
     ("ENI401", _assign_activate_0700, ["AssignActivate 0x0700", "DC 0x0300"]),
@@ -455,6 +564,34 @@ def test_differing_descriptions_of_a_slave_are_named(tmp_path: Path,
     assert check_eni(example_eni, chosen).findings == []
 
 
+def test_every_description_of_a_duplicate_identity_is_checked(tmp_path: Path,
+                                                               example_eni: Path) -> None:
+    """Two ESI files describe the drive differently (the copy's DC OpMode activates
+    0x0700, not 0x0300): ENI002 is an error (apply refuses the device as well), and the
+    device rules still run against both descriptions: a finding both give (the InitCmd that
+    writes the read-only 0x1018:01) is one line, the one only the copy gives (the ENI's
+    AssignActivate 0x0300 is none of its own) is named in ENI002 with its line and file,
+    never switched off."""
+    other = tmp_path / "other"
+    other.mkdir()
+    text = (EXAMPLES / "esi" / "ecatcfg-EXD402-drive.xml").read_text()
+    assert text.count("<AssignActivate>#x0300</AssignActivate>") == 1
+    (other / "drive-v2.xml").write_text(text.replace("<AssignActivate>#x0300",
+                                                     "<AssignActivate>#x0700"))
+    path = _defective(tmp_path, example_eni, _coe_cmd(0x1018, 1, "01000000"))
+    result = check_eni(path, Library([EXAMPLES / "esi", other], cache=False), use_cache=False)
+    found = _rules(result)
+    assert sorted(found) == ["ENI002", "ENI302"], found
+    assert len(found["ENI302"]) == 1 and "0x1018:01" in found["ENI302"][0]
+    [activation] = etree.parse(str(path)).xpath(
+        "Config/Slave[normalize-space(Info/Name)='axis1']/InitCmds/InitCmd"
+        "[Comment='set DC activation']")
+    [duplicate] = found["ENI002"]
+    assert (f"the device rules differ by description: ENI401 at line "
+            f"{activation.sourceline} only with drive-v2.xml") in duplicate, duplicate
+    assert [f.severity for f in result.findings if f.rule == "ENI002"] == ["error"]
+
+
 # -- the command line -----------------------------------------------------------------------
 
 def test_cli_formats_and_exit_codes(tmp_path: Path, example_eni: Path) -> None:
@@ -518,13 +655,29 @@ def test_cli_explain_list_and_usage_errors(tmp_path: Path) -> None:
 # PDOs and the PDO assignment that the exact-revision ESI (corpus esi/drives) marks
 # read-only and Fixed: the slave answers those downloads with abort 0x06010002.
 REAL_DEFECTS: dict[str, set[tuple[str, str]]] = {
+    # A Beremiz test ENI that lists the slaves only: no Mailbox for the Sanyo Denki RS2
+    # drive, whose ESI has SM0/SM1 mailboxes (MBoxOut at 0x1800): apply --virtual --esi of
+    # the file stops in INIT+ERR 0x0016, as the agreement test shows.
+    "corpus-extra/beremiz-tests/wago_sanyo/config.xml": {
+        ("ENI504", "the ENI sets up no mailbox, the device has one (SM0, ")},
+    # One finding per object, not per subindex (issue 39: 26 lines before, several the
+    # same finding twice).
     "corpus-extra/rocos-ecm-history/eni_sea.xml": {
-        ("ENI302", "0x1C12:00, read-only"), ("ENI302", "0x1C12:01, read-only"),
-        ("ENI302", "0x1C13:00, read-only"), ("ENI302", "0x1C13:01, read-only"),
-        *{("ENI302", f"0x1600:{s:02X}, read-only") for s in range(8)},
-        *{("ENI302", f"0x1A00:{s:02X}, read-only") for s in range(8)},
+        ("ENI302", "write 0x1C12:00, 0x1C12:01, read-only"),
+        ("ENI302", "write 0x1C13:00, 0x1C13:01, read-only"),
+        ("ENI302", "write " + ", ".join(f"0x1600:{s:02X}" for s in range(8)) + ", read-only"),
+        ("ENI302", "write " + ", ".join(f"0x1A00:{s:02X}" for s in range(8)) + ", read-only"),
         ("ENI203", "PDO 0x1600 is Fixed"), ("ENI203", "PDO 0x1A00 is Fixed"),
     },
+    # The HBM GEN Series DAQ of these three pmec ENIs is described differently by four ESI
+    # files of corpus-extra esi/hbm: apply refuses the device until --prefer chooses, and so
+    # does check (the device rules ran against each description).
+    **{eni: {("ENI002", "0x11d:0xd01:0x2 (GEN Series DAQ System) is described differently "
+                        "by 4 ESI files")}
+       for eni in ("corpus-extra/pmec-foswec2/NAVFACOSWECSxml.xml",
+                   "corpus-extra/pmec-lupa/LUPAxml.xml",
+                   "corpus-extra/pmec-wec-bench/DriveAndDUTAndPAAndLoadXML.xml",
+                   "corpus-extra/pmec-wec-bench/Pendulum2XML.xml")},
 }
 
 

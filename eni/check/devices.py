@@ -2,12 +2,18 @@
 mapping, CoE InitCmds, DC and the mailbox.  The device of a slave is the library's device
 of the slave's exact identity (vendor, product, revision: ``Config/Slave/Info``), found as
 every command finds one (``esi/library.py``); a slave whose device is not found is said so
-once and checked against the ENI alone (``network.py``)."""
+once and checked against the ENI alone (``network.py``); one whose identity several ESI
+files describe differently is checked against each description (``_every_candidate``)."""
 
 from __future__ import annotations
 
+import dataclasses
+import re
+from pathlib import Path
+
+from ecatcfg.eni.check import pdo_state
 from ecatcfg.eni.check.context import CheckContext
-from ecatcfg.eni.check.network import sm_pdos
+from ecatcfg.eni.check.network import sm_pdos, sm_records
 from ecatcfg.eni.check.rules import declare
 from ecatcfg.eni.plan import CoeInitCmd, PdoDesc, SlavePlan
 from ecatcfg.eni.words import foe_words, soe_words
@@ -17,6 +23,7 @@ from ecatcfg.esi.coe import (TRANSITION_STATE, DictEntry, dictionary_with_object
                              write_refusal, write_target)
 from ecatcfg.esi.dc_cycle import min_cycle_time, us
 from ecatcfg.esi.library import DuplicateError, Library, SelectorError
+from ecatcfg.esi.lint.finding import Finding
 from ecatcfg.esi.model import Device, Pdo
 
 IDENTITY = declare("ENI001", "warning", "no ESI device of the slave's identity", """
@@ -24,10 +31,13 @@ IDENTITY = declare("ENI001", "warning", "no ESI device of the slave's identity",
     revision (a revision is matched exactly, as the library does everywhere; the message
     lists the revisions it has).  The slave is checked against the ENI alone; add its ESI
     file to check the PDOs, InitCmds and DC settings against the device.""")
-DUPLICATE = declare("ENI002", "warning", "the slave's identity has differing ESI files", """
+DUPLICATE = declare("ENI002", "error", "the slave's identity has differing ESI files", """
     Several ESI files describe the slave's identity differently (esi/duplicates.py:
-    what changes what a master does); the message names each file and what differs.  The
-    slave is checked against the ENI alone; --prefer FILE_OR_FOLDER chooses one.""")
+    what changes what a master does); the message names each file and what differs.
+    apply and simulate refuse such a device until --prefer FILE_OR_FOLDER chooses one, so
+    check fails too.  The device rules still run, against every description: a finding
+    all of them give is reported as usual (once), one that only some give is named in this
+    finding, with the descriptions that give it.""")
 MANDATORY = declare("ENI201", "error", "a Mandatory PDO is not assigned", """
     The ESI marks the PDO Mandatory: the device needs it assigned to its SyncManager
     (ETG.2000 RxPdo/TxPdo @Mandatory).  A slave whose mandatory PDO is missing refuses
@@ -83,6 +93,14 @@ FOE = declare("ENI503", "error", "an FoE InitCmd for a device without FoE", """
     (unsupported protocol), and the transition fails.""")
 
 
+NO_MAILBOX = declare("ENI504", "error", "no mailbox for a device that has one", """
+    The slave has no Mailbox element and its InitCmds set neither SM0 nor SM1, but its
+    device's ESI has a mailbox (MBoxOut/MBoxIn SyncManagers).  A slave with a mailbox
+    checks its mailbox SyncManagers before PREOP and refuses it with AL status code 0x0016
+    (invalid mailbox configuration; SOES ESC_checkmbx); a partial ENI is completed from its
+    own Mailbox element only (eni/derive.py), never from the ESI.""")
+
+
 SOE_DRIVE = declare("ENI502", "error", "an SoE InitCmd the device cannot take", """
     The slave's ESI has no SoE in its mailbox (Mailbox/SoE), or the InitCmd's DriveNo is
     beyond the drives the ESI gives (Mailbox/SoE@ChannelCount; one drive, 0, without it).
@@ -92,15 +110,66 @@ SOE_DRIVE = declare("ENI502", "error", "an SoE InitCmd the device cannot take", 
 
 def check(ctx: CheckContext, library: Library) -> None:
     for slave in ctx.plan.slaves:
-        device = _device(ctx, library, slave)
-        if device is None:
-            continue
-        if device.slots is None:      # modular devices: the PDOs come from their modules
-            _pdos(ctx, slave, device)
-        _coe(ctx, slave, device)
-        _dc(ctx, slave, device)
-        _mailbox(ctx, slave, device)
-        _soe(ctx, slave, device)
+        devices = _devices(ctx, library, slave)
+        if len(devices) == 1:
+            _device_rules(ctx, slave, devices[0][1])
+        elif devices:
+            _every_candidate(ctx, slave, devices)
+
+
+def _device_rules(ctx: CheckContext, slave: SlavePlan, device: Device) -> None:
+    if device.slots is None:      # modular devices: the PDOs come from their modules
+        _pdos(ctx, slave, device)
+    _coe(ctx, slave, device)
+    pdo_state.check_held_sizes(ctx, slave, lambda index: _esi_mapping(device, index))
+    _dc(ctx, slave, device)
+    _mailbox(ctx, slave, device)
+    _soe(ctx, slave, device)
+
+
+# A finding's words without the ESI places it names (file:line), to tell one finding made
+# against two descriptions of a device from two findings.
+_PLACE = re.compile(r"[^\s(),]+\.xml:\d+")
+
+
+def _every_candidate(ctx: CheckContext, slave: SlavePlan,
+                     devices: list[tuple[str, Device]]) -> None:
+    """An identity several ESI files describe differently (ENI002, an error: apply refuses
+    it too unless --prefer chooses): the device rules run against every description; a
+    finding they all give is reported once (as the first description words it), the others
+    are named in the ENI002 finding, with the descriptions that give them."""
+    per: list[list[Finding]] = []
+    for _, device in devices:
+        before = len(ctx.findings)
+        _device_rules(ctx, slave, device)
+        per.append(ctx.findings[before:])
+        del ctx.findings[before:]
+
+    def key(f: Finding) -> tuple[str, int | None, str]:
+        return (f.rule, f.line, _PLACE.sub("ESI", f.message))
+
+    keys = [{key(f) for f in found} for found in per]
+    common = set.intersection(*keys)
+    for f in per[0]:
+        if key(f) in common:
+            ctx.findings.append(f)
+    # What only some give, by rule and line: how many findings with which description.
+    some: dict[tuple[str, int | None], dict[str, int]] = {}
+    for (where, _), found in zip(devices, per):
+        for f in found:
+            if key(f) not in common:
+                counts = some.setdefault((f.rule, f.line), {})
+                counts[where] = counts.get(where, 0) + 1
+    duplicate = next((f for f in ctx.findings[::-1] if f.rule == DUPLICATE
+                      and f.message.startswith(f"slave {slave.name!r}")), None)
+    if some and duplicate is not None:
+        said = "; ".join(f"{rule} at line {line} only with " + ", ".join(
+            f"{Path(w).name}" + (f" ({n} findings)" if n > 1 else "")
+            for w, n in counts.items()) for (rule, line), counts in some.items())
+        index = ctx.findings.index(duplicate)
+        ctx.findings[index] = dataclasses.replace(
+            duplicate, message=duplicate.message + f"; the device rules differ by "
+            f"description: {said}")
 
 
 def _soe(ctx: CheckContext, slave: SlavePlan, device: Device) -> None:
@@ -120,18 +189,38 @@ def _soe(ctx: CheckContext, slave: SlavePlan, device: Device) -> None:
                     f"drive(s), numbered from 0 (ChannelCount, {esi})", slave)
 
 
-def _device(ctx: CheckContext, library: Library, slave: SlavePlan) -> Device | None:
+def _devices(ctx: CheckContext, library: Library, slave: SlavePlan
+             ) -> list[tuple[str, Device]]:
+    """The slave's device, or each description of it where several ESI files describe its
+    identity differently (ENI002), with where each is; none when the library has none."""
     selector = f"0x{slave.vendor_id:x}:0x{slave.product_code:x}:0x{slave.revision:x}"
     line = ctx.lines.child(slave, "Info")
     try:
         entry = library.find(selector).entry
     except DuplicateError as exc:
-        ctx.add(DUPLICATE, line, exc.message, slave)
-        return None
+        ctx.add(DUPLICATE, line, exc.message + " (the device rules ran against each)", slave)
+        same = [e for e in library.entries
+                if (e.vendor_id, e.product_code, e.revision)
+                == (slave.vendor_id, slave.product_code, slave.revision)]
+        described: dict[str, tuple[str, Device]] = {}
+        for e in same:
+            digest = library.description(e).digest
+            if digest not in described:
+                described[digest] = (f"{e.file}:{e.line}", library.device(e))
+        return list(described.values())
     except SelectorError as exc:
         ctx.add(IDENTITY, line, exc.message, slave)
+        return []
+    return [(f"{entry.file}:{entry.line}", library.device(entry))]
+
+
+def _esi_mapping(device: Device, index: int) -> list[int] | None:
+    """PDO ``index`` of the device as mapping values, None when it has none."""
+    pdo = next((p for p in device.pdos if p.index == index), None)
+    if pdo is None:
         return None
-    return library.device(entry)
+    return [((e.index or 0) << 16 | ((e.subindex or 0) if e.index else 0) << 8
+             | (e.bit_len or 0)) for e in pdo.entries]
 
 
 def _esi_pdo(device: Device, pdo: PdoDesc) -> Pdo | None:
@@ -211,6 +300,10 @@ def _coe(ctx: CheckContext, slave: SlavePlan, device: Device) -> None:
     if mb is None or dic is None:
         return
     cmds = mb.coe_init_cmds
+    # One finding per object and cause, however many of its subindexes the InitCmds write
+    # (a PDO object written entry by entry is one read-only object, not nine findings).
+    missing: dict[tuple[int, str], list[tuple[str, int | None]]] = {}
+    refused: dict[tuple[int, str], list[tuple[str, int | None]]] = {}
     for n, cmd in enumerate(cmds):
         if cmd.disabled or cmd.ccs != 1:
             continue
@@ -220,20 +313,43 @@ def _coe(ctx: CheckContext, slave: SlavePlan, device: Device) -> None:
         if found is None or not isinstance(found, DictEntry):
             # Objects of a module's dictionary are not in a modular device's own.
             if device.slots is None:
-                ctx.add(MISSING, line, f"CoE InitCmd writes {shown}; the device's "
-                        f"dictionary has no such {'object' if found is None else 'subindex'}"
-                        f" ({device.source.file}:{device.source.line})", slave)
+                kind = "object" if found is None else "subindex"
+                missing.setdefault((cmd.index, kind), []).append((shown, line))
             continue
         for transition in cmd.transitions:
             state = TRANSITION_STATE.get(transition.value)
             why = write_refusal(found, state) if state is not None else None
             if why is not None:
                 what = "read-only" if why.startswith("access") else "not writable then"
-                ctx.add(READ_ONLY, line, f"CoE InitCmd ({transition.value}, runs in {state}) "
-                        f"writes {shown}, {what} in {device.source.file}:"
-                        f"{found.obj.source.line} ({why})", slave)
+                refused.setdefault((cmd.index, f"({transition.value}, in {state}) "
+                                    f"write{{}} {{}}, {what} in {device.source.file}:"
+                                    f"{found.obj.source.line} ({why})"), []).append(
+                    (shown, line))
                 break
         _size(ctx, slave, cmd, found, shown, line)
+    for (_, kind), written in missing.items():
+        ctx.add(MISSING, written[0][1], f"CoE InitCmd{_s(written)} write{_s1(written)} "
+                f"{_spelled(written)}; the device's dictionary has no such {kind} "
+                f"({device.source.file}:{device.source.line})", slave)
+    for (_, words), written in refused.items():
+        ctx.add(READ_ONLY, written[0][1], f"CoE InitCmd{_s(written)} "
+                + words.format(_s1(written), _spelled(written)), slave)
+
+
+def _s(written: list[tuple[str, int | None]]) -> str:
+    return "s" if len(written) > 1 else ""
+
+
+def _s1(written: list[tuple[str, int | None]]) -> str:
+    return "" if len(written) > 1 else "s"
+
+
+def _spelled(written: list[tuple[str, int | None]]) -> str:
+    """``0x1C12:00, 0x1C12:01`` and, for more than one, the lines of the others."""
+    shown = list(dict.fromkeys(w for w, _ in written))
+    lines = sorted({ln for _, ln in written[1:] if ln is not None and ln != written[0][1]})
+    return ", ".join(shown) + (f" (also at line{'s' if len(lines) > 1 else ''} "
+                               + ", ".join(map(str, lines)) + ")" if lines else "")
 
 
 def _size(ctx: CheckContext, slave: SlavePlan, cmd: CoeInitCmd, found: DictEntry,
@@ -309,6 +425,12 @@ def _dc(ctx: CheckContext, slave: SlavePlan, device: Device) -> None:
 def _mailbox(ctx: CheckContext, slave: SlavePlan, device: Device) -> None:
     mb = slave.mailbox
     if mb is None:
+        boxes = [sm for sm in device.sms if sm.is_mailbox]
+        if boxes and not {0, 1} & set(sm_records(slave)):
+            ctx.add(NO_MAILBOX, ctx.lines.slave(slave),
+                    f"the ENI sets up no mailbox, the device has one (SM{boxes[0].number}, "
+                    f"{boxes[0].source.file}:{boxes[0].source.line}): the slave refuses "
+                    "PREOP with AL status code 0x0016", slave)
         return
     if device.mailbox is None or "FoE" not in device.mailbox.protocols:
         cmds = mb.foe_init_cmds

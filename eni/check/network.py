@@ -9,9 +9,11 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 from ecatcfg.eni.check.context import CheckContext
+from ecatcfg.eni.contents import ENCRYPTED_FMMU, UNMAPPED_FMMU
 from ecatcfg.eni.check.rules import declare
 from ecatcfg.eni.plan import (COPY_ELEMENT, BitRange, CoeInitCmd, EoeInitCmd, FoeInitCmd,
-                              PdoDesc, SlavePlan, SmSettings, SoeInitCmd, register_writes)
+                              PdoDesc, SlavePlan, SmSettings, SoeInitCmd, register_writes,
+                              register_writes_at)
 from ecatcfg.eni.words import soe_words
 from ecatcfg.esi.idn import ENI_TRANSITIONS
 from ecatcfg.esc import (FMMU_SIZE, LOGICAL_CMDS, SM_SIZE, AlState, Cmd, FmmuConfig,
@@ -75,8 +77,8 @@ SOE_TRANSITION = declare("ENI107", "warning", "an SoE InitCmd in a transition th
 
 def check(ctx: CheckContext) -> None:
     for item in ctx.plan.unsupported:
-        if item.element == COPY_ELEMENT:
-            continue                          # its own rule: ENI111 (eni/check/copies.py)
+        if item.element == COPY_ELEMENT or is_unmapped_fmmu(item.what):
+            continue           # their own rules: ENI111 (copies.py), ENI108 (fmmus.py)
         slave = next((s for s in ctx.plan.slaves if s.name == item.slave), None)
         ctx.add(UNSUPPORTED, item.line, item.describe(), slave)
     for slave in ctx.plan.slaves:
@@ -86,6 +88,12 @@ def check(ctx: CheckContext) -> None:
         _soe(ctx, slave)
     _overlaps(ctx)
     _frames(ctx)
+
+
+def is_unmapped_fmmu(what: str) -> bool:
+    """An unsupported item that is an FMMU setting outside every cyclic command: a fault
+    of the file (ENI108, eni/check/fmmus.py), not a part ecatcfg cannot do (ENI003)."""
+    return UNMAPPED_FMMU in what and ENCRYPTED_FMMU not in what
 
 
 def sm_records(slave: SlavePlan) -> dict[int, list[tuple[SmConfig, frozenset[Transition]]]]:
@@ -232,16 +240,19 @@ def _overlaps(ctx: CheckContext) -> None:
                         f"ProcessData/{what} bits {b.bit_start}..{b.bit_start + b.bit_length - 1}"
                         f" overlap slave {sa.name!r}'s {a.bit_start}.."
                         f"{a.bit_start + a.bit_length - 1}", sb)
-    reads: list[tuple[int, int, SlavePlan]] = []
+    reads: list[tuple[int, int, SlavePlan, int]] = []
     for slave in ctx.plan.slaves:
-        for fmmu, _ in fmmu_records(slave):
-            if fmmu.type in (FmmuType.READ, FmmuType.READ_WRITE):
+        for _, record, _, position in register_writes_at(slave, Reg.FMMU0, FMMU_SIZE, 16):
+            fmmu = FmmuConfig.from_bytes(record)
+            if fmmu.active and fmmu.length and fmmu.type in (FmmuType.READ,
+                                                             FmmuType.READ_WRITE):
                 start = fmmu.logical_start * 8 + fmmu.logical_start_bit
-                reads.append((start, start + fmmu.bit_length, slave))
+                reads.append((start, start + fmmu.bit_length, slave, position))
     reads.sort(key=lambda r: r[0])
-    for (_, end0, first), (start1, _, second) in zip(reads, reads[1:]):
+    for (_, end0, first, _), (start1, _, second, position) in zip(reads, reads[1:]):
         if first is not second and start1 < end0:
-            ctx.add(OVERLAP, ctx.lines.slave(second),
+            ctx.add(OVERLAP, ctx.lines.listed(second, "InitCmds", position,
+                                              len(second.init_cmds)),
                     f"a read FMMU maps logical 0x{start1 // 8:08X}.{start1 % 8}, which slave "
                     f"{first.name!r}'s read FMMU maps too", second)
 

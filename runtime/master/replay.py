@@ -164,12 +164,14 @@ def init_cmd_job(cmd: InitCmd, who: str | None, data: bytes | None = None,
 def _refused(status: bytes | bytearray, who: str | None, comment: str,
              timed_out: bool = False) -> ApplyError:
     al_status, = struct.unpack_from("<H", status, 0)
-    code = struct.unpack_from("<H", status, 4)[0] if len(status) >= 6 else 0
+    code = struct.unpack_from("<H", status, 4)[0] if len(status) >= 6 else None
     text = f"slave stays in {al_state_name(al_status)}"
-    if len(status) < 6 and al_status & AL_STATUS_ERROR:
-        # The ENI's state check reads 0x0130 alone: the code (0x0134) was not read, and
-        # al_code 0 asks the caller to read it (Network._explain).
-        text += " (the ENI's check does not read the AL status code 0x0134)"
+    if code is None:
+        # An ENI whose state check reads 0x0130 alone (2 bytes) never reads the code
+        # (0x0134): saying 0x0000 "no error" would be a guess.  al_code None asks the
+        # caller to read it (Network._explain).
+        if al_status & AL_STATUS_ERROR:
+            text += " (the ENI's check does not read the AL status code, 0x0134)"
     elif code or al_status & AL_STATUS_ERROR:
         text += f", AL status code 0x{code:04X} ({al_status_name(code)})"
     if timed_out:

@@ -11,13 +11,17 @@ emulated ESC are built exactly as for a device read from an ESI file:
 
 - SyncManagers: the mailbox areas, the ``ProcessData/Sm`` settings, and the SM registers
   the InitCmds write (the length of a process-data SM is the one written in PREOP->SAFEOP;
-  an SM enabled only in SAFEOP->OP is ``OpOnly``);
+  an SM enabled only in SAFEOP->OP is ``OpOnly``); the direction is the data's
+  (``ProcessData/Sm`` Type, else the FMMUs over it), so a control byte written the other
+  way is refused as a slave refuses it;
 - FMMUs: the types of the FMMUs the InitCmds configure;
 - PDOs: the ENI's PDOs; the default assignment (0x1C1n and the SII PDO categories) is the
   final value of the ENI's CoE assignment downloads, else ``ProcessData/Sm/Pdo``, else the
   PDOs' ``Sm`` attribute.  A PDO the ENI assigns without describing it gets its mapping
   from the ENI's mapping downloads, else the slave's process-image variables (as gap
   entries: the ENI names no objects for them), padded to the SM length the ENI writes;
+  one that ``ProcessData/Sm``, where it lists PDOs, does not name either (an assignment
+  download of 0x16FF beside a described 0x1600) does not exist on the device;
 - mailbox: the protocols of ``Mailbox/Protocol``; CoE flags from what the InitCmds do
   (PDO assignment, PDO configuration, complete access); EoE with IP parameters; SoE
   drives with the IDNs the ENI's SoE InitCmds write (those of PS required before SAFEOP,
@@ -40,7 +44,7 @@ import struct
 from dataclasses import dataclass, field
 
 from ecatcfg.esc import (ESC_DC_LATCH_UNIT, ESC_DC_SYNC_UNIT, FMMU_SIZE, RX_PDO_MAPPING,
-                         SM1_STATUS, SM_DIR_ECAT_WRITES, SM_DIR_MASK, SM_PDO_ASSIGN,
+                         SM1_STATUS, SM_DIR_ECAT_READS, SM_DIR_ECAT_WRITES, SM_DIR_MASK, SM_PDO_ASSIGN,
                          SM_PDO_ASSIGN_RANGE, SM_SIZE, TX_PDO_MAPPING, Cmd, FmmuConfig, FmmuType,
                          Reg, SmConfig, Transition, array_downloads)
 from ecatcfg.eni.plan import (CoeInitCmd, NetworkPlan, PdoDesc, SlavePlan,
@@ -186,8 +190,14 @@ def _sync_managers(slave: SlavePlan, source: Source) -> list[SyncManager]:
         if setting is None and w is None:
             continue                        # only ever cleared: not in use
         control = w.config.control if w else (setting.control_byte if setting else 0)
-        kind = setting.type if setting and setting.type in ("Outputs", "Inputs") else (
-            "Outputs" if control & SM_DIR_MASK == SM_DIR_ECAT_WRITES else "Inputs")
+        kind = setting.type if setting and setting.type in ("Outputs", "Inputs") else \
+            _fmmu_kind(slave, w.config.start if w else None) or (
+                "Outputs" if control & SM_DIR_MASK == SM_DIR_ECAT_WRITES else "Inputs")
+        # The device's direction is its data's (ProcessData/Sm Type, else the FMMU over it),
+        # not whatever the InitCmds write: a write that says otherwise is refused as a real
+        # slave refuses it (0x001D/0x001E, runtime/segment/al_checks.py).
+        control = control & ~SM_DIR_MASK | (SM_DIR_ECAT_WRITES if kind == "Outputs"
+                                            else SM_DIR_ECAT_READS)
         op_only = w is not None and Transition.SO in w.transitions \
             and Transition.PS not in w.transitions
         sms[number] = SyncManager(
@@ -200,6 +210,20 @@ def _sync_managers(slave: SlavePlan, source: Source) -> list[SyncManager]:
     top = max(sms, default=-1)
     # The SII's SYNCM category and 0x1C00 list SMs by position: unused numbers stay empty.
     return [sms.get(n) or SyncManager(n, None, source) for n in range(top + 1)]
+
+
+def _fmmu_kind(slave: SlavePlan, start: int | None) -> str | None:
+    """Outputs or Inputs: the direction of the FMMUs the InitCmds set over physical
+    ``start`` (all of one direction), else None."""
+    if start is None:
+        return None
+    kinds = {FmmuConfig.from_bytes(data).type
+             for records in register_writes(slave, Reg.FMMU0, FMMU_SIZE, 8).values()
+             for data, _ in records
+             if (cfg := FmmuConfig.from_bytes(data)).active and cfg.length
+             and cfg.physical_start <= start < cfg.physical_start + cfg.length}
+    return ("Outputs" if kinds == {FmmuType.WRITE} else "Inputs" if kinds == {FmmuType.READ}
+            else None)
 
 
 def _fmmus(slave: SlavePlan, sms: list[SyncManager], source: Source) -> list[Fmmu]:
@@ -252,8 +276,13 @@ def _pdos(slave: SlavePlan, plan: NetworkPlan, sms: list[SyncManager], coe: _Coe
     for desc in described.values():
         sm = next((n for n, indices in assigned.items() if desc.index in indices), None)
         pdos.append(_pdo(desc, sm, source))
+    settings = {s.number: s for s in (slave.process_data.sms if slave.process_data else [])}
     for n, indices in assigned.items():
-        missing = [i for i in indices if i not in described]
+        # A PDO the CoE downloads assign that ProcessData/Sm, where it lists PDOs, does not
+        # name is one the ENI knows nothing of (0x16FF for 0x1600): the device has none,
+        # and refuses SAFEOP as a real one would (0x001D/0x001E).
+        listed = settings[n].pdos if n in settings else []
+        missing = [i for i in indices if i not in described and (not listed or i in listed)]
         for index in missing:
             pdos.append(Pdo("rx" if sms[n].type == "Outputs" else "tx", index,
                             {_LANGUAGE: f"PDO 0x{index:04X}"}, source, sm=n,
