@@ -11,14 +11,13 @@ import argparse
 import io
 import os
 import sys
-import textwrap
 from pathlib import Path
 
 FORMATS = ("text", "json", "junit", "sarif")
 
 
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    from ecatcfg.cli.options import add_prefer
+    from ecatcfg.cli.options import add_prefer, add_rule_options
 
     p = sub.add_parser(
         "check", help="check an ENI against itself and the ESI files of its devices",
@@ -35,18 +34,14 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
     p.add_argument("--format", choices=FORMATS, default="text")
     p.add_argument("-o", "--output", metavar="FILE",
                    help="write the report to FILE (atomically) instead of stdout")
-    p.add_argument("--select", action="append", metavar="IDS",
-                   help="only these rules (comma-separated ids or prefixes; repeatable)")
-    p.add_argument("--ignore", action="append", metavar="IDS",
-                   help="skip these rules (comma-separated ids or prefixes; repeatable)")
-    p.add_argument("--explain", metavar="ID", help="explain one rule and exit")
-    p.add_argument("--list-rules", action="store_true", help="list every rule and exit")
+    add_rule_options(p)
     p.add_argument("--no-cache", action="store_true",
                    help="do not use the ESI index cache and the ENI plan cache")
     p.set_defaults(run=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    from ecatcfg.cli.options import rule_help
     from ecatcfg.eni.check import all_rules
     from ecatcfg.errors import UsageError
     from ecatcfg.esi.lint.config import split_ids
@@ -54,17 +49,7 @@ def run(args: argparse.Namespace) -> int:
     from ecatcfg.fileio import check_input
 
     rules = all_rules()
-    if args.explain:
-        rule = rules.get(args.explain.strip().upper())
-        if rule is None:
-            raise UsageError(f"unknown rule {args.explain!r}; `ecatcfg check --list-rules` "
-                             "lists them")
-        print(f"{rule.id} ({rule.severity}): {rule.summary}\n")
-        print(textwrap.fill(" ".join(rule.explanation.split()), width=88))
-        return 0
-    if args.list_rules:
-        for rule in sorted(rules.values(), key=lambda r: r.id):
-            print(f"{rule.id}  {rule.severity:<7}  {rule.summary}")
+    if rule_help(args, rules, "check"):
         return 0
     if not args.enis:
         raise UsageError("give at least one ENI file (or --explain ID)")
