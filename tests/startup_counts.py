@@ -400,6 +400,25 @@ def cycle_allocations(n: int, dc: bool, cycles: int = 200) -> dict[str, int]:
     return {"peak": peak, "retained": after - base, "misses": replay.misses}
 
 
+def cycle_allocations_alone(n: int, dc: bool) -> dict[str, int]:
+    """:func:`cycle_allocations` in an interpreter of its own: tracemalloc counts every
+    thread's allocations, and in the suite's process threads that other tests left (a
+    reader, a segment that is still closing) allocate while the master cycles."""
+    import json
+    import subprocess
+    import sys
+    here = Path(__file__).resolve().parent
+    done = subprocess.run(
+        [sys.executable, "-c", "import json, startup_counts; print(json.dumps("
+         f"startup_counts.cycle_allocations({n}, {dc!r})))"],
+        cwd=here, capture_output=True, text=True, timeout=300,
+        env={**os.environ, "PYTHONPATH": os.pathsep.join(
+            p for p in (str(here), os.environ.get("PYTHONPATH", "")) if p)})
+    assert done.returncode == 0, done.stderr[-3000:]
+    out: dict[str, int] = json.loads(done.stdout.strip().splitlines()[-1])
+    return out
+
+
 def env_for(cache: Path) -> dict[str, str]:
     """The environment of the child processes: a plan cache of their own in ``cache``, and
     a bytecode cache there too (as an installed package has .pyc files; an environment that

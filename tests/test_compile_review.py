@@ -472,7 +472,7 @@ def test_demo_into_a_path_that_is_a_file(tmp_path, capsys):
     assert f"cannot write {blocker}" in capsys.readouterr().err
     (tmp_path / "d" / "demo.eni.xml").mkdir(parents=True)
     assert main(["demo", "--out-dir", str(tmp_path / "d")]) == 2
-    assert f"cannot write {tmp_path / 'd' / 'demo.eni.xml'}: Is a directory" in \
+    assert f"{tmp_path / 'd' / 'demo.eni.xml'}: is a folder, not a file to write" in \
         capsys.readouterr().err
 
 

@@ -111,7 +111,7 @@ def test_what_only_a_refusal_needs_is_not_imported_on_a_cold_start(
 @pytest.mark.parametrize("line", ["8", "64 dc"])
 def test_allocations_per_cycle_within_budget(line: str) -> None:
     n, _, dc = line.partition(" ")
-    got = counts.cycle_allocations(int(n), dc == "dc")
+    got = counts.cycle_allocations_alone(int(n), dc == "dc")
     assert got["misses"] == 0           # every reply replayed: the master measured alone
     for what in ("peak", "retained"):
         budget = BUDGET["allocations"][f"{line} {what}"]
