@@ -1,4 +1,4 @@
-"""The whole check-vs-apply agreement matrix of issue 39 (Agreement 1): every ENI of both
+"""The whole check-vs-apply agreement matrix: every ENI of both
 corpora and the example line compiled by ``ecatcfg compile``, unmodified and with every
 fault class of ``tests/faults.py`` planted with each seed, ``check`` against ``apply
 --virtual``, with the ESI files of both corpora and from the ENI alone.

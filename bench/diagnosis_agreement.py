@@ -1,4 +1,4 @@
-"""Agreement 2 of issue 39, whole: every corpus ENI, with and without the corpora's ESI files,
+"""The emulator-vs-diagnosis agreement, whole: every corpus ENI, with and without the corpora's ESI files,
 unchanged and with every fault the seeded generator plants (``tests/diagnosis_agreement.py``),
 brought up on the in-memory virtual segment; every refusal of an emulated slave must be
 diagnosed with the same AL status code and the rule the emulator applied, and never with

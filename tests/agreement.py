@@ -1,4 +1,4 @@
-"""Agreement 1 of issue 39: ``check`` reports an error if and only if ``apply --virtual`` of
+"""The check/apply agreement: ``check`` reports an error if and only if ``apply --virtual`` of
 the same file fails, with the ESI files (the slaves emulated from their devices) and without
 (every slave emulated from the ENI alone).  Both run in this process: ``check_eni`` and
 ``Network.virtual`` on an in-memory segment, each given the same :class:`Library`.

@@ -1,4 +1,4 @@
-"""Agreement 2 of issue 39: every refusal of an emulated slave is diagnosed with the rule the
+"""The emulator/diagnosis agreement: every refusal of an emulated slave is diagnosed with the rule the
 emulator applied.  Shared by ``tests/test_diagnosis_agreement.py`` (a fixed sample in CI)
 and ``bench/diagnosis_agreement.py`` (every corpus ENI, every fault).
 

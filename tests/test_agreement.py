@@ -1,4 +1,4 @@
-"""Agreement 1 of issue 39 on a fixed sample: ``check`` reports an error if and only if
+"""The check/apply agreement on a fixed sample: ``check`` reports an error if and only if
 ``apply --virtual`` of the same file fails, with the ESI files and from the ENI alone, on
 real ENIs unmodified and with each fault class of ``faults.py`` planted by its seeded
 generator; every planted fault check must report is an error at the line of the element

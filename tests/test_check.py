@@ -660,7 +660,7 @@ REAL_DEFECTS: dict[str, set[tuple[str, str]]] = {
     # the file stops in INIT+ERR 0x0016, as the agreement test shows.
     "corpus-extra/beremiz-tests/wago_sanyo/config.xml": {
         ("ENI504", "the ENI sets up no mailbox, the device has one (SM0, ")},
-    # One finding per object, not per subindex (issue 39: 26 lines before, several the
+    # One finding per object, not per subindex (26 lines before, several the
     # same finding twice).
     "corpus-extra/rocos-ecm-history/eni_sea.xml": {
         ("ENI302", "write 0x1C12:00, 0x1C12:01, read-only"),

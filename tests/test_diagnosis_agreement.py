@@ -1,4 +1,4 @@
-"""Agreement 2 (issue 39): the emulator against the diagnosis.  Every refusal an emulated
+"""The emulator against the diagnosis.  Every refusal an emulated
 slave makes carries a rule (``runtime/refusals.py``), and the master's diagnosis, which
 reads only what the slave holds on the wire, must give the same AL status code, name that
 rule and never say "the slave's firmware checks more".  Cases: a fixed sample of corpus ENIs
@@ -76,7 +76,7 @@ def test_corpus_sample_refusals_are_diagnosed_with_the_emulators_rule(request, e
     assert any(o.refusals for o in outcomes[1:])
 
 
-# -- the cases of issue 39 -----------------------------------------------------------------------
+# -- the cases a user met --------------------------------------------------------------------
 
 def _elmo_with_digital_outputs(corpus):
     """The rocos Elmo ENI as a configurator re-exports it with the drive's digital outputs
