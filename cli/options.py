@@ -7,7 +7,6 @@ own helpers."""
 from __future__ import annotations
 
 import argparse
-import textwrap
 from collections.abc import Callable, Mapping
 from typing import Any
 
@@ -98,6 +97,8 @@ def add_rule_options(p: argparse.ArgumentParser) -> None:
 def rule_help(args: argparse.Namespace, rules: Mapping[str, Any], command: str) -> bool:
     """``--explain ID`` or ``--list-rules`` printed (True: the command is done), else False.
     ``rules``: id -> a rule with ``id``, ``severity``, ``summary`` and ``explanation``."""
+    import textwrap
+
     from ecatcfg.errors import UsageError
 
     if args.explain:
