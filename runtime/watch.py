@@ -17,6 +17,7 @@ from ecatcfg.eni.plan import NetworkPlan
 from ecatcfg.eni.words import command_address
 from ecatcfg.errors import EcatcfgError
 from ecatcfg.esc import LOGICAL_CMDS
+from ecatcfg.runtime.master.cyclic import CommandCount
 from ecatcfg.runtime.network import Network
 
 Value = bool | int | float
@@ -171,7 +172,7 @@ class InfoData:
                 out[name] = len(net.plan.slaves)
         return out
 
-    def _serves(self, c: Any, slave: str) -> bool:
+    def _serves(self, c: CommandCount, slave: str) -> bool:
         """Whether command ``c`` carries any of ``slave``'s process data."""
         if c.cmd.cmd not in LOGICAL_CMDS:
             return False
