@@ -18,7 +18,6 @@ from __future__ import annotations
 import os
 import stat
 import sys
-import tempfile
 from pathlib import Path
 from typing import BinaryIO, Literal
 
@@ -151,6 +150,9 @@ class OutputFile:
             self.file: BinaryIO = os.fdopen(fd, "wb")
             self.name = str(path)
             return
+        # Imported here: tempfile brings shutil and its compressors, which a run that
+        # writes nothing (apply with its plan in the cache) need not load.
+        import tempfile
         fd, self._tmp = tempfile.mkstemp(dir=self.path.parent, prefix=f".{self.path.name}.",
                                          suffix=".tmp")
         self.name = self._tmp

@@ -35,6 +35,10 @@ SOEM_SAMPLE = "corpus-extra/soem-sample/sample-eni.xml"
 
 _BEREMIZ = ("Beremiz's EtherLab-plugin file is a partial ENI: mailbox SMs of length 0 and "
             "CoE writes in INIT->INIT (II), which no slave can take (no mailbox in INIT)")
+# SOEM's report (a dict that starts with 'found') when it did not reach OP, or a count of
+# slaves or sizes that differs; pytest words the comparison "assert 5 == 4" or, from 9.2 on,
+# "assert (5 == 4)", and shortens long dicts: only the start is matched.
+_SOEM_NOT_OP = r"\{'found': \d+|assert \(?\d+ == \d+\)?"
 _SOEM_SAMPLE = ("SOEM's hand-written sample gives its slaves a mailbox but no station "
                 "address; the reader takes a slave without PhysAddr/AutoIncAddr as passive")
 
@@ -74,10 +78,10 @@ KNOWN: dict[str, Known] = {
               "0x1A04 for TwinCAT's mapping of the bridge's process data", FIRST_CONTACT),
     # -- SOEM on `simulate --eni` over veth --------------------------------------------------
     f"tests/test_eni_only.py::test_soem_reaches_op_on_an_eni_without_esi[{BEREMIZ_HIGEN}]":
-        Known(r"'al': \[\[17, 22\]", _BEREMIZ + "; the emulated drive refuses PREOP with "
-              "0x0016", FIRST_CONTACT),
+        Known(_SOEM_NOT_OP, _BEREMIZ + "; the emulated drive refuses PREOP with 0x0016",
+              FIRST_CONTACT),
     f"tests/test_eni_only.py::test_soem_reaches_op_on_an_eni_without_esi[{BEREMIZ_SANYO}]":
-        Known(r"assert -1 == 0", _BEREMIZ, FIRST_CONTACT),
+        Known(r"assert \(?-1 == 0\)?", _BEREMIZ, FIRST_CONTACT),
     f"tests/test_eni_only.py::test_soem_reaches_op_on_an_eni_without_esi[{SOEM_SAMPLE}]":
         Known(r"'Sample device A' has no <PhysAddr> and <AutoIncAddr>", _SOEM_SAMPLE,
               FIRST_CONTACT),
@@ -89,7 +93,7 @@ KNOWN: dict[str, Known] = {
        for f in ("FOSTWIN-Primary1.xml", "FOSTWIN_Secondary1.xml")},
     **{"tests/test_eni_only.py::test_soem_reaches_op_on_an_eni_without_esi"
        f"[corpus-extra/{f}]":
-       Known(r"'al': \[|assert \d+ == \d+", "SOEM does not reach OP, or maps other sizes, on "
+       Known(_SOEM_NOT_OP, "SOEM does not reach OP, or maps other sizes, on "
              "these TwinCAT exports emulated from the ENI alone (EL6001/EL6090 serial and "
              "display terminals, EasyCAT, HBM GEN DAQ with 113 TxPDOs)", FIRST_CONTACT)
        for f in ("pmec-foswec2/FOSWEC2_MD_20230314.xml", "pmec-foswec2/NAVFACOSWECSxml.xml",

@@ -241,6 +241,11 @@ while True:
 
 MASTER = r"""
 import sys
+# How the package is installed is not the package: an editable install's finder (newer
+# setuptools) imports importlib.metadata, zipfile and their compressors the first time it
+# is asked for the package.  Asking once before counting leaves only what ecatcfg imports.
+import importlib.util
+importlib.util.find_spec("ecatcfg")
 before = set(sys.modules)
 import json, os, select, socket
 
