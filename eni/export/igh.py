@@ -543,12 +543,8 @@ def igh_config(plan: NetworkPlan, file: str | Path) -> IghConfig:
     name = str(file)
     # IgH's domains exchange process data with the slaves only: a copy from one slave's
     # inputs to another's outputs is the application's job.
-    refuse_unexported(plan, name, "not exported for IgH")
-    for cmd in plan.master.init_cmds:
-        if cmd.ado is not None and not soem_register(cmd.ado, cmd.length) and \
-                cmd.cmd in REGISTER_WRITES:
-            raise ExportError(f"the master: InitCmd {init_cmd_words(cmd)}: IgH has no "
-                              f"start-up register writes", name)
+    refuse_unexported(plan, name, "not exported for IgH", "IgH has no start-up register "
+                      "writes")
     # IgH's position is the slave's place on the bus, which is its place among the ENI's
     # slaves (ETG.2100 lists them in bus order; some writers' AutoIncAddr say otherwise).
     slaves = [_slave(name, plan, k) for k in range(len(plan.slaves))]

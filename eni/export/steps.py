@@ -239,10 +239,12 @@ def _entries(variables: list[Variable], ranges: list[BitRange]) -> list[ImageEnt
     return out
 
 
-def refuse_unexported(plan: NetworkPlan, name: str, copies: str) -> None:
+def refuse_unexported(plan: NetworkPlan, name: str, copies: str, master_writes: str) -> None:
     """What no export carries, refused by name before anything is written: a part of the
-    ENI the reader kept as unsupported, and slave-to-slave copies (``copies``: how the
-    refusal words them for the target).  Each target's own limits come after."""
+    ENI the reader kept as unsupported, slave-to-slave copies (``copies``: how the refusal
+    words them for the target) and the master's own register writes outside what a
+    master sets up itself (``master_writes``: the target's reason).  Each target's own
+    limits come after."""
     if plan.unsupported:
         u = plan.unsupported[0]
         who = f"slave {u.slave!r}" if u.slave else "the master"
@@ -258,6 +260,11 @@ def refuse_unexported(plan: NetworkPlan, name: str, copies: str) -> None:
                     raise ExportError(f"the master: slave-to-slave copies (CopyInfos) are "
                                       f"{copies}: {words}", name,
                                       copy_info_line(name, plan, copy))
+    for cmd in plan.master.init_cmds:
+        if cmd.ado is not None and not soem_register(cmd.ado, cmd.length) and \
+                cmd.cmd in REGISTER_WRITES:
+            raise ExportError(f"the master: InitCmd {init_cmd_words(cmd)}: {master_writes}",
+                              name)
 
 
 def slave_setups(plan: NetworkPlan, file: str | Path) -> list[SlaveSetup]:
@@ -267,12 +274,7 @@ def slave_setups(plan: NetworkPlan, file: str | Path) -> list[SlaveSetup]:
     # Copies: SOEM's cycle (send/receive_processdata over its own IOmap) has no place for
     # them, and its working counter is the group's, not the command's: the export would
     # copy data the ENI calls invalid.
-    refuse_unexported(plan, name, "not exported")
-    for cmd in plan.master.init_cmds:
-        if cmd.ado is not None and not soem_register(cmd.ado, cmd.length) and \
-                cmd.cmd in REGISTER_WRITES:
-            raise ExportError(f"master InitCmd {init_cmd_words(cmd)}: SOEM's hooks are per "
-                              f"slave", name)
+    refuse_unexported(plan, name, "not exported", "SOEM's hooks are per slave")
     out = []
     for slave in plan.slaves:
         pd = slave.process_data
