@@ -13,7 +13,8 @@ import difflib
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ecatcfg.eni.plan import CoeInitCmd, EoeInitCmd, PdoDesc, PdoEntryDesc, SoeInitCmd
+from ecatcfg.eni.plan import (FIRST_STATION_ADDRESS, CoeInitCmd, EoeInitCmd, PdoDesc,
+                              PdoEntryDesc, SoeInitCmd)
 from ecatcfg.eni.standard import Watchdogs
 from ecatcfg.compiler import eoe_params, soe_cmds, watchdogs, wiring
 from ecatcfg.compiler.topology import (LoadedTopology, MappingEntry, MappingVariable, Sdo,
@@ -124,7 +125,8 @@ def resolve_all(loaded: LoadedTopology, library: Library
             errors.add(f"slave name {cfg.name!r} is already used by the slave at line "
                        f"{loaded.line('slaves', names[cfg.name])}", *where, "name")
         names.setdefault(cfg.name, index)
-        phys = cfg.station_address if cfg.station_address is not None else 1001 + pos
+        phys = cfg.station_address if cfg.station_address is not None \
+            else FIRST_STATION_ADDRESS + pos
         if phys in used:
             errors.add(f"station address {phys} is also the address of slave "
                        f"{slaves[used[phys]].name!r}", *where,

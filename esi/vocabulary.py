@@ -42,7 +42,7 @@ _ENI_READ = _words("read", "read by the ENI reader where eni/contents.py lists i
     Identification IdentifyCmd Index Info InitCmd InitCmds InputDefaultData
     InputDefaultDataMask InputOffs Mailbox MailboxStates Master MaxFrameSize OpCode
     OutputDefaultData OutputDefaultDataMask OutputOffs PhysAddr Physics Port PreviousPort
-    ProcessData ProcessImage ProductCode RNIC Recv ReferenceClock Requires Retries RevisionNo
+    ProcessData ProcessImage ProductCode RNIC Recv Receive ReferenceClock Requires Retries RevisionNo
     Send SeparateIOUpdate SerialNo ShiftTime Slave SoE SrcBitOffs State SubIndex Timeout
     Transition Validate VendorId Sm0 Sm1 Sm2 Sm3 EtherCATConfig EncryptedEtherCATConfig
     DataMask Variable Inputs Outputs ByteSize BitOffs Type Enable StartAddress ControlByte

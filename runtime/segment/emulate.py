@@ -274,8 +274,12 @@ def specs_from_eni(plan: NetworkPlan, library: Library | None, shown: str) -> li
             from ecatcfg.errors import EcatcfgError
             raise EcatcfgError(f"slave {s.name!r}: {exc.message}", shown) from None
         except SelectorError as exc:
+            # The objects the ENI writes exist on the device, and so do those it reads
+            # (Ccs 2, an upload, typed by the data it gives: SOEM's sample ENI reads
+            # 0x1C13 of a device it describes no process data for).
             writes = tuple(Write(c.index, c.subindex, c.data, c.complete_access)
-                           for c in coe if not c.disabled and c.ccs == 1)
+                           for c in coe if not c.disabled
+                           and (c.ccs == 1 or c.ccs == 2 and c.data))
             specs.append(SlaveSpec(device_from_eni(s, plan, shown), s.name,
                                    serial=s.serial_no, alias=alias, device_id=device_id,
                                    extra_writes=writes,
