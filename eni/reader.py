@@ -303,7 +303,9 @@ class _Reader:
         from ecatcfg.eni.contents import audit, dropped_init_cmds
         self._dropped = dropped_init_cmds(config)
         ignored: list[Unsupported] = []
-        slave_els, slaves, passive = [], [], []
+        slave_els: list[Element] = []
+        slaves: list[SlavePlan] = []
+        passive: list[tuple[Element, PassiveSlave]] = []
         # No address, but a mailbox, InitCmds, process data or DC: an ESC slave whose
         # place is its order in the file (SOEM's sample ENI; SOEM's ENI converter,
         # scripts/eniconv.py, takes a missing AutoIncAddr as 1 - n for the n-th Slave).

@@ -31,13 +31,6 @@ CAPTURES = "every capture of both corpora replayed and its devices' timing fitte
 
 
 KNOWN: dict[str, Known] = {
-    # -- apply --virtual, with and without ESI ---------------------------------------------
-    "tests/test_eni_only.py::test_corpus_eni_reaches_op_and_cycles"
-    "[corpus-extra/pmec-fostwin/FOSTWIN-Primary1.xml-with-esi]":
-        Known(r"'Term 2 \(EL6695\)' \[download pdo 0x1A04 entries\]: SDO abort 0x06020000",
-              "the EL6695 bridge emulated from its ESI (corpus-extra esi/dls EL66xx) has no "
-              "0x1A04 for TwinCAT's mapping of the bridge's process data", FIRST_CONTACT),
-
     # -- captures --------------------------------------------------------------------------
     "tests/test_conformance.py::test_every_capture_is_listed":
         Known(r"assert \{.*\} == \{", "the captures added to corpus-extra/pcap (EtherCrab: an "

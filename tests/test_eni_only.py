@@ -46,8 +46,15 @@ PENDULUM = "corpus-extra/pmec-wec-bench/Pendulum2XML.xml"
 # SDOs as ecrt_master_sdo_download calls before activation (slaves in PREOP).
 BEREMIZ_HIGEN = "corpus-extra/beremiz-tests/wago_higen/config.xml"
 BEREMIZ_SANYO = "corpus-extra/beremiz-tests/wago_sanyo/config.xml"
+FOSTWIN_PRIMARY = "corpus-extra/pmec-fostwin/FOSTWIN-Primary1.xml"
 REFUSED = {
     (ENCRYPTED, None): "FMMU settings encrypted (EncryptedEtherCATConfig)",
+    # TwinCAT maps the EL6695 bridge's "Active TxPDOs-Map" 0x1A04 in PS; no revision of the
+    # EL6695 in Beckhoff's ESI (corpus-extra esi/dls EL66xx) has a PDO or an object 0x1A04
+    # (no modules either): the device emulated from that ESI aborts the download with
+    # 0x06020000 as a device that follows its ESI would.  From the ENI alone, which lists
+    # 0x1A04, it reaches OP (and SOEM maps the ENI's sizes on it).
+    (FOSTWIN_PRIMARY, True): "SDO abort 0x06020000: the ESI has no 0x1A04",
     # A CoE write in INIT->INIT: a slave in INIT has no mailbox, none could take it.
     (BEREMIZ_HIGEN, None): "CoE InitCmds in transition II, which no slave can take",
     # The drive emulated from its ESI (sanyo.xml of the same folder) has a mailbox; the
@@ -236,6 +243,9 @@ def _assert_refused(path: Path, esi: list[Path] | None, eni: str) -> None:
     if eni == PENDULUM:
         _assert_no_description_agrees(path, esi)
         return
+    if eni == FOSTWIN_PRIMARY:
+        _assert_no_1a04_in_the_esi(path, esi)
+        return
     if eni == BEREMIZ_HIGEN:
         _assert_init_to_init_coe_refused(path, esi)
         return
@@ -262,6 +272,31 @@ def _assert_refused(path: Path, esi: list[Path] | None, eni: str) -> None:
         f"{path}:{line}: slave 'Slave_1001 [CiA402 Motor Control Device]' [clear sm pdos "
         "(0x1C12)]: SDO abort 0x06010002 (attempt to write a read-only object) at 0x1C12:00")
     assert refused.value.abort_code == 0x06010002
+
+
+def _assert_no_1a04_in_the_esi(path: Path, esi: list[Path] | None) -> None:
+    """No EL6695 of the ESI (every revision) describes 0x1A04, as PDO or object; the ENI
+    downloads its mapping in PS, and apply stops there with the slave's abort."""
+    assert esi is not None
+    el66 = etree.parse(str(esi[1] / "dls" / "Beckhoff EL66xx.xml"))
+    devices = el66.xpath("//Device[starts-with(Type, 'EL6695')]")
+    assert len(devices) == 10
+    for device in devices:
+        indices = {i.strip().lower() for i in device.xpath(
+            "RxPdo/Index/text() | TxPdo/Index/text() | Profile/Dictionary/Objects/Object/"
+            "Index/text()")}
+        assert "#x1a04" not in indices and "#x1a01" in indices
+    [cmd] = etree.parse(str(path)).xpath("//Slave/Mailbox/CoE/InitCmds/InitCmd"
+                                         "[Index='6660'][Transition='PS']")
+    net = Network.virtual(path, esi, esi_cache=True, esi_prefer=prefer(esi))
+    try:
+        with pytest.raises(ApplyError) as refused:
+            net.up(AlState.OP)
+    finally:
+        net.close()
+    assert str(refused.value) == (
+        f"{path}:{cmd.sourceline}: slave 'Term 2 (EL6695)' [download pdo 0x1A04 entries]: "
+        "SDO abort 0x06020000 (object does not exist in the object directory) at 0x1A04:00")
 
 
 def _assert_init_to_init_coe_refused(path: Path, esi: list[Path] | None) -> None:
