@@ -15,7 +15,7 @@ from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
 from ecatcfg.esc import (DETECTED_MODULE_IDENT_LIST, MIN_MAILBOX_SIZE, MODULE_IDENT_LIST,
-                         Reg, is_pdo_object)
+                         Cmd, Reg, is_pdo_object)
 from ecatcfg.esi import sii
 from ecatcfg.esi.coe import dictionary_with_objects, has_coe
 from ecatcfg.eni.plan import NetworkPlan, PdoDesc, SlavePlan
@@ -313,8 +313,15 @@ def _head_identification(slave: SlavePlan) -> tuple[int, int | None]:
     """The station alias and the device ID a hot-connect group's head is identified by
     (what its IdentifyCmds expect to read: 0x0012; the ID in AL status code 0x0134 after
     the ETG.1020 request, or at the ID address the device's ESI names): the emulated head
-    has them, as the real one was given them; (0, None) for any other slave."""
+    has them, as the real one was given them; (0, None) for any other slave, but for the
+    alias an InitCmd checks at 0x0012 (compile's check of a slave given an ``alias:``, as
+    an IgH user's slave addressed alias:position was given it)."""
     alias, device_id = 0, None
+    for cmd in slave.init_cmds:
+        want = cmd.validate.data if cmd.validate is not None else b""
+        if cmd.cmd in (Cmd.APRD, Cmd.FPRD) and cmd.ado == Reg.STATION_ALIAS \
+                and len(want) >= 2:
+            alias = int.from_bytes(want[:2], "little")
     group = slave.hot_connect
     for cmd in group.identify_cmds if group is not None else []:
         want = cmd.validate.data if cmd.validate is not None else b""
