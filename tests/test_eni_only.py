@@ -33,6 +33,7 @@ from ecatcfg.esi.library import Library
 from ecatcfg.runtime import Network
 from ecatcfg.runtime.segment import emulate
 from ecatcfg.runtime.segment.eni_device import device_from_eni, type_name
+from ecatcfg.runtime.segment.od_from_esi import build as od_from_esi_build
 from ecatcfg.runtime.master.replay import ApplyError
 
 # The ENIs that do not reach OP, and why; each test asserts the exact failure (file, line,
@@ -639,3 +640,43 @@ def test_zero_pdo_assignment_entries_assign_nothing(example_plan):
         [0x1601]]
     device = device_from_eni(plan.slave("axis1"), plan, "example.eni.xml")
     assert [p.index for p in device.rx_pdos if p.sm == 2] == []
+
+
+def test_devices_from_the_eni_alone_present_the_enis_configuration(corpus_extra):
+    """What SOEM reads (the SII, 0x1C1n) agrees with the ENI, read with XPath: the EL6695
+    bridge's Virtual PDOs that the ENI assigns are in its default assignment; an EL3692
+    whose outputs the ENI unassigns (SM2 written with length 0 in PS, disabled) has SM2 of
+    length 0, not ProcessData/Sm2/DefaultSize; a slave whose mailbox areas have length 0
+    (Beremiz's plugin file) has no mailbox."""
+    eni = corpus_extra / "eni"
+    path = eni / "pmec-fostwin" / "FOSTWIN_Secondary1.xml"
+    [el] = etree.parse(str(path)).xpath("//Config/Slave")
+    virtual = {int(p.findtext("Index").replace("#x", "0x"), 0): p.get("Sm")
+               for p in el.xpath("ProcessData/*[@Virtual='true']")}
+    assert virtual == {0x1608: "2", 0x1A05: None, 0x1A08: "3"}
+    plan = eni_reader.read_file(path)
+    device = device_from_eni(plan.slaves[0], plan, str(path))
+    od = {o.index: o for o in od_from_esi_build(device)}
+    assigned = {n: [int.from_bytes(od[0x1C10 + n][s].value, "little")
+                    for s in range(1, od[0x1C10 + n][0].as_int() + 1)] for n in (2, 3)}
+    assert assigned == {2: [0x1608], 3: [0x1A01, 0x1A08]}
+    assert [p.index for p in sii.decode(sii.build(device)).rxpdos] == [0x1608]
+
+    path = eni / "pmec-foswec2" / "NAVFACOSWECSxml.xml"
+    [el] = etree.parse(str(path)).xpath("//Config/Slave[Info/Name='Term 7 (EL3692)']")
+    assert el.findtext("ProcessData/Sm2/DefaultSize") == "4"
+    [sm2] = el.xpath("InitCmds/InitCmd[Comment='set sm 2 (outputs)']")
+    assert sm2.findtext("Transition") == "PS" and bytes.fromhex(sm2.findtext("Data"))[2:4] \
+        == b"\0\0"
+    plan = eni_reader.read_file(path)
+    [slave] = [s for s in plan.slaves if s.name == "Term 7 (EL3692)"]
+    device = device_from_eni(slave, plan, str(path))
+    assert (device.sms[2].default_size, device.sms[2].enable) == (0, 0)
+    assert sii.decode(sii.build(device)).syncms[2].length == 0
+
+    path = eni / "beremiz-tests" / "wago_higen" / "config.xml"
+    [el] = etree.parse(str(path)).xpath("//Config/Slave[Info/Name='EK1100']")
+    assert [el.findtext(f"Mailbox/{a}/Length") for a in ("Send", "Recv")] == ["0", "0"]
+    plan = eni_reader.read_file(path)
+    device = device_from_eni(plan.slaves[0], plan, str(path))
+    assert device.mailbox is None and device.sms == []
