@@ -211,3 +211,14 @@ def test_every_corpus_device_with_slot_groups_reaches_op_on_its_own_emulation(
     bad = [f"{r.key} ({r.type}): {r.outcome}: {r.message}" for r in results
            if r.outcome != "op"]
     assert not bad, "\n".join(bad)
+
+
+def test_show_gives_each_slot_its_group():
+    import json
+    done = subprocess.run([sys.executable, "-m", "ecatcfg", "show", str(FIXTURE), "--device",
+                           "EXG8200", "--format", "json"], capture_output=True, text=True,
+                          timeout=120)
+    assert done.returncode == 0, done.stderr
+    shown = json.loads(done.stdout)
+    slots = etree.parse(str(FIXTURE)).getroot().iter("Slot")
+    assert [s["slot_group"] for s in shown["slots"]] == [_hex(s.get("SlotGroup")) for s in slots]
