@@ -19,7 +19,8 @@ from ecatcfg.compiler import eoe_params, soe_cmds, watchdogs, wiring
 from ecatcfg.compiler.topology import (LoadedTopology, MappingEntry, MappingVariable, Sdo,
                                        Slave)
 from ecatcfg.errors import EcatcfgError
-from ecatcfg.esc import MAX_PDO_ENTRIES, MODULE_IDENT_LIST, SM_PDO_ASSIGN, Transition
+from ecatcfg.esc import (MAX_PDO_ENTRIES, MODULE_IDENT_LIST, SM_PDO_ASSIGN, Transition,
+                         pdo_mapping_range)
 from ecatcfg.esi import datatypes
 from ecatcfg.esi.coe import (TRANSITION_STATE, DictEntry, device_dictionary, has_coe, lookup,
                              write_refusal, write_target)
@@ -365,6 +366,10 @@ def _find_module(selector: int | str, by_ident: dict[int, Module],
 
 # -- PDO choice ---------------------------------------------------------------------------
 
+def _pdo_tag(direction: str) -> str:
+    return "RxPdo" if direction == "rx" else "TxPdo"
+
+
 def _desc(pdo: Pdo, plug: PluggedModule | None = None) -> PdoDesc:
     """A plan PDO from an ESI PDO; a module's PDOs moved by its slot and slot group
     (ETG.2000 DependOnSlot, DependOnSlotGroup: ``PluggedModule``, esi/slots.py); only an
@@ -440,6 +445,17 @@ def _device_pdos(slave: ResolvedSlave, modules: list[PluggedModule],
     for plug in modules:
         for esi_pdo in plug.module.rx_pdos + plug.module.tx_pdos:
             d = _desc(esi_pdo, plug)
+            allowed = pdo_mapping_range(d.direction)
+            if has_coe(dev) and not d.virtual and esi_pdo.index is not None \
+                    and d.index not in allowed:
+                # Moved by its slot and slot group past the mapping objects of its direction
+                # (ETG.1000.6; lint ESI101 checks the indices as written): the slave's
+                # assignment check would refuse it.
+                errors.add(f"slave {cfg.name!r}: the {_pdo_tag(d.direction)} "
+                           f"0x{esi_pdo.index:04X} at {esi_pdo.source} is 0x{d.index:04X} in "
+                           f"slot {plug.slot}, moved by its slot and slot group outside "
+                           f"0x{allowed.start:04X}-0x{allowed.stop - 1:04X}", "slaves",
+                           slave.index, "modules", plug.slot)
             # The module's position in the PDO's name, as EC-Engineer writes it:
             # "Module 3 (UR20-4DI-P / 1315170000).Input"; the variables carry it on.
             d.name = f"{plug.label}.{d.name}"
@@ -785,6 +801,14 @@ def _sdos(slave: ResolvedSlave, modules: list[PluggedModule], errors: _Errors) -
     esi = []
     for c, owner_plug, owner in given:
         cmd = _coe_cmd(c, owner_plug)
+        if cmd.index > 0xFFFF:
+            # An object index is 16 bits (ETG.1000.6); moved by the slot and its slot
+            # group past it, the InitCmd would address no object.
+            errors.add(f"slave {slave.name!r}: the InitCmd{owner} at {c.source}: its index "
+                       f"0x{c.index or 0:04X} moved by its slot and slot group is "
+                       f"0x{cmd.index:X}, outside 0..0xFFFF", "slaves", slave.index,
+                       "modules" if owner else "device")
+            continue
         refused = _refusals(slave, cmd)
         if refused:
             # The slave would refuse it and stop in that transition: the ESI contradicts

@@ -222,3 +222,22 @@ def test_show_gives_each_slot_its_group():
     shown = json.loads(done.stdout)
     slots = etree.parse(str(FIXTURE)).getroot().iter("Slot")
     assert [s["slot_group"] for s in shown["slots"]] == [_hex(s.get("SlotGroup")) for s in slots]
+
+
+def test_an_index_moved_out_of_its_range_is_an_error_naming_the_esi_line(tmp_path):
+    """Slot group 60 moves the axis TxPDO 0x1A00 by 60 x 0x20 to 0x2180, past the TxPDO
+    mappings 0x1A00-0x1BFF, and the InitCmd 0x5860 by 60 x 0x800 to 0x23860, past 16 bits
+    (ETG.1000.6): errors at the ESI lines, never an ENI with those indices."""
+    text = FIXTURE.read_text(encoding="utf-8").replace(
+        '<Slot MinInstances="1" MaxInstances="1" SlotGroup="2">',
+        '<Slot MinInstances="1" MaxInstances="1" SlotGroup="60">')
+    esi = tmp_path / "far.xml"
+    esi.write_text(text, encoding="utf-8")
+    lines = text.splitlines()
+    tx = next(n for n, ln in enumerate(lines, start=1) if "<TxPdo" in ln)
+    init = next(n for n, ln in enumerate(lines, start=1) if "<InitCmd>" in ln)
+    with pytest.raises(TopologyError) as err:
+        _eni(esi, "slaves:\n  - name: s\n    device: EXG8200\n")
+    message = str(err.value)
+    assert f"TxPdo 0x1A00 at {esi}:{tx} is 0x2180 in slot 2" in message, message
+    assert f"InitCmd of Module 2 (Axis) at {esi}:{init}" in message and "0x23860" in message
