@@ -30,7 +30,8 @@ from ecatcfg.esi.model import CoeInitCmd as EsiCoeInitCmd
 from ecatcfg.esi.model import DcOpMode, Device, Dictionary, Module, Pdo, SyncManager
 from ecatcfg.esi.physics import DEFAULT_PHYSICS
 from ecatcfg.esi.slots import (PluggedModule, fits, ident_list, ident_list_data,
-                               module_dictionaries, plug, ungrouped_indices)
+                               module_dictionaries, moved_excludes, plug,
+                               ungrouped_indices)
 from ecatcfg.record import replace
 
 
@@ -383,7 +384,7 @@ def _desc(pdo: Pdo, plug: PluggedModule | None = None) -> PdoDesc:
         data_type=e.data_type) for e in pdo.entries]
     return PdoDesc(pdo.direction, pdo_index(pdo.index or 0), pdo.name, entries, sm=pdo.sm,
                    fixed=pdo.fixed, mandatory=pdo.mandatory, virtual=pdo.virtual,
-                   excludes=[pdo_index(x) for x in pdo.excludes])
+                   excludes=moved_excludes(plug, pdo) if plug else list(pdo.excludes))
 
 
 def _choose_pdos(slave: ResolvedSlave, modules: list[PluggedModule], errors: _Errors) -> None:

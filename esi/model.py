@@ -260,6 +260,9 @@ class Pdo:
     pdo_order: int | None = None
     depend_on_slot: bool = False
     depend_on_slot_group: bool = False
+    # Exclude -> its own (DependOnSlot, DependOnSlotGroup), where the Exclude element gives
+    # either; an Exclude without them moves as the PDO's Index does (esi/slots.py).
+    exclude_depends: dict[int, tuple[bool, bool]] = field(default_factory=dict)
     # A device PDO that the module plugged in the slot replaces by its own (ETG.2000
     # ``OverwrittenByModule``; Beckhoff TwinSAFE and EP/EJ terminals with a default module).
     overwritten_by_module: bool = False

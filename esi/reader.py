@@ -474,6 +474,11 @@ class _Reader:
                 value = self.int_(ch.text, ch, f"{tag}/Exclude")
                 if value is not None:
                     pdo.excludes.append(value)
+                    if ch.get("DependOnSlot") is not None \
+                            or ch.get("DependOnSlotGroup") is not None:
+                        pdo.exclude_depends[value] = (
+                            self.bool_(ch.get("DependOnSlot"), ch, "@DependOnSlot"),
+                            self.bool_(ch.get("DependOnSlotGroup"), ch, "@DependOnSlotGroup"))
             else:
                 self.unknown(ch, "Pdo", el)
         return pdo

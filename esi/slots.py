@@ -12,7 +12,8 @@ Device-level rules that both the compiler (a topology's ``modules:``) and the vi
   its object indices by (P - 1) x ``SlotIndexIncrement`` (ETG.2000 ``Slots/Slot``; a slot's
   own increment wins over the one given for all slots): the UR20's third module has TxPdo
   0x1A02 and objects 0x6020, 0x8020; the Copley XE2's axis B 0x1740 and 0x6840;
-- only indices marked ``DependOnSlot`` move; a fixed index stays as written;
+- only indices marked ``DependOnSlot`` move; a fixed index stays as written (an Exclude
+  by its own marks, else as its PDO's Index);
 - a slot may belong to a slot group (``Slot/@SlotGroup``, the group described by
   ``Slots/SlotGroupData``: a drive's axis, a safety terminal's logic): indices marked
   ``DependOnSlotGroup`` move by the group's number x ``SlotGroupPdoIncrement`` (PDOs) or
@@ -236,8 +237,14 @@ def _moved_pdo(device: Device, pdo: Pdo, p: PluggedModule) -> Pdo:
         sm = found.number if found else None
     return replace(pdo, index=p.pdo_index(pdo.index or 0, pdo.depend_on_slot,
                                           pdo.depend_on_slot_group),
-                   excludes=[p.pdo_index(x, pdo.depend_on_slot, pdo.depend_on_slot_group)
-                             for x in pdo.excludes], sm=sm, entries=entries)
+                   excludes=moved_excludes(p, pdo), sm=sm, entries=entries)
+
+
+def moved_excludes(p: PluggedModule, pdo: Pdo) -> list[int]:
+    """The PDO's Excludes where they land in ``p``'s slot: each by its own DependOnSlot /
+    DependOnSlotGroup (ETG.2000 puts both on Exclude too), else as the PDO's Index."""
+    own = (pdo.depend_on_slot, pdo.depend_on_slot_group)
+    return [p.pdo_index(x, *pdo.exclude_depends.get(x, own)) for x in pdo.excludes]
 
 
 def _moved_dictionary(dic: Dictionary, moved: dict[int, int]) -> Dictionary:

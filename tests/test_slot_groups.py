@@ -20,7 +20,10 @@ indices below were worked out by hand from that rule:
            slot offsets 2 / 0x20, group offsets 0x40 / 0x800
 
     EXG-AXIS  RxPdo 0x1600 (DependOnSlot)        -> 0x1600, 0x1601
+              its Exclude 0x1700 (DependOnSlotGroup, its own mark) -> 0x1720, 0x1740
               entry 0x5840 (DependOnSlotGroup)   -> 0x6040, 0x6840
+              RxPdo 0x1700 (DependOnSlotGroup, no Sm: not assigned) -> 0x1720, 0x1740
+              its Exclude 0x1600 (DependOnSlot)  -> 0x1600, 0x1601
               TxPdo 0x1A00 (DependOnSlotGroup)   -> 0x1A20, 0x1A40
               entry 0x5841 (DependOnSlotGroup)   -> 0x6041, 0x6841
               entry 0x5000 (DependOnSlot)        -> 0x5000, 0x5010
@@ -51,9 +54,12 @@ from ecatcfg.runtime.network import Network
 FIXTURE = Path(__file__).with_name("fixtures") / "ecatcfg-EXG-slot-groups.xml"
 WITH_OPTION = "slaves:\n  - name: s\n    device: EXG8200\n    modules: {3: [EXG-OPTION]}\n"
 
-# (PDO index, its entries' indices) in assignment order, from the table above.
-PDOS = [(0x1600, [0x6040]), (0x1A20, [0x6041, 0x5000, 0x2000]),
-        (0x1601, [0x6840]), (0x1A40, [0x6841, 0x5010, 0x2000]), (0x1A42, [0x5920])]
+# (PDO index, its Excludes, its entries' indices) in ESI order, module by module, from the
+# table above.
+PDOS = [(0x1600, [0x1720], [0x6040]), (0x1720, [0x1600], [0x6040]),
+        (0x1A20, [], [0x6041, 0x5000, 0x2000]),
+        (0x1601, [0x1740], [0x6840]), (0x1740, [0x1601], [0x6840]),
+        (0x1A40, [], [0x6841, 0x5010, 0x2000]), (0x1A42, [], [0x5920])]
 
 
 def _hex(text: str | None) -> int:
@@ -88,7 +94,8 @@ def test_compile_moves_the_indices_by_slot_group():
     """The ENI's PDO list, assignment and InitCmds, read with lxml, are the hand-computed
     indices of the module docstring."""
     eni = etree.fromstring(_eni(FIXTURE))
-    pdos = [(_hex(p.findtext("Index")), [_hex(e.findtext("Index")) for e in p.iter("Entry")])
+    pdos = [(_hex(p.findtext("Index")), [_hex(x.text) for x in p.iter("Exclude")],
+             [_hex(e.findtext("Index")) for e in p.iter("Entry")])
             for p in eni.iter("RxPdo", "TxPdo")]
     assert pdos == PDOS
     coe = [(_hex(c.findtext("Index")), _hex(c.findtext("SubIndex")), c.findtext("Data"))
@@ -180,7 +187,7 @@ def test_compile_cli_writes_the_group_indices(tmp_path):
     assert done.returncode == 0, done.stderr
     eni = etree.parse(str(out)).getroot()
     assert [_hex(p.findtext("Index")) for p in eni.iter("RxPdo", "TxPdo")] == \
-        [i for i, _ in PDOS]
+        [i for i, _, _ in PDOS]
 
 
 # -- the corpus devices with slot groups -------------------------------------------------------
