@@ -274,6 +274,13 @@ class Device:
     kind: str | None    # esc / firmware / drive; None: nothing tells
     source: str         # how the kind was found
     esi: bool = False   # an ESI of the corpora describes it: the emulator can build it
+    own: bool = False   # it has its own measured figures (timing.DEVICES), not its kind's
+
+    @property
+    def figures(self) -> str | None:
+        """Whose figures the emulated slave takes: its own (its type, e.g. "EL6910") or
+        its kind's."""
+        return self.label.split(" (")[0] if self.own else self.kind
 
 
 def sii_dumps(folder: Path) -> dict[str, bytes]:
@@ -293,7 +300,7 @@ def classify(slave: Slave, library: Library, dumps: dict[str, bytes]) -> Device:
             if (e.vendor_id, e.product_code) == (vendor, product)]
     if same:
         from ecatcfg.runtime.segment.emulate import SlaveSpec, emulated_slave
-        from ecatcfg.runtime.segment.timing import kind_of
+        from ecatcfg.runtime.segment.timing import DEVICES, kind_of
         entry = (min(same, key=lambda e: (abs((e.revision or 0) - revision), e.file))
                  if revision is not None else max(same, key=lambda e: e.revision or 0))
         note = "" if entry.revision == revision else \
@@ -301,7 +308,8 @@ def classify(slave: Slave, library: Library, dumps: dict[str, bytes]) -> Device:
             (" (the capture reads none)" if revision is None else "")
         kind = kind_of(emulated_slave(SlaveSpec(library.device(entry))))
         return Device(f"{entry.type} ({label})", kind,
-                      f"ESI {Path(entry.file).name} line {entry.line}{note}", esi=True)
+                      f"ESI {Path(entry.file).name} line {entry.line}{note}", esi=True,
+                      own=(vendor, product) in DEVICES)
     from ecatcfg.esc import ESC_DEVICE_EMULATION
     from ecatcfg.esi import sii
     for name, data in dumps.items():
@@ -421,12 +429,14 @@ def _quantity_key(q: str) -> tuple[int, str]:
 
 def by_kind(windows: list[Window]) -> dict[tuple[str, str], list[Window]]:
     """The windows per (kind, quantity) the fit uses: EEPROM reads under ``"all"`` (the ESC
-    reads the EEPROM, whatever runs behind it); slaves of no kind left out."""
+    reads the EEPROM, whatever runs behind it); a device with its own figures
+    (``timing.DEVICES``) under its type instead of its kind; slaves of no kind left out."""
     groups: dict[tuple[str, str], list[Window]] = defaultdict(list)
     for w in windows:
-        if w.device.kind is None:
+        figures = w.device.figures
+        if figures is None:
             continue
-        groups[("all" if w.quantity == EEPROM else w.device.kind, w.quantity)].append(w)
+        groups[("all" if w.quantity == EEPROM else figures, w.quantity)].append(w)
     return dict(groups)
 
 

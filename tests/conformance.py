@@ -30,7 +30,9 @@ from collections.abc import Iterator
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-from ecatcfg.esc import Cmd
+from ecatcfg.esc import (SM_STATUS_MAILBOX_FULL, SM_STATUS_READ_EVENT, SM_STATUS_WRITE_EVENT, Cmd,
+                         sm_register)
+from ecatcfg.esi.coe import device_dictionary
 from ecatcfg.esi.library import Library, SelectorError
 from ecatcfg.runtime import wire
 from ecatcfg.runtime.pcap import read_capture
@@ -476,7 +478,73 @@ def _register_rule(rp: Replay, sent: Datagram, real: Datagram, mine: Datagram, r
         if hw is not None and emu is not None and emu & 0x7FFF_FFFF <= max(
                 hw & 0x7FFF_FFFF, 1000):
             return BY_RULE, "system time difference no larger than the hardware's"
+    if pos is not None:
+        found = _mailbox_rule(rp, sent, real, mine, reg, pos)
+        if found is not None:
+            return found
     return DIFFERENT, ""
+
+
+# CoE objects whose value is the device's own, which an ESI types but gives no value for:
+# the hardware and software versions (ETG.1000.6 0x1009, 0x100A; the EL6910's ESI types
+# 0x100A STRING(11), its firmware answers "04 (V01.11)" and five spaces).
+VERSION_STRINGS = (0x1009, 0x100A)
+COE, SDO_UPLOAD_RESPONSE = 3, 2       # mailbox type; server command specifier (bits 7:5)
+
+
+def _mailbox_rule(rp: Replay, sent: Datagram, real: Datagram, mine: Datagram, reg: int,
+                  pos: int) -> tuple[str, str] | None:
+    """(class, rule or limit) for a differing byte of the slave's mailbox-in SM: its status
+    register or its buffer; None when no mailbox rule applies."""
+    slave = rp.segment.slaves[pos]
+    sm = slave._mailbox_in_sm()
+    if sm is None:
+        return None
+    if reg == sm_register(sm.number) + 5:                            # SM status
+        hw, emu = real.data[reg - sent.ado], mine.data[reg - sent.ado]
+        if hw ^ emu == SM_STATUS_READ_EVENT:
+            # Both empty; the read event of the master's last read is cleared when the
+            # firmware acts on it: the EK1914 within 0.3 ms or at its next request, the
+            # EL6910 and SOES on a LAN9252 at their next reply, whenever their loop runs.
+            return KNOWN_LIMIT, ("mailbox-in read event (SM status bit 1): when the "
+                                 "firmware clears it")
+        full = SM_STATUS_MAILBOX_FULL | SM_STATUS_WRITE_EVENT
+        if {hw & full, emu & full} == {0, full} and (hw ^ emu) & ~(
+                full | SM_STATUS_READ_EVENT) == 0:
+            # The emulated reply takes the table's time (runtime/segment/timing.py), a
+            # real one varies (the EL6910's 1.65-2.07 ms): one is there, the other not
+            # yet.  A master that reads SM1 on it would get another working counter:
+            # that stays different.
+            return BY_RULE, "mailbox reply time varies"
+        return None
+    if not sm.start <= reg < sm.end or sent.ado > sm.start:
+        return None
+    at = sm.start - sent.ado
+    hw_len, emu_len = _u(real.data, at, 2), _u(mine.data, at, 2)
+    if hw_len is None or emu_len is None:
+        return None
+    if reg - sm.start >= 6 + max(hw_len, emu_len):
+        # The mailbox header's length ends the message (ETG.1000.4); what follows in the
+        # buffer is what the slave's firmware wrote there before (earlier replies, its
+        # diagnosis texts, uninitialised RAM), the emulated ESC's buffer is zeros.
+        return KNOWN_LIMIT, "mailbox-in bytes past the message (earlier contents)"
+    hw_obj, emu_obj = _upload_of(real.data[at:]), _upload_of(mine.data[at:])
+    if hw_obj is not None and hw_obj == emu_obj and hw_obj[0] in VERSION_STRINGS:
+        dic = device_dictionary(slave.device)
+        obj = dic.objects.get(hw_obj[0]) if dic is not None else None
+        info = obj.info if obj is not None else None
+        if info is None or (info.default_data is None and info.default_string is None):
+            return KNOWN_LIMIT, ("version string 0x1009/0x100A: the firmware's own, its "
+                                 "ESI gives none")
+    return None
+
+
+def _upload_of(message: bytes) -> tuple[int, int] | None:
+    """(index, subindex) of a CoE SDO upload response, else None."""
+    if len(message) < 12 or message[5] & 0x0F != COE or message[8] >> 5 != \
+            SDO_UPLOAD_RESPONSE:
+        return None
+    return int.from_bytes(message[9:11], "little"), message[11]
 
 
 def _moves_together(rp: Replay, sent: Datagram, real: Datagram, mine: Datagram, pos: int,

@@ -27,7 +27,7 @@ EXTRA = "corpus-extra/"          # captures of ../shared/corpus-extra/pcap
 RECORDED: dict[str, tuple[bool, int, int, int, int, int]] = {
     "ethercrab/replay-dc.pcapng": (True, 2838, 1946, 364, 528, 0),
     "ethercrab/replay-ek1100-alias-address.pcapng": (True, 650, 396, 107, 147, 0),
-    "ethercrab/replay-ek1100-el2828-el2889.pcapng": (True, 2062, 1424, 106, 532, 0),
+    "ethercrab/replay-ek1100-el2828-el2889.pcapng": (True, 2062, 1425, 105, 532, 0),
     "ethercrab/rs-detect-slaves-ek1100-el1004.pcapng": (False, 0, 0, 0, 0, 0),
     "ethercrab/rs-detect-slaves-ek1100-only.pcapng": (False, 0, 0, 0, 0, 0),
     "ethercrab/soem-dual-lan9252.pcapng": (False, 0, 0, 0, 0, 0),
@@ -42,6 +42,10 @@ RECORDED: dict[str, tuple[bool, int, int, int, int, int]] = {
     # corpus-extra (its MANIFEST.md): EtherCrab on real Beckhoff lines.
     EXTRA + "ethercrab/replay-issue-255.pcapng": (True, 1684, 1147, 5, 532, 0),
     EXTRA + "ethercrab/rs-example-sii-el2004.pcapng": (True, 127, 96, 0, 31, 0),
+    # EK1100 + EL6910 TwinSAFE logic (revision 0x140000, emulated from the ESI of 0x110000)
+    # and an EK1914 whose SDO reads of 0x1001 and 0x1008 are answered with abort codes.
+    EXTRA + "ethercrab/replay-mailbox-el6910.pcapng": (True, 1690, 1379, 127, 184, 0),
+    EXTRA + "ethercrab/replay-sdo-error.pcapng": (True, 278, 246, 1, 31, 0),
     # No ESI for the EL3004 rev 0x150000 (0x2:0xbbc3052) nor the Kollmorgen AKD in either
     # corpus (test_slaves_without_an_esi_are_named).
     EXTRA + "ethercrab/replay-ek1914-el3004-configure.pcapng": (False, 0, 0, 0, 0, 0),
@@ -168,3 +172,53 @@ def test_the_el2004s_three_fmmus_decide_a_working_counter(corpus_extra, library,
     r = _report(corpus_extra, library, name, dumps)
     assert [(d.what, d.field, d.expected, d.got) for d in r.differences] == [
         ("BWR 0x0000 0x0630", "wkc", "1", "3")]
+
+
+def test_what_the_el6910_and_the_sdo_aborts_leave_to_named_limits(corpus_extra, library, dumps):
+    """The EL6910 (revision 0x140000; the corpus has the ESI of 0x110000) and the EK1914
+    whose reads of 0x1001 and 0x1008 are aborted: every datagram is equal, by rule or one
+    of these limits.  The real mailbox buffer keeps what the firmware wrote before past
+    the message's length (the EK1914's diagnosis texts, the EL6910's uninitialised RAM);
+    the EL6910's firmware answers 0x100A "04 (V01.11)" and five spaces where its ESI
+    types a STRING(11) with no value; the read event of SM1 is cleared when the firmware
+    gets to it."""
+    el6910 = _report(corpus_extra, library, EXTRA + "ethercrab/replay-mailbox-el6910.pcapng",
+                     dumps)
+    assert el6910.slaves[1] == "EL6910 (0x2:0x1afe3052:0x140000, ESI of revision 0x110000)"
+    assert set(el6910.limits) == {
+        "SII category area layout (word 0x40 on)",
+        "mailbox-in bytes past the message (earlier contents)",
+        "version string 0x1009/0x100A: the firmware's own, its ESI gives none",
+        "mailbox-in read event (SM status bit 1): when the firmware clears it"}
+    assert el6910.limits["version string 0x1009/0x100A: the firmware's own, its ESI gives "
+                         "none"] == 1
+    aborts = _report(corpus_extra, library, EXTRA + "ethercrab/replay-sdo-error.pcapng", dumps)
+    assert set(aborts.limits) == {
+        "SII category area layout (word 0x40 on)",
+        "mailbox-in bytes past the message (earlier contents)",
+        "mailbox-in read event (SM status bit 1): when the firmware clears it"}
+
+
+def test_the_el6910_takes_its_own_time(corpus_extra, library, dumps, monkeypatch):
+    """Without its measured figures (runtime/segment/timing.py DEVICES) the EL6910 takes
+    the firmware kind's: in PREOP after 1.335 ms where the real one is still in INIT
+    (1.51-1.60 ms), so the AL status reads differ."""
+    from ecatcfg.runtime.segment import timing
+    name = EXTRA + "ethercrab/replay-mailbox-el6910.pcapng"
+    monkeypatch.setattr(timing, "DEVICES", {})
+    r = _report(corpus_extra, library, name, dumps)
+    assert {d.field for d in r.differences} == {"0x0130"}, r.differences[:5]
+
+
+def test_an_sdo_download_answer_echoes_the_data_as_the_hardware_does(corpus_extra, library,
+                                                                      dumps, monkeypatch):
+    """The EL6910 answers the download of 0xF008 (code word 1) with the 4 data bytes of
+    the request in the reserved bytes of the response; an emulated answer with zeros
+    there differs (runtime/segment/sdo_server.py)."""
+    from ecatcfg.runtime.segment import sdo_server
+    name = EXTRA + "ethercrab/replay-mailbox-el6910.pcapng"
+    assert _report(corpus_extra, library, name, dumps).counts[DIFFERENT] == 0
+    monkeypatch.setattr(sdo_server, "echo_request_data", lambda response, request: response)
+    r = _report(corpus_extra, library, name, dumps)
+    assert [(d.what, d.field, d.expected, d.got) for d in r.differences] == [
+        ("FPRD 0x1001 0x1100", "0x110C", "01", "00")]

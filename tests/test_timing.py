@@ -121,7 +121,7 @@ def test_eeprom_is_busy_while_reading(lib):
     run(seg, fp(Cmd.FPWR, 0x0508, bytes(8)))        # read-only to the master: stays 0
     run(seg, fp(Cmd.FPWR, 0x0502, struct.pack("<HI", 0x0100, 8)))   # read word 8
     read_ns = timing.TABLE["drive"].eeprom_read_ns
-    assert read_ns == 720_000
+    assert read_ns == 690_000
     clock.advance(read_ns - 1_000)
     [status, data] = run(seg, fp(Cmd.FPRD, 0x0502, 2), fp(Cmd.FPRD, 0x0508, 8))
     assert status.data == struct.pack("<H", 0x8140)              # busy, as a real ESC
