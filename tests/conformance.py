@@ -38,6 +38,7 @@ from ecatcfg.runtime import wire
 from ecatcfg.runtime.pcap import read_capture
 from ecatcfg.runtime.segment.dc_clock import DcModel
 from ecatcfg.runtime.segment.emulate import SlaveSpec, emulated_slave
+from ecatcfg.runtime.segment.syncman import SmKind
 from ecatcfg.runtime.segment.virtual import VirtualSegment
 from ecatcfg.runtime.segment.timing import Timing
 from ecatcfg.runtime.wire import Datagram
@@ -407,6 +408,7 @@ class State:
         self.last: dict[tuple[int, int], tuple[int, int]] = {}   # (pos, reg) -> (hw, emu)
         self.dl_read: set[int] = set()
         self.clock_set: set[int] = set()                          # clocks started
+        self.request_ns: dict[int, int] = {}     # pos -> when its mailbox-out SM was written
 
 
 def _targets(rp: Replay, sent: Datagram) -> list[int]:
@@ -446,8 +448,8 @@ def _register_rule(rp: Replay, sent: Datagram, real: Datagram, mine: Datagram, r
         if hw & 0x8000 and (hw & ~0x8700) == (emu & ~0x8700) and not emu & 0x8700:
             return limit if chip else (BY_RULE, "EEPROM busy while a read is in flight")
         if emu & 0x8000 and (hw & ~0x8700) == (emu & ~0x8700) and not hw & 0x8700:
-            # The emulated read takes the median time of the captured ones (0.72 ms of
-            # 0.49-0.96 ms, runtime/segment/timing.py): a faster real read is done already.
+            # The emulated read takes the table's time (0.69 ms, runtime/segment/timing.py;
+            # captured reads end within 0.49-0.96 ms): a faster real read is done already.
             return limit if chip else (BY_RULE, "EEPROM read time varies (0.49-0.96 ms)")
         return DIFFERENT, ""
     if EEPROM_DATA <= reg < EEPROM_DATA + 8 and pos is not None:
@@ -490,6 +492,19 @@ def _register_rule(rp: Replay, sent: Datagram, real: Datagram, mine: Datagram, r
 # 0x100A STRING(11), its firmware answers "04 (V01.11)" and five spaces).
 VERSION_STRINGS = (0x1009, 0x100A)
 COE, SDO_UPLOAD_RESPONSE = 3, 2       # mailbox type; server command specifier (bits 7:5)
+# How long after its request a reply may be there on one side only: the slowest reply of a
+# device with an ESI in the captures (the EL6910's 0xF008 download, at most 2.07 ms).
+REPLY_VARIES_NS = 2_100_000
+
+
+def _note_mailbox_request(rp: Replay, sent: Datagram, real: Datagram, who: list[int]) -> None:
+    """When the master's write of a slave's mailbox-out SM (a request) was taken."""
+    if sent.cmd not in WRITES or len(who) != 1 or not real.wkc:
+        return
+    slave = rp.segment.slaves[who[0]]
+    out = next((sm for sm in slave.sms if sm.active and sm.kind is SmKind.MAILBOX_OUT), None)
+    if out is not None and sent.ado <= out.start < sent.ado + len(sent.data):
+        rp.state.request_ns[who[0]] = rp.now
 
 
 def _mailbox_rule(rp: Replay, sent: Datagram, real: Datagram, mine: Datagram, reg: int,
@@ -509,8 +524,9 @@ def _mailbox_rule(rp: Replay, sent: Datagram, real: Datagram, mine: Datagram, re
             return KNOWN_LIMIT, ("mailbox-in read event (SM status bit 1): when the "
                                  "firmware clears it")
         full = SM_STATUS_MAILBOX_FULL | SM_STATUS_WRITE_EVENT
+        since = rp.now - rp.state.request_ns.get(pos, rp.now)
         if {hw & full, emu & full} == {0, full} and (hw ^ emu) & ~(
-                full | SM_STATUS_READ_EVENT) == 0:
+                full | SM_STATUS_READ_EVENT) == 0 and 0 < since <= REPLY_VARIES_NS:
             # The emulated reply takes the table's time (runtime/segment/timing.py), a
             # real one varies (the EL6910's 1.65-2.07 ms): one is there, the other not
             # yet.  A master that reads SM1 on it would get another working counter:
@@ -615,6 +631,7 @@ def classify(rp: Replay, e: Exchange, i: int, sent: Datagram, real: Datagram,
                                                      real.data[k:k + 1].hex(),
                                                      mine.data[k:k + 1].hex())))
     _start_clock_where_the_hardware_was(rp, sent, real, mine, who)
+    _note_mailbox_request(rp, sent, real, who)
     if real.irq != mine.irq:
         diff = real.irq ^ mine.irq
         everyone = len(rp.state.dl_read) >= len(rp.segment.slaves)

@@ -27,7 +27,6 @@ class Known:
 
 # The work that removes entries, named once.
 FIRST_CONTACT = "first contact with the exporters' whole vocabulary and these files' shapes"
-CAPTURES = "every capture of both corpora replayed and its devices' timing fitted"
 
 BEREMIZ_HIGEN = "corpus-extra/beremiz-tests/wago_higen/config.xml"
 BEREMIZ_SANYO = "corpus-extra/beremiz-tests/wago_sanyo/config.xml"

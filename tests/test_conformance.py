@@ -44,7 +44,7 @@ RECORDED: dict[str, tuple[bool, int, int, int, int, int]] = {
     EXTRA + "ethercrab/rs-example-sii-el2004.pcapng": (True, 127, 96, 0, 31, 0),
     # EK1100 + EL6910 TwinSAFE logic (revision 0x140000, emulated from the ESI of 0x110000)
     # and an EK1914 whose SDO reads of 0x1001 and 0x1008 are answered with abort codes.
-    EXTRA + "ethercrab/replay-mailbox-el6910.pcapng": (True, 1690, 1379, 127, 184, 0),
+    EXTRA + "ethercrab/replay-mailbox-el6910.pcapng": (True, 1690, 1378, 127, 185, 0),
     EXTRA + "ethercrab/replay-sdo-error.pcapng": (True, 278, 246, 1, 31, 0),
     # No ESI for the EL3004 rev 0x150000 (0x2:0xbbc3052) nor the Kollmorgen AKD in either
     # corpus (test_slaves_without_an_esi_are_named).
@@ -208,6 +208,22 @@ def test_the_el6910_takes_its_own_time(corpus_extra, library, dumps, monkeypatch
     monkeypatch.setattr(timing, "DEVICES", {})
     r = _report(corpus_extra, library, name, dumps)
     assert {d.field for d in r.differences} == {"0x0130"}, r.differences[:5]
+
+
+def test_a_mailbox_reply_there_on_one_side_only_is_the_reply_times_rule(
+        corpus_extra, library, dumps, monkeypatch):
+    """The EL6910's replies take 1.65-2.07 ms, the emulated one 1.763 ms: at a few polls
+    of SM1's status one is there and the other not yet.  Only within 2.1 ms of the
+    request: without that time (the rule off) exactly those polls differ, in 0x080D."""
+    import conformance
+    name = EXTRA + "ethercrab/replay-mailbox-el6910.pcapng"
+    r = _report(corpus_extra, library, name, dumps)
+    polls = r.rules["mailbox reply time varies"]
+    assert polls > 0
+    monkeypatch.setattr(conformance, "REPLY_VARIES_NS", 0)
+    r = _report(corpus_extra, library, name, dumps)
+    assert {(d.what, d.field) for d in r.differences} == {("FPRD 0x1001 0x080D", "0x080D")}
+    assert len(r.differences) == polls
 
 
 def test_an_sdo_download_answer_echoes_the_data_as_the_hardware_does(corpus_extra, library,
