@@ -517,14 +517,19 @@ def _mailbox_rule(rp: Replay, sent: Datagram, real: Datagram, mine: Datagram, re
         return None
     if reg == sm_register(sm.number) + 5:                            # SM status
         hw, emu = real.data[reg - sent.ado], mine.data[reg - sent.ado]
-        if hw ^ emu == SM_STATUS_READ_EVENT:
-            # Both empty; the read event of the master's last read is cleared when the
-            # firmware acts on it: the EK1914 within 0.3 ms or at its next request, the
-            # EL6910 and SOES on a LAN9252 at their next reply, whenever their loop runs.
-            return KNOWN_LIMIT, ("mailbox-in read event (SM status bit 1): when the "
-                                 "firmware clears it")
-        full = SM_STATUS_MAILBOX_FULL | SM_STATUS_WRITE_EVENT
         since = rp.now - rp.state.request_ns.get(pos, rp.now)
+        if hw ^ emu == SM_STATUS_READ_EVENT:
+            # Both empty; the read event of the master's last read clears when the
+            # firmware writes the first byte of its next reply (runtime/segment/timing.py
+            # reply_start_ns), which varies as the reply time does (the EL6910's within
+            # 0.98-1.24 ms of the request).
+            if 0 < since <= REPLY_VARIES_NS:
+                return BY_RULE, "the firmware starts writing its reply at a varying time"
+            # The EK1914 also clears it twice of eight with no request pending (0.28 and
+            # 1.07 ms after the master's read): when its loop does that is its own.
+            return KNOWN_LIMIT, ("mailbox-in read event (SM status bit 1) cleared by the "
+                                 "firmware with no request")
+        full = SM_STATUS_MAILBOX_FULL | SM_STATUS_WRITE_EVENT
         if {hw & full, emu & full} == {0, full} and (hw ^ emu) & ~(
                 full | SM_STATUS_READ_EVENT) == 0 and 0 < since <= REPLY_VARIES_NS:
             # The emulated reply takes the table's time (runtime/segment/timing.py), a

@@ -13,6 +13,7 @@ the other figures may only get better.
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
@@ -44,8 +45,8 @@ RECORDED: dict[str, tuple[bool, int, int, int, int, int]] = {
     EXTRA + "ethercrab/rs-example-sii-el2004.pcapng": (True, 127, 96, 0, 31, 0),
     # EK1100 + EL6910 TwinSAFE logic (revision 0x140000, emulated from the ESI of 0x110000)
     # and an EK1914 whose SDO reads of 0x1001 and 0x1008 are answered with abort codes.
-    EXTRA + "ethercrab/replay-mailbox-el6910.pcapng": (True, 1690, 1378, 127, 185, 0),
-    EXTRA + "ethercrab/replay-sdo-error.pcapng": (True, 278, 246, 1, 31, 0),
+    EXTRA + "ethercrab/replay-mailbox-el6910.pcapng": (True, 1690, 1513, 135, 42, 0),
+    EXTRA + "ethercrab/replay-sdo-error.pcapng": (True, 278, 252, 1, 25, 0),
     # No ESI for the EL3004 rev 0x150000 (0x2:0xbbc3052) nor the Kollmorgen AKD in either
     # corpus (test_slaves_without_an_esi_are_named).
     EXTRA + "ethercrab/replay-ek1914-el3004-configure.pcapng": (False, 0, 0, 0, 0, 0),
@@ -180,23 +181,34 @@ def test_what_the_el6910_and_the_sdo_aborts_leave_to_named_limits(corpus_extra, 
     of these limits.  The real mailbox buffer keeps what the firmware wrote before past
     the message's length (the EK1914's diagnosis texts, the EL6910's uninitialised RAM);
     the EL6910's firmware answers 0x100A "04 (V01.11)" and five spaces where its ESI
-    types a STRING(11) with no value; the read event of SM1 is cleared when the firmware
-    gets to it."""
+    types a STRING(11) with no value; the EK1914 twice clears the read event of SM1 with
+    no request pending."""
     el6910 = _report(corpus_extra, library, EXTRA + "ethercrab/replay-mailbox-el6910.pcapng",
                      dumps)
     assert el6910.slaves[1] == "EL6910 (0x2:0x1afe3052:0x140000, ESI of revision 0x110000)"
-    assert set(el6910.limits) == {
-        "SII category area layout (word 0x40 on)",
-        "mailbox-in bytes past the message (earlier contents)",
-        "version string 0x1009/0x100A: the firmware's own, its ESI gives none",
-        "mailbox-in read event (SM status bit 1): when the firmware clears it"}
-    assert el6910.limits["version string 0x1009/0x100A: the firmware's own, its ESI gives "
-                         "none"] == 1
+    version = "version string 0x1009/0x100A: the firmware's own, its ESI gives none"
+    past = "mailbox-in bytes past the message (earlier contents)"
+    assert el6910.limits == {"SII category area layout (word 0x40 on)": 32, past: 10,
+                             version: 1}
     aborts = _report(corpus_extra, library, EXTRA + "ethercrab/replay-sdo-error.pcapng", dumps)
-    assert set(aborts.limits) == {
-        "SII category area layout (word 0x40 on)",
-        "mailbox-in bytes past the message (earlier contents)",
-        "mailbox-in read event (SM status bit 1): when the firmware clears it"}
+    assert aborts.limits == {
+        "SII category area layout (word 0x40 on)": 16, past: 7,
+        "mailbox-in read event (SM status bit 1) cleared by the firmware with no request": 2}
+
+
+def test_the_el6910_starts_its_replies_when_the_real_one_does(corpus_extra, library, dumps,
+                                                               monkeypatch):
+    """The EL6910's firmware writes the first byte of a reply about 1.16 ms after the
+    request (SM1's read event clears), its last about 0.6 ms later: emulated so, 8 polls
+    of SM1's status fall between the two clocks (the reply-start rule).  Break it on
+    purpose, the read event held until the reply is there: over a hundred polls more."""
+    from ecatcfg.runtime.segment import timing
+    name = EXTRA + "ethercrab/replay-mailbox-el6910.pcapng"
+    rule = "the firmware starts writing its reply at a varying time"
+    assert _report(corpus_extra, library, name, dumps).rules[rule] == 8
+    monkeypatch.setattr(timing, "DEVICES", {timing.EL6910: replace(
+        timing.DEVICES[timing.EL6910], reply_start_ns=None)})
+    assert _report(corpus_extra, library, name, dumps).rules[rule] > 100
 
 
 def test_the_el6910_takes_its_own_time(corpus_extra, library, dumps, monkeypatch):

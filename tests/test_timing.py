@@ -186,6 +186,34 @@ def test_mailbox_reply_is_not_readable_before_its_latency(lib):
     assert reply.wkc == 1 and reply.data[8] == 0x43 and reply.data[9:12] == b"\x18\x10\x01"
 
 
+def test_the_read_event_clears_when_the_firmware_starts_its_reply(lib):
+    """After the master read a reply, SM1's status shows the read event (0x02) until the
+    firmware writes the first byte of its next reply (0x00), then full (0x09) when the
+    last is written: the sequence of the real EL6910 (ethercrab-rs/ethercrab
+    tests/replay-mailbox-el6910.pcapng: 0x02 for about 1.16 ms, 0x00 for about 0.6 ms).
+    Without a reply start (the drive kind's table) it stays 0x02 until the reply."""
+    for start_ms, expected in ((1, [0x02, 0x00, 0x09]), (None, [0x02, 0x02, 0x09])):
+        clock = Clock()
+        figures = {"mailbox_reply_ms": 2} | ({"reply_start_ms": start_ms} if start_ms else {})
+        seg = line(lib, "EXD-402", clock=clock, model=timing.overridden({"drive": figures}))
+        addressed(seg)
+        to_preop(seg, clock)
+        request = SDO_UPLOAD_1018_01.ljust(128, b"\0")
+        run(seg, fp(Cmd.FPWR, 0x1000, request))
+        clock.advance(2 * MS)
+        [reply] = run(seg, fp(Cmd.FPRD, 0x1080, 128))
+        assert reply.wkc == 1
+        again = request[:5] + bytes((0x23,)) + request[6:]       # the next mailbox counter
+        [d] = run(seg, fp(Cmd.FPWR, 0x1000, again))
+        assert d.wkc == 1
+        seen = []
+        for step in (MS - 1, 1, MS):
+            clock.advance(step)
+            [status] = run(seg, fp(Cmd.FPRD, 0x080D, 1))
+            seen.append(status.data[0])
+        assert seen == expected, start_ms
+
+
 def test_a_request_written_again_is_answered_once(lib):
     """SOEM sends a frame again when no answer came back within 2 ms (ecx_srconfirm, up to
     three sends of an SM0 write): the same bytes, so the same mailbox counter.  The slave

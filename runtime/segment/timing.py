@@ -17,7 +17,7 @@ by what it is (:func:`kind_of`):
 - ``firmware``: any other slave (firmware behind the ESC: mailbox devices, SOES slaves).
 
 Override with a JSON file (:func:`load`): per kind any of ``mailbox_reply_ms``,
-``eeprom_read_ms``, ``eeprom_write_ms`` and ``state_change_ms`` (a map of transitions: ``IP``, ``PS``, ``SO``,
+``reply_start_ms``, ``eeprom_read_ms``, ``eeprom_write_ms`` and ``state_change_ms`` (a map of transitions: ``IP``, ``PS``, ``SO``,
 ``OS``, ``SP``, ``SI``, ``OP``, ``OI``, ``PI``), merged over the table; figures given for
 a kind also replace the measured figures of that kind's devices in :data:`DEVICES`.
 """
@@ -53,6 +53,11 @@ class SlaveTiming:
     # The EEPROM's own write cycle after a word is written: a command in that time is not
     # acknowledged (0x0502 bit 13) and not carried out.
     eeprom_write_ns: int = 0
+    # From a mailbox request until the firmware writes the first byte of its reply into
+    # SM1, which clears the read event (SM1 status bit 1) of the master's last read (ESC
+    # datasheet, 0x0805: "cleared after first byte of buffer was written"); the reply
+    # shows when its last byte is written, after mailbox_reply_ns.  None: at that time.
+    reply_start_ns: int | None = None
 
     def transition_ns(self, transition: str) -> int:
         """Time of a state change, e.g. ``"PS"`` for PREOP -> SAFEOP."""
@@ -79,6 +84,9 @@ EEPROM_WRITE_MS = 3.5
 # (dumps/soem-*-lan9252.pcapng: SDO replies after 37-40 ms, IP/PS after 9-19 ms) cannot
 # share one figure with them; no ESI describes it, it is left out (docs/timing.md).
 FIRMWARE_BACK_MS = 1.335   # no capture shows the transitions back: taken as IP
+# The EK1914 (tests/replay-sdo-error.pcapng, tests/replay-ek1914-*.pcapng): SM1's read event
+# is cleared by the first poll after a request, within [0, 0.521] ms (7 of 7).
+FIRMWARE_REPLY_START_MS = 0.26
 # A Kollmorgen AKD servo drive (no ESI in the corpora; classified from its real SII,
 # ethercrab-rs/ethercrab dumps/eeprom/akd.hex): CoE SDO replies in [1.54, 1.96] ms (35 of
 # 39 mailbox replies; the 4 EoE IP-parameter replies of dumps/twincat-akd-nc-mode.pcapng
@@ -94,7 +102,7 @@ TABLE: dict[str, SlaveTiming] = {
     "firmware": SlaveTiming("firmware", _ms(0.535), _ms(EEPROM_READ_MS), {
         "IP": _ms(1.335), "PS": _ms(3.377), "SO": _ms(0.547)} | {
         t: _ms(FIRMWARE_BACK_MS) for t in ("OS", "SP", "SI", "OP", "OI", "PI")},
-        _ms(EEPROM_WRITE_MS)),
+        _ms(EEPROM_WRITE_MS), reply_start_ns=_ms(FIRMWARE_REPLY_START_MS)),
     "drive": SlaveTiming("drive", _ms(1.749), _ms(EEPROM_READ_MS), {
         "IP": _ms(4.308), "PS": _ms(100.0), "SO": _ms(100.0)} | {
         t: _ms(DRIVE_BACK_MS) for t in ("OS", "SP", "SI", "OP", "OI", "PI")},
@@ -108,10 +116,13 @@ TABLE: dict[str, SlaveTiming] = {
 # EL6910 TwinSAFE logic terminal (ethercrab-rs/ethercrab tests/replay-mailbox-el6910.pcapng,
 # EtherCrab polling every 0.1 ms): 10 CoE SDO replies in 1.65-2.07 ms, three times the
 # EK1914's; no one figure holds them all, 1.763 ms holds 7 (0x1C00 reads; the 0x100A
-# upload and the 0xF008 download take 1.94-2.07 ms); IP within [1.514, 1.600] ms.
+# upload and the 0xF008 download take 1.94-2.07 ms); its firmware starts writing a reply
+# (SM1's read event clears) within [1.122, 1.196] ms (9 of 10; 0x100A within 0.98-1.09 ms),
+# 0.5-0.9 ms before the reply is there; IP within [1.514, 1.600] ms.
 EL6910 = (0x2, 0x1AFE3052)
 DEVICES: dict[tuple[int, int], SlaveTiming] = {
     EL6910: replace(TABLE["firmware"], mailbox_reply_ns=_ms(1.763),
+                    reply_start_ns=_ms(1.159),
                     state_change_ns=TABLE["firmware"].state_change_ns | {"IP": _ms(1.557)}),
 }
 
@@ -196,9 +207,12 @@ def overridden(raw: object, source: str = "timing") -> Timing:
                 t = replace(t, eeprom_read_ns=_ms(_milliseconds(value, f"{where}: {key}")))
             elif key == "eeprom_write_ms":
                 t = replace(t, eeprom_write_ns=_ms(_milliseconds(value, f"{where}: {key}")))
+            elif key == "reply_start_ms":
+                t = replace(t, reply_start_ns=_ms(_milliseconds(value, f"{where}: {key}")))
             else:
                 raise EcatcfgError(f"{where}: unknown key {key!r} (mailbox_reply_ms, "
-                                   "eeprom_read_ms, eeprom_write_ms, state_change_ms)")
+                                   "reply_start_ms, eeprom_read_ms, eeprom_write_ms, "
+                                   "state_change_ms)")
         kinds[kind] = t
     # The user's figures for a kind are for all its devices, the measured ones included.
     return Timing(kinds, {key: t for key, t in DEVICES.items() if t.kind not in raw})
