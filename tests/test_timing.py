@@ -214,6 +214,14 @@ def test_the_read_event_clears_when_the_firmware_starts_its_reply(lib):
         assert seen == expected, start_ms
 
 
+def test_figures_for_a_kind_replace_its_devices_own():
+    """The EL6910 has its own measured figures (DEVICES) unless the user gives figures for
+    its kind, `firmware`: they are then meant for every firmware device."""
+    assert timing.EL6910 in Timing().devices
+    assert timing.EL6910 in timing.overridden({"drive": {"mailbox_reply_ms": 5}}).devices
+    assert timing.overridden({"firmware": {"mailbox_reply_ms": 5}}).devices == {}
+
+
 def test_a_request_written_again_is_answered_once(lib):
     """SOEM sends a frame again when no answer came back within 2 ms (ecx_srconfirm, up to
     three sends of an SM0 write): the same bytes, so the same mailbox counter.  The slave

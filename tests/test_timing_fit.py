@@ -146,8 +146,8 @@ def test_no_figure_keeps_more_windows_in_step_than_the_tables(windows):
 def test_what_stays_out_of_step(windows):
     """docs/timing.md: one figure per kind cannot hold the SOES demo firmware on a LAN9252
     (SDO replies after 37-40 ms, begun after 17 ms, state changes after 9-19 ms) together
-    with the EK1914 and EL3004, nor the AKD's EoE replies (7-46 ms, not even agreeing with each other)
-    together with its CoE replies, nor one AKD start-up to PREOP of 16-19 ms; and the
+    with the EK1914 and EL3004, nor the AKD's EoE replies (7-46 ms, not even agreeing with
+    each other) together with its CoE replies, nor one AKD start-up to PREOP of 16-19 ms; and the
     EL3004 (no ESI) reaches PREOP within 0.55 ms, where the EK1914 beside it takes at least
     0.94 ms; no one figure holds three of the EL6910's ten replies with the other seven,
     nor the start of its 0x100A reply with the other nine."""

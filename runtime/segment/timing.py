@@ -17,9 +17,10 @@ by what it is (:func:`kind_of`):
 - ``firmware``: any other slave (firmware behind the ESC: mailbox devices, SOES slaves).
 
 Override with a JSON file (:func:`load`): per kind any of ``mailbox_reply_ms``,
-``reply_start_ms``, ``eeprom_read_ms``, ``eeprom_write_ms`` and ``state_change_ms`` (a map of transitions: ``IP``, ``PS``, ``SO``,
-``OS``, ``SP``, ``SI``, ``OP``, ``OI``, ``PI``), merged over the table; figures given for
-a kind also replace the measured figures of that kind's devices in :data:`DEVICES`.
+``reply_start_ms``, ``eeprom_read_ms``, ``eeprom_write_ms`` and ``state_change_ms`` (a map
+of transitions: ``IP``, ``PS``, ``SO``, ``OS``, ``SP``, ``SI``, ``OP``, ``OI``, ``PI``),
+merged over the table; figures given for a kind also replace the measured figures of that
+kind's devices in :data:`DEVICES`.
 """
 
 from __future__ import annotations
