@@ -27,22 +27,7 @@ class Known:
 
 # The work that removes entries, named once.
 FIRST_CONTACT = "first contact with the exporters' whole vocabulary and these files' shapes"
-CAPTURES = "every capture of both corpora replayed and its devices' timing fitted"
 
 
 KNOWN: dict[str, Known] = {
-    # -- captures --------------------------------------------------------------------------
-    "tests/test_conformance.py::test_every_capture_is_listed":
-        Known(r"assert \{.*\} == \{", "the captures added to corpus-extra/pcap (EtherCrab: an "
-              "EL6910 TwinSAFE bring-up, SDO reads answered with abort codes) have no "
-              "recorded conformance figures yet", CAPTURES),
-    "tests/test_dc_unit.py::test_the_rule_classifies_the_real_slaves_as_their_replies_show":
-        Known(r"assert \{.*\} == \{", "the new captures bring slaves the DC-unit table does "
-              "not list yet", CAPTURES),
-    **{f"tests/test_timing_fit.py::{t}":
-       Known(r"replay-mailbox-el6910|assert|Counter", "the new captures' windows (EL6910 "
-             "EEPROM reads, SDO downloads) are not in the timing tables yet", CAPTURES)
-       for t in ("test_every_window_of_a_device_with_an_esi_holds_the_table",
-                 "test_no_figure_keeps_more_windows_in_step_than_the_tables",
-                 "test_the_captured_devices_and_their_kinds", "test_what_stays_out_of_step")},
 }

@@ -54,7 +54,8 @@ DOES_NOT_STOP: dict[str, str] = {
     "ESI503": "Eeprom/ByteSize: compile does not read the EEPROM part",
     "ESI601": "a slot's unknown module ident: the resolver refuses plugging it",
     "ESI602": "a missing module library: the library and the resolver refuse it",
-    "ESI604": "a slot group: the resolver refuses a module in a grouped slot",
+    "ESI604": "a DependOnSlotGroup index in a slot of no group: the resolver refuses that "
+              "module there with its own message",
     "XSD001": "compile validates no schema; the schema errors that change a value compile "
               "reads are ESI002 and the other rules here",
 }
