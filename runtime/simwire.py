@@ -19,7 +19,6 @@ segment never import each other, and the wire sits between them).
 from __future__ import annotations
 
 import heapq
-import math
 import threading
 from typing import Protocol
 
@@ -115,7 +114,7 @@ class SimulatedLink(_Base):
                 return self._take()
             if timeout <= 0:
                 return None
-            until = clock.ns + max(1, math.ceil(timeout * 1e9))
+            until = clock.ns + max(1, round(timeout * 1e9))
             if due and due[0][0] <= until:
                 clock.advance_to(due[0][0])
                 return self._take()
