@@ -24,7 +24,8 @@ from contextlib import contextmanager
 from contextvars import ContextVar
 from typing import Protocol
 
-__all__ = ["Clock", "WallClock", "SimClock", "WALL", "monotonic", "using", "in_use"]
+__all__ = ["Clock", "WallClock", "SimClock", "WALL", "monotonic", "using", "in_use",
+           "clock_of"]
 
 # Unix time (ns) a simulated clock reads as wall time at its start: 2026-01-01 00:00:00
 # UTC, a fixed instant so that the DC start time a master derives from it is the same on
@@ -110,6 +111,13 @@ class SimClock:
         """Move to ``t_ns`` if that is later than now."""
         if t_ns > self.ns:
             self.ns = t_ns
+
+
+def clock_of(link: object) -> Clock:
+    """The clock a link's frames live on: a simulated wire's :class:`SimClock`
+    (its ``clock``), else the wall clock."""
+    clock = getattr(link, "clock", None)
+    return clock if isinstance(clock, SimClock) else WALL
 
 
 _IN_USE: ContextVar[Clock] = ContextVar("ecatcfg_clock", default=WALL)

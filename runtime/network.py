@@ -32,7 +32,7 @@ from ecatcfg.eni.plan import NetworkPlan, Variable
 from ecatcfg.errors import EcatcfgError
 from ecatcfg.esc import AlState
 from ecatcfg.record import record
-from ecatcfg.runtime.clock import WALL
+from ecatcfg.runtime.clock import WALL, clock_of
 from ecatcfg.runtime.master.bringup import (DC_THRESHOLD_NS, DC_TIMEOUT_S, Event, Master,
                                             check_requests)
 from ecatcfg.runtime.master.replay import ApplyError
@@ -123,7 +123,7 @@ class Network:
         if pcap is not None:
             from ecatcfg.runtime.pcap import PcapRecorder
             # A simulated wire's frames are recorded at its simulated times.
-            self.recorder = PcapRecorder(pcap, getattr(link, "clock", None))
+            self.recorder = PcapRecorder(pcap, clock_of(link))
         self.master = Master(eni, link, recorder=self.recorder, on_event=on_event,
                              dc_threshold_ns=dc_threshold_ns, dc_timeout_s=dc_timeout_s,
                              recovery=recovery, esi=library)

@@ -375,10 +375,16 @@ def tshark_malformed(pcap: str | os.PathLike) -> list[dict[str, Any]]:
     return out
 
 
-def serve_in_memory(segment) -> tuple[Any, Callable[[], None]]:
+def serve_in_memory(segment, clock=None) -> tuple[Any, Callable[[], None]]:
     """``segment`` answering on a thread over an in-memory link: (the master's end of the
-    link, a function that stops the thread)."""
+    link, a function that stops the thread).  With a ``SimClock``: the segment on that
+    clock behind a simulated wire (``runtime/simwire.py``), no thread, nothing to stop."""
     import threading
+
+    if clock is not None:
+        from ecatcfg.runtime.simwire import SimulatedLink
+        segment.set_clock(clock.monotonic_ns)
+        return SimulatedLink(clock, segment), lambda: None
 
     from ecatcfg.runtime.link import MemoryLink
 

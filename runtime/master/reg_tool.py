@@ -6,7 +6,7 @@ counter 0, which is reported as such."""
 from __future__ import annotations
 
 
-from ecatcfg.runtime.clock import WALL
+from ecatcfg.runtime.clock import clock_of
 from ecatcfg.esc import MAX_DATAGRAM_DATA, Cmd
 from ecatcfg.runtime.master.al_tool import StatesError, positions_on_line
 from ecatcfg.runtime.master.replay import TIMEOUT_COMMAND
@@ -30,7 +30,7 @@ def frames_of_another_master(link: Link, seconds: float = LISTEN_S) -> int:
     """EtherCAT frames that arrive on ``link`` while this process sends nothing: another
     master is running the line (its frames come back through the same interface).  On an
     EtherCAT line nothing else sends frames, so any frame at all is one."""
-    monotonic = getattr(link, "clock", WALL).monotonic     # a simulated wire's own time
+    monotonic = clock_of(link).monotonic     # a simulated wire's own time
     end = monotonic() + seconds
     seen = 0
     while (left := end - monotonic()) > 0:

@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Protocol
 from ecatcfg.esc import MAX_DATAGRAM_DATA
 from ecatcfg.record import record
 from ecatcfg.runtime import wire
-from ecatcfg.runtime.clock import WALL, Clock
+from ecatcfg.runtime.clock import Clock, clock_of
 from ecatcfg.runtime.wire import Datagram, FrameError
 
 if TYPE_CHECKING:
@@ -41,7 +41,7 @@ class Transport:
         """``clock``: the time deadlines are on (``runtime/clock.py``); by default the
         link's own (a simulated wire's), else the wall clock."""
         self.link = link
-        self.clock: Clock = clock or getattr(link, "clock", None) or WALL
+        self.clock: Clock = clock or clock_of(link)
         self.recorder = recorder             # (frame, sent?) for pcap recording
         self.timeout = timeout
         self.counters = Counters()

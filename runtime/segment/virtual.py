@@ -144,6 +144,14 @@ class VirtualSegment:
                                  "0-3 and a share is between 0 and 1")
             self._lossy[(self._wired_index(lossy.slave), lossy.port)] = lossy.share
 
+    def set_clock(self, clock_ns: Callable[[], int]) -> None:
+        """Live on ``clock_ns`` from now on (a simulated clock, before the first frame):
+        the slaves' local clocks start again from their seeded values on it."""
+        self.clock_ns = clock_ns
+        for slave, clock in zip(self.wired, self.dc_model.clocks(len(self.wired), clock_ns())):
+            slave.dc = clock
+        self._rewire()
+
     def _attach(self, slave: EmulatedSlave) -> None:
         """The segment's time and callbacks for ``slave``."""
         slave.clock_ns = self._now
