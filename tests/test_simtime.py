@@ -4,10 +4,14 @@ of 100 ms, a lost frame's timeout) tested without waiting for it."""
 
 from __future__ import annotations
 
+import json
+import subprocess
+import sys
 import threading
 import time
 
 import pytest
+from rig import tshark_fields
 
 from conftest import EXAMPLES
 from ecatcfg.compiler import build, topology
@@ -188,3 +192,52 @@ def test_waiting_for_nothing_on_a_simulated_wire_is_an_error(plan):
         assert net.link.recv(0) is None and clock.ns == SimClock().ns
         with pytest.raises(LinkError, match="none on its way"):
             net.link.recv(None)
+
+
+# -- apply --virtual --simulated-time ------------------------------------------------------
+
+def apply(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", "ecatcfg", "apply", *args],
+                          capture_output=True, text=True, timeout=300)
+
+
+def test_apply_on_simulated_time_reports_the_timings_and_repeats_itself(plan, tmp_path):
+    """Twice the same run: the same capture, byte for byte; the timings reported are the
+    capture's own (read back with tshark), and they include the fitted firmware times
+    (an EL7xxx-like drive's PREOP->SAFEOP alone takes more than 100 ms)."""
+    eni = tmp_path / "example.eni.xml"
+    eni.write_bytes(eni_writer.to_bytes(plan))
+    runs = []
+    for name in ("a", "b"):
+        run = apply(str(eni), "--virtual", "--esi", str(ESI), "--simulated-time",
+                    "--cycles", "200", "--format", "json", "--pcap", str(tmp_path / name))
+        assert run.returncode == 0, run.stderr
+        runs.append(json.loads(run.stdout))
+    assert (tmp_path / "a").read_bytes() == (tmp_path / "b").read_bytes()
+    took = runs[0]["simulated_time_ms"]
+    assert {k: v for k, v in took.items() if k != "host_s"} == {
+        k: v for k, v in runs[1]["simulated_time_ms"].items() if k != "host_s"}
+    assert list(took) == ["start-up to OP", "200 cycles", "way down", "total", "host_s"]
+    assert took["200 cycles"] == pytest.approx(200.0, abs=1.0)    # 1 ms cycles, paced
+    assert took["start-up to OP"] > 100
+    assert took["total"] == pytest.approx(sum(took[k] for k in list(took)[:3]), abs=0.01)
+    times = [float(r["frame.time_epoch"][0]) for r in
+             tshark_fields(tmp_path / "a", ["frame.time_epoch"])]
+    assert len(times) == 2 * runs[0]["frames"]["sent"]
+    # First frame sent to last frame back: the whole run but the moments before the first
+    # frame and after the last (both none on simulated time).
+    assert (times[-1] - times[0]) * 1e3 == pytest.approx(took["total"], abs=0.01)
+
+
+@pytest.mark.parametrize("args, says", [
+    (["--iface", "lo", "--simulated-time"], "a mode of the virtual segment"),
+    (["--virtual", "--simulated-time"], "give --cycles N"),
+    (["--virtual", "--simulated-time", "--cycles", "3", "--busy-wait", "50"],
+     "no host timing"),
+])
+def test_simulated_time_options_are_checked(plan, tmp_path, args, says):
+    eni = tmp_path / "example.eni.xml"
+    eni.write_bytes(eni_writer.to_bytes(plan))
+    run = apply(str(eni), *args)
+    assert run.returncode == 2 and says in run.stderr, run.stderr
+    assert "Traceback" not in run.stderr
