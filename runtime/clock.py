@@ -18,10 +18,10 @@ runs (:func:`using`), and outside any step it is the wall clock.
 
 from __future__ import annotations
 
+import threading
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
-from contextvars import ContextVar
 from typing import Protocol
 
 __all__ = ["Clock", "WallClock", "SimClock", "WALL", "monotonic", "using", "in_use",
@@ -120,28 +120,29 @@ def clock_of(link: object) -> Clock:
     return clock if isinstance(clock, SimClock) else WALL
 
 
-_IN_USE: ContextVar[Clock] = ContextVar("ecatcfg_clock", default=WALL)
+class _InUse(threading.local):
+    clock: Clock = WALL             # each thread starts on the wall clock
+
+
+_IN_USE = _InUse()
 
 
 def monotonic() -> float:
     """Seconds on the clock in use (:func:`using`; the wall clock outside any)."""
-    return _IN_USE.get().monotonic()
+    return _IN_USE.clock.monotonic()
 
 
 def in_use() -> Clock:
     """The clock in use in this thread (:func:`using`)."""
-    return _IN_USE.get()
+    return _IN_USE.clock
 
 
 @contextmanager
 def using(clock: Clock) -> Iterator[Clock]:
-    """Put ``clock`` in use for the block (this thread, or this task): :func:`monotonic` reads it.
-    Nothing is set when it is in use already."""
-    if _IN_USE.get() is clock:
-        yield clock
-        return
-    token = _IN_USE.set(clock)
+    """Put ``clock`` in use in this thread for the block: :func:`monotonic` reads it."""
+    before = _IN_USE.clock
+    _IN_USE.clock = clock
     try:
         yield clock
     finally:
-        _IN_USE.reset(token)
+        _IN_USE.clock = before
