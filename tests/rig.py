@@ -375,10 +375,22 @@ def tshark_malformed(pcap: str | os.PathLike) -> list[dict[str, Any]]:
     return out
 
 
-def serve_in_memory(segment) -> tuple[Any, Callable[[], None]]:
-    """``segment`` answering on a thread over an in-memory link: (the master's end of the
-    link, a function that stops the thread)."""
+def serve_in_memory(segment, clock=None, *, wallclock: bool = False
+                    ) -> tuple[Any, Callable[[], None]]:
+    """``segment`` behind an in-memory link: (the master's end of the link, a function that
+    stops what serves it).  On simulated time by default: the segment on ``clock`` (a
+    fresh ``SimClock`` if none) behind a simulated wire (``runtime/simwire.py``), no thread,
+    nothing to stop; a ``Transport`` on the link takes its clock.  ``wallclock``: the
+    segment served on a thread over a ``MemoryLink`` in real time, where that is the
+    point."""
     import threading
+
+    if not wallclock:
+        from ecatcfg.runtime.clock import SimClock
+        from ecatcfg.runtime.simwire import SimulatedLink
+        clock = clock or SimClock()
+        segment.set_clock(clock.monotonic_ns)
+        return SimulatedLink(clock, segment), lambda: None
 
     from ecatcfg.runtime.link import MemoryLink
 

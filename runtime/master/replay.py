@@ -13,9 +13,9 @@ How a slave's commands of one transition are chained is ``transition.py``.
 from __future__ import annotations
 
 import struct
-import time
 from typing import TYPE_CHECKING, Any, TypeVar
 
+from ecatcfg.runtime.clock import monotonic
 from ecatcfg.eni.plan import (CoeInitCmd, EoeInitCmd, FoeInitCmd, InitCmd, MailboxPlan,
                               SoeInitCmd)
 from ecatcfg.eni.compare import compared, matches
@@ -86,8 +86,8 @@ class SlaveProgress:
 
 def _pause(seconds: float) -> Job:
     """Let the other jobs' rounds go by for ``seconds`` without sending anything."""
-    until = time.monotonic() + seconds
-    while time.monotonic() < until:
+    until = monotonic() + seconds
+    while monotonic() < until:
         yield []
 
 
@@ -115,7 +115,7 @@ def init_cmd_job(cmd: InitCmd, who: str | None, data: bytes | None = None,
         progress.last_command = what
     dg = datagram_for(cmd, data if data is not None else
                       cmd.data if cmd.data is not None else bytes(cmd.length))
-    deadline = time.monotonic() + command_timeout(cmd)
+    deadline = monotonic() + command_timeout(cmd)
     retries = RETRIES if cmd.retries is None else cmd.retries
     wrong_wkc = 0
     polls = 0
@@ -123,7 +123,7 @@ def init_cmd_job(cmd: InitCmd, who: str | None, data: bytes | None = None,
     last = "no reply (frames lost)"
     while True:
         reply = yield [dg]
-        now = time.monotonic()
+        now = monotonic()
         if reply is not None:
             got = reply[0]
             if cmd.cnt is not None and got.wkc > cmd.cnt:
@@ -221,7 +221,7 @@ class MailboxChannel:
         empty = 0
         while True:
             reply = yield [read]
-            now = time.monotonic()
+            now = monotonic()
             if reply is not None and reply[0].wkc == 1:
                 message = bytes(reply[0].data)
                 counter = message[5] >> 4 & 0x07 if len(message) >= 6 else 0
@@ -265,7 +265,7 @@ class MailboxChannel:
             if reply is not None and reply[0].wkc == 1 and \
                     bool(reply[0].data[2] & SM_PDI_REPEAT_ACK) == bool(value & SM_ACTIVATE_REPEAT):
                 return
-            if time.monotonic() > deadline:
+            if monotonic() > deadline:
                 raise ApplyError("the slave did not acknowledge the mailbox repeat", who,
                                  what)
 
@@ -275,7 +275,7 @@ def sdo_job(channel: MailboxChannel, transaction: Transaction, who: str | None,
     """One SDO transfer (``runtime/master/sdo_client.py`` transaction) through the mailbox."""
     from ecatcfg.runtime.mailbox import MailboxProtocolError, SdoAbort
 
-    deadline = time.monotonic() + timeout
+    deadline = monotonic() + timeout
     request: bytes | None = transaction.first_request()
     try:
         while True:
@@ -336,7 +336,7 @@ def eoe_init_cmd_job(channel: MailboxChannel, cmd: EoeInitCmd, who: str | None,
     if len(message) > channel.plan.send.length:
         raise ApplyError(f"the mailbox (SM0, {channel.plan.send.length} bytes) cannot carry "
                          f"the EoE request ({len(message)} bytes)", who, what)
-    deadline = time.monotonic() + (cmd.timeout / 1000 if cmd.timeout else TIMEOUT_MAILBOX)
+    deadline = monotonic() + (cmd.timeout / 1000 if cmd.timeout else TIMEOUT_MAILBOX)
     yield from channel.send(message, deadline, who, what)
     while True:
         response = yield from channel.receive(deadline, who, what)

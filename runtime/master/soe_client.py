@@ -18,8 +18,8 @@ fails the transfer.
 
 from __future__ import annotations
 
-import time
 
+from ecatcfg.runtime.clock import monotonic
 from ecatcfg.eni.plan import SoeInitCmd
 from ecatcfg.eni.words import soe_init_cmd_name
 from ecatcfg.esi.idn import MAX_DRIVE, idn_text
@@ -196,7 +196,7 @@ def soe_job(channel: MailboxChannel, transfer: SoeTransfer, who: str | None,
     fragments that arrive then may fit together without the lost one.  So a read during
     which an SM1 read was lost is asked again (until the timeout).  Fragments that do not
     fit together otherwise are the drive's error."""
-    deadline = time.monotonic() + timeout
+    deadline = monotonic() + timeout
     try:
         while True:
             lost = channel.lost_reads

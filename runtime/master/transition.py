@@ -11,8 +11,8 @@ One command's job is ``replay.py``.
 from __future__ import annotations
 
 import struct
-import time
 
+from ecatcfg.runtime.clock import monotonic
 from ecatcfg.eni.plan import (CoeInitCmd, DcPlan, EoeInitCmd, FoeInitCmd, InitCmd, SlavePlan,
                               SoeInitCmd)
 from ecatcfg.eni.sequence import transition_sequence
@@ -95,7 +95,7 @@ def _dc_start_time(slave: SlavePlan, dc: DcPlan, cmd: InitCmd, length: int,
     after the slave's (reference-synchronised) system time, on a cycle boundary plus the
     shift (IgH, SOEM)."""
     read = Datagram.physical(Cmd.FPRD, slave.phys_addr, Reg.DC_SYSTEM_TIME, 8)
-    [got] = yield from until_answered([read], time.monotonic() + TIMEOUT_COMMAND, ApplyError(
+    [got] = yield from until_answered([read], monotonic() + TIMEOUT_COMMAND, ApplyError(
         "cannot read the DC system time (0x0910)", who, init_cmd_name(cmd)))
     now, = struct.unpack("<Q", got.data)
     cycle = dc.cycle_time0 or 1
