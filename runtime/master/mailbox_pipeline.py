@@ -1,5 +1,5 @@
-"""A slave's CoE InitCmds of one transition with the next request ahead: one frame per
-start-up write where one after the other took two.
+"""A slave's CoE or SoE InitCmds of one transition with the next request ahead: one frame
+per start-up write where one after the other took two.
 
 Written one after the other, every SDO costs a frame that writes the request into SM0 and
 a frame that reads the answer from SM1 (the firmware needs time: a read in the frame of the
@@ -16,11 +16,13 @@ what a mailbox of one buffer each way allows.
 
 A request goes ahead only when
 
-- the transfer out has sent its last request: an expedited download, or a normal one whose
-  data all went in the first message (a segment depends on the answer to the segment before:
-  ETG.1000.6 5.6.2.3, the toggle; an upload may turn into segments), and
-- the next command addresses another object: download responses and aborts echo the index
-  and subindex (ETG.1000.6 5.6.2.2, 5.6.2.7), which tell the two answers apart.
+- the transfer out has sent its last request: an expedited SDO download, or a normal one
+  whose data all went in the first message (a segment depends on the answer to the segment
+  before: ETG.1000.6 5.6.2.3, the toggle; an upload may turn into segments); an SoE write,
+  whose fragments all went (the drive answers the last one only, ETG.1000.6 5.8), and
+- the next command addresses another object: SDO download responses and aborts echo the
+  index and subindex (ETG.1000.6 5.6.2.2, 5.6.2.7), SoE write responses and error replies
+  the IDN and drive (ETG.1000.6 5.8.2), which tell the two answers apart.
 
 A refusal (an abort) of the command before finds the next one's request already in the
 slave, as a master that sends an ENI's whole list would: the transition fails on the refused
@@ -43,8 +45,10 @@ frames is no place for requests ahead.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
+from typing import Protocol
 
-from ecatcfg.eni.plan import CoeInitCmd
+from ecatcfg.eni.plan import CoeInitCmd, SoeInitCmd
 from ecatcfg.runtime.mailbox import (Abort, DownloadResponse, MailboxProtocolError, SdoAbort,
                                      UploadResponse, decode)
 from ecatcfg.runtime.master.lockstep import Job
@@ -57,80 +61,177 @@ DROP_AHEAD_S = 0.2     # s the answer to a request ahead may take after a refusa
 #                       demo firmware on a LAN9252: 37-40 ms, docs/timing.md)
 
 
+class Transfer(Protocol):
+    """One InitCmd's transfer as the pipeline moves it."""
+
+    what: str
+    timeout: float
+
+    @property
+    def cmd(self) -> CoeInitCmd | SoeInitCmd:
+        """The InitCmd, named by the error when it fails."""
+        ...
+
+    @property
+    def key(self) -> tuple[int, ...]:
+        """The object it addresses, as its answers echo it."""
+        ...
+
+    @property
+    def done(self) -> bool: ...
+
+    def start(self) -> list[bytes]:
+        """The requests that open the transfer (made, with their mailbox counters, at the
+        first call; the same list after).  Raises :class:`ApplyError` for a command that
+        cannot be sent (made here, not when the transfer is, so that the slave's progress
+        names the command first)."""
+        ...
+
+    def last_request_out(self) -> bool:
+        """The answer to the request out ends the transfer or refuses it."""
+        ...
+
+    def on_response(self, message: bytes) -> bytes | None:
+        """Digest one message from SM1: the next request, or ``None``."""
+        ...
+
+    def answers(self, message: bytes) -> bool:
+        """``message`` is an answer about this transfer's object."""
+        ...
+
+    def failure(self, error: Exception) -> ApplyError | None:
+        """The transfer's error (its protocol's, or an :class:`ApplyError` of the
+        mailbox) as the slave's and command's; ``None`` if not its kind."""
+        ...
+
+
 def coe_init_cmds_job(channel: MailboxChannel, cmds: list[CoeInitCmd], who: str | None,
                       progress: SlaveProgress | None = None) -> Job:
     """Run ``cmds`` (one slave's CoE InitCmds of a transition, in order) through the
     slave's mailbox; an :class:`ApplyError` names the command that failed (``init_cmd``)."""
+    yield from pipelined(channel, [_sdo_maker(channel, c, who) for c in cmds], who,
+                         progress)
+
+
+def pipelined(channel: MailboxChannel, transfers: list[Callable[[], Transfer]],
+              who: str | None, progress: SlaveProgress | None = None) -> Job:
+    """Run the transfers (each made when its turn comes or its request goes ahead) in
+    order, each next one's request ahead where it may go (module docstring)."""
     i = 0
-    strict_until = 0        # commands before this index go without a request ahead
-    ahead: SdoDownload | SdoUpload | None = None    # cmds[i]'s transfer, its request out
-    while i < len(cmds):
-        cmd = failing = cmds[i]
-        what = coe_init_cmd_what(cmd)
-        if progress is not None:
-            progress.last_command = what
-        deadline = time.monotonic() + coe_init_cmd_timeout(cmd)
+    strict_until = 0        # transfers before this index go without a request ahead
+    ahead: Transfer | None = None    # transfers[i], made while the one before was out
+    while i < len(transfers):
         again = False
+        failing: Transfer | None = None
         try:
-            request: bytes | None = None
-            if ahead is not None:
-                t, ahead = ahead, None
-                yield from channel.settle_ahead(deadline, who, what)
+            t = ahead if ahead is not None else transfers[i]()
+            ahead = None
+            failing = t
+            if progress is not None:
+                progress.last_command = t.what
+            deadline = time.monotonic() + t.timeout
+            requests: list[bytes] = []
+            if channel.ahead is not None:
+                yield from channel.settle_ahead(deadline, who, t.what)
             else:
-                t = coe_transfer(channel, cmd, who, what)
-                request = t.first_request()
-            nxt = cmds[i + 1] if strict_until <= i + 1 < len(cmds) else None
+                requests = t.start()
+            may_go = strict_until <= i + 1 < len(transfers)
             while True:
-                if request is not None:
-                    yield from channel.send(request, deadline, who, what)
-                if ahead is None and nxt is not None and _goes_ahead(t, cmd, nxt):
-                    ahead = _transfer_ahead(channel, nxt, who)
-                    if ahead is not None:
-                        channel.send_ahead(ahead.first_request())
-                response = yield from channel.receive(deadline, who, what)
-                if ahead is not None and nxt is not None and _answers(response, nxt):
-                    # The answer to ``cmd`` went with a lost frame; this one is the next
-                    # command's.  Take it, then run the list again (module docstring).
+                for request in requests:
+                    yield from channel.send(request, deadline, who, t.what)
+                requests = []
+                if may_go and ahead is None and t.last_request_out():
+                    may_go = False
+                    ahead = transfers[i + 1]()
+                    opening = _opening(ahead) if ahead.key != t.key else []
+                    if len(opening) == 1:
+                        channel.send_ahead(opening[0])
+                response = yield from channel.receive(deadline, who, t.what)
+                if ahead is not None and channel.ahead is not None and \
+                        ahead.answers(response):
+                    # The answer to ``t`` went with a lost frame; this one is the next
+                    # transfer's.  Take it, then run the list again (module docstring).
                     channel.ahead = None
-                    failing = nxt
+                    failing = ahead
                     ahead.on_response(response)
-                    ahead, strict_until, again = None, len(cmds), True
+                    ahead, strict_until, again = None, len(transfers), True
                     break
-                request = t.on_response(response)
-                if request is None and t.done:
+                follow = t.on_response(response)
+                if follow is None and t.done:
                     break
-        except (SdoAbort, MailboxProtocolError, ApplyError) as error:
+                if follow is not None:
+                    requests = [follow]
+        except Exception as error:
+            failure = failing.failure(error) if failing is not None else (
+                error if isinstance(error, ApplyError) else None)
+            if failure is None:
+                raise
             yield from channel.drop_ahead(time.monotonic() + DROP_AHEAD_S)
-            failure = error if isinstance(error, ApplyError) else sdo_failure(
-                error, who, coe_init_cmd_what(failing))
-            failure.init_cmd = failure.init_cmd or failing
+            if failing is not None:
+                failure.init_cmd = failure.init_cmd or failing.cmd
             raise failure from None
         i = 0 if again else i + 1
 
 
-def _goes_ahead(t: SdoDownload | SdoUpload, cmd: CoeInitCmd, nxt: CoeInitCmd) -> bool:
-    """The next command's request may go before ``t``'s answer is read (module
-    docstring)."""
-    return (isinstance(t, SdoDownload) and t.last_request_out
-            and (nxt.index, nxt.subindex) != (cmd.index, cmd.subindex))
-
-
-def _transfer_ahead(channel: MailboxChannel, cmd: CoeInitCmd,
-                    who: str | None) -> SdoDownload | SdoUpload | None:
-    """The next command's transfer, or ``None`` when it cannot have one (its own turn
-    then says why, naming it)."""
+def _opening(t: Transfer) -> list[bytes]:
+    """The requests that open ``t``; none when it cannot be made (its own turn then says
+    why, naming it)."""
     try:
-        return coe_transfer(channel, cmd, who, coe_init_cmd_what(cmd))
+        return t.start()
     except ApplyError:
-        return None
+        return []
 
 
-def _answers(message: bytes, cmd: CoeInitCmd) -> bool:
-    """``message`` is a CoE answer to ``cmd``'s object (an initiate response or an abort
-    that echoes its index and subindex)."""
-    try:
-        _header, content = decode(message)
-    except MailboxProtocolError:
-        return False
-    return (isinstance(content, (DownloadResponse, UploadResponse, Abort))
-            and (content.index, content.subindex) == (cmd.index, cmd.subindex))
+# -- CoE --------------------------------------------------------------------------------------
+
+def _sdo_maker(channel: MailboxChannel, cmd: CoeInitCmd,
+               who: str | None) -> Callable[[], Transfer]:
+    return lambda: _Sdo(channel, cmd, who)
+
+
+class _Sdo:
+    """A CoE InitCmd's SDO transfer (``sdo_client.py``)."""
+
+    def __init__(self, channel: MailboxChannel, cmd: CoeInitCmd, who: str | None) -> None:
+        self.cmd = cmd
+        self.who = who
+        self.what = coe_init_cmd_what(cmd)
+        self.timeout = coe_init_cmd_timeout(cmd)
+        self.channel = channel
+        self.transfer: SdoDownload | SdoUpload | None = None
+
+    @property
+    def key(self) -> tuple[int, ...]:
+        return (self.cmd.index, self.cmd.subindex)
+
+    @property
+    def done(self) -> bool:
+        return self.transfer is not None and self.transfer.done
+
+    def start(self) -> list[bytes]:
+        if self.transfer is None:
+            self.transfer = coe_transfer(self.channel, self.cmd, self.who, self.what)
+            self._opening = [self.transfer.first_request()]
+        return self._opening
+
+    def last_request_out(self) -> bool:
+        t = self.transfer
+        return isinstance(t, SdoDownload) and t.last_request_out
+
+    def on_response(self, message: bytes) -> bytes | None:
+        assert self.transfer is not None, "a response before the request"
+        return self.transfer.on_response(message)
+
+    def answers(self, message: bytes) -> bool:
+        """An initiate response or an abort that echoes the index and subindex."""
+        try:
+            _header, content = decode(message)
+        except MailboxProtocolError:
+            return False
+        return (isinstance(content, (DownloadResponse, UploadResponse, Abort))
+                and (content.index, content.subindex) == self.key)
+
+    def failure(self, error: Exception) -> ApplyError | None:
+        if isinstance(error, (SdoAbort, MailboxProtocolError)):
+            return sdo_failure(error, self.who, self.what)
+        return error if isinstance(error, ApplyError) else None
