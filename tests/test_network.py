@@ -385,6 +385,37 @@ def test_modular_devices_are_emulated_with_their_modules(corpus, slave, source):
         assert net.state == AlState.OP and net.cycle()
 
 
+def test_a_refused_sdo_is_named_and_the_answer_to_the_request_ahead_is_taken(example_plan):
+    """An SDO the drive refuses (an object it does not have) in the middle of its PS list:
+    the request after it went ahead, in the frame that read the abort, so the drive has
+    taken it too; the transition fails naming the refused command, and the answer to the
+    request ahead is read and dropped: nothing is left in SM1 for a later reader to take
+    for its own answer."""
+    import copy
+    from ecatcfg.runtime.master.replay import ApplyError
+    plan = copy.deepcopy(example_plan)
+    mailbox = plan.slaves[4].mailbox
+    cmds = mailbox.coe_init_cmds
+    missing = copy.deepcopy(next(c for c in cmds if c.index == 0x6060))
+    missing.index, missing.comment = 0x5FFE, "no such object"
+    at = cmds.index(next(c for c in cmds if c.index == 0x1C12 and c.data == b"\x00")) + 1
+    cmds.insert(at, missing)
+    after = cmds[at + 1]
+    with Network.virtual(plan, esi=[ESI]) as net:
+        sent: list[bytes] = []
+        net.master.transport.recorder = lambda f, out: sent.append(f) if out else None
+        with pytest.raises(ApplyError, match=r"\[no such object\]: SDO abort 0x06020000") \
+                as refused:
+            net.up()
+        assert refused.value.init_cmd is missing
+        drive = net.segment.slaves[4]
+        assert drive.state == AlState.PREOP
+        assert not drive.mem[0x080D] & 0x08     # SM1 status (0x0805 + 8): not full
+        assert not drive.mailbox_queue
+    requests = _sm0_requests(sent, mailbox.send.start)
+    assert requests[-2:] == [(missing.index, missing.subindex), (after.index, after.subindex)]
+
+
 def test_mailbox_counters_go_on_across_transitions():
     # 15 mailbox messages in PS (counters 1..7, 1..7, 1), then one in SO: a master that
     # restarts at 1 there sends a counter equal to the last one, which the slave drops as
