@@ -21,8 +21,8 @@ from ecatcfg.eni.plan import (CoeInitCmd, EoeInitCmd, FoeInitCmd, InitCmd, Mailb
 from ecatcfg.eni.compare import compared, matches
 from ecatcfg.eni.words import init_cmd_name
 from ecatcfg.errors import EcatcfgError
-from ecatcfg.esc import (AL_STATUS_ERROR, SM1_STATUS, SM_ACTIVATE_REPEAT, SM_PDI_REPEAT_ACK, Cmd,
-                         Reg, al_state_name, al_status_name)
+from ecatcfg.esc import (AL_STATUS_ERROR, SM1_STATUS, SM_ACTIVATE_REPEAT, SM_PDI_REPEAT_ACK,
+                         SM_STATUS_MAILBOX_FULL, Cmd, Reg, al_state_name, al_status_name)
 from ecatcfg.record import record
 from ecatcfg.runtime.master.lockstep import Job, Step, until_answered
 from ecatcfg.runtime.wire import Datagram, datagram_for
@@ -252,27 +252,38 @@ class MailboxChannel:
 
     def receive(self, deadline: float, who: str | None, what: str | None) -> Step[bytes]:
         """Read the slave's next message from SM1.  Reading an empty mailbox gets working
-        counter 0 and changes nothing, so SM1 is read directly instead of polling its
-        status first.  If a read's frame was lost, the message may have been taken out of
-        SM1 on the way: when SM1 then stays empty for ``REPEAT_AFTER`` (a slow firmware
-        may simply not have answered yet), the repeat toggle asks the slave to post its
-        last message again (ETG.1000.4 mailbox repeat)."""
+        counter 0 and changes nothing, so SM1 is read directly at first, instead of
+        polling its status before.  While the answer is not there, SM1's status byte is
+        polled (0x080D bit 3, mailbox full: ESC datasheet section II, SyncManager status),
+        1 byte where a read takes the whole SM1, so that the polls of many slow slaves
+        share a frame; once it says full, SM1 is read.  If a read's frame was lost, the
+        message may have been taken out of SM1 on the way: when SM1 then stays empty for
+        ``REPEAT_AFTER`` (a slow firmware may simply not have answered yet), the repeat
+        toggle asks the slave to post its last message again (ETG.1000.4 mailbox
+        repeat)."""
         sm1 = self.plan.recv
         read = Datagram.physical(Cmd.FPRD, self.address, sm1.start, sm1.length)
+        status = Datagram.physical(Cmd.FPRD, self.address, SM1_STATUS, 1)
+        direct = True          # read SM1 itself: at first, and once its status says full
         lost_at: float | None = None
         empty = 0
         while True:
             # A request sent ahead goes behind the read, but not after a lost frame: until
             # the reply it may have cost is back, no new answer may join the one awaited.
             ahead = self.ahead if not self.ahead_taken and lost_at is None else None
-            reply = yield [read] if ahead is None else [read, self._sm0_write(ahead)]
+            first = read if direct else status
+            reply = yield [first] if ahead is None else [first, self._sm0_write(ahead)]
             now = time.monotonic()
             if ahead is not None:
                 self.ahead_tried = True
                 if reply is not None and reply[1].wkc == 1:
                     self.ahead_taken = True
                     self.sent_messages += 1
-            if reply is not None and reply[0].wkc == 1:
+            if not direct and reply is not None and reply[0].wkc == 1 and \
+                    reply[0].data[0] & SM_STATUS_MAILBOX_FULL and now <= deadline:
+                direct = True
+                continue
+            if direct and reply is not None and reply[0].wkc == 1:
                 message = bytes(reply[0].data)
                 counter = message[5] >> 4 & 0x07 if len(message) >= 6 else 0
                 if counter and counter == self.last_received:
@@ -288,9 +299,12 @@ class MailboxChannel:
                 return message
             if now > deadline:
                 raise ApplyError("no mailbox response in time", who, what)
+            lost_read = reply is None and direct        # a lost status poll took nothing
+            direct = False
             if reply is None:
-                self.lost_reads += 1
-                lost_at = lost_at or now
+                if lost_read:
+                    self.lost_reads += 1
+                    lost_at = lost_at or now
             elif lost_at is not None and now - lost_at >= REPEAT_AFTER:
                 yield from self._repeat(deadline, who, what)
                 lost_at = None
