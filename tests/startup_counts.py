@@ -140,7 +140,7 @@ def simulated_time(clock: SimClock) -> types.SimpleNamespace:
 
 # The master's modules that read the clock on the way to OP and while cycling.
 CLOCKED = ("bringup", "transport", "lockstep", "replay", "transition", "scan", "cyclic",
-           "recovery")
+           "recovery", "mailbox_pipeline")
 
 
 def _modules() -> tuple[Any, Any]:

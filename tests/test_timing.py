@@ -221,6 +221,35 @@ def test_figures_for_a_kind_replace_its_devices_own():
     assert timing.overridden({"firmware": {"mailbox_reply_ms": 5}}).devices == {}
 
 
+def test_the_firmware_answers_one_request_at_a_time(lib):
+    """A second request written while the firmware still works on the first (a master that
+    sends the next request ahead of reading the answer) is answered a whole latency after
+    the first answer, not in parallel with it: one firmware, one mailbox handler."""
+    clock = Clock()
+    seg = line(lib, "EXD-402", clock=clock)
+    addressed(seg)
+    to_preop(seg, clock)
+    latency = timing.TABLE["drive"].mailbox_reply_ns
+    first = SDO_UPLOAD_1018_01.ljust(128, b"\0")
+    second = bytearray(first)
+    second[5] = 0x23                                  # counter 2
+    second[11] = 0x02                                 # 0x1018:02
+    [d] = run(seg, fp(Cmd.FPWR, 0x1000, first))
+    assert d.wkc == 1
+    clock.advance(latency // 2)
+    [d] = run(seg, fp(Cmd.FPWR, 0x1000, bytes(second)))
+    assert d.wkc == 1                                 # SM0 taken: the firmware read it
+    clock.advance(latency // 2 + 1)
+    [reply] = run(seg, fp(Cmd.FPRD, 0x1080, 128))
+    assert reply.wkc == 1 and reply.data[9:12] == b"\x18\x10\x01"
+    clock.advance(latency - 2)                        # the second's latency not yet over
+    [reply] = run(seg, fp(Cmd.FPRD, 0x1080, 128))
+    assert reply.wkc == 0
+    clock.advance(1)
+    [reply] = run(seg, fp(Cmd.FPRD, 0x1080, 128))
+    assert reply.wkc == 1 and reply.data[9:12] == b"\x18\x10\x02"
+
+
 def test_a_request_written_again_is_answered_once(lib):
     """SOEM sends a frame again when no answer came back within 2 ms (ecx_srconfirm, up to
     three sends of an SM0 write): the same bytes, so the same mailbox counter.  The slave

@@ -687,8 +687,12 @@ class EmulatedSlave:
             return
         replies = self.mailbox.handle(message, state)
         if replies and self.timing and self.timing.mailbox_reply_ns:
-            # The firmware answers after its reply latency (runtime/segment/timing.py).
+            # The firmware answers after its reply latency (runtime/segment/timing.py), one
+            # message at a time: a request taken while it still works on the one before
+            # (a master that writes SM0 before reading SM1) waits for that one first.
             now = self.clock_ns()
+            if self._replies:
+                now = max(now, self._replies[-1][0])
             self._replies.append((now + self.timing.mailbox_reply_ns, replies))
             start = self.timing.reply_start_ns
             if start is not None and start < self.timing.mailbox_reply_ns:
