@@ -115,6 +115,7 @@ class Library:
         self.prefer: list[Path] = [self._preferred(p) for p in prefer or []]
         self._descriptions: dict[tuple[str, int], Description] = {}
         self._trees: dict[str, etree._ElementTree] = {}
+        self._differing: dict[tuple[tuple[str, int], ...], list[tuple[int, list[str]]]] = {}
         self.evidence_for: Callable[[int, int, int], Evidence | None] | None = None
         # What the evidence chose (the notes of :meth:`find`), in order: a caller that
         # selects through code it does not own (a check's rules) reports them.
@@ -430,9 +431,17 @@ class Library:
     def differing(self, group: list[DeviceEntry]) -> list[tuple[DeviceEntry, list[str]]]:
         """The entries of ``group`` whose description is not the first's, each with what
         differs (empty: all describe the same device)."""
-        first = self.description(group[0])
-        return [(e, differences(first, self.description(e), _short(group[0]), _short(e)))
-                for e in group[1:] if self.description(e).digest != first.digest]
+        # Asked for every slave of a line (512 times for one identity): the descriptions
+        # of one library do not change, so neither does what differs between them.
+        key = tuple((e.file, e.ordinal) for e in group)
+        found = self._differing.get(key)
+        if found is None:
+            first = self.description(group[0])
+            found = self._differing[key] = [
+                (i, differences(first, self.description(e), _short(group[0]), _short(e)))
+                for i, e in enumerate(group[1:], 1)
+                if self.description(e).digest != first.digest]
+        return [(group[i], list(d)) for i, d in found]
 
     def _one_description(self, found: Selection, scope: list[DeviceEntry],
                          evidence: Evidence | None = None) -> Selection:
