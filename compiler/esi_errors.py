@@ -26,6 +26,7 @@ class FileGate:
     one reading of its files, so each is asked once here."""
 
     def __init__(self, library: Library) -> None:
+        self.library = library
         self.paths = {lf.shown: lf.path for lf in library.files}
         self.others = list(self.paths.values())
         self.results: dict[str, FileResult] = {}
@@ -33,7 +34,8 @@ class FileGate:
     def findings(self, shown: str) -> FileResult:
         found = self.results.get(shown)
         if found is None:
-            found = self.results[shown] = file_findings(self.paths[shown], shown, self.others)
+            found = self.results[shown] = file_findings(self.paths[shown], shown, self.others,
+                                                        self.library.loaded)
         return found
 
 

@@ -24,6 +24,7 @@ from ecatcfg.esi.lint.context import FileContext
 from ecatcfg.esi.lint.finding import DeviceRef, FileResult, Finding
 from ecatcfg.esi.lint.rules import RULES, iter_checks
 from ecatcfg.esi.lint.schema import SchemaSet
+from ecatcfg.esi.model import EsiFile
 from ecatcfg.fileio import read_input
 
 
@@ -77,8 +78,11 @@ class _Emitter:
                                          RULES[rule_id].severity, message, device))
 
 
-def lint_file(target: Target, options: LintOptions, others: list[Path]) -> FileResult | None:
-    """Lint one file; ``None`` for a non-ESI XML file met inside a folder (skipped)."""
+def lint_file(target: Target, options: LintOptions, others: list[Path],
+              model: EsiFile | None = None) -> FileResult | None:
+    """Lint one file; ``None`` for a non-ESI XML file met inside a folder (skipped).
+    ``model``: the file's model, already read from the same content (the rules only read
+    it), instead of reading it from the tree again."""
     start = time.perf_counter()
     result = FileResult(target.shown)
     out = _Emitter(target.shown, options.active)
@@ -114,7 +118,7 @@ def lint_file(target: Target, options: LintOptions, others: list[Path]) -> FileR
     spans = element_spans(tree, f"{within}Descriptions/Devices/Device")
     result.module_spans = (element_spans(tree, f"{within}Descriptions/Modules/Module")
                            + element_spans(tree, "Modules/Module"))
-    esi = reader.read_tree(tree, target.shown)
+    esi = model if model is not None else reader.read_tree(tree, target.shown)
     devices = [DeviceRef(d.vendor.id, d.product_code, d.revision, d.type_name, d.source.line)
                for d in esi.devices]
     result.devices = devices
