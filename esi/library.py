@@ -117,6 +117,8 @@ class Library:
         self._trees: dict[str, etree._ElementTree] = {}
         self._differing: dict[tuple[tuple[str, int], ...], list[tuple[int, list[str]]]] = {}
         self._loaded: dict[Path, str] = {}      # the content digest of each model read
+        self._found: dict[tuple[str, str | None], Selection] = {}   # find() without evidence
+        self._revisions: dict[tuple[int | None, int | None], frozenset[int | None]] | None = None
         self.evidence_for: Callable[[int, int, int], Evidence | None] | None = None
         # What the evidence chose (the notes of :meth:`find`), in order: a caller that
         # selects through code it does not own (a check's rules) reports them.
@@ -259,6 +261,15 @@ class Library:
                                         if e.revision is not None})))
         return exact, other, note
 
+    def revisions(self, vendor_id: int | None, product_code: int | None) -> frozenset[int | None]:
+        """The revisions the library has of one product (asked once per slave of a line)."""
+        if self._revisions is None:
+            by_product: dict[tuple[int | None, int | None], set[int | None]] = {}
+            for e in self.entries:
+                by_product.setdefault((e.vendor_id, e.product_code), set()).add(e.revision)
+            self._revisions = {k: frozenset(v) for k, v in by_product.items()}
+        return self._revisions.get((vendor_id, product_code), frozenset())
+
     def differs(self, vendor_id: int, product_code: int, revision: int) -> bool:
         """Whether several descriptions give this identity differently (a caller that must
         read evidence from a slave to choose, its SII, reads it only then)."""
@@ -279,6 +290,13 @@ class Library:
         (and without evidence) a :class:`DuplicateError` naming each file and what
         differs.  Without ``evidence``, the library's own :meth:`guided` evidence is used.
         """
+        # A line names a few devices for hundreds of slaves: without evidence (which may
+        # choose differently per slave), what a selector finds in one library is found once.
+        key = (selector, within.shown if within is not None else None)
+        plain = evidence is None and self.evidence_for is None
+        known = self._found.get(key) if plain else None
+        if known is not None:
+            return Selection(known.entry, known.note, known.preferred)
         scope = self.entries if within is None else [
             e for e in self.entries if e.file == within.shown]
         try:
@@ -292,7 +310,10 @@ class Library:
             e = found.entry
             if e.product_code is not None and e.revision is not None:
                 evidence = self.evidence_for(e.vendor_id or 0, e.product_code, e.revision)
-        return self._one_description(found, scope, evidence)
+        chosen = self._one_description(found, scope, evidence)
+        if plain:
+            self._found[key] = Selection(chosen.entry, chosen.note, chosen.preferred)
+        return chosen
 
     def guided(self, evidence_for: Callable[[int, int, int], Evidence | None]) -> Library:
         """This library (its files, models and caches shared) where :meth:`find` takes the

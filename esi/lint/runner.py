@@ -10,7 +10,6 @@ from __future__ import annotations
 import bisect
 import os
 import time
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
@@ -195,6 +194,9 @@ def lint_paths(targets: list[Target], options: LintOptions, jobs: int | None = N
             if progress:
                 progress(done, len(targets))
     else:
+        # Only here: the compile gate lints one file at a time, in the compiling process.
+        from concurrent.futures import ProcessPoolExecutor, as_completed
+
         schemas = _schema_set(options)
         if schemas is not None:        # compile once here; forked workers inherit them
             for root in reader.ROOTS:
