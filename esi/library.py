@@ -116,7 +116,8 @@ class Library:
         self._descriptions: dict[tuple[str, int], Description] = {}
         self._trees: dict[str, etree._ElementTree] = {}
         self._differing: dict[tuple[tuple[str, int], ...], list[tuple[int, list[str]]]] = {}
-        self._loaded: dict[Path, str] = {}      # the content digest of each model read
+        # The content digest and element spans of each model read (``loaded``).
+        self._loaded: dict[Path, tuple[str, reader.ElementSpans]] = {}
         self._found: dict[tuple[str, str | None], Selection] = {}   # find() without evidence
         self._revisions: dict[tuple[int | None, int | None], frozenset[int | None]] | None = None
         self.evidence_for: Callable[[int, int, int], Evidence | None] | None = None
@@ -379,16 +380,20 @@ class Library:
         model = self._models.get(lf.path)
         if model is None:
             data = xmlsafe.read_file(lf.path, lf.shown)
-            model = self._models[lf.path] = reader.read_bytes(data, lf.shown)
-            self._loaded[lf.path] = content_digest(data)
+            tree = xmlsafe.parse_bytes(data, lf.shown)
+            model = self._models[lf.path] = reader.read_tree(tree, lf.shown)
+            self._loaded[lf.path] = (content_digest(data), reader.spans_of(tree))
         return model
 
-    def loaded(self, path: Path, digest: str) -> EsiFile | None:
-        """The model already read from ``path`` when it held the content of ``digest``
-        (``esi.cache.content_digest``), else ``None``: lint of a file the library read
-        for a compile need not read it a second time (the model of a 3 MB Beckhoff file
-        takes longer to build than its lint rules take to run)."""
-        return self._models.get(path) if self._loaded.get(path) == digest else None
+    def loaded(self, path: Path, digest: str) -> tuple[EsiFile, reader.ElementSpans] | None:
+        """The model and element spans already read from ``path`` when it held the content
+        of ``digest`` (``esi.cache.content_digest``), else ``None``: lint of a file the
+        library read for a compile need not parse and read it a second time (the model of
+        a 3 MB Beckhoff file takes longer to build than its lint rules take to run)."""
+        known = self._loaded.get(path)
+        if known is None or known[0] != digest:
+            return None
+        return self._models[path], known[1]
 
     def _file(self, shown: str) -> LibraryFile:
         return next(lf for lf in self.files if lf.shown == shown)

@@ -20,6 +20,7 @@ from ecatcfg.esi.cache import content_digest
 from ecatcfg.esi.lint.finding import FileResult, Finding
 from ecatcfg.esi.lint.runner import LintOptions, Target, lint_file
 from ecatcfg.esi.model import EsiFile
+from ecatcfg.esi.reader import ElementSpans
 from ecatcfg.fileio import read_input
 
 STOPS_COMPILE: frozenset[str] = frozenset({
@@ -67,13 +68,15 @@ _CACHE_FILES = 64       # a long-running process (a fuzz campaign) must not grow
 
 
 def file_findings(path: Path, shown: str, others: list[Path],
-                  loaded: Callable[[Path, str], EsiFile | None] | None = None) -> FileResult:
+                  loaded: Callable[[Path, str], tuple[EsiFile, ElementSpans] | None] | None
+                  = None) -> FileResult:
     """The findings of the rules that stop compile in one ESI file, linted once per
     process while its content is unchanged (a sweep compiles the devices of one file one
     after another).  Keyed by a digest of the content, not the modification time, whose
     granularity (a clock tick) lets a file rewritten at once with the same size look
-    unchanged.  ``loaded(path, digest)``: the model already read from that very content
-    (``Library.loaded``), which lint then takes instead of reading the file's again."""
+    unchanged.  ``loaded(path, digest)``: the model and element spans already read from
+    that very content (``Library.loaded``), which lint then takes instead of parsing and
+    reading the file again."""
     try:
         digest = content_digest(read_input(path, shown))
     except OSError:
@@ -84,9 +87,9 @@ def file_findings(path: Path, shown: str, others: list[Path],
         # Named directly, a file is never skipped (``None`` is for non-ESI files in folders).
         if len(_cache) >= _CACHE_FILES:
             del _cache[next(iter(_cache))]          # the oldest
-        model = loaded(path, digest) if loaded is not None and digest else None
+        known = loaded(path, digest) if loaded is not None and digest else None
         found = _cache[key] = lint_file(Target(path, shown, True), LintOptions(STOPS_COMPILE),
-                                        others, model) or FileResult(shown)
+                                        others, known) or FileResult(shown)
     return found
 
 
