@@ -170,8 +170,7 @@ def _find_device(cfg: Slave, index: int, library: Library, errors: _Errors
         return None
     # Say which revision was taken only when there was a choice.
     e = selection.entry
-    choices = {x.revision for x in library.entries
-               if (x.vendor_id, x.product_code) == (e.vendor_id, e.product_code)}
+    choices = library.revisions(e.vendor_id, e.product_code)
     notes = [selection.note if len(choices) > 1 else None, selection.preferred]
     return device, "; ".join(n for n in notes if n) or None, e
 

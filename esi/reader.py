@@ -11,6 +11,7 @@ diagnosis texts, vendor-specific blocks) are skipped silently.
 from __future__ import annotations
 
 import gc
+from dataclasses import dataclass
 from pathlib import Path
 
 from lxml import etree
@@ -147,6 +148,39 @@ def read_file(path: str | Path, shown_as: str | None = None) -> EsiFile:
     """Read one ESI file or module library into the model."""
     name = shown_as or str(path)
     return read_tree(xmlsafe.parse_file(path, name), name)
+
+
+def element_spans(tree: etree._ElementTree, path: str) -> list[tuple[int, int | None]]:
+    """(first line, first line after it) of each element at ``path`` below the root, in
+    document order (``None``: it runs to the end of the file)."""
+    spans: list[tuple[int, int | None]] = []
+    for el in tree.getroot().iterfind(path):
+        node: etree._Element | None = el
+        end: int | None = None
+        while node is not None and end is None:
+            nxt = node.getnext()
+            if nxt is not None:
+                end = nxt.sourceline
+            node = node.getparent()
+        spans.append((el.sourceline or 0, end))
+    return spans
+
+
+@dataclass(frozen=True, slots=True)
+class ElementSpans:
+    """Where each Device and Module element of a file lies (``element_spans``): what lint
+    ties a finding's line to."""
+
+    devices: list[tuple[int, int | None]]
+    modules: list[tuple[int, int | None]]
+
+
+def spans_of(tree: etree._ElementTree) -> ElementSpans:
+    """The spans of a parsed, namespace-stripped ESI tree's Device and Module elements."""
+    within = "EtherCATInfo/" if tree.getroot().tag == LIST_ROOT else ""
+    return ElementSpans(element_spans(tree, f"{within}Descriptions/Devices/Device"),
+                        element_spans(tree, f"{within}Descriptions/Modules/Module")
+                        + element_spans(tree, "Modules/Module"))
 
 
 def read_bytes(data: bytes, shown_as: str) -> EsiFile:
