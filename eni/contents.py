@@ -163,8 +163,9 @@ CONTENTS: dict[str, dict[str, Part]] = {
     },
     "Config/Master": {
         "Info": _read("name, destination and source MAC, EtherType"),
-        "MailboxStates": _read("where the mailbox-state bits are; apply polls SM1 "
-                               "directly, which a slave answers the same way"),
+        "MailboxStates": _read("where the mailbox-state bits are; apply polls each "
+                               "slave's SM1 status byte (0x080D) instead, which the "
+                               "slave answers the same way"),
         "EoE": _accepted("the master's own EoE switch (ports, frames, MAC table): no "
                          "command to a slave"),
         "InitCmds": _read("replayed before (BeforeSlave) or after the slaves' commands",

@@ -34,6 +34,7 @@ import threading
 import time
 
 import pysoem
+from soem_patience import be_patient
 
 STATE_TIMEOUT_US = 10_000_000      # a loaded 2-core machine: margin over the ~0.1 s needed
 CYCLES = 10
@@ -123,6 +124,7 @@ def main() -> None:
     assert spec is not None and spec.loader is not None
     exported = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(exported)
+    be_patient(pysoem)
     master = pysoem.Master()
     master.open(iface)
     try:

@@ -18,6 +18,7 @@ import sys
 import time
 
 import pysoem
+from soem_patience import be_patient
 
 STATE_TIMEOUT_US = 10_000_000      # a loaded 2-core machine: margin over the ~0.1 s needed
 
@@ -28,6 +29,7 @@ def main() -> None:
     assert spec is not None and spec.loader is not None
     exported = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(exported)
+    be_patient(pysoem)
     master = pysoem.Master()
     master.open(iface)
     result: dict = {}

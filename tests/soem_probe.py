@@ -26,12 +26,14 @@ import sys
 import time
 
 import pysoem
+from soem_patience import be_patient
 
 STATE_TIMEOUT_US = 2_000_000
 
 
 def main() -> None:
     iface, options = sys.argv[1], json.loads(sys.argv[2] if len(sys.argv) > 2 else "{}")
+    be_patient(pysoem)
     master = pysoem.Master()
     master.open(iface)
     result: dict = {}
