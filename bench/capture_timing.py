@@ -15,7 +15,10 @@ event it can time, with bounds:
   to the first AL status read (0x0130) that shows the requested state;
 - **mailbox reply**: from a complete write of the mailbox-out SM (SM0) to the first read
   that finds the mailbox-in SM (SM1) full (its status 0x080D bit 3, or a read of the SM1
-  area with a working counter).
+  area with a working counter);
+- **reply start**: from such a write, made while SM1's status showed the read event of the
+  master's last read (bit 1), to the first status read without it: the firmware has
+  written the first byte of its reply (the ESC clears the event then).
 
 A capture stamps each frame when the master's host sends it (Q) and when the reply comes
 back (R); the slave acted somewhere in between.  A polling master sees a reply only at its
@@ -72,7 +75,7 @@ STATES = {1: "INIT", 2: "PREOP", 3: "BOOT", 4: "SAFEOP", 8: "OP"}
 # The timing model's transition names (runtime/segment/timing.py TRANSITIONS) by (from, to) state.
 TRANSITIONS = {(1, 2): "IP", (2, 4): "PS", (4, 8): "SO", (8, 4): "OS", (4, 2): "SP",
                (4, 1): "SI", (8, 2): "OP", (8, 1): "OI", (2, 1): "PI"}
-MAILBOX, EEPROM = "mailbox", "eeprom"
+MAILBOX, EEPROM, REPLY_START = "mailbox", "eeprom", "reply start"
 
 
 @dataclass
@@ -134,6 +137,7 @@ class Slave:
     sm: dict[int, tuple[int, int]] = field(default_factory=dict)      # n -> (start, length)
     state: int = 1
     want: int = 1                   # the state of the AL control write being timed
+    sm1_read_event: bool = False    # SM1 status bit 1 at the last read: a reply was read
 
     def dword(self, word: int) -> int | None:
         """SII words ``word`` and ``word + 1`` as the capture read them."""
@@ -237,6 +241,11 @@ def analyse(exchanges: list[Exchange]) -> tuple[list[Event], dict[str, Slave]]:
                                                  else "download"),
                                 8: "CoE SDO info"}.get(service, f"CoE service {service}")
                     open_[(k, "mailbox")] = Pending("mailbox", what, ex.sent, ex.back)
+                    if s.sm1_read_event:
+                        # The master read the last reply: the read event (SM1 status bit
+                        # 1) stays until the firmware writes the first byte of the next.
+                        open_[(k, REPLY_START)] = Pending(REPLY_START, what, ex.sent,
+                                                          ex.back)
             elif d.cmd in READS or d.cmd == BRD:
                 if d.ado == 0x0502 and (k, "eeprom") in open_ and len(d.data) >= 2:
                     status = d.data[0] | d.data[1] << 8
@@ -253,13 +262,14 @@ def analyse(exchanges: list[Exchange]) -> tuple[list[Event], dict[str, Slave]]:
                         else:
                             close(k, "state", ex, state == s.want)
                     s.state = state
+                elif d.ado in (0x0805, 0x080D) and len(d.data) > 0x080D - d.ado:
+                    status = d.data[0x080D - d.ado]           # SM1 status, alone or in a block
+                    s.sm1_read_event = bool(status & 0x02)
+                    close(k, REPLY_START, ex, not status & 0x02)
+                    close(k, "mailbox", ex, bool(status & 0x08))
                 elif (k, "mailbox") in open_:
                     sm1 = s.sm.get(1)
-                    if d.ado == 0x080D and len(d.data) >= 1:
-                        close(k, "mailbox", ex, bool(d.data[0] & 0x08))
-                    elif d.ado == 0x0805 and len(d.data) >= 9:    # SM1 status in a block
-                        close(k, "mailbox", ex, bool(d.data[8] & 0x08))
-                    elif sm1 and d.ado == sm1[0]:
+                    if sm1 and d.ado == sm1[0]:
                         close(k, "mailbox", ex, True)
     return events, dict(slaves)
 
@@ -274,6 +284,13 @@ class Device:
     kind: str | None    # esc / firmware / drive; None: nothing tells
     source: str         # how the kind was found
     esi: bool = False   # an ESI of the corpora describes it: the emulator can build it
+    own: bool = False   # it has its own measured figures (timing.DEVICES), not its kind's
+
+    @property
+    def figures(self) -> str | None:
+        """Whose figures the emulated slave takes: its own (its type, e.g. "EL6910") or
+        its kind's."""
+        return self.label.split(" (")[0] if self.own else self.kind
 
 
 def sii_dumps(folder: Path) -> dict[str, bytes]:
@@ -293,7 +310,7 @@ def classify(slave: Slave, library: Library, dumps: dict[str, bytes]) -> Device:
             if (e.vendor_id, e.product_code) == (vendor, product)]
     if same:
         from ecatcfg.runtime.segment.emulate import SlaveSpec, emulated_slave
-        from ecatcfg.runtime.segment.timing import kind_of
+        from ecatcfg.runtime.segment.timing import DEVICES, kind_of
         entry = (min(same, key=lambda e: (abs((e.revision or 0) - revision), e.file))
                  if revision is not None else max(same, key=lambda e: e.revision or 0))
         note = "" if entry.revision == revision else \
@@ -301,7 +318,8 @@ def classify(slave: Slave, library: Library, dumps: dict[str, bytes]) -> Device:
             (" (the capture reads none)" if revision is None else "")
         kind = kind_of(emulated_slave(SlaveSpec(library.device(entry))))
         return Device(f"{entry.type} ({label})", kind,
-                      f"ESI {Path(entry.file).name} line {entry.line}{note}", esi=True)
+                      f"ESI {Path(entry.file).name} line {entry.line}{note}", esi=True,
+                      own=(vendor, product) in DEVICES)
     from ecatcfg.esc import ESC_DEVICE_EMULATION
     from ecatcfg.esi import sii
     for name, data in dumps.items():
@@ -412,7 +430,7 @@ def summary(windows: list[Window]) -> str:
             f"hi {spread(his)}  mid {spread(mids)} ms")
 
 
-ORDER = (EEPROM, MAILBOX, "IP", "PS", "SO", "OS", "SP", "SI", "OP", "OI", "PI")
+ORDER = (EEPROM, MAILBOX, REPLY_START, "IP", "PS", "SO", "OS", "SP", "SI", "OP", "OI", "PI")
 
 
 def _quantity_key(q: str) -> tuple[int, str]:
@@ -421,12 +439,14 @@ def _quantity_key(q: str) -> tuple[int, str]:
 
 def by_kind(windows: list[Window]) -> dict[tuple[str, str], list[Window]]:
     """The windows per (kind, quantity) the fit uses: EEPROM reads under ``"all"`` (the ESC
-    reads the EEPROM, whatever runs behind it); slaves of no kind left out."""
+    reads the EEPROM, whatever runs behind it); a device with its own figures
+    (``timing.DEVICES``) under its type instead of its kind; slaves of no kind left out."""
     groups: dict[tuple[str, str], list[Window]] = defaultdict(list)
     for w in windows:
-        if w.device.kind is None:
+        figures = w.device.figures
+        if figures is None:
             continue
-        groups[("all" if w.quantity == EEPROM else w.device.kind, w.quantity)].append(w)
+        groups[("all" if w.quantity == EEPROM else figures, w.quantity)].append(w)
     return dict(groups)
 
 

@@ -8,16 +8,20 @@ Run from the checkout:  python3 bench/soe.py [--writes 0,8,32] [--sizes 1024,409
 1. **Start-up writes** (in memory: ``Network.virtual``, the segment served on a thread over
    ``MemoryLink``).  The self-written two-axis SoE drive ``tests/fixtures/esi/soe_drive.xml``
    (TSD-2, 128-byte mailbox) compiled with ``ecatcfg.compiler``: its ESI's own 7 SoE writes
-   (the IDNs it needs before SAFEOP), plus N more PS writes of S-0-0032 (2 bytes, drive 0);
+   (the IDNs it needs before SAFEOP), plus N more PS writes of S-0-0032 (2 bytes, drive 0
+   and drive 1 in turn: a write cannot go ahead of the answer to a write of the same
+   object, whose answer it could not be told from);
    the baseline, in the same run and interleaved, the CiA 402 example drive EXD-402
    (``examples/esi``, 128-byte mailbox) with its 9 PDO-assignment SDOs plus N more PS SDO
-   downloads of 0x6040:00 (2 bytes, expedited).  Each run from power-on (a new segment),
+   downloads of 0x6040:00 and 0x6060:00 in turn (2 and 1 bytes, expedited).  Each run from
+   power-on (a new segment),
    INIT -> OP (``net.up()``); every frame the master sends is recorded
    (``Transport.recorder``) and sorted: process data (a logical datagram: the ENI's cyclic
    frames, which run while PS and SO last, so their number follows time, not work) and
    configuration (the rest).  Per added write: (configuration frames at N - at 0) / N and
-   (PS time at N - at 0) / N, medians of R runs; the least a write can cost is 2 frames,
-   one that writes the request into SM0 and one that reads the answer from SM1.
+   (PS time at N - at 0) / N, medians of R runs; the least a write can cost is 1 frame:
+   the one that reads the answer to the write before and, behind that read, writes this
+   request into SM0 (runtime/master/mailbox_pipeline.py); one after the other, 2 frames.
    Over veth too (root): each ENI written (``eni.writer``) and run by ``ecatcfg apply ENI
    --cycles 0 --format json`` as a process in one namespace, ``ecatcfg simulate`` of the
    device started afresh for each device and round in the other; PS time and frames from
@@ -135,12 +139,16 @@ def startup_plan(kind: str, n: int) -> Any:
         Library([esi], cache=False)).plan
     mailbox = plan.slaves[0].mailbox
     assert mailbox is not None
+    # Two objects in turn, as a start-up list writes (a write to the object just written
+    # cannot go ahead of its answer: the two answers could not be told apart).
     if kind == "SoE":
         mailbox.soe_init_cmds += [SoeInitCmd([Transition.PS], f"bench {i}", S_0_0032,
-                                             b"\x0b\x00") for i in range(n)]
+                                             b"\x0b\x00", drive_no=i % 2) for i in range(n)]
     else:
-        mailbox.coe_init_cmds += [CoeInitCmd([Transition.PS], f"bench {i}", 0x6040, 0,
-                                             b"\x06\x00") for i in range(n)]
+        mailbox.coe_init_cmds += [
+            CoeInitCmd([Transition.PS], f"bench {i}", 0x6040, 0, b"\x06\x00") if i % 2 == 0
+            else CoeInitCmd([Transition.PS], f"bench {i}", 0x6060, 0, b"\x08")
+            for i in range(n)]
     return plan
 
 
@@ -159,10 +167,13 @@ def startup_run(kind: str, n: int) -> dict[str, float]:
         if net.state != AlState.OP:
             raise SystemExit(f"{kind} with {n} writes did not reach OP")
         if kind == "SoE":
-            logged = [idn for idn, _ in net.segment.slaves[0].mailbox.soe.drives[0].log]
-            if logged.count(S_0_0032) != n + 1:          # the ESI's own S-0-0032 and ours
-                raise SystemExit(f"the drive took {logged.count(S_0_0032)} writes of "
-                                 f"S-0-0032, not {n + 1}")
+            drives = net.segment.slaves[0].mailbox.soe.drives
+            # each drive: the ESI's own S-0-0032 and ours
+            for drive, want in ((0, 1 + (n + 1) // 2), (1, 1 + n // 2)):
+                logged = [idn for idn, _ in drives[drive].log].count(S_0_0032)
+                if logged != want:
+                    raise SystemExit(f"drive {drive} took {logged} writes of S-0-0032, "
+                                     f"not {want}")
     ps, ps_s = rec.between("PS: PS", "PS: SAFEOP")
     return {"wall_s": wall, "frames": len(rec.sent),
             "config": len(rec.sent) - process_data(rec.sent),

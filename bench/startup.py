@@ -66,7 +66,10 @@ Method (targets: apply's whole process no slower than SOEM's, and apply's frames
               slave chain: that slave's register InitCmds of the transition (one frame
               each: every one waits for the one before) + 2 frames (SM0 write, SM1 read)
               per mailbox round trip of its CoE InitCmds (1 round trip for an expedited
-              or normal transfer, + 1 per segment when the data does not fit SM0 - 16).
+              or normal transfer, + 1 per segment when the data does not fit SM0 - 16),
+              less 1 per CoE InitCmd whose request can go ahead, in the frame that reads
+              the answer to a download of another object before it
+              (runtime/master/mailbox_pipeline.py).
      A state-check InitCmd counts once (no polling), a mailbox response is assumed
      to be there at the first SM1 read.  Commands of different slaves share frames
      without limit in this minimum; "lockstep min" also applies the 1486-byte frame
@@ -302,10 +305,18 @@ def minimum_frames(plan) -> Minimum:
             if coe and t != Transition.IP:      # CoE before the AL control write (replay.py)
                 split = next((i for i, c in enumerate(cmds) if c.ado == Reg.AL_CONTROL
                               and c.cmd in (Cmd.APWR, Cmd.FPWR, Cmd.BWR)), len(cmds))
-            mbx = []
+            mbx: list[int] = []
+            write, read = dg + s.mailbox.send.length, dg + s.mailbox.recv.length
+            before = None
             for c in coe:
-                mbx += [dg + s.mailbox.send.length, dg + s.mailbox.recv.length] * \
-                    sdo_round_trips(c, s.mailbox.send.length)
+                if before is not None and before.ccs != 2 and \
+                        (before.index, before.subindex) != (c.index, c.subindex):
+                    mbx[-1] += write          # the request ahead, behind the read before
+                    mbx.append(read)
+                else:
+                    mbx += [write, read]
+                mbx += [write, read] * (sdo_round_trips(c, s.mailbox.send.length) - 1)
+                before = c
             chain = [dg + c.length for c in cmds[:split]] + mbx + \
                     [dg + c.length for c in cmds[split:]]
             chains.append(chain)

@@ -36,6 +36,12 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
     target.add_argument("--virtual", action="store_true",
                         help="a virtual segment emulating the ENI's slaves: from their ESI "
                              "files (--esi), else from the ENI alone")
+    p.add_argument("--simulated-time", action="store_true",
+                   help="with --virtual: run master and slaves on simulated time, the "
+                        "slaves taking the time real ones take (the fitted timing model, "
+                        "docs/timing.md): as fast as the host can, the same frames on every "
+                        "run, and the simulated time each step would take on a real line "
+                        "reported; needs --cycles when cycling")
     p.add_argument("--esi", action="append", metavar="PATH",
                    help="ESI file or folder; repeatable.  With --virtual the slaves are "
                         "emulated from them (a slave whose device is not there from the ENI "
@@ -135,6 +141,7 @@ def _run(args: argparse.Namespace, ctx: _Run) -> int:
         notify.watchdog()               # a step that reports progress is alive
         report.event(event)
     net = _network(args, plan, on_event, dc_threshold, dc_timeout)
+    report.mark("start", net)
     guard = _SignalGuard(net, report, notify)
     failure: EcatcfgError | None = None
     with guard:                         # also while the summary is printed
@@ -180,6 +187,15 @@ def _checked_options(args: argparse.Namespace
         raise UsageError("--prefer ranks files of --esi: give them with --esi")
     if args.cycles is not None and args.cycles < 0:
         raise UsageError(f"--cycles {args.cycles}: must be 0 or more")
+    if args.simulated_time and not args.virtual:
+        raise UsageError("--simulated-time is a mode of the virtual segment: give --virtual")
+    if args.simulated_time and args.cycles is None and STATES[args.state] >= 4:   # SAFEOP and OP cycle
+        raise UsageError("--simulated-time: give --cycles N (simulated time runs as fast as "
+                         "the host can: cycling until Ctrl-C would never pause)")
+    if args.simulated_time and (args.rt_priority is not None or args.lock_memory
+                                or args.cpu is not None or args.busy_wait):
+        raise UsageError("--simulated-time: the real-time options pace a real line's "
+                         "cycles; simulated time has no host timing to improve")
     dc_threshold: int = DC_THRESHOLD_NS if args.dc_threshold is None else args.dc_threshold
     dc_timeout: float = DC_TIMEOUT_S if args.dc_timeout is None else args.dc_timeout
     try:
@@ -232,8 +248,13 @@ def _network(args: argparse.Namespace, plan: NetworkPlan, on_event: Callable[[Ev
     from ecatcfg.runtime.network import Network
 
     if args.virtual:
+        clock = timing = None
+        if args.simulated_time:
+            from ecatcfg.runtime.clock import SimClock
+            from ecatcfg.runtime.segment.timing import Timing
+            clock, timing = SimClock(), Timing()
         return Network.virtual(plan, args.esi, esi_prefer=args.prefer, pcap=args.pcap,
-                               on_event=on_event,
+                               on_event=on_event, clock=clock, timing=timing,
                                esi_cache=not args.no_cache, skip_unsupported=True,
                                eni_name=args.eni,
                                dc_threshold_ns=dc_threshold, dc_timeout_s=dc_timeout)
@@ -251,6 +272,7 @@ def _up_and_cycle(net: Network, plan: NetworkPlan, target: AlState,
     from ecatcfg.esc import AlState
 
     net.up(target, accept_newer_revision=args.accept_newer_revision)
+    report.mark(f"start-up to {target.name}", net)
     # The stop timeout a service manager needs (docs/runtime.md).
     up = len(net.master.slaves)
     status = (f"{up} slaves in {target.name}" + (
@@ -263,6 +285,7 @@ def _up_and_cycle(net: Network, plan: NetworkPlan, target: AlState,
         notify.ready(status.replace(";", ", cycling;", 1))
         net.run(args.cycles, guard.cycle_callback(report.cycle_callback(net, notify.watchdog)),
                 realtime=realtime)
+        report.mark(f"{args.cycles} cycles", net)
     else:
         notify.ready(status)
 
@@ -285,10 +308,12 @@ def _down(net: Network, plan: NetworkPlan, args: argparse.Namespace, report: App
         report.final_states(net.master.read_states(), net.master.progress,
                             highest=highest, scanned=net.master.scanned,
                             line=net.master.line)
+        report.mark("way down", net)
     else:
         notify.stopping("leaving the slaves as they are")
         report.final_states(highest, net.master.progress, highest=highest,
                             scanned=net.master.scanned, line=net.master.line)
+        report.mark("states read", net)
     return failure
 
 

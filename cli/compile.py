@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import gc
 import sys
 
 
@@ -33,11 +34,24 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
 
 
 def run(args: argparse.Namespace) -> int:
+    # One pass over inputs of bounded size, with little cyclic garbage (about 8 000 objects
+    # on a 512-slave line): the cyclic GC would rescan the ESI models it reads (hundreds of
+    # thousands of objects) some 25 times, a sixth of a cold compile's CPU time.
+    was_enabled = gc.isenabled()
+    gc.disable()
+    try:
+        return _run(args)
+    finally:
+        if was_enabled:
+            gc.enable()
+
+
+def _run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from ecatcfg import __version__
     from ecatcfg.cli.paths import messages, output_file
-    from ecatcfg.compiler import build, header, topology
+    from ecatcfg.compiler import build, topology
     from ecatcfg.eni import writer as eni_writer
     from ecatcfg.errors import EcatcfgError, UsageError
     from ecatcfg.esi.library import Library
@@ -68,8 +82,11 @@ def run(args: argparse.Namespace) -> int:
         print(f"warning: {warning}", file=sys.stderr)
     # Render everything before writing anything: an error leaves no file behind.
     eni = eni_writer.to_bytes(result.plan, generator=f"ecatcfg {__version__}")
-    h = header.render(result.plan, Path(args.topology).name,
-                      guard=header.guard_for(Path(args.header).name)) if args.header else None
+    h = None
+    if args.header:
+        from ecatcfg.compiler import header      # its templates need jinja2: only for a header
+        h = header.render(result.plan, Path(args.topology).name,
+                          guard=header.guard_for(Path(args.header).name))
     for target, data in [(args.output, eni)] + ([(args.header, h)] if h is not None else []):
         try:
             write_atomic(target, data)

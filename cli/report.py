@@ -73,6 +73,32 @@ class ApplyReport:
         self.skipped_parts: list[dict[str, Any]] = []
         self.ignored_parts: list[dict[str, Any]] = []
         self.derived_parts: list[dict[str, Any]] = []
+        # On simulated time (apply --virtual --simulated-time): (what ended, its ns).
+        self.marks: list[tuple[str, int]] = []
+        self._host_start = 0.0
+
+    def mark(self, what: str, net: Network) -> None:
+        """On simulated time: the simulated instant ``what`` ended at (``"start"`` first),
+        for the timings the run would take on a real line; nothing on the wall clock."""
+        from ecatcfg.runtime.clock import SimClock
+        clock = net.clock
+        if isinstance(clock, SimClock):
+            if not self.marks:
+                import time
+                self._host_start = time.perf_counter()
+            self.marks.append((what, clock.ns))
+
+    def simulated_time(self) -> dict[str, float] | None:
+        """ms of simulated time each part of the run took, ``total``, and the host's
+        seconds for all of it; None on the wall clock."""
+        if len(self.marks) < 2:
+            return None
+        import time
+        out = {what: round((t - before) / 1e6, 3)
+               for (_, before), (what, t) in zip(self.marks, self.marks[1:])}
+        out["total"] = round((self.marks[-1][1] - self.marks[0][1]) / 1e6, 3)
+        out["host_s"] = round(time.perf_counter() - self._host_start, 3)
+        return out
 
     def derived(self, derived: list[Derived]) -> None:
         """The set-up derived for a partial ENI (``eni/derive.py``): a line each, and the
@@ -209,6 +235,9 @@ class ApplyReport:
             "skipped": self.skipped_parts,
             "ignored": self.ignored_parts,
         }
+        simulated = self.simulated_time()
+        if simulated is not None:
+            self.summary["simulated_time_ms"] = simulated
         by_slave = {c["slave"]: c["cause"] for c in self.summary["causes"]}
         for row in self.rows:
             row["cause"] = by_slave.get(row["name"])
@@ -254,6 +283,11 @@ class ApplyReport:
                 f"{stats.wkc_errors} working-counter errors; cycle jitter p50 "
                 f"{jitter['p50']:.0f} us, p99 {jitter['p99']:.0f} us, max "
                 f"{jitter['max']:.0f} us")
+        if simulated is not None:
+            parts = ", ".join(f"{what} {ms:.1f} ms" for what, ms in simulated.items()
+                              if what not in ("total", "host_s"))
+            console.print(f"simulated time: {simulated['total']:.1f} ms ({parts}) in "
+                          f"{simulated['host_s']:.2f} s of host time")
         if failure:
             # escape: the message names the InitCmd as "[comment]", which is not markup.
             from rich.markup import escape

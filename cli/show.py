@@ -156,7 +156,9 @@ def _esi_text(r: dict[str, Any], out: _Out) -> None:
         for s in r["slots"]:
             out.line(f"  {s['name']!r} {s['min']}..{s['max']}: "
                      f"{' '.join([_hex(i, 8) for i in s['modules']] + s['module_classes'])} "
-                     f"(default {_hex(s['default'], 8)})")
+                     f"(default {_hex(s['default'], 8)})"
+                     + (f", slot group {s['slot_group']}" if s.get("slot_group") is not None
+                        else ""))
     if r.get("modules"):
         out.heading("Modules")
         for m in r["modules"]:

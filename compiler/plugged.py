@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ecatcfg.compiler.esi_errors import slave_errors
+from ecatcfg.compiler.esi_errors import FileGate, slave_errors
 from ecatcfg.compiler.passive import split
 from ecatcfg.compiler.resolve import resolve_all
 from ecatcfg.compiler.topology import LoadedTopology, TopologyError
@@ -47,7 +47,8 @@ def plugged_devices(loaded: LoadedTopology, library: Library,
     parts = split(loaded, library)
     resolved, errors, _ = resolve_all(parts.active, library)
     errors = parts.errors + errors
-    defects = [slave_errors(parts.active, r, library, allow_esi_errors) for r in resolved]
+    gate = FileGate(library)
+    defects = [slave_errors(parts.active, r, library, allow_esi_errors, gate) for r in resolved]
     if not allow_esi_errors:
         errors += [e for found in defects for e in found]
     if errors:

@@ -13,13 +13,15 @@ import difflib
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ecatcfg.eni.plan import CoeInitCmd, EoeInitCmd, PdoDesc, PdoEntryDesc, SoeInitCmd
+from ecatcfg.eni.plan import (FIRST_STATION_ADDRESS, CoeInitCmd, EoeInitCmd, PdoDesc,
+                              PdoEntryDesc, SoeInitCmd)
 from ecatcfg.eni.standard import Watchdogs
 from ecatcfg.compiler import eoe_params, soe_cmds, watchdogs, wiring
 from ecatcfg.compiler.topology import (LoadedTopology, MappingEntry, MappingVariable, Sdo,
                                        Slave)
 from ecatcfg.errors import EcatcfgError
-from ecatcfg.esc import MAX_PDO_ENTRIES, MODULE_IDENT_LIST, SM_PDO_ASSIGN, Transition
+from ecatcfg.esc import (MAX_PDO_ENTRIES, MODULE_IDENT_LIST, SM_PDO_ASSIGN, Transition,
+                         pdo_mapping_range)
 from ecatcfg.esi import datatypes
 from ecatcfg.esi.coe import (TRANSITION_STATE, DictEntry, device_dictionary, has_coe, lookup,
                              write_refusal, write_target)
@@ -29,7 +31,8 @@ from ecatcfg.esi.model import CoeInitCmd as EsiCoeInitCmd
 from ecatcfg.esi.model import DcOpMode, Device, Dictionary, Module, Pdo, SyncManager
 from ecatcfg.esi.physics import DEFAULT_PHYSICS
 from ecatcfg.esi.slots import (PluggedModule, fits, ident_list, ident_list_data,
-                               module_dictionaries, plug)
+                               module_dictionaries, moved_excludes, plug,
+                               ungrouped_indices)
 from ecatcfg.record import replace
 
 
@@ -51,7 +54,8 @@ class ResolvedSlave:
     watchdog: Watchdogs | None = None        # topology watchdog: (slave's, else master's)
     remapped: set[int] = field(default_factory=set)
     pdo_prefix: dict[int, str] = field(default_factory=dict)  # module PDOs: "Module 2 (X)"
-    module_dicts: list[tuple[int, Dictionary]] = field(default_factory=list)  # (offset, dic)
+    # (station index -> module index, dictionary) of each plugged module (esi/slots.py)
+    module_dicts: list[tuple[dict[int, int], Dictionary]] = field(default_factory=list)
     modules: list[PluggedModule] = field(default_factory=list)     # plugged, in slot order
     note: str | None = None                  # e.g. which revision was taken
     notes: list[str] = field(default_factory=list)   # e.g. a slot's default module plugged
@@ -73,16 +77,14 @@ class ResolvedSlave:
     def dictionary_for(self, index: int) -> tuple[Dictionary | None, int]:
         """The dictionary that describes object ``index`` and its index there: the device's,
         or a plugged module's (its DependOnSlot objects moved by the slot's offset, so slot
-        3's 0x8020 is the module's 0x8000).  Falls back to the device's."""
+        3's 0x8020 is the module's 0x8000, its DependOnSlotGroup ones by its slot group's).
+        Falls back to the device's."""
         dic = self.dictionary
         if dic is not None and index in dic.objects:
             return dic, index
-        for offset, mod in self.module_dicts:
-            obj = mod.objects.get(index - offset)
-            if obj is not None and (obj.depend_on_slot or not offset):
-                return mod, index - offset
-            if offset and index in mod.objects and not mod.objects[index].depend_on_slot:
-                return mod, index
+        for moved, mod in self.module_dicts:
+            if index in moved:
+                return mod, moved[index]
         return dic, index
 
 
@@ -124,7 +126,8 @@ def resolve_all(loaded: LoadedTopology, library: Library
             errors.add(f"slave name {cfg.name!r} is already used by the slave at line "
                        f"{loaded.line('slaves', names[cfg.name])}", *where, "name")
         names.setdefault(cfg.name, index)
-        phys = cfg.station_address if cfg.station_address is not None else 1001 + pos
+        phys = cfg.station_address if cfg.station_address is not None \
+            else FIRST_STATION_ADDRESS + pos
         if phys in used:
             errors.add(f"station address {phys} is also the address of slave "
                        f"{slaves[used[phys]].name!r}", *where,
@@ -167,8 +170,7 @@ def _find_device(cfg: Slave, index: int, library: Library, errors: _Errors
         return None
     # Say which revision was taken only when there was a choice.
     e = selection.entry
-    choices = {x.revision for x in library.entries
-               if (x.vendor_id, x.product_code) == (e.vendor_id, e.product_code)}
+    choices = library.revisions(e.vendor_id, e.product_code)
     notes = [selection.note if len(choices) > 1 else None, selection.preferred]
     return device, "; ".join(n for n in notes if n) or None, e
 
@@ -237,14 +239,6 @@ def _plug_modules(slave: ResolvedSlave, library: Library, entry: DeviceEntry,
                        f"{'s' if high != 1 else ''}; the topology plugs {len(selectors)}",
                        *here)
             continue
-        if selectors and slot.slot_group is not None:
-            # ETG.2000 SlotGroupData moves the indices of modules marked DependOnSlotGroup
-            # by the group's place; ecatcfg does not compute that, and a wrong index would
-            # configure another object (no corpus device uses slot groups).
-            errors.add(f"slave {cfg.name!r}: {label} belongs to slot group "
-                       f"{slot.slot_group}; module offsets by slot group (SlotGroupData, "
-                       "DependOnSlotGroup) are not implemented", *here)
-            continue
         if len(selectors) < low:
             errors.add(f"slave {cfg.name!r}: {label} needs at least {low} module"
                        f"{'s' if low != 1 else ''}; the topology plugs "
@@ -277,6 +271,16 @@ def _plug_modules(slave: ResolvedSlave, library: Library, entry: DeviceEntry,
                 continue
             by_slot.setdefault(number, []).append((module, default))
     plugged = plug(dev, by_slot)
+    for p in plugged:
+        ungrouped = ungrouped_indices(p)
+        if ungrouped:
+            # ETG.2000 DependOnSlotGroup: moved by the slot group's number, and this slot is
+            # in no group; as written it could configure another group's object (lint ESI604).
+            errors.add(f"slave {cfg.name!r}: module {p.module.type_name} marks an index "
+                       f"DependOnSlotGroup (at {ungrouped[0]}), but slot {p.slot} "
+                       f"({slots[p.slot - 1].name or 'unnamed'}) belongs to no slot group "
+                       "(Slot/@SlotGroup), so there is no group number to move it by",
+                       *where, p.slot)
     for p in plugged:
         if p.default:
             slave.notes.append(f"slot {p.slot} ({slots[p.slot - 1].name or 'unnamed'}): "
@@ -364,18 +368,24 @@ def _find_module(selector: int | str, by_ident: dict[int, Module],
 
 # -- PDO choice ---------------------------------------------------------------------------
 
-def _desc(pdo: Pdo, pdo_offset: int = 0, index_offset: int = 0) -> PdoDesc:
-    """A plan PDO from an ESI PDO; module PDOs shifted by their slot (ETG.2000 DependOnSlot)."""
-    # Only an Index marked DependOnSlot moves with the slot; a fixed index stays as written.
-    index = (pdo.index or 0) + (pdo_offset if pdo.depend_on_slot else 0)
+def _pdo_tag(direction: str) -> str:
+    return "RxPdo" if direction == "rx" else "TxPdo"
+
+
+def _desc(pdo: Pdo, plug: PluggedModule | None = None) -> PdoDesc:
+    """A plan PDO from an ESI PDO; a module's PDOs moved by its slot and slot group
+    (ETG.2000 DependOnSlot, DependOnSlotGroup: ``PluggedModule``, esi/slots.py); only an
+    index so marked moves, a fixed index stays as written."""
+    def pdo_index(i: int) -> int:
+        return plug.pdo_index(i, pdo.depend_on_slot, pdo.depend_on_slot_group) if plug else i
     entries = [PdoEntryDesc(
-        index=(e.index or 0) + (index_offset if e.depend_on_slot and e.index else 0),
+        index=plug.object_index(e.index or 0, e.depend_on_slot, e.depend_on_slot_group)
+        if plug else e.index or 0,
         subindex=e.subindex or 0, bit_len=e.bit_len or 0, name=e.name,
         data_type=e.data_type) for e in pdo.entries]
-    return PdoDesc(pdo.direction, index, pdo.name, entries, sm=pdo.sm, fixed=pdo.fixed,
-                   mandatory=pdo.mandatory, virtual=pdo.virtual,
-                   excludes=[x + (pdo_offset if pdo.depend_on_slot else 0)
-                             for x in pdo.excludes])
+    return PdoDesc(pdo.direction, pdo_index(pdo.index or 0), pdo.name, entries, sm=pdo.sm,
+                   fixed=pdo.fixed, mandatory=pdo.mandatory, virtual=pdo.virtual,
+                   excludes=moved_excludes(plug, pdo) if plug else list(pdo.excludes))
 
 
 def _choose_pdos(slave: ResolvedSlave, modules: list[PluggedModule], errors: _Errors) -> None:
@@ -436,7 +446,18 @@ def _device_pdos(slave: ResolvedSlave, modules: list[PluggedModule],
         (dev.module_pdo_group or 0, _desc(p), p) for p in sorted(own, key=lambda p: p.source.line)]
     for plug in modules:
         for esi_pdo in plug.module.rx_pdos + plug.module.tx_pdos:
-            d = _desc(esi_pdo, plug.pdo_offset, plug.index_offset)
+            d = _desc(esi_pdo, plug)
+            allowed = pdo_mapping_range(d.direction)
+            if has_coe(dev) and not d.virtual and esi_pdo.index is not None \
+                    and d.index not in allowed:
+                # Moved by its slot and slot group past the mapping objects of its direction
+                # (ETG.1000.6; lint ESI101 checks the indices as written): the slave's
+                # assignment check would refuse it.
+                errors.add(f"slave {cfg.name!r}: the {_pdo_tag(d.direction)} "
+                           f"0x{esi_pdo.index:04X} at {esi_pdo.source} is 0x{d.index:04X} in "
+                           f"slot {plug.slot}, moved by its slot and slot group outside "
+                           f"0x{allowed.start:04X}-0x{allowed.stop - 1:04X}", "slaves",
+                           slave.index, "modules", plug.slot)
             # The module's position in the PDO's name, as EC-Engineer writes it:
             # "Module 3 (UR20-4DI-P / 1315170000).Input"; the variables carry it on.
             d.name = f"{plug.label}.{d.name}"
@@ -757,8 +778,10 @@ def _dc_mode(slave: ResolvedSlave, errors: _Errors) -> DcOpMode | None:
 
 # -- SDOs ---------------------------------------------------------------------------------
 
-def _coe_cmd(cmd: EsiCoeInitCmd, offset: int = 0) -> CoeInitCmd:
-    index = (cmd.index or 0) + (offset if cmd.depend_on_slot else 0)
+def _coe_cmd(cmd: EsiCoeInitCmd, plug: PluggedModule | None = None) -> CoeInitCmd:
+    index = cmd.index or 0
+    if plug is not None:
+        index = plug.object_index(index, cmd.depend_on_slot, cmd.depend_on_slot_group)
     transitions = [Transition(t) for t in cmd.transitions if t in Transition.__members__]
     return CoeInitCmd(transitions, cmd.comment or f"download 0x{index:04X}:{cmd.subindex or 0:02X}",
                       index, cmd.subindex or 0, cmd.data or b"",
@@ -768,17 +791,26 @@ def _coe_cmd(cmd: EsiCoeInitCmd, offset: int = 0) -> CoeInitCmd:
 def _sdos(slave: ResolvedSlave, modules: list[PluggedModule], errors: _Errors) -> None:
     dev, cfg = slave.device, slave.cfg
     # The device's own InitCmds, then each plugged module's (ETG.2000
-    # Module/Mailbox/CoE/InitCmd), in module order, DependOnSlot indices moved by the slot.
-    given: list[tuple[EsiCoeInitCmd, int, str]] = [
-        (c, 0, "") for c in (dev.mailbox.coe.init_cmds if dev.mailbox and dev.mailbox.coe
-                             else [])]
+    # Module/Mailbox/CoE/InitCmd), in module order, DependOnSlot indices moved by the slot,
+    # DependOnSlotGroup ones by its slot group.
+    given: list[tuple[EsiCoeInitCmd, PluggedModule | None, str]] = [
+        (c, None, "") for c in (dev.mailbox.coe.init_cmds if dev.mailbox and dev.mailbox.coe
+                                else [])]
     for plug in modules:
         mb = plug.module.mailbox
         if mb and mb.coe:
-            given += [(c, plug.index_offset, f" of {plug.label}") for c in mb.coe.init_cmds]
+            given += [(c, plug, f" of {plug.label}") for c in mb.coe.init_cmds]
     esi = []
-    for c, offset, owner in given:
-        cmd = _coe_cmd(c, offset)
+    for c, owner_plug, owner in given:
+        cmd = _coe_cmd(c, owner_plug)
+        if cmd.index > 0xFFFF:
+            # An object index is 16 bits (ETG.1000.6); moved by the slot and its slot
+            # group past it, the InitCmd would address no object.
+            errors.add(f"slave {slave.name!r}: the InitCmd{owner} at {c.source}: its index "
+                       f"0x{c.index or 0:04X} moved by its slot and slot group is "
+                       f"0x{cmd.index:X}, outside 0..0xFFFF", "slaves", slave.index,
+                       "modules" if owner else "device")
+            continue
         refused = _refusals(slave, cmd)
         if refused:
             # The slave would refuse it and stop in that transition: the ESI contradicts

@@ -677,6 +677,12 @@ def load(path: str | Path, shown_as: str | None = None,
         text = read_input(path, shown)
     except OSError as exc:
         raise EcatcfgError(f"cannot read: {exc.strerror}", shown) from None
+    # Beremiz's EtherLab-plugin file is read as the topology it describes.
+    from ecatcfg.compiler.beremiz import plugin_topology
+    converted = plugin_topology(text, shown)
+    if converted is not None:
+        return loads(converted, f"{shown} (Beremiz's plugin file, read as a topology)",
+                     unknown_keys)
     return loads(text, shown, unknown_keys)
 
 

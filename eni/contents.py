@@ -255,6 +255,7 @@ CONTENTS: dict[str, dict[str, Part]] = {
     "Slave/Mailbox": {
         "Send": _read("SM0: where requests are written"),
         "Recv": _read("SM1: where answers are read"),
+        "Receive": _read("SM1, as SOEM's hand-written sample ENI names Recv"),
         "BootStrap": _accepted("the mailbox for BOOT: apply does not go to BOOT"),
         "Protocol": _accepted("the protocols the slave speaks: a description"),
         "CoE": _read("SDO downloads (and uploads) per transition", "Mailbox/CoE"),

@@ -265,6 +265,12 @@ class HotConnectPlan:
     identify_cmds: list[InitCmd] = field(default_factory=list)
 
 
+# The station address of the first slave (the next ones count up: 1001, 1002, ..., as
+# TwinCAT numbers them) where nothing else gives one: compile's default, and the reader's
+# for a slave an ENI gives no address.
+FIRST_STATION_ADDRESS = 1001
+
+
 @record
 class SlavePlan:
     name: str

@@ -23,6 +23,7 @@ from lxml import etree
 
 from ecatcfg.eni.plan import (
     COPY_ELEMENT,
+    FIRST_STATION_ADDRESS,
     BitRange,
     CoeInitCmd,
     CopyInfo,
@@ -302,11 +303,20 @@ class _Reader:
         from ecatcfg.eni.contents import audit, dropped_init_cmds
         self._dropped = dropped_init_cmds(config)
         ignored: list[Unsupported] = []
-        slave_els, slaves, passive = [], [], []
-        for el in config.iterchildren("Slave"):
-            if self.has_esc(el):
+        slave_els: list[Element] = []
+        slaves: list[SlavePlan] = []
+        passive: list[tuple[Element, PassiveSlave]] = []
+        # No address, but a mailbox, InitCmds, process data or DC: an ESC slave whose
+        # place is its order in the file (SOEM's sample ENI; SOEM's ENI converter,
+        # scripts/eniconv.py, takes a missing AutoIncAddr as 1 - n for the n-th Slave).
+        addressed = [(el, self.has_esc(el)) for el in config.iterchildren("Slave")]
+        unaddressed = [el for el, has in addressed
+                       if not has and self.needs_esc(el) is not None]
+        self.placed_by_order([el for el, has in addressed if has] + unaddressed, unaddressed)
+        for el, has in addressed:
+            if has or el in unaddressed:
                 slave_els.append(el)
-                slaves.append(self.slave(el))
+                slaves.append(self.slave(el, position=None if has else len(slaves)))
             else:
                 passive.append((el, self.passive(el, after=len(slaves))))
         self.hot_connect_groups(slave_els, slaves)
@@ -407,16 +417,24 @@ class _Reader:
 
     # --- slaves ---------------------------------------------------------------------------
 
-    def slave(self, el: Element) -> SlavePlan:
+    def slave(self, el: Element, position: int | None = None) -> SlavePlan:
+        """``position``: the place of a slave the file gives no address (see
+        :meth:`placed_by_order`): station address ``FIRST_STATION_ADDRESS + position``, as
+        compile numbers them."""
         info = self.child(el, "Info")
         pd = el.find("ProcessData")
         mailbox = el.find("Mailbox")
         dc = el.find("DC")
         hot = el.find("HotConnect")
+        if position is None:
+            phys = self.req_int(info, "PhysAddr", U16)
+            auto = self.req_int(info, "AutoIncAddr", S16) & 0xFFFF             # -1 -> 65535
+        else:
+            phys, auto = FIRST_STATION_ADDRESS + position, -position & 0xFFFF
         return SlavePlan(
             name=self.opt_text(info, "Name") or "",
-            phys_addr=self.req_int(info, "PhysAddr", U16),
-            auto_inc_addr=self.req_int(info, "AutoIncAddr", S16) & 0xFFFF,     # -1 -> 65535
+            phys_addr=phys,
+            auto_inc_addr=auto,
             # EAS writes Physics as an attribute of Slave as well (eni-exports §8).
             physics=self.opt_text(info, "Physics") or el.get("Physics") or "YY",
             vendor_id=self.uint32(info, "VendorId"),
@@ -446,27 +464,45 @@ class _Reader:
                              "slave with an ESC has all three, a passive one none", info)
         return bool(present)
 
-    def passive(self, el: Element, after: int) -> PassiveSlave:
-        """A slave without an ESC (:class:`PassiveSlave`).  What only an ESC can do
-        (InitCmds, a mailbox, SyncManagers, PDOs or process image ranges, DC, identifying
-        a hot-connect group) is an error at its line: the master could not do it."""
-        info = self.child(el, "Info")
-        name = self.opt_text(info, "Name") or ""
+    def needs_esc(self, el: Element) -> tuple[Element, str] | None:
+        """The first part of a slave that only an ESC can have (InitCmds, a mailbox,
+        SyncManagers, PDOs or process image ranges, DC, identifying a hot-connect group)
+        and what it is, or None: a passive terminal (TwinCAT's EL9011) has none."""
         pd = el.find("ProcessData")
         init_cmds = el.find("InitCmds")
-        needs_esc = [
+        parts = [
             (pd[0] if pd is not None and len(pd) else None, "process data"),
             (init_cmds[0] if init_cmds is not None and len(init_cmds) else None, "InitCmds"),
             (el.find("Mailbox"), "a mailbox"),
             (el.find("DC"), "distributed clocks"),
             (el.find("HotConnect"), "a hot-connect group"),
         ]
-        for part, what in needs_esc:
-            if part is not None:
-                raise self.error(
-                    f"slave {name!r} has no <PhysAddr> and <AutoIncAddr> (a passive slave, "
-                    f"without an ESC) but has <{part.tag!s}>: {what} needs an EtherCAT "
-                    "Slave Controller", part)
+        return next(((part, what) for part, what in parts if part is not None), None)
+
+    def placed_by_order(self, elements: list[Element], unaddressed: list[Element]) -> None:
+        """Slaves with what needs an ESC but without ``PhysAddr`` and ``AutoIncAddr`` (a
+        hand-written ENI, as SOEM's sample) are placed by their order in the file, as
+        SOEM's converter places them.  Beside slaves that do give an address that order
+        may not be their place (a passive slave, a gap in the addresses): an error at the
+        first of them, naming what needs the ESC."""
+        if not unaddressed or len(unaddressed) == len(elements):
+            return
+        el = unaddressed[0]
+        name = self.opt_text(self.child(el, "Info"), "Name") or ""
+        found = self.needs_esc(el)
+        assert found is not None
+        part, what = found
+        raise self.error(
+            f"slave {name!r} has no <PhysAddr> and <AutoIncAddr> but has <{part.tag!s}> "
+            f"({what} needs an EtherCAT Slave Controller), while other slaves give their "
+            "address: its place on the line cannot be told; give it <PhysAddr> and "
+            "<AutoIncAddr>", part)
+
+    def passive(self, el: Element, after: int) -> PassiveSlave:
+        """A slave without an ESC (:class:`PassiveSlave`): nothing :meth:`needs_esc`."""
+        info = self.child(el, "Info")
+        name = self.opt_text(info, "Name") or ""
+        pd = el.find("ProcessData")
         return PassiveSlave(
             name=name,
             after=after,
@@ -614,8 +650,19 @@ class _Reader:
     def mailbox_area(self, el: Element) -> MailboxArea:
         return MailboxArea(self.req_int(el, "Start", U16), self.req_int(el, "Length", DATAGRAM))
 
+    def mailbox_recv(self, el: Element) -> Element:
+        """``Recv`` (ETG.2100), or ``Receive``, as SOEM's hand-written sample ENI spells it;
+        not both."""
+        spelled = el.find("Receive")
+        if spelled is None:
+            return self.child(el, "Recv")
+        if el.find("Recv") is not None:
+            raise self.error("<Mailbox> has both <Recv> and <Receive>: one SM1 area, "
+                             "named once", spelled)
+        return spelled
+
     def mailbox(self, el: Element) -> MailboxPlan:
-        recv = self.child(el, "Recv")
+        recv = self.mailbox_recv(el)
         boot = el.find("BootStrap")
         coe, eoe, aoe, soe = (el.find(tag) for tag in ("CoE", "EoE", "AoE", "SoE"))
         foe = el.find("FoE")

@@ -16,8 +16,6 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
-from lxml import etree
-
 from ecatcfg.eni.plan import (
     BitRange,
     CoeInitCmd,
@@ -48,19 +46,20 @@ from ecatcfg.fileio import write_atomic
 _XSI = "http://www.w3.org/2001/XMLSchema-instance"
 _DECLARATION = b'<?xml version="1.0" encoding="UTF-8"?>\n'
 
-Element = etree._Element
-
 
 def to_bytes(plan: NetworkPlan, generator: str | None = None) -> bytes:
     """The ENI document for ``plan``; ``generator`` goes into a leading
     ``<!-- Created with ... -->`` comment (as EC-Engineer writes one)."""
-    root = etree.Element("EtherCATConfig", nsmap={"xsi": _XSI})
-    if plan.version is not None:
-        root.set("Version", plan.version)
-    root.set(f"{{{_XSI}}}noNamespaceSchemaLocation", "EtherCATConfig.xsd")
+    doc = _Document()
     if generator is not None:
         # "--" may not occur inside an XML comment.
-        root.addprevious(etree.Comment(f" Created with {re.sub('-(?=-)', '- ', generator)} "))
+        text = _checked(f" Created with {re.sub('-(?=-)', '- ', generator)} ")
+        doc.parts.append(f"<!--{text}-->\n")
+    root = doc.root("EtherCATConfig")
+    root.set("xmlns:xsi", _XSI)
+    if plan.version is not None:
+        root.set("Version", plan.version)
+    root.set("xsi:noNamespaceSchemaLocation", "EtherCATConfig.xsd")
     config = _sub(root, "Config")
     _master(config, plan.master)
     for slave in plan.in_file_order():
@@ -71,9 +70,7 @@ def to_bytes(plan: NetworkPlan, generator: str | None = None) -> bytes:
     for cyclic in plan.cyclic:
         _cyclic(config, cyclic)
     _process_image(config, plan.process_image)
-    body = etree.tostring(root.getroottree(), encoding="UTF-8", xml_declaration=False,
-                          pretty_print=True)
-    return _DECLARATION + body
+    return _DECLARATION + doc.finish().encode("utf-8")
 
 
 def write(plan: NetworkPlan, path: str | Path, generator: str | None = None) -> None:
@@ -81,30 +78,145 @@ def write(plan: NetworkPlan, path: str | Path, generator: str | None = None) -> 
     write_atomic(path, to_bytes(plan, generator))
 
 
+# --- the document ---------------------------------------------------------------------------
+#
+# The ENI is written as text in document order, as lxml's ``tostring(pretty_print=True)``
+# spells a tree (two spaces per level, ``<Tag/>`` for an element with neither text nor
+# children, ``<Tag></Tag>`` for an empty text, libxml2's escapes): building the tree of a
+# 512-slave line (330 000 elements: 16 000 InitCmds, 36 000 PDO entries) and serialising it
+# took longer than compiling the line.  ``tests/test_eni_writer.py`` holds the spelling to
+# lxml's for every character and every shape the writer makes.
+
+# Characters XML 1.0 does not allow (§2.2), refused as lxml refuses them when a text is set.
+_NOT_XML = re.compile("[\x00-\x08\x0b\x0c\x0e-\x1f\ufffe\uffff\ud800-\udfff]")
+_TEXT_SPECIAL = re.compile("[&<>\r]")
+_ATTR_SPECIAL = re.compile('[&<>"\n\r\t]')
+_ESCAPES = {"&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;", "\n": "&#10;",
+            "\r": "&#13;", "\t": "&#9;"}
+
+
+def _escape_match(m: re.Match[str]) -> str:
+    return _ESCAPES[m.group()]
+
+
+def _checked(value: str) -> str:
+    if _NOT_XML.search(value):
+        raise ValueError("All strings must be XML compatible: Unicode or ASCII, no NULL bytes "
+                         f"or control characters ({value!r})")
+    return value
+
+
+def _text_escaped(value: str) -> str:
+    """Element text as libxml2 writes it: ``&``, ``<``, ``>`` and carriage return escaped."""
+    return _TEXT_SPECIAL.sub(_escape_match, _checked(value))
+
+
+def _attr_escaped(value: str) -> str:
+    """An attribute value in double quotes: also ``"``, newline and tab escaped."""
+    return _ATTR_SPECIAL.sub(_escape_match, _checked(value))
+
+
+class _Document:
+    """The text of the document being written, and its elements still open."""
+
+    __slots__ = ("parts", "open", "escaped")
+
+    def __init__(self) -> None:
+        self.parts: list[str] = []
+        self.open: list[Element] = []
+        self.escaped: dict[str, str] = {}
+
+    def root(self, tag: str) -> Element:
+        el = Element(self, tag, "")
+        self.open.append(el)
+        return el
+
+    def finish(self) -> str:
+        while self.open:
+            self.open.pop().close()
+        return "".join(self.parts)
+
+
+class Element:
+    """An element being written.  Its attributes are set before its first child; its start
+    tag is written with the first child (or as ``<Tag/>`` when it closes without one).  A
+    child added to an element closes the element's open descendants."""
+
+    __slots__ = ("doc", "tag", "indent", "attrs", "started")
+
+    def __init__(self, doc: _Document, tag: str, indent: str) -> None:
+        self.doc = doc
+        self.tag = tag
+        self.indent = indent
+        self.attrs = ""
+        self.started = False
+
+    def set(self, name: str, value: str) -> None:
+        if self.started:
+            raise ValueError(f"<{self.tag}>: attribute {name} set after its first child")
+        self.attrs += f' {name}="{_attr_escaped(value)}"'
+
+    def enter(self) -> None:
+        """Make this the innermost open element, its start tag written."""
+        stack = self.doc.open
+        while stack[-1] is not self:
+            stack.pop().close()
+        if not self.started:
+            self.started = True
+            self.doc.parts.append(f"{self.indent}<{self.tag}{self.attrs}>\n")
+
+    def close(self) -> None:
+        if self.started:
+            self.doc.parts.append(f"{self.indent}</{self.tag}>\n")
+        else:
+            self.doc.parts.append(f"{self.indent}<{self.tag}{self.attrs}/>\n")
+
+
 # --- value spelling -------------------------------------------------------------------------
 
-def _sub(parent: Element, tag: str, text: str | None = None) -> Element:
-    el = etree.SubElement(parent, tag)
-    if text is not None:
-        el.text = text
+def _sub(parent: Element, tag: str) -> Element:
+    """A child element, to be given attributes and children."""
+    if not parent.started or parent.doc.open[-1] is not parent:
+        parent.enter()
+    el = Element(parent.doc, tag, parent.indent + "  ")
+    parent.doc.open.append(el)
     return el
+
+
+def _leaf(parent: Element, tag: str, text: str) -> None:
+    """A child element holding ``text`` (written now: it takes no attributes or children)."""
+    # Texts repeat (InitCmd comments, entry names and types): each is checked once.
+    escaped = parent.doc.escaped.get(text)
+    if escaped is None:
+        escaped = parent.doc.escaped[text] = _text_escaped(text)
+    _safe_leaf(parent, tag, escaped)
+
+
+def _safe_leaf(parent: Element, tag: str, text: str) -> None:
+    """:func:`_leaf` for a text known to need no escape (digits, hex)."""
+    if not parent.started or parent.doc.open[-1] is not parent:
+        parent.enter()
+    parent.doc.parts.append(f"{parent.indent}  <{tag}>{text}</{tag}>\n")
 
 
 def _bool(value: bool) -> str:
     return "1" if value else "0"
 
 
-def _int(parent: Element, tag: str, value: int) -> Element:
-    return _sub(parent, tag, str(value))
+def _int(parent: Element, tag: str, value: int) -> None:
+    # _safe_leaf, inlined: a 512-slave line has 130 000 numbers.
+    if not parent.started or parent.doc.open[-1] is not parent:
+        parent.enter()
+    parent.doc.parts.append(f"{parent.indent}  <{tag}>{value}</{tag}>\n")
 
 
-def _uint32(parent: Element, tag: str, value: int) -> Element:
+def _uint32(parent: Element, tag: str, value: int) -> None:
     """A uint32 (identity, logical address) in a schema ``xs:int``: values from 2^31 up are
     written as their signed 32-bit twin (0xE0000ECA -> -536867126), which validates and
     which int32 parsers in masters read back to the same bits; the reader masks them."""
     if not 0 <= value <= 0xFFFFFFFF:
         raise ValueError(f"<{tag}> {value} is not a 32-bit unsigned value")
-    return _int(parent, tag, value - (1 << 32) if value & 0x80000000 else value)
+    _int(parent, tag, value - (1 << 32) if value & 0x80000000 else value)
 
 
 def _opt_int(parent: Element, tag: str, value: int | None) -> None:
@@ -112,20 +224,20 @@ def _opt_int(parent: Element, tag: str, value: int | None) -> None:
         _int(parent, tag, value)
 
 
-def _hex(parent: Element, tag: str, value: bytes) -> Element:
-    return _sub(parent, tag, value.hex())
+def _hex(parent: Element, tag: str, value: bytes) -> None:
+    _safe_leaf(parent, tag, value.hex())
 
 
 def _text(parent: Element, tag: str, value: str) -> None:
     """A string field where "" means absent (the reader gives "" for a missing element)."""
     if value:
-        _sub(parent, tag, value)
+        _leaf(parent, tag, value)
 
 
 def _opt_text(parent: Element, tag: str, value: str | None) -> None:
     """An optional string field: None is absent, "" an empty element."""
     if value is not None:
-        _sub(parent, tag, value)
+        _leaf(parent, tag, value)
 
 
 def _index(value: int) -> str:
@@ -168,9 +280,9 @@ def _init_cmd(parent: Element, cmd: InitCmd, tag: str = "InitCmd") -> None:
     """An ``ECatCmdType`` command: an ``InitCmd``, or a hot-connect ``IdentifyCmd``."""
     el = _sub(parent, tag)
     for transition in cmd.transitions:
-        _sub(el, "Transition", transition.value)
+        _leaf(el, "Transition", transition.value)
     if cmd.before_slave is not None:
-        _sub(el, "BeforeSlave", _bool(cmd.before_slave))
+        _safe_leaf(el, "BeforeSlave", _bool(cmd.before_slave))
     _text(el, "Comment", cmd.comment)
     _opt_text(el, "Requires", cmd.requires)
     _int(el, "Cmd", cmd.cmd)
@@ -201,7 +313,7 @@ def _init_cmds(parent: Element, cmds: list[InitCmd]) -> None:
 def _master(config: Element, master: MasterPlan) -> None:
     el = _sub(config, "Master")
     info = _sub(el, "Info")
-    _sub(info, "Name", master.name)
+    _leaf(info, "Name", master.name)
     _hex(info, "Destination", master.destination)
     _hex(info, "Source", master.source)
     _hex(info, "EtherType", master.ether_type)
@@ -217,10 +329,10 @@ def _master(config: Element, master: MasterPlan) -> None:
 def _slave(config: Element, slave: SlavePlan) -> None:
     el = _sub(config, "Slave")
     info = _sub(el, "Info")
-    _sub(info, "Name", slave.name)
+    _leaf(info, "Name", slave.name)
     _int(info, "PhysAddr", slave.phys_addr)
     _int(info, "AutoIncAddr", slave.auto_inc_addr)
-    _sub(info, "Physics", slave.physics)
+    _leaf(info, "Physics", slave.physics)
     _identity(info, slave)
     if slave.process_data is not None:
         _process_data(el, slave.process_data)
@@ -248,7 +360,7 @@ def _passive(config: Element, slave: PassiveSlave) -> None:
     ``PreviousPort``."""
     el = _sub(config, "Slave")
     info = _sub(el, "Info")
-    _sub(info, "Name", slave.name)
+    _leaf(info, "Name", slave.name)
     _identity(info, slave)
     if slave.process_data:
         _sub(el, "ProcessData")
@@ -279,15 +391,15 @@ def _process_data(parent: Element, pd: ProcessData) -> None:
 
 def _sm(parent: Element, sm: SmSettings) -> None:
     el = _sub(parent, f"Sm{sm.number}")
-    _sub(el, "Type", sm.type)
+    _leaf(el, "Type", sm.type)
     _opt_int(el, "MinSize", sm.min_size)
     _opt_int(el, "MaxSize", sm.max_size)
     _opt_int(el, "DefaultSize", sm.default_size)
     _int(el, "StartAddress", sm.start_address)
     _int(el, "ControlByte", sm.control_byte)
-    _sub(el, "Enable", _bool(sm.enable))
+    _safe_leaf(el, "Enable", _bool(sm.enable))
     if sm.virtual is not None:
-        _sub(el, "Virtual", _bool(sm.virtual))
+        _safe_leaf(el, "Virtual", _bool(sm.virtual))
     _opt_int(el, "Watchdog", sm.watchdog)
     for index in sm.pdos:
         _int(el, "Pdo", index)              # xs:int: decimal, as the real files write it
@@ -302,17 +414,17 @@ def _pdo(parent: Element, pdo: PdoDesc) -> None:
     _set_flag(el, "Virtual", pdo.virtual)
     if pdo.sm is not None:
         el.set("Sm", str(pdo.sm))
-    _sub(el, "Index", _index(pdo.index))
-    _sub(el, "Name", pdo.name)
+    _safe_leaf(el, "Index", _index(pdo.index))
+    _leaf(el, "Name", pdo.name)
     for index in pdo.excludes:
-        _sub(el, "Exclude", _index(index))
+        _safe_leaf(el, "Exclude", _index(index))
     for entry in pdo.entries:
         _entry(el, entry)
 
 
 def _entry(parent: Element, entry: PdoEntryDesc) -> None:
     el = _sub(parent, "Entry")
-    _sub(el, "Index", _index(entry.index))
+    _safe_leaf(el, "Index", _index(entry.index))
     _int(el, "SubIndex", entry.subindex)
     _int(el, "BitLen", entry.bit_len)
     _text(el, "Name", entry.name)           # padding entries (index 0) have none
@@ -341,7 +453,7 @@ def _mailbox(parent: Element, mb: MailboxPlan) -> None:
         _mailbox_area(boot, "Send", mb.bootstrap_send)
         _mailbox_area(boot, "Recv", mb.bootstrap_recv)
     for protocol in mb.protocols:
-        _sub(el, "Protocol", protocol)
+        _leaf(el, "Protocol", protocol)
     if mb.coe_init_cmds or mb.coe_profiles:
         _coe(el, mb)
     # ETG.2100 order: CoE, SoE, AoE, EoE, FoE, VoE.
@@ -350,7 +462,7 @@ def _mailbox(parent: Element, mb: MailboxPlan) -> None:
         for soe_cmd in mb.soe_init_cmds:
             _soe_init_cmd(cmds, soe_cmd)
     if mb.aoe_net_id is not None:
-        _sub(_sub(el, "AoE"), "NetId", mb.aoe_net_id)
+        _leaf(_sub(el, "AoE"), "NetId", mb.aoe_net_id)
     if mb.eoe_init_cmds:
         cmds = _sub(_sub(el, "EoE"), "InitCmds")
         for eoe_cmd in mb.eoe_init_cmds:
@@ -386,7 +498,7 @@ def _mailbox_cmd_head(parent: Element, cmd: MailboxInitCmd) -> Element:
     if isinstance(cmd, CoeInitCmd):
         _set_flag(el, "CompleteAccess", cmd.complete_access)
     for transition in cmd.transitions:
-        _sub(el, "Transition", transition.value)
+        _leaf(el, "Transition", transition.value)
     _text(el, "Comment", cmd.comment)
     _int(el, "Timeout", cmd.timeout)
     return el
@@ -394,7 +506,7 @@ def _mailbox_cmd_head(parent: Element, cmd: MailboxInitCmd) -> Element:
 
 def _mailbox_cmd_tail(el: Element, cmd: MailboxInitCmd) -> None:
     if cmd.disabled:
-        _sub(el, "Disabled", _bool(True))
+        _safe_leaf(el, "Disabled", _bool(True))
 
 
 def _coe_init_cmd(parent: Element, cmd: CoeInitCmd) -> None:
@@ -435,7 +547,7 @@ def _previous_port(parent: Element, port: PreviousPort) -> None:
     el = _sub(parent, "PreviousPort")
     if port.selected is not None:
         el.set("Selected", _bool(port.selected))     # xs:int in the 2011 schema
-    _sub(el, "Port", port.port)
+    _leaf(el, "Port", port.port)
     _opt_int(el, "PhysAddr", port.phys_addr)
 
 
@@ -451,7 +563,7 @@ def _hot_connect(parent: Element, group: HotConnectPlan) -> None:
 
 def _dc(parent: Element, dc: DcPlan) -> None:
     el = _sub(parent, "DC")
-    _sub(el, "ReferenceClock", _bool(dc.reference_clock))
+    _safe_leaf(el, "ReferenceClock", _bool(dc.reference_clock))
     _int(el, "CycleTime0", dc.cycle_time0)
     _int(el, "CycleTime1", dc.cycle_time1)
     _int(el, "ShiftTime", dc.shift_time)
@@ -475,7 +587,7 @@ def _cyclic(config: Element, cyclic: Cyclic) -> None:
 def _cyclic_cmd(parent: Element, cmd: CyclicCmd) -> None:
     el = _sub(parent, "Cmd")
     for state in cmd.states:
-        _sub(el, "State", state)
+        _leaf(el, "State", state)
     _text(el, "Comment", cmd.comment)
     _int(el, "Cmd", cmd.cmd)
     _address(el, cmd.adp, cmd.ado, cmd.addr)
@@ -504,7 +616,7 @@ def _process_image(config: Element, image: ProcessImage) -> None:
 
 def _variable(parent: Element, var: Variable) -> None:
     el = _sub(parent, "Variable")
-    _sub(el, "Name", var.name)
+    _leaf(el, "Name", var.name)
     _opt_text(el, "Comment", var.comment)
     _opt_text(el, "DataType", var.data_type)
     _int(el, "BitSize", var.bit_size)

@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import hashlib
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from lxml import etree
 
@@ -82,11 +82,17 @@ class Description:
     device: Node
     modules: tuple[Node, ...] = ()          # the file's Module elements (devices with slots)
     references: tuple[str, ...] = ()        # its file's InfoReference names (ditto)
+    _digest: str = field(default="", init=False, repr=False, compare=False)
 
     @property
     def digest(self) -> str:
-        return hashlib.blake2b(repr((self.device, self.modules, self.references)).encode(),
-                               digest_size=16).hexdigest()
+        # Computed once: the repr of a drive's Device element with its dictionary is
+        # megabytes, and the library compares one description for every slave that uses it.
+        if not self._digest:
+            object.__setattr__(self, "_digest", hashlib.blake2b(
+                repr((self.device, self.modules, self.references)).encode(),
+                digest_size=16).hexdigest())
+        return self._digest
 
 
 def describe(device: etree._Element) -> Description:

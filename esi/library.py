@@ -115,6 +115,11 @@ class Library:
         self.prefer: list[Path] = [self._preferred(p) for p in prefer or []]
         self._descriptions: dict[tuple[str, int], Description] = {}
         self._trees: dict[str, etree._ElementTree] = {}
+        self._differing: dict[tuple[tuple[str, int], ...], list[tuple[int, list[str]]]] = {}
+        # The content digest and element spans of each model read (``loaded``).
+        self._loaded: dict[Path, tuple[str, reader.ElementSpans]] = {}
+        self._found: dict[tuple[str, str | None], Selection] = {}   # find() without evidence
+        self._revisions: dict[tuple[int | None, int | None], frozenset[int | None]] | None = None
         self.evidence_for: Callable[[int, int, int], Evidence | None] | None = None
         # What the evidence chose (the notes of :meth:`find`), in order: a caller that
         # selects through code it does not own (a check's rules) reports them.
@@ -257,6 +262,15 @@ class Library:
                                         if e.revision is not None})))
         return exact, other, note
 
+    def revisions(self, vendor_id: int | None, product_code: int | None) -> frozenset[int | None]:
+        """The revisions the library has of one product (asked once per slave of a line)."""
+        if self._revisions is None:
+            by_product: dict[tuple[int | None, int | None], set[int | None]] = {}
+            for e in self.entries:
+                by_product.setdefault((e.vendor_id, e.product_code), set()).add(e.revision)
+            self._revisions = {k: frozenset(v) for k, v in by_product.items()}
+        return self._revisions.get((vendor_id, product_code), frozenset())
+
     def differs(self, vendor_id: int, product_code: int, revision: int) -> bool:
         """Whether several descriptions give this identity differently (a caller that must
         read evidence from a slave to choose, its SII, reads it only then)."""
@@ -277,6 +291,13 @@ class Library:
         (and without evidence) a :class:`DuplicateError` naming each file and what
         differs.  Without ``evidence``, the library's own :meth:`guided` evidence is used.
         """
+        # A line names a few devices for hundreds of slaves: without evidence (which may
+        # choose differently per slave), what a selector finds in one library is found once.
+        key = (selector, within.shown if within is not None else None)
+        plain = evidence is None and self.evidence_for is None
+        known = self._found.get(key) if plain else None
+        if known is not None:
+            return Selection(known.entry, known.note, known.preferred)
         scope = self.entries if within is None else [
             e for e in self.entries if e.file == within.shown]
         try:
@@ -290,7 +311,10 @@ class Library:
             e = found.entry
             if e.product_code is not None and e.revision is not None:
                 evidence = self.evidence_for(e.vendor_id or 0, e.product_code, e.revision)
-        return self._one_description(found, scope, evidence)
+        chosen = self._one_description(found, scope, evidence)
+        if plain:
+            self._found[key] = Selection(chosen.entry, chosen.note, chosen.preferred)
+        return chosen
 
     def guided(self, evidence_for: Callable[[int, int, int], Evidence | None]) -> Library:
         """This library (its files, models and caches shared) where :meth:`find` takes the
@@ -355,8 +379,21 @@ class Library:
     def load(self, lf: LibraryFile) -> EsiFile:
         model = self._models.get(lf.path)
         if model is None:
-            model = self._models[lf.path] = reader.read_file(lf.path, lf.shown)
+            data = xmlsafe.read_file(lf.path, lf.shown)
+            tree = xmlsafe.parse_bytes(data, lf.shown)
+            model = self._models[lf.path] = reader.read_tree(tree, lf.shown)
+            self._loaded[lf.path] = (content_digest(data), reader.spans_of(tree))
         return model
+
+    def loaded(self, path: Path, digest: str) -> tuple[EsiFile, reader.ElementSpans] | None:
+        """The model and element spans already read from ``path`` when it held the content
+        of ``digest`` (``esi.cache.content_digest``), else ``None``: lint of a file the
+        library read for a compile need not parse and read it a second time (the model of
+        a 3 MB Beckhoff file takes longer to build than its lint rules take to run)."""
+        known = self._loaded.get(path)
+        if known is None or known[0] != digest:
+            return None
+        return self._models[path], known[1]
 
     def _file(self, shown: str) -> LibraryFile:
         return next(lf for lf in self.files if lf.shown == shown)
@@ -430,9 +467,17 @@ class Library:
     def differing(self, group: list[DeviceEntry]) -> list[tuple[DeviceEntry, list[str]]]:
         """The entries of ``group`` whose description is not the first's, each with what
         differs (empty: all describe the same device)."""
-        first = self.description(group[0])
-        return [(e, differences(first, self.description(e), _short(group[0]), _short(e)))
-                for e in group[1:] if self.description(e).digest != first.digest]
+        # Asked for every slave of a line (512 times for one identity): the descriptions
+        # of one library do not change, so neither does what differs between them.
+        key = tuple((e.file, e.ordinal) for e in group)
+        found = self._differing.get(key)
+        if found is None:
+            first = self.description(group[0])
+            found = self._differing[key] = [
+                (i, differences(first, self.description(e), _short(group[0]), _short(e)))
+                for i, e in enumerate(group[1:], 1)
+                if self.description(e).digest != first.digest]
+        return [(group[i], list(d)) for i, d in found]
 
     def _one_description(self, found: Selection, scope: list[DeviceEntry],
                          evidence: Evidence | None = None) -> Selection:

@@ -185,6 +185,7 @@ class DictObject:
     info: ObjectInfo | None = None
     flags: ObjectFlags | None = None
     depend_on_slot: bool = False
+    depend_on_slot_group: bool = False      # ETG.2000 Index@DependOnSlotGroup (esi/slots.py)
 
     @property
     def name(self) -> str:
@@ -226,6 +227,7 @@ class PdoEntry:
     names: dict[int, str]
     source: Source
     depend_on_slot: bool = False
+    depend_on_slot_group: bool = False
 
     @property
     def name(self) -> str:
@@ -257,6 +259,10 @@ class Pdo:
     os_index_inc: int | None = None
     pdo_order: int | None = None
     depend_on_slot: bool = False
+    depend_on_slot_group: bool = False
+    # Exclude -> its own (DependOnSlot, DependOnSlotGroup), where the Exclude element gives
+    # either; an Exclude without them moves as the PDO's Index does (esi/slots.py).
+    exclude_depends: dict[int, tuple[bool, bool]] = field(default_factory=dict)
     # A device PDO that the module plugged in the slot replaces by its own (ETG.2000
     # ``OverwrittenByModule``; Beckhoff TwinSAFE and EP/EJ terminals with a default module).
     overwritten_by_module: bool = False
@@ -394,6 +400,7 @@ class CoeInitCmd:
     fixed: bool = False
     comment: str | None = None
     depend_on_slot: bool = False
+    depend_on_slot_group: bool = False
 
 
 @dataclass(slots=True)
@@ -548,7 +555,24 @@ class Slot:
     module_classes: list[str] = field(default_factory=list)
     slot_pdo_increment: int | None = None
     slot_index_increment: int | None = None
-    slot_group: int | None = None
+    slot_group: int | None = None           # the SlotGroupData/@SlotGroup it belongs to
+    slot_group_pdo_increment: int | None = None
+    slot_group_index_increment: int | None = None
+
+    @property
+    def name(self) -> str:
+        return pick_name(self.names)
+
+
+@dataclass(slots=True)
+class SlotGroup:
+    """Slots/SlotGroupData: a group of slots (a drive's axis, a safety terminal's logic), by
+    its number; the modules in its slots have their ``DependOnSlotGroup`` indices moved by
+    number x SlotGroupIndexIncrement / SlotGroupPdoIncrement (esi/slots.py)."""
+
+    number: int | None                      # None: unreadable (a ReadProblem at its line)
+    names: dict[int, str]
+    source: Source
 
     @property
     def name(self) -> str:
@@ -571,6 +595,9 @@ class Slots:
     source: Source
     slot_pdo_increment: int | None = None
     slot_index_increment: int | None = None
+    slot_group_pdo_increment: int | None = None
+    slot_group_index_increment: int | None = None
+    groups: list[SlotGroup] = field(default_factory=list)      # SlotGroupData, in order
     # Write the configured module ident list (0xF030) in this transition (ETG.2000
     # ``DownloadModuleIdentList``, ``DownloadModuleListTransition``, default PS).
     download_module_ident_list: bool = False

@@ -11,6 +11,7 @@ diagnosis texts, vendor-specific blocks) are skipped silently.
 from __future__ import annotations
 
 import gc
+from dataclasses import dataclass
 from pathlib import Path
 
 from lxml import etree
@@ -21,8 +22,8 @@ from ecatcfg.esi.model import (
     Access, ArrayInfo, CoeInitCmd, CoeSettings, DataType, DataTypeSubItem, Dc, DcOpMode,
     Device, DeviceInfo, DictObject, Dictionary, Eeprom, EoeSettings, EsiFile, Fmmu, Group,
     IgnoredElement, Mailbox, MAILBOX_PROTOCOLS, Module, ModulePdoGroup, ObjectFlags,
-    ObjectInfo, Pdo, PdoEntry, Profile, ProblemKind, ReadProblem, Severity, Slot, Slots,
-    SoeInitCmd, SoeSettings, Source, STATES, SyncManager, Vendor, sm_type_from_control,
+    ObjectInfo, Pdo, PdoEntry, Profile, ProblemKind, ReadProblem, Severity, Slot, SlotGroup,
+    Slots, SoeInitCmd, SoeSettings, Source, STATES, SyncManager, Vendor, sm_type_from_control,
 )
 from ecatcfg.esi.values import INT64_MIN, UINT64_MAX, parse_bool, parse_hex_bytes, parse_int
 
@@ -77,7 +78,8 @@ _SKIPPED: dict[str, frozenset[str]] = {
     "Object": frozenset(("Comment", "Properties", "Xml")),
     "ObjectInfo": frozenset(("DisplayName", "Unit")),
     "Flags": frozenset(("SafetyMapping", "Attribute", "Transition")),
-    "Slots": frozenset(("SlotGroupData", "SlotSelections")),
+    "Slots": frozenset(("SlotSelections",)),
+    "SlotGroupData": frozenset(("ImageFile16x14", "ImageData16x14")),
     "Slot": frozenset(("Image16x14", "ImageFile16x14", "ImageData16x14")),
     "Module": frozenset(("SafetyParaMapping", "Image16x14", "ImageFile16x14",
                          "ImageData16x14", "VendorSpecific")),
@@ -129,6 +131,8 @@ _RANGES: dict[str, tuple[int, int]] = {
     "SubItem/BitOffs": _BITS, "DataType/Index": _U16, "Object/Index": _U16,
     "SubItem/SubIdx": _U8, "ArrayInfo/LBound": _U8, "ArrayInfo/Elements": _BITS,
     "Type/@ModuleIdent": _IDENTITY,
+    # A slot group's number moves object indices (16 bits) by number x increment.
+    "SlotGroupData/@SlotGroup": _U16, "Slot/@SlotGroup": _U16,
 }
 
 _ANY = (INT64_MIN, UINT64_MAX)
@@ -144,6 +148,39 @@ def read_file(path: str | Path, shown_as: str | None = None) -> EsiFile:
     """Read one ESI file or module library into the model."""
     name = shown_as or str(path)
     return read_tree(xmlsafe.parse_file(path, name), name)
+
+
+def element_spans(tree: etree._ElementTree, path: str) -> list[tuple[int, int | None]]:
+    """(first line, first line after it) of each element at ``path`` below the root, in
+    document order (``None``: it runs to the end of the file)."""
+    spans: list[tuple[int, int | None]] = []
+    for el in tree.getroot().iterfind(path):
+        node: etree._Element | None = el
+        end: int | None = None
+        while node is not None and end is None:
+            nxt = node.getnext()
+            if nxt is not None:
+                end = nxt.sourceline
+            node = node.getparent()
+        spans.append((el.sourceline or 0, end))
+    return spans
+
+
+@dataclass(frozen=True, slots=True)
+class ElementSpans:
+    """Where each Device and Module element of a file lies (``element_spans``): what lint
+    ties a finding's line to."""
+
+    devices: list[tuple[int, int | None]]
+    modules: list[tuple[int, int | None]]
+
+
+def spans_of(tree: etree._ElementTree) -> ElementSpans:
+    """The spans of a parsed, namespace-stripped ESI tree's Device and Module elements."""
+    within = "EtherCATInfo/" if tree.getroot().tag == LIST_ROOT else ""
+    return ElementSpans(element_spans(tree, f"{within}Descriptions/Devices/Device"),
+                        element_spans(tree, f"{within}Descriptions/Modules/Module")
+                        + element_spans(tree, "Modules/Module"))
 
 
 def read_bytes(data: bytes, shown_as: str) -> EsiFile:
@@ -463,12 +500,19 @@ class _Reader:
             elif ctag == "Index":
                 pdo.index = self.int_(ch.text, ch, f"{tag}/Index", "error")
                 pdo.depend_on_slot = self.bool_(ch.get("DependOnSlot"), ch, "@DependOnSlot")
+                pdo.depend_on_slot_group = self.bool_(ch.get("DependOnSlotGroup"), ch,
+                                                      "@DependOnSlotGroup")
             elif ctag == "Name":
                 self.add_name(pdo.names, ch)
             elif ctag == "Exclude":
                 value = self.int_(ch.text, ch, f"{tag}/Exclude")
                 if value is not None:
                     pdo.excludes.append(value)
+                    if ch.get("DependOnSlot") is not None \
+                            or ch.get("DependOnSlotGroup") is not None:
+                        pdo.exclude_depends[value] = (
+                            self.bool_(ch.get("DependOnSlot"), ch, "@DependOnSlot"),
+                            self.bool_(ch.get("DependOnSlotGroup"), ch, "@DependOnSlotGroup"))
             else:
                 self.unknown(ch, "Pdo", el)
         return pdo
@@ -482,6 +526,8 @@ class _Reader:
                 if ch.get("DependOnSlot") is not None:
                     entry.depend_on_slot = self.bool_(ch.get("DependOnSlot"), ch,
                                                       "@DependOnSlot")
+                entry.depend_on_slot_group = self.bool_(ch.get("DependOnSlotGroup"), ch,
+                                                        "@DependOnSlotGroup")
             elif tag == "SubIndex":
                 entry.subindex = self.int_(ch.text, ch, "Entry/SubIndex", "error")
             elif tag == "BitLen":
@@ -582,6 +628,8 @@ class _Reader:
             elif tag == "Index":
                 cmd.index = self.int_(ch.text, ch, "InitCmd/Index", "error")
                 cmd.depend_on_slot = self.bool_(ch.get("DependOnSlot"), ch, "@DependOnSlot")
+                cmd.depend_on_slot_group = self.bool_(ch.get("DependOnSlotGroup"), ch,
+                                                      "@DependOnSlotGroup")
             elif tag == "SubIndex":
                 cmd.subindex = self.int_(ch.text, ch, "InitCmd/SubIndex", "error")
             elif tag == "Data":
@@ -775,6 +823,8 @@ class _Reader:
                 if ch.get("DependOnSlot") is not None:
                     obj.depend_on_slot = self.bool_(ch.get("DependOnSlot"), ch,
                                                     "@DependOnSlot")
+                obj.depend_on_slot_group = self.bool_(ch.get("DependOnSlotGroup"), ch,
+                                                      "@DependOnSlotGroup")
             elif tag == "Name":
                 self.add_name(obj.names, ch)
             elif tag == "Type":
@@ -868,6 +918,11 @@ class _Reader:
                                                    "Slots/@SlotPdoIncrement"),
                       slot_index_increment=self.int_(el.get("SlotIndexIncrement"), el,
                                                      "Slots/@SlotIndexIncrement"),
+                      slot_group_pdo_increment=self.int_(
+                          el.get("SlotGroupPdoIncrement"), el, "Slots/@SlotGroupPdoIncrement"),
+                      slot_group_index_increment=self.int_(
+                          el.get("SlotGroupIndexIncrement"), el,
+                          "Slots/@SlotGroupIndexIncrement"),
                       download_module_ident_list=self.bool_(
                           el.get("DownloadModuleIdentList"), el,
                           "Slots/@DownloadModuleIdentList"),
@@ -881,6 +936,8 @@ class _Reader:
                     self.int_(ch.get("RxPdo"), ch, "ModulePdoGroup/@RxPdo"),
                     self.int_(ch.get("TxPdo"), ch, "ModulePdoGroup/@TxPdo"),
                     self.int_(ch.get("Alignment"), ch, "ModulePdoGroup/@Alignment")))
+            elif ch.tag == "SlotGroupData":
+                slots.groups.append(self.slot_group(ch))
             else:
                 self.unknown(ch, "Slots", el)
         return slots
@@ -895,7 +952,11 @@ class _Reader:
                                                  "Slot/@SlotPdoIncrement"),
                     slot_index_increment=self.int_(g("SlotIndexIncrement"), el,
                                                    "Slot/@SlotIndexIncrement"),
-                    slot_group=self.int_(g("SlotGroup"), el, "Slot/@SlotGroup"))
+                    slot_group=self.int_(g("SlotGroup"), el, "Slot/@SlotGroup"),
+                    slot_group_pdo_increment=self.int_(g("SlotGroupPdoIncrement"), el,
+                                                       "Slot/@SlotGroupPdoIncrement"),
+                    slot_group_index_increment=self.int_(g("SlotGroupIndexIncrement"), el,
+                                                         "Slot/@SlotGroupIndexIncrement"))
         for ch in el:
             tag = ch.tag
             if tag == "ModuleIdent":
@@ -912,6 +973,22 @@ class _Reader:
             else:
                 self.unknown(ch, "Slot", el)
         return slot
+
+    def slot_group(self, el: etree._Element) -> SlotGroup:
+        """Slots/SlotGroupData: its number (required: a group without one cannot be told
+        from another, a ReadProblem at its line) and its names; its image is for people."""
+        raw = el.get("SlotGroup")
+        number = self.int_(raw, el, "SlotGroupData/@SlotGroup", "error")
+        if raw is None:
+            self.problems.append(ReadProblem(self.src(el), "SlotGroupData has no SlotGroup "
+                                             "number", "error"))
+        group = SlotGroup(number, {}, self.src(el))
+        for ch in el:
+            if ch.tag == "Name":
+                self.add_name(group.names, ch)
+            else:
+                self.unknown(ch, "SlotGroupData", el)
+        return group
 
     def module(self, el: etree._Element) -> Module:
         mod = Module(None, "", {}, self.src(el))

@@ -118,7 +118,8 @@ def summary(dev: Device, with_objects: bool = False) -> dict[str, Any]:
         "slots": [] if dev.slots is None else [
             {"name": s.name, "min": s.min_instances, "max": s.max_instances,
              "modules": list(s.module_idents), "module_classes": list(s.module_classes),
-             "default": s.default_ident} for s in dev.slots.slots],
+             "default": s.default_ident, "slot_group": s.slot_group}
+            for s in dev.slots.slots],
     }
     if with_objects:
         dic = device_dictionary(dev)

@@ -109,6 +109,11 @@ SM_UNASSIGNED = 0xFF
 DEFAULT_SIZE = 2048          # bytes, when the ESI gives no Eeprom/ByteSize
 SIZE_STEP = 128              # word 0x3E counts 128-byte (1 kbit) steps
 MAX_SIZE = 0x10000 * SIZE_STEP
+# SOEM caches the SII bytes below EC_MAXEEPBUF (ethercattype.h: EC_MAXEEPBITMAP << 5, 4 KiB)
+# and reads 0xFF past it (ethercatmain.c ecx_siigetbyte), so ecx_siifind does not find a
+# category that starts there: an image that grows past ByteSize keeps its names only while
+# it stays within that window.
+SOEM_SII_WINDOW = 4096
 MAX_STRINGS = 255            # string indices are one byte; 0 = no string
 PAD = 0xFF                   # erased EEPROM
 
@@ -502,7 +507,8 @@ def build(device: Device, *, serial: int = 0, alias: int = 0) -> bytes:
       (``Sm``) and are not virtual.
     - When that does not fit ``ByteSize``, the names of PDO entries, then of PDOs and DC
       modes are left out (string index 0); if it still does not fit, the image grows to the
-      next power of two and word 0x3E says so.  :func:`build_image` reports both.
+      next power of two and word 0x3E says so, with the names as long as the image stays
+      within the 4 KiB SOEM reads (``SOEM_SII_WINDOW``), else without them as before.  :func:`build_image` reports both.
     """
     return build_image(device, serial=serial, alias=alias).data
 
@@ -526,22 +532,29 @@ def build_image(device: Device, *, serial: int = 0, alias: int = 0) -> BuildResu
         if HEADER_SIZE + len(body) <= declared:
             break
     else:
-        names, body = NAMES_ALL, _categories(device, NAMES_ALL)
+        # It grows anyway: the names stay unless they push categories (SYNCM, the PDOs of
+        # a device from an ENI with 113 TxPdos) out of what SOEM reads.
+        for names in (NAMES_ALL, NAMES_NO_ENTRIES, NAMES_NONE):
+            body = _categories(device, names)
+            if HEADER_SIZE + len(body) <= SOEM_SII_WINDOW:
+                break
     needed = HEADER_SIZE + len(body)
     size = declared
     given = _byte_size(device)
+    what = f"Eeprom/ByteSize {given}" if given else f"the default {DEFAULT_SIZE} bytes"
     if needed > size:
         while size < needed:
             size = 1 << size.bit_length() if size & (size - 1) else size * 2
         if size > MAX_SIZE:
             raise SiiError(f"device {device.type_name!r}: the SII needs {needed} bytes, more "
                            "than an EEPROM can address", file=source.file, line=source.line)
-        what = f"Eeprom/ByteSize {given}" if given else f"the default {DEFAULT_SIZE} bytes"
         notes.append(f"the image needs {needed} bytes, more than {what}; written as a "
                      f"{size}-byte EEPROM")
-    elif names != NAMES_ALL:
+    if names != NAMES_ALL:
         left = "PDO entry names" if names == NAMES_NO_ENTRIES else "PDO, entry and DC mode names"
-        notes.append(f"{left} left out of STRINGS to fit Eeprom/ByteSize {given}")
+        notes.append(f"{left} left out of STRINGS to fit "
+                     + (what if needed <= declared
+                        else f"the {SOEM_SII_WINDOW} bytes SOEM reads"))
     image = bytearray(_header(device, serial, alias, size) + body)
     image += bytes([PAD]) * (size - len(image))
     return BuildResult(bytes(image), notes)

@@ -12,7 +12,18 @@ Device-level rules that both the compiler (a topology's ``modules:``) and the vi
   its object indices by (P - 1) x ``SlotIndexIncrement`` (ETG.2000 ``Slots/Slot``; a slot's
   own increment wins over the one given for all slots): the UR20's third module has TxPdo
   0x1A02 and objects 0x6020, 0x8020; the Copley XE2's axis B 0x1740 and 0x6840;
-- only indices marked ``DependOnSlot`` move; a fixed index stays as written;
+- only indices marked ``DependOnSlot`` move; a fixed index stays as written (an Exclude
+  by its own marks, else as its PDO's Index);
+- a slot may belong to a slot group (``Slot/@SlotGroup``, the group described by
+  ``Slots/SlotGroupData``: a drive's axis, a safety terminal's logic): indices marked
+  ``DependOnSlotGroup`` move by the group's number x ``SlotGroupPdoIncrement`` (PDOs) or
+  ``SlotGroupIndexIncrement`` (objects), the slot's own increment winning over the one given
+  for all slots, as for the slot increments.  ETG.2100's ENI schema says it in its words:
+  the index "will be adapted depend on the slot group number and the SlotGroupIndexIncrement
+  value in the Slots-part of the device description".  An index marked both moves by both;
+  the position (for ``DependOnSlot``) is counted over the whole device, groups or not.
+  A ``DependOnSlotGroup`` index of a module in a slot of no group has no group number to
+  move by: the compiler refuses it (:func:`ungrouped_indices`), lint reports it (ESI604);
 - a module PDO without ``Sm`` goes to its direction's process-data SyncManager;
 - a device PDO marked ``OverwrittenByModule`` gives way to the PDOs of the plugged modules.
 """
@@ -22,12 +33,13 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 from ecatcfg.esc import array_downloads
-from ecatcfg.esi.model import Device, Dictionary, Module, Pdo, Profile, Slot
+from ecatcfg.esi.model import Device, Dictionary, Module, Pdo, Profile, Slot, Source
 
 
 @dataclass(frozen=True, slots=True)
 class PluggedModule:
-    """``module`` in slot ``slot`` (from 1) at ``position`` (from 1) with its offsets."""
+    """``module`` in slot ``slot`` (from 1) at ``position`` (from 1) with its offsets: by
+    its position (``DependOnSlot``) and by its slot's group (``DependOnSlotGroup``)."""
 
     slot: int
     module: Module
@@ -35,6 +47,23 @@ class PluggedModule:
     index_offset: int
     position: int = 0
     default: bool = False          # plugged because the slot's default, not named
+    slot_group: int | None = None  # Slot/@SlotGroup of its slot
+    group_pdo_offset: int = 0
+    group_index_offset: int = 0
+
+    def pdo_index(self, index: int, depend_on_slot: bool, depend_on_slot_group: bool) -> int:
+        """Where a PDO index (or an Exclude) of the module lands in this slot."""
+        return (index + (self.pdo_offset if depend_on_slot else 0)
+                + (self.group_pdo_offset if depend_on_slot_group else 0))
+
+    def object_index(self, index: int, depend_on_slot: bool,
+                     depend_on_slot_group: bool) -> int:
+        """Where an object index of the module (a dictionary object, a PDO entry, an
+        InitCmd's) lands in this slot; 0, a PDO entry's padding, names no object and stays."""
+        if not index:
+            return index
+        return (index + (self.index_offset if depend_on_slot else 0)
+                + (self.group_index_offset if depend_on_slot_group else 0))
 
     @property
     def dictionary(self) -> Dictionary | None:
@@ -56,6 +85,17 @@ def increments(device: Device, slot: Slot) -> tuple[int, int]:
     return pdo or 0, idx or 0
 
 
+def group_increments(device: Device, slot: Slot) -> tuple[int, int]:
+    """(PDO, object index) increment per slot group number of ``slot``: its own, else the
+    one for all slots (ETG.2000 ``SlotGroupPdoIncrement``, ``SlotGroupIndexIncrement``)."""
+    assert device.slots is not None
+    pdo = slot.slot_group_pdo_increment if slot.slot_group_pdo_increment is not None \
+        else device.slots.slot_group_pdo_increment
+    idx = slot.slot_group_index_increment if slot.slot_group_index_increment is not None \
+        else device.slots.slot_group_index_increment
+    return pdo or 0, idx or 0
+
+
 def takes_several(slot: Slot) -> bool:
     return (slot.max_instances or 1) > 1
 
@@ -69,14 +109,36 @@ def plug(device: Device, by_slot: dict[int, list[tuple[Module, bool]]]) -> list[
     position = 0
     for number, slot in enumerate(device.slots.slots, start=1):
         pdo_inc, idx_inc = increments(device, slot)
+        group_pdo_inc, group_idx_inc = group_increments(device, slot)
+        group = slot.slot_group or 0
         modules = by_slot.get(number, [])
         if not takes_several(slot) and not modules:
             position += 1                   # an empty single slot keeps its position
         for module, default in modules:
             position += 1
             plugged.append(PluggedModule(number, module, (position - 1) * pdo_inc,
-                                         (position - 1) * idx_inc, position, default))
+                                         (position - 1) * idx_inc, position, default,
+                                         slot.slot_group, group * group_pdo_inc,
+                                         group * group_idx_inc))
     return plugged
+
+
+def ungrouped_indices(plugged: PluggedModule) -> list[Source]:
+    """Where the module's ESI marks an index ``DependOnSlotGroup`` although it sits in a
+    slot of no slot group: there is no group number to move it by, and taking it as written
+    could configure another group's object."""
+    if plugged.slot_group is not None:
+        return []
+    m = plugged.module
+    found = [p.source for p in m.rx_pdos + m.tx_pdos if p.depend_on_slot_group]
+    found += [e.source for p in m.rx_pdos + m.tx_pdos for e in p.entries
+              if e.depend_on_slot_group]
+    if m.mailbox and m.mailbox.coe:
+        found += [c.source for c in m.mailbox.coe.init_cmds if c.depend_on_slot_group]
+    dic = plugged.dictionary
+    if dic is not None:
+        found += [o.source for o in dic.objects.values() if o.depend_on_slot_group]
+    return sorted(found, key=lambda src: (src.file, src.line))      # in document order
 
 
 def plugged_module(device: Device, number: int, module: Module) -> PluggedModule:
@@ -129,9 +191,19 @@ def ident_list(plugged: list[PluggedModule]) -> list[int]:
     return idents
 
 
-def module_dictionaries(plugged: list[PluggedModule]) -> list[tuple[int, Dictionary]]:
-    """(object index offset, dictionary) of each plugged module that has a dictionary."""
-    return [(p.index_offset, p.dictionary) for p in plugged if p.dictionary is not None]
+def moved_objects(plugged: PluggedModule) -> dict[int, int]:
+    """Index in the station -> index in the module's dictionary, for each of its objects."""
+    dic = plugged.dictionary
+    if dic is None:
+        return {}
+    return {plugged.object_index(index, obj.depend_on_slot, obj.depend_on_slot_group): index
+            for index, obj in dic.objects.items()}
+
+
+def module_dictionaries(plugged: list[PluggedModule]
+                        ) -> list[tuple[dict[int, int], Dictionary]]:
+    """(station index -> module index, dictionary) of each plugged module that has one."""
+    return [(moved_objects(p), p.dictionary) for p in plugged if p.dictionary is not None]
 
 
 def with_modules(device: Device, plugged: list[PluggedModule]) -> Device:
@@ -144,11 +216,11 @@ def with_modules(device: Device, plugged: list[PluggedModule]) -> Device:
     tx = [(own, p) for p in device.tx_pdos if not p.overwritten_by_module]
     for p in plugged:
         for pdo in p.module.rx_pdos + p.module.tx_pdos:
-            moved = _moved_pdo(device, pdo, p.pdo_offset, p.index_offset)
+            moved = _moved_pdo(device, pdo, p)
             (rx if pdo.direction == "rx" else tx).append((p.module.pdo_group or 0, moved))
     profiles = list(device.profiles) + [
-        Profile(dic.source, dictionary=_moved_dictionary(dic, offset))
-        for offset, dic in module_dictionaries(plugged)]
+        Profile(dic.source, dictionary=_moved_dictionary(dic, moved))
+        for moved, dic in module_dictionaries(plugged)]
     # ETG.2000 ModulePdoGroup: a group's PDOs after those of the groups before it (the
     # compiler orders the assignment the same way).
     return replace(device, rx_pdos=[p for _, p in sorted(rx, key=lambda g: g[0])],
@@ -156,22 +228,27 @@ def with_modules(device: Device, plugged: list[PluggedModule]) -> Device:
                    plugged=tuple(ident_list(plugged)))
 
 
-def _moved_pdo(device: Device, pdo: Pdo, pdo_offset: int, index_offset: int) -> Pdo:
-    entries = [replace(e, index=(e.index or 0) + (index_offset if e.depend_on_slot and e.index
-                                                   else 0)) for e in pdo.entries]
+def _moved_pdo(device: Device, pdo: Pdo, p: PluggedModule) -> Pdo:
+    entries = [replace(e, index=p.object_index(e.index or 0, e.depend_on_slot,
+                                               e.depend_on_slot_group)) for e in pdo.entries]
     sm = pdo.sm
     if sm is None:
         found = device.default_sm(pdo.direction)
         sm = found.number if found else None
-    return replace(pdo, index=(pdo.index or 0) + (pdo_offset if pdo.depend_on_slot else 0),
-                   sm=sm, entries=entries)
+    return replace(pdo, index=p.pdo_index(pdo.index or 0, pdo.depend_on_slot,
+                                          pdo.depend_on_slot_group),
+                   excludes=moved_excludes(p, pdo), sm=sm, entries=entries)
 
 
-def _moved_dictionary(dic: Dictionary, offset: int) -> Dictionary:
-    objects = {}
-    for index, obj in dic.objects.items():
-        moved = index + offset if obj.depend_on_slot else index
-        objects[moved] = replace(obj, index=moved)
+def moved_excludes(p: PluggedModule, pdo: Pdo) -> list[int]:
+    """The PDO's Excludes where they land in ``p``'s slot: each by its own DependOnSlot /
+    DependOnSlotGroup (ETG.2000 puts both on Exclude too), else as the PDO's Index."""
+    own = (pdo.depend_on_slot, pdo.depend_on_slot_group)
+    return [p.pdo_index(x, *pdo.exclude_depends.get(x, own)) for x in pdo.excludes]
+
+
+def _moved_dictionary(dic: Dictionary, moved: dict[int, int]) -> Dictionary:
+    objects = {at: replace(dic.objects[index], index=at) for at, index in moved.items()}
     return Dictionary(dic.data_types, objects, dic.source)
 
 

@@ -8,8 +8,7 @@ A name is handled in one of three ways (:data:`WORDS`):
 - ``metadata``: it cannot change what a master sends or checks, wherever it appears:
   names, comments, texts and images for people, a tool's own data, descriptions of the
   hardware that the master reads from the slave itself;
-- ``refused``: ecatcfg does not implement it and refuses it by name (``VoE`` InitCmds,
-  slot groups).
+- ``refused``: ecatcfg does not implement it and refuses it by name (``VoE`` InitCmds).
 
 The ENI reader uses the table for what it finds where its list does not name it
 (``eni/contents.py``): a ``metadata`` word there is a warning (text and JSON), anything
@@ -42,7 +41,7 @@ _ENI_READ = _words("read", "read by the ENI reader where eni/contents.py lists i
     Identification IdentifyCmd Index Info InitCmd InitCmds InputDefaultData
     InputDefaultDataMask InputOffs Mailbox MailboxStates Master MaxFrameSize OpCode
     OutputDefaultData OutputDefaultDataMask OutputOffs PhysAddr Physics Port PreviousPort
-    ProcessData ProcessImage ProductCode RNIC Recv ReferenceClock Requires Retries RevisionNo
+    ProcessData ProcessImage ProductCode RNIC Recv Receive ReferenceClock Requires Retries RevisionNo
     Send SeparateIOUpdate SerialNo ShiftTime Slave SoE SrcBitOffs State SubIndex Timeout
     Transition Validate VendorId Sm0 Sm1 Sm2 Sm3 EtherCATConfig EncryptedEtherCATConfig
     DataMask Variable Inputs Outputs ByteSize BitOffs Type Enable StartAddress ControlByte
@@ -81,6 +80,7 @@ _ESI_READ = _words("read", "read into the ESI model (esi/reader.py)", """
     @OverwrittenByModule @PdoAssign @PdoConfig @PdoOrder @PdoUpload @PotentialReferenceClock
     @ProductCode @ProductRevision @ReadRestrictions @RevisionNo @RxPdo @SdoInfo
     @SegmentedSdo @SerialNo @SlotGroup @SlotIndexIncrement @SlotPdoIncrement @StartAddress
+    SlotGroupData @DependOnSlotGroup @SlotGroupIndexIncrement @SlotGroupPdoIncrement
     @SubIndex @TimeStamp @TxPdo @UseFromBuildNo @VendorId @Watchdog @WriteRestrictions
     @UseLrdLwr
 """)
@@ -94,6 +94,7 @@ _TEXT = _words("metadata", "a name, comment or text for people", """
     MaxValue BitMask Scaling FloatFormat ConvertValue Const_A Const_B Const_C Const_D
     @Name @DisplayName @DSType @UniqueName @slave_name @Ref @RefName @SortOrder
     @DScale @DefaultFactor @ChnFac @SwapData
+    @SlotGroupIncrement
 """)
 
 _UI = _words("metadata", "how a configuration tool shows the device (images, dialogs, "
@@ -171,10 +172,8 @@ _HOST = _words("metadata", "the master's host-side settings (its interface, task
 
 # -- refused by name ---------------------------------------------------------------------------
 
-_REFUSED = _words("refused", "not implemented: refused by name (eni/contents.py; slot "
-                  "groups by compile)", """
-    VoE SlotGroupData SlotSelections @DependOnSlotGroup @SlotGroupIncrement
-    @SlotGroupIndexIncrement @SlotGroupPdoIncrement
+_REFUSED = _words("refused", "not implemented: refused by name (eni/contents.py)", """
+    VoE SlotSelections
 """)
 
 WORDS: dict[str, tuple[Kind, str]] = {}

@@ -111,14 +111,19 @@ def _not_utf8(data: bytes, file: str) -> XmlError | None:
     return None
 
 
+def read_file(path: str | Path, shown_as: str | None = None) -> bytes:
+    """The content of ``path``; a failure is an :class:`XmlError` naming ``shown_as``."""
+    name = shown_as or str(path)
+    try:
+        return read_input(path, name)
+    except OSError as exc:
+        raise XmlError(f"cannot read: {exc.strerror}", name) from None
+
+
 def parse_file(path: str | Path, shown_as: str | None = None) -> etree._ElementTree:
     """Read and parse ``path``; errors name ``shown_as`` (the path as the user gave it)."""
     name = shown_as or str(path)
-    try:
-        data = read_input(path, name)
-    except OSError as exc:
-        raise XmlError(f"cannot read: {exc.strerror}", name) from None
-    return parse_bytes(data, name)
+    return parse_bytes(read_file(path, name), name)
 
 
 def strip_namespaces(tree: etree._ElementTree) -> None:

@@ -24,7 +24,6 @@ from __future__ import annotations
 import gc
 import struct
 import threading
-import time
 from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import TYPE_CHECKING, Literal, overload
@@ -33,12 +32,14 @@ from ecatcfg.eni.plan import NetworkPlan, Variable
 from ecatcfg.errors import EcatcfgError
 from ecatcfg.esc import AlState
 from ecatcfg.record import record
+from ecatcfg.runtime.clock import WALL, clock_of
 from ecatcfg.runtime.master.bringup import (DC_THRESHOLD_NS, DC_TIMEOUT_S, Event, Master,
                                             check_requests)
 from ecatcfg.runtime.master.replay import ApplyError
 
 if TYPE_CHECKING:                   # imported where used: `import ecatcfg.runtime` stays light
     from ecatcfg.esi.library import Library
+    from ecatcfg.runtime.clock import Clock
     from ecatcfg.runtime.master.cyclic import CycleStats
     from ecatcfg.runtime.segment.dc_clock import DcModel
     from ecatcfg.runtime.link import Link
@@ -121,7 +122,8 @@ class Network:
         self.recorder: PcapRecorder | None = None
         if pcap is not None:
             from ecatcfg.runtime.pcap import PcapRecorder
-            self.recorder = PcapRecorder(pcap)
+            # A simulated wire's frames are recorded at its simulated times.
+            self.recorder = PcapRecorder(pcap, clock_of(link))
         self.master = Master(eni, link, recorder=self.recorder, on_event=on_event,
                              dc_threshold_ns=dc_threshold_ns, dc_timeout_s=dc_timeout_s,
                              recovery=recovery, esi=library)
@@ -148,7 +150,8 @@ class Network:
                 skip_unsupported: bool = False, eni_name: str | None = None,
                 timing: Timing | None = None, dc: DcModel | None = None,
                 dc_threshold_ns: int = DC_THRESHOLD_NS,
-                dc_timeout_s: float = DC_TIMEOUT_S, recovery: bool = True) -> Network:
+                dc_timeout_s: float = DC_TIMEOUT_S, recovery: bool = True,
+                clock: Clock | None = None) -> Network:
         """The ENI on a virtual segment that emulates its slaves from the ESI files
         (``esi_cache``: through the ESI index cache), or from a :class:`Library` already
         built (a caller that brings up many ENIs from one library reads its files once).  A slave whose device the files do not
@@ -164,8 +167,14 @@ class Network:
         several describe one device differently (``Library``'s ``prefer``); without it the
         description that agrees with the ENI's slave is taken, said in an
         ``Event("esi", ...)``, and where none or several agree the device is an error
-        naming the files and what differs."""
+        naming the files and what differs.
+        ``clock``: a :class:`~ecatcfg.runtime.clock.SimClock` runs master and segment on
+        simulated time, in the caller's thread (``runtime/simwire.py``): the same calls
+        give the same frames at the same times, whatever the host does, and waiting costs
+        no host time (:attr:`clock` says how long things took).  By default the segment
+        answers on a thread of its own, in real time."""
         from ecatcfg.eni import reader as eni_reader
+        from ecatcfg.runtime.clock import SimClock
         from ecatcfg.runtime.segment import emulate
         from ecatcfg.runtime.link import MemoryLink
 
@@ -179,7 +188,8 @@ class Network:
                                              else str(eni)), on_event)
         library = _library(esi, esi_prefer, esi_cache)
         specs = emulate.specs_from_eni(plan, library, shown)
-        segment = emulate.segment(specs, faults, timing, dc=dc)
+        segment = emulate.segment(specs, faults, timing, dc=dc,
+                                  clock_ns=clock.monotonic_ns if clock is not None else None)
         if on_event is not None:
             for spec, slave in zip(specs, segment.slaves):
                 if spec.esi_choice is not None:
@@ -190,21 +200,30 @@ class Network:
                     on_event(Event("emulated", f"slave {slave.name!r} (position "
                                                f"{slave.position}): emulated from the ENI "
                                                f"alone ({slave.eni_only})"))
-        ours, theirs = MemoryLink.pair()
-        stop = threading.Event()
-        thread = threading.Thread(target=segment.serve, args=(theirs,),
-                                  kwargs={"stop": stop}, daemon=True, name="virtual-segment")
-        thread.start()
+        closers: list[Callable[[], None]] = []
+        link: Link
+        if isinstance(clock, SimClock):
+            from ecatcfg.runtime.simwire import SimulatedLink
+            link = SimulatedLink(clock, segment)
+        else:
+            ours, theirs = MemoryLink.pair()
+            stop = threading.Event()
+            thread = threading.Thread(target=segment.serve, args=(theirs,),
+                                      kwargs={"stop": stop}, daemon=True,
+                                      name="virtual-segment")
+            thread.start()
+            link = ours
 
-        def close_segment() -> None:
-            stop.set()
-            thread.join(2)
-            theirs.close()
+            def close_segment() -> None:
+                stop.set()
+                thread.join(2)
+                theirs.close()
+            closers.append(close_segment)
 
-        net = cls(plan, ours, pcap=pcap, on_event=on_event, skip_unsupported=skip_unsupported,
+        net = cls(plan, link, pcap=pcap, on_event=on_event, skip_unsupported=skip_unsupported,
                   eni_name=eni_name or (None if isinstance(eni, NetworkPlan) else str(eni)),
                   dc_threshold_ns=dc_threshold_ns, dc_timeout_s=dc_timeout_s,
-                  recovery=recovery, esi=library, _closers=[close_segment])
+                  recovery=recovery, esi=library, _closers=closers)
         net.segment = segment
         net.esi_sources = [(None if spec.eni_only is not None else
                             f"{spec.device.source.file}:{spec.device.source.line}",
@@ -212,6 +231,12 @@ class Network:
         return net
 
     # -- state ------------------------------------------------------------------------------
+
+    @property
+    def clock(self) -> Clock:
+        """The time the master runs on: the wall clock on a real line, the
+        :class:`~ecatcfg.runtime.clock.SimClock` of a simulated one."""
+        return self.master.transport.clock
 
     @property
     def state(self) -> AlState:
@@ -462,7 +487,10 @@ class Network:
             self.reset_stats()          # the statistics of this run
             period = self.master.cyclic.cycle_time_us / 1e6
             margin = realtime.busy_wait_us / 1e6 if realtime is not None else 0.0
-            clock, sleep = time.perf_counter, time.sleep
+            timer = self.master.transport.clock
+            clock, sleep = timer.monotonic, timer.sleep
+            if timer is not WALL:
+                margin = 0.0            # nothing to gain from spinning on simulated time
             next_at = clock()
             done = 0
             while not self._stop.is_set() and (cycles is None or done < cycles):

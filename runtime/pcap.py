@@ -16,15 +16,17 @@ both; this function gives each frame its number and time in nanoseconds.
 from __future__ import annotations
 
 import os
-import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from ecatcfg.fileio import OutputFile
+from ecatcfg.runtime.clock import WALL
 
 if TYPE_CHECKING:                   # scapy is imported when a recording starts
     from scapy.utils import RawPcapNgWriter
+
+    from ecatcfg.runtime.clock import Clock
 
 LINKTYPE_ETHERNET = 1
 DIRECTION_INBOUND, DIRECTION_OUTBOUND = 1, 2     # pcapng EPB flags, bits 0-1
@@ -68,8 +70,12 @@ class _Frame(bytes):
 class PcapRecorder:
     """``recorder(frame, sent)`` appends one frame; ``close()`` publishes the file."""
 
-    def __init__(self, path: str | os.PathLike[str]) -> None:
+    def __init__(self, path: str | os.PathLike[str], clock: Clock | None = None) -> None:
+        """``clock``: where the frames' times come from (``time_ns``); the host's by
+        default, a simulated wire's for a capture on simulated time."""
         from scapy.utils import RawPcapNgWriter
+
+        self._time_ns = (clock or WALL).time_ns
 
         self.path = Path(path)
         self._out = OutputFile(self.path, mode=0o644)
@@ -88,7 +94,7 @@ class PcapRecorder:
             raise ValueError(f"the pcap recording {self.path} is closed")
         packet = _Frame(frame)
         packet.direction = DIRECTION_OUTBOUND if sent else DIRECTION_INBOUND
-        self._writer.write_packet(packet, sec=time.time())
+        self._writer.write_packet(packet, sec=self._time_ns() / 1e9)
         self.frames += 1
 
     def close(self) -> None:

@@ -30,12 +30,15 @@ from collections.abc import Iterator
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-from ecatcfg.esc import Cmd
+from ecatcfg.esc import (SM_STATUS_MAILBOX_FULL, SM_STATUS_READ_EVENT, SM_STATUS_WRITE_EVENT, Cmd,
+                         sm_register)
+from ecatcfg.esi.coe import device_dictionary
 from ecatcfg.esi.library import Library, SelectorError
 from ecatcfg.runtime import wire
 from ecatcfg.runtime.pcap import read_capture
 from ecatcfg.runtime.segment.dc_clock import DcModel
 from ecatcfg.runtime.segment.emulate import SlaveSpec, emulated_slave
+from ecatcfg.runtime.segment.syncman import SmKind
 from ecatcfg.runtime.segment.virtual import VirtualSegment
 from ecatcfg.runtime.segment.timing import Timing
 from ecatcfg.runtime.wire import Datagram
@@ -405,6 +408,7 @@ class State:
         self.last: dict[tuple[int, int], tuple[int, int]] = {}   # (pos, reg) -> (hw, emu)
         self.dl_read: set[int] = set()
         self.clock_set: set[int] = set()                          # clocks started
+        self.request_ns: dict[int, int] = {}     # pos -> when its mailbox-out SM was written
 
 
 def _targets(rp: Replay, sent: Datagram) -> list[int]:
@@ -444,8 +448,8 @@ def _register_rule(rp: Replay, sent: Datagram, real: Datagram, mine: Datagram, r
         if hw & 0x8000 and (hw & ~0x8700) == (emu & ~0x8700) and not emu & 0x8700:
             return limit if chip else (BY_RULE, "EEPROM busy while a read is in flight")
         if emu & 0x8000 and (hw & ~0x8700) == (emu & ~0x8700) and not hw & 0x8700:
-            # The emulated read takes the median time of the captured ones (0.72 ms of
-            # 0.49-0.96 ms, runtime/segment/timing.py): a faster real read is done already.
+            # The emulated read takes the table's time (0.69 ms, runtime/segment/timing.py;
+            # captured reads end within 0.49-0.96 ms): a faster real read is done already.
             return limit if chip else (BY_RULE, "EEPROM read time varies (0.49-0.96 ms)")
         return DIFFERENT, ""
     if EEPROM_DATA <= reg < EEPROM_DATA + 8 and pos is not None:
@@ -476,7 +480,92 @@ def _register_rule(rp: Replay, sent: Datagram, real: Datagram, mine: Datagram, r
         if hw is not None and emu is not None and emu & 0x7FFF_FFFF <= max(
                 hw & 0x7FFF_FFFF, 1000):
             return BY_RULE, "system time difference no larger than the hardware's"
+    if pos is not None:
+        found = _mailbox_rule(rp, sent, real, mine, reg, pos)
+        if found is not None:
+            return found
     return DIFFERENT, ""
+
+
+# CoE objects whose value is the device's own, which an ESI types but gives no value for:
+# the hardware and software versions (ETG.1000.6 0x1009, 0x100A; the EL6910's ESI types
+# 0x100A STRING(11), its firmware answers "04 (V01.11)" and five spaces).
+VERSION_STRINGS = (0x1009, 0x100A)
+COE, SDO_UPLOAD_RESPONSE = 3, 2       # mailbox type; server command specifier (bits 7:5)
+# How long after its request a reply may be there on one side only: the slowest reply of a
+# device with an ESI in the captures (the EL6910's 0xF008 download, at most 2.07 ms).
+REPLY_VARIES_NS = 2_100_000
+
+
+def _note_mailbox_request(rp: Replay, sent: Datagram, real: Datagram, who: list[int]) -> None:
+    """When the master's write of a slave's mailbox-out SM (a request) was taken."""
+    if sent.cmd not in WRITES or len(who) != 1 or not real.wkc:
+        return
+    slave = rp.segment.slaves[who[0]]
+    out = next((sm for sm in slave.sms if sm.active and sm.kind is SmKind.MAILBOX_OUT), None)
+    if out is not None and sent.ado <= out.start < sent.ado + len(sent.data):
+        rp.state.request_ns[who[0]] = rp.now
+
+
+def _mailbox_rule(rp: Replay, sent: Datagram, real: Datagram, mine: Datagram, reg: int,
+                  pos: int) -> tuple[str, str] | None:
+    """(class, rule or limit) for a differing byte of the slave's mailbox-in SM: its status
+    register or its buffer; None when no mailbox rule applies."""
+    slave = rp.segment.slaves[pos]
+    sm = slave._mailbox_in_sm()
+    if sm is None:
+        return None
+    if reg == sm_register(sm.number) + 5:                            # SM status
+        hw, emu = real.data[reg - sent.ado], mine.data[reg - sent.ado]
+        since = rp.now - rp.state.request_ns.get(pos, rp.now)
+        if hw ^ emu == SM_STATUS_READ_EVENT:
+            # Both empty; the read event of the master's last read clears when the
+            # firmware writes the first byte of its next reply (runtime/segment/timing.py
+            # reply_start_ns), which varies as the reply time does (the EL6910's within
+            # 0.98-1.24 ms of the request).
+            if 0 < since <= REPLY_VARIES_NS:
+                return BY_RULE, "the firmware starts writing its reply at a varying time"
+            # The EK1914 also clears it twice of eight with no request pending (0.28 and
+            # 1.07 ms after the master's read): when its loop does that is its own.
+            return KNOWN_LIMIT, ("mailbox-in read event (SM status bit 1) cleared by the "
+                                 "firmware with no request")
+        full = SM_STATUS_MAILBOX_FULL | SM_STATUS_WRITE_EVENT
+        if {hw & full, emu & full} == {0, full} and (hw ^ emu) & ~(
+                full | SM_STATUS_READ_EVENT) == 0 and 0 < since <= REPLY_VARIES_NS:
+            # The emulated reply takes the table's time (runtime/segment/timing.py), a
+            # real one varies (the EL6910's 1.65-2.07 ms): one is there, the other not
+            # yet.  A master that reads SM1 on it would get another working counter:
+            # that stays different.
+            return BY_RULE, "mailbox reply time varies"
+        return None
+    if not sm.start <= reg < sm.end or sent.ado > sm.start:
+        return None
+    at = sm.start - sent.ado
+    hw_len, emu_len = _u(real.data, at, 2), _u(mine.data, at, 2)
+    if hw_len is None or emu_len is None:
+        return None
+    if reg - sm.start >= 6 + max(hw_len, emu_len):
+        # The mailbox header's length ends the message (ETG.1000.4); what follows in the
+        # buffer is what the slave's firmware wrote there before (earlier replies, its
+        # diagnosis texts, uninitialised RAM), the emulated ESC's buffer is zeros.
+        return KNOWN_LIMIT, "mailbox-in bytes past the message (earlier contents)"
+    hw_obj, emu_obj = _upload_of(real.data[at:]), _upload_of(mine.data[at:])
+    if hw_obj is not None and hw_obj == emu_obj and hw_obj[0] in VERSION_STRINGS:
+        dic = device_dictionary(slave.device)
+        obj = dic.objects.get(hw_obj[0]) if dic is not None else None
+        info = obj.info if obj is not None else None
+        if info is None or (info.default_data is None and info.default_string is None):
+            return KNOWN_LIMIT, ("version string 0x1009/0x100A: the firmware's own, its "
+                                 "ESI gives none")
+    return None
+
+
+def _upload_of(message: bytes) -> tuple[int, int] | None:
+    """(index, subindex) of a CoE SDO upload response, else None."""
+    if len(message) < 12 or message[5] & 0x0F != COE or message[8] >> 5 != \
+            SDO_UPLOAD_RESPONSE:
+        return None
+    return int.from_bytes(message[9:11], "little"), message[11]
 
 
 def _moves_together(rp: Replay, sent: Datagram, real: Datagram, mine: Datagram, pos: int,
@@ -547,6 +636,7 @@ def classify(rp: Replay, e: Exchange, i: int, sent: Datagram, real: Datagram,
                                                      real.data[k:k + 1].hex(),
                                                      mine.data[k:k + 1].hex())))
     _start_clock_where_the_hardware_was(rp, sent, real, mine, who)
+    _note_mailbox_request(rp, sent, real, who)
     if real.irq != mine.irq:
         diff = real.irq ^ mine.irq
         everyone = len(rp.state.dl_read) >= len(rp.segment.slaves)

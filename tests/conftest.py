@@ -98,6 +98,27 @@ def _private_cache(tmp_path_factory, monkeypatch):
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path_factory.mktemp("xdg-cache")))
 
 
+@pytest.fixture(autouse=True)
+def _simulated_time(request, monkeypatch):
+    """In-memory networks (``Network.virtual``) run on simulated time in tests: every one a
+    test makes without a ``clock`` gets a fresh ``SimClock`` (runtime/simwire.py), so a
+    busy host cannot make a reply late or a watchdog expire.  A test where real time is
+    the point (a background run timed by the host, real-time jitter) is marked
+    ``wallclock``.  Only where the runtime is imported already: a test of something else
+    does not load it."""
+    import sys
+    if request.node.get_closest_marker("wallclock") or \
+            "ecatcfg.runtime.network" not in sys.modules:
+        return
+    from ecatcfg.runtime.clock import SimClock
+    from ecatcfg.runtime.network import Network
+    virtual = Network.__dict__["virtual"].__func__
+
+    def simulated(cls, *args, clock=None, **kwargs):
+        return virtual(cls, *args, clock=SimClock() if clock is None else clock, **kwargs)
+    monkeypatch.setattr(Network, "virtual", classmethod(simulated))
+
+
 def write(tmp_path: Path, name: str, text: str | bytes) -> Path:
     path = tmp_path / name
     path.write_bytes(text.encode() if isinstance(text, str) else text)

@@ -879,11 +879,16 @@ def frames() -> st.SearchStrategy[list[bytes]]:
 # -- the virtual line -------------------------------------------------------------------------
 
 class LoopLink:
-    """The master's link straight into a virtual segment, in the caller's thread: a frame
-    sent is processed at once and its reply (after ``tamper``) waits to be received.  No
-    threads, so a run is repeatable; a lost reply costs the master's timeout in sleep."""
+    """The master's link straight into a virtual segment, in the caller's thread, on
+    simulated time (``clock``: the master's transport takes it, the segment is set on it):
+    a frame sent is processed at once, costing its round trip, and its reply (after
+    ``tamper``) waits to be received.  No threads and no host time, so a run is
+    repeatable; a lost reply costs the master's timeout in simulated time only."""
 
     def __init__(self, segment, tamper: Callable[[bytes], list[bytes]] | None = None) -> None:
+        from ecatcfg.runtime.clock import SimClock
+        self.clock = SimClock()
+        segment.set_clock(self.clock.monotonic_ns)
         self.segment = segment
         self.tamper = tamper
         self.queue: collections.deque[bytes] = collections.deque()
@@ -891,14 +896,16 @@ class LoopLink:
 
     def send(self, frame: bytes) -> None:
         self.sent.append(bytes(frame))
+        self.segment.tick()                     # watchdogs and timing as of now
         reply = bytes(self.segment.process(frame))
+        self.clock.advance(self.segment.round_trip_ns(len(frame)))
         self.queue.extend(self.tamper(reply) if self.tamper else [reply])
 
     def recv(self, timeout: float | None = None) -> bytes | None:
         if self.queue:
             return self.queue.popleft()
         if timeout:
-            time.sleep(min(timeout, 0.005))
+            self.clock.sleep(timeout)
         return None
 
     def fileno(self) -> int:

@@ -126,6 +126,22 @@ def ident_list_profile(access: str) -> str:
             "<Type>DTF030</Type><BitSize>48</BitSize></Object>\n</Objects>"))
 
 
+def group_module() -> str:
+    """A module with one TxPdo whose entry moves by its slot group (ETG.2000
+    Index@DependOnSlotGroup)."""
+    return ('<Module><Type ModuleIdent="#x100">Axis</Type><Name>Axis</Name><TxPdo Sm="3">'
+            '<Index DependOnSlot="1">#x1A01</Index><Name>Axis inputs</Name><Entry>'
+            '<Index DependOnSlotGroup="1">#x5841</Index><SubIndex>0</SubIndex><BitLen>16'
+            '</BitLen><Name>Statusword</Name><DataType>UINT</DataType></Entry></TxPdo>'
+            '</Module>')
+
+
+def grouped_slots(group_data: str) -> str:
+    return ('<Slots SlotGroupIndexIncrement="#x800">\n<Slot SlotGroup="1" MinInstances="0" '
+            'MaxInstances="1"><Name>Slot 1</Name><ModuleIdent>#x100</ModuleIdent></Slot>\n'
+            f"{group_data}</Slots>")
+
+
 def ident_list_slots(mark: bool = False) -> str:
     return (MARK if mark else "") + slots("<ModuleIdent>#x100</ModuleIdent>").replace(
         "<Slots>", '<Slots DownloadModuleIdentList="true">')
@@ -275,16 +291,25 @@ CASES: list[Case] = [
                  + "</Modules></EtherCATModule>\n"),)),
     Case("ESI603", esi(drive(), modules=module("#x100") + "\n" + M + module("#x100", "N")),
          esi(drive(), modules=module("#x100") + "\n" + module("#x101", "N"))),
-    # A slot of a slot group (the shape of Beckhoff's EL6900 and EP1908 files).
-    Case("ESI604", esi(drive(slots=f'<Slots>\n{M}<Slot MinInstances="0" MaxInstances="1" '
-                                   'SlotGroup="0"><Name>Slot 1</Name><ModuleIdent>#x100'
-                                   '</ModuleIdent></Slot>\n<SlotGroupData SlotGroup="0"/>'
-                                   '</Slots>'), modules=module("#x100")),
-         esi(drive(slots=slots("<ModuleIdent>#x100</ModuleIdent>")), modules=module("#x100"))),
+    # A module whose entry moves by its slot group (an axis of a multi-axis drive), in a
+    # slot of no group; the same slot in group 1 is fine.
+    Case("ESI604", esi(drive(slots=f'<Slots>\n{M}<Slot MinInstances="0" MaxInstances="1">'
+                                   '<Name>Slot 1</Name><ModuleIdent>#x100</ModuleIdent></Slot>'
+                                   '</Slots>'), modules=group_module()),
+         esi(drive(slots='<Slots>\n<Slot SlotGroup="1" MinInstances="0" MaxInstances="1">'
+                         '<Name>Slot 1</Name><ModuleIdent>#x100</ModuleIdent></Slot>'
+                         '</Slots>'), modules=group_module())),
     Case("ESI605", esi(drive(profile=ident_list_profile("ro"), slots=ident_list_slots(True)),
                        modules=module("#x100")),
          esi(drive(profile=ident_list_profile("rw"), slots=ident_list_slots()),
              modules=module("#x100"))),
+    # Slot group 1 described twice (the second is marked); once is fine.
+    Case("ESI606", esi(drive(slots=grouped_slots(
+        '<SlotGroupData SlotGroup="1"><Name>Axis A</Name></SlotGroupData>\n'
+        f'{M}<SlotGroupData SlotGroup="1"><Name>Axis B</Name></SlotGroupData>')),
+        modules=group_module()),
+         esi(drive(slots=grouped_slots('<SlotGroupData SlotGroup="1"><Name>Axis A</Name>'
+                                       '</SlotGroupData>')), modules=group_module())),
 ]
 
 

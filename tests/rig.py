@@ -356,6 +356,35 @@ def tshark_fields(pcap: str | os.PathLike, fields: Sequence[str], *,
             for p in packets]
 
 
+def soe_messages(pcap: str | os.PathLike) -> list[tuple[int, int, bool, bool, int, bytes]]:
+    """Every SoE message tshark decodes in ``pcap``, once each and in order: (op code,
+    drive, incomplete, error, IDN or fragments left, data).
+
+    Only the frames as they came back count (the first ESC sets the locally administered
+    bit of the source address): they hold every message, the SM0 writes unchanged and the
+    SM1 reads filled, where the frames going out hold the writes again.  A frame may carry
+    several messages (the read of an answer and, behind it, the next request: the master's
+    requests ahead), in order.  tshark shows data for write requests and read responses
+    (op codes 3 and 2) only."""
+    fields = ["eth.src", "ecat_mailbox.soe_opcode", "ecat_mailbox.soe_header_driveno",
+              "ecat_mailbox.soe_header_incomplete", "ecat_mailbox.soe_header_error",
+              "ecat_mailbox.soe_idn", "ecat_mailbox.soe_frag", "ecat_mailbox.soe_data"]
+    out = []
+    for p in tshark_fields(pcap, fields, display_filter="ecat_mailbox.soe"):
+        src, ops, drives, incompletes, errors, idns, frags, datas = p.values()
+        if not int(src[0][:2], 16) & 0x02:
+            continue
+        idn_or_frag = {False: iter(idns), True: iter(frags)}
+        data = iter(datas)
+        for op, drive, incomplete, error in zip(ops, drives, incompletes, errors):
+            fragment = incomplete in ("1", "True")
+            text = next(data) if op in ("2", "3") else ""
+            out.append((int(op), int(drive), fragment, error in ("1", "True"),
+                        int(next(idn_or_frag[fragment]), 0),
+                        bytes.fromhex(text.replace(":", ""))))
+    return out
+
+
 def tshark_malformed(pcap: str | os.PathLike) -> list[dict[str, Any]]:
     """Packets of ``pcap`` that tshark finds malformed, with an expert error, or with an
     EtherCAT mailbox/CoE 'invalid' marker: ``[{"frame": N, "messages": [...]}]``, ``[]`` when
@@ -375,10 +404,22 @@ def tshark_malformed(pcap: str | os.PathLike) -> list[dict[str, Any]]:
     return out
 
 
-def serve_in_memory(segment) -> tuple[Any, Callable[[], None]]:
-    """``segment`` answering on a thread over an in-memory link: (the master's end of the
-    link, a function that stops the thread)."""
+def serve_in_memory(segment, clock=None, *, wallclock: bool = False
+                    ) -> tuple[Any, Callable[[], None]]:
+    """``segment`` behind an in-memory link: (the master's end of the link, a function that
+    stops what serves it).  On simulated time by default: the segment on ``clock`` (a
+    fresh ``SimClock`` if none) behind a simulated wire (``runtime/simwire.py``), no thread,
+    nothing to stop; a ``Transport`` on the link takes its clock.  ``wallclock``: the
+    segment served on a thread over a ``MemoryLink`` in real time, where that is the
+    point."""
     import threading
+
+    if not wallclock:
+        from ecatcfg.runtime.clock import SimClock
+        from ecatcfg.runtime.simwire import SimulatedLink
+        clock = clock or SimClock()
+        segment.set_clock(clock.monotonic_ns)
+        return SimulatedLink(clock, segment), lambda: None
 
     from ecatcfg.runtime.link import MemoryLink
 

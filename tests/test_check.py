@@ -668,6 +668,13 @@ REAL_DEFECTS: dict[str, set[tuple[str, str]]] = {
     # the file stops in INIT+ERR 0x0016, as the agreement test shows.
     "corpus-extra/beremiz-tests/wago_sanyo/config.xml": {
         ("ENI504", "the ENI sets up no mailbox, the device has one (SM0, ")},
+    # The other Beremiz file gives every slave mailbox areas of start 0 and length 0 (its
+    # plugin's placeholders): the HIGEN drive's ESI (same folder) has SM0/SM1 at
+    # 0x1800/0x1C00 of 32..512 bytes; apply --virtual --esi refuses the file earlier, for
+    # its CoE writes in INIT->INIT (tests/test_eni_only.py).
+    "corpus-extra/beremiz-tests/wago_higen/config.xml": {
+        ("ENI501", "'EDA7000 CoE Drive': Mailbox/Send: length 0, the ESI allows 32..512"),
+        ("ENI501", "'EDA7000 CoE Drive': Mailbox/Recv: length 0, the ESI allows 32..512")},
     # One finding per object, not per subindex (26 lines before, several the
     # same finding twice).
     "corpus-extra/rocos-ecm-history/eni_sea.xml": {

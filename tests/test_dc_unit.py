@@ -84,13 +84,14 @@ def observed(corpus: Path, corpus_extra: Path) -> dict[tuple[int, int], tuple[st
 
 def test_the_rule_classifies_the_real_slaves_as_their_replies_show(observed):
     """EK1100 (ConfigData 0x0D: DC SYNC and latch units on) runs its DC unit; the EK1914
-    coupler with TwinSAFE logic (0x00) and the EL2828 (0x01) answer none of its registers.
+    coupler with TwinSAFE logic (0x00), the EL2828 (0x01) and the EL6910 TwinSAFE logic
+    terminal answer none of its registers.
     The one slave the ESI cannot tell is the EL2889 (0x01, no DC op mode, yet a DC unit):
     the chip table keeps what its capture shows, and the emulated chip of every slave
     agrees with the hardware (checked in the fixture)."""
     real = {name: dc for name, dc, _ in observed.values()}
     assert real == {"EK1100": True, "EL1004": False, "EL2828": False, "EL2889": True,
-                    "EK1914": False}
+                    "EK1914": False, "EL6910": False}
     wrong = {name for name, dc, rule in observed.values() if dc != rule}
     assert wrong == {"EL2889"}
     assert chip_for(*EL2889).dc_unit

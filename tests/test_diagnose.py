@@ -190,7 +190,7 @@ def test_0x001b_names_the_watchdog_time(plan):
     (SM watchdog enabled in its ESI) to SAFEOP+ERR 0x001B; ``doctor`` says why."""
     with Network.virtual(plan, esi=[ESI]) as net:
         net.up()
-        time.sleep(0.4)                 # no cycles: the outputs stop
+        net.clock.sleep(0.4)            # no cycles: the outputs stop
         count, findings = doctor(net.master.transport, AlState.OP, plan)
         assert count == 5
         by_name = {f.name: f for f in findings}
@@ -551,12 +551,12 @@ def test_a_slave_that_leaves_op_with_a_code_while_cycling_is_reported_with_its_c
     events = []
     with Network.virtual(plan, esi=[ESI], on_event=events.append) as net:
         net.up()
-        time.sleep(0.3)
-        deadline = time.monotonic() + 5
+        net.clock.sleep(0.3)
+        deadline = net.clock.monotonic() + 5
         while not any(e.slave == "lamps" and e.kind == "online" for e in events):
-            assert time.monotonic() < deadline, [e.text for e in events]
+            assert net.clock.monotonic() < deadline, [e.text for e in events]
             net.cycle()
-            time.sleep(0.001)
+            net.clock.sleep(0.001)
         lamps = [e for e in events if e.slave == "lamps"]
         assert [e.kind for e in lamps] == ["offline", "online"], [e.text for e in lamps]
         text = lamps[0].text

@@ -240,36 +240,44 @@ def _config(path: Path) -> etree._Element:
 def xpath_facts(path: Path) -> dict:
     """What the raw XML says, counted with plain XPath (independent of the reader)."""
     config = _config(path)
-    # A slave without PhysAddr and AutoIncAddr has no ESC (a passive end cap, as TwinCAT
-    # writes the EL9011): counted apart.
-    slaves = config.xpath("Slave[Info/PhysAddr or Info/AutoIncAddr]")
+    # A slave without PhysAddr and AutoIncAddr and without anything only an ESC has
+    # (mailbox, InitCmds, process data, DC) has no ESC (a passive end cap, as TwinCAT writes
+    # the EL9011): counted apart.  One with a mailbox but no address (SOEM's hand-written
+    # sample) is an ESC slave at its order in the file, as SOEM's converter
+    # (scripts/eniconv.py) places it, numbered as compile numbers station addresses.
+    esc = ("Info/PhysAddr or Info/AutoIncAddr or Mailbox or InitCmds/* or ProcessData/* "
+           "or DC or HotConnect")
+    slaves = config.xpath(f"Slave[{esc}]")
     return {
         "master_cmds": int(config.xpath("count(Master/InitCmds/InitCmd)")),
-        "passive": int(config.xpath("count(Slave[not(Info/PhysAddr) and not(Info/AutoIncAddr)])")),
-        "slaves": [(int(s.xpath("string(Info/PhysAddr)")), int(s.xpath("string(Info/VendorId)")),
-                    int(s.xpath("string(Info/ProductCode)")),
+        "passive": int(config.xpath(f"count(Slave[not({esc})])")),
+        "slaves": [(int(s.xpath("string(Info/PhysAddr)") or 1001 + n),
+                    int(s.xpath("string(Info/VendorId)")),
+                    int(s.xpath("string(Info/ProductCode)"), 0),
                     int(s.xpath("count(InitCmds/InitCmd)")),
                     int(s.xpath("count(Mailbox/CoE/InitCmds/InitCmd)")),
                     int(s.xpath("count(ProcessData/RxPdo | ProcessData/TxPdo)")))
-                   for s in slaves],
+                   for n, s in enumerate(slaves)],
         "cyclic_cmds": int(config.xpath("count(Cyclic/Frame/Cmd)")),
         "variables": int(config.xpath("count(ProcessImage/*/Variable)")),
     }
 
 
 def plan_facts(plan: NetworkPlan) -> dict:
-    """The plan's counts; InitCmds it leaves out as refused (encrypted FMMU settings) are
-    counted from ``unsupported``, so every command of the file is accounted for."""
-    def dropped(name: str) -> int:
+    """The plan's counts; InitCmds it leaves out as refused (encrypted FMMU settings, CoE
+    writes in INIT->INIT) are counted from ``unsupported``, so every command of the file is
+    accounted for."""
+    def dropped(name: str, element: str = "Slave/InitCmds/InitCmd") -> int:
         return sum(p.commands for p in plan.unsupported
-                   if p.slave == name and p.element == "Slave/InitCmds/InitCmd")
+                   if p.slave == name and p.element == element)
 
     return {
         "master_cmds": len(plan.master.init_cmds),
         "passive": len(plan.passive),
         "slaves": [(s.phys_addr, s.vendor_id, s.product_code,
                     len(s.init_cmds) + dropped(s.name),
-                    len(s.mailbox.coe_init_cmds) if s.mailbox else 0,
+                    (len(s.mailbox.coe_init_cmds) if s.mailbox else 0)
+                    + dropped(s.name, "CoE/InitCmds/InitCmd"),
                     len(s.process_data.pdos) if s.process_data else 0)
                    for s in plan.slaves],
         "cyclic_cmds": sum(len(f.cmds) for c in plan.cyclic for f in c.frames),
@@ -524,3 +532,63 @@ def test_reader_errors_are_eni_read_errors():
 def test_missing_file_is_an_error(tmp_path: Path):
     with pytest.raises(EniReadError, match="cannot read"):
         read_file(tmp_path / "nope.xml", shown_as="nope.xml")
+
+
+# -- slaves an ENI gives no address ------------------------------------------------------------
+
+def _unaddressed(first_info: str = "", recv: str = "Recv") -> bytes:
+    """Two slaves with a mailbox and CoE writes but no PhysAddr/AutoIncAddr (the shape of
+    SOEM's hand-written sample ENI), an end cap between them; ``first_info`` goes into the
+    first slave's Info."""
+    def slave(name: str, product: str, info: str = "") -> str:
+        return (f"<Slave><Info><Name>{name}</Name>{info}<VendorId>1</VendorId>"
+                f"<ProductCode>{product}</ProductCode><RevisionNo>0</RevisionNo></Info>"
+                "<Mailbox><Send><Start>0x1000</Start><Length>128</Length></Send>"
+                f"<{recv}><Start>0x1100</Start><Length>128</Length></{recv}>"
+                "<Protocol>CoE</Protocol><CoE><InitCmds><InitCmd><Transition>PS</Transition>"
+                "<Ccs>1</Ccs><Index>0x1c13</Index><SubIndex>0</SubIndex><Data>00</Data>"
+                "</InitCmd></InitCmds></CoE></Mailbox></Slave>")
+    return ('<?xml version="1.0"?>\n<EtherCATConfig Version="1.3"><Config><Master><Info>'
+            "<Name>m</Name></Info></Master>"
+            + slave("A", "0x1234", first_info)
+            + "<Slave><Info><Name>end cap</Name><VendorId>2</VendorId>"
+              "<ProductCode>590557264</ProductCode><RevisionNo>0</RevisionNo></Info></Slave>"
+            + slave("B", "0x10055aa") + "</Config></EtherCATConfig>\n").encode()
+
+
+def test_slaves_with_a_mailbox_but_no_address_are_placed_by_their_order():
+    """SOEM's ENI converter (scripts/eniconv.py) takes a Slave without AutoIncAddr as the
+    n-th slave of the line, n its order in the file; the end cap, with nothing an ESC has,
+    stays passive.  Station addresses count from 1001 as compile numbers them."""
+    plan = read_bytes(_unaddressed(), "soem.xml")
+    assert [(s.name, s.position, s.auto_inc_addr, s.phys_addr, s.product_code)
+            for s in plan.slaves] == [("A", 0, 0, 1001, 0x1234),
+                                      ("B", 1, 0xFFFF, 1002, 0x10055AA)]
+    assert [(p.name, p.after) for p in plan.passive] == [("end cap", 1)]
+    assert [(c.index, c.data) for c in plan.slaves[1].mailbox.coe_init_cmds] == [
+        (0x1C13, b"\x00")]
+
+
+def test_receive_is_read_as_the_mailbox_recv_area():
+    """SOEM's sample spells SM1's area ``<Receive>``; ETG.2100 ``<Recv>``."""
+    plan = read_bytes(_unaddressed(recv="Receive"), "soem.xml")
+    assert [s.mailbox.recv.start for s in plan.slaves] == [0x1100, 0x1100]
+    both = _unaddressed().replace(b"</Recv>", b"</Recv><Receive><Start>1</Start>"
+                                  b"<Length>1</Length></Receive>", 1)
+    with pytest.raises(EniReadError) as info:
+        read_bytes(both, "both.xml")
+    assert "<Mailbox> has both <Recv> and <Receive>" in str(info.value)
+
+
+def test_a_slave_without_address_beside_addressed_ones_is_a_located_error():
+    """Beside slaves that give their address, the order in the file need not be a slave's
+    place (a gap, a passive slave): refused at the part that needs the ESC."""
+    data = _unaddressed().replace(
+        b"<Name>B</Name>", b"<Name>B</Name><PhysAddr>1002</PhysAddr><AutoIncAddr>-1</AutoIncAddr>"
+        b"<Physics>YY</Physics>")
+    with pytest.raises(EniReadError) as info:
+        read_bytes(data, "mixed.xml")
+    assert info.value.line == _line_of(data, "//Slave[1]/Mailbox")
+    assert "slave 'A' has no <PhysAddr> and <AutoIncAddr> but has <Mailbox>" in str(info.value)
+    assert "its place on the line cannot be told" in str(info.value)
+

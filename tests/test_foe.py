@@ -559,7 +559,7 @@ def run_mailbox_job(job, answers: list[bytes], *, answer_after: float = 0.0,
     """Run a mailbox job against a slave whose SM0 (0x1000) takes each write but the first
     ``refuse_writes`` (working counter 0: the mailbox is full) and whose SM1 (0x1080) hands
     out ``answers``, one per read once a request was written and ``answer_after`` s have
-    passed; the messages written.  A job still running after ``give_up`` s fails the
+    passed (its status, 0x080D bit 3, says so); the messages written.  A job still running after ``give_up`` s fails the
     test."""
     from ecatcfg.esc import Cmd
     from ecatcfg.runtime.mailbox import pad_to
@@ -584,6 +584,10 @@ def run_mailbox_job(job, answers: list[bytes], *, answer_after: float = 0.0,
                 elif dg.cmd == Cmd.FPRD and dg.ado == 0x1080 and pending and written and \
                         time.monotonic() - started >= answer_after:
                     data, wkc = pad_to(pending.pop(0), len(dg.data)), 1
+                elif dg.cmd == Cmd.FPRD and dg.ado == 0x080D:      # SM1 status: bit 3 full
+                    full = bool(pending and written) and \
+                        time.monotonic() - started >= answer_after
+                    data, wkc = bytes([0x08 if full else 0]).ljust(len(dg.data), b"\0"), 1
                 replies.append(Datagram(dg.cmd, dg.idx, dg.address, data, wkc=wkc))
             request = job.send(replies)
     except StopIteration:

@@ -365,19 +365,6 @@ def test_module_pdo_replaces_the_overwritten_device_pdo(modules, bits, default):
         check_process_data_moves(net, plan, "s")
 
 
-def test_a_slot_in_a_slot_group_is_refused_not_offset_wrongly(tmp_path):
-    """Slot group offsets (ETG.2000 SlotGroupData) are not computed: plugging into a slot
-    of a group is an error at the topology line, never an ENI with unmoved indices."""
-    esi = tmp_path / "grouped.xml"
-    esi.write_text(FIXTURE.read_text(encoding="utf-8").replace(
-        '<Slot MinInstances="1" MaxInstances="1">',
-        '<Slot MinInstances="1" MaxInstances="1" SlotGroup="1">'), encoding="utf-8")
-    text = "slaves:\n  - name: s\n    device: EXS6900\n    modules: {1: EXS-APP-32}\n"
-    with pytest.raises(TopologyError) as err:
-        build.compile_topology(topology.loads(text, "t.yaml"), Library([esi], cache=False))
-    assert "t.yaml:4" in str(err.value) and "slot group 1" in str(err.value), str(err.value)
-
-
 def test_example_station_is_the_worked_example_of_the_docs(esi_schema):
     """docs/compile.md's table for examples/station/station.yaml; its ESI and the fixture's
     are valid ETG.2000."""

@@ -188,27 +188,54 @@ def test_bring_up_survives_heavy_frame_loss(example_plan):
             assert [s.state for s in net.segment.slaves] == [AlState.OP] * 5
 
 
+def _sm0_requests(frames, sm0):
+    """(index, subindex) of every CoE request written into SM0 at ``sm0``, in order."""
+    from ecatcfg.runtime.mailbox import decode
+    out = []
+    for f in frames:
+        for d in wire.decode(f).datagrams:
+            if d.cmd == Cmd.FPWR and d.ado == sm0:
+                content = decode(bytes(d.data))[1]
+                out.append((content.index, content.subindex))
+    return out
+
+
+def _losing(segment, pick):
+    """``segment.process`` that drops the first reply ``pick(datagrams)`` chooses (another
+    datagram index: the master takes it for a lost frame); the dropped datagrams in the
+    list it returns."""
+    process = segment.process
+    lost = []
+
+    def lossy(frame):
+        back = process(frame)
+        datagrams = wire.decode(back).datagrams
+        if not lost and pick(datagrams):
+            lost.append(datagrams)
+            back[17] ^= 0xFF
+        return back
+    segment.process = lossy
+    return lost
+
+
 def test_a_lost_mailbox_answer_is_recovered_with_the_repeat_request(example_plan):
-    """The reply to the SM1 read that took the drive's first answer out of the mailbox is
-    lost on the way back: the answer is gone from SM1, and only the repeat toggle
-    (ETG.1000.4 mailbox repeat) gets it posted again."""
-    from ecatcfg.runtime import wire
+    """The reply to the SM1 read that took the drive's last answer of PS out of the mailbox
+    (no request went ahead of it) is lost on the way back: the answer is gone from SM1, and
+    only the repeat toggle (ETG.1000.4 mailbox repeat) gets it posted again."""
+    from ecatcfg.runtime.mailbox import decode
+    mailbox = example_plan.slaves[4].mailbox
+    last = [c for c in mailbox.coe_init_cmds if Transition.PS in c.transitions][-1]
     with Network.virtual(example_plan, esi=[ESI]) as net:
         segment = net.segment
-        sm1 = example_plan.slaves[4].mailbox.recv.start
-        process = segment.process
-        lost = []
 
-        def lose_first_answer(frame):
-            back = process(frame)
-            answered = [d for d in wire.decode(back).datagrams
-                        if d.cmd == Cmd.FPRD and d.ado == sm1 and d.wkc == 1]
-            if answered and not lost:
-                lost.append(answered[0])
-                back[17] ^= 0xFF           # another datagram index: the master drops it
-            return back
-
-        segment.process = lose_first_answer
+        def last_answer(datagrams):
+            reads = [d for d in datagrams if d.cmd == Cmd.FPRD and d.ado == mailbox.recv.start
+                     and d.wkc == 1]
+            if not reads:
+                return False
+            answer = decode(bytes(reads[0].data))[1]
+            return (answer.index, answer.subindex) == (last.index, last.subindex)
+        lost = _losing(segment, last_answer)
         sent: list[bytes] = []
         net.master.transport.recorder = lambda f, out: sent.append(f) if out else None
         net.up()
@@ -217,6 +244,68 @@ def test_a_lost_mailbox_answer_is_recovered_with_the_repeat_request(example_plan
     repeats = [d for f in sent for d in wire.decode(f).datagrams
                if d.cmd == Cmd.FPWR and d.ado == 0x080E]
     assert len(repeats) == 1
+    # Nothing was sent twice: the repeat brought the answer back.
+    ps = [c for c in mailbox.coe_init_cmds if Transition.PS in c.transitions]
+    assert _sm0_requests(sent, mailbox.send.start) == [(c.index, c.subindex) for c in ps]
+
+
+def _assert_assigned(drive):
+    """The example drive's PDO assignment as its PS InitCmds write it (complete access:
+    0x1C12 = 1 x 0x1601, 0x1C13 = 2 x 0x1A00, 0x1A01) and its mode of operation."""
+    assert [drive.od.int_value(0x1C12, k) for k in range(2)] == [1, 0x1601]
+    assert [drive.od.int_value(0x1C13, k) for k in range(3)] == [2, 0x1A00, 0x1A01]
+    assert drive.od.int_value(0x6060) == 9
+
+
+def test_start_up_sdos_go_one_frame_each(example_plan):
+    """Each CoE InitCmd's request goes in the frame that reads the answer to the one
+    before, behind that read (the ESC processes datagrams in order: the read can only
+    return the earlier answer): the drive's 11 PS SDOs in 12 frames, not 22."""
+    mailbox = example_plan.slaves[4].mailbox
+    ps = [c for c in mailbox.coe_init_cmds if Transition.PS in c.transitions]
+    with Network.virtual(example_plan, esi=[ESI]) as net:
+        sent: list[bytes] = []
+        net.master.transport.recorder = lambda f, out: sent.append(f) if out else None
+        net.up()
+        assert net.state == AlState.OP
+        _assert_assigned(net.segment.slaves[4])
+    shapes = [[(d.cmd, d.ado) for d in wire.decode(f).datagrams
+               if d.cmd in (Cmd.FPRD, Cmd.FPWR)
+               and d.ado in (mailbox.send.start, mailbox.recv.start)] for f in sent]
+    shapes = [s for s in shapes if s]
+    read, write = (Cmd.FPRD, mailbox.recv.start), (Cmd.FPWR, mailbox.send.start)
+    assert shapes == [[write]] + [[read, write]] * (len(ps) - 1) + [[read]]
+    assert _sm0_requests(sent, mailbox.send.start) == [(c.index, c.subindex) for c in ps]
+
+
+def test_an_answer_lost_with_the_next_request_in_the_slave_runs_the_list_again(
+        example_plan):
+    """The frame that read the drive's first answer of PS and wrote its second request is
+    lost on the way back: the answer is gone, the second request is in the slave, and
+    its answer is the next in SM1 (a repeat would post that one again).  Whether the
+    first command took is unknown, so the drive's PS list runs again from its start, one
+    request at a time, without a repeat request; the drive ends configured as the ENI
+    says."""
+    mailbox = example_plan.slaves[4].mailbox
+    ps = [(c.index, c.subindex) for c in mailbox.coe_init_cmds
+          if Transition.PS in c.transitions]
+    with Network.virtual(example_plan, esi=[ESI]) as net:
+        segment = net.segment
+
+        def answer_and_request(datagrams):
+            return any(d.cmd == Cmd.FPRD and d.ado == mailbox.recv.start and d.wkc == 1
+                       for d in datagrams) and any(
+                d.cmd == Cmd.FPWR and d.ado == mailbox.send.start and d.wkc == 1
+                for d in datagrams)
+        lost = _losing(segment, answer_and_request)
+        sent: list[bytes] = []
+        net.master.transport.recorder = lambda f, out: sent.append(f) if out else None
+        net.up()
+        assert lost and net.state == AlState.OP
+        _assert_assigned(segment.slaves[4])
+    assert not [d for f in sent for d in wire.decode(f).datagrams
+                if d.cmd == Cmd.FPWR and d.ado == 0x080E]
+    assert _sm0_requests(sent, mailbox.send.start) == ps[:2] + ps
 
 
 @pytest.mark.parametrize("cut", [2, 7])
@@ -294,6 +383,37 @@ def test_modular_devices_are_emulated_with_their_modules(corpus, slave, source):
     with Network(plan, link, _closers=[close]) as net:
         net.up()
         assert net.state == AlState.OP and net.cycle()
+
+
+def test_a_refused_sdo_is_named_and_the_answer_to_the_request_ahead_is_taken(example_plan):
+    """An SDO the drive refuses (an object it does not have) in the middle of its PS list:
+    the request after it went ahead, in the frame that read the abort, so the drive has
+    taken it too; the transition fails naming the refused command, and the answer to the
+    request ahead is read and dropped: nothing is left in SM1 for a later reader to take
+    for its own answer."""
+    import copy
+    from ecatcfg.runtime.master.replay import ApplyError
+    plan = copy.deepcopy(example_plan)
+    mailbox = plan.slaves[4].mailbox
+    cmds = mailbox.coe_init_cmds
+    missing = copy.deepcopy(next(c for c in cmds if c.index == 0x6060))
+    missing.index, missing.comment = 0x5FFE, "no such object"
+    at = cmds.index(next(c for c in cmds if c.index == 0x1C12 and c.data == b"\x00")) + 1
+    cmds.insert(at, missing)
+    after = cmds[at + 1]
+    with Network.virtual(plan, esi=[ESI]) as net:
+        sent: list[bytes] = []
+        net.master.transport.recorder = lambda f, out: sent.append(f) if out else None
+        with pytest.raises(ApplyError, match=r"\[no such object\]: SDO abort 0x06020000") \
+                as refused:
+            net.up()
+        assert refused.value.init_cmd is missing
+        drive = net.segment.slaves[4]
+        assert drive.state == AlState.PREOP
+        assert not drive.mem[0x080D] & 0x08     # SM1 status (0x0805 + 8): not full
+        assert not drive.mailbox_queue
+    requests = _sm0_requests(sent, mailbox.send.start)
+    assert requests[-2:] == [(missing.index, missing.subindex), (after.index, after.subindex)]
 
 
 def test_mailbox_counters_go_on_across_transitions():

@@ -142,7 +142,7 @@ def test_late_cycles_are_counted(example_plan):
     with Network.virtual(example_plan, esi=[ESI]) as net:
         net.up()
         period = net.master.cyclic.cycle_time_us / 1e6
-        net.run(cycles=10, callback=lambda n: time.sleep(2 * period))
+        net.run(cycles=10, callback=lambda n: n.clock.sleep(2 * period))
         assert net.run_stats.late == 10
         assert "10 late" in str(net.run_stats)
 

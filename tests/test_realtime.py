@@ -36,6 +36,9 @@ from ecatcfg.runtime.master import realtime
 
 ESI = EXAMPLES / "esi"
 CYCLE_US = 1000
+# Real-time options pace a real line: these tests measure the host's periods and CPU time,
+# so their in-memory networks stay on the host's clock (tests/conftest.py).
+pytestmark = pytest.mark.wallclock
 
 
 

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import contextlib
 import struct
-import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
@@ -21,6 +20,7 @@ from ecatcfg.eni.plan import NetworkPlan
 from ecatcfg.esc import AlState, Cmd, Reg
 from ecatcfg.esi.library import Library
 from ecatcfg.runtime import Network, wire
+from ecatcfg.runtime.clock import SimClock
 from ecatcfg.runtime.master import recovery
 from ecatcfg.runtime.segment import emulate
 from ecatcfg.runtime.master.cyclic import CyclicFrames
@@ -52,7 +52,8 @@ def network(plan: NetworkPlan, where: str, rig: object | None = None, **kwargs: 
     namespace B, the master's raw socket in namespace A); the events it reported."""
     events: list[Event] = []
     if where == "memory":
-        with Network.virtual(plan, esi=[ESI], on_event=events.append, **kwargs) as net:
+        with Network.virtual(plan, esi=[ESI], on_event=events.append, clock=SimClock(),
+                             **kwargs) as net:
             net.up()
             yield net, events
         return
@@ -91,14 +92,14 @@ class IoCheck:
         got = sum(int(net[b]) << k for k, b in enumerate(BUTTONS))
         if got != self.n % 16:
             self.failures.append(f"cycle {self.n}: buttons read {got}, set {self.n % 16}")
-        time.sleep(0.0005)
+        self.net.clock.sleep(0.0005)
         return ok
 
     def run(self, seconds: float) -> int:
         """Cycles for ``seconds``; how many were not valid."""
         bad = 0
-        end = time.monotonic() + seconds
-        while time.monotonic() < end:
+        end = self.net.clock.monotonic() + seconds
+        while self.net.clock.monotonic() < end:
             bad += not self.cycle()
         return bad
 
@@ -107,20 +108,20 @@ class IoCheck:
         where the I/O going on is a precondition, not what a test is about, a reply of the
         in-memory segment's thread that misses the 10 ms cycle timeout on a loaded machine
         does not fail it; a line whose I/O does not run still does."""
-        start = time.monotonic()
+        start = self.net.clock.monotonic()
         while True:
             self.failures.clear()
             if self.run(seconds) == 0 and self.failures == []:
                 return
-            assert time.monotonic() - start < limit, (
+            assert self.net.clock.monotonic() - start < limit, (
                 f"no {seconds} s of valid cycles in {limit} s: {self.failures[:3]}")
 
     def until(self, done, limit: float) -> float:
-        start = time.monotonic()
+        start = self.net.clock.monotonic()
         while not done():
-            assert time.monotonic() - start < limit, f"not done after {limit} s"
+            assert self.net.clock.monotonic() - start < limit, f"not done after {limit} s"
             self.cycle()
-        return time.monotonic() - start
+        return self.net.clock.monotonic() - start
 
 
 def kinds(events: list[Event], slave: str) -> list[str]:
@@ -159,7 +160,7 @@ def test_a_slave_in_safeop_err_after_its_watchdog_is_brought_back_to_op(plan):
     with network(plan, "memory") as (net, events):
         io = IoCheck(net)
         assert io.run(0.1) == 0
-        time.sleep(0.3)                       # no process data: the SM watchdog expires
+        net.clock.sleep(0.3)                       # no process data: the SM watchdog expires
         io.until(lambda: not net.online("lamps"), 1.0)
         assert "SAFEOP+ERR" in net.health["lamps"].reason
         assert "0x001B" in net.health["lamps"].reason
@@ -214,14 +215,14 @@ def test_the_back_off_doubles(plan):
         stamps: list[float] = []              # each retry reported
         starts: list[float] = []              # each attempt taken on
         net.master.on_event = lambda e: (events.append(e), e.kind == "retry"
-                                         and stamps.append(time.monotonic()))
+                                         and stamps.append(net.clock.monotonic()))
         joining = False
 
         def gave_up() -> bool:
             nonlocal joining
             h = net.health["lamps"]
             if h.joining and not joining:
-                starts.append(time.monotonic())
+                starts.append(net.clock.monotonic())
             joining = h.joining
             return h.gave_up
         io.until(gave_up, 10)
@@ -247,7 +248,7 @@ def test_going_down_passes_over_a_slave_that_is_offline(plan):
 
 
 def test_without_recovery_a_lost_slave_only_fails_the_cycle(plan):
-    with Network.virtual(plan, esi=[ESI], recovery=False) as net:
+    with Network.virtual(plan, esi=[ESI], recovery=False, clock=SimClock()) as net:
         net.up()
         assert net.cycle()
         net.segment.remove_cable("axis1")
@@ -352,7 +353,7 @@ def grouped_network(plan, segment, where: str, rig=None, pcap: Path | None = Non
     events: list[Event] = []
     if where == "memory":
         from rig import serve_in_memory
-        link, close = serve_in_memory(segment)
+        link, close = serve_in_memory(segment, SimClock())
     else:
         stack = contextlib.ExitStack()
         stack.enter_context(serving(rig, segment))
@@ -399,11 +400,11 @@ def test_a_hot_connect_group_absent_at_start_joins_when_plugged_in(plan, where, 
         io = IoCheck.__new__(IoCheck)
         assert all(net.cycle() for _ in range(50))
         seg.restore_cable("lamps")
-        start = time.monotonic()
+        start = net.clock.monotonic()
         while not (net.online("lamps") and net.online("axis1")):
-            assert time.monotonic() - start < BOUND_S
+            assert net.clock.monotonic() - start < BOUND_S
             assert net.cycle() or True
-            time.sleep(0.0005)
+            net.clock.sleep(0.0005)
         assert [s.state for s in seg.slaves] == [AlState.OP] * 5
         del io
         checker = IoCheck(net)
@@ -512,7 +513,7 @@ def test_the_compiled_tree_example_runs_without_its_groups_and_takes_them_in(tmp
                                    Library(esi, cache=False)).plan
     tree = eni_reader.read_bytes(eni_writer.to_bytes(built), "hotconnect.eni.xml")
     events: list[Event] = []
-    with Network.virtual(tree, esi=esi, on_event=events.append) as net:
+    with Network.virtual(tree, esi=esi, on_event=events.append, clock=SimClock()) as net:
         seg = net.segment
         assert {s.name for s in seg.remove_cable("junction")} == {
             "junction", "axis1", "axis2", "outputs"}
@@ -525,18 +526,18 @@ def test_the_compiled_tree_example_runs_without_its_groups_and_takes_them_in(tmp
         for _ in range(2):
             assert all(net.cycle() for _ in range(30))
             seg.restore_cable("junction")
-            start = time.monotonic()
+            start = net.clock.monotonic()
             while not all(h.online for h in net.health.values()):
-                assert time.monotonic() - start < BOUND_S, net.health
+                assert net.clock.monotonic() - start < BOUND_S, net.health
                 net.cycle()
-                time.sleep(0.0005)
+                net.clock.sleep(0.0005)
             assert all(s.state == AlState.OP for s in seg.slaves)
             assert [s.station_address for s in seg.slaves] == list(range(1001, 1008))
             assert all(net.cycle() for _ in range(30))
             seg.remove_cable("junction")
-            start = time.monotonic()
+            start = net.clock.monotonic()
             while net.online("outputs"):
-                assert time.monotonic() - start < 1
+                assert net.clock.monotonic() - start < 1
                 net.cycle()
         assert [e.text for e in events if e.kind == "hot-connect"][-2:] == [
             "hot-connect group 'junction' (3 slaves) left the line; the others go on",
@@ -668,7 +669,7 @@ def tree_network(events: list[Event]) -> Network:
     built = build.compile_topology(topology.load(EXAMPLES / "tree" / "tree.yaml"),
                                    Library(esi, cache=False)).plan
     tree = eni_reader.read_bytes(eni_writer.to_bytes(built), "tree.eni.xml")
-    return Network.virtual(tree, esi=esi, on_event=events.append)
+    return Network.virtual(tree, esi=esi, on_event=events.append, clock=SimClock())
 
 
 def test_a_dc_slave_configured_again_from_init_keeps_its_system_time():
@@ -688,14 +689,14 @@ def test_a_dc_slave_configured_again_from_init_keeps_its_system_time():
                 drive.refuse.clear()
         net.master.on_event = first_retry
         drive._set_state(State.SAFEOP, 0x001A)
-        start = time.monotonic()
+        start = net.clock.monotonic()
         while net.online("axis3"):
-            assert time.monotonic() - start < 1
+            assert net.clock.monotonic() - start < 1
             net.cycle()
         while not net.online("axis3"):
-            assert time.monotonic() - start < BOUND_S + 2, [e.text for e in events[-5:]]
+            assert net.clock.monotonic() - start < BOUND_S + 2, [e.text for e in events[-5:]]
             net.cycle()
-            time.sleep(0.0005)
+            net.clock.sleep(0.0005)
         assert [e.kind for e in events if e.slave == "axis3"] == ["offline", "retry", "online"]
         diffs = net.master.read_dc_differences()
         assert all(d is not None and abs(d) < 1000 for d in diffs.values()), diffs
@@ -714,15 +715,15 @@ def test_a_dc_slave_powered_off_and_on_gets_its_system_time_back():
         drive = next(s for s in seg.slaves if s.name == "axis3")
         seg.remove_cable("axis3")
         drive.power_cycle()
-        start = time.monotonic()
+        start = net.clock.monotonic()
         while net.online("axis3"):
-            assert time.monotonic() - start < 1
+            assert net.clock.monotonic() - start < 1
             net.cycle()
         seg.restore_cable("axis3")
         while not net.online("axis3"):
-            assert time.monotonic() - start < BOUND_S, [e.text for e in events[-5:]]
+            assert net.clock.monotonic() - start < BOUND_S, [e.text for e in events[-5:]]
             net.cycle()
-            time.sleep(0.0005)
+            net.clock.sleep(0.0005)
         assert drive.state == AlState.OP
         # Recovery waited until 0x092C was under 1000 ns before OP; read here, a cycle or
         # two later on a loaded host, the control loop may be a few ns over it for a moment
@@ -762,12 +763,12 @@ def test_a_group_head_identified_by_its_device_id_on_a_segment_from_the_eni(plan
         return replace(s, hot_connect=HotConnectPlan(2, [request, check]))
 
     by_id = replace(plan, slaves=[grouped(s) for s in plan.slaves])
-    with Network.virtual(by_id, esi=[ESI]) as net:
+    with Network.virtual(by_id, esi=[ESI], clock=SimClock()) as net:
         lamps = next(s for s in net.segment.slaves if s.name == "lamps")
         assert lamps.device_id == 42
         net.up()
         assert net.online("lamps") and all(s.state == AlState.OP for s in net.segment.slaves)
-    with Network.virtual(by_id, esi=[ESI]) as net:
+    with Network.virtual(by_id, esi=[ESI], clock=SimClock()) as net:
         next(s for s in net.segment.slaves if s.name == "lamps").device_id = 43
         from ecatcfg.runtime.master.bringup import VerifyError
         with pytest.raises(VerifyError, match="extra slave"):
@@ -869,7 +870,7 @@ def test_a_group_whose_slaves_fell_to_safeop_err_has_not_left_the_line(plan):
         io.steady(0.1, 2.0)
         where = {name: h.position for name, h in net.health.items()}
         assert where == {"coupler": 0, "buttons": 1, "sensors": 2, "lamps": 3, "axis1": 4}
-        time.sleep(0.3)                       # no process data: the SM watchdog expires
+        net.clock.sleep(0.3)                       # no process data: the SM watchdog expires
         io.until(lambda: not net.online("lamps"), 1.0)
         assert "0x001B" in net.health["lamps"].reason
         assert {name: h.position for name, h in net.health.items()} == where

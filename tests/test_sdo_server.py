@@ -216,6 +216,23 @@ def test_expedited_upload_and_download(slave):
     assert msg == UploadResponse(0x1018, 1, u32(0xE0F1), 4, True, False)
 
 
+def test_an_expedited_download_is_answered_with_its_data_echoed(slave):
+    """Real Beckhoff firmware echoes the request's 4 data bytes in the reserved bytes of
+    the response (ETG.1000.6): the EL3004 of ethercrab-rs/ethercrab
+    tests/replay-ek1914-el3004-configure.pcapng answers 0x1C13:01 = 0x1A00 (request
+    ``2b 13 1c 01 00 1a 00 00``) with ``60 13 1c 01 00 1a 00 00``.  The same request here;
+    an abort keeps its code there."""
+    slave.download(0x1C13, 0, b"\0")                    # unassign to change sub 1
+    def sent(sdo: str) -> bytes:               # mailbox header with the next counter, CoE
+        header = bytes.fromhex("0a00 0000 00") + bytes((slave.counter() << 4 | MbxType.COE,))
+        [reply] = slave.server.handle(pad_to(header + bytes.fromhex("0020" + sdo),
+                                             slave.sm0), PREOP)
+        return reply[6:16]
+
+    assert sent("2b13 1c01 001a 0000") == bytes.fromhex("0030 6013 1c01 001a 0000")
+    assert sent("2b34 1201 0100 0000") == bytes.fromhex("0020 8034 1201 0000 0206")
+
+
 def test_normal_upload_in_one_message(slave):
     assert slave.upload(0x1008, 0) == b"ecatcfg test device\0"
     assert slave.exchanges == 1

@@ -827,3 +827,30 @@ def test_help_lists_sii_and_stays_light():
     out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True,
                          cwd=ROOT, check=True)
     assert out.stdout.strip() == "True []"
+
+
+def test_an_image_past_its_size_keeps_its_categories_where_soem_reads(tmp_path):
+    """SOEM reads the SII bytes below EC_MAXEEPBUF only (4 KiB, ethercatmain.c
+    ecx_siigetbyte: 0xFF past it), so a category past it is not found: an image that has
+    to grow anyway leaves the entry names out before SYNCM and the PDOs leave that window
+    (a device from an ENI alone with 113 TxPdos, HBM's GEN DAQ)."""
+    def pdo(index: int) -> str:
+        entries = "".join(f"<Entry><Index>#x6000</Index><SubIndex>{n}</SubIndex>"
+                          f"<BitLen>8</BitLen><Name>entry name number {index:x}.{n}</Name>"
+                          "<DataType>USINT</DataType></Entry>" for n in range(1, 41))
+        return f'<TxPdo Sm="0"><Index>#x{index:X}</Index><Name>P</Name>{entries}</TxPdo>'
+
+    body = ('<Sm StartAddress="#x1000" ControlByte="#x20" Enable="1">Inputs</Sm>'
+            + "".join(pdo(0x1A00 + n) for n in range(6)))
+    device = one_device(tmp_path, body)
+    # With every name the image would reach past the window.
+    assert sii.HEADER_SIZE + len(sii._categories(device, sii.NAMES_ALL)) > sii.SOEM_SII_WINDOW
+    result = sii.build_image(device)
+    img = sii.decode(result.data)
+    assert img.end_offset < sii.SOEM_SII_WINDOW
+    assert [len(p.entries) for p in img.txpdos] == [40] * 6
+    assert img.txpdos[0].entries[0].name is None and img.txpdos[0].name == "P"
+    assert len(result.data) == 4096 and result.notes[0].endswith(
+        "more than the default 2048 bytes; written as a 4096-byte EEPROM")
+    assert result.notes[1:] == [
+        "PDO entry names left out of STRINGS to fit the 4096 bytes SOEM reads"]

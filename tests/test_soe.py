@@ -21,7 +21,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from rig import serving, start_simulate, tshark_fields, tshark_malformed
+from rig import serving, soe_messages, start_simulate, tshark_malformed
 # The mailbox that takes every SM0 write and answers from a list: test_eoe's.
 from test_eoe import CHANNEL_PLAN
 from test_eoe import drive as drive_job
@@ -599,17 +599,7 @@ def test_tshark_decodes_what_was_sent(tmp_path, tshark_path):
         net.segment.slaves[0].mailbox.soe.drives[0].idns[0x0300] = Idn("long", 0,
                                                                        bytes(range(200)))
         assert soe_tool.soe_transfer(net.master.transport, 0, 0x0300) == bytes(range(200))
-    fields = ["ecat_mailbox.soe_opcode", "ecat_mailbox.soe_header_driveno",
-              "ecat_mailbox.soe_header_incomplete", "ecat_mailbox.soe_header_error",
-              "ecat_mailbox.soe_idn", "ecat_mailbox.soe_frag", "ecat_mailbox.soe_data"]
-    rows: list[tuple[str, ...]] = []
-    for p in tshark_fields(pcap, fields, display_filter="ecat_mailbox.soe"):
-        row = tuple(v[0] if v else "" for v in p.values())
-        if not rows or rows[-1] != row:     # an SM0 write is captured going and coming back
-            rows.append(row)
-    decoded = [(int(op), int(drive), incomplete in ("1", "True"), error in ("1", "True"),
-                int(idn or frag, 0), bytes.fromhex(data.replace(":", "")))
-               for op, drive, incomplete, error, idn, frag, data in rows]
+    decoded = soe_messages(pcap)
     written = [(c.drive_no, c.idn, c.data) for c in cmds[:5]]
     expected = []
     for drive, idn, data in written:

@@ -17,7 +17,7 @@ import sys
 from pathlib import Path
 
 from lxml import etree
-from rig import tshark_fields, tshark_malformed
+from rig import soe_messages, tshark_malformed
 
 from conftest import FIXTURES, write
 
@@ -61,17 +61,9 @@ def eni_writes(eni: Path) -> list[tuple[int, int, bytes]]:
 
 
 def wire_writes(pcap: Path) -> list[tuple[int, int, bytes]]:
-    """(drive, IDN, data) of each SoE write request tshark finds, once per request (an SM0
-    write is captured going out and coming back)."""
-    fields = ["ecat_mailbox.soe_opcode", "ecat_mailbox.soe_header_driveno",
-              "ecat_mailbox.soe_idn", "ecat_mailbox.soe_data"]
-    rows: list[tuple[str, ...]] = []
-    for p in tshark_fields(pcap, fields, display_filter="ecat_mailbox.soe_opcode == 3"):
-        row = tuple(v[0] if v else "" for v in p.values())
-        if not rows or rows[-1] != row:
-            rows.append(row)
-    return [(int(drive), int(idn, 0), bytes.fromhex(data.replace(":", "")))
-            for _op, drive, idn, data in rows]
+    """(drive, IDN, data) of each SoE write request tshark finds, once per request."""
+    return [(drive, idn, data) for op, drive, _, _, idn, data in soe_messages(pcap)
+            if op == 3]
 
 
 def test_compiled_soe_drive_reaches_op_with_every_idn_written_in_order(tmp_path, eni_schema,

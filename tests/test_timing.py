@@ -13,7 +13,6 @@ from __future__ import annotations
 import json
 import struct
 import sys
-import time
 from pathlib import Path
 
 import pytest
@@ -121,7 +120,7 @@ def test_eeprom_is_busy_while_reading(lib):
     run(seg, fp(Cmd.FPWR, 0x0508, bytes(8)))        # read-only to the master: stays 0
     run(seg, fp(Cmd.FPWR, 0x0502, struct.pack("<HI", 0x0100, 8)))   # read word 8
     read_ns = timing.TABLE["drive"].eeprom_read_ns
-    assert read_ns == 720_000
+    assert read_ns == 690_000
     clock.advance(read_ns - 1_000)
     [status, data] = run(seg, fp(Cmd.FPRD, 0x0502, 2), fp(Cmd.FPRD, 0x0508, 8))
     assert status.data == struct.pack("<H", 0x8140)              # busy, as a real ESC
@@ -184,6 +183,71 @@ def test_mailbox_reply_is_not_readable_before_its_latency(lib):
     assert status.data[0] & 0x08                                   # mailbox full
     [reply] = run(seg, fp(Cmd.FPRD, 0x1080, 128))
     assert reply.wkc == 1 and reply.data[8] == 0x43 and reply.data[9:12] == b"\x18\x10\x01"
+
+
+def test_the_read_event_clears_when_the_firmware_starts_its_reply(lib):
+    """After the master read a reply, SM1's status shows the read event (0x02) until the
+    firmware writes the first byte of its next reply (0x00), then full (0x09) when the
+    last is written: the sequence of the real EL6910 (ethercrab-rs/ethercrab
+    tests/replay-mailbox-el6910.pcapng: 0x02 for about 1.16 ms, 0x00 for about 0.6 ms).
+    Without a reply start (the drive kind's table) it stays 0x02 until the reply."""
+    for start_ms, expected in ((1, [0x02, 0x00, 0x09]), (None, [0x02, 0x02, 0x09])):
+        clock = Clock()
+        figures = {"mailbox_reply_ms": 2} | ({"reply_start_ms": start_ms} if start_ms else {})
+        seg = line(lib, "EXD-402", clock=clock, model=timing.overridden({"drive": figures}))
+        addressed(seg)
+        to_preop(seg, clock)
+        request = SDO_UPLOAD_1018_01.ljust(128, b"\0")
+        run(seg, fp(Cmd.FPWR, 0x1000, request))
+        clock.advance(2 * MS)
+        [reply] = run(seg, fp(Cmd.FPRD, 0x1080, 128))
+        assert reply.wkc == 1
+        again = request[:5] + bytes((0x23,)) + request[6:]       # the next mailbox counter
+        [d] = run(seg, fp(Cmd.FPWR, 0x1000, again))
+        assert d.wkc == 1
+        seen = []
+        for step in (MS - 1, 1, MS):
+            clock.advance(step)
+            [status] = run(seg, fp(Cmd.FPRD, 0x080D, 1))
+            seen.append(status.data[0])
+        assert seen == expected, start_ms
+
+
+def test_figures_for_a_kind_replace_its_devices_own():
+    """The EL6910 has its own measured figures (DEVICES) unless the user gives figures for
+    its kind, `firmware`: they are then meant for every firmware device."""
+    assert timing.EL6910 in Timing().devices
+    assert timing.EL6910 in timing.overridden({"drive": {"mailbox_reply_ms": 5}}).devices
+    assert timing.overridden({"firmware": {"mailbox_reply_ms": 5}}).devices == {}
+
+
+def test_the_firmware_answers_one_request_at_a_time(lib):
+    """A second request written while the firmware still works on the first (a master that
+    sends the next request ahead of reading the answer) is answered a whole latency after
+    the first answer, not in parallel with it: one firmware, one mailbox handler."""
+    clock = Clock()
+    seg = line(lib, "EXD-402", clock=clock)
+    addressed(seg)
+    to_preop(seg, clock)
+    latency = timing.TABLE["drive"].mailbox_reply_ns
+    first = SDO_UPLOAD_1018_01.ljust(128, b"\0")
+    second = bytearray(first)
+    second[5] = 0x23                                  # counter 2
+    second[11] = 0x02                                 # 0x1018:02
+    [d] = run(seg, fp(Cmd.FPWR, 0x1000, first))
+    assert d.wkc == 1
+    clock.advance(latency // 2)
+    [d] = run(seg, fp(Cmd.FPWR, 0x1000, bytes(second)))
+    assert d.wkc == 1                                 # SM0 taken: the firmware read it
+    clock.advance(latency // 2 + 1)
+    [reply] = run(seg, fp(Cmd.FPRD, 0x1080, 128))
+    assert reply.wkc == 1 and reply.data[9:12] == b"\x18\x10\x01"
+    clock.advance(latency - 2)                        # the second's latency not yet over
+    [reply] = run(seg, fp(Cmd.FPRD, 0x1080, 128))
+    assert reply.wkc == 0
+    clock.advance(1)
+    [reply] = run(seg, fp(Cmd.FPRD, 0x1080, 128))
+    assert reply.wkc == 1 and reply.data[9:12] == b"\x18\x10\x02"
 
 
 def test_a_request_written_again_is_answered_once(lib):
@@ -332,10 +396,10 @@ def test_our_master_reaches_op_on_realistic_drives():
     """Eight drives with the table's times: apply's timeouts fit them.  The drives' PS and
     SO take 100 ms each, so the line cannot be in OP sooner (a lower bound only)."""
     plan = drives_plan(8)
-    start = time.monotonic()
     with Network.virtual(plan, esi=[ESI], timing=Timing()) as net:
+        start = net.clock.monotonic()
         net.up()
-        took = time.monotonic() - start
+        took = net.clock.monotonic() - start
         assert [s.state for s in net.segment.slaves] == [AlState.OP] * 8
         assert all(s.timing is not None and s.timing.kind == "drive"
                    for s in net.segment.slaves)

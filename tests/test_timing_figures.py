@@ -51,8 +51,8 @@ def test_an_unknown_figure_is_refused_with_the_figures_there_are(tmp_path):
     with pytest.raises(EcatcfgError) as exc:
         _load(tmp_path, {"esc": {"eeprom_read": 1}})
     assert str(exc.value).endswith(
-        "'esc': unknown key 'eeprom_read' (mailbox_reply_ms, eeprom_read_ms, "
-        "eeprom_write_ms, state_change_ms)")
+        "'esc': unknown key 'eeprom_read' (mailbox_reply_ms, reply_start_ms, "
+        "eeprom_read_ms, eeprom_write_ms, state_change_ms)")
 
 
 def _kind_without_profile_402(tmp_path: Path, words: bool) -> str:

@@ -18,7 +18,6 @@ import re
 import struct
 import subprocess
 import sys
-import time
 from ipaddress import IPv4Address
 from pathlib import Path
 
@@ -346,7 +345,7 @@ def test_the_emulated_slave_holds_what_the_topology_set(esi_file, tmp_path):
                 for a in (0x0400, 0x0410, 0x0420)] == [2498, 2500, 50000, 2498, 1000, 50000]
         # The ESC runs its SM watchdog with them: half a second without outputs expires the
         # power-on 100 ms, not the 5 s the topology set.
-        later = time.monotonic() + 0.5
+        later = net.clock.monotonic() + 0.5
         for slave in (drive, io):
             slave.check_watchdog(later)
             assert (slave.state, slave.error) == (AlState.OP, False)

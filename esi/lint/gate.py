@@ -13,11 +13,14 @@ read (EEPROM, the XML schema: see docs/lint.md "Which lint errors stop compile")
 
 from __future__ import annotations
 
-import hashlib
+from collections.abc import Callable
 from pathlib import Path
 
+from ecatcfg.esi.cache import content_digest
 from ecatcfg.esi.lint.finding import FileResult, Finding
 from ecatcfg.esi.lint.runner import LintOptions, Target, lint_file
+from ecatcfg.esi.model import EsiFile
+from ecatcfg.esi.reader import ElementSpans
 from ecatcfg.fileio import read_input
 
 STOPS_COMPILE: frozenset[str] = frozenset({
@@ -54,34 +57,40 @@ DOES_NOT_STOP: dict[str, str] = {
     "ESI503": "Eeprom/ByteSize: compile does not read the EEPROM part",
     "ESI601": "a slot's unknown module ident: the resolver refuses plugging it",
     "ESI602": "a missing module library: the library and the resolver refuse it",
-    "ESI604": "a slot group: the resolver refuses a module in a grouped slot",
+    "ESI604": "a DependOnSlotGroup index in a slot of no group: the resolver refuses that "
+              "module there with its own message",
     "XSD001": "compile validates no schema; the schema errors that change a value compile "
               "reads are ESI002 and the other rules here",
 }
 
 
-_cache: dict[tuple[Path, str, bytes], FileResult] = {}
+_cache: dict[tuple[Path, str, str], FileResult] = {}
 _CACHE_FILES = 64       # a long-running process (a fuzz campaign) must not grow without end
 
 
-def file_findings(path: Path, shown: str, others: list[Path]) -> FileResult:
+def file_findings(path: Path, shown: str, others: list[Path],
+                  loaded: Callable[[Path, str], tuple[EsiFile, ElementSpans] | None] | None
+                  = None) -> FileResult:
     """The findings of the rules that stop compile in one ESI file, linted once per
     process while its content is unchanged (a sweep compiles the devices of one file one
     after another).  Keyed by a digest of the content, not the modification time, whose
     granularity (a clock tick) lets a file rewritten at once with the same size look
-    unchanged."""
+    unchanged.  ``loaded(path, digest)``: the model and element spans already read from
+    that very content (``Library.loaded``), which lint then takes instead of parsing and
+    reading the file again."""
     try:
-        digest = hashlib.blake2b(read_input(path, shown), digest_size=16).digest()
+        digest = content_digest(read_input(path, shown))
     except OSError:
-        digest = b""                        # lint reports the unreadable file (ESI001)
+        digest = ""                         # lint reports the unreadable file (ESI001)
     key = (path, shown, digest)
     found = _cache.get(key)
     if found is None:
         # Named directly, a file is never skipped (``None`` is for non-ESI files in folders).
         if len(_cache) >= _CACHE_FILES:
             del _cache[next(iter(_cache))]          # the oldest
-        found = _cache[key] = lint_file(Target(path, shown, True),
-                                        LintOptions(STOPS_COMPILE), others) or FileResult(shown)
+        known = loaded(path, digest) if loaded is not None and digest else None
+        found = _cache[key] = lint_file(Target(path, shown, True), LintOptions(STOPS_COMPILE),
+                                        others, known) or FileResult(shown)
     return found
 
 

@@ -10,7 +10,6 @@ from __future__ import annotations
 import bisect
 import os
 import time
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
@@ -24,6 +23,8 @@ from ecatcfg.esi.lint.context import FileContext
 from ecatcfg.esi.lint.finding import DeviceRef, FileResult, Finding
 from ecatcfg.esi.lint.rules import RULES, iter_checks
 from ecatcfg.esi.lint.schema import SchemaSet
+from ecatcfg.esi.model import EsiFile
+from ecatcfg.esi.reader import ElementSpans
 from ecatcfg.fileio import read_input
 
 
@@ -77,11 +78,18 @@ class _Emitter:
                                          RULES[rule_id].severity, message, device))
 
 
-def lint_file(target: Target, options: LintOptions, others: list[Path]) -> FileResult | None:
-    """Lint one file; ``None`` for a non-ESI XML file met inside a folder (skipped)."""
+def lint_file(target: Target, options: LintOptions, others: list[Path],
+              known: tuple[EsiFile, ElementSpans] | None = None) -> FileResult | None:
+    """Lint one file; ``None`` for a non-ESI XML file met inside a folder (skipped).
+    ``known``: the file's model and element spans, already read from the same content
+    (the rules only read them), instead of parsing and reading the file again (unless a
+    schema is to be validated: that needs the tree)."""
     start = time.perf_counter()
     result = FileResult(target.shown)
     out = _Emitter(target.shown, options.active)
+    if known is not None and options.schema_dir is None:
+        esi, where = known
+        return _checked(target, options, others, result, out, start, esi, where, None)
     try:
         data = read_input(target.path, target.shown)
         tree = xmlsafe.parse_bytes(data, target.shown, strip=False)
@@ -110,11 +118,16 @@ def lint_file(target: Target, options: LintOptions, others: list[Path]) -> FileR
             result.schema_missing = str(schemas.path_for(root_name))
 
     xmlsafe.strip_namespaces(tree)
-    within = "EtherCATInfo/" if tree.getroot().tag == reader.LIST_ROOT else ""
-    spans = element_spans(tree, f"{within}Descriptions/Devices/Device")
-    result.module_spans = (element_spans(tree, f"{within}Descriptions/Modules/Module")
-                           + element_spans(tree, "Modules/Module"))
-    esi = reader.read_tree(tree, target.shown)
+    return _checked(target, options, others, result, out, start,
+                    reader.read_tree(tree, target.shown), reader.spans_of(tree), schema_errors)
+
+
+def _checked(target: Target, options: LintOptions, others: list[Path], result: FileResult,
+             out: _Emitter, start: float, esi: EsiFile, where: ElementSpans,
+             schema_errors: list[tuple[int, int | None, str]] | None) -> FileResult:
+    """The rules run over a file's model, findings tied to its Device elements."""
+    spans = where.devices
+    result.module_spans = where.modules
     devices = [DeviceRef(d.vendor.id, d.product_code, d.revision, d.type_name, d.source.line)
                for d in esi.devices]
     result.devices = devices
@@ -151,22 +164,6 @@ def _done(result: FileResult, out: _Emitter, start: float) -> FileResult:
     return result
 
 
-def element_spans(tree: etree._ElementTree, path: str) -> list[tuple[int, int | None]]:
-    """(first line, first line after it) of each element at ``path`` below the root, in
-    document order (``None``: it runs to the end of the file)."""
-    spans: list[tuple[int, int | None]] = []
-    for el in tree.getroot().iterfind(path):
-        node: etree._Element | None = el
-        end: int | None = None
-        while node is not None and end is None:
-            nxt = node.getnext()
-            if nxt is not None:
-                end = nxt.sourceline
-            node = node.getparent()
-        spans.append((el.sourceline or 0, end))
-    return spans
-
-
 # -- many files -----------------------------------------------------------------------------
 
 def default_jobs() -> int:
@@ -191,6 +188,9 @@ def lint_paths(targets: list[Target], options: LintOptions, jobs: int | None = N
             if progress:
                 progress(done, len(targets))
     else:
+        # Only here: the compile gate lints one file at a time, in the compiling process.
+        from concurrent.futures import ProcessPoolExecutor, as_completed
+
         schemas = _schema_set(options)
         if schemas is not None:        # compile once here; forked workers inherit them
             for root in reader.ROOTS:

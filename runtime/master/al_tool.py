@@ -13,8 +13,8 @@ code (0x0134) are read until the slave is in the state, shows an error (the refu
 from __future__ import annotations
 
 import struct
-import time
 
+from ecatcfg.runtime.clock import monotonic
 from ecatcfg.errors import EcatcfgError
 from ecatcfg.esc import (AL_ERROR_ACK, AL_STATE_MASK, AL_STATUS_ERROR, AlState, Cmd, Reg,
                          al_state_name, al_status_name)
@@ -88,13 +88,13 @@ def _decode(position: int, data: bytes | bytearray, requested: AlState | None = 
 
 
 def _read_job(position: int, out: dict[int, SlaveAlStatus]) -> Job:
-    deadline = time.monotonic() + TIMEOUT_COMMAND
+    deadline = monotonic() + TIMEOUT_COMMAND
     while True:
         reply = yield [_status(position)]
         if reply is not None and reply[0].wkc == 1:
             out[position] = _decode(position, reply[0].data)
             return
-        if time.monotonic() > deadline:
+        if monotonic() > deadline:
             raise StatesError(f"slave {position}: no answer to the AL status read (0x0130)")
 
 
@@ -111,20 +111,20 @@ def _request_job(before: SlaveAlStatus, target: AlState, timeout: float,
     adp = -position & 0xFFFF
     control = int(target) | (AL_ERROR_ACK if before.error else 0)
     write = Datagram.physical(Cmd.APWR, adp, Reg.AL_CONTROL, struct.pack("<H", control))
-    deadline = time.monotonic() + TIMEOUT_COMMAND
+    deadline = monotonic() + TIMEOUT_COMMAND
     while True:
         reply = yield [write]
         if reply is not None and reply[0].wkc == 1:
             break
-        if time.monotonic() > deadline:
+        if monotonic() > deadline:
             raise StatesError(f"slave {position}: the AL control write (0x0120) of "
                               f"{target.name} was not answered")
-    deadline = time.monotonic() + timeout
+    deadline = monotonic() + timeout
     error_since: float | None = None
     last = before
     while True:
         reply = yield [_status(position)]
-        now = time.monotonic()
+        now = monotonic()
         if reply is not None and reply[0].wkc == 1:
             last = _decode(position, reply[0].data, target)
             if last.reached:

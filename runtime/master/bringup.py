@@ -17,10 +17,10 @@ The order follows what TwinCAT and EC-Engineer do (``docs/eni-exports.md`` ยง2-ย
 from __future__ import annotations
 
 import struct
-import time
 from collections.abc import Callable
 from typing import TYPE_CHECKING
 
+from ecatcfg.runtime.clock import monotonic
 from ecatcfg.eni.plan import NetworkPlan, SlavePlan
 from ecatcfg.esc import (AL_ERROR_ACK, AL_STATE_MASK, AL_STATUS_ERROR, ESC_FEATURE_DC,
                          AlState, Cmd, Reg, Transition)
@@ -334,7 +334,7 @@ class Master:
     def run_transition(self, transition: Transition,
                        skip: frozenset[str] | set[str] = frozenset()) -> None:
         """Every slave's InitCmds of ``transition`` (but the slaves named in ``skip``)."""
-        start = time.monotonic()
+        start = self.transport.clock.monotonic()
         frames = self.transport.counters.frames_sent
         self._event("transition", f"{transition.value}: {transition.name} ...")
         # Requires=cycle: from PREOP->SAFEOP on, process data runs while slaves change state.
@@ -361,11 +361,11 @@ class Master:
             raise
         self.state = transition.target
         self._event("transition", f"{transition.value}: {self.state.name} in "
-                    f"{(time.monotonic() - start) * 1000:.0f} ms, "
+                    f"{(self.transport.clock.monotonic() - start) * 1000:.0f} ms, "
                     f"{self.transport.counters.frames_sent - frames} frames")
 
     def _tick(self) -> None:
-        now = time.monotonic()
+        now = self.transport.clock.monotonic()
         if now >= self._next_cycle:
             self._next_cycle = now + self.cyclic.cycle_time_us / 1e6
             self.cyclic.exchange(self.transport, self.state)
@@ -417,7 +417,7 @@ class Master:
         delays = propagation_delays(measured, reference, ports, self.found)
         self.dc_delays = {s.name: delays[s.name] for s in dc}
         ref_rx = times[reference.name][1]
-        master_time = time.time_ns() - EPOCH_2000_NS
+        master_time = self.transport.clock.time_ns() - EPOCH_2000_NS
         writes = []
         for s in dc:
             delay = delays[s.name]
@@ -443,7 +443,7 @@ class Master:
         threshold = self.dc_threshold_ns
         armw = _drift_frame(reference)
         tick = self._tick if self._cycling else None
-        start = time.monotonic()
+        start = self.transport.clock.monotonic()
         frames = 0
         while True:
             diffs = self.read_dc_differences(dc)
@@ -451,10 +451,10 @@ class Master:
             if not off:
                 self._event("dc", f"DC: every system time difference under {threshold} ns "
                             f"after {frames} drift frames, "
-                            f"{(time.monotonic() - start) * 1000:.0f} ms (largest "
+                            f"{(self.transport.clock.monotonic() - start) * 1000:.0f} ms (largest "
                             f"{max(abs(d or 0) for d in diffs.values())} ns)")
                 return
-            if time.monotonic() - start > self.dc_timeout_s:
+            if self.transport.clock.monotonic() - start > self.dc_timeout_s:
                 name = max(off, key=lambda n: float("inf") if off[n] is None
                            else abs(off[n] or 0))
                 worst = off[name]
@@ -514,7 +514,7 @@ class Master:
         got = yield from until_answered(
             [Datagram.physical(Cmd.FPRD, source.phys_addr, Reg.DC_SYSTEM_TIME, 8),
              Datagram.physical(Cmd.FPRD, slave.phys_addr, Reg.DC_SYSTEM_TIME, 28)],
-            time.monotonic() + TIMEOUT_COMMAND, failed)
+            monotonic() + TIMEOUT_COMMAND, failed)
         theirs, = struct.unpack("<Q", got[0].data)
         own, old_offset, old_delay = struct.unpack_from("<Q8xqI", got[1].data)
         # A read of 0x0910 gives the local copy of system time less the delay, the time when
@@ -540,7 +540,7 @@ class Master:
         if not self.dc_threshold_ns:
             return
         _, reference = self._dc_slaves()
-        deadline = time.monotonic() + self.dc_timeout_s
+        deadline = monotonic() + self.dc_timeout_s
         read = Datagram.physical(Cmd.FPRD, slave.phys_addr, Reg.DC_SYSTEM_TIME_DIFFERENCE, 4)
         drift = [_drift_frame(reference)] if reference is not None else []
         last: int | None = None
@@ -559,15 +559,15 @@ class Master:
                                             and last <= before)
                     if last < self.dc_threshold_ns and settled:
                         return
-            if time.monotonic() > deadline:
+            if monotonic() > deadline:
                 raise DcSyncError(f"DC did not converge: system time difference (0x092C) "
                                   f"{last} ns, threshold {self.dc_threshold_ns} ns, after "
                                   f"{self.dc_timeout_s:g} s", slave.name, {slave.name: last})
 
     def _broadcast_write(self, ado: int, data: bytes) -> None:
-        deadline = time.monotonic() + TIMEOUT_COMMAND
+        deadline = self.transport.clock.monotonic() + TIMEOUT_COMMAND
         while self.transport.exchange([Datagram.physical(Cmd.BWR, 0, ado, data)]) is None:
-            if time.monotonic() > deadline:
+            if self.transport.clock.monotonic() > deadline:
                 raise ApplyError("no frame came back for the DC receive-time latch")
 
 
@@ -590,7 +590,7 @@ def _read_receive_times(slave: SlavePlan,
                         out: dict[str, tuple[tuple[int, int, int, int], int]]) -> Job:
     ports = Datagram.physical(Cmd.FPRD, slave.phys_addr, Reg.DC_RECEIVE_TIME_PORT0, 16)
     unit = Datagram.physical(Cmd.FPRD, slave.phys_addr, 0x0918, 8)
-    got = yield from until_answered([ports, unit], time.monotonic() + TIMEOUT_COMMAND,
+    got = yield from until_answered([ports, unit], monotonic() + TIMEOUT_COMMAND,
                                     ApplyError("cannot read the DC receive times", slave.name))
     p0, p1, p2, p3 = struct.unpack("<IIII", got[0].data)
     rx, = struct.unpack("<Q", got[1].data)
@@ -704,5 +704,5 @@ def _write_by_position(position: int, ado: int, data: bytes) -> Job:
 
 def _write_until_ok(slave: SlavePlan, ado: int, data: bytes) -> Job:
     dg = Datagram.physical(Cmd.FPWR, slave.phys_addr, ado, data)
-    yield from until_answered([dg], time.monotonic() + TIMEOUT_COMMAND,
+    yield from until_answered([dg], monotonic() + TIMEOUT_COMMAND,
                               ApplyError(f"cannot write DC register 0x{ado:04X}", slave.name))

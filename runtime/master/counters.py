@@ -15,8 +15,8 @@ a 2-port terminal shows ports A and B, not four ports of which two can never cou
 
 from __future__ import annotations
 
-import time
 
+from ecatcfg.runtime.clock import monotonic
 from ecatcfg.esc import PORT_LETTERS, Cmd, Reg
 from ecatcfg.record import record
 from ecatcfg.runtime.master.al_tool import StatesError
@@ -75,7 +75,7 @@ class SlaveCounters:
 
 def _job(position: int, clear: bool, out: dict[int, SlaveCounters]) -> Job:
     adp = -position & 0xFFFF
-    deadline = time.monotonic() + TIMEOUT_COMMAND
+    deadline = monotonic() + TIMEOUT_COMMAND
     read = Datagram.physical(Cmd.APRD, adp, Reg.RX_ERROR_COUNTER, BLOCK)
     ports = Datagram.physical(Cmd.APRD, adp, Reg.PORT_DESCRIPTOR, 1)
     while True:
@@ -84,7 +84,7 @@ def _job(position: int, clear: bool, out: dict[int, SlaveCounters]) -> Job:
             out[position] = SlaveCounters.from_block(position, bytes(reply[0].data),
                                                      reply[1].data[0])
             break
-        if time.monotonic() > deadline:
+        if monotonic() > deadline:
             raise StatesError(f"slave {position}: no answer to the error counter read "
                               "(0x0300-0x0313)")
     if not clear:
@@ -94,7 +94,7 @@ def _job(position: int, clear: bool, out: dict[int, SlaveCounters]) -> Job:
         reply = yield [wipe]
         if reply is not None and reply[0].wkc == 1:
             return
-        if time.monotonic() > deadline:
+        if monotonic() > deadline:
             raise StatesError(f"slave {position}: clearing the error counters (0x0300) "
                               "was not answered")
 

@@ -27,7 +27,6 @@ copies cost per cycle").
 from __future__ import annotations
 
 import struct
-import time
 from array import array
 
 from ecatcfg.eni.plan import CopyInfo, CyclicCmd, NetworkPlan
@@ -319,7 +318,7 @@ class CyclicFrames:
     def exchange(self, transport: Transport, state: AlState, timeout: float = 0.01) -> bool:
         """One cycle: every frame with the commands of ``state``; ``True`` if all came back
         with the working counters expected (each slot's ``expected``)."""
-        now = time.perf_counter()
+        now = transport.clock.monotonic()
         stats = self.stats
         if self._last_start is not None:
             stats.add_period((now - self._last_start) * 1e6)

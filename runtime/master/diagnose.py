@@ -46,10 +46,10 @@ the slave's identity), a DC refusal is compared with what the ESI says of the SY
 from __future__ import annotations
 
 import struct
-import time
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
+from ecatcfg.runtime.clock import monotonic
 from ecatcfg.errors import EcatcfgError
 from ecatcfg.esc import (AL_STATE_MASK, AL_STATUS_ERROR, FMMU_SIZE, RX_PDO_MAPPING,
                          SII_BOOTSTRAP_MAILBOX, SII_FIRST_CATEGORY, SII_PRODUCT_CODE,
@@ -119,13 +119,13 @@ class _Unreadable(EcatcfgError):
 
 def _read(position: int, ado: int, length: int, out: dict[int, bytes]) -> Step[None]:
     dg = Datagram.physical(Cmd.APRD, -position & 0xFFFF, ado, length)
-    deadline = time.monotonic() + TIMEOUT_COMMAND
+    deadline = monotonic() + TIMEOUT_COMMAND
     while True:
         reply = yield [dg]
         if reply is not None and reply[0].wkc == 1:
             out[ado] = bytes(reply[0].data)
             return
-        if time.monotonic() > deadline:
+        if monotonic() > deadline:
             return
 
 
@@ -136,7 +136,7 @@ def _registers(position: int, spans: list[tuple[int, int]]) -> Step[dict[int, by
     adp = -position & 0xFFFF
     wanted = {ado: Datagram.physical(Cmd.APRD, adp, ado, n) for ado, n in spans}
     out: dict[int, bytes] = {}
-    deadline = time.monotonic() + TIMEOUT_COMMAND
+    deadline = monotonic() + TIMEOUT_COMMAND
     while True:
         missing = [ado for ado in wanted if ado not in out]
         if not missing:
@@ -146,7 +146,7 @@ def _registers(position: int, spans: list[tuple[int, int]]) -> Step[dict[int, by
             for ado, dg in zip(missing, reply):
                 if dg.wkc == 1:
                     out[ado] = bytes(dg.data)
-        if time.monotonic() > deadline:
+        if monotonic() > deadline:
             return out
 
 
@@ -409,12 +409,12 @@ def _write(position: int, ado: int, data: bytes) -> Step[None]:
     """One register write to the slave at ``position``, again until it is answered;
     :class:`_Unreadable` after the command timeout."""
     dg = Datagram.physical(Cmd.APWR, -position & 0xFFFF, ado, data)
-    deadline = time.monotonic() + TIMEOUT_COMMAND
+    deadline = monotonic() + TIMEOUT_COMMAND
     while True:
         reply = yield [dg]
         if reply is not None and reply[0].wkc == 1:
             return
-        if time.monotonic() > deadline:
+        if monotonic() > deadline:
             raise _Unreadable(f"0x{ado:04X} not written (no answer)")
 
 
@@ -422,7 +422,7 @@ def _sii_categories(position: int) -> Step[_SiiLayout]:
     from ecatcfg.esi.sii import (CAT_END, CAT_RXPDO, CAT_SYNCM, CAT_TXPDO, HEADER_SIZE,
                                  SiiError, decode)
     from ecatcfg.runtime.master.scan import sii_words
-    deadline = time.monotonic() + SII_TIMEOUT
+    deadline = monotonic() + SII_TIMEOUT
     image = bytearray(HEADER_SIZE)
     image[0] = 1                       # not an erased header (decode refuses those)
     word = SII_FIRST_CATEGORY
@@ -835,7 +835,7 @@ def _mailbox_sms(position: int, boot: bool, fields: dict[str, Any],
         raise _Unreadable("SM0/SM1 registers (0x0800) not read")
     word = SII_BOOTSTRAP_MAILBOX if boot else SII_STD_MAILBOX
     try:
-        words = yield from sii_words(position, word, time.monotonic() + SII_TIMEOUT)
+        words = yield from sii_words(position, word, monotonic() + SII_TIMEOUT)
     except ApplyError as exc:
         raise _Unreadable(f"SII words 0x{word:04X}-0x{word + 3:04X} not read: "
                           f"{exc.message}") from None

@@ -15,9 +15,9 @@ layout beyond the identity and the configuration-area checksum (``esi/sii.py``).
 from __future__ import annotations
 
 import struct
-import time
 from collections.abc import Callable
 
+from ecatcfg.runtime.clock import monotonic
 from ecatcfg.esc import (EEPROM_BUSY, EEPROM_ERROR_ACKNOWLEDGE, EEPROM_ERRORS, SII_ALIAS,
                          SII_CHECKSUM, SII_SIZE, SII_VENDOR_ID, Cmd, Reg,
                          eeprom_write_request)
@@ -83,7 +83,7 @@ class Eeprom:
     def _take(self) -> Step[bytes]:
         """0x0500 = 0: the EEPROM belongs to EtherCAT (not the PDI) for what follows."""
         owner = Datagram.physical(Cmd.APWR, self.adp, Reg.EEPROM_CONFIG, b"\x00")
-        yield from until_answered([owner], time.monotonic() + READ_TIMEOUT,
+        yield from until_answered([owner], monotonic() + READ_TIMEOUT,
                                   ApplyError(f"position {self.position}: no answer"))
         return b""
 
@@ -109,7 +109,7 @@ class Eeprom:
 
     def _words(self, word: int) -> Step[bytes]:
         self.reads += 1
-        return (yield from sii_words(self.position, word, time.monotonic() + READ_TIMEOUT))
+        return (yield from sii_words(self.position, word, monotonic() + READ_TIMEOUT))
 
     def write(self, image: bytes, current: bytes,
               progress: Callable[[int], None] | None = None) -> list[int]:
@@ -138,7 +138,7 @@ class Eeprom:
     def _write_word(self, word: int, value: int) -> Step[None]:
         """One word: send the write command, poll 0x0502 until not busy; a refused command
         (no acknowledge: the last word's write cycle) is sent again until the deadline."""
-        deadline = time.monotonic() + WRITE_TIMEOUT
+        deadline = monotonic() + WRITE_TIMEOUT
         request = Datagram.physical(Cmd.APWR, self.adp, Reg.EEPROM_CONTROL,
                                     eeprom_write_request(word, value))
         status = Datagram.physical(Cmd.APRD, self.adp, Reg.EEPROM_CONTROL, 2)
@@ -153,12 +153,12 @@ class Eeprom:
                 control, = struct.unpack("<H", got[0].data)
                 if not control & EEPROM_BUSY:
                     break
-                if time.monotonic() > deadline:
+                if monotonic() > deadline:
                     raise ApplyError(f"{where}: the EEPROM stays busy (0x0502 = "
                                      f"0x{control:04X})")
             if control & EEPROM_ERRORS == EEPROM_ERROR_ACKNOWLEDGE:
                 self.refused += 1
-                if time.monotonic() > deadline:
+                if monotonic() > deadline:
                     raise ApplyError(f"{where}: the EEPROM does not acknowledge (0x0502 = "
                                      f"0x{control:04X})")
                 continue

@@ -14,8 +14,8 @@ refuses them (``eni/contents.py``).
 
 from __future__ import annotations
 
-import time
 
+from ecatcfg.runtime.clock import monotonic
 from ecatcfg.eni.plan import FoeInitCmd
 from ecatcfg.esc import FoeOpCode
 from ecatcfg.runtime.master.foe_client import FoeRead, FoeTransferError, FoeWrite
@@ -34,7 +34,7 @@ def run_transfer(channel: MailboxChannel, t: FoeRead | FoeWrite, timeout: float,
     request: bytes | None = t.first_request()
     while True:
         if request is not None:
-            yield from channel.send(request, time.monotonic() + TIMEOUT_COMMAND, who, what)
+            yield from channel.send(request, monotonic() + TIMEOUT_COMMAND, who, what)
         if t.done:
             if t.wrong_number is not None:
                 raise t.wrong_number
@@ -42,7 +42,7 @@ def run_transfer(channel: MailboxChannel, t: FoeRead | FoeWrite, timeout: float,
         try:
             # Unnamed: the callers put the slave and the command in front of the
             # FoeTransferError's text, which would else name them twice.
-            reply = yield from channel.receive(time.monotonic() + timeout, None, None)
+            reply = yield from channel.receive(monotonic() + timeout, None, None)
         except ApplyError as exc:
             raise FoeTransferError(exc.message) from None
         request = t.on_response(reply)

@@ -25,8 +25,8 @@ overrides it.  BOOT is refused by a slave without a boot loader (AL status code 
 from __future__ import annotations
 
 import struct
-import time
 
+from ecatcfg.runtime.clock import monotonic
 from ecatcfg.eni.plan import MailboxArea, MailboxPlan
 from ecatcfg.errors import EcatcfgError
 from ecatcfg.esc import (MAILBOX_PROTOCOL_BITS, SII_BOOTSTRAP_MAILBOX,
@@ -131,12 +131,12 @@ def _session(report: FoeReport, data: bytes | None, password: int, state: AlStat
     pos = report.position
     who = f"slave {pos}"
     adp = -pos & 0xFFFF
-    deadline = time.monotonic() + TIMEOUT_COMMAND
+    deadline = monotonic() + TIMEOUT_COMMAND
     status = yield from access(Datagram.physical(Cmd.APRD, adp, Reg.AL_STATUS, 2), deadline,
                                 f"{who}: reading the AL status (0x0130)")
     report.al_status_before = struct.unpack_from("<H", status.data)[0]
     report.identity_before = yield from _identity(adp, pos, who)
-    sii_deadline = time.monotonic() + TIMEOUT_COMMAND
+    sii_deadline = monotonic() + TIMEOUT_COMMAND
     try:
         boot = struct.unpack("<4H", (yield from sii_words(pos, SII_BOOTSTRAP_MAILBOX,
                                                           sii_deadline)))
@@ -168,7 +168,7 @@ def _session(report: FoeReport, data: bytes | None, password: int, state: AlStat
     yield from request_state(address, AlState.INIT, who)
     sm0 = SmConfig(rx_start, rx_size, SM_CONTROL_MBOX_OUT, True)
     sm1 = SmConfig(tx_start, tx_size, SM_CONTROL_MBOX_IN, True)
-    deadline = time.monotonic() + TIMEOUT_COMMAND
+    deadline = monotonic() + TIMEOUT_COMMAND
     yield from access(Datagram.physical(Cmd.FPWR, address, Reg.SM0,
                                          sm0.to_bytes() + sm1.to_bytes()),
                        deadline, f"{who}: writing SM0/SM1 ({target.name} mailbox, 0x0800)")
@@ -180,7 +180,7 @@ def _session(report: FoeReport, data: bytes | None, password: int, state: AlStat
                        protocols=["FoE"])
     channel = MailboxChannel(address, plan)
     yield from empty_sm1(SlaveMailbox(pos), channel)
-    started = time.monotonic()
+    started = monotonic()
     t: FoeRead | FoeWrite
     if data is None:
         t = FoeRead(report.name, password, mbx_out_size=rx_size, mbx_in_size=tx_size,
@@ -195,7 +195,7 @@ def _session(report: FoeReport, data: bytes | None, password: int, state: AlStat
         # Leave the slave as a firmware update leaves it: back in INIT.
         yield from request_state(address, AlState.INIT, who)
         raise FoeToolError(f"{who}, {what}: {exc}", foe_code=exc.code) from None
-    report.seconds = time.monotonic() - started
+    report.seconds = monotonic() - started
     report.packets, report.busy_replies = t.packets, t.busy_replies
     if isinstance(t, FoeRead):
         report.data = t.result
@@ -203,7 +203,7 @@ def _session(report: FoeReport, data: bytes | None, password: int, state: AlStat
     else:
         report.size = len(t.data)
     yield from request_state(address, AlState.INIT, who)
-    deadline = time.monotonic() + TIMEOUT_COMMAND
+    deadline = monotonic() + TIMEOUT_COMMAND
     yield from access(Datagram.physical(Cmd.FPWR, address, Reg.EEPROM_CONFIG, b"\x00"),
                        deadline, f"{who}: taking the SII EEPROM back (0x0500)")
     report.identity_after = yield from _identity(adp, pos, who)
@@ -211,12 +211,12 @@ def _session(report: FoeReport, data: bytes | None, password: int, state: AlStat
 
 def _identity(adp: int, pos: int, who: str) -> Step[Identity]:
     """The identity in the SII (words 0x08-0x0F), read while EtherCAT owns the EEPROM."""
-    deadline = time.monotonic() + TIMEOUT_COMMAND
+    deadline = monotonic() + TIMEOUT_COMMAND
     yield from access(Datagram.physical(Cmd.APWR, adp, Reg.EEPROM_CONFIG, b"\x00"),
                        deadline, f"{who}: taking the SII EEPROM (0x0500)")
     try:
-        ids = yield from sii_words(pos, SII_VENDOR_ID, time.monotonic() + TIMEOUT_COMMAND)
-        rev = yield from sii_words(pos, SII_REVISION, time.monotonic() + TIMEOUT_COMMAND)
+        ids = yield from sii_words(pos, SII_VENDOR_ID, monotonic() + TIMEOUT_COMMAND)
+        rev = yield from sii_words(pos, SII_REVISION, monotonic() + TIMEOUT_COMMAND)
     except ApplyError as exc:
         raise FoeToolError(str(exc)) from None
     vendor, product = struct.unpack("<II", ids)

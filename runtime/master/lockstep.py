@@ -15,10 +15,10 @@ costs is about the length of its longest per-slave chain.
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable, Generator
 from typing import TypeVar
 
+from ecatcfg.runtime.clock import monotonic, using
 from ecatcfg.runtime.master.transport import Transport, pack
 from ecatcfg.runtime.wire import Datagram
 
@@ -31,14 +31,17 @@ IDLE_S = 0.0005     # when every job only waits, do not spin the wire
 
 def run_jobs(transport: Transport, jobs: list[Job],
              on_round: Callable[[], None] | None = None) -> None:
-    """Run ``jobs`` to completion; an exception from any job ends the step and propagates."""
-    active = start(jobs)
-    while active:
-        if on_round is not None:
-            on_round()
-        if not any(request for _, request in active):
-            time.sleep(IDLE_S)
-        active = one_round(transport, active)
+    """Run ``jobs`` to completion; an exception from any job ends the step and propagates.
+    The jobs run on the transport's clock (their deadlines: :func:`~ecatcfg.runtime.clock.monotonic`)."""
+    clock = transport.clock
+    with using(clock):
+        active = start(jobs)
+        while active:
+            if on_round is not None:
+                on_round()
+            if not any(request for _, request in active):
+                clock.sleep(IDLE_S)
+            active = one_round(transport, active)
 
 
 Pending = list[tuple[Job, list[Datagram]]]     # running jobs and the datagrams each wants
@@ -61,6 +64,12 @@ def one_round(transport: Transport, active: Pending, timeout: float | None = Non
     sent its replies (``None`` when a frame was lost); returns the jobs still running.
     An exception from a job propagates, or goes to ``on_error(job, exception)`` (the job
     then ends) when that is given."""
+    with using(transport.clock):
+        return _round(transport, active, timeout, on_error)
+
+
+def _round(transport: Transport, active: Pending, timeout: float | None,
+           on_error: Callable[[Job, Exception], None] | None) -> Pending:
     owned = [(i, dg) for i, (_, request) in enumerate(active) for dg in request]
     replies: dict[int, list[Datagram] | None] = {i: [] for i in range(len(active))}
     for frame in pack([dg for _, dg in owned]):
@@ -90,10 +99,10 @@ def until_answered(datagrams: list[Datagram], deadline: float,
                    error: Exception) -> Step[list[Datagram]]:
     """A job step: send ``datagrams`` every round until each comes back with working
     counter 1 (lost frames and refusals are sent again); returns the replies, or raises
-    ``error`` once ``deadline`` (``time.monotonic()``) has passed."""
+    ``error`` once ``deadline`` (:func:`~ecatcfg.runtime.clock.monotonic`) has passed."""
     while True:
         reply = yield datagrams
         if reply is not None and all(d.wkc == 1 for d in reply):
             return reply
-        if time.monotonic() > deadline:
+        if monotonic() > deadline:
             raise error

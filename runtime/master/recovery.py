@@ -28,9 +28,9 @@ the cycle's, with the cycle time as their timeout.
 from __future__ import annotations
 
 import struct
-import time
 from typing import TYPE_CHECKING, Protocol
 
+from ecatcfg.runtime.clock import monotonic, using
 from ecatcfg.eni.plan import NetworkPlan, SlavePlan, register_writes
 from ecatcfg.esc import (AL_ERROR_ACK, AL_STATE_MASK, AL_STATUS_ERROR, AUTO_INCREMENT_CMDS,
                          BROADCAST_CMDS, CONFIGURED_ADDRESS_CMDS, FMMU_SIZE, LOGICAL_CMDS,
@@ -71,7 +71,7 @@ class SlaveHealth:
     position: int               # where it is on the line (auto-increment position)
     online: bool = True         # in the network's state, its data exchanged and valid
     reason: str = ""            # why it is offline
-    since: float = 0.0          # time.monotonic() it went offline
+    since: float = 0.0          # monotonic() it went offline
     attempts: int = 0           # failed attempts to bring it back
     joining: bool = False       # being brought back now
     gave_up: bool = False       # MAX_ATTEMPTS failed: Network.recover() tries again
@@ -189,7 +189,7 @@ class Supervisor:
         self.health = {s.name: SlaveHealth(s.name, s.position) for s in master.plan.slaves}
         for name in self._absent_members():
             h = self.health[name]
-            h.online, h.since = False, time.monotonic()
+            h.online, h.since = False, self._now()
             h.reason = f"its hot-connect group ({self._group_of[name]!r}) is not on the line"
         self._pending: Pending = []
         self._incoming: list[Job] = []                # started, first round next cycle
@@ -243,7 +243,7 @@ class Supervisor:
         inputs = self.master.cyclic.inputs
         if ok and self._all_online and not self._pending and not self._al_wrong(inputs):
             return True                         # the usual cycle: nothing to look after
-        now = time.monotonic()
+        now = self._now()
         if not ok:
             ok = self._tolerated()
         if not ok or self._al_wrong(inputs):
@@ -264,7 +264,8 @@ class Supervisor:
             self._next_probe = now + PROBE_INTERVAL
             self._incoming.append(self._probe())
         if self._incoming:
-            self._pending += start(self._incoming)
+            with using(self.master.transport.clock):     # the jobs' first deadlines
+                self._pending += start(self._incoming)
             self._incoming = []
         if self._pending:
             self._pending = one_round(self.master.transport, self._pending, self.timeout,
@@ -298,7 +299,7 @@ class Supervisor:
             extra = sum(share for name in down for s, share in self._shares[name] if s is slot)
             if slot.wkc > slot.expected + extra:
                 return False
-            self._next_probe = min(self._next_probe, time.monotonic())
+            self._next_probe = min(self._next_probe, self._now())
         return True
 
     def _job_failed(self, job: Job, exc: Exception) -> None:
@@ -306,6 +307,10 @@ class Supervisor:
             raise exc
 
     # -- going offline and coming back ---------------------------------------------------------
+
+    def _now(self) -> float:
+        """Seconds on the master's clock (the wire's: simulated on a simulated wire)."""
+        return self.master.transport.clock.monotonic()
 
     def _event(self, kind: str, text: str, slave: str) -> None:
         self.master._event(kind, text, slave)
@@ -319,7 +324,7 @@ class Supervisor:
         h = self.health[name]
         if not h.online:
             return
-        h.online, h.reason, h.since = False, reason, time.monotonic()
+        h.online, h.reason, h.since = False, reason, self._now()
         self._all_online = False
         h.attempts, h.gave_up, h.next_try = 0, False, 0.0
         h.cause = []
@@ -360,7 +365,7 @@ class Supervisor:
         h.refused.clear()
         self._update_clear()
         self._event("online", f"{self._where(h)} is back in {self.master.state.name} after "
-                              f"{time.monotonic() - h.since:.2f} s", name)
+                              f"{self._now() - h.since:.2f} s", name)
 
     def _group_left(self, name: str) -> None:
         """A hot-connect group whose every slave stopped answering has left the line:
@@ -408,7 +413,7 @@ class Supervisor:
                                    f"({error}){why}", h.name)
             return
         wait = min(BACKOFF_FIRST * 2 ** (h.attempts - 1), BACKOFF_MAX)
-        h.next_try = time.monotonic() + wait
+        h.next_try = self._now() + wait
         self._event("retry", f"{self._where(h)}: attempt {h.attempts} of {MAX_ATTEMPTS} "
                              f"failed ({error}); again in {wait:g} s{why}", h.name)
 
@@ -459,7 +464,7 @@ class Supervisor:
                 return
             by_address = {s.phys_addr: s for s in self._by_name.values()}
             absent = self._absent_members()
-            now = time.monotonic()
+            now = monotonic()
             for pos in range(n):
                 addr_dg, state_dg = back[2 * pos], back[2 * pos + 1]
                 if addr_dg.wkc != 1 or state_dg.wkc != 1:
@@ -501,7 +506,7 @@ class Supervisor:
         yield from hotconnect.identify_job(head, position, found)
         if not found[(head.name, position)]:
             h.joining = False
-            h.next_try = time.monotonic() + PROBE_INTERVAL
+            h.next_try = monotonic() + PROBE_INTERVAL
             if ("identify", position) not in h.refused:
                 h.refused.add(("identify", position))
                 self._event("refused", f"hot-connect group {head.name!r}: the slave at "
@@ -528,7 +533,7 @@ class Supervisor:
             problem = compare(master.plan.slaves, plan, got, master.accept_newer_revision)
             if problem:
                 h.joining = False
-                h.next_try = time.monotonic() + PROBE_INTERVAL
+                h.next_try = monotonic() + PROBE_INTERVAL
                 if got.identity not in h.refused:
                     h.refused.add(got.identity)
                     self._event("refused", f"{self._where(h)}: another device is in its "
@@ -590,15 +595,15 @@ def _request(slave: SlavePlan, control: int, wait: AlState | None) -> Step[None]
     """Write AL control by position; with ``wait``, until the slave shows that state."""
     adp = slave.auto_inc_addr
     write = Datagram.physical(Cmd.APWR, adp, Reg.AL_CONTROL, struct.pack("<H", control))
-    yield from until_answered([write], time.monotonic() + TIMEOUT_COMMAND,
+    yield from until_answered([write], monotonic() + TIMEOUT_COMMAND,
                               ApplyError("no answer to the AL control write", slave.name))
     if wait is None:
         return
     read = Datagram.physical(Cmd.APRD, adp, Reg.AL_STATUS, 2)
-    deadline = time.monotonic() + TIMEOUT_STATE
+    deadline = monotonic() + TIMEOUT_STATE
     while True:
         back = yield [read]
         if back is not None and back[0].wkc == 1 and back[0].data[0] & AL_STATE_MASK == wait:
             return
-        if time.monotonic() > deadline:
+        if monotonic() > deadline:
             raise ApplyError(f"did not go to {wait.name}", slave.name)

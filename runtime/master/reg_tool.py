@@ -5,8 +5,8 @@ counter 0, which is reported as such."""
 
 from __future__ import annotations
 
-import time
 
+from ecatcfg.runtime.clock import clock_of
 from ecatcfg.esc import MAX_DATAGRAM_DATA, Cmd
 from ecatcfg.runtime.master.al_tool import StatesError, positions_on_line
 from ecatcfg.runtime.master.replay import TIMEOUT_COMMAND
@@ -30,9 +30,10 @@ def frames_of_another_master(link: Link, seconds: float = LISTEN_S) -> int:
     """EtherCAT frames that arrive on ``link`` while this process sends nothing: another
     master is running the line (its frames come back through the same interface).  On an
     EtherCAT line nothing else sends frames, so any frame at all is one."""
-    end = time.monotonic() + seconds
+    monotonic = clock_of(link).monotonic     # a simulated wire's own time
+    end = monotonic() + seconds
     seen = 0
-    while (left := end - time.monotonic()) > 0:
+    while (left := end - monotonic()) > 0:
         if link.recv(left) is not None:
             seen += 1
     return seen
@@ -49,7 +50,8 @@ def check_range(address: int, length: int) -> None:
 
 
 def _exchange(transport: Transport, dg: Datagram, what: str) -> Datagram:
-    deadline = time.monotonic() + TIMEOUT_COMMAND
+    monotonic = transport.clock.monotonic
+    deadline = monotonic() + TIMEOUT_COMMAND
     while True:
         back = transport.exchange([dg])
         if back is not None:
@@ -57,7 +59,7 @@ def _exchange(transport: Transport, dg: Datagram, what: str) -> Datagram:
                 return back[0]
             raise RegisterError(f"{what}: working counter {back[0].wkc}, expected 1 (the "
                                 "slave does not have this register area or refused)")
-        if time.monotonic() > deadline:
+        if monotonic() > deadline:
             raise RegisterError(f"{what}: no reply (frames lost)")
 
 

@@ -13,21 +13,22 @@ How a slave's commands of one transition are chained is ``transition.py``.
 from __future__ import annotations
 
 import struct
-import time
 from typing import TYPE_CHECKING, Any, TypeVar
 
+from ecatcfg.runtime.clock import monotonic
 from ecatcfg.eni.plan import (CoeInitCmd, EoeInitCmd, FoeInitCmd, InitCmd, MailboxPlan,
                               SoeInitCmd)
 from ecatcfg.eni.compare import compared, matches
 from ecatcfg.eni.words import init_cmd_name
 from ecatcfg.errors import EcatcfgError
-from ecatcfg.esc import (AL_STATUS_ERROR, SM1_STATUS, SM_ACTIVATE_REPEAT, SM_PDI_REPEAT_ACK, Cmd,
-                         Reg, al_state_name, al_status_name)
+from ecatcfg.esc import (AL_STATUS_ERROR, SM1_STATUS, SM_ACTIVATE_REPEAT, SM_PDI_REPEAT_ACK,
+                         SM_STATUS_MAILBOX_FULL, Cmd, Reg, al_state_name, al_status_name)
 from ecatcfg.record import record
 from ecatcfg.runtime.master.lockstep import Job, Step, until_answered
 from ecatcfg.runtime.wire import Datagram, datagram_for
 
 if TYPE_CHECKING:     # imported where used: only ENIs with CoE InitCmds need the SDO client
+    from ecatcfg.runtime.mailbox import MailboxProtocolError, SdoAbort
     from ecatcfg.runtime.master.sdo_client import SdoDownload, SdoUpload
     from ecatcfg.runtime.master.sdo_info import SdoInfoRequest
 
@@ -86,8 +87,8 @@ class SlaveProgress:
 
 def _pause(seconds: float) -> Job:
     """Let the other jobs' rounds go by for ``seconds`` without sending anything."""
-    until = time.monotonic() + seconds
-    while time.monotonic() < until:
+    until = monotonic() + seconds
+    while monotonic() < until:
         yield []
 
 
@@ -115,7 +116,7 @@ def init_cmd_job(cmd: InitCmd, who: str | None, data: bytes | None = None,
         progress.last_command = what
     dg = datagram_for(cmd, data if data is not None else
                       cmd.data if cmd.data is not None else bytes(cmd.length))
-    deadline = time.monotonic() + command_timeout(cmd)
+    deadline = monotonic() + command_timeout(cmd)
     retries = RETRIES if cmd.retries is None else cmd.retries
     wrong_wkc = 0
     polls = 0
@@ -123,7 +124,7 @@ def init_cmd_job(cmd: InitCmd, who: str | None, data: bytes | None = None,
     last = "no reply (frames lost)"
     while True:
         reply = yield [dg]
-        now = time.monotonic()
+        now = monotonic()
         if reply is not None:
             got = reply[0]
             if cmd.cnt is not None and got.wkc > cmd.cnt:
@@ -192,6 +193,13 @@ class MailboxChannel:
     sent_messages: int = 0
     last_received: int = 0       # counter of the slave's last message taken
     lost_reads: int = 0          # SM1 reads whose frame was lost (a message may be gone)
+    # A request that goes with the SM1 reads of :meth:`receive`, behind them in the same
+    # frame, before the reply read is taken (``mailbox_pipeline.py``): ``ahead_taken`` once
+    # SM0 took it (working counter 1), ``ahead_tried`` once a frame carried it at all (a
+    # lost frame may have delivered it).
+    ahead: bytes | None = None
+    ahead_taken: bool = False
+    ahead_tried: bool = False
 
     def counter(self) -> int:
         """The next mailbox counter, 1..7 (0 means 'not used'; SOEM never sends it)."""
@@ -201,28 +209,81 @@ class MailboxChannel:
     def send(self, message: bytes, deadline: float, who: str | None,
              what: str | None) -> Job:
         """Write one request into SM0 (the whole SM, so the ESC sees the buffer complete)."""
-        sm0 = self.plan.send
-        dg = Datagram.physical(Cmd.FPWR, self.address, sm0.start,
-                               message.ljust(sm0.length, b"\x00")[:sm0.length])
-        yield from until_answered([dg], deadline, ApplyError(
+        yield from until_answered([self._sm0_write(message)], deadline, ApplyError(
             "the mailbox (SM0) did not take the request", who, what))
         self.sent_messages += 1
 
+    def _sm0_write(self, message: bytes) -> Datagram:
+        sm0 = self.plan.send
+        return Datagram.physical(Cmd.FPWR, self.address, sm0.start,
+                                 message.ljust(sm0.length, b"\x00")[:sm0.length])
+
+    def send_ahead(self, message: bytes) -> None:
+        """Let ``message`` go with the SM1 reads of the next :meth:`receive`, behind them in
+        the same frame: the reply read and the next request cost one frame, not two.  The
+        ESC works through a frame's datagrams in order (ETG.1000.4 4.2; ESC datasheet
+        section I, "frame processing"), and the firmware only sees SM0 after the frame has
+        passed, so the read in front returns the previous reply (or nothing), never this
+        request's.  SM0 refuses the write while it is still full (working counter 0): it
+        is then carried again with the next read."""
+        self.ahead, self.ahead_taken, self.ahead_tried = message, False, False
+
+    def settle_ahead(self, deadline: float, who: str | None, what: str | None) -> Job:
+        """Make sure the request sent ahead is in the slave: written on its own if no read
+        carried it into SM0 (a copy of one a lost frame delivered carries the same counter,
+        which the slave drops as a repeat: ETG.1000.4 mailbox counter)."""
+        if self.ahead is not None and not self.ahead_taken:
+            yield from self.send(self.ahead, deadline, who, what)
+        self.ahead = None
+
+    def drop_ahead(self, deadline: float) -> Job:
+        """After a refusal: take back the request sent ahead.  One no frame carried is just
+        forgotten; one the slave may have is answered, and that answer is read and dropped
+        (within ``deadline``), so SM1 holds no reply to it for whoever reads next."""
+        if self.ahead is None:
+            return
+        tried = self.ahead_taken or self.ahead_tried
+        self.ahead = None
+        if tried:
+            try:
+                yield from self.receive(deadline, None, None)
+            except ApplyError:
+                pass                       # it never got in, or its answer is late: no harm
+
     def receive(self, deadline: float, who: str | None, what: str | None) -> Step[bytes]:
         """Read the slave's next message from SM1.  Reading an empty mailbox gets working
-        counter 0 and changes nothing, so SM1 is read directly instead of polling its
-        status first.  If a read's frame was lost, the message may have been taken out of
-        SM1 on the way: when SM1 then stays empty for ``REPEAT_AFTER`` (a slow firmware
-        may simply not have answered yet), the repeat toggle asks the slave to post its
-        last message again (ETG.1000.4 mailbox repeat)."""
+        counter 0 and changes nothing, so SM1 is read directly at first, instead of
+        polling its status before.  While the answer is not there, SM1's status byte is
+        polled (0x080D bit 3, mailbox full: ESC datasheet section II, SyncManager status),
+        1 byte where a read takes the whole SM1, so that the polls of many slow slaves
+        share a frame; once it says full, SM1 is read.  If a read's frame was lost, the
+        message may have been taken out of SM1 on the way: when SM1 then stays empty for
+        ``REPEAT_AFTER`` (a slow firmware may simply not have answered yet), the repeat
+        toggle asks the slave to post its last message again (ETG.1000.4 mailbox
+        repeat)."""
         sm1 = self.plan.recv
         read = Datagram.physical(Cmd.FPRD, self.address, sm1.start, sm1.length)
+        status = Datagram.physical(Cmd.FPRD, self.address, SM1_STATUS, 1)
+        direct = True          # read SM1 itself: at first, and once its status says full
         lost_at: float | None = None
         empty = 0
         while True:
-            reply = yield [read]
-            now = time.monotonic()
-            if reply is not None and reply[0].wkc == 1:
+            # A request sent ahead goes behind the read, but not after a lost frame: until
+            # the reply it may have cost is back, no new answer may join the one awaited.
+            ahead = self.ahead if not self.ahead_taken and lost_at is None else None
+            first = read if direct else status
+            reply = yield [first] if ahead is None else [first, self._sm0_write(ahead)]
+            now = monotonic()
+            if ahead is not None:
+                self.ahead_tried = True
+                if reply is not None and reply[1].wkc == 1:
+                    self.ahead_taken = True
+                    self.sent_messages += 1
+            if not direct and reply is not None and reply[0].wkc == 1 and \
+                    reply[0].data[0] & SM_STATUS_MAILBOX_FULL and now <= deadline:
+                direct = True
+                continue
+            if direct and reply is not None and reply[0].wkc == 1:
                 message = bytes(reply[0].data)
                 counter = message[5] >> 4 & 0x07 if len(message) >= 6 else 0
                 if counter and counter == self.last_received:
@@ -238,9 +299,12 @@ class MailboxChannel:
                 return message
             if now > deadline:
                 raise ApplyError("no mailbox response in time", who, what)
+            lost_read = reply is None and direct        # a lost status poll took nothing
+            direct = False
             if reply is None:
-                self.lost_reads += 1
-                lost_at = lost_at or now
+                if lost_read:
+                    self.lost_reads += 1
+                    lost_at = lost_at or now
             elif lost_at is not None and now - lost_at >= REPEAT_AFTER:
                 yield from self._repeat(deadline, who, what)
                 lost_at = None
@@ -265,7 +329,7 @@ class MailboxChannel:
             if reply is not None and reply[0].wkc == 1 and \
                     bool(reply[0].data[2] & SM_PDI_REPEAT_ACK) == bool(value & SM_ACTIVATE_REPEAT):
                 return
-            if time.monotonic() > deadline:
+            if monotonic() > deadline:
                 raise ApplyError("the slave did not acknowledge the mailbox repeat", who,
                                  what)
 
@@ -275,7 +339,7 @@ def sdo_job(channel: MailboxChannel, transaction: Transaction, who: str | None,
     """One SDO transfer (``runtime/master/sdo_client.py`` transaction) through the mailbox."""
     from ecatcfg.runtime.mailbox import MailboxProtocolError, SdoAbort
 
-    deadline = time.monotonic() + timeout
+    deadline = monotonic() + timeout
     request: bytes | None = transaction.first_request()
     try:
         while True:
@@ -285,32 +349,51 @@ def sdo_job(channel: MailboxChannel, transaction: Transaction, who: str | None,
             request = transaction.on_response(response)
             if request is None and transaction.done:
                 return transaction
-    except SdoAbort as abort:
-        raise ApplyError(str(abort), who, what, abort_code=abort.code) from None
-    except MailboxProtocolError as error:
-        raise ApplyError(f"mailbox protocol error: {error}", who, what) from None
+    except (SdoAbort, MailboxProtocolError) as error:
+        raise sdo_failure(error, who, what) from None
+
+
+def sdo_failure(error: SdoAbort | MailboxProtocolError, who: str | None,
+                what: str | None) -> ApplyError:
+    """An SDO transfer's abort or protocol error as the slave's and command's error."""
+    from ecatcfg.runtime.mailbox import SdoAbort
+
+    if isinstance(error, SdoAbort):
+        return ApplyError(str(error), who, what, abort_code=error.code)
+    return ApplyError(f"mailbox protocol error: {error}", who, what)
 
 
 def coe_init_cmd_job(channel: MailboxChannel, cmd: CoeInitCmd, who: str | None,
                      progress: SlaveProgress | None = None) -> Job:
-    from ecatcfg.runtime.master.sdo_client import SdoDownload, SdoUpload
-
-    what = cmd.comment.strip() and cmd.comment or f"SDO 0x{cmd.index:04X}:{cmd.subindex:02X}"
+    what = coe_init_cmd_what(cmd)
     if progress is not None:
         progress.last_command = what
+    t = coe_transfer(channel, cmd, who, what)
+    yield from sdo_job(channel, t, who, what, coe_init_cmd_timeout(cmd))
+
+
+def coe_init_cmd_what(cmd: CoeInitCmd) -> str:
+    return cmd.comment.strip() and cmd.comment or f"SDO 0x{cmd.index:04X}:{cmd.subindex:02X}"
+
+
+def coe_init_cmd_timeout(cmd: CoeInitCmd) -> float:
+    return cmd.timeout / 1000 if cmd.timeout else TIMEOUT_MAILBOX
+
+
+def coe_transfer(channel: MailboxChannel, cmd: CoeInitCmd, who: str | None,
+                 what: str) -> SdoUpload | SdoDownload:
+    """The SDO transfer (``sdo_client.py``) of a CoE InitCmd, its counters the channel's."""
+    from ecatcfg.runtime.master.sdo_client import SdoDownload, SdoUpload
+
     size = channel.plan.send.length
-    timeout = cmd.timeout / 1000 if cmd.timeout else TIMEOUT_MAILBOX
-    t: SdoUpload | SdoDownload
     try:
         if cmd.ccs == 2:                          # upload (rare in ENIs: a read check)
-            t = SdoUpload(cmd.index, cmd.subindex, cmd.complete_access, size,
-                          channel.counter)
-        else:
-            t = SdoDownload(cmd.index, cmd.subindex, cmd.data, cmd.complete_access, size,
-                            channel.counter)
+            return SdoUpload(cmd.index, cmd.subindex, cmd.complete_access, size,
+                             channel.counter)
+        return SdoDownload(cmd.index, cmd.subindex, cmd.data, cmd.complete_access, size,
+                           channel.counter)
     except ValueError as exc:                     # the ENI's SM0 is too small for any SDO
         raise ApplyError(f"the mailbox cannot carry this SDO: {exc}", who, what) from None
-    yield from sdo_job(channel, t, who, what, timeout)
 
 
 def eoe_init_cmd_job(channel: MailboxChannel, cmd: EoeInitCmd, who: str | None,
@@ -336,7 +419,7 @@ def eoe_init_cmd_job(channel: MailboxChannel, cmd: EoeInitCmd, who: str | None,
     if len(message) > channel.plan.send.length:
         raise ApplyError(f"the mailbox (SM0, {channel.plan.send.length} bytes) cannot carry "
                          f"the EoE request ({len(message)} bytes)", who, what)
-    deadline = time.monotonic() + (cmd.timeout / 1000 if cmd.timeout else TIMEOUT_MAILBOX)
+    deadline = monotonic() + (cmd.timeout / 1000 if cmd.timeout else TIMEOUT_MAILBOX)
     yield from channel.send(message, deadline, who, what)
     while True:
         response = yield from channel.receive(deadline, who, what)

@@ -10,8 +10,8 @@ changes nothing a later configuration relies on.  Identity words: vendor 0x08, p
 from __future__ import annotations
 
 import struct
-import time
 
+from ecatcfg.runtime.clock import monotonic
 from ecatcfg.eni.compare import revision_check
 from ecatcfg.eni.plan import NetworkPlan, SlavePlan
 from ecatcfg.esc import (EEPROM_BUSY, EEPROM_ERROR_ACKNOWLEDGE, EEPROM_ERRORS, EEPROM_R64,
@@ -65,7 +65,7 @@ def sii_words(position: int, word: int, deadline: float) -> Step[bytes]:
         while True:
             reply = yield [request] if phase == "request" else [status] if phase == "poll" \
                 else [value]
-            if time.monotonic() > deadline:
+            if monotonic() > deadline:
                 raise ApplyError(f"position {position}: the SII EEPROM does not answer")
             if reply is None or reply[0].wkc != 1:
                 continue
@@ -94,7 +94,7 @@ def sii_words(position: int, word: int, deadline: float) -> Step[bytes]:
 
 
 def identity_job(position: int, out: dict[int, FoundSlave]) -> Job:
-    deadline = time.monotonic() + EEPROM_TIMEOUT
+    deadline = monotonic() + EEPROM_TIMEOUT
     adp = -position & 0xFFFF
     # The EEPROM belongs to the EtherCAT side for the reading (0x0500 = 0).
     owner = Datagram.physical(Cmd.APWR, adp, Reg.EEPROM_CONFIG, b"\x00")
@@ -151,7 +151,7 @@ def sii_head_job(position: int, out: dict[int, bytes]) -> Job:
     end marker.  Not the whole EEPROM: a scan of names reads a few hundred bytes."""
     from ecatcfg.esi.sii import CAT_END, CAT_GENERAL, CATEGORY_HEADER
 
-    deadline = time.monotonic() + EEPROM_TIMEOUT
+    deadline = monotonic() + EEPROM_TIMEOUT
     adp = -position & 0xFFFF
     owner = Datagram.physical(Cmd.APWR, adp, Reg.EEPROM_CONFIG, b"\x00")
     yield from until_answered([owner], deadline, ApplyError(f"position {position}: no answer"))
@@ -160,7 +160,7 @@ def sii_head_job(position: int, out: dict[int, bytes]) -> Job:
     def upto(words: int) -> Step[None]:
         nonlocal data, deadline
         while len(data) < 2 * words:
-            deadline = time.monotonic() + EEPROM_TIMEOUT
+            deadline = monotonic() + EEPROM_TIMEOUT
             data += yield from sii_words(position, len(data) // 2, deadline)
 
     word = SII_FIRST_CATEGORY

@@ -129,6 +129,12 @@ class SdoDownload(_Transaction):
         self._toggle = False             # toggle of the segment in flight
         self._segments = False           # initiate answered: now in the segment phase
 
+    @property
+    def last_request_out(self) -> bool:
+        """All the data has gone out: the answer to the request out ends the transfer (or
+        refuses it); no further request of this transfer depends on it."""
+        return self._started and not self.done and self._offset >= len(self.data)
+
     def _first(self) -> bytes:
         counter = self.counter()
         if 1 <= len(self.data) <= 4 and not self.complete_access:

@@ -27,10 +27,10 @@ from __future__ import annotations
 
 import re
 import struct
-import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
+from ecatcfg.runtime.clock import monotonic
 from ecatcfg.eni.plan import MailboxArea, MailboxPlan
 from ecatcfg.errors import EcatcfgError
 from ecatcfg.esc import (AL_ERROR_ACK, AL_STATE_MASK, AL_STATUS_ERROR, MAILBOX_PROTOCOL_BITS,
@@ -209,7 +209,7 @@ def access(dg: Datagram, deadline: float, what: str, wkc: int = 1) -> Step[Datag
             if reply[0].wkc == wkc:
                 return reply[0]
             last = f"working counter {reply[0].wkc}, expected {wkc}"
-        if time.monotonic() > deadline:
+        if monotonic() > deadline:
             raise SdoToolError(f"{what}: {last}")
 
 
@@ -217,7 +217,7 @@ def _prepare(info: SlaveMailbox) -> Job:
     pos = info.position
     adp = -pos & 0xFFFF
     who = f"slave {pos}"
-    deadline = time.monotonic() + TIMEOUT_COMMAND
+    deadline = monotonic() + TIMEOUT_COMMAND
     status = yield from access(Datagram.physical(Cmd.APRD, adp, Reg.AL_STATUS, 6), deadline,
                                 f"{who}: reading the AL status (0x0130)")
     al_status = struct.unpack_from("<H", status.data)[0]
@@ -234,7 +234,7 @@ def _prepare(info: SlaveMailbox) -> Job:
     pdi_owned = bool(owner.data[0] & 0x01)
     yield from access(Datagram.physical(Cmd.APWR, adp, Reg.EEPROM_CONFIG, b"\x00"),
                        deadline, f"{who}: taking the SII EEPROM (0x0500)")
-    sii_deadline = time.monotonic() + TIMEOUT_COMMAND
+    sii_deadline = monotonic() + TIMEOUT_COMMAND
     try:
         mbx = yield from sii_words(pos, SII_STD_MAILBOX, sii_deadline)
         proto = yield from sii_words(pos, SII_MAILBOX_PROTOCOLS, sii_deadline)
@@ -255,7 +255,7 @@ def _prepare(info: SlaveMailbox) -> Job:
     info.station_address = address
 
     if state in (AlState.PREOP, AlState.SAFEOP, AlState.OP):
-        deadline = time.monotonic() + TIMEOUT_COMMAND
+        deadline = monotonic() + TIMEOUT_COMMAND
         regs = yield from access(Datagram.physical(Cmd.FPRD, address, Reg.SM0, 16),
                                   deadline, f"{who}: reading SM0/SM1 (0x0800)")
         sm0 = SmConfig.from_bytes(regs.data[:8])
@@ -281,7 +281,7 @@ def _prepare(info: SlaveMailbox) -> Job:
         raise SdoToolError(f"{who}: a {rx_size}-byte receive mailbox cannot carry an SDO")
     sm0 = SmConfig(rx_start, rx_size, SM_CONTROL_MBOX_OUT, True)
     sm1 = SmConfig(tx_start, tx_size, SM_CONTROL_MBOX_IN, True)
-    deadline = time.monotonic() + TIMEOUT_COMMAND
+    deadline = monotonic() + TIMEOUT_COMMAND
     if state != AlState.INIT:
         # PREOP+ERR without a mailbox: back to INIT before the SMs change.
         yield from request_state(address, AlState.INIT, who)
@@ -307,7 +307,7 @@ def _sm_text(sm: SmConfig) -> str:
 
 def station_address_of(info: SlaveMailbox, adp: int, who: str) -> Step[int]:
     """The slave's configured station address; it gets one when it has none."""
-    deadline = time.monotonic() + TIMEOUT_COMMAND
+    deadline = monotonic() + TIMEOUT_COMMAND
     reply = yield from access(Datagram.physical(Cmd.APRD, adp, Reg.STATION_ADDRESS, 2),
                                deadline, f"{who}: reading the station address (0x0010)")
     address: int = struct.unpack("<H", reply.data)[0]
@@ -318,7 +318,7 @@ def station_address_of(info: SlaveMailbox, adp: int, who: str) -> Step[int]:
             back = yield [probe]
             if back is not None:
                 break
-            if time.monotonic() > deadline:
+            if monotonic() > deadline:
                 raise SdoToolError(f"{who}: no answer to FPRD 0x{address:04X}")
         if back[0].wkc != 1:
             raise SdoToolError(f"{who} has station address 0x{address:04X}, which "
@@ -331,7 +331,7 @@ def station_address_of(info: SlaveMailbox, adp: int, who: str) -> Step[int]:
             back = yield [probe]
             if back is not None:
                 break
-            if time.monotonic() > deadline:
+            if monotonic() > deadline:
                 raise SdoToolError(f"{who}: no answer while choosing a station address")
         if back[0].wkc == 0:
             break
@@ -345,17 +345,17 @@ def station_address_of(info: SlaveMailbox, adp: int, who: str) -> Step[int]:
 
 def request_state(address: int, target: AlState, who: str) -> Job:
     """AL control = target | acknowledge; wait until AL status shows it (or a refusal)."""
-    deadline = time.monotonic() + TIMEOUT_COMMAND
+    deadline = monotonic() + TIMEOUT_COMMAND
     yield from access(Datagram.physical(Cmd.FPWR, address, Reg.AL_CONTROL,
                                          struct.pack("<H", target | AL_ERROR_ACK)),
                        deadline, f"{who}: requesting {target.name} (0x0120)")
     read = Datagram.physical(Cmd.FPRD, address, Reg.AL_STATUS, 6)
-    deadline = time.monotonic() + TIMEOUT_STATE
+    deadline = monotonic() + TIMEOUT_STATE
     error_since: float | None = None
     al_status = code = -1
     while True:
         reply = yield [read]
-        now = time.monotonic()
+        now = monotonic()
         if reply is not None and reply[0].wkc == 1:
             al_status = struct.unpack_from("<H", reply[0].data)[0]
             code = struct.unpack_from("<H", reply[0].data, 4)[0]
@@ -386,7 +386,7 @@ def _refused(who: str, target: AlState, al_status: int, code: int,
 def empty_sm1(info: SlaveMailbox, channel: MailboxChannel) -> Job:
     """Take out the messages an earlier transfer left for SM1 (a slave may have queued more
     than one, e.g. two answers to a request that was written twice)."""
-    deadline = time.monotonic() + TIMEOUT_COMMAND
+    deadline = monotonic() + TIMEOUT_COMMAND
     who = f"slave {info.position}"
     status_dg = Datagram.physical(Cmd.FPRD, channel.address, SM1_STATUS, 3)
     recv = channel.plan.recv
@@ -403,7 +403,7 @@ def empty_sm1(info: SlaveMailbox, channel: MailboxChannel) -> Job:
             reply = yield [read]
             if reply is not None:
                 break
-            if time.monotonic() > deadline:
+            if monotonic() > deadline:
                 raise SdoToolError(f"{who}: emptying SM1: no reply (frames lost)")
     raise SdoToolError(f"{who}: SM1 does not stop filling ({STALE_MESSAGES} messages "
                        "read): is another master using this slave's mailbox?")

@@ -18,8 +18,9 @@ fails the transfer.
 
 from __future__ import annotations
 
-import time
+from collections.abc import Callable
 
+from ecatcfg.runtime.clock import monotonic
 from ecatcfg.eni.plan import SoeInitCmd
 from ecatcfg.eni.words import soe_init_cmd_name
 from ecatcfg.esi.idn import MAX_DRIVE, idn_text
@@ -196,7 +197,7 @@ def soe_job(channel: MailboxChannel, transfer: SoeTransfer, who: str | None,
     fragments that arrive then may fit together without the lost one.  So a read during
     which an SM1 read was lost is asked again (until the timeout).  Fragments that do not
     fit together otherwise are the drive's error."""
-    deadline = time.monotonic() + timeout
+    deadline = monotonic() + timeout
     try:
         while True:
             lost = channel.lost_reads
@@ -222,25 +223,95 @@ def soe_init_cmd_job(channel: MailboxChannel, cmd: SoeInitCmd, who: str | None,
     """One SoE InitCmd: the write request (op code 3, the only one ETG.2100 documents for
     ``Mailbox/SoE/InitCmds``) of its IDN, drive and elements.  An error names the IDN,
     the drive and the transition."""
-    what = soe_init_cmd_name(cmd)
-    if progress is not None:
-        progress.last_command = what
-    if cmd.op_code != SoeOpCode.WRITE_REQUEST:
-        raise ApplyError(f"SoE InitCmd with op code {cmd.op_code}: only write requests "
-                         f"(op code 3) configure a drive (transition {transition})", who, what)
-    try:
-        transfer = SoeTransfer(cmd.idn, cmd.data, drive_no=cmd.drive_no,
-                               elements=cmd.elements, mbx_out_size=channel.plan.send.length,
-                               counter=channel.counter)
-    except ValueError as exc:
-        raise ApplyError(f"{exc} (transition {transition})", who, what) from None
-    timeout = cmd.timeout / 1000 if cmd.timeout else TIMEOUT_MAILBOX
-    try:
-        yield from soe_job(channel, transfer, who, what, timeout)
-    except ApplyError as exc:
-        exc.message += f" (transition {transition})"
-        exc.args = (exc.message,)
-        raise
+    yield from soe_init_cmds_job(channel, [cmd], who, transition, progress)
 
 
-__all__ = ["SoeRefused", "SoeTransfer", "soe_init_cmd_job", "soe_job"]
+def soe_init_cmds_job(channel: MailboxChannel, cmds: list[SoeInitCmd], who: str | None,
+                      transition: str, progress: SlaveProgress | None = None) -> Job:
+    """A drive's SoE InitCmds of a transition, in order, each write's request ahead of the
+    answer to the one before where it may go (``mailbox_pipeline.py``)."""
+    from ecatcfg.runtime.master.mailbox_pipeline import Transfer, pipelined
+
+    def maker(cmd: SoeInitCmd) -> Callable[[], Transfer]:
+        return lambda: _SoeWrite(channel, cmd, who, transition)
+    yield from pipelined(channel, [maker(c) for c in cmds], who, progress)
+
+
+class _SoeWrite:
+    """An SoE InitCmd's write as ``mailbox_pipeline.pipelined`` moves it."""
+
+    def __init__(self, channel: MailboxChannel, cmd: SoeInitCmd, who: str | None,
+                 transition: str) -> None:
+        self.cmd = cmd
+        self.who = who
+        self.transition = transition
+        self.what = soe_init_cmd_name(cmd)
+        self.timeout = cmd.timeout / 1000 if cmd.timeout else TIMEOUT_MAILBOX
+        self.channel = channel
+        self.transfer: SoeTransfer | None = None
+
+    @property
+    def key(self) -> tuple[int, ...]:
+        return (self.cmd.idn, self.cmd.drive_no)
+
+    @property
+    def done(self) -> bool:
+        return self.transfer is not None and self.transfer.done
+
+    def start(self) -> list[bytes]:
+        if self.transfer is None:
+            cmd, transition = self.cmd, self.transition
+            if cmd.op_code != SoeOpCode.WRITE_REQUEST:
+                raise ApplyError(f"SoE InitCmd with op code {cmd.op_code}: only write "
+                                 f"requests (op code 3) configure a drive (transition "
+                                 f"{transition})", self.who, self.what)
+            try:
+                self.transfer = SoeTransfer(cmd.idn, cmd.data, drive_no=cmd.drive_no,
+                                            elements=cmd.elements,
+                                            mbx_out_size=self.channel.plan.send.length,
+                                            counter=self.channel.counter)
+            except ValueError as exc:
+                raise ApplyError(f"{exc} (transition {transition})", self.who,
+                                 self.what) from None
+            self._opening = self.transfer.requests()
+        return self._opening
+
+    def last_request_out(self) -> bool:
+        # A write's requests all go at its start; the drive answers the last one.
+        return self.transfer is not None and not self.transfer.done
+
+    def on_response(self, message: bytes) -> bytes | None:
+        assert self.transfer is not None, "a response before the request"
+        self.transfer.on_response(message)
+        return None
+
+    def answers(self, message: bytes) -> bool:
+        """A write response or an error reply for this IDN of this drive."""
+        try:
+            _header, content = decode(message)
+            if not isinstance(content, tuple) or content[0] != MbxType.SOE:
+                return False
+            soe = decode_soe(content[1])
+        except (MailboxProtocolError, ValueError):
+            return False
+        return bool(soe.op_code == SoeOpCode.WRITE_RESPONSE or soe.error) and \
+            (soe.idn, soe.drive_no) == self.key
+
+    def failure(self, error: Exception) -> ApplyError | None:
+        failure: ApplyError
+        if isinstance(error, SoeError):
+            failure = SoeRefused(str(error), self.who, self.what, error.code)
+        elif isinstance(error, MailboxProtocolError):
+            failure = ApplyError(f"mailbox protocol error: {error}", self.who, self.what)
+        elif isinstance(error, ApplyError):
+            failure = error
+        else:
+            return None
+        if f"(transition {self.transition})" not in failure.message:
+            failure.message += f" (transition {self.transition})"
+            failure.args = (failure.message,)
+        return failure
+
+
+__all__ = ["SoeRefused", "SoeTransfer", "soe_init_cmd_job", "soe_init_cmds_job",
+           "soe_job"]

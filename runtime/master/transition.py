@@ -3,16 +3,17 @@
 Within a transition each slave runs its commands in the order ``eni/sequence.py`` gives
 (one definition, which ``show`` prints too): register commands up to the AL-control
 request, then CoE, SoE, EoE and FoE mailbox commands (FoE: ``foe_init.py``), then the
-request and the rest.  A station's plugged modules are checked before its CoE InitCmds
-configure them (``modules.py``).
+request and the rest.  The CoE and SoE commands go with each request ahead of the answer
+to the one before (``mailbox_pipeline.py``).  A station's plugged modules are checked
+before its CoE InitCmds configure them (``modules.py``).
 One command's job is ``replay.py``.
 """
 
 from __future__ import annotations
 
 import struct
-import time
 
+from ecatcfg.runtime.clock import monotonic
 from ecatcfg.eni.plan import (CoeInitCmd, DcPlan, EoeInitCmd, FoeInitCmd, InitCmd, SlavePlan,
                               SoeInitCmd)
 from ecatcfg.eni.sequence import transition_sequence
@@ -20,8 +21,7 @@ from ecatcfg.eni.words import init_cmd_name
 from ecatcfg.esc import MODULE_IDENT_LIST, Cmd, Reg, Transition
 from ecatcfg.runtime.master.lockstep import Job, Step, until_answered
 from ecatcfg.runtime.master.replay import (TIMEOUT_COMMAND, ApplyError, MailboxChannel,
-                                           SlaveProgress, coe_init_cmd_job, eoe_init_cmd_job,
-                                           init_cmd_job)
+                                           SlaveProgress, eoe_init_cmd_job, init_cmd_job)
 from ecatcfg.runtime.wire import Datagram
 
 DC_START_DELAY_NS = 100_000_000    # SYNC start this far ahead of the reference (IgH, SOEM)
@@ -53,13 +53,13 @@ def slave_transition_job(slave: SlavePlan, transition: Transition,
             # tests/test_startup_counts.py).
             from ecatcfg.runtime.master.modules import check_modules
             yield from check_modules(channel, slave, transition, who)
-        for c in sequence.coe:
-            yield from _failing(c, coe_init_cmd_job(channel, c, who, progress))
+        if sequence.coe:            # imported here: only CoE slaves need the SDO client
+            from ecatcfg.runtime.master.mailbox_pipeline import coe_init_cmds_job
+            yield from coe_init_cmds_job(channel, sequence.coe, who, progress)
         if sequence.soe:            # imported here: only SoE drives need the client
-            from ecatcfg.runtime.master.soe_client import soe_init_cmd_job
-            for s in sequence.soe:
-                yield from _failing(s, soe_init_cmd_job(channel, s, who, transition.name,
-                                                        progress))
+            from ecatcfg.runtime.master.soe_client import soe_init_cmds_job
+            yield from soe_init_cmds_job(channel, sequence.soe, who, transition.name,
+                                         progress)
         for e in sequence.eoe:
             yield from _failing(e, eoe_init_cmd_job(channel, e, who, progress))
         if sequence.foe:
@@ -95,7 +95,7 @@ def _dc_start_time(slave: SlavePlan, dc: DcPlan, cmd: InitCmd, length: int,
     after the slave's (reference-synchronised) system time, on a cycle boundary plus the
     shift (IgH, SOEM)."""
     read = Datagram.physical(Cmd.FPRD, slave.phys_addr, Reg.DC_SYSTEM_TIME, 8)
-    [got] = yield from until_answered([read], time.monotonic() + TIMEOUT_COMMAND, ApplyError(
+    [got] = yield from until_answered([read], monotonic() + TIMEOUT_COMMAND, ApplyError(
         "cannot read the DC system time (0x0910)", who, init_cmd_name(cmd)))
     now, = struct.unpack("<Q", got.data)
     cycle = dc.cycle_time0 or 1

@@ -9,13 +9,13 @@ never taken for the current one.
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Protocol
 
 from ecatcfg.esc import MAX_DATAGRAM_DATA
 from ecatcfg.record import record
 from ecatcfg.runtime import wire
+from ecatcfg.runtime.clock import Clock, clock_of
 from ecatcfg.runtime.wire import Datagram, FrameError
 
 if TYPE_CHECKING:
@@ -37,8 +37,11 @@ class Transport:
     """Send datagrams in one frame and wait for that frame to come back."""
 
     def __init__(self, link: Link, *, recorder: Callable[[bytes, bool], None] | None = None,
-                 timeout: float = DEFAULT_TIMEOUT) -> None:
+                 timeout: float = DEFAULT_TIMEOUT, clock: Clock | None = None) -> None:
+        """``clock``: the time deadlines are on (``runtime/clock.py``); by default the
+        link's own (a simulated wire's), else the wall clock."""
         self.link = link
+        self.clock: Clock = clock or clock_of(link)
         self.recorder = recorder             # (frame, sent?) for pcap recording
         self.timeout = timeout
         self.counters = Counters()
@@ -58,9 +61,10 @@ class Transport:
         self.counters.frames_sent += 1
         if self.recorder:
             self.recorder(frame, True)
-        deadline = time.monotonic() + (self.timeout if timeout is None else timeout)
+        monotonic = self.clock.monotonic
+        deadline = monotonic() + (self.timeout if timeout is None else timeout)
         while True:
-            left = deadline - time.monotonic()
+            left = deadline - monotonic()
             if left <= 0:
                 self.counters.frames_lost += 1
                 return None
@@ -95,9 +99,10 @@ class Transport:
         if recorder:
             recorder(bytes(frame), True)
         receive = self._recv_into
-        deadline = time.monotonic() + (self.timeout if timeout is None else timeout)
+        monotonic = self.clock.monotonic
+        deadline = monotonic() + (self.timeout if timeout is None else timeout)
         while True:
-            left = deadline - time.monotonic()
+            left = deadline - monotonic()
             if left <= 0:
                 self.counters.frames_lost += 1
                 return 0

@@ -15,7 +15,7 @@ from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
 from ecatcfg.esc import (DETECTED_MODULE_IDENT_LIST, MIN_MAILBOX_SIZE, MODULE_IDENT_LIST,
-                         Reg, is_pdo_object)
+                         Cmd, Reg, is_pdo_object)
 from ecatcfg.esi import sii
 from ecatcfg.esi.coe import dictionary_with_objects, has_coe
 from ecatcfg.eni.plan import NetworkPlan, PdoDesc, SlavePlan
@@ -274,8 +274,12 @@ def specs_from_eni(plan: NetworkPlan, library: Library | None, shown: str) -> li
             from ecatcfg.errors import EcatcfgError
             raise EcatcfgError(f"slave {s.name!r}: {exc.message}", shown) from None
         except SelectorError as exc:
+            # The objects the ENI writes exist on the device, and so do those it reads
+            # (Ccs 2, an upload, typed by the data it gives: SOEM's sample ENI reads
+            # 0x1C13 of a device it describes no process data for).
             writes = tuple(Write(c.index, c.subindex, c.data, c.complete_access)
-                           for c in coe if not c.disabled and c.ccs == 1)
+                           for c in coe if not c.disabled
+                           and (c.ccs == 1 or c.ccs == 2 and c.data))
             specs.append(SlaveSpec(device_from_eni(s, plan, shown), s.name,
                                    serial=s.serial_no, alias=alias, device_id=device_id,
                                    extra_writes=writes,
@@ -309,8 +313,15 @@ def _head_identification(slave: SlavePlan) -> tuple[int, int | None]:
     """The station alias and the device ID a hot-connect group's head is identified by
     (what its IdentifyCmds expect to read: 0x0012; the ID in AL status code 0x0134 after
     the ETG.1020 request, or at the ID address the device's ESI names): the emulated head
-    has them, as the real one was given them; (0, None) for any other slave."""
+    has them, as the real one was given them; (0, None) for any other slave, but for the
+    alias an InitCmd checks at 0x0012 (compile's check of a slave given an ``alias:``, as
+    an IgH user's slave addressed alias:position was given it)."""
     alias, device_id = 0, None
+    for cmd in slave.init_cmds:
+        want = cmd.validate.data if cmd.validate is not None else b""
+        if cmd.cmd in (Cmd.APRD, Cmd.FPRD) and cmd.ado == Reg.STATION_ALIAS \
+                and len(want) >= 2:
+            alias = int.from_bytes(want[:2], "little")
     group = slave.hot_connect
     for cmd in group.identify_cmds if group is not None else []:
         want = cmd.validate.data if cmd.validate is not None else b""

@@ -52,6 +52,7 @@ from ecatcfg.eni.plan import (CoeInitCmd, NetworkPlan, PdoDesc, SlavePlan,
 from ecatcfg.esi.model import (CoeSettings, Dc, DcOpMode, Device, Eeprom, EoeSettings, Fmmu,
                                Mailbox, Pdo, PdoEntry, Profile, SoeInitCmd, SoeSettings, Source,
                                SyncManager, Vendor)
+from ecatcfg.record import replace
 
 # SII configuration area word 0 (PDI control 0x0140, ESC configuration 0x0141) of slaves
 # without a mailbox: device emulation, with a digital I/O PDI when they have process data
@@ -95,6 +96,11 @@ def device_from_eni(slave: SlavePlan, plan: NetworkPlan, file: str) -> Device:
     """The device ``slave`` of ``plan`` describes (``file`` names the ENI in the model's
     sources)."""
     source = Source(file, 0)
+    if slave.mailbox is not None and not (slave.mailbox.send.length
+                                          and slave.mailbox.recv.length):
+        # Mailbox areas of length 0 (Beremiz's EtherLab-plugin file gives every slave
+        # one, couplers too) carry nothing: the device the ENI describes has no mailbox.
+        slave = replace(slave, mailbox=None)
     coe = _coe_downloads(slave.mailbox.coe_init_cmds if slave.mailbox else [])
     sms = _sync_managers(slave, source)
     pdos = _pdos(slave, plan, sms, coe, source)
@@ -154,6 +160,16 @@ def _enabling(writes: list[_SmWrite]) -> _SmWrite | None:
     return None
 
 
+def _configuring(writes: list[_SmWrite]) -> _SmWrite | None:
+    """The write that sets a process-data SM up for SAFEOP (PREOP->SAFEOP, else
+    SAFEOP->OP), enabled or not; the clearing writes of INIT->PREOP are not one."""
+    for want in (Transition.PS, Transition.SO):
+        for w in writes:
+            if want in w.transitions:
+                return w
+    return None
+
+
 def _checked_config(slave: SlavePlan) -> int | None:
     """The PDI control and ESC configuration (0x0140-0x0141, loaded from SII word 0) when
     the ENI checks them: EtherCAT Automation Studio's "check PDI" InitCmd reads 0x0140 and
@@ -200,11 +216,18 @@ def _sync_managers(slave: SlavePlan, source: Source) -> list[SyncManager]:
                                             else SM_DIR_ECAT_READS)
         op_only = w is not None and Transition.SO in w.transitions \
             and Transition.PS not in w.transitions
+        # The length the ENI configures, also for an SM it leaves disabled (an EL3692
+        # whose outputs the ENI unassigns: SM2 written with length 0 in PREOP->SAFEOP,
+        # where the ESI's default, 4, stays in ProcessData/Sm2/DefaultSize).  A master
+        # that sizes an SM from the SII when its assignment maps nothing (SOEM keeps the
+        # SII length) then finds what the ENI set, and so does its 0x1C1n.
+        written = w or _configuring(writes.get(number, []))
         sms[number] = SyncManager(
             number, kind, source,
             start_address=w.config.start if w else setting.start_address if setting else 0,
             control_byte=control,
-            default_size=w.config.length if w else setting.default_size if setting else None,
+            default_size=written.config.length if written else setting.default_size
+            if setting else None,
             enable=1 if (w is not None or (setting is not None and setting.enable)) else 0,
             op_only=op_only, virtual=bool(setting and setting.virtual))
     top = max(sms, default=-1)
@@ -295,8 +318,14 @@ def _pdos(slave: SlavePlan, plan: NetworkPlan, sms: list[SyncManager], coe: _Coe
 def _pdo(desc: PdoDesc, sm: int | None, source: Source) -> Pdo:
     entries = [PdoEntry(e.index, e.subindex, e.bit_len, e.data_type, {_LANGUAGE: e.name},
                         source) for e in desc.entries]
+    # ``Virtual`` (ETG.2000 Pdo@Virtual, copied by TwinCAT from the ESI: an EL6695 bridge's
+    # "IO Outputs") says the master chooses the mapping, so an ESI device does not assign
+    # the PDO by default.  The ENI holds that choice: a virtual PDO it assigns has the
+    # entries it lists and is in the device's assignment, as on the configured device that
+    # SOEM, reading 0x1C1n and the mapping, sizes the SMs from.
     return Pdo(desc.direction, desc.index, {_LANGUAGE: desc.name}, source, sm=sm,
-               fixed=desc.fixed, mandatory=desc.mandatory, virtual=desc.virtual,
+               fixed=desc.fixed, mandatory=desc.mandatory,
+               virtual=desc.virtual and sm is None,
                excludes=list(desc.excludes), entries=entries)
 
 

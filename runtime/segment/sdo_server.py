@@ -15,6 +15,11 @@ Choices where those sources are silent:
   not implement.
 - Other CoE services (emergency, PDO over mailbox, an SDO *response* sent to the slave) get a
   mailbox error reply with detail 4 (service not supported).
+- The response to an expedited download carries the request's 4 data bytes, where
+  ETG.1000.6 has 4 reserved bytes: real Beckhoff firmware echoes them (the EK1914, EL3004
+  and EL6910 of ethercrab-rs/ethercrab ``tests/replay-ek1914-el3004-configure.pcapng`` and
+  ``tests/replay-mailbox-el6910.pcapng``: 0x1C13:01 = 0x1A00 is answered
+  ``60 13 1C 01 00 1A 00 00``).
 """
 
 from __future__ import annotations
@@ -24,7 +29,8 @@ from dataclasses import dataclass, field
 from ecatcfg.esc import AlState
 from ecatcfg.runtime.mailbox import (
     ABORT_TOGGLE, ABORT_TYPE_MISMATCH, ABORT_UNKNOWN_COMMAND, ABORT_UNSUPPORTED_ACCESS,
-    COE_HEADER, NORMAL_OVERHEAD, SEGMENT_OVERHEAD, Abort, CoeMessage, CoeService,
+    COE_HEADER, COE_HEADER_SIZE, CS_SHIFT, MBX_HEADER_SIZE, NORMAL_OVERHEAD,
+    SCS_INITIATE_DOWNLOAD, SDO_MIN_LENGTH, SEGMENT_OVERHEAD, Abort, CoeMessage, CoeService,
     DownloadSegment, InitiateDownload, InitiateUpload, MailboxProtocolError, MbxErrorDetail,
     SdoAbort, SdoInfo, UnknownSdo, UploadSegmentRequest, decode_coe, encode_abort,
     encode_download_response, encode_download_segment_response, encode_sdo_info_error,
@@ -32,6 +38,16 @@ from ecatcfg.runtime.mailbox import (
 )
 from ecatcfg.runtime.segment.objects import ObjectDictionary
 from ecatcfg.runtime.segment.sdo_info_server import SdoInfoServer
+
+
+def echo_request_data(response: bytes, request: bytes) -> bytes:
+    """A download response (whole mailbox message) with the 4 data bytes of the expedited
+    request (its CoE part) in its reserved bytes, as Beckhoff firmware answers (module
+    docstring); an abort is left as it is."""
+    if len(request) < SDO_MIN_LENGTH or \
+            response[MBX_HEADER_SIZE + COE_HEADER_SIZE] >> CS_SHIFT != SCS_INITIATE_DOWNLOAD:
+        return response
+    return response[:-4] + request[SDO_MIN_LENGTH - 4:SDO_MIN_LENGTH]
 
 
 @dataclass(slots=True)
@@ -95,17 +111,18 @@ class SdoServer:
         if service != CoeService.SDO_REQUEST:
             raise MailboxProtocolError(f"CoE service {service} is not served",
                                        detail=MbxErrorDetail.SERVICE_NOT_SUPPORTED)
-        return self._sdo(msg, state)
+        return self._sdo(msg, state, data)
 
     # -- SDO ---------------------------------------------------------------------------
 
-    def _sdo(self, msg: CoeMessage, state: AlState) -> list[bytes]:
+    def _sdo(self, msg: CoeMessage, state: AlState, data: bytes) -> list[bytes]:
         if isinstance(msg, Abort):
             self._transfer = None                # the master gave up: nothing to answer
             return []
         if isinstance(msg, InitiateDownload):
             self._transfer = None
-            return self._initiate_download(msg, state)
+            [response] = self._initiate_download(msg, state)
+            return [echo_request_data(response, data) if msg.expedited else response]
         if isinstance(msg, DownloadSegment):
             return self._download_segment(msg, state)
         if isinstance(msg, InitiateUpload):

@@ -175,6 +175,7 @@ class EmulatedSlave:
         self._eeprom_regs = b""
         self._transition: tuple[int, AlState] | None = None
         self._replies: deque[tuple[int, list[bytes]]] = deque()
+        self._reply_starts: deque[int] = deque()     # when the firmware starts writing one
         self.eeprom = bytearray(sii_image)
         self.od = od
         # Input values the user holds (simulate --input, its control channel): (index,
@@ -561,7 +562,7 @@ class EmulatedSlave:
     def busy(self) -> bool:
         """Work in progress that becomes visible later (timing model)."""
         return self._eeprom_due is not None or self._transition is not None \
-            or bool(self._replies)
+            or bool(self._replies) or bool(self._reply_starts)
 
     def settle(self) -> None:
         """Make visible what is done by now (clock_ns): the segment calls this before
@@ -576,6 +577,15 @@ class EmulatedSlave:
             target = self._transition[1]
             self._transition = None
             self._enter(target)
+        while self._reply_starts and now >= self._reply_starts[0]:
+            self._reply_starts.popleft()
+            sm = self._mailbox_in_sm()
+            if sm is not None and not sm.full and sm.read_event:
+                # The firmware writes the first byte of its reply into SM1: that clears
+                # the read event of the master's last read (ESC datasheet, SM status
+                # 0x0805 bit 1); the reply shows when its last byte is written.
+                sm.read_event = False
+                sm.store_status(self.mem)
         while self._replies and now >= self._replies[0][0]:
             self.mailbox_queue.extend(self._replies.popleft()[1])
             self._post_next()
@@ -627,6 +637,7 @@ class EmulatedSlave:
     def _stop_mailbox(self) -> None:
         self.mailbox_queue.clear()
         self._replies.clear()
+        self._reply_starts.clear()
         self.last_mailbox = None
 
     def _write_sm_area(self, sm: SmState, ado: int, data: bytes | memoryview) -> bool:
@@ -676,8 +687,16 @@ class EmulatedSlave:
             return
         replies = self.mailbox.handle(message, state)
         if replies and self.timing and self.timing.mailbox_reply_ns:
-            # The firmware answers after its reply latency (runtime/segment/timing.py).
-            self._replies.append((self.clock_ns() + self.timing.mailbox_reply_ns, replies))
+            # The firmware answers after its reply latency (runtime/segment/timing.py), one
+            # message at a time: a request taken while it still works on the one before
+            # (a master that writes SM0 before reading SM1) waits for that one first.
+            now = self.clock_ns()
+            if self._replies:
+                now = max(now, self._replies[-1][0])
+            self._replies.append((now + self.timing.mailbox_reply_ns, replies))
+            start = self.timing.reply_start_ns
+            if start is not None and start < self.timing.mailbox_reply_ns:
+                self._reply_starts.append(now + start)
             return
         self.mailbox_queue.extend(replies)
         self._post_next()

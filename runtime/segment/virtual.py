@@ -144,6 +144,14 @@ class VirtualSegment:
                                  "0-3 and a share is between 0 and 1")
             self._lossy[(self._wired_index(lossy.slave), lossy.port)] = lossy.share
 
+    def set_clock(self, clock_ns: Callable[[], int]) -> None:
+        """Live on ``clock_ns`` from now on (a simulated clock, before the first frame):
+        the slaves' local clocks start again from their seeded values on it."""
+        self.clock_ns = clock_ns
+        for slave, clock in zip(self.wired, self.dc_model.clocks(len(self.wired), clock_ns())):
+            slave.dc = clock
+        self._rewire()
+
     def _attach(self, slave: EmulatedSlave) -> None:
         """The segment's time and callbacks for ``slave``."""
         slave.clock_ns = self._now
@@ -551,14 +559,54 @@ class VirtualSegment:
 
     # -- running on a link -------------------------------------------------------------------
 
+    def round_trip_ns(self, size: int) -> int:
+        """How long after the master starts sending a frame of ``size`` bytes (Ethernet
+        header on, no FCS) its last byte is back: the bytes at 100 Mbit/s (80 ns per byte,
+        with preamble and start delimiter, padding to 60 bytes and FCS: ETG.1000.4 runs
+        on IEEE 802.3 100BASE-TX) plus, per slave the frame reaches, the processing delay
+        out, the forwarding delay back and a cable crossed twice (:class:`DcModel`)."""
+        on_wire = (max(size, 60) + 4 + 8) * 80
+        model = self.dc_model
+        return on_wire + len(self.slaves) * (model.processing_ns + model.forwarding_ns
+                                             + 2 * model.cable_ns)
+
+    def tick(self) -> None:
+        """What the slaves do on their own between frames, as of now (``clock_ns``): work
+        done under the timing model shows, SM watchdogs expire.  :meth:`serve` runs it
+        every 2 ms, a simulated wire (``runtime/simwire.py``) before every frame."""
+        slave_now = self.clock_ns() / 1e9
+        self.settle()
+        for s in self.wired:            # unplugged slaves time out too
+            s.check_watchdog(slave_now)
+
+    def answer(self, frame: bytes | bytearray) -> tuple[bytearray | None, float]:
+        """The frame through the wire's faults (:class:`Faults`) and the slaves: the reply
+        (``None``: lost on the way out or back, or a CRC error) and how much later than
+        usual it comes back (s; a delayed frame)."""
+        faults = self.faults
+        rng = self._rng
+        if faults.drop and rng.random() < faults.drop / 2:
+            return None, 0.0                               # lost on the way out
+        reply = self.process_lossy(frame)
+        if reply is None:
+            return None, 0.0                               # a CRC error: dropped
+        if faults.drop and rng.random() < faults.drop / 2:
+            return None, 0.0                               # lost on the way back
+        if faults.corrupt and rng.random() < faults.corrupt and len(reply) > 16:
+            bit = rng.randrange((len(reply) - 16) * 8)
+            reply[16 + bit // 8] ^= 1 << bit % 8
+        if faults.delay and rng.random() < faults.delay:
+            return reply, faults.delay_s
+        return reply, 0.0
+
     def serve(self, link: Link, *, duration: float | None = None,
               stop: threading.Event | None = None,
               on_ready: Callable[[], None] | None = None,
               on_tick: Callable[[], None] | None = None) -> None:
-        """Answer frames from ``link`` until ``stop`` is set or ``duration`` has passed.
+        """Answer frames from ``link`` until ``stop`` is set or ``duration`` has passed, in
+        real time (the host's clock paces the loop; the slaves live on ``clock_ns``).
         ``on_tick`` runs every 2 ms between frames: where a caller changes the segment
         (a power cycle asked for by a signal) without cutting a frame in two."""
-        faults = self.faults
         end = time.monotonic() + duration if duration is not None else None
         delayed: list[tuple[float, int, bytes]] = []
         sequence = 0
@@ -572,10 +620,7 @@ class VirtualSegment:
             while delayed and delayed[0][0] <= now:
                 link.send(heapq.heappop(delayed)[2])
             if now >= next_tick:
-                slave_now = self.clock_ns() / 1e9
-                self.settle()
-                for s in self.wired:            # unplugged slaves time out too
-                    s.check_watchdog(slave_now)
+                self.tick()
                 if on_tick is not None:
                     on_tick()
                 next_tick = now + 0.002
@@ -585,20 +630,12 @@ class VirtualSegment:
             frame = link.recv(wait)
             if frame is None:
                 continue
-            if faults.drop and self._rng.random() < faults.drop / 2:
-                continue                                   # lost on the way out
-            lossy = self.process_lossy(frame)
-            if lossy is None:
-                continue                                   # a CRC error: dropped
-            reply = lossy
-            if faults.drop and self._rng.random() < faults.drop / 2:
-                continue                                   # lost on the way back
-            if faults.corrupt and self._rng.random() < faults.corrupt and len(reply) > 16:
-                bit = self._rng.randrange((len(reply) - 16) * 8)
-                reply[16 + bit // 8] ^= 1 << bit % 8
-            if faults.delay and self._rng.random() < faults.delay:
+            reply, late = self.answer(frame)
+            if reply is None:
+                continue
+            if late:
                 sequence += 1
-                heapq.heappush(delayed, (now + faults.delay_s, sequence, bytes(reply)))
+                heapq.heappush(delayed, (now + late, sequence, bytes(reply)))
                 continue
             link.send(bytes(reply))
 

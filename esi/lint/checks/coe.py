@@ -13,13 +13,14 @@ from ecatcfg.esi.lint.checks.common import hex4
 from ecatcfg.esi.lint.context import FileContext
 from ecatcfg.esi.lint.rules import Hit, device_rule, file_rule
 from ecatcfg.esi.model import CoeInitCmd, Device, Dictionary, DictObject, Source
-from ecatcfg.esi.slots import fits, plugged_module
+from ecatcfg.esi.slots import PluggedModule, fits, plugged_module
 
 
 def _init_cmds(dev: Device) -> list[CoeInitCmd]:
     if dev.mailbox is None or dev.mailbox.coe is None:
         return []
-    return [c for c in dev.mailbox.coe.init_cmds if not c.depend_on_slot]
+    return [c for c in dev.mailbox.coe.init_cmds
+            if not (c.depend_on_slot or c.depend_on_slot_group)]
 
 
 class _Target(NamedTuple):
@@ -56,25 +57,27 @@ def _init_cmd_targets(ctx: FileContext) -> Iterator[_Target]:
         if coe is None or not coe.init_cmds:
             continue
         own = mod.profile.dictionary if mod.profile else None
-        places: list[tuple[Dictionary, int, str]] = []       # (dictionary, offset, where)
+        # (dictionary, the module plugged in the station, where)
+        places: list[tuple[Dictionary, PluggedModule | None, str]] = []
         if own is not None and own.objects:
-            places.append((own, 0, ""))
+            places.append((own, None, ""))
         stations = 0
         for dev in ctx.esi.devices:
             dic = dictionary_with_objects(dev)
             number = next((n for n, slot in enumerate(dev.slots.slots, start=1)
                            if fits(slot, mod)), None) if dev.slots else None
             if dic is not None and number is not None:
-                offset = plugged_module(dev, number, mod).index_offset
-                places.append((dic, offset, f"{dev.type_name} slot {number}"))
+                places.append((dic, plugged_module(dev, number, mod),
+                               f"{dev.type_name} slot {number}"))
                 stations += 1
         for cmd in coe.init_cmds:
             if cmd.index is None or not places:
                 continue
             found: DictEntry | DictObject | None = None
             shown = hex4(cmd.index)
-            for dic, offset, where in places:
-                moved = cmd.index + (offset if cmd.depend_on_slot else 0)
+            for dic, plugged, where in places:
+                moved = cmd.index if plugged is None else plugged.object_index(
+                    cmd.index, cmd.depend_on_slot, cmd.depend_on_slot_group)
                 found = write_target(dic, moved, cmd.subindex, cmd.complete_access)
                 shown = hex4(cmd.index) + (f" ({hex4(moved)} in {where})"
                                            if moved != cmd.index else "")

@@ -10,6 +10,7 @@ from ecatcfg.esi.lint.checks.common import repeats
 from ecatcfg.esi.lint.context import FileContext
 from ecatcfg.esi.lint.rules import Hit, device_rule, file_rule
 from ecatcfg.esi.model import Device
+from ecatcfg.esi.slots import fits, plugged_module, ungrouped_indices
 
 
 @device_rule("ESI601", "error", "a Slot names a module ident no known module has", """
@@ -55,22 +56,50 @@ def duplicate_module_ident(ctx: FileContext) -> Iterator[Hit]:
                   f"of {first.type_name!r} at line {first.source.line}")
 
 
-@device_rule("ESI604", "error", "a Slot belongs to a slot group, which ecatcfg cannot compile", """
-    Slot/@SlotGroup puts a slot in a group of ``SlotGroupData``: the object and PDO indices
-    of a module marked ``DependOnSlotGroup`` move by the group's place as well as by the
-    slot's (ETG.2000 modular device profile).  ecatcfg does not compute those offsets, and a
-    wrong index would configure another object, so ``ecatcfg compile`` refuses any module
-    in such a slot: the device can only be compiled with its grouped slots empty.  This is
-    a limit of ecatcfg, not a fault of the file; ``--ignore ESI604`` where the grouped slots
-    stay empty.""")
-def slot_group(dev: Device, ctx: FileContext) -> Iterator[Hit]:
+@device_rule("ESI604", "error", "a module marks an index DependOnSlotGroup but fits a slot of no "
+             "slot group", """
+    Index@DependOnSlotGroup moves a module's PDO or object index by the number of the slot
+    group its slot belongs to (Slot/@SlotGroup) times SlotGroupPdoIncrement or
+    SlotGroupIndexIncrement (ETG.2000 Slots; esi/slots.py).  This slot belongs to no group,
+    so there is no number to move the index by: taken as written it could configure another
+    group's object, and ``ecatcfg compile`` refuses the module in this slot.  Give the slot
+    its SlotGroup, or take the attribute off indices that do not depend on a group.""")
+def ungrouped_slot_group_index(dev: Device, ctx: FileContext) -> Iterator[Hit]:
     if dev.slots is None:
         return
-    for slot in dev.slots.slots:
+    for number, slot in enumerate(dev.slots.slots, start=1):
         if slot.slot_group is not None:
+            continue
+        for mod in ctx.esi.modules:
+            if not fits(slot, mod):
+                continue
+            found = ungrouped_indices(plugged_module(dev, number, mod))
+            if found:
+                yield Hit(slot.source, f"Slot {slot.name!r} belongs to no slot group, but "
+                          f"module {mod.type_name!r}, which fits it, marks the index at "
+                          f"line {found[0].line} DependOnSlotGroup")
+
+
+@device_rule("ESI606", "warning", "a slot group is described twice, or not at all", """
+    Slots/SlotGroupData describes a slot group (its name for a configuration tool) by the
+    number the slots give in Slot/@SlotGroup.  Two descriptions of one number, or a slot of a
+    number no SlotGroupData describes while the device describes others, leave a tool to
+    guess which group is meant.  The indices a group moves depend on the number alone, so
+    nothing sent changes; a device without any SlotGroupData (Beckhoff's EL69xx, EP1908)
+    is not reported.""")
+def slot_group_data(dev: Device, ctx: FileContext) -> Iterator[Hit]:
+    if dev.slots is None or not dev.slots.groups:
+        return
+    for group, first in repeats(dev.slots.groups, lambda g: g.number):
+        yield Hit(group.source, f"SlotGroupData describes slot group {group.number} again "
+                  f"(first at line {first.source.line})")
+    described = {g.number for g in dev.slots.groups}
+    for slot in dev.slots.slots:
+        if slot.slot_group is not None and slot.slot_group not in described:
             yield Hit(slot.source, f"Slot {slot.name!r} belongs to slot group "
-                      f"{slot.slot_group}; ecatcfg compile refuses modules in it "
-                      "(SlotGroupData offsets are not implemented)")
+                      f"{slot.slot_group}, which no SlotGroupData describes")
+
+
 @device_rule("ESI605", "error", "the module ident list is to be downloaded but 0xF030 cannot be "
              "written", """
     Slots/@DownloadModuleIdentList makes a configurator download the configured module

@@ -33,7 +33,8 @@ def _mapped_entries(dev: Device) -> Iterator[tuple[Pdo, PdoEntry, DictEntry | Di
         return
     for pdo in dev.pdos:
         for entry in pdo.entries:
-            if entry.index is None or entry.is_padding or entry.depend_on_slot:
+            if entry.index is None or entry.is_padding or entry.depend_on_slot \
+                    or entry.depend_on_slot_group:
                 continue
             yield pdo, entry, lookup(dic, entry.index, entry.subindex)
 
