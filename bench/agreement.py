@@ -1,9 +1,10 @@
 """The whole check-vs-apply agreement matrix: every ENI of both
-corpora and the example line compiled by ``ecatcfg compile``, unmodified and with every
+corpora, the example line compiled by ``ecatcfg compile`` and ``--lines`` lines of corpus
+devices drawn by seed and compiled the same way (``tests/compiled_lines.py``), unmodified and with every
 fault class of ``tests/faults.py`` planted with each seed, ``check`` against ``apply
 --virtual``, with the ESI files of both corpora and from the ENI alone.
 
-    python3 bench/agreement.py [--seeds N] [--corpus DIR --corpus-extra DIR] [-v]
+    python3 bench/agreement.py [--seeds N] [--lines N] [--corpus DIR --corpus-extra DIR] [-v]
 
 Prints one line per case that is neither an agreement nor a documented limit (and with -v
 every case), then the figures as a Markdown table for docs/BENCHMARKS.md: cases, agreements,
@@ -30,6 +31,10 @@ SHARED = ROOT.parent / "shared"
 def main() -> int:
     ap = argparse.ArgumentParser()
     ap.add_argument("--seeds", type=int, default=3)
+    ap.add_argument("--lines", type=int, default=10,
+                    help="lines of corpus devices compiled (line seeds 1..N)")
+    ap.add_argument("--only-lines", action="store_true",
+                    help="only the compiled lines of corpus devices, not the corpus ENIs")
     ap.add_argument("--corpus", type=Path, default=SHARED / "corpus")
     ap.add_argument("--corpus-extra", type=Path, default=SHARED / "corpus-extra")
     ap.add_argument("-v", "--verbose", action="store_true")
@@ -37,6 +42,7 @@ def main() -> int:
     sys.path.insert(0, str(ROOT.parent))
     sys.path.insert(0, str(ROOT / "tests"))
     from agreement import LIMITS, Outcome, run_matrix
+    from compiled_lines import candidates, line
     from conftest import compile_example
     from faults import FAULTS
 
@@ -44,15 +50,24 @@ def main() -> int:
     from ecatcfg.esi.library import Library
 
     enis: dict[str, bytes] = {}
-    for root in (args.corpus, args.corpus_extra):
+    for root in (args.corpus, args.corpus_extra) if not args.only_lines else ():
         for path in sorted((root / "eni").rglob("*.xml")):
             enis[f"{root.name}/{path.relative_to(root / 'eni').as_posix()}"] = \
                 path.read_bytes()
     with tempfile.TemporaryDirectory() as tmp:
-        enis["examples (compiled)"] = compile_example(Path(tmp) / "line.xml").read_bytes()
+        if not args.only_lines:
+            enis["examples (compiled)"] = compile_example(Path(tmp) / "line.xml").read_bytes()
         library = Library([args.corpus / "esi", args.corpus_extra / "esi", ROOT / "examples"
                            / "esi"], cache=IndexCache(Path(tmp) / "cache"),
                           prefer=[args.corpus / "esi" / "drives"])
+        pool = candidates(library, tuple(str((root / "esi").resolve())
+                                         for root in (args.corpus, args.corpus_extra)))
+        lines = 0
+        for seed in range(1, args.lines + 1):
+            drawn = line(library, pool, seed)
+            if drawn is not None:
+                enis[drawn.name] = drawn.eni
+                lines += 1
 
         def report(o: Outcome) -> None:
             if args.verbose or not o.explained:
@@ -69,7 +84,7 @@ def main() -> int:
     unexplained = [o for o in outcomes if not o.explained]
     agree = sum(1 for o in outcomes if o.agree and o.at_line and not o.allowed_disagreement)
     print(f"\n{platform.machine()}, {os.cpu_count()} CPUs, Python {sys.version.split()[0]}; "
-          f"{len(enis)} ENIs, {len(FAULTS)} fault classes, {args.seeds} seed(s), "
+          f"{len(enis)} ENIs ({lines} compiled lines of corpus devices), {len(FAULTS)} fault classes, {args.seeds} seed(s), "
           f"with ESI and ENI only")
     print("| what | cases |")
     print("|---|---|")

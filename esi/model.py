@@ -341,6 +341,31 @@ class SyncManager:
                 return size
         return 0
 
+    def takes_mailbox_length(self, length: int) -> bool:
+        """Whether the slave takes a mailbox SM of ``length`` bytes, the one rule of the
+        ENI check (ENI501) and the emulated firmware's mailbox check (0x0016).
+
+        ETG.2000 ``Device/Sm``: ``MinSize`` and ``MaxSize`` are the sizes the slave accepts,
+        ``DefaultSize`` the one a configurator programs.  A slave takes any length in
+        ``MinSize..MaxSize`` (the Slave Stack Code's mailbox check bounds the SM length by
+        its MIN_MBX_SIZE and MAX_MBX_SIZE and works with the length it is given), a bound
+        the file does not give being :attr:`mailbox_size`, and always :attr:`mailbox_size`
+        itself, the size every part of ecatcfg configures, even where it lies outside the
+        bounds (lint reports that contradiction in the ESI).  A file with no size at all
+        bounds nothing: only its :attr:`mailbox_size`, 0, which no mailbox has."""
+        size = self.mailbox_size
+        lo = self.min_size if self.min_size is not None else size
+        hi = self.max_size if self.max_size is not None else size
+        return lo <= length <= hi or length == size
+
+    def mailbox_lengths_text(self) -> str:
+        """The lengths :meth:`takes_mailbox_length` takes, for a message."""
+        size = self.mailbox_size
+        lo = self.min_size if self.min_size is not None else size
+        hi = self.max_size if self.max_size is not None else size
+        bounds = f"{lo}..{hi}" if lo != hi else f"{lo}"
+        return bounds if lo <= size <= hi else f"{bounds} or {size}"
+
     @property
     def mailbox_control(self) -> int:
         """The control byte of a mailbox SM: ``ControlByte``, else the standard mailbox

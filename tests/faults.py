@@ -438,6 +438,60 @@ def sync0_fast(root: Root, rng: random.Random) -> Planted | None:
                    also=(_path(slave.find("DC")), *map(_path, writes)))
 
 
+def sync0_zero(root: Root, rng: random.Random) -> Planted | None:
+    """SYNC0 switched on with the SYNC0 cycle register (0x09A0) written 0, the DC element
+    left as it was (a tool that writes the register from another field): SYNC0 is then a
+    single pulse (ESC Section II), and a slave with firmware refuses SAFEOP with 0x0035
+    (the Slave Stack Code's StartInputHandler).  A device without firmware takes it."""
+    found = []
+    for slave in _slaves(root):
+        writes = [c for c in slave.iterfind("InitCmds/InitCmd")
+                  if number(c.findtext("Ado")) == 0x09A0 and len(_data(c)) >= 4]
+        active = [c for c in slave.iterfind("InitCmds/InitCmd")
+                  if number(c.findtext("Ado")) == 0x0980 and len(_data(c)) == 2
+                  and _data(c)[1] & 0x03 == 0x03]
+        if writes and active:
+            found.append((slave, writes))
+    if not found:
+        return None
+    slave, writes = rng.choice(found)
+    for c in writes:
+        d = bytearray(_data(c))
+        d[0:4] = bytes(4)
+        _set_data(c, bytes(d))
+    return Planted(_name(slave), _path(writes[-1]), "SYNC0 cycle register 0",
+                   also=tuple(map(_path, writes[:-1])))
+
+
+def maps_device_type(root: Root, rng: random.Random) -> Planted | None:
+    """A 32-bit entry of a PDO replaced by 0x1000:00 (device type) in the mapping download
+    and in ``ProcessData`` alike (a tool that maps the object and describes it so): the ENI
+    agrees with itself, but ETG.1000.6 gives 0x1000 no PDO mapping.  A slave whose
+    dictionary says so (its ESI's Flags without PdoMapping) refuses the mapping or SAFEOP;
+    from the ENI alone the object is what the ENI says, and a dictionary that gives no
+    Flags for it leaves it to the device (docs/show-diff-check.md)."""
+    found = []
+    for slave, cmd, off in _mapping_writes(root):
+        entry = _data(cmd)[off:off + 4]
+        index, sub = int.from_bytes(entry[2:4], "little"), entry[1]
+        pdo = number(cmd.findtext("Index"))
+        descs = [e for d in slave.iterfind("ProcessData/*") if d.tag in ("RxPdo", "TxPdo")
+                 and number(d.findtext("Index")) == pdo for e in d.iterfind("Entry")
+                 if number(e.findtext("Index")) == index
+                 and number(e.findtext("SubIndex")) == sub and number(e.findtext("BitLen")) == 32]
+        if entry[0] == 32 and descs:
+            found.append((slave, cmd, off, descs[0]))
+    if not found:
+        return None
+    slave, cmd, off, desc = rng.choice(found)
+    _change_entry(cmd, off, bytes([32, 0, 0x00, 0x10]))
+    for tag, text in (("Index", "#x1000"), ("SubIndex", "0")):
+        el = desc.find(tag)
+        if el is not None:
+            el.text = text
+    return Planted(_name(slave), _path(cmd), "maps 0x1000:00", also=(_path(desc),))
+
+
 def mailbox_size(root: Root, rng: random.Random) -> Planted | None:
     """SM0 and Mailbox/Send of one slave both 1000 bytes: the ENI agrees with itself, but
     the device's mailbox is another size and it refuses PREOP (0x0016, SOES
@@ -495,6 +549,8 @@ FAULTS: dict[str, Fault] = {f.name: f for f in (
     Fault("fmmu-outside", fmmu_outside, False),
     Fault("wrong-cnt", wrong_cnt, False),
     Fault("sync0-fast", sync0_fast, "esi"),
+    Fault("sync0-zero", sync0_zero, "firmware"),
+    Fault("maps-device-type", maps_device_type, "esi"),
     Fault("mailbox-size", mailbox_size, "esi"),
     Fault("watchdog", watchdog, "firmware"),
 )}

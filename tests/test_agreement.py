@@ -19,6 +19,7 @@ from pathlib import Path
 
 import pytest
 from agreement import LIMITS, Outcome, run_matrix
+from compiled_lines import compile_line, line
 from conftest import compile_example
 from faults import FAULTS, plant
 
@@ -32,6 +33,18 @@ SAMPLE = ["corpus/eni/rocos-ethercat/eni.xml", "corpus/eni/jn-ec-master/mega_mas
           "corpus/eni/acontis-doc/acontis-TrainingSlaves-ENI.xml",
           "corpus/eni/rocos-ethercat/eni1.xml"]
 SEED = 39
+# Lines of corpus devices as compile writes them (compiled_lines.py draws such lines by
+# seed for the bench; these two are fixed): drives of four vendors with CoE PDO
+# downloads, one with DC (Mitsubishi MR-J4-TM, Elmo, Synapticon SOMANET, an open-source
+# EaserCAT); a coupler with DC before an EtherCAT P coupler, digital inputs and a
+# junction (Inovance GL20, Beckhoff EK1200, EJ2918, EK1322).
+LINES = {
+    "drives": [("0xa1e:0x201:0x20002", None), ("0x9a:0x30924:0x1", "DC Sync"),
+               ("0x22d2:0x201:0xa000002", None), ("0xaaa:0xbbbccc:0x2", None)],
+    "coupler and terminals": [("0x100000:0x10f41001:0x1006000", "Synchron"),
+                              ("0x2:0x4b02c52:0x1388", None), ("0x2:0xb662852:0x110000", None),
+                              ("0x2:0x52a2c52:0x110000", None)],
+}
 
 
 @pytest.fixture(scope="module")
@@ -44,16 +57,20 @@ def library(corpus: Path, corpus_extra: Path, tmp_path_factory: pytest.TempPathF
                    prefer=[corpus / "esi" / "drives"])
 
 
-def _enis(corpus: Path, tmp_path: Path) -> dict[str, bytes]:
+def _enis(corpus: Path, tmp_path: Path, library: Library) -> dict[str, bytes]:
     enis = {name: (corpus.parent / name).read_bytes() for name in SAMPLE}
     enis["examples (compiled)"] = compile_example(tmp_path / "line.xml").read_bytes()
+    for name, devices in LINES.items():
+        enis[f"compiled line: {name}"] = compile_line(library, [
+            {"name": f"slave{n}", "device": device, **({"dc": dc} if dc else {})}
+            for n, (device, dc) in enumerate(devices, start=1)])
     return enis
 
 
 def test_check_errs_exactly_where_apply_fails(corpus: Path, tmp_path: Path,
                                               library: Library) -> None:
     started = time.perf_counter()
-    outcomes = run_matrix(_enis(corpus, tmp_path), [None, *FAULTS], [SEED],
+    outcomes = run_matrix(_enis(corpus, tmp_path, library), [None, *FAULTS], [SEED],
                           {False: None, True: library})
     bad = [o.describe() for o in outcomes if not o.explained]
     assert not bad, "\n".join(bad)
@@ -104,6 +121,13 @@ def test_an_outcome_is_judged_by_its_class() -> None:
     elsewhere = Outcome("x.xml", "assign-short", 1, True, ["7: ENI205 m"], [], [], "0x001D",
                         frozenset({5}))
     assert elsewhere.agree and not elsewhere.explained
+    # The watchdog limit holds only where the emulated slave did leave OP with 0x001B.
+    kept = Outcome("x.xml", "watchdog", 1, False, ["5: ENI121 m"], [], [], None,
+                   frozenset({5}))
+    assert not kept.agree and kept.limit is None and not kept.explained
+    left = Outcome("x.xml", "watchdog", 1, False, ["5: ENI121 m"], [], [], None,
+                   frozenset({5}), "drive SAFEOP+ERR 0x001B")
+    assert left.limit == "watchdog-after-op" and left.explained
 
 
 def test_a_refusal_read_without_its_code_is_not_called_no_error() -> None:
@@ -116,3 +140,27 @@ def test_a_refusal_read_without_its_code_is_not_called_no_error() -> None:
     assert short.al_code is None
     full = _refused(bytes([0x12, 0, 0, 0, 0x35, 0]), "drive", "check device state for SAFEOP")
     assert "AL status code 0x0035" in str(full) and full.al_code == 0x35
+
+
+def test_a_compiled_line_is_drawn_again_by_its_seed(corpus: Path, corpus_extra: Path,
+                                                    library: Library, eni_schema) -> None:
+    """The generator of compiled lines (the bench's cases): the same seed draws the same
+    devices, the line is the ENI compile writes for them (valid against ETG.2100's schema),
+    and its slaves are the devices drawn, read back with plain lxml."""
+    from lxml import etree
+
+    from compiled_lines import candidates
+    pool = candidates(library, tuple(str((root / "esi").resolve())
+                                     for root in (corpus, corpus_extra)))
+    assert {e.file.split("/esi/")[0] for e in pool} == {str(corpus.resolve()),
+                                                        str(corpus_extra.resolve())}
+    first, again = line(library, pool, 3), line(library, pool, 3)
+    assert first is not None and again is not None
+    assert first.devices == again.devices and first.eni == again.eni
+    assert 2 <= len(first.devices) <= 4
+    doc = etree.fromstring(first.eni)
+    assert eni_schema.validate(doc.getroottree()), eni_schema.error_log
+    got = [":".join(hex(int(s.findtext(f"Info/{t}"))) for t in ("VendorId", "ProductCode",
+                                                                  "RevisionNo"))
+           for s in doc.iterfind("Config/Slave")]
+    assert got == list(first.devices)

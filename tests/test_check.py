@@ -284,6 +284,12 @@ def _axis1_watchdog_1(root: Root) -> None:
     before.addprevious(cmd)
 
 
+def _axis1_sync0_cycle_0(root: Root) -> None:
+    """axis1's InitCmd that writes the SYNC0 cycle (0x09A0) writes 0; the DC element still
+    says 1 ms and the activation (0x0981 = 0x03) switches SYNC0 on."""
+    _init_cmd(_slave(root, "axis1"), "set DC cycle time").find("Data").text = "00" * 8
+
+
 def _axis1_without_mailbox(root: Root) -> None:
     axis = _slave(root, "axis1")
     axis.remove(axis.find("Mailbox"))
@@ -330,6 +336,8 @@ DEFECTS: list[tuple[str, Callable[[Root], None], list[str]]] = [
                                  "the master reads it", "0x001D"]),
     ("ENI121", _axis1_watchdog_1,
      ["axis1", "SM watchdog 100 µs (1 × 100000 ns)", "the cycle 1000 µs", "0x001B"]),
+    ("ENI404", _axis1_sync0_cycle_0, ["axis1", "AssignActivate 0x0300", "0x09A0 is written 0",
+                                      "0x0035"]),
     ("ENI120", _mailbox_512, ["axis1", "SM0 (0x1000..0x11FF) reaches into SM1 "
                                        "(0x1080..0x10FF)"]),
     ("ENI205", _1c13_count_1, ["0x1C13 holds 1 PDO(s) after PS (0x1A00)",
@@ -536,7 +544,7 @@ def test_a_sync0_cycle_below_the_devices_minimum_is_an_error(tmp_path: Path,
                                  use_cache=False))
         assert list(found) == expected, found
     [message] = found["ENI403"]
-    assert "DC CycleTime0 is 1000 µs with SYNC0 on" in message
+    assert "the SYNC0 cycle the InitCmds write (0x09A0) is 1000 µs with SYNC0 on" in message
     assert "minimum cycle time 2000 µs (ESI 0x1C32:05 default" in message
     assert "0x0035" in message
 

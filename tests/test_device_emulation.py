@@ -196,6 +196,37 @@ def test_sm_watchdog_with_firmware_drops_to_safeop_with_0x001b(beckhoff):
     assert slave.outputs() == bytes(16)
 
 
+def test_sm_watchdog_shorter_than_the_segments_loop_expires_between_two_writes(beckhoff):
+    """A watchdog of 1 unit (100 µs) under a 1 ms cycle: the ESC's watchdog runs out between
+    two output writes whenever they come, not when the segment's loop looks (every 2 ms,
+    ``check_watchdog``, not called here).  The slave's clock is the test's own: 50 µs
+    between writes keeps OP, 1 ms drops the EL7342's firmware to SAFEOP+ERR 0x001B."""
+    now = [10**12]
+    seg = segment([SlaveSpec(beckhoff.device(beckhoff.find("EL7342").entry), "EL7342-0")],
+                  clock_ns=lambda: now[0])
+    slave = seg.slaves[0]
+    address_all(seg)
+    configure(seg, 0x1001, 0, SmConfig(0x1000, 128, 0x26, True))
+    configure(seg, 0x1001, 1, SmConfig(0x1080, 128, 0x22, True))
+    assert request(seg, 0x1001, AlState.PREOP) == (AlState.PREOP, 0)
+    run(seg, fp(Cmd.FPWR, 0x1001, 0x0420, u16(1)))
+    configure(seg, 0x1001, 2, SmConfig(0x1100, 16, 0x64, True),
+              FmmuConfig(0, 16, 0, 7, 0x1100, 0, FmmuType.WRITE), 0)
+    configure(seg, 0x1001, 3, SmConfig(0x1200, 16, 0x20, True),
+              FmmuConfig(16, 16, 0, 7, 0x1200, 0, FmmuType.READ), 1)
+    assert request(seg, 0x1001, AlState.SAFEOP) == (AlState.SAFEOP, 0)
+    assert request(seg, 0x1001, AlState.OP) == (AlState.OP, 0)
+    for gap_ns in (50_000, 50_000, 90_000):
+        now[0] += gap_ns
+        run(seg, Datagram.logical(Cmd.LWR, 0, b"\x01" * 16))
+        assert (slave.state, slave.error) == (AlState.OP, False)
+    now[0] += 1_000_000
+    run(seg, Datagram.logical(Cmd.LWR, 0, b"\x01" * 16))
+    assert (slave.state, slave.error, slave.status_code) == (AlState.SAFEOP, True, 0x001B)
+    [d] = run(seg, fp(Cmd.FPRD, 0x1001, 0x0442, 1))
+    assert d.data == b"\x01"                                     # expired once
+
+
 # -- replies compared with real hardware ---------------------------------------------------
 
 def _exchanges(path: Path) -> list[tuple[bytes, bytes]]:

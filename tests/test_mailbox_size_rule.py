@@ -90,3 +90,41 @@ def test_a_mailbox_without_any_size_is_a_lint_error(tmp_path, capsys):
     assert main(["lint", str(folder), "--format", "json", "--no-config"]) == 1
     findings = json.loads(capsys.readouterr().out)["findings"]
     assert [(f["rule"], f["severity"]) for f in findings] == [("ESI213", "error")]
+
+
+def _recv_length(eni, length: int) -> None:
+    """SM1's InitCmd and ``Mailbox/Recv/Length`` set to ``length``, with lxml."""
+    tree = etree.parse(str(eni))
+    slave = tree.getroot().find("Config/Slave")
+    for cmd in slave.iterfind("InitCmds/InitCmd"):
+        data = bytes.fromhex(cmd.findtext("Data") or "")
+        if int(cmd.findtext("Ado")) == 0x0808 and len(data) == 8:
+            cmd.find("Data").text = (data[:2] + struct.pack("<H", length) + data[4:]).hex()
+    slave.find("Mailbox/Recv/Length").text = str(length)
+    tree.write(str(eni))
+
+
+@pytest.mark.parametrize("length,takes", [(64, True), (32, True), (96, True), (31, False),
+                                          (100, False)])
+def test_check_and_the_emulated_slave_take_the_same_mailbox_lengths(tmp_path, capsys,
+                                                                    length, takes):
+    """ETG.2000: MinSize..MaxSize are the sizes the slave accepts, DefaultSize (here none:
+    MaxSize) the one a configurator programs.  SM1 of 32..96 bytes: check (ENI501) and
+    the slave emulated from the same ESI (0x0016 before PREOP) take exactly the lengths
+    inside the bounds: one rule, not two."""
+    folder, topo = line(tmp_path, MIN_AND_MAX)
+    eni = tmp_path / "line.eni.xml"
+    assert main(["compile", str(topo), "--esi", str(folder), "-o", str(eni),
+                 "--no-cache"]) == 0, capsys.readouterr().err
+    _recv_length(eni, length)
+    capsys.readouterr()
+    checked = main(["check", str(eni), "--esi", str(folder), "--format", "json", "--no-cache"])
+    rules = [f["rule"] for f in json.loads(capsys.readouterr().out)["findings"]
+             if f["severity"] == "error"]
+    assert (checked, rules) == ((0, []) if takes else (1, ["ENI501"]))
+    applied = main(["apply", str(eni), "--virtual", "--esi", str(folder), "--cycles", "3",
+                    "--no-cache"])
+    said = capsys.readouterr()
+    assert (applied == 0) == takes, said
+    if not takes:
+        assert "0x0016" in said.out + said.err

@@ -11,13 +11,13 @@ import dataclasses
 import re
 from pathlib import Path
 
+from ecatcfg.eni.check import dc as dc_sync
 from ecatcfg.eni.check import pdo_state
 from ecatcfg.eni.check.context import CheckContext
 from ecatcfg.eni.check.network import sm_pdos, sm_records
 from ecatcfg.eni.check.rules import declare
 from ecatcfg.eni.plan import CoeInitCmd, PdoDesc, SlavePlan
 from ecatcfg.eni.words import foe_words, soe_words
-from ecatcfg.esc import REGISTER_WRITES, Reg, sync0_running
 from ecatcfg.esi import datatypes
 from ecatcfg.esi.coe import (TRANSITION_STATE, DictEntry, dictionary_with_objects, lookup,
                              write_refusal, write_target)
@@ -265,11 +265,11 @@ def _pdos(ctx: CheckContext, slave: SlavePlan, device: Device) -> None:
                 ctx.add(FIXED, line, f"PDO 0x{pdo.index:04X} is Fixed in {esi.source.file}:"
                         f"{esi.source.line} with {len(theirs)} entries; the ENI maps other "
                         f"ones ({len(mine)} entries)", slave)
-    _mappable(ctx, slave, device, assigned, line)
+    _mappable(ctx, slave, device, assigned)
 
 
-def _mappable(ctx: CheckContext, slave: SlavePlan, device: Device, assigned: list[PdoDesc],
-              line: int | None) -> None:
+def _mappable(ctx: CheckContext, slave: SlavePlan, device: Device,
+              assigned: list[PdoDesc]) -> None:
     dic = dictionary_with_objects(device)
     if dic is None:
         return
@@ -278,7 +278,7 @@ def _mappable(ctx: CheckContext, slave: SlavePlan, device: Device, assigned: lis
                   for e in p.entries}
     for pdo in assigned:
         letter = "R" if pdo.direction == "rx" else "T"
-        for e in pdo.entries:
+        for position, e in enumerate(pdo.entries):
             if not e.index or (pdo.direction, e.index, e.subindex) in esi_mapped:
                 continue
             found = lookup(dic, e.index, e.subindex)
@@ -289,7 +289,9 @@ def _mappable(ctx: CheckContext, slave: SlavePlan, device: Device, assigned: lis
             if letter not in mapping:
                 why = (f"its PdoMapping is {mapping!r}" if mapping
                        else "it has no PdoMapping")
-                ctx.add(MAPPABLE, line, f"PDO 0x{pdo.index:04X} maps 0x{e.index:04X}:"
+                ctx.add(MAPPABLE, ctx.lines.pdo_entry(slave, pdo.direction, pdo.index,
+                                                      position),
+                        f"PDO 0x{pdo.index:04X} maps 0x{e.index:04X}:"
                         f"{e.subindex:02X}, which the dictionary does not let a "
                         f"{letter}xPDO map ({why})", slave)
 
@@ -365,27 +367,8 @@ def _size(ctx: CheckContext, slave: SlavePlan, cmd: CoeInitCmd, found: DictEntry
                 f"{found.type} of {want} byte(s)", slave)
 
 
-def _assign_activate(slave: SlavePlan) -> tuple[int, int] | None:
-    """The last non-zero AssignActivate the slave's InitCmds write (0x0980 + 0x0981, or
-    0x0981 alone), with the line index of the command."""
-    found = None
-    for n, cmd in enumerate(slave.init_cmds):
-        if cmd.cmd not in REGISTER_WRITES or cmd.ado is None or not cmd.data:
-            continue
-        data = cmd.data
-        if cmd.ado == Reg.DC_CYCLIC_UNIT_CONTROL and len(data) >= 2:
-            value = int.from_bytes(data[:2], "little")
-        elif cmd.ado == Reg.DC_CYCLIC_UNIT_CONTROL + 1:
-            value = data[0] << 8
-        else:
-            continue
-        if value & 0xFF00:                      # a write that activates SYNC signals
-            found = (value, n)
-    return found
-
-
 def _dc(ctx: CheckContext, slave: SlavePlan, device: Device) -> None:
-    found = _assign_activate(slave)
+    found = dc_sync.assign_activate(slave)
     if found is None:
         return
     value, n = found
@@ -401,15 +384,23 @@ def _dc(ctx: CheckContext, slave: SlavePlan, device: Device) -> None:
         ctx.add(ASSIGN_ACTIVATE, line, f"InitCmds write AssignActivate 0x{value:04X}; the "
                 f"device has {have}", slave)
         return
+    # The cycle the slave gets: what the InitCmds write to 0x09A0, else DC CycleTime0.
+    running = dc_sync.sync0(slave)
+    minimum = min_cycle_time(device)
+    if running is not None and running.cycle_ns and minimum is not None \
+            and running.cycle_ns < minimum.ns:
+        if running.cycle_at is None:
+            where, what = ctx.lines.child(slave, "DC"), "DC CycleTime0"
+        else:
+            where = ctx.lines.listed(slave, "InitCmds", running.cycle_at,
+                                     len(slave.init_cmds))
+            what = "the SYNC0 cycle the InitCmds write (0x09A0)"
+        ctx.add(MIN_CYCLE, where, f"{what} is {us(running.cycle_ns)} with SYNC0 on; the "
+                f"device's {minimum.text()}: its firmware refuses SAFEOP with AL status "
+                "code 0x0035", slave)
     dc = slave.dc
     if dc is None:
         return
-    minimum = min_cycle_time(device)
-    if sync0_running(value >> 8) and dc.cycle_time0 and minimum is not None \
-            and dc.cycle_time0 < minimum.ns:
-        ctx.add(MIN_CYCLE, ctx.lines.child(slave, "DC"), f"DC CycleTime0 is "
-                f"{us(dc.cycle_time0)} with SYNC0 on; the device's {minimum.text()}: its "
-                "firmware refuses SAFEOP with AL status code 0x0035", slave)
     for mode in matching:
         fixed = [(name, want, got) for name, want, factor, got in (
             ("CycleTime0", mode.cycle_time_sync0, mode.cycle_time_sync0_factor, dc.cycle_time0),
@@ -444,15 +435,11 @@ def _mailbox(ctx: CheckContext, slave: SlavePlan, device: Device) -> None:
                            (mb.recv, "Recv", device.sms[1] if len(device.sms) > 1 else None)):
         if sm is None or sm not in boxes:
             continue
-        lo = sm.min_size if sm.min_size is not None else sm.mailbox_size
-        hi = sm.max_size if sm.max_size is not None else sm.mailbox_size
         problems = []
-        # The size every part of ecatcfg configures (SyncManager.mailbox_size: DefaultSize
-        # first) is the ESI's own choice even where it lies outside its MinSize..MaxSize
-        # (lint reports that contradiction in the ESI).
-        if not lo <= area.length <= hi and area.length != sm.mailbox_size:
+        # The one rule of the lengths a slave takes (the emulated firmware's too).
+        if not sm.takes_mailbox_length(area.length):
             problems.append(f"length {area.length}, the ESI allows "
-                            + (f"{lo}..{hi}" if lo != hi else f"{lo}"))
+                            + sm.mailbox_lengths_text())
         if sm.start_address is not None and area.start != sm.start_address:
             problems.append(f"start 0x{area.start:04X}, the ESI's is 0x{sm.start_address:04X}")
         if problems:

@@ -12,6 +12,7 @@ from ecatcfg.eni.check.context import CheckContext
 from ecatcfg.eni.check.rules import declare
 from ecatcfg.eni.check.network import is_unmapped_fmmu
 from ecatcfg.eni.plan import SlavePlan, register_writes_at
+from ecatcfg.record import replace
 from ecatcfg.esc import (FMMU_SIZE, SM_DIR_ECAT_READS, SM_DIR_ECAT_WRITES, SM_DIR_MASK,
                          SM_MODE_MAILBOX, SM_MODE_MASK, SM_SIZE, SM_WATCHDOG_ENABLE,
                          WATCHDOG_DIVIDER_DEFAULT, Cmd, FmmuConfig, FmmuType, Reg, SmConfig,
@@ -180,7 +181,7 @@ def _bits(ctx: CheckContext, slave: SlavePlan,
             mapped |= found
         missing = sorted(want - mapped)
         if missing:
-            fmmu, position = mine[0]
+            fmmu, position = _owner(mine, set(missing), reads, windows)
             runs = _runs(missing)
             ctx.add(BITS, _line(ctx, slave, position),
                     f"ProcessData/{kind} bit(s) {runs} ({len(missing)} of {len(want)}) are "
@@ -189,6 +190,18 @@ def _bits(ctx: CheckContext, slave: SlavePlan,
                     f"{fmmu.length} byte(s) to bit {fmmu.logical_stop_bit}): "
                     f"{'inputs the master never reads' if reads else 'outputs the slave never gets'}",
                     slave)
+
+
+def _owner(mine: list[tuple[FmmuConfig, int]], missing: set[int], reads: bool,
+           windows: list[Window]) -> tuple[FmmuConfig, int]:
+    """The FMMU a finding about ``missing`` bits names: the one whose whole bytes hold
+    them (its start or stop bit leaves them out; a slave may have several FMMUs of one
+    direction, an EJ2918 two write ones), else the first."""
+    for fmmu, position in mine:
+        whole = replace(fmmu, logical_start_bit=0, logical_stop_bit=7)
+        if (_image_bits(whole, reads, windows) or set()) & missing:
+            return fmmu, position
+    return mine[0]
 
 
 def _runs(bits: list[int]) -> str:

@@ -15,6 +15,7 @@ from lxml import etree
 
 from ecatcfg.eni.plan import NetworkPlan, SlavePlan
 from ecatcfg.esi import xmlsafe
+from ecatcfg.esi.values import parse_int
 from ecatcfg.fileio import read_input
 
 
@@ -42,6 +43,22 @@ class EniLines:
         element = self._slaves.get(id(slave))
         found = None if element is None else element.find(where)
         return found.sourceline if found is not None else self.slave(slave)
+
+    def pdo_entry(self, slave: SlavePlan, direction: str, pdo: int, position: int
+                  ) -> int | None:
+        """The line of the ``position``-th ``Entry`` of ``ProcessData``'s PDO ``pdo`` of
+        ``direction`` ("rx": RxPdo, "tx": TxPdo), else of that PDO, else of ``ProcessData``."""
+        element = self._slaves.get(id(slave))
+        tag = "RxPdo" if direction == "rx" else "TxPdo"
+        for desc in [] if element is None else element.iterfind(f"ProcessData/{tag}"):
+            try:
+                index = parse_int((desc.findtext("Index") or "").strip())
+            except ValueError:
+                continue
+            if index == pdo:
+                entries = list(desc.iterchildren("Entry"))
+                return (entries[position] if position < len(entries) else desc).sourceline
+        return self.child(slave, "ProcessData")
 
     def listed(self, slave: SlavePlan, where: str, index: int, count: int) -> int | None:
         """The line of the ``index``-th of ``count`` ``InitCmd`` elements in ``where``."""

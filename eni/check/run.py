@@ -6,7 +6,7 @@ import time
 from pathlib import Path
 
 from ecatcfg.eni import cache, reader
-from ecatcfg.eni.check import copies, devices, fmmus, network, pdo_state
+from ecatcfg.eni.check import copies, dc, devices, fmmus, network, pdo_state
 from ecatcfg.eni.check.context import CheckContext
 from ecatcfg.eni.check.lines import EniLines
 from ecatcfg.eni.check.rules import RULES, UNREADABLE
@@ -46,6 +46,7 @@ def check_eni(path: str | Path, library: Library | None, active: frozenset[str] 
     copies.check(ctx)
     pdo_state.check(ctx)
     fmmus.check(ctx)
+    dc.check(ctx)
     if library is not None:
         by_identity = evidence_by_identity(plan, shown)
         guided = library.guided(lambda v, p, r: by_identity.get((v, p, r)))

@@ -2,8 +2,9 @@
 AL state machine (``slave.py``) refuses, and with which AL status code.
 
 - INIT->BOOT: SM0/SM1 as the bootstrap mailbox of the slave's SII (0x0015 otherwise);
-- INIT->PREOP: the mailbox SyncManagers as the slave's ESI places them (SOES
-  ``ESC_checkmbx``: otherwise 0x0016, invalid mailbox configuration);
+- INIT->PREOP: the mailbox SyncManagers as the slave's ESI places them, of a length its
+  MinSize..MaxSize allows (``SyncManager.takes_mailbox_length``; the Slave Stack Code's
+  mailbox check: otherwise 0x0016, invalid mailbox configuration);
 - PREOP->SAFEOP (and SAFEOP->OP for SyncManagers the ESI marks OpOnly): each process-data
   SyncManager with the length the assigned PDOs need and an FMMU over it (SOES
   ``ESC_checkSM23``: 0x001D for outputs, 0x001E for inputs); with SYNC0 on, a cycle time
@@ -38,19 +39,22 @@ SM_MODE_AND_DIRECTION = SM_MODE_MASK | SM_DIR_MASK
 
 
 def mailbox_refusal(device: Device, sms: Sequence[SmState]) -> Refusal | None:
-    """INIT->PREOP: SM0/SM1 as the slave's own mailbox (start, length, mode and
-    direction), enabled (SOES ESC_checkmbx: otherwise 0x0016); None when they are."""
+    """INIT->PREOP: SM0/SM1 as the slave's own mailbox (start, mode and direction as
+    its ESI gives them, a length its MinSize..MaxSize allows), enabled (otherwise 0x0016,
+    as the Slave Stack Code's and SOES' mailbox checks); None when they are."""
     for esi_sm in device.sms:
         if esi_sm.type not in ("MBoxOut", "MBoxIn"):
             continue
         sm = sms[esi_sm.number]
-        want = (esi_sm.start_address, esi_sm.mailbox_size,
-                esi_sm.mailbox_control & SM_MODE_AND_DIRECTION)
-        got = (sm.start, sm.length, sm.control & SM_MODE_AND_DIRECTION)
-        if not sm.enabled or got != want:
+        want = (esi_sm.start_address, esi_sm.mailbox_control & SM_MODE_AND_DIRECTION)
+        got = (sm.start, sm.control & SM_MODE_AND_DIRECTION)
+        # The length: any the ESI's MinSize..MaxSize allows (the one rule, shared with
+        # the ENI check: SyncManager.takes_mailbox_length).
+        if not sm.enabled or got != want or not esi_sm.takes_mailbox_length(sm.length):
             return Refusal(AlStatusCode.INVALID_MAILBOX, Rule.MAILBOX_SM,
                            f"SM{esi_sm.number} {_sm_text(sm)}, the mailbox is "
-                           f"0x{want[0]:04X}+{want[1]} control 0x{want[2]:02X}")
+                           f"0x{want[0] or 0:04X}+{esi_sm.mailbox_lengths_text()} "
+                           f"control 0x{want[1]:02X}")
     return None
 
 

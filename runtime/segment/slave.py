@@ -718,8 +718,14 @@ class EmulatedSlave:
     # -- process data ------------------------------------------------------------------------
 
     def outputs_written(self, now: float | None = None) -> None:
-        """A complete write of an output SM (feeds the SM watchdog)."""
-        self._last_output_write = self.clock_ns() / 1e9 if now is None else now
+        """A complete write of an output SM (feeds the SM watchdog).  A write after a gap
+        longer than the watchdog time finds it expired first: the ESC's watchdog counts
+        down between the two writes whenever they come (ESC Section II, 0x0420), not only
+        when the segment's loop looks (every few ms, ``check_watchdog``), so a watchdog
+        shorter than the loop's period expires as on hardware."""
+        now = self.clock_ns() / 1e9 if now is None else now
+        self.check_watchdog(now)
+        self._last_output_write = now
         self.outputs_valid = True
         self._watchdog_expired = False
         self.mem[Reg.WATCHDOG_STATUS] = 1
