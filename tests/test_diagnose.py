@@ -579,3 +579,36 @@ def test_esi_files_for_the_causes_are_read_without_the_cache_when_told(plan, tmp
         Network(plan, MemoryLink(), esi=[ESI], esi_cache=cached).close()
         entries = list((home / "ecatcfg").glob("esi-index-*/*")) if home.exists() else []
         assert bool(entries) == cached, entries
+
+
+# -- the process-data cause on bit-sized PDOs and inactive FMMUs --------------------------------
+
+def test_0x001e_of_bit_sized_pdos_rounds_their_bits_up_to_whole_bytes(plan):
+    """The 4-input terminal 'buttons' (EX1004, examples/esi: four fixed TxPDOs of one BOOL
+    bit each, no CoE) with its SM0 set to 2 bytes: 4 bits take 1 byte of the SM (ETG.2010:
+    an SM is (bits + 7) / 8 bytes long), so the slave's SII PDOs give 1 byte, not 0 and
+    not 'no data'."""
+    exc = refusal(patched(plan, "buttons", "set sm 0 (inputs)", 2, 2))
+    assert exc.al_code == 0x001E
+    [cause] = exc.causes
+    assert cause["slave"] == "buttons"
+    assert any("SM0 length 2 bytes (0x0802), but the fixed PDOs of the slave's SII "
+               "(0x1A00, 0x1A01, 0x1A02, 0x1A03) gives 1 bytes" in line
+               for line in cause["cause"]), cause["cause"]
+    [sm] = cause["sync_managers"]
+    assert (sm["sm"], sm["length"], sm["assigned_bytes"]) == (0, 2, 1)
+    assert "sm-length" in cause["rules"]
+
+
+def test_0x001e_an_fmmu_written_but_not_activated_maps_nothing(plan):
+    """The terminal's FMMU 0 written with everything but its activate byte (0x060C = 0,
+    ESC datasheet Section II: an FMMU maps only when activated): the slave refuses SAFEOP
+    for its inputs, and the cause says no read FMMU maps SM0, not that all agrees."""
+    exc = refusal(patched(plan, "buttons", "set fmmu 0 (inputs)", 12, 0))
+    assert exc.al_code == 0x001E
+    [cause] = exc.causes
+    assert cause["slave"] == "buttons"
+    assert cause["cause"] == ["no read FMMU maps all of SM0 (0x1000, 1 bytes; FMMUs at 0x0600)"]
+    assert cause["rules"] == ["no-fmmu"]
+    [sm] = cause["sync_managers"]
+    assert sm["fmmu_covers"] is False
