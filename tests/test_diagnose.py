@@ -612,3 +612,93 @@ def test_0x001e_an_fmmu_written_but_not_activated_maps_nothing(plan):
     assert cause["rules"] == ["no-fmmu"]
     [sm] = cause["sync_managers"]
     assert sm["fmmu_covers"] is False
+
+
+# -- 0x0045: an SoE drive's missing IDNs (S-0-0021), read in this process ---------------------
+
+SOE_TOPOLOGY = """\
+master: {name: soe-line, cycle_time_us: 1000}
+slaves:
+  - {name: axes, device: TSD-2 SoE}
+"""
+
+
+def test_0x0045_lists_every_idn_the_drive_misses(tmp_path):
+    """The two-axis SoE drive of tests/fixtures/esi/soe_drive.xml with two of drive 0's PS
+    writes (S-0-0002, S-0-0032) taken out of its ENI: it refuses SAFEOP with 0x0045 and
+    lists both in drive 0's S-0-0021 (the AX5000's IDN list of invalid operation data);
+    drive 1 lists none, and the drive after the last (SoE error 0x800A, no such drive)
+    ends the reading without a word."""
+    from conftest import FIXTURES, write
+    from ecatcfg.compiler import build, topology
+    from ecatcfg.eni import reader as eni_reader, writer as eni_writer
+    from ecatcfg.esi.library import Library
+    esi = FIXTURES / "esi" / "soe_drive.xml"
+    compiled = build.compile_topology(topology.load(write(tmp_path, "t.yaml", SOE_TOPOLOGY)),
+                                      Library([esi], cache=False)).plan
+    plan = eni_reader.read_bytes(eni_writer.to_bytes(compiled), "soe.xml")
+    mailbox = plan.slave("axes").mailbox
+    mailbox.soe_init_cmds = [c for c in mailbox.soe_init_cmds
+                             if (c.drive_no, c.idn) not in ((0, 2), (0, 32))]
+    with Network.virtual(plan, esi=[esi]) as net:
+        with pytest.raises(ApplyError) as err:
+            net.up()
+    assert err.value.al_code == 0x0045
+    [cause] = err.value.causes
+    assert cause["slave"] == "axes"
+    assert cause["cause"] == ["S-0-0021 of drive 0 lists S-0-0002, S-0-0032: IDNs the drive "
+                              "needs before SAFEOP that are missing or invalid"]
+    assert cause["soe_invalid_idns"] == {0: ["S-0-0002", "S-0-0032"], 1: []}
+    assert cause["rules"] == ["soe-idns"]
+
+
+# -- doctor, the command, in this process over an in-memory line -------------------------------
+
+def test_doctor_reports_each_slave_and_the_one_that_is_not_the_enis(plan, tmp_path,
+                                                                    monkeypatch, capsys):
+    """``ecatcfg doctor ENI --iface X`` run in this process, its raw socket replaced by an
+    in-memory wire to the emulated example line (just powered on: every slave in INIT).
+    The ENI expects another product code at the lamps' place: that finding says what the
+    lamps' SII holds; every finding is in the JSON with its state and identity lines, and
+    the text names each slave with no error flag."""
+    from rig import serve_in_memory
+
+    from ecatcfg.cli import main
+    from ecatcfg.eni import writer as eni_writer
+    from ecatcfg.esi.library import Library
+    from ecatcfg.runtime import link as links
+    from ecatcfg.runtime.segment import emulate
+    wrong = copy.deepcopy(plan)
+    wrong.slave("lamps").product_code = 0x00003009
+    eni = tmp_path / "wrong.eni.xml"
+    eni.write_bytes(eni_writer.to_bytes(wrong))
+    closers = []
+
+    def memory_line(iface: str, *args, **kwargs):
+        assert iface == "memory0"
+        segment = emulate.segment(emulate.specs_from_eni(plan, Library([ESI], cache=False),
+                                                         "x"))
+        master_end, close = serve_in_memory(segment)
+        closers.append(close)
+        return master_end
+    monkeypatch.setattr(links, "RawLink", memory_line)
+    try:
+        assert main(["doctor", str(eni), "--iface", "memory0", "--format", "json"]) == 1
+        out = json.loads(capsys.readouterr().out)
+        assert (out["slaves"], out["ok"]) == (5, False)
+        found = {f["name"]: f for f in out["findings"]}
+        assert [(f["name"], f["state"]) for f in out["findings"]] == [
+            (n, "INIT") for n in ("coupler", "buttons", "sensors", "lamps", "axis1")]
+        assert [found[n]["identity"] for n in ("coupler", "buttons", "sensors", "axis1")] == [
+            None] * 4
+        [lamps] = found["lamps"]["identity"]
+        assert lamps.startswith("position 3: the slave's SII holds vendor ID 0xE0000ECA "
+                                "(word 0x0008), product code 0x00003008 (word 0x000A)")
+        assert main(["doctor", str(eni), "--iface", "memory0"]) == 1
+        text = capsys.readouterr().out
+        assert ("slave 0 (coupler): INIT, not OP\n  no error flag (AL status code 0x0000): "
+                "nothing refused OP; no request for it reached the slave\n") in text
+        assert f"slave 3 (lamps): INIT, not OP\n  identity: {lamps}\n" in text
+    finally:
+        for close in closers:
+            close()
