@@ -187,3 +187,75 @@ def test_ip_downloads_come_before_ps_downloads_whatever_the_eni_order(example_en
              for line in written]
     assert order == [(0x605F, 0), *ps]
     assert written[0] == "slave.sdo_write(0x605F, 0, bytes.fromhex('0100'), False)"
+
+
+# -- SoE writes and parts apply does not do ----------------------------------------------------
+
+SOE_TOPOLOGY = """\
+master: {name: soe-line, cycle_time_us: 1000}
+slaves:
+  - {name: axes, device: TSD-2 SoE}
+"""
+
+
+def soe_eni(tmp_path: Path, disable_first: bool = False) -> Path:
+    """The two-axis SoE drive of tests/fixtures/esi/soe_drive.xml compiled, its SoE
+    InitCmds of PREOP->SAFEOP only (a hook runs before SAFEOP: an SO write is refused, a
+    test of its own); its first one disabled (``<Disabled>1</Disabled>``) if asked."""
+    from conftest import FIXTURES
+    from ecatcfg.compiler import build, topology
+    from ecatcfg.eni import writer as eni_writer
+    from ecatcfg.esi.library import Library
+    plan = build.compile_topology(topology.load(write(tmp_path, "t.yaml", SOE_TOPOLOGY)),
+                                  Library([FIXTURES / "esi" / "soe_drive.xml"],
+                                          cache=False)).plan
+    tree = etree.fromstring(eni_writer.to_bytes(plan)).getroottree()
+    for cmd in tree.xpath("//Mailbox/SoE/InitCmds/InitCmd"):
+        if [t.text for t in cmd.iterfind("Transition")] != ["PS"]:
+            cmd.getparent().remove(cmd)
+    if disable_first:
+        first = tree.xpath("//Mailbox/SoE/InitCmds/InitCmd")[0]
+        first.insert(1, etree.fromstring("<Disabled>1</Disabled>"))
+    eni = tmp_path / "soe.eni.xml"
+    tree.write(str(eni))
+    return eni
+
+
+def test_the_c_export_makes_every_enabled_soe_write_after_a_disabled_one(tmp_path):
+    """The drive's first SoE InitCmd disabled (not sent by any master, ETG.2100): the SOEM
+    C export's hook makes each of the others with ecx_SoEwrite, in ENI order."""
+    from ecatcfg.eni.export import soem_c
+    eni = soe_eni(tmp_path, disable_first=True)
+    cmds = etree.parse(str(eni)).xpath("//Mailbox/SoE/InitCmds/InitCmd")
+    enabled = [int(c.findtext("IDN")) for c in cmds if c.find("Disabled") is None]
+    assert len(enabled) == len(cmds) - 1 >= 2
+    source, _ = soem_c.render(slave_setups(read_file(eni), eni), "soe.h", eni.name, "0" * 64,
+                              "test")
+    calls = [line for line in source.decode().splitlines() if "ecatcfg_soe(context, slave," in line]
+    assert [int(line.split(", ")[4]) for line in calls] == enabled
+
+
+def test_the_pysoem_export_refuses_soe_writes_at_the_first_ones_line(tmp_path):
+    """pysoem has no SoE call: the export refuses the drive's SoE writes, at the line of the
+    first InitCmd (lxml's sourceline), naming how many there are."""
+    from ecatcfg.eni.export.steps import ExportError
+    eni = soe_eni(tmp_path)
+    cmds = etree.parse(str(eni)).xpath("//Mailbox/SoE/InitCmds/InitCmd")
+    with pytest.raises(ExportError) as caught:
+        module_of(eni)
+    assert caught.value.line == cmds[0].sourceline
+    assert f"pysoem has no SoE call ({len(cmds)} SoE write(s) in all)" in caught.value.message
+
+
+def test_a_part_apply_does_not_do_is_refused_at_its_line(example_eni, tmp_path):
+    """VoE InitCmds in the drive's mailbox (vendor messages apply does not send): the
+    export refuses the ENI at the VoE element's line, naming the slave."""
+    from ecatcfg.eni.export.steps import ExportError
+    voe = ("<VoE><InitCmds><InitCmd><Transition>PS</Transition><Data>0100</Data></InitCmd>"
+           "</InitCmds></VoE>")
+    eni = edited(example_eni, tmp_path, "axis1", "Mailbox", voe)
+    [element] = etree.parse(str(eni)).xpath("//Slave[Info/Name='axis1']/Mailbox/VoE")
+    with pytest.raises(ExportError) as caught:
+        slave_setups(read_file(eni), eni)
+    assert (caught.value.file, caught.value.line) == (str(eni), element.sourceline)
+    assert caught.value.message.startswith("slave 'axis1': ")
