@@ -719,3 +719,23 @@ def test_0x0016_names_the_mailbox_sm_against_the_sii(plan):
         {"sm": 1, "start": 0x1080, "length": 64, "control": 0x22, "enabled": True,
          "sii_start": 0x1080, "sii_length": 128}]
     assert cause["rules"] == ["mailbox-sm"]
+
+
+def test_registers_a_lost_frame_took_are_read_again(plan):
+    """Half the frames lost on the wire (seeded, half of them after the slaves processed
+    them): the diagnosis's register reads (AL status, SM0/SM1, FMMU 0) ask again for what
+    did not come back, until the command timeout, and read what a loss-free line reads."""
+    from ecatcfg.runtime.master.diagnose import read_registers
+    from ecatcfg.runtime.segment.virtual import Faults
+    spans = [(0x0130, 6), (0x0800, 16), (0x0600, 16)]
+    with Network.virtual(plan, esi=[ESI]) as net:
+        want = read_registers(net.master.transport, 4, spans)
+    assert set(want) == {0x0130, 0x0800, 0x0600}
+    lost = 0
+    for seed in range(6):
+        with Network.virtual(plan, esi=[ESI], faults=Faults(drop=0.5, seed=seed)) as net:
+            counters = net.master.transport.counters
+            before = counters.frames_lost
+            assert read_registers(net.master.transport, 4, spans) == want, seed
+            lost += counters.frames_lost - before
+    assert lost > 0                   # the seeds lose frames of these reads
