@@ -743,3 +743,31 @@ def test_an_soe_drive_from_the_eni_alone_takes_the_enis_idn_writes(tmp_path):
         assert drive.eni_only
         net.up()
         assert net.state == AlState.OP
+
+
+def test_the_sii_of_a_drive_from_the_eni_carries_its_ports_bootstrap_and_checked_pdi(
+        example_plan):
+    """What the SII of axis1 built from the ENI alone holds where the ENI says it: the
+    ports of ``Info/Physics`` (GENERAL bytes 16-17, a nibble per port, ETG.2010), the
+    bootstrap mailbox of ``Mailbox/Bootstrap`` (words 0x14-0x17: receive offset and size,
+    send offset and size) and, where an InitCmd checks 0x0140-0x0141 (EtherCAT Automation
+    Studio's "check PDI": FPRD with Validate), that value as SII word 0, the bytes read
+    at 0x0140 first (little-endian, ETG.1000.4)."""
+    plan = copy.deepcopy(example_plan)
+    slave = plan.slave("axis1")
+    assert slave.physics and slave.mailbox.bootstrap_send is not None
+    image = sii.decode(sii.build(device_from_eni(slave, plan, "example.eni.xml")))
+    assert image.general is not None
+    # "YY": ports 0 and 1 MII (nibble 1 each, ETG.2010 General category), 2 and 3 absent.
+    assert (slave.physics, image.general.physical_ports) == ("YY", 0x0011)
+    out, into = slave.mailbox.bootstrap_send, slave.mailbox.bootstrap_recv
+    assert (image.bootstrap_rx, image.bootstrap_tx) == ((out.start, out.length),
+                                                        (into.start, into.length))
+    from ecatcfg.eni.plan import Validate
+    status = next(c for c in slave.init_cmds if c.ado == 0x0130 and c.validate is not None)
+    check = copy.deepcopy(status)
+    check.ado, check.comment = 0x0140, "check PDI"
+    check.validate = Validate(bytes.fromhex("0508"), None, status.validate.timeout)
+    slave.init_cmds.append(check)
+    image = sii.decode(sii.build(device_from_eni(slave, plan, "example.eni.xml")))
+    assert image.pdi_control == 0x0805
