@@ -771,3 +771,13 @@ def test_the_sii_of_a_drive_from_the_eni_carries_its_ports_bootstrap_and_checked
     slave.init_cmds.append(check)
     image = sii.decode(sii.build(device_from_eni(slave, plan, "example.eni.xml")))
     assert image.pdi_control == 0x0805
+
+
+def test_the_dc_modes_of_a_drive_from_the_eni_are_named_in_its_sii(example_plan):
+    """The SII's DC category (ETG.2010) of axis1 from the ENI alone: a "Free Run" mode
+    (activation 0) and the "DC" mode the ENI configures (0x0300, SYNC0 every 1 ms), each
+    with its name in the string category, as ``sii show`` lists them."""
+    slave = example_plan.slave("axis1")
+    image = sii.decode(sii.build(device_from_eni(slave, example_plan, "example.eni.xml")))
+    assert [(m.name, m.assign_activate, m.cycle_time0) for m in image.dc] == [
+        ("Free Run", 0, 0), ("DC", 0x0300, 1_000_000)]
