@@ -179,3 +179,39 @@ def test_a_cyclic_command_without_data_or_length_is_an_error_not_a_crash(example
     with pytest.raises(EcatcfgError) as caught:
         read(root)
     assert caught.value.line is not None
+
+
+def test_a_metadata_element_is_ignored_and_an_unknown_one_of_the_master_refused(example_eni):
+    """``ExcludedPdo`` in a Slave (a configurator's hint; what it decided is in the ENI's
+    PDOs): read with a warning at its line, nothing refused.  An element no format has in
+    ``Config/Master``: refused as the master's, each line of the refusal indented under
+    its heading."""
+    root = etree.fromstring(example_eni)
+    root.xpath(DRIVE)[0].append(etree.fromstring("<ExcludedPdo>#x1600</ExcludedPdo>"))
+    root.find("Config/Master").append(etree.fromstring("<Frobnicate>1</Frobnicate>"))
+    plan, tree = read(root)
+    [warning] = contents.ignored_warnings(plan, "line.xml")
+    line = tree.xpath(f"{DRIVE}/ExcludedPdo")[0].sourceline
+    assert warning.startswith(f"line.xml:{line}: slave 'axis1': ignored <ExcludedPdo>, which "
+                              "ecatcfg does not read here: a hint to the configurator")
+    [part] = plan.unsupported
+    message = pytest.raises(contents.UnsupportedEniError, contents.refuse, plan,
+                            "line.xml").value.message
+    master = tree.find("Config/Master/Frobnicate").sourceline
+    assert message == (
+        "the ENI asks for 1 thing apply does not do; nothing was written to the bus:\n"
+        f"  line.xml:{master}: the master: <Frobnicate>, an element ecatcfg does not know "
+        "[Master/Frobnicate]\n" + contents.SKIP_HINT)
+
+
+def test_an_foe_read_request_in_init_to_init_is_refused(example_eni):
+    """An FoE read request (OpCode 1) in INIT->INIT: the slave has no mailbox there
+    (ETG.1000.6), so no master can run it; refused like a CoE command there."""
+    cmd = ("<InitCmd><Transition>II</Transition><Timeout>0</Timeout>"
+           "<Data>0100000000006669726d</Data></InitCmd>")
+    root = etree.fromstring(example_eni)
+    root.xpath(f"{DRIVE}/Mailbox")[0].append(etree.fromstring(_mailbox("FoE", cmd)))
+    plan, _ = read(root)
+    [part] = plan.unsupported
+    assert (part.element, part.slave, part.commands) == ("FoE/InitCmds/InitCmd", "axis1", 1)
+    assert part.what.startswith("a FoE InitCmd in transition II (INIT->INIT)")
