@@ -259,3 +259,43 @@ def test_a_part_apply_does_not_do_is_refused_at_its_line(example_eni, tmp_path):
         slave_setups(read_file(eni), eni)
     assert (caught.value.file, caught.value.line) == (str(eni), element.sourceline)
     assert caught.value.message.startswith("slave 'axis1': ")
+
+
+# -- commands no hook can carry ----------------------------------------------------------------
+
+def _coe(transitions: list[str], ccs: int = 1) -> str:
+    return ("<InitCmd>" + "".join(f"<Transition>{t}</Transition>" for t in transitions)
+            + f"<Comment>mode</Comment><Timeout>0</Timeout><Ccs>{ccs}</Ccs><Index>24672</Index>"
+            "<SubIndex>0</SubIndex><Data>09</Data></InitCmd>")
+
+
+@pytest.mark.parametrize("transitions, said", [
+    (["PS", "SO"], "in PS/SO (SO too)"),             # exported once, its SO repeat lost
+    (["SO", "OS"], "in SO/OS"),                      # none of the hook's transitions
+])
+def test_a_command_outside_the_hooks_transitions_is_refused_by_them(example_eni, tmp_path,
+                                                                    transitions, said):
+    """A CoE download of 0x6060 the drive gets in SAFEOP->OP (and back): the hooks run in
+    PREOP before SAFEOP; the refusal names the transitions the ENI gives it, at its line."""
+    from ecatcfg.eni.export.steps import ExportError
+    eni = edited(example_eni, tmp_path, "axis1", "Mailbox/CoE/InitCmds", _coe(transitions))
+    [cmd] = etree.parse(str(eni)).xpath(
+        "//Slave[Info/Name='axis1']/Mailbox/CoE/InitCmds/InitCmd[Comment='mode']")
+    with pytest.raises(ExportError) as caught:
+        slave_setups(read_file(eni), eni)
+    assert caught.value.line == cmd.sourceline
+    assert caught.value.message == (f"slave 4 ('axis1'): SDO 0x6060:00 = 9 {said}: the "
+                                    "exported hooks run in PREOP before SAFEOP only (IP, PS)")
+
+
+def test_a_coe_upload_is_refused_at_its_line(example_eni, tmp_path):
+    """A CoE InitCmd with Ccs 2 (an upload, ETG.2100): the hooks make downloads only; the
+    refusal is at the command's line."""
+    from ecatcfg.eni.export.steps import ExportError
+    eni = edited(example_eni, tmp_path, "axis1", "Mailbox/CoE/InitCmds", _coe(["PS"], ccs=2))
+    [cmd] = etree.parse(str(eni)).xpath(
+        "//Slave[Info/Name='axis1']/Mailbox/CoE/InitCmds/InitCmd[Comment='mode']")
+    with pytest.raises(ExportError) as caught:
+        slave_setups(read_file(eni), eni)
+    assert caught.value.line == cmd.sourceline
+    assert caught.value.message.endswith(": only SDO downloads are exported")
