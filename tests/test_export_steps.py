@@ -299,3 +299,18 @@ def test_a_coe_upload_is_refused_at_its_line(example_eni, tmp_path):
         slave_setups(read_file(eni), eni)
     assert caught.value.line == cmd.sourceline
     assert caught.value.message.endswith(": only SDO downloads are exported")
+
+
+def test_the_module_says_where_the_enis_inputs_differ_from_soems(example_eni):
+    """SOEM lays the example's outputs out first (the lamps' 8 bits at byte 0, axis1's 48
+    from byte 1: 7 bytes), then the inputs from byte 7 (buttons and sensors, 4 bits each,
+    fill it; axis1's 128 bits, byte-oriented, from byte 8); the ENI's own input image has
+    axis1's Recv at bit 16 (byte 2). The module says so for the inputs as for the
+    outputs."""
+    text, _ = module_of(example_eni)
+    recv = etree.parse(str(example_eni)).xpath(
+        "//Slave[Info/Name='axis1']/ProcessData/Recv/BitStart/text()")
+    assert recv == ["16"]
+    assert ("# slave 4 ('axis1'): SOEM puts its 128 input bit(s) at IOmap byte 8 bit 0 "
+            "(Istartbit 0); the ENI's input image at byte 2 bit 0: the places here are "
+            "SOEM's") in text
