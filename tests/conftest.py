@@ -229,6 +229,14 @@ class FifoUnblock:
 # counts as an expected failure with the entry's reason.  A listed case that passes, or
 # fails otherwise, fails the run.
 
+def _known_key(nodeid: str) -> str:
+    """A test's id as known_refusals.py names it, from the checkout: pytest started from
+    another folder (bench/mutation.py runs the tests of a copy from the folder above it,
+    ``ecatcfg/tests/...``) puts that folder in front."""
+    at = nodeid.find("/tests/", 0, nodeid.find("::") if "::" in nodeid else len(nodeid))
+    return nodeid[at + 1:] if at >= 0 else nodeid
+
+
 @pytest.hookimpl(hookwrapper=True)
 def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo[None]):
     outcome = yield
@@ -236,7 +244,7 @@ def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo[None]):
     if call.when != "call":
         return
     from known_refusals import KNOWN
-    known = KNOWN.get(item.nodeid)
+    known = KNOWN.get(_known_key(item.nodeid))
     if known is None:
         return
     import re
@@ -260,7 +268,7 @@ def pytest_collection_finish(session: pytest.Session) -> None:
     """Every entry of known_refusals.py names a case that exists (when its file was
     collected whole): a renamed test or a removed corpus file must take its entry along."""
     from known_refusals import KNOWN
-    ids = {item.nodeid for item in session.items}
+    ids = {_known_key(item.nodeid) for item in session.items}
     files = {nodeid.split("::", 1)[0] for nodeid in ids}
     stale = [k for k in KNOWN if k.split("::", 1)[0] in files and k not in ids
              and not session.config.option.keyword and not session.config.option.markexpr

@@ -579,3 +579,163 @@ def test_esi_files_for_the_causes_are_read_without_the_cache_when_told(plan, tmp
         Network(plan, MemoryLink(), esi=[ESI], esi_cache=cached).close()
         entries = list((home / "ecatcfg").glob("esi-index-*/*")) if home.exists() else []
         assert bool(entries) == cached, entries
+
+
+# -- the process-data cause on bit-sized PDOs and inactive FMMUs --------------------------------
+
+def test_0x001e_of_bit_sized_pdos_rounds_their_bits_up_to_whole_bytes(plan):
+    """The 4-input terminal 'buttons' (EX1004, examples/esi: four fixed TxPDOs of one BOOL
+    bit each, no CoE) with its SM0 set to 2 bytes: 4 bits take 1 byte of the SM (ETG.2010:
+    an SM is (bits + 7) / 8 bytes long), so the slave's SII PDOs give 1 byte, not 0 and
+    not 'no data'."""
+    exc = refusal(patched(plan, "buttons", "set sm 0 (inputs)", 2, 2))
+    assert exc.al_code == 0x001E
+    [cause] = exc.causes
+    assert cause["slave"] == "buttons"
+    assert any("SM0 length 2 bytes (0x0802), but the fixed PDOs of the slave's SII "
+               "(0x1A00, 0x1A01, 0x1A02, 0x1A03) gives 1 bytes" in line
+               for line in cause["cause"]), cause["cause"]
+    [sm] = cause["sync_managers"]
+    assert (sm["sm"], sm["length"], sm["assigned_bytes"]) == (0, 2, 1)
+    assert "sm-length" in cause["rules"]
+
+
+def test_0x001e_an_fmmu_written_but_not_activated_maps_nothing(plan):
+    """The terminal's FMMU 0 written with everything but its activate byte (0x060C = 0,
+    ESC datasheet Section II: an FMMU maps only when activated): the slave refuses SAFEOP
+    for its inputs, and the cause says no read FMMU maps SM0, not that all agrees."""
+    exc = refusal(patched(plan, "buttons", "set fmmu 0 (inputs)", 12, 0))
+    assert exc.al_code == 0x001E
+    [cause] = exc.causes
+    assert cause["slave"] == "buttons"
+    assert cause["cause"] == ["no read FMMU maps all of SM0 (0x1000, 1 bytes; FMMUs at 0x0600)"]
+    assert cause["rules"] == ["no-fmmu"]
+    [sm] = cause["sync_managers"]
+    assert sm["fmmu_covers"] is False
+
+
+# -- 0x0045: an SoE drive's missing IDNs (S-0-0021), read in this process ---------------------
+
+SOE_TOPOLOGY = """\
+master: {name: soe-line, cycle_time_us: 1000}
+slaves:
+  - {name: axes, device: TSD-2 SoE}
+"""
+
+
+def test_0x0045_lists_every_idn_the_drive_misses(tmp_path):
+    """The two-axis SoE drive of tests/fixtures/esi/soe_drive.xml with two of drive 0's PS
+    writes (S-0-0002, S-0-0032) taken out of its ENI: it refuses SAFEOP with 0x0045 and
+    lists both in drive 0's S-0-0021 (the AX5000's IDN list of invalid operation data);
+    drive 1 lists none, and the drive after the last (SoE error 0x800A, no such drive)
+    ends the reading without a word."""
+    from conftest import FIXTURES, write
+    from ecatcfg.compiler import build, topology
+    from ecatcfg.eni import reader as eni_reader, writer as eni_writer
+    from ecatcfg.esi.library import Library
+    esi = FIXTURES / "esi" / "soe_drive.xml"
+    compiled = build.compile_topology(topology.load(write(tmp_path, "t.yaml", SOE_TOPOLOGY)),
+                                      Library([esi], cache=False)).plan
+    plan = eni_reader.read_bytes(eni_writer.to_bytes(compiled), "soe.xml")
+    mailbox = plan.slave("axes").mailbox
+    mailbox.soe_init_cmds = [c for c in mailbox.soe_init_cmds
+                             if (c.drive_no, c.idn) not in ((0, 2), (0, 32))]
+    with Network.virtual(plan, esi=[esi]) as net:
+        with pytest.raises(ApplyError) as err:
+            net.up()
+    assert err.value.al_code == 0x0045
+    [cause] = err.value.causes
+    assert cause["slave"] == "axes"
+    assert cause["cause"] == ["S-0-0021 of drive 0 lists S-0-0002, S-0-0032: IDNs the drive "
+                              "needs before SAFEOP that are missing or invalid"]
+    assert cause["soe_invalid_idns"] == {0: ["S-0-0002", "S-0-0032"], 1: []}
+    assert cause["rules"] == ["soe-idns"]
+
+
+# -- doctor, the command, in this process over an in-memory line -------------------------------
+
+def test_doctor_reports_each_slave_and_the_one_that_is_not_the_enis(plan, tmp_path,
+                                                                    monkeypatch, capsys):
+    """``ecatcfg doctor ENI --iface X`` run in this process, its raw socket replaced by an
+    in-memory wire to the emulated example line (just powered on: every slave in INIT).
+    The ENI expects another product code at the lamps' place: that finding says what the
+    lamps' SII holds; every finding is in the JSON with its state and identity lines, and
+    the text names each slave with no error flag."""
+    from rig import serve_in_memory
+
+    from ecatcfg.cli import main
+    from ecatcfg.eni import writer as eni_writer
+    from ecatcfg.esi.library import Library
+    from ecatcfg.runtime import link as links
+    from ecatcfg.runtime.segment import emulate
+    wrong = copy.deepcopy(plan)
+    wrong.slave("lamps").product_code = 0x00003009
+    eni = tmp_path / "wrong.eni.xml"
+    eni.write_bytes(eni_writer.to_bytes(wrong))
+    closers = []
+
+    def memory_line(iface: str, *args, **kwargs):
+        assert iface == "memory0"
+        segment = emulate.segment(emulate.specs_from_eni(plan, Library([ESI], cache=False),
+                                                         "x"))
+        master_end, close = serve_in_memory(segment)
+        closers.append(close)
+        return master_end
+    monkeypatch.setattr(links, "RawLink", memory_line)
+    try:
+        assert main(["doctor", str(eni), "--iface", "memory0", "--format", "json"]) == 1
+        out = json.loads(capsys.readouterr().out)
+        assert (out["slaves"], out["ok"]) == (5, False)
+        found = {f["name"]: f for f in out["findings"]}
+        assert [(f["name"], f["state"]) for f in out["findings"]] == [
+            (n, "INIT") for n in ("coupler", "buttons", "sensors", "lamps", "axis1")]
+        assert [found[n]["identity"] for n in ("coupler", "buttons", "sensors", "axis1")] == [
+            None] * 4
+        [lamps] = found["lamps"]["identity"]
+        assert lamps.startswith("position 3: the slave's SII holds vendor ID 0xE0000ECA "
+                                "(word 0x0008), product code 0x00003008 (word 0x000A)")
+        assert main(["doctor", str(eni), "--iface", "memory0"]) == 1
+        text = capsys.readouterr().out
+        assert ("slave 0 (coupler): INIT, not OP\n  no error flag (AL status code 0x0000): "
+                "nothing refused OP; no request for it reached the slave\n") in text
+        assert f"slave 3 (lamps): INIT, not OP\n  identity: {lamps}\n" in text
+    finally:
+        for close in closers:
+            close()
+
+
+def test_0x0016_names_the_mailbox_sm_against_the_sii(plan):
+    """The drive's SM1 (mailbox in) written 0x40 bytes long where its SII's standard mailbox
+    (words 0x1A-0x1B, from its ESI: 0x1080, 128 bytes) says 128: it refuses PREOP with
+    0x0016, and the cause gives both SMs as read and the SII's areas."""
+    exc = refusal(patched(plan, "axis1", "set sm 1 (mailbox in)", 2, 0x40))
+    assert exc.al_code == 0x0016
+    [cause] = exc.causes
+    assert cause["cause"] == ["SM1 (0x0808) 0x1080, 64 bytes, the SII's mailbox send area is "
+                              "0x1080, 128 bytes (SII word 0x001A)"]
+    assert cause["mailbox_sms"] == [
+        {"sm": 0, "start": 0x1000, "length": 128, "control": 0x26, "enabled": True,
+         "sii_start": 0x1000, "sii_length": 128},
+        {"sm": 1, "start": 0x1080, "length": 64, "control": 0x22, "enabled": True,
+         "sii_start": 0x1080, "sii_length": 128}]
+    assert cause["rules"] == ["mailbox-sm"]
+
+
+def test_registers_a_lost_frame_took_are_read_again(plan):
+    """Half the frames lost on the wire (seeded, half of them after the slaves processed
+    them): the diagnosis's register reads (AL status, SM0/SM1, FMMU 0) ask again for what
+    did not come back, until the command timeout, and read what a loss-free line reads."""
+    from ecatcfg.runtime.master.diagnose import read_registers
+    from ecatcfg.runtime.segment.virtual import Faults
+    spans = [(0x0130, 6), (0x0800, 16), (0x0600, 16)]
+    with Network.virtual(plan, esi=[ESI]) as net:
+        want = read_registers(net.master.transport, 4, spans)
+    assert set(want) == {0x0130, 0x0800, 0x0600}
+    lost = 0
+    for seed in range(6):
+        with Network.virtual(plan, esi=[ESI], faults=Faults(drop=0.5, seed=seed)) as net:
+            counters = net.master.transport.counters
+            before = counters.frames_lost
+            assert read_registers(net.master.transport, 4, spans) == want, seed
+            lost += counters.frames_lost - before
+    assert lost > 0                   # the seeds lose frames of these reads

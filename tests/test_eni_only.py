@@ -667,3 +667,117 @@ def test_devices_from_the_eni_alone_present_the_enis_configuration(corpus_extra)
     plan = eni_reader.read_file(path)
     device = device_from_eni(plan.slaves[0], plan, str(path))
     assert device.mailbox is None and device.sms == []
+
+
+def _undescribed_1601(example_plan):
+    """The example with axis1's RxPDO 0x1601 assigned (0x1C12) and mapped by the ENI's
+    downloads but not described in ProcessData: a partial ENI, as a configurator that
+    leaves out PDOs it did not change writes it."""
+    plan = copy.deepcopy(example_plan)
+    pd = plan.slave("axis1").process_data
+    pd.pdos = [p for p in pd.pdos if p.index != 0x1601]
+    return plan
+
+
+def test_an_assigned_pdo_the_eni_does_not_describe_keeps_its_sms_direction(example_plan):
+    """0x1601 on SM2 (Outputs): the device from the ENI has it as an RxPDO, in the SII's
+    RxPDO category (ETG.2010 category 51) that a master reads, with the two entries the
+    mapping download writes (0x6040:00 16 bits, 0x60FF:00 32 bits); with it, the line
+    reaches OP and the drive gets its outputs."""
+    plan = _undescribed_1601(example_plan)
+    device = device_from_eni(plan.slave("axis1"), plan, "example.eni.xml")
+    image = sii.decode(sii.build(device))
+    [rx] = [p for p in image.rxpdos if p.index == 0x1601]
+    assert (rx.sm, [(e.index, e.subindex, e.bit_len) for e in rx.entries]) == (
+        2, [(0x6040, 0, 16), (0x60FF, 0, 32)])
+    assert 0x1601 not in [p.index for p in image.txpdos]
+    with Network.virtual(plan) as net:
+        net.up()
+        assert net.state == AlState.OP
+        net["axis1.RxPDO 2 (CSV).Target velocity"] = -7
+        net.cycle()
+        assert net.segment.slaves[4].outputs()[2:6] == (-7).to_bytes(4, "little", signed=True)
+
+
+def test_a_mapping_entry_the_eni_counts_but_does_not_write_maps_nothing(example_plan):
+    """0x1601:00 = 3 with entries 1 and 2 written (complete access from subindex 0): the
+    third holds what the object held, which an ENI does not say; the device from the ENI
+    takes 0, the entry that maps nothing (ETG.1000.6 PDO mapping), and is built, not a
+    crash of ``simulate --eni``."""
+    plan = _undescribed_1601(example_plan)
+    [cmd] = [c for c in plan.slave("axis1").mailbox.coe_init_cmds
+             if c.index == 0x1601 and c.complete_access]
+    cmd.data = bytes.fromhex("0300" "10004060" "2000ff60")
+    device = device_from_eni(plan.slave("axis1"), plan, "example.eni.xml")
+    [rx] = [p for p in device.rx_pdos if p.index == 0x1601]
+    assert [(e.index, e.subindex, e.bit_len) for e in rx.entries][:3] == [
+        (0x6040, 0, 16), (0x60FF, 0, 32), (0, 0, 0)]
+
+
+SOE_TOPOLOGY = """\
+master: {name: soe-line, cycle_time_us: 1000}
+slaves:
+  - name: axes
+    device: TSD-2 SoE
+    soe:
+      - {idn: P-0-0100, data: "02000000", transition: SO, drive: 1}
+"""
+
+
+def test_an_soe_drive_from_the_eni_alone_takes_the_enis_idn_writes(tmp_path):
+    """The two-axis SoE drive of tests/fixtures/esi/soe_drive.xml compiled, then emulated
+    from the ENI alone: its IDNs are those the ENI's SoE InitCmds write (drive 0's PS
+    writes, P-0-0100 of drive 1 in SO), so the master's writes are taken and the line
+    reaches OP (a drive without them answers "no IDN", SoE error 0x1001, to the first)."""
+    from conftest import FIXTURES, write
+    from ecatcfg.compiler import build, topology
+    from ecatcfg.eni import writer as eni_writer
+    library = Library([FIXTURES / "esi" / "soe_drive.xml"], cache=False)
+    compiled = build.compile_topology(topology.load(write(tmp_path, "t.yaml", SOE_TOPOLOGY)),
+                                      library).plan
+    plan = eni_reader.read_bytes(eni_writer.to_bytes(compiled), "soe.xml")
+    written = {(c.drive_no, c.idn) for c in plan.slave("axes").mailbox.soe_init_cmds}
+    assert {(0, 1), (0, 2), (0, 32), (1, 0x8064)} <= written
+    with Network.virtual(plan) as net:
+        [drive] = net.segment.slaves
+        assert drive.eni_only
+        net.up()
+        assert net.state == AlState.OP
+
+
+def test_the_sii_of_a_drive_from_the_eni_carries_its_ports_bootstrap_and_checked_pdi(
+        example_plan):
+    """What the SII of axis1 built from the ENI alone holds where the ENI says it: the
+    ports of ``Info/Physics`` (GENERAL bytes 16-17, a nibble per port, ETG.2010), the
+    bootstrap mailbox of ``Mailbox/Bootstrap`` (words 0x14-0x17: receive offset and size,
+    send offset and size) and, where an InitCmd checks 0x0140-0x0141 (EtherCAT Automation
+    Studio's "check PDI": FPRD with Validate), that value as SII word 0, the bytes read
+    at 0x0140 first (little-endian, ETG.1000.4)."""
+    plan = copy.deepcopy(example_plan)
+    slave = plan.slave("axis1")
+    assert slave.physics and slave.mailbox.bootstrap_send is not None
+    image = sii.decode(sii.build(device_from_eni(slave, plan, "example.eni.xml")))
+    assert image.general is not None
+    # "YY": ports 0 and 1 MII (nibble 1 each, ETG.2010 General category), 2 and 3 absent.
+    assert (slave.physics, image.general.physical_ports) == ("YY", 0x0011)
+    out, into = slave.mailbox.bootstrap_send, slave.mailbox.bootstrap_recv
+    assert (image.bootstrap_rx, image.bootstrap_tx) == ((out.start, out.length),
+                                                        (into.start, into.length))
+    from ecatcfg.eni.plan import Validate
+    status = next(c for c in slave.init_cmds if c.ado == 0x0130 and c.validate is not None)
+    check = copy.deepcopy(status)
+    check.ado, check.comment = 0x0140, "check PDI"
+    check.validate = Validate(bytes.fromhex("0508"), None, status.validate.timeout)
+    slave.init_cmds.append(check)
+    image = sii.decode(sii.build(device_from_eni(slave, plan, "example.eni.xml")))
+    assert image.pdi_control == 0x0805
+
+
+def test_the_dc_modes_of_a_drive_from_the_eni_are_named_in_its_sii(example_plan):
+    """The SII's DC category (ETG.2010) of axis1 from the ENI alone: a "Free Run" mode
+    (activation 0) and the "DC" mode the ENI configures (0x0300, SYNC0 every 1 ms), each
+    with its name in the string category, as ``sii show`` lists them."""
+    slave = example_plan.slave("axis1")
+    image = sii.decode(sii.build(device_from_eni(slave, example_plan, "example.eni.xml")))
+    assert [(m.name, m.assign_activate, m.cycle_time0) for m in image.dc] == [
+        ("Free Run", 0, 0), ("DC", 0x0300, 1_000_000)]
