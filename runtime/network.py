@@ -172,11 +172,12 @@ class Network:
         simulated time, in the caller's thread (``runtime/simwire.py``): the same calls
         give the same frames at the same times, whatever the host does, and waiting costs
         no host time (:attr:`clock` says how long things took).  By default the segment
-        answers on a thread of its own, in real time."""
+        lives on the wall clock and answers each frame in the thread that sends it, at
+        once (``SynchronousLink``): the master's pacing alone reads real time, and a frame
+        is lost only when ``faults`` drop it."""
         from ecatcfg.eni import reader as eni_reader
         from ecatcfg.runtime.clock import SimClock
         from ecatcfg.runtime.segment import emulate
-        from ecatcfg.runtime.link import MemoryLink
 
         shown = eni_name or (str(eni) if not isinstance(eni, NetworkPlan) else "the ENI")
         plan = eni if isinstance(eni, NetworkPlan) else eni_reader.read_file(eni)
@@ -206,19 +207,12 @@ class Network:
             from ecatcfg.runtime.simwire import SimulatedLink
             link = SimulatedLink(clock, segment)
         else:
-            ours, theirs = MemoryLink.pair()
-            stop = threading.Event()
-            thread = threading.Thread(target=segment.serve, args=(theirs,),
-                                      kwargs={"stop": stop}, daemon=True,
-                                      name="virtual-segment")
-            thread.start()
-            link = ours
-
-            def close_segment() -> None:
-                stop.set()
-                thread.join(2)
-                theirs.close()
-            closers.append(close_segment)
+            # The slaves answer in the master's thread, on the wall clock: a segment served
+            # on a thread of its own answers when the host schedules it, and a busy host
+            # made the master count frames lost that no wire lost (runtime/simwire.py).
+            from ecatcfg.runtime.simwire import SynchronousLink
+            link = SynchronousLink(segment) if clock is None else SynchronousLink(segment,
+                                                                                  clock=clock)
 
         net = cls(plan, link, pcap=pcap, on_event=on_event, skip_unsupported=skip_unsupported,
                   eni_name=eni_name or (None if isinstance(eni, NetworkPlan) else str(eni)),

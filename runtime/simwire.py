@@ -1,4 +1,5 @@
-"""A wire on simulated time: the master's frames answered in the same thread, nothing waits.
+"""In-memory wires whose far end answers in the master's thread: on simulated time, or on
+the wall clock.
 
 :class:`SimulatedLink` is the master's end of a line whose far end (a virtual segment,
 ``runtime/segment/virtual.py``) is run synchronously: ``send`` hands the frame to the far
@@ -14,6 +15,16 @@ calls made: the same start-up gives the same frames at the same simulated times,
 idle host or a busy one (``tests/test_simtime.py``).  The far end is anything with the
 three methods of :class:`FarEnd`; this module imports no segment code (the master and the
 segment never import each other, and the wire sits between them).
+
+:class:`SynchronousLink` is the same wire on the host's clock (``ecatcfg apply --virtual``,
+``watch --virtual``, ``Network.virtual`` without a ``SimClock``): ``send`` lets the slaves
+catch up with the wall clock (``tick``: SM watchdogs that expired meanwhile, work the
+timing model finished, the DC clocks read the time) and answers the frame at once, in the
+sender's thread.  A real slave answers in microseconds, in hardware; a segment served on a
+thread of its own answers when the host schedules that thread, and on a busy host that
+is late enough for the master to count the frame lost.  Here a frame is lost only when
+the wire's faults drop it, and late only when they delay it.  Only the master's own
+pacing (its cycle, its timeouts) reads real time.
 """
 
 from __future__ import annotations
@@ -23,10 +34,10 @@ import threading
 from typing import Protocol
 
 from ecatcfg.esc import ETH_HEADER_SIZE
-from ecatcfg.runtime.clock import SimClock
+from ecatcfg.runtime.clock import WALL, Clock, SimClock
 from ecatcfg.runtime.link import DEFAULT_MTU, LinkError, _Base, _too_big, _too_short
 
-__all__ = ["FarEnd", "SimulatedLink"]
+__all__ = ["FarEnd", "SimulatedLink", "SynchronousLink"]
 
 
 class FarEnd(Protocol):
@@ -144,3 +155,93 @@ class SimulatedLink(_Base):
         with self.lock:
             self._closed = True
             self._due.clear()
+
+
+class SynchronousLink(_Base):
+    """The master's end of a wire to ``far`` on the wall clock (see the module docstring).
+
+    A reply is there as soon as ``send`` returns: the microseconds a frame takes on a real
+    wire (:meth:`FarEnd.round_trip_ns`) are less than the host can sleep for, so they are
+    not waited for.  A reply the wire's faults delay is there that much later, in real
+    time: ``recv`` waits for it as for a frame on a real line.
+
+    Thread-safe: any thread may send and receive (the cycle thread of a run and a caller
+    that changes the far end between two frames under :attr:`lock`); a thread waiting in
+    ``recv`` takes a reply another thread's ``send`` queued."""
+
+    def __init__(self, far: FarEnd, *, clock: Clock = WALL, name: str = "sync",
+                 mtu: int = DEFAULT_MTU) -> None:
+        self.clock = clock
+        self.far = far
+        self.iface = name
+        self.mtu = mtu
+        self.lock = threading.RLock()
+        self._ready = threading.Condition(self.lock)
+        self._due: list[_Due] = []
+        self._sent = 0
+        self._closed = False
+
+    def __repr__(self) -> str:
+        state = "closed" if self._closed else f"{len(self._due)} due"
+        return f"SynchronousLink({self.iface!r}, {state})"
+
+    def send(self, frame: bytes | bytearray) -> None:
+        if self._closed:
+            raise LinkError(f"{self.iface}: link is closed")
+        size = len(frame)
+        if size > self.mtu + ETH_HEADER_SIZE:
+            raise _too_big(self.iface, size, self.mtu)
+        if size < ETH_HEADER_SIZE:
+            raise _too_short(self.iface, size)
+        with self._ready:
+            far = self.far
+            far.tick()                  # the slaves caught up with the wall clock
+            reply, late = far.answer(frame)
+            if reply is None:
+                return                  # the wire's faults lost it
+            self._sent += 1
+            back = self.clock.monotonic_ns() + round(late * 1e9)
+            heapq.heappush(self._due, (back, self._sent, bytes(reply)))
+            self._ready.notify()
+
+    def recv(self, timeout: float | None = None) -> bytes | None:
+        """The next reply that is back, waiting up to ``timeout`` s (``None``: until one
+        is, ``0``: just look) for one; ``None`` when none is back by then."""
+        clock = self.clock
+        with self._ready:
+            deadline = None if timeout is None else clock.monotonic_ns() + round(timeout * 1e9)
+            while True:
+                if self._closed:
+                    raise LinkError(f"{self.iface}: link is closed")
+                due = self._due
+                now = clock.monotonic_ns()
+                if due and due[0][0] <= now:
+                    return heapq.heappop(due)[2]
+                until = deadline
+                if due and (until is None or due[0][0] < until):
+                    until = due[0][0]
+                if until is None:
+                    self._ready.wait()
+                elif until <= now:
+                    return None
+                else:
+                    self._ready.wait((until - now) / 1e9)
+
+    def recv_into(self, buffer: bytearray, timeout: float | None = None) -> int:
+        """The next reply copied into ``buffer``: its length, or 0 after ``timeout``."""
+        frame = self.recv(timeout)
+        if frame is None:
+            return 0
+        n = len(frame)
+        buffer[:n] = frame
+        return n
+
+    def fileno(self) -> int:
+        raise LinkError(f"{self.iface}: a synchronous wire has no descriptor to wait on "
+                        "(replies are there when send returns; call recv)")
+
+    def close(self) -> None:
+        with self._ready:
+            self._closed = True
+            self._due.clear()
+            self._ready.notify_all()

@@ -65,10 +65,12 @@ class Transport:
         deadline = monotonic() + (self.timeout if timeout is None else timeout)
         while True:
             left = deadline - monotonic()
-            if left <= 0:
+            # Past the deadline, one last look at what is back: a reply that came in time
+            # while this thread was not scheduled is not a lost frame.
+            reply = self.link.recv(left if left > 0 else 0)
+            if reply is None and left <= 0:
                 self.counters.frames_lost += 1
                 return None
-            reply = self.link.recv(left)
             if reply is None:
                 continue
             if self.recorder:
@@ -103,9 +105,8 @@ class Transport:
         deadline = monotonic() + (self.timeout if timeout is None else timeout)
         while True:
             left = deadline - monotonic()
-            if left <= 0:
-                self.counters.frames_lost += 1
-                return 0
+            if left < 0:
+                left = 0            # past it: one last look (as in exchange)
             if receive is not None:
                 size = int(receive(reply, left))
             else:
@@ -114,6 +115,9 @@ class Transport:
                 if got is not None:
                     reply[:size] = got
             if not size:
+                if left == 0:
+                    self.counters.frames_lost += 1
+                    return 0
                 continue
             if recorder:
                 recorder(bytes(reply[:size]), False)
