@@ -5,8 +5,8 @@ downloads, a large IDN written and read in fragments against the mailbox's minim
 Run from the checkout:  python3 bench/soe.py [--writes 0,8,32] [--sizes 1024,4096]
 [--mailboxes 128,1024] [--repeat R] [--no-veth] [--json FILE]   (root for the veth part)
 
-1. **Start-up writes** (in memory: ``Network.virtual``, the segment served on a thread over
-   ``MemoryLink``).  The self-written two-axis SoE drive ``tests/fixtures/esi/soe_drive.xml``
+1. **Start-up writes** (in memory: ``Network.virtual``, the segment answering in the
+   master's thread, ``SynchronousLink``).  The self-written two-axis SoE drive ``tests/fixtures/esi/soe_drive.xml``
    (TSD-2, 128-byte mailbox) compiled with ``ecatcfg.compiler``: its ESI's own 7 SoE writes
    (the IDNs it needs before SAFEOP), plus N more PS writes of S-0-0032 (2 bytes, drive 0
    and drive 1 in turn: a write cannot go ahead of the answer to a write of the same

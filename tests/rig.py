@@ -410,29 +410,16 @@ def serve_in_memory(segment, clock=None, *, wallclock: bool = False
     stops what serves it).  On simulated time by default: the segment on ``clock`` (a
     fresh ``SimClock`` if none) behind a simulated wire (``runtime/simwire.py``), no thread,
     nothing to stop; a ``Transport`` on the link takes its clock.  ``wallclock``: the
-    segment served on a thread over a ``MemoryLink`` in real time, where that is the
-    point."""
-    import threading
+    segment on the host's clock behind a ``SynchronousLink`` (answered in the sending
+    thread, as ``Network.virtual`` does without a clock), where real time is the point."""
+    from ecatcfg.runtime.simwire import SimulatedLink, SynchronousLink
 
     if not wallclock:
         from ecatcfg.runtime.clock import SimClock
-        from ecatcfg.runtime.simwire import SimulatedLink
         clock = clock or SimClock()
         segment.set_clock(clock.monotonic_ns)
         return SimulatedLink(clock, segment), lambda: None
-
-    from ecatcfg.runtime.link import MemoryLink
-
-    a, b = MemoryLink.pair()
-    stop = threading.Event()
-    thread = threading.Thread(target=segment.serve, args=(b,), kwargs={"stop": stop},
-                              daemon=True)
-    thread.start()
-
-    def close() -> None:
-        stop.set()
-        thread.join(2)
-    return a, close
+    return SynchronousLink(segment), lambda: None
 
 
 def start_simulate(rig: VethRig, *args: str, duration: float = 60) -> tuple[
