@@ -271,6 +271,8 @@ def _up_and_cycle(net: Network, plan: NetworkPlan, target: AlState,
     """Bring the line up to ``target`` and, in SAFEOP or OP, cycle it (--cycles)."""
     from ecatcfg.esc import AlState
 
+    if target >= AlState.SAFEOP and args.cycles != 0:
+        prepare_cycling(net)
     net.up(target, accept_newer_revision=args.accept_newer_revision)
     report.mark(f"start-up to {target.name}", net)
     # The stop timeout a service manager needs (docs/runtime.md).
@@ -288,6 +290,16 @@ def _up_and_cycle(net: Network, plan: NetworkPlan, target: AlState,
         report.mark(f"{args.cycles} cycles", net)
     else:
         notify.ready(status)
+
+
+def prepare_cycling(net: Network) -> None:
+    """Import what the first cycle would import (the supervisor of slaves that drop out,
+    ``runtime/master/recovery.py``) before the slaves are in OP: an import between two
+    cycles of a line in OP delays the second one (a module compiled from source, where no
+    bytecode is written, on a busy host: tens of ms), and a slave whose outputs stop for
+    longer than its SM watchdog (100 ms by default) drops to SAFEOP+ERR."""
+    if net.master.recovery:
+        import ecatcfg.runtime.master.recovery  # noqa: F401
 
 
 def _down(net: Network, plan: NetworkPlan, args: argparse.Namespace, report: ApplyReport,

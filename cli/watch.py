@@ -56,6 +56,7 @@ def run(args: argparse.Namespace) -> int:
     import time
 
     from ecatcfg.cli import EXIT_USAGE
+    from ecatcfg.cli.apply import prepare_cycling
     from ecatcfg.cli.watch_commands import Commands
     from ecatcfg.cli.watch_input import Keyboard, Lines, foreground
     from ecatcfg.eni import cache as eni_cache
@@ -106,6 +107,7 @@ def run(args: argparse.Namespace) -> int:
             stdin = None
         reader: Keyboard | Lines = (Keyboard(stdin, commands) if keyboard and stdin is not None
                                     else Lines(-1 if stdin is None else stdin, commands))
+        prepare_cycling(net)
         net.up()
         start = time.monotonic()
         show: _Live | _Lines = (
