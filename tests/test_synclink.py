@@ -141,3 +141,19 @@ def test_another_thread_takes_the_reply_and_close_wakes_it(plan):
         link.close()
         waiter.join(10)
         assert isinstance(got[-1], LinkError)
+
+
+def test_a_reply_back_by_the_deadline_is_not_a_lost_frame(plan):
+    """The transport looks once more when its deadline has passed: with no time at all to
+    wait (a master thread descheduled from its send to past its deadline looks the same),
+    the reply that is already back is taken, on both of its paths."""
+    with Network.virtual(plan, esi=[ESI]) as net:
+        transport = Transport(net.link)
+        got = transport.exchange(BRD, timeout=0)
+        assert got is not None and got[0].wkc == 5
+        net.up()
+        master = net.master
+        lost = master.transport.counters.frames_lost
+        for _ in range(3):                  # the cyclic frames: exchange_prepared
+            assert master.cyclic.exchange(master.transport, master.state, timeout=0)
+        assert master.transport.counters.frames_lost == lost
