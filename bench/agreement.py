@@ -37,6 +37,9 @@ def main() -> int:
                     help="only the compiled lines of corpus devices, not the corpus ENIs")
     ap.add_argument("--corpus", type=Path, default=SHARED / "corpus")
     ap.add_argument("--corpus-extra", type=Path, default=SHARED / "corpus-extra")
+    ap.add_argument("--fault", action="append", metavar="NAME",
+                    help="only this fault class (repeatable; tests/faults.py), without the "
+                         "unmodified files")
     ap.add_argument("-v", "--verbose", action="store_true")
     args = ap.parse_args()
     sys.path.insert(0, str(ROOT.parent))
@@ -76,7 +79,11 @@ def main() -> int:
                       flush=True)
 
         started = time.perf_counter()
-        outcomes = run_matrix(enis, [None, *FAULTS], list(range(1, args.seeds + 1)),
+        unknown = sorted(set(args.fault or ()) - set(FAULTS))
+        if unknown:
+            ap.error(f"--fault {', '.join(unknown)}: not a fault class of tests/faults.py")
+        classes = list(args.fault) if args.fault else [None, *FAULTS]
+        outcomes = run_matrix(enis, classes, list(range(1, args.seeds + 1)),
                               {False: None, True: library}, report)
         seconds = time.perf_counter() - started
     limits = Counter(o.limit for o in outcomes if o.limit is not None)
@@ -84,7 +91,7 @@ def main() -> int:
     unexplained = [o for o in outcomes if not o.explained]
     agree = sum(1 for o in outcomes if o.agree and o.at_line and not o.allowed_disagreement)
     print(f"\n{platform.machine()}, {os.cpu_count()} CPUs, Python {sys.version.split()[0]}; "
-          f"{len(enis)} ENIs ({lines} compiled lines of corpus devices), {len(FAULTS)} fault classes, {args.seeds} seed(s), "
+          f"{len(enis)} ENIs ({lines} compiled lines of corpus devices), {len(classes)} fault classes, {args.seeds} seed(s), "
           f"with ESI and ENI only")
     print("| what | cases |")
     print("|---|---|")

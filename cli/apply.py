@@ -159,7 +159,7 @@ def _run(args: argparse.Namespace, ctx: _Run) -> int:
                 report.note(f"stopped by {exc.args[0]}" if exc.args else "interrupted")
             if guard.stop_asked:               # a signal while cycling: the loop has ended
                 report.note(f"stopped by {guard.stop_asked}")
-            down_failure = _down(net, plan, args, report, notify)
+            down_failure = _down(net, plan, args, report, notify, target)
             failure = failure or down_failure     # the first error is the run's
         finally:
             net.close()
@@ -303,20 +303,28 @@ def prepare_cycling(net: Network) -> None:
 
 
 def _down(net: Network, plan: NetworkPlan, args: argparse.Namespace, report: ApplyReport,
-          notify: Notifier) -> EcatcfgError | None:
-    """Back to INIT unless --stay, and the slaves' final states in the report; the error
-    of the way down, if any."""
+          notify: Notifier, target: AlState) -> EcatcfgError | None:
+    """Back to INIT unless --stay, and the slaves' final states in the report; the first
+    error found here: a slave that left the state the line ran in, or the way down's."""
     from ecatcfg.errors import EcatcfgError
     from ecatcfg.esc import AlState
 
     failure: EcatcfgError | None = None
     highest = net.master.read_states()
+    if net.state == target > AlState.INIT:
+        # The line reached its target and ran there: a slave that left it since (an SM
+        # watchdog run out between two cycles) fails the run, as the transition's own
+        # read-back would have.  (A run stopped on the way up has slaves between states.)
+        try:
+            net.master.check_kept(highest)
+        except EcatcfgError as exc:
+            failure = exc
     if not args.stay and net.state > AlState.INIT:
         notify.stopping(f"bringing {len(plan.slaves)} slaves down to INIT")
         try:
             net.down()
         except EcatcfgError as exc:
-            failure = exc
+            failure = failure or exc
         report.final_states(net.master.read_states(), net.master.progress,
                             highest=highest, scanned=net.master.scanned,
                             line=net.master.line)

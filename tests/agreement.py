@@ -32,11 +32,6 @@ def _dictionary_gap(o: Outcome) -> bool:
             and any(code in str(o.apply_failure) for code in ("0x06020000", "0x06090011")))
 
 
-def _watchdog_after_op(o: Outcome) -> bool:
-    return (o.fault == "watchdog" and not o.apply_says and "0x001B" in o.left_op
-            and any(" ENI121 " in e for e in o.check_errors))
-
-
 # The disagreements that are limits, not bugs: (does it apply to the outcome, the reason).
 # docs/show-diff-check.md, "check and apply --virtual", names each with its reason.
 LIMITS: dict[str, tuple[Callable[[Outcome], bool], str]] = {
@@ -44,15 +39,6 @@ LIMITS: dict[str, tuple[Callable[[Outcome], bool], str]] = {
         A CoE InitCmd writes an object the device's ESI dictionary does not list: check warns
         (ENI301; vendors' dictionaries are partial, the real slave's decides), the slave
         emulated from that ESI has only the ESI's objects and aborts the download."""),
-    "watchdog-after-op": (_watchdog_after_op, """
-        An SM watchdog shorter than the cycle: check errs (ENI121) and the emulated slave
-        leaves OP with 0x001B between two output writes, as a real one (its watchdog runs
-        out between writes, runtime/segment/slave.py).  Where that happens after OP was
-        reached, the run does not fail: the master's cycle judges working counters, which
-        the emulated ESC still counts in SAFEOP, and with recovery off nothing reads the
-        state until the way down (the report's table then shows SAFEOP+ERR 0x001B).  The
-        case is a limit only when the slave was found in SAFEOP+ERR 0x001B after the
-        cycles."""),
 }
 
 
@@ -67,7 +53,6 @@ class Outcome:
     check_warnings: list[str]        # every other warning
     apply_failure: str | None
     expected_lines: frozenset[int] = frozenset()
-    left_op: str = ""                # slaves found out of OP after the cycles (apply passed)
     firmware: bool = True            # the planted slave has firmware (a mailbox)
     device: bool = False             # the planted slave was emulated from its ESI device
 
@@ -133,7 +118,6 @@ class Outcome:
         return (f"{what}: check {'errors' if self.check_says else 'clean'}"
                 f"{' (' + '; '.join(self.check_errors[:3]) + ')' if self.check_errors else ''}"
                 f", apply {'fails: ' + str(self.apply_failure) if self.apply_says else 'reaches OP'}"
-                + (f" (after the cycles: {self.left_op})" if self.left_op else "")
                 + (f"; expected an error at line {', '.join(map(str, sorted(self.expected_lines)))}"
                    if not self.at_line else ""))
 
@@ -143,39 +127,35 @@ class Outcome:
 HOST_TIMING = "no frame came back"
 
 
-def apply_failure(path: Path, library: Library | None) -> tuple[str | None, str]:
-    """How ``apply --virtual`` of the file fails (None: it reached OP and cycled without a
-    working-counter error), and the slaves found out of OP after the cycles of a run that
-    did not fail ("" when all are in OP).  A failure of the host's timing is tried once
-    more."""
-    failure, left = _apply_once(path, library)
+def apply_failure(path: Path, library: Library | None) -> str | None:
+    """How ``apply --virtual`` of the file fails (None: it reached OP, cycled without a
+    working-counter error, and every slave was still in OP after the cycles, as ``apply``
+    reads them before the way down).  A failure of the host's timing is tried once more."""
+    failure = _apply_once(path, library)
     if failure is not None and HOST_TIMING in failure:
-        failure, left = _apply_once(path, library)
-    return failure, left
+        failure = _apply_once(path, library)
+    return failure
 
 
-def _apply_once(path: Path, library: Library | None) -> tuple[str | None, str]:
+def _apply_once(path: Path, library: Library | None) -> str | None:
     from ecatcfg.errors import EcatcfgError
     from ecatcfg.runtime import Network
     try:
         net = Network.virtual(path, library, recovery=False)
     except EcatcfgError as exc:
-        return str(exc).splitlines()[0], ""
+        return str(exc).splitlines()[0]
     try:
         net.up(AlState.OP)
         net.run(CYCLES)
         stats = net.run_stats
-        # A frame that did not come back in time is the host's load (the in-memory
-        # segment answers in a thread), not the file: only working counters judge.
         if stats is not None and stats.wkc_errors:
-            return f"{stats.wkc_errors} working-counter error(s) in {stats.cycles} cycles", ""
-        states = net.master.read_states()
-        left = [f"{slave.name} {state.name} 0x{state.code:04X}" if state else
-                f"{slave.name} silent" for slave, state in zip(net.master.slaves, states)
-                if state is None or state.state != AlState.OP or state.error]
-        return None, "; ".join(left)
+            return f"{stats.wkc_errors} working-counter error(s) in {stats.cycles} cycles"
+        # What `apply` does after the cycles (cli/apply.py): a slave that left OP while
+        # the line ran (an SM watchdog run out between two cycles) fails the run.
+        net.master.check_kept(net.master.read_states())
+        return None
     except EcatcfgError as exc:
-        return str(exc).splitlines()[0], ""
+        return " ".join(str(exc).split())
     finally:
         net.close()
 
@@ -215,9 +195,9 @@ def run_case(data: bytes, eni: str, fault: str | None, seed: int,
                    if f.rule == UNSUPPORTED]
     warnings = [f"{f.line}: {f.rule} {f.message}" for f in result.findings
                 if f.severity != "error" and f.rule != UNSUPPORTED]
-    failure, left = apply_failure(path, library)
+    failure = apply_failure(path, library)
     return Outcome(eni, fault, seed, library is not None, errors, unsupported, warnings,
-                   failure, expected, left, firmware, device)
+                   failure, expected, firmware, device)
 
 
 def run_matrix(enis: dict[str, bytes], faults: list[str | None], seeds: list[int],

@@ -662,3 +662,35 @@ def test_virtual_apply_pcap_of_the_example(tshark_path, tmp_path):
     assert rc == 0 and report["ok"], err
     # The drive's mappings and assignments go with CompleteAccess (normal transfers).
     assert check_pcap(pcap, eni_reader.read_file(eni)) == 11
+
+
+def test_a_slave_that_leaves_op_while_the_line_runs_fails_apply(tmp_path: Path) -> None:
+    """An SM watchdog of one base tick (0x0420 = 1: 100 µs at the default divider) set in
+    PS on the drive, which has firmware: the watchdog runs out between two cycles and the
+    drive drops to SAFEOP+ERR 0x001B, while the emulated ESC still counts the writes, so
+    every working counter adds up.  apply reads the states after the cycles and fails
+    naming the slave and the code, as `check` (ENI121) says it would; it used to exit 0."""
+    import copy
+
+    from lxml import etree
+    eni = compile_example(tmp_path / "line.eni.xml")
+    tree = etree.parse(str(eni))
+    axis = tree.xpath("Config/Slave[Info/Name='axis1']")[0]
+    template = next(c for c in axis.iterfind("InitCmds/InitCmd")
+                    if c.findtext("Cmd") == str(int(Cmd.FPWR)) and
+                    [t.text for t in c.iterfind("Transition")] == ["PS"])
+    cmd = copy.deepcopy(template)
+    cmd.find("Comment").text = "set SM watchdog"
+    cmd.find("Ado").text = str(0x0420)
+    cmd.find("Data").text = "0100"
+    template.addnext(cmd)
+    tree.write(str(eni))
+    assert subprocess.run([sys.executable, "-m", "ecatcfg", "check", str(eni)],
+                          capture_output=True, text=True, timeout=60).returncode == 1
+    done = subprocess.run([sys.executable, "-m", "ecatcfg", "apply", str(eni), "--virtual",
+                           "--esi", str(EXAMPLES / "esi"), "--simulated-time", "--cycles",
+                           "50", "--format", "json"], capture_output=True, text=True,
+                          timeout=120)
+    assert done.returncode == 1, done.stdout + done.stderr
+    error = json.loads(done.stdout)["error"]
+    assert "left it" in error and "'axis1'" in error and "0x001B" in error, error

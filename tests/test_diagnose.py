@@ -705,18 +705,19 @@ def test_doctor_reports_each_slave_and_the_one_that_is_not_the_enis(plan, tmp_pa
 
 
 def test_0x0016_names_the_mailbox_sm_against_the_sii(plan):
-    """The drive's SM1 (mailbox in) written 0x40 bytes long where its SII's standard mailbox
-    (words 0x1A-0x1B, from its ESI: 0x1080, 128 bytes) says 128: it refuses PREOP with
-    0x0016, and the cause gives both SMs as read and the SII's areas."""
-    exc = refusal(patched(plan, "axis1", "set sm 1 (mailbox in)", 2, 0x40))
+    """The drive's SM1 (mailbox in) written 0x20 bytes long, below the 34 its ESI's MinSize
+    allows (its SII's standard mailbox, words 0x1A-0x1B: 0x1080, 128 bytes): it refuses
+    PREOP with 0x0016, and the cause gives both SMs as read and the SII's areas.  (64 bytes
+    would be taken: MinSize..MaxSize, esi/model.py SyncManager.takes_mailbox_length.)"""
+    exc = refusal(patched(plan, "axis1", "set sm 1 (mailbox in)", 2, 0x20))
     assert exc.al_code == 0x0016
     [cause] = exc.causes
-    assert cause["cause"] == ["SM1 (0x0808) 0x1080, 64 bytes, the SII's mailbox send area is "
+    assert cause["cause"] == ["SM1 (0x0808) 0x1080, 32 bytes, the SII's mailbox send area is "
                               "0x1080, 128 bytes (SII word 0x001A)"]
     assert cause["mailbox_sms"] == [
         {"sm": 0, "start": 0x1000, "length": 128, "control": 0x26, "enabled": True,
          "sii_start": 0x1000, "sii_length": 128},
-        {"sm": 1, "start": 0x1080, "length": 64, "control": 0x22, "enabled": True,
+        {"sm": 1, "start": 0x1080, "length": 32, "control": 0x22, "enabled": True,
          "sii_start": 0x1080, "sii_length": 128}]
     assert cause["rules"] == ["mailbox-sm"]
 

@@ -101,6 +101,17 @@ class NotReachedError(ApplyError):
         self.lines = lines
 
 
+class LeftStateError(ApplyError):
+    """Slaves found out of the state the line was brought to, after it ran there."""
+
+    def __init__(self, state: AlState, lines: list[str]) -> None:
+        super().__init__(f"while the line ran in {state.name}, {len(lines)} "
+                         f"slave{'s' if len(lines) != 1 else ''} left it:\n"
+                         + "\n".join(f"  {x}" for x in lines))
+        self.state = state
+        self.lines = lines
+
+
 class IncompleteEniError(ApplyError):
     """An ENI whose InitCmds do not request every state on the way to the target
     (``runtime/master/reached.py``); raised before any frame is sent.  ``missing``: per slave,
@@ -266,6 +277,19 @@ class Master:
         lines = not_reached(self.slaves, self.read_states(), transition.target)
         if lines:
             raise NotReachedError(transition, lines)
+
+    def check_kept(self, states: list[SlaveState | None]) -> None:
+        """Raise :class:`LeftStateError` if a slave that answered the read of ``states``
+        (:meth:`read_states`, after the line ran) is no longer in the state the line was
+        brought to, or shows the error flag: a slave whose SM watchdog ran out between two
+        cycles (0x001B) drops to SAFEOP+ERR while every working counter still adds up, so
+        the cycles alone cannot tell.  A slave that did not answer is the working
+        counters' and the recovery's to judge (a hot-connect group may be away)."""
+        answered = [(slave, st) for slave, st in zip(self.slaves, states) if st is not None]
+        lines = not_reached([slave for slave, _ in answered], [st for _, st in answered],
+                            self.state)
+        if lines:
+            raise LeftStateError(self.state, lines)
 
     def _has_commands(self, transition: Transition) -> bool:
         return any(transition in c.transitions for c in self.plan.master.init_cmds) or any(
