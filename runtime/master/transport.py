@@ -63,14 +63,17 @@ class Transport:
             self.recorder(frame, True)
         monotonic = self.clock.monotonic
         deadline = monotonic() + (self.timeout if timeout is None else timeout)
+        last = False
         while True:
-            left = deadline - monotonic()
-            # Past the deadline, one last look at what is back: a reply that came in time
-            # while this thread was not scheduled is not a lost frame.
-            reply = self.link.recv(left if left > 0 else 0)
-            if reply is None and left <= 0:
+            if last:
                 self.counters.frames_lost += 1
                 return None
+            left = deadline - monotonic()
+            if left <= 0:
+                # Past the deadline, one last look at what is back: a reply that came in
+                # time while this thread was not scheduled is not a lost frame.
+                last, left = True, 0
+            reply = self.link.recv(left)
             if reply is None:
                 continue
             if self.recorder:
@@ -103,10 +106,14 @@ class Transport:
         receive = self._recv_into
         monotonic = self.clock.monotonic
         deadline = monotonic() + (self.timeout if timeout is None else timeout)
+        last = False
         while True:
+            if last:
+                self.counters.frames_lost += 1
+                return 0
             left = deadline - monotonic()
-            if left < 0:
-                left = 0            # past it: one last look (as in exchange)
+            if left <= 0:
+                last, left = True, 0        # past it: one last look (as in exchange)
             if receive is not None:
                 size = int(receive(reply, left))
             else:
@@ -115,9 +122,6 @@ class Transport:
                 if got is not None:
                     reply[:size] = got
             if not size:
-                if left == 0:
-                    self.counters.frames_lost += 1
-                    return 0
                 continue
             if recorder:
                 recorder(bytes(reply[:size]), False)
