@@ -242,3 +242,34 @@ def test_device_id_without_a_group_is_an_error():
     assert _errors(text) == [
         f"t.yaml:{line}: slave 'inputs': 'device_id' identifies the head of a hot-connect "
         "group, and this slave is none (add hot_connect: true)"]
+
+
+def _coupler_and_head(port: str):
+    """The example line cut to its coupler and the lamps terminal, the lamps a hot-connect
+    group of one plugged (ENI ``PreviousPort``) into the coupler's ``port``."""
+    from ecatcfg.eni.plan import HotConnectPlan, PreviousPort
+    from ecatcfg.record import replace
+    plan = build.compile_topology(topology.load(EXAMPLES / "topology.yaml"),
+                                  _lib(EXAMPLES / "esi")).plan
+    coupler = next(s for s in plan.slaves if s.name == "coupler")
+    lamps = next(s for s in plan.slaves if s.name == "lamps")
+    lamps = replace(lamps, hot_connect=HotConnectPlan(1, []),
+                    previous_ports=[PreviousPort(port, coupler.phys_addr)])
+    return replace(plan, slaves=[coupler, lamps]), coupler, lamps
+
+
+@pytest.mark.parametrize("plugged", [2, 1], ids=["its-port", "another-port"])
+def test_a_head_is_its_group_only_on_the_enis_port_of_its_parent(plugged):
+    """In a tree, the group is there when its head pairs port by port: the lamps terminal
+    found on the coupler's port C, where the ENI puts it, is the group; found on port B,
+    with the same identity and passing the same IdentifyCmds, it is not (it is on another
+    branch of the tree), so the group counts as absent."""
+    from ecatcfg.runtime.master.hotconnect import present_groups
+    from ecatcfg.runtime.master.scan import FoundSlave
+    from ecatcfg.runtime.wiring import Plug
+    plan, coupler, lamps = _coupler_and_head("C")
+    found = [FoundSlave(0, coupler.vendor_id, coupler.product_code, coupler.revision, 0),
+             FoundSlave(1, lamps.vendor_id, lamps.product_code, lamps.revision, 0,
+                        plug=Plug(0, plugged))]
+    identified = {("lamps", 1): True}          # its IdentifyCmds pass where it is
+    assert present_groups(plan, found, identified) == ({"lamps"} if plugged == 2 else set())
