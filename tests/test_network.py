@@ -601,3 +601,75 @@ def test_another_revision_is_reported_and_a_newer_one_taken_only_on_request():
     finally:
         close()
     assert [f.revision for f in found] == [revision] * 3
+
+
+def test_the_enis_bus_shift_write_is_left_out_and_its_other_cyclic_writes_are_sent(
+        example_plan):
+    """EC-Engineer's cyclic frame carries an APWR of 0x0910 to the reference clock (bus
+    shift: the master's own time, zeros in the file); this master follows the reference
+    clock instead (ARMW), so that write is not sent, while a cyclic register write of
+    another register (an FPWR of a user RAM word of the drive, OP only) is: the drive's
+    word holds it after the cycles, and no frame carries the 0x0910 write."""
+    import copy
+    from ecatcfg.eni.plan import CyclicCmd
+    from ecatcfg.esc import Reg
+    plan = copy.deepcopy(example_plan)
+    drive = plan.slave("axis1")
+    word = b"\x5a\xa5"
+    frame = plan.cyclic[0].frames[0]
+    frame.cmds += [
+        CyclicCmd(["SAFEOP", "OP"], "bus shift", Cmd.APWR, 8, adp=drive.auto_inc_addr,
+                  ado=Reg.DC_SYSTEM_TIME, data=bytes(8), cnt=1),
+        CyclicCmd(["OP"], "a user RAM word", Cmd.FPWR, 2, adp=drive.phys_addr, ado=0x0F80,
+                  data=word, cnt=1)]
+    cyclic = CyclicFrames(plan)
+    sent = [(s.cmd.cmd, s.cmd.ado) for slots in cyclic.frames for s in slots]
+    assert (Cmd.APWR, Reg.DC_SYSTEM_TIME) not in sent and (Cmd.FPWR, 0x0F80) in sent
+    with Network.virtual(plan) as net:
+        net.up()
+        assert all(net.cycle() for _ in range(5))
+        axis1 = next(s for s in net.segment.slaves if s.name == "axis1")
+        assert bytes(axis1.mem[0x0F80:0x0F82]) == word
+
+
+def test_the_cycle_periods_jitter_is_their_deviation_from_the_median():
+    """``CycleStats.jitter`` (watch's status line, ``report``): the periods 1000, 1000,
+    1010, 990, 1000, 1030 us have the median 1000 us and the deviations 0, 0, 0, 10, 10,
+    30 us: p50 is the middle one, 10 us (the upper of the two middle ones, as the list
+    has an even length), p99 and max the largest, 30 us.  A single period has no jitter."""
+    from ecatcfg.runtime.master.cyclic import CycleStats
+    stats = CycleStats()
+    stats.add_period(1000.0)
+    assert stats.jitter() == {"p50": 0.0, "p99": 0.0, "max": 0.0}
+    for us in (1000.0, 1010.0, 990.0, 1000.0, 1030.0):
+        stats.add_period(us)
+    assert stats.jitter() == {"p50": 10.0, "p99": 30.0, "max": 30.0}
+    many = CycleStats()                        # 200 periods: p99 is the 199th deviation
+    for k in range(199):
+        many.add_period(1000.0 + k)
+    many.add_period(3000.0)                    # one late cycle
+    # median (1099 + 1100) / 2 = 1099.5; deviations sorted: 0.5, 0.5, 1.5, 1.5, ... 98.5,
+    # 98.5 (indices 0-197), 99.5 (1000 us), 1900.5 (the late one)
+    assert many.jitter() == {"p50": 50.5, "p99": 99.5, "max": 1900.5}
+
+
+def test_the_working_counters_are_the_last_cycles_against_the_enis(example_plan):
+    """``working_counters`` (watch's status line): after a cycle of the example line in OP
+    the process-data LRW brought back the working counter the ENI's ``Cnt`` says, at the
+    ENI's image offsets; with the drive unplugged, 3 less (its outputs count 2, its
+    inputs 1: ETG.1000.4 LRW); a state's commands not sent show -1."""
+    [lrw] = [c for frame in example_plan.cyclic[0].frames for c in frame.cmds
+             if c.cmd == Cmd.LRW]
+    with Network.virtual(example_plan, recovery=False) as net:
+        net.up()
+        assert net.cycle()
+        [count] = [c for frame in net.master.cyclic.working_counters() for c in frame
+                   if c.cmd.cmd == Cmd.LRW]
+        assert (count.wkc, count.expected, count.ok) == (lrw.cnt, lrw.cnt, True)
+        assert (count.in_at, count.out_at) == (lrw.input_offs, lrw.output_offs)
+        net.segment.remove_cable("axis1")
+        assert not net.cycle()
+        [count] = [c for frame in net.master.cyclic.working_counters() for c in frame
+                   if c.cmd.cmd == Cmd.LRW]
+        assert (count.wkc, count.expected, count.ok) == (lrw.cnt - 3, lrw.cnt, False)
+        net.segment.restore_cable("axis1")
