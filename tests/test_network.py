@@ -657,12 +657,21 @@ def test_the_working_counters_are_the_last_cycles_against_the_enis(example_plan)
     """``working_counters`` (watch's status line): after a cycle of the example line in OP
     the process-data LRW brought back the working counter the ENI's ``Cnt`` says, at the
     ENI's image offsets; with the drive unplugged, 3 less (its outputs count 2, its
-    inputs 1: ETG.1000.4 LRW); a state's commands not sent show -1."""
-    [lrw] = [c for frame in example_plan.cyclic[0].frames for c in frame.cmds
-             if c.cmd == Cmd.LRW]
-    with Network.virtual(example_plan, recovery=False) as net:
+    inputs 1: ETG.1000.4 LRW).  The AL status BRD's output offset is moved from its input
+    offset (the schema lets them differ; the exporters write them equal), so that each
+    offset is seen to be its own."""
+    import copy
+    plan = copy.deepcopy(example_plan)
+    [lrw] = [c for frame in plan.cyclic[0].frames for c in frame.cmds if c.cmd == Cmd.LRW]
+    [brd] = [c for frame in plan.cyclic[0].frames for c in frame.cmds if c.cmd == Cmd.BRD]
+    brd.output_offs = brd.input_offs + 2
+    with Network.virtual(plan, recovery=False) as net:
         net.up()
         assert net.cycle()
+        [status] = [c for frame in net.master.cyclic.working_counters() for c in frame
+                    if c.cmd.cmd == Cmd.BRD]
+        assert (status.wkc, status.in_at, status.out_at) == (
+            brd.cnt, brd.input_offs, brd.input_offs + 2)
         [count] = [c for frame in net.master.cyclic.working_counters() for c in frame
                    if c.cmd.cmd == Cmd.LRW]
         assert (count.wkc, count.expected, count.ok) == (lrw.cnt, lrw.cnt, True)
