@@ -273,3 +273,29 @@ def test_a_head_is_its_group_only_on_the_enis_port_of_its_parent(plugged):
                         plug=Plug(0, plugged))]
     identified = {("lamps", 1): True}          # its IdentifyCmds pass where it is
     assert present_groups(plan, found, identified) == ({"lamps"} if plugged == 2 else set())
+
+
+def test_a_slave_behind_an_absent_group_is_plugged_where_the_group_was():
+    """The example line as a tree whose every slave names the one before it in a single
+    ``PreviousPort`` (port B, no ``Selected`` attribute: one entry, as TwinCAT writes it),
+    the lamps terminal a hot-connect group of one.  With the group absent, the line as it
+    is (``as_found``) has the drive plugged into port B of the sensors terminal, where the
+    lamps were: walking up from the lamps to the first slave present, through entries
+    none of which is selected."""
+    from ecatcfg.eni.plan import HotConnectPlan, PreviousPort
+    from ecatcfg.record import replace
+    from ecatcfg.runtime.master.hotconnect import as_found
+    plan = build.compile_topology(topology.load(EXAMPLES / "topology.yaml"),
+                                  _lib(EXAMPLES / "esi")).plan
+    ordered = sorted(plan.slaves, key=lambda s: s.position)
+    chained = [ordered[0]] + [replace(s, previous_ports=[PreviousPort("B", before.phys_addr)])
+                              for before, s in zip(ordered, ordered[1:])]
+    chained = [replace(s, hot_connect=HotConnectPlan(1, [])) if s.name == "lamps" else s
+               for s in chained]
+    sensors = next(s for s in chained if s.name == "sensors")
+    present = {s.name for s in chained} - {"lamps"}
+    line = as_found(replace(plan, slaves=chained), present)
+    assert [s.name for s in line.slaves] == ["coupler", "buttons", "sensors", "axis1"]
+    drive = next(s for s in line.slaves if s.name == "axis1")
+    assert [(p.port, p.phys_addr, p.selected) for p in drive.previous_ports] == [
+        ("B", sensors.phys_addr, True)]
