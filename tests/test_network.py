@@ -682,3 +682,35 @@ def test_the_working_counters_are_the_last_cycles_against_the_enis(example_plan)
                    if c.cmd.cmd == Cmd.LRW]
         assert (count.wkc, count.expected, count.ok) == (lrw.cnt - 3, lrw.cnt, False)
         net.segment.restore_cable("axis1")
+
+
+def test_a_reply_with_the_circulating_bit_set_is_still_the_cycles(example_plan):
+    """A slave may set a datagram's circulating bit (ETG.1000.4: the frame passed a closed
+    port 0); the reply is still the frame sent, so the cycle takes its working counters and
+    inputs.  A reply whose datagram came back with another length is not this frame: the
+    cycle fails and its inputs are not taken."""
+    with Network.virtual(example_plan, recovery=False) as net:
+        net.up()
+        seg = net.segment
+        answer = seg.answer
+        change = {"flags": wire.CIRCULATING}
+
+        def marked(frame):
+            back, late = answer(frame)
+            if back is not None and frame[wire.FRAME_HEADER_END + 0] == Cmd.ARMW:
+                pos, n = wire.datagram_offsets(back)[-1]          # the BRD of AL status
+                flags, = struct.unpack_from("<H", back, pos + 6)
+                struct.pack_into("<H", back, pos + 6, flags ^ change["flags"])
+            return back, late
+        seg.answer = marked
+        buttons = next(s for s in seg.slaves if s.name == "buttons")
+        buttons.set_inputs(b"\x05")
+        assert all(net.cycle() for _ in range(3))
+        assert [net[f"buttons.Channel {k}.Input"] for k in range(1, 5)] == [
+            True, False, True, False]
+        change["flags"] = 1                   # 2 bytes of AL status said to be 3
+        buttons.set_inputs(b"\x0a")
+        assert not any(net.cycle() for _ in range(3))
+        assert net.master.cyclic.stats.lost_frames >= 3
+        assert [net[f"buttons.Channel {k}.Input"] for k in range(1, 5)] == [
+            True, False, True, False]
