@@ -299,3 +299,22 @@ def test_a_slave_behind_an_absent_group_is_plugged_where_the_group_was():
     drive = next(s for s in line.slaves if s.name == "axis1")
     assert [(p.port, p.phys_addr, p.selected) for p in drive.previous_ports] == [
         ("B", sensors.phys_addr, True)]
+
+
+def test_without_the_first_slaves_group_every_slave_moves_up_one_position():
+    """The coupler a hot-connect group of one and absent: every slave present sits one
+    position further up (auto-increment addresses 0, -1, -2, -3), and the drift
+    compensation's ARMW, addressed by position to the drive (the reference clock), moves
+    with it."""
+    from ecatcfg.eni.plan import HotConnectPlan
+    from ecatcfg.record import replace
+    from ecatcfg.runtime.master.hotconnect import as_found
+    plan = build.compile_topology(topology.load(EXAMPLES / "topology.yaml"),
+                                  _lib(EXAMPLES / "esi")).plan
+    plan = replace(plan, slaves=[replace(s, hot_connect=HotConnectPlan(1, []))
+                                 if s.name == "coupler" else s for s in plan.slaves])
+    line = as_found(plan, {s.name for s in plan.slaves} - {"coupler"})
+    assert [(s.name, s.auto_inc_addr) for s in line.slaves] == [
+        ("buttons", 0), ("sensors", 0xFFFF), ("lamps", 0xFFFE), ("axis1", 0xFFFD)]
+    [armw] = [c for f in line.cyclic[0].frames for c in f.cmds if c.cmd == Cmd.ARMW]
+    assert armw.adp == 0xFFFD
