@@ -880,3 +880,17 @@ def test_a_terminal_without_sm_settings_has_the_pdos_of_their_sm_attribute(examp
     image = sii.decode(sii.build(device_from_eni(buttons, plan, "example.eni.xml")))
     assert [(p.index, p.sm) for p in image.txpdos] == [
         (0x1A00, 0), (0x1A01, 0), (0x1A02, 0), (0x1A03, 0)]
+
+
+def test_a_direction_without_an_fmmu_write_takes_the_first_free_fmmu(example_plan):
+    """axis1 without its "set fmmu 1 (inputs)" InitCmd (as when the reader refused that
+    FMMU's settings): its SM3 carries inputs, so the device from the ENI still has an
+    inputs FMMU, the first one free (FMMU 1), beside the outputs and mailbox-state ones
+    the InitCmds set, in its SII's FMMU category (ETG.2010: 1 outputs, 2 inputs, 3
+    mailbox state)."""
+    plan = copy.deepcopy(example_plan)
+    axis1 = plan.slave("axis1")
+    axis1.init_cmds = [c for c in axis1.init_cmds if c.comment != "set fmmu 1 (inputs)"]
+    device = device_from_eni(axis1, plan, "example.eni.xml")
+    assert [f.type for f in device.fmmus] == ["Outputs", "Inputs", "MBoxState"]
+    assert sii.decode(sii.build(device)).fmmus == [1, 2, 3]

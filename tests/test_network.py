@@ -641,6 +641,10 @@ def test_the_cycle_periods_jitter_is_their_deviation_from_the_median():
     stats = CycleStats()
     stats.add_period(1000.0)
     assert stats.jitter() == {"p50": 0.0, "p99": 0.0, "max": 0.0}
+    two = CycleStats()                         # two periods: each 5 us from their median
+    two.add_period(1000.0)
+    two.add_period(1010.0)
+    assert two.jitter() == {"p50": 5.0, "p99": 5.0, "max": 5.0}
     for us in (1000.0, 1010.0, 990.0, 1000.0, 1030.0):
         stats.add_period(us)
     assert stats.jitter() == {"p50": 10.0, "p99": 30.0, "max": 30.0}
