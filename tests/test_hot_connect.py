@@ -284,12 +284,14 @@ def test_a_slave_behind_an_absent_group_is_plugged_where_the_group_was():
     none of which is selected."""
     from ecatcfg.eni.plan import HotConnectPlan, PreviousPort
     from ecatcfg.record import replace
+    import itertools
+
     from ecatcfg.runtime.master.hotconnect import as_found
     plan = build.compile_topology(topology.load(EXAMPLES / "topology.yaml"),
                                   _lib(EXAMPLES / "esi")).plan
     ordered = sorted(plan.slaves, key=lambda s: s.position)
     chained = [ordered[0]] + [replace(s, previous_ports=[PreviousPort("B", before.phys_addr)])
-                              for before, s in zip(ordered, ordered[1:])]
+                              for before, s in itertools.pairwise(ordered)]
     chained = [replace(s, hot_connect=HotConnectPlan(1, [])) if s.name == "lamps" else s
                for s in chained]
     sensors = next(s for s in chained if s.name == "sensors")

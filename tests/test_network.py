@@ -611,6 +611,7 @@ def test_the_enis_bus_shift_write_is_left_out_and_its_other_cyclic_writes_are_se
     another register (an FPWR of a user RAM word of the drive, OP only) is: the drive's
     word holds it after the cycles, and no frame carries the 0x0910 write."""
     import copy
+
     from ecatcfg.eni.plan import CyclicCmd
     from ecatcfg.esc import Reg
     plan = copy.deepcopy(example_plan)
@@ -702,7 +703,7 @@ def test_a_reply_with_the_circulating_bit_set_is_still_the_cycles(example_plan):
         def marked(frame):
             back, late = answer(frame)
             if back is not None and frame[wire.FRAME_HEADER_END + 0] == Cmd.ARMW:
-                pos, n = wire.datagram_offsets(back)[-1]          # the BRD of AL status
+                pos, _ = wire.datagram_offsets(back)[-1]          # the BRD of AL status
                 flags, = struct.unpack_from("<H", back, pos + 6)
                 struct.pack_into("<H", back, pos + 6, flags ^ change["flags"])
             return back, late

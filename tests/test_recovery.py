@@ -969,7 +969,9 @@ def test_a_drive_that_leaves_during_its_recovery_is_reported_with_what_it_did_no
         seg.answer = leaving
         drive._set_state(AlState.SAFEOP, 0x001A)       # the firmware's own decision
         io.until(lambda: not net.online("axis1"), 1.0)
-        retries = lambda: [e.text for e in events if e.kind == "retry"]  # noqa: E731
+
+        def retries() -> list[str]:
+            return [e.text for e in events if e.kind == "retry"]
         io.until(lambda: len(retries()) == 1, 3 * recovery.TIMEOUT_COMMAND)
         assert "slave 'axis1': no answer to the AL control write" in retries()[0], retries()
         seg.restore_cable("axis1")
@@ -1004,8 +1006,8 @@ def test_a_group_head_that_fails_its_identify_cmds_once_joins_when_they_pass(pla
             net.cycle()
             net.clock.sleep(0.0005)
         assert [e.text for e in events if e.kind == "refused"] == [
-            "hot-connect group 'lamps': the slave at position 3 is not its head (its "
-            "IdentifyCmds failed); it is not configured"]
+            ("hot-connect group 'lamps': the slave at position 3 is not its head (its "
+             "IdentifyCmds failed); it is not configured")]
         assert not net.online("lamps") and lamps.state == AlState.INIT
         struct.pack_into("<H", lamps.mem, Reg.STATION_ALIAS, ALIAS)
         start = net.clock.monotonic()
