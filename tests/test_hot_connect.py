@@ -282,10 +282,10 @@ def test_a_slave_behind_an_absent_group_is_plugged_where_the_group_was():
     is (``as_found``) has the drive plugged into port B of the sensors terminal, where the
     lamps were: walking up from the lamps to the first slave present, through entries
     none of which is selected."""
-    from ecatcfg.eni.plan import HotConnectPlan, PreviousPort
-    from ecatcfg.record import replace
     import itertools
 
+    from ecatcfg.eni.plan import HotConnectPlan, PreviousPort
+    from ecatcfg.record import replace
     from ecatcfg.runtime.master.hotconnect import as_found
     plan = build.compile_topology(topology.load(EXAMPLES / "topology.yaml"),
                                   _lib(EXAMPLES / "esi")).plan
