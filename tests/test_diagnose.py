@@ -740,3 +740,22 @@ def test_registers_a_lost_frame_took_are_read_again(plan):
             assert read_registers(net.master.transport, 4, spans) == want, seed
             lost += counters.frames_lost - before
     assert lost > 0                   # the seeds lose frames of these reads
+
+
+def test_0x0011_of_a_slave_that_left_the_line_says_what_was_not_read(plan):
+    """An invalid state change (0x0011) to explain for the drive, which has just been
+    unplugged: AL control and AL status get no working counter by the command timeout, and
+    the cause says so (not a state machine verdict on registers nobody read); with the
+    drive plugged back (still in OP, as it kept power), the same explanation reads both."""
+    from ecatcfg.runtime.master.diagnose import explain
+    with Network.virtual(plan, esi=[ESI], recovery=False) as net:
+        net.up()
+        net.segment.remove_cable("axis1")
+        gone = explain(net.master.transport, 4, 0x0011)
+        assert (gone.code, gone.lines) == (0x0011, [
+            "AL control and status (0x0120, 0x0130) not read"])
+        assert "requested_state" not in gone.fields
+        net.segment.restore_cable("axis1")
+        back = explain(net.master.transport, 4, 0x0011)
+        assert back.lines[0].startswith("AL control 0x0120 asks for "), back.lines
+        assert back.fields["requested_state"] == "OP"

@@ -781,3 +781,116 @@ def test_the_dc_modes_of_a_drive_from_the_eni_are_named_in_its_sii(example_plan)
     image = sii.decode(sii.build(device_from_eni(slave, example_plan, "example.eni.xml")))
     assert [(m.name, m.assign_activate, m.cycle_time0) for m in image.dc] == [
         ("Free Run", 0, 0), ("DC", 0x0300, 1_000_000)]
+
+
+def test_an_undescribed_output_pdo_is_filled_from_the_outputs_where_the_inputs_lie_apart(
+        example_plan):
+    """0x1601 assigned to SM2 but neither described nor mapped by a download: the device
+    from the ENI fills it with gap entries named after the process-image outputs inside
+    the slave's Send range (ProcessData/Send), Controlword and Target velocity, not with
+    whatever lies in its Recv range.  Here the inputs image puts the drive 8 bytes further
+    on than the outputs (the two images are laid out apart, as TwinCAT's are), so the two
+    ranges cover different bit offsets."""
+    from ecatcfg.eni.plan import BitRange
+    plan = _undescribed_1601(example_plan)
+    axis1 = plan.slave("axis1")
+    axis1.mailbox.coe_init_cmds = [c for c in axis1.mailbox.coe_init_cmds
+                                   if c.index != 0x1601]
+    pd = axis1.process_data
+    assert [(r.bit_start, r.bit_length) for r in pd.send] == [(16, 48)]
+    pd.recv = [BitRange(r.bit_start + 64, r.bit_length) for r in pd.recv]
+    for var in plan.process_image.inputs:
+        if var.name.startswith("axis1."):
+            var.bit_offs += 64
+    device = device_from_eni(axis1, plan, "example.eni.xml")
+    [rx] = [p for p in device.rx_pdos if p.index == 0x1601]
+    assert [(e.index, e.bit_len, list(e.names.values())) for e in rx.entries] == [
+        (0, 16, ["axis1.RxPDO 2 (CSV).Controlword"]),
+        (0, 32, ["axis1.RxPDO 2 (CSV).Target velocity"])]
+    # Without the drive's outputs in the process image, the PDO is one gap entry of the
+    # SM's 48 bits.
+    plan.process_image.outputs = [v for v in plan.process_image.outputs
+                                  if not v.name.startswith("axis1.")]
+    device = device_from_eni(axis1, plan, "example.eni.xml")
+    [rx] = [p for p in device.rx_pdos if p.index == 0x1601]
+    assert [(e.index, e.subindex, e.bit_len) for e in rx.entries] == [(0, 0, 48)]
+
+
+def test_an_sm_without_a_type_takes_the_direction_of_the_fmmu_over_it(example_plan):
+    """axis1's SM2 with no ``ProcessData/Sm`` type and written by its InitCmd with the
+    control byte of an input SM (0x60): the FMMU the InitCmds set over 0x1100 writes, so
+    the device from the ENI has SM2 as outputs, with the control byte of an output SM
+    (0x64) in its SII, as the drive's own ESI has it."""
+    plan = copy.deepcopy(example_plan)
+    axis1 = plan.slave("axis1")
+    for setting in axis1.process_data.sms:
+        if setting.number == 2:
+            setting.type = None
+    [sm2] = [c for c in axis1.init_cmds if c.ado == 0x0810 and c.comment == "set sm 2 (outputs)"]
+    assert sm2.data[4] == 0x64
+    sm2.data = sm2.data[:4] + bytes([0x60]) + sm2.data[5:]
+    device = device_from_eni(axis1, plan, "example.eni.xml")
+    assert (device.sms[2].type, device.sms[2].control_byte) == ("Outputs", 0x64)
+    syncm = sii.decode(sii.build(device)).syncms[2]
+    assert (syncm.control, syncm.type) == (0x64, 3)       # ETG.2010 SYNCM type 3: outputs
+    # Without an FMMU over SM2, its control byte is all that tells: 0x64, outputs.
+    axis1.init_cmds = [c for c in axis1.init_cmds if c.comment != "set fmmu 0 (outputs)"]
+    sm2.data = sm2.data[:4] + bytes([0x64]) + sm2.data[5:]
+    device = device_from_eni(axis1, plan, "example.eni.xml")
+    assert (device.sms[2].type, device.sms[2].control_byte) == ("Outputs", 0x64)
+
+
+def test_the_sii_of_a_drive_from_the_eni_offers_complete_access_and_keeps_a_virtual_sm(
+        example_plan):
+    """axis1's ENI downloads its PDO mappings and assignments with complete access: the
+    SII built from the ENI says the drive's CoE supports it (general category, CoE details
+    bit 5, ETG.2010); an SM whose ``ProcessData/Sm`` is marked virtual keeps the virtual
+    bit of its SYNCM enable byte (bit 2)."""
+    plan = copy.deepcopy(example_plan)
+    axis1 = plan.slave("axis1")
+    assert any(c.complete_access for c in axis1.mailbox.coe_init_cmds)
+    for setting in axis1.process_data.sms:
+        if setting.number == 3:
+            setting.virtual = True
+    image = sii.decode(sii.build(device_from_eni(axis1, plan, "example.eni.xml")))
+    assert image.general.coe_details & 0x20
+    assert [bool(image.syncms[n].enable & 0x04) for n in (2, 3)] == [False, True]
+
+
+def test_an_sm_the_initcmds_do_not_set_up_keeps_the_enis_size(example_plan):
+    """axis1 without its "set sm 3 (inputs)" InitCmd (only the clearing writes name SM3):
+    the device from the ENI takes SM3's size from ``ProcessData/Sm3/DefaultSize`` (6
+    bytes), not from a write that is not there."""
+    plan = copy.deepcopy(example_plan)
+    axis1 = plan.slave("axis1")
+    axis1.init_cmds = [c for c in axis1.init_cmds if c.comment != "set sm 3 (inputs)"]
+    [sm3] = [s for s in axis1.process_data.sms if s.number == 3]
+    assert sm3.default_size == 6
+    device = device_from_eni(axis1, plan, "example.eni.xml")
+    assert (device.sms[3].type, device.sms[3].default_size) == ("Inputs", 6)
+
+
+def test_a_terminal_without_sm_settings_has_the_pdos_of_their_sm_attribute(example_plan):
+    """The input terminal (no mailbox, so no assignment download) with no ``ProcessData/Sm``
+    elements (the schema makes them optional): its PDOs are assigned by their ``Sm``
+    attribute, all four to SM0, in the device from the ENI and its SII."""
+    plan = copy.deepcopy(example_plan)
+    buttons = plan.slave("buttons")
+    buttons.process_data.sms = []
+    image = sii.decode(sii.build(device_from_eni(buttons, plan, "example.eni.xml")))
+    assert [(p.index, p.sm) for p in image.txpdos] == [
+        (0x1A00, 0), (0x1A01, 0), (0x1A02, 0), (0x1A03, 0)]
+
+
+def test_a_direction_without_an_fmmu_write_takes_the_first_free_fmmu(example_plan):
+    """axis1 without its "set fmmu 1 (inputs)" InitCmd (as when the reader refused that
+    FMMU's settings): its SM3 carries inputs, so the device from the ENI still has an
+    inputs FMMU, the first one free (FMMU 1), beside the outputs and mailbox-state ones
+    the InitCmds set, in its SII's FMMU category (ETG.2010: 1 outputs, 2 inputs, 3
+    mailbox state)."""
+    plan = copy.deepcopy(example_plan)
+    axis1 = plan.slave("axis1")
+    axis1.init_cmds = [c for c in axis1.init_cmds if c.comment != "set fmmu 1 (inputs)"]
+    device = device_from_eni(axis1, plan, "example.eni.xml")
+    assert [f.type for f in device.fmmus] == ["Outputs", "Inputs", "MBoxState"]
+    assert sii.decode(sii.build(device)).fmmus == [1, 2, 3]

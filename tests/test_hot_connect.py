@@ -242,3 +242,81 @@ def test_device_id_without_a_group_is_an_error():
     assert _errors(text) == [
         f"t.yaml:{line}: slave 'inputs': 'device_id' identifies the head of a hot-connect "
         "group, and this slave is none (add hot_connect: true)"]
+
+
+def _coupler_and_head(port: str):
+    """The example line cut to its coupler and the lamps terminal, the lamps a hot-connect
+    group of one plugged (ENI ``PreviousPort``) into the coupler's ``port``."""
+    from ecatcfg.eni.plan import HotConnectPlan, PreviousPort
+    from ecatcfg.record import replace
+    plan = build.compile_topology(topology.load(EXAMPLES / "topology.yaml"),
+                                  _lib(EXAMPLES / "esi")).plan
+    coupler = next(s for s in plan.slaves if s.name == "coupler")
+    lamps = next(s for s in plan.slaves if s.name == "lamps")
+    lamps = replace(lamps, hot_connect=HotConnectPlan(1, []),
+                    previous_ports=[PreviousPort(port, coupler.phys_addr)])
+    return replace(plan, slaves=[coupler, lamps]), coupler, lamps
+
+
+@pytest.mark.parametrize("plugged", [2, 1], ids=["its-port", "another-port"])
+def test_a_head_is_its_group_only_on_the_enis_port_of_its_parent(plugged):
+    """In a tree, the group is there when its head pairs port by port: the lamps terminal
+    found on the coupler's port C, where the ENI puts it, is the group; found on port B,
+    with the same identity and passing the same IdentifyCmds, it is not (it is on another
+    branch of the tree), so the group counts as absent."""
+    from ecatcfg.runtime.master.hotconnect import present_groups
+    from ecatcfg.runtime.master.scan import FoundSlave
+    from ecatcfg.runtime.wiring import Plug
+    plan, coupler, lamps = _coupler_and_head("C")
+    found = [FoundSlave(0, coupler.vendor_id, coupler.product_code, coupler.revision, 0),
+             FoundSlave(1, lamps.vendor_id, lamps.product_code, lamps.revision, 0,
+                        plug=Plug(0, plugged))]
+    identified = {("lamps", 1): True}          # its IdentifyCmds pass where it is
+    assert present_groups(plan, found, identified) == ({"lamps"} if plugged == 2 else set())
+
+
+def test_a_slave_behind_an_absent_group_is_plugged_where_the_group_was():
+    """The example line as a tree whose every slave names the one before it in a single
+    ``PreviousPort`` (port B, no ``Selected`` attribute: one entry, as TwinCAT writes it),
+    the lamps terminal a hot-connect group of one.  With the group absent, the line as it
+    is (``as_found``) has the drive plugged into port B of the sensors terminal, where the
+    lamps were: walking up from the lamps to the first slave present, through entries
+    none of which is selected."""
+    import itertools
+
+    from ecatcfg.eni.plan import HotConnectPlan, PreviousPort
+    from ecatcfg.record import replace
+    from ecatcfg.runtime.master.hotconnect import as_found
+    plan = build.compile_topology(topology.load(EXAMPLES / "topology.yaml"),
+                                  _lib(EXAMPLES / "esi")).plan
+    ordered = sorted(plan.slaves, key=lambda s: s.position)
+    chained = [ordered[0]] + [replace(s, previous_ports=[PreviousPort("B", before.phys_addr)])
+                              for before, s in itertools.pairwise(ordered)]
+    chained = [replace(s, hot_connect=HotConnectPlan(1, [])) if s.name == "lamps" else s
+               for s in chained]
+    sensors = next(s for s in chained if s.name == "sensors")
+    present = {s.name for s in chained} - {"lamps"}
+    line = as_found(replace(plan, slaves=chained), present)
+    assert [s.name for s in line.slaves] == ["coupler", "buttons", "sensors", "axis1"]
+    drive = next(s for s in line.slaves if s.name == "axis1")
+    assert [(p.port, p.phys_addr, p.selected) for p in drive.previous_ports] == [
+        ("B", sensors.phys_addr, True)]
+
+
+def test_without_the_first_slaves_group_every_slave_moves_up_one_position():
+    """The coupler a hot-connect group of one and absent: every slave present sits one
+    position further up (auto-increment addresses 0, -1, -2, -3), and the drift
+    compensation's ARMW, addressed by position to the drive (the reference clock), moves
+    with it."""
+    from ecatcfg.eni.plan import HotConnectPlan
+    from ecatcfg.record import replace
+    from ecatcfg.runtime.master.hotconnect import as_found
+    plan = build.compile_topology(topology.load(EXAMPLES / "topology.yaml"),
+                                  _lib(EXAMPLES / "esi")).plan
+    plan = replace(plan, slaves=[replace(s, hot_connect=HotConnectPlan(1, []))
+                                 if s.name == "coupler" else s for s in plan.slaves])
+    line = as_found(plan, {s.name for s in plan.slaves} - {"coupler"})
+    assert [(s.name, s.auto_inc_addr) for s in line.slaves] == [
+        ("buttons", 0), ("sensors", 0xFFFF), ("lamps", 0xFFFE), ("axis1", 0xFFFD)]
+    [armw] = [c for f in line.cyclic[0].frames for c in f.cmds if c.cmd == Cmd.ARMW]
+    assert armw.adp == 0xFFFD

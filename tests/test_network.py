@@ -601,3 +601,121 @@ def test_another_revision_is_reported_and_a_newer_one_taken_only_on_request():
     finally:
         close()
     assert [f.revision for f in found] == [revision] * 3
+
+
+def test_the_enis_bus_shift_write_is_left_out_and_its_other_cyclic_writes_are_sent(
+        example_plan):
+    """EC-Engineer's cyclic frame carries an APWR of 0x0910 to the reference clock (bus
+    shift: the master's own time, zeros in the file); this master follows the reference
+    clock instead (ARMW), so that write is not sent, while a cyclic register write of
+    another register (an FPWR of a user RAM word of the drive, OP only) is: the drive's
+    word holds it after the cycles, and no frame carries the 0x0910 write."""
+    import copy
+
+    from ecatcfg.eni.plan import CyclicCmd
+    from ecatcfg.esc import Reg
+    plan = copy.deepcopy(example_plan)
+    drive = plan.slave("axis1")
+    word = b"\x5a\xa5"
+    frame = plan.cyclic[0].frames[0]
+    frame.cmds += [
+        CyclicCmd(["SAFEOP", "OP"], "bus shift", Cmd.APWR, 8, adp=drive.auto_inc_addr,
+                  ado=Reg.DC_SYSTEM_TIME, data=bytes(8), cnt=1),
+        CyclicCmd(["OP"], "a user RAM word", Cmd.FPWR, 2, adp=drive.phys_addr, ado=0x0F80,
+                  data=word, cnt=1)]
+    cyclic = CyclicFrames(plan)
+    sent = [(s.cmd.cmd, s.cmd.ado) for slots in cyclic.frames for s in slots]
+    assert (Cmd.APWR, Reg.DC_SYSTEM_TIME) not in sent and (Cmd.FPWR, 0x0F80) in sent
+    with Network.virtual(plan) as net:
+        net.up()
+        assert all(net.cycle() for _ in range(5))
+        axis1 = next(s for s in net.segment.slaves if s.name == "axis1")
+        assert bytes(axis1.mem[0x0F80:0x0F82]) == word
+
+
+def test_the_cycle_periods_jitter_is_their_deviation_from_the_median():
+    """``CycleStats.jitter`` (watch's status line, ``report``): the periods 1000, 1000,
+    1010, 990, 1000, 1030 us have the median 1000 us and the deviations 0, 0, 0, 10, 10,
+    30 us: p50 is the middle one, 10 us (the upper of the two middle ones, as the list
+    has an even length), p99 and max the largest, 30 us.  A single period has no jitter."""
+    from ecatcfg.runtime.master.cyclic import CycleStats
+    stats = CycleStats()
+    stats.add_period(1000.0)
+    assert stats.jitter() == {"p50": 0.0, "p99": 0.0, "max": 0.0}
+    two = CycleStats()                         # two periods: each 5 us from their median
+    two.add_period(1000.0)
+    two.add_period(1010.0)
+    assert two.jitter() == {"p50": 5.0, "p99": 5.0, "max": 5.0}
+    for us in (1000.0, 1010.0, 990.0, 1000.0, 1030.0):
+        stats.add_period(us)
+    assert stats.jitter() == {"p50": 10.0, "p99": 30.0, "max": 30.0}
+    many = CycleStats()                        # 200 periods: p99 is the 199th deviation
+    for k in range(199):
+        many.add_period(1000.0 + k)
+    many.add_period(3000.0)                    # one late cycle
+    # median (1099 + 1100) / 2 = 1099.5; deviations sorted: 0.5, 0.5, 1.5, 1.5, ... 98.5,
+    # 98.5 (indices 0-197), 99.5 (1000 us), 1900.5 (the late one)
+    assert many.jitter() == {"p50": 50.5, "p99": 99.5, "max": 1900.5}
+
+
+def test_the_working_counters_are_the_last_cycles_against_the_enis(example_plan):
+    """``working_counters`` (watch's status line): after a cycle of the example line in OP
+    the process-data LRW brought back the working counter the ENI's ``Cnt`` says, at the
+    ENI's image offsets; with the drive unplugged, 3 less (its outputs count 2, its
+    inputs 1: ETG.1000.4 LRW).  The AL status BRD's output offset is moved from its input
+    offset (the schema lets them differ; the exporters write them equal), so that each
+    offset is seen to be its own."""
+    import copy
+    plan = copy.deepcopy(example_plan)
+    [lrw] = [c for frame in plan.cyclic[0].frames for c in frame.cmds if c.cmd == Cmd.LRW]
+    [brd] = [c for frame in plan.cyclic[0].frames for c in frame.cmds if c.cmd == Cmd.BRD]
+    brd.output_offs = brd.input_offs + 2
+    with Network.virtual(plan, recovery=False) as net:
+        net.up()
+        assert net.cycle()
+        [status] = [c for frame in net.master.cyclic.working_counters() for c in frame
+                    if c.cmd.cmd == Cmd.BRD]
+        assert (status.wkc, status.in_at, status.out_at) == (
+            brd.cnt, brd.input_offs, brd.input_offs + 2)
+        [count] = [c for frame in net.master.cyclic.working_counters() for c in frame
+                   if c.cmd.cmd == Cmd.LRW]
+        assert (count.wkc, count.expected, count.ok) == (lrw.cnt, lrw.cnt, True)
+        assert (count.in_at, count.out_at) == (lrw.input_offs, lrw.output_offs)
+        net.segment.remove_cable("axis1")
+        assert not net.cycle()
+        [count] = [c for frame in net.master.cyclic.working_counters() for c in frame
+                   if c.cmd.cmd == Cmd.LRW]
+        assert (count.wkc, count.expected, count.ok) == (lrw.cnt - 3, lrw.cnt, False)
+        net.segment.restore_cable("axis1")
+
+
+def test_a_reply_with_the_circulating_bit_set_is_still_the_cycles(example_plan):
+    """A slave may set a datagram's circulating bit (ETG.1000.4: the frame passed a closed
+    port 0); the reply is still the frame sent, so the cycle takes its working counters and
+    inputs.  A reply whose datagram came back with another length is not this frame: the
+    cycle fails and its inputs are not taken."""
+    with Network.virtual(example_plan, recovery=False) as net:
+        net.up()
+        seg = net.segment
+        answer = seg.answer
+        change = {"flags": wire.CIRCULATING}
+
+        def marked(frame):
+            back, late = answer(frame)
+            if back is not None and frame[wire.FRAME_HEADER_END + 0] == Cmd.ARMW:
+                pos, _ = wire.datagram_offsets(back)[-1]          # the BRD of AL status
+                flags, = struct.unpack_from("<H", back, pos + 6)
+                struct.pack_into("<H", back, pos + 6, flags ^ change["flags"])
+            return back, late
+        seg.answer = marked
+        buttons = next(s for s in seg.slaves if s.name == "buttons")
+        buttons.set_inputs(b"\x05")
+        assert all(net.cycle() for _ in range(3))
+        assert [net[f"buttons.Channel {k}.Input"] for k in range(1, 5)] == [
+            True, False, True, False]
+        change["flags"] = 1                   # 2 bytes of AL status said to be 3
+        buttons.set_inputs(b"\x0a")
+        assert not any(net.cycle() for _ in range(3))
+        assert net.master.cyclic.stats.lost_frames >= 3
+        assert [net[f"buttons.Channel {k}.Input"] for k in range(1, 5)] == [
+            True, False, True, False]

@@ -934,3 +934,116 @@ def test_the_failed_attempts_are_forgotten_once_the_slave_is_back(plan):
     with lamps_refusing_op_once(plan) as (net, events, io, states):
         assert net.health["lamps"].attempts == 0, net.health["lamps"]
         assert not net.health["lamps"].gave_up
+
+
+def test_a_drive_that_leaves_during_its_recovery_is_reported_with_what_it_did_not_answer(plan):
+    """The drive falls to SAFEOP+ERR and leaves the line twice while it is brought back:
+    the first time as its error is acknowledged (the AL control write gets no working
+    counter), the second time right after it went to INIT on the next attempt (AL status no
+    longer read).  Each attempt's retry event names the drive and what failed; the third
+    attempt brings it back to OP."""
+    with network(plan, "memory") as (net, events):
+        io = IoCheck(net)
+        assert io.run(0.05) == 0
+        seg = net.segment
+        drive = next(s for s in seg.slaves if s.name == "axis1")
+        adp = -4 & 0xFFFF                      # the drive's position on the line
+        pulls = [0x0014, 0x0001]               # SAFEOP + error acknowledge; INIT
+        answer = seg.answer
+
+        def leaving(frame):
+            """The drive's cable pulled as the frame carrying the next AL control write
+            of ``pulls`` reaches it (the acknowledge: before it; INIT: after it)."""
+            writes = [d for d in wire.decode(frame).datagrams
+                      if (d.cmd, d.adp, d.ado) == (Cmd.APWR, adp, Reg.AL_CONTROL)]
+            if not pulls or not writes or struct.unpack("<H", writes[0].data)[0] != pulls[0]:
+                return answer(frame)
+            control = pulls.pop(0)
+            if control == 0x0001:
+                back = answer(frame)
+                seg.remove_cable("axis1")
+                return back
+            seg.remove_cable("axis1")
+            return answer(frame)
+
+        seg.answer = leaving
+        drive._set_state(AlState.SAFEOP, 0x001A)       # the firmware's own decision
+        io.until(lambda: not net.online("axis1"), 1.0)
+
+        def retries() -> list[str]:
+            return [e.text for e in events if e.kind == "retry"]
+        io.until(lambda: len(retries()) == 1, 3 * recovery.TIMEOUT_COMMAND)
+        assert "slave 'axis1': no answer to the AL control write" in retries()[0], retries()
+        seg.restore_cable("axis1")
+        io.until(lambda: len(retries()) == 2, 3 * recovery.TIMEOUT_STATE)
+        assert drive.state == AlState.INIT
+        assert "slave 'axis1': did not go to INIT" in retries()[1], retries()
+        seg.restore_cable("axis1")
+        io.until(lambda: net.online("axis1"), 3 * recovery.TIMEOUT_STATE)
+        assert drive.state == AlState.OP and pulls == []
+        assert kinds(events, "axis1") == ["offline", "retry", "retry", "online"], [
+            e.text for e in events]
+
+
+def test_a_group_head_that_fails_its_identify_cmds_once_joins_when_they_pass(plan):
+    """The lamps group is plugged in with the wrong station alias in its head: refused once
+    ("is not its head") and not configured; the alias corrected (the head read again at the
+    next probe), the group joins and runs."""
+    grouped = with_group(plan, "lamps", 2)
+    seg = grouped_segment(grouped, "lamps")
+    seg.remove_cable("lamps")
+    with grouped_network(grouped, seg, "memory") as (net, events):
+        net.up()
+        lamps = next(s for s in seg.wired if s.name == "lamps")
+        struct.pack_into("<H", lamps.mem, Reg.STATION_ALIAS, ALIAS + 1)
+        seg.restore_cable("lamps")
+        start = net.clock.monotonic()
+        while not any(e.kind == "refused" for e in events):
+            assert net.clock.monotonic() - start < BOUND_S
+            net.cycle()
+            net.clock.sleep(0.0005)
+        for _ in range(100):                     # many probes: still refused, once
+            net.cycle()
+            net.clock.sleep(0.0005)
+        assert [e.text for e in events if e.kind == "refused"] == [
+            ("hot-connect group 'lamps': the slave at position 3 is not its head (its "
+             "IdentifyCmds failed); it is not configured")]
+        assert not net.online("lamps") and lamps.state == AlState.INIT
+        struct.pack_into("<H", lamps.mem, Reg.STATION_ALIAS, ALIAS)
+        start = net.clock.monotonic()
+        while not (net.online("lamps") and net.online("axis1")):
+            assert net.clock.monotonic() - start < BOUND_S, [e.text for e in events]
+            net.cycle()
+            net.clock.sleep(0.0005)
+        assert [s.state for s in seg.slaves] == [AlState.OP] * 5
+        IoCheck(net).steady(0.2, 2.0)
+
+
+def test_a_slave_back_in_init_gets_its_init_to_init_commands_again(plan):
+    """The drive's ENI entry has an INIT->INIT command with an effect one can see (a word of
+    the ESC's user RAM, 0x0F80, which a power cycle clears): the drive powered off and on
+    comes back in INIT and is configured from there, that command included, as at
+    start-up."""
+    from ecatcfg.eni.plan import InitCmd
+    from ecatcfg.esc import Transition
+    from ecatcfg.record import replace
+    word = b"\x5a\xa5"
+    user_ram = 0x0F80                          # ESC user RAM, 0x0F80-0x0FFF
+    axis1 = next(s for s in plan.slaves if s.name == "axis1")
+    extra = InitCmd([Transition.II], "a word of user RAM", Cmd.APWR, 2, adp=axis1.auto_inc_addr,
+                    ado=user_ram, data=word, cnt=1)
+    with_ii = replace(plan, slaves=[replace(s, init_cmds=s.init_cmds + [extra])
+                                    if s.name == "axis1" else s for s in plan.slaves])
+    with network(with_ii, "memory") as (net, events):
+        io = IoCheck(net)
+        drive = next(s for s in net.segment.slaves if s.name == "axis1")
+        assert bytes(drive.mem[user_ram:user_ram + 2]) == word
+        net.segment.remove_cable("axis1")
+        drive.power_cycle()
+        assert bytes(drive.mem[user_ram:user_ram + 2]) != word
+        io.until(lambda: not net.online("axis1"), 1.0)
+        net.segment.restore_cable("axis1")
+        io.until(lambda: net.online("axis1"), BOUND_S)
+        assert drive.state == AlState.OP
+        assert bytes(drive.mem[user_ram:user_ram + 2]) == word
+        assert kinds(events, "axis1") == ["offline", "online"], [e.text for e in events]
