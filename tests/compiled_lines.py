@@ -24,6 +24,7 @@ from __future__ import annotations
 import json
 import random
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 from ecatcfg.errors import EcatcfgError
@@ -54,11 +55,12 @@ def _selector(e: DeviceEntry) -> str:
 def candidates(library: Library, corpus_roots: tuple[str, ...]) -> list[DeviceEntry]:
     """Every device of the files below ``corpus_roots`` (absolute folder paths) that a
     selector by identity reaches: it has vendor, product and revision, and ``find`` gives
-    this very description (not another file's, not a refusal for duplicates)."""
+    this very description (not another file's, not a refusal for duplicates).  Paths are
+    compared resolved: ``../shared`` may be a symbolic link."""
     out = []
     for e in library.entries:
         if e.vendor_id is None or e.product_code is None or e.revision is None \
-                or not e.file.startswith(corpus_roots):
+                or not str(Path(e.file).resolve()).startswith(corpus_roots):
             continue
         try:
             found = library.find(_selector(e)).entry

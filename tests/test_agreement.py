@@ -150,8 +150,8 @@ def test_a_compiled_line_is_drawn_again_by_its_seed(corpus: Path, corpus_extra: 
     from compiled_lines import candidates
     pool = candidates(library, tuple(str((root / "esi").resolve())
                                      for root in (corpus, corpus_extra)))
-    assert {e.file.split("/esi/")[0] for e in pool} == {str(corpus.resolve()),
-                                                        str(corpus_extra.resolve())}
+    assert {str(Path(e.file).resolve()).split("/esi/")[0] for e in pool} == {
+        str(corpus.resolve()), str(corpus_extra.resolve())}
     first, again = line(library, pool, 3), line(library, pool, 3)
     assert first is not None and again is not None
     assert first.devices == again.devices and first.eni == again.eni
