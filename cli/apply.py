@@ -272,7 +272,22 @@ def _up_and_cycle(net: Network, plan: NetworkPlan, target: AlState,
     from ecatcfg.esc import AlState
 
     if target >= AlState.SAFEOP and args.cycles != 0:
-        prepare_cycling(net)
+        prepare_cycling(net, realtime)
+    try:
+        _up_and_run(net, plan, target, args, report, notify, realtime, guard)
+    finally:
+        if realtime is not None:
+            import gc
+            gc.unfreeze()       # prepare_cycling froze the heap; a run that never
+            #                     cycled did not unfreeze it (Network._loop does)
+
+
+def _up_and_run(net: Network, plan: NetworkPlan, target: AlState,
+                args: argparse.Namespace, report: ApplyReport, notify: Notifier,
+                realtime: RealtimeOptions | None, guard: _SignalGuard) -> None:
+    """The start-up, then the cycles of a SAFEOP or OP target."""
+    from ecatcfg.esc import AlState
+
     net.up(target, accept_newer_revision=args.accept_newer_revision)
     report.mark(f"start-up to {target.name}", net)
     # The stop timeout a service manager needs (docs/runtime.md).
@@ -292,14 +307,27 @@ def _up_and_cycle(net: Network, plan: NetworkPlan, target: AlState,
         notify.ready(status)
 
 
-def prepare_cycling(net: Network) -> None:
-    """Import what the first cycle would import (the supervisor of slaves that drop out,
-    ``runtime/master/recovery.py``) before the slaves are in OP: an import between two
-    cycles of a line in OP delays the second one (a module compiled from source, where no
-    bytecode is written, on a busy host: tens of ms), and a slave whose outputs stop for
-    longer than its SM watchdog (100 ms by default) drops to SAFEOP+ERR."""
+def prepare_cycling(net: Network, realtime: RealtimeOptions | None = None) -> None:
+    """Do before the slaves are in OP what the first cycles would otherwise wait for: a
+    slave whose outputs stop for longer than its SM watchdog (100 ms by default) drops to
+    SAFEOP+ERR.
+
+    - Import the supervisor of slaves that drop out (``runtime/master/recovery.py``), which
+      the first cycle imports (a module compiled from source, where no bytecode is
+      written, on a busy host: tens of ms).
+    - With real-time options, the run freezes the heap before its first cycle
+      (``gc.collect()`` and ``gc.freeze()``, ``Network._loop``); a full collection of a
+      large heap (an application that imports ecatcfg, the test runner) takes tens to
+      hundreds of ms.  Collected and frozen here, the run's own collection only scans what
+      is new since, and the run unfreezes everything at its end."""
     if net.master.recovery:
         import ecatcfg.runtime.master.recovery  # noqa: F401
+    if realtime is not None:
+        import gc
+
+        import ecatcfg.runtime.master.realtime  # noqa: F401  (the run's first step)
+        gc.collect()
+        gc.freeze()
 
 
 def _down(net: Network, plan: NetworkPlan, args: argparse.Namespace, report: ApplyReport,

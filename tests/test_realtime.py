@@ -215,6 +215,32 @@ def test_apply_flags_run_the_cycle_with_the_options(example_eni, monkeypatch, ca
     assert os.sched_getscheduler(0) != os.SCHED_FIFO
 
 
+def test_a_large_heap_is_frozen_before_the_slaves_reach_op(example_eni, capsys):
+    """With real-time options the run freezes the heap before its first cycle (a full
+    collection, then gc.freeze).  In a process with a large heap (an application, the test
+    runner) that collection alone outlasts the slaves' 100 ms SM watchdog; done between OP
+    and the first cycle, the drive dropped to SAFEOP+ERR 0x001B and apply failed.  It is
+    done before the slaves leave PREOP (cli/apply.prepare_cycling)."""
+    import gc
+
+    from ecatcfg.cli import main
+    _require_root()
+    heap = [[i] for i in range(200_000)]          # many small tracked objects
+    started = time.monotonic()
+    gc.collect()
+    while time.monotonic() - started < 0.25:      # a collection must take 250 ms or more
+        heap.extend([[i] for i in range(len(heap))])
+        started = time.monotonic()
+        gc.collect()
+    try:
+        rc = main(["apply", str(example_eni), "--virtual", "--esi", str(ESI), "--cycles",
+                   "10", "--rt-priority", "3", "--lock-memory"])
+        assert rc == 0, capsys.readouterr()
+        assert not gc.get_freeze_count()          # the heap is not left frozen
+    finally:
+        del heap
+
+
 # -- the hot path ----------------------------------------------------------------------------
 
 def _old_way(net: Network, state: AlState, idx: int) -> list[bytes]:
