@@ -93,6 +93,30 @@ class _Base:
     def close(self) -> None:
         raise NotImplementedError           # each link closes its own way
 
+    def recv(self, timeout: float | None) -> bytes | None:
+        raise NotImplementedError           # each link receives its own way
+
+    def recv_into(self, buffer: bytearray, timeout: float | None = None) -> int:
+        """The next frame copied into ``buffer``: its length, or 0 after ``timeout``
+        (links without a socket to read into; RawLink reads straight into it)."""
+        frame = self.recv(timeout)
+        if frame is None:
+            return 0
+        n = len(frame)
+        buffer[:n] = frame
+        return n
+
+
+def check_frame(iface: str, closed: bool, size: int, mtu: int) -> None:
+    """What an in-memory link refuses to send, as a NIC would (the same messages as
+    RawLink's): anything on a closed link, a frame past the MTU or shorter than a header."""
+    if closed:
+        raise LinkError(f"{iface}: link is closed")
+    if size > mtu + ETH_HEADER_SIZE:
+        raise _too_big(iface, size, mtu)
+    if size < ETH_HEADER_SIZE:
+        raise _too_short(iface, size)
+
 
 # --------------------------------------------------------------------------- raw sockets
 
@@ -345,13 +369,7 @@ class MemoryLink(_Base):
         return len(self._queue)
 
     def send(self, frame: bytes | bytearray) -> None:
-        if self._closed:
-            raise LinkError(f"{self.iface}: link is closed")
-        size = len(frame)
-        if size > self.mtu + ETH_HEADER_SIZE:
-            raise _too_big(self.iface, size, self.mtu)
-        if size < ETH_HEADER_SIZE:
-            raise _too_short(self.iface, size)
+        check_frame(self.iface, self._closed, len(frame), self.mtu)
         peer = self._peer
         if peer is not None:
             peer._deliver(bytes(frame))
@@ -395,15 +413,6 @@ class MemoryLink(_Base):
             if queue:
                 self._cv.notify()       # another receiving thread may take the next one
             return frame
-
-    def recv_into(self, buffer: bytearray, timeout: float | None = None) -> int:
-        """The next frame copied into ``buffer``: its length, or 0 after ``timeout``."""
-        frame = self.recv(timeout)
-        if frame is None:
-            return 0
-        n = len(frame)
-        buffer[:n] = frame
-        return n
 
     def recv_many(self, max_frames: int, timeout: float | None = None) -> list[bytes]:
         """Up to ``max_frames`` frames: waits up to ``timeout`` for the first one, then takes

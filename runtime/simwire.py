@@ -35,7 +35,7 @@ from typing import Protocol
 
 from ecatcfg.esc import ETH_HEADER_SIZE
 from ecatcfg.runtime.clock import WALL, Clock, SimClock
-from ecatcfg.runtime.link import DEFAULT_MTU, LinkError, _Base, _too_big, _too_short
+from ecatcfg.runtime.link import DEFAULT_MTU, LinkError, _Base, check_frame
 
 __all__ = ["FarEnd", "SimulatedLink", "SynchronousLink"]
 
@@ -86,13 +86,7 @@ class SimulatedLink(_Base):
         return f"SimulatedLink({self.iface!r}, {state})"
 
     def send(self, frame: bytes | bytearray) -> None:
-        if self._closed:
-            raise LinkError(f"{self.iface}: link is closed")
-        size = len(frame)
-        if size > self.mtu + ETH_HEADER_SIZE:
-            raise _too_big(self.iface, size, self.mtu)
-        if size < ETH_HEADER_SIZE:
-            raise _too_short(self.iface, size)
+        check_frame(self.iface, self._closed, len(frame), self.mtu)
         with self.lock:
             sent_at = self.clock.ns
             if self.log is not None:
@@ -103,7 +97,7 @@ class SimulatedLink(_Base):
             if reply is None:
                 return
             self._sent += 1
-            back = sent_at + far.round_trip_ns(size) + round(late * 1e9)
+            back = sent_at + far.round_trip_ns(len(frame)) + round(late * 1e9)
             heapq.heappush(self._due, (back, self._sent, bytes(reply)))
 
     def recv(self, timeout: float | None = None) -> bytes | None:
@@ -137,15 +131,6 @@ class SimulatedLink(_Base):
         if self.log is not None:
             self.log.append((self.clock.ns, False, frame))
         return frame
-
-    def recv_into(self, buffer: bytearray, timeout: float | None = None) -> int:
-        """The next reply copied into ``buffer``: its length, or 0 after ``timeout``."""
-        frame = self.recv(timeout)
-        if frame is None:
-            return 0
-        n = len(frame)
-        buffer[:n] = frame
-        return n
 
     def fileno(self) -> int:
         raise LinkError(f"{self.iface}: a simulated wire has no descriptor to wait on "
@@ -186,13 +171,7 @@ class SynchronousLink(_Base):
         return f"SynchronousLink({self.iface!r}, {state})"
 
     def send(self, frame: bytes | bytearray) -> None:
-        if self._closed:
-            raise LinkError(f"{self.iface}: link is closed")
-        size = len(frame)
-        if size > self.mtu + ETH_HEADER_SIZE:
-            raise _too_big(self.iface, size, self.mtu)
-        if size < ETH_HEADER_SIZE:
-            raise _too_short(self.iface, size)
+        check_frame(self.iface, self._closed, len(frame), self.mtu)
         with self._ready:
             far = self.far
             far.tick()                  # the slaves caught up with the wall clock
@@ -226,15 +205,6 @@ class SynchronousLink(_Base):
                     return None
                 else:
                     self._ready.wait((until - now) / 1e9)
-
-    def recv_into(self, buffer: bytearray, timeout: float | None = None) -> int:
-        """The next reply copied into ``buffer``: its length, or 0 after ``timeout``."""
-        frame = self.recv(timeout)
-        if frame is None:
-            return 0
-        n = len(frame)
-        buffer[:n] = frame
-        return n
 
     def fileno(self) -> int:
         raise LinkError(f"{self.iface}: a synchronous wire has no descriptor to wait on "
