@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import contextlib
 import struct
+import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
@@ -45,11 +46,77 @@ def plan() -> NetworkPlan:
     return eni_reader.read_bytes(eni_writer.to_bytes(built), "example.eni.xml")
 
 
+class BusyHost:
+    """What the host's scheduling did to one attempt over veth, where the segment answers
+    from a thread of this process on the wall clock: frames whose reply came too late
+    (the master's transport counts them lost) and the longest gap between the starts of
+    two cycles (the master's thread not scheduled).  A gap longer than half the slaves'
+    SM watchdog (100 ms) can expire one, and the slave then leaves OP as it would on a
+    real line left without outputs; neither is what these tests are about, and in memory,
+    on simulated time, the same tests have neither."""
+
+    GAP_S = 0.05
+
+    def __init__(self) -> None:
+        self.nets: list[Network] = []
+        self.longest_gap = 0.0
+
+    def track(self, net: Network) -> None:
+        self.nets.append(net)
+        cycle = net.cycle
+        started: list[float] = []
+
+        def timed_cycle(*args: object, **kwargs: object) -> bool:
+            now = time.monotonic()
+            if started:
+                self.longest_gap = max(self.longest_gap, now - started[0])
+            started[:] = [now]
+            return cycle(*args, **kwargs)
+        net.cycle = timed_cycle                 # type: ignore[method-assign]
+
+    def lost_cycles(self) -> int:
+        """Cyclic frames lost so far."""
+        return sum(n.master.cyclic.stats.lost_frames for n in self.nets)
+
+    def evidence(self) -> str | None:
+        """What the host did, when it did something that can fail these tests."""
+        lost = sum(n.master.transport.counters.frames_lost for n in self.nets)
+        gap = self.longest_gap
+        if lost or gap > self.GAP_S:
+            return f"{lost} frames lost, longest gap between cycles {gap * 1000:.0f} ms"
+        return None
+
+
+# Attempts of a veth scenario: a failure with the host's evidence (BusyHost) is tried again
+# on a fresh network; one without it fails at once, and so does the last attempt.
+VETH_ATTEMPTS = 4
+
+
+def tolerating_the_host(where: str, attempt: Callable[[BusyHost | None], None]) -> None:
+    """Run ``attempt``: once in memory (simulated time: no host to tolerate); over veth,
+    again after a failure the host explains, at most :data:`VETH_ATTEMPTS` times."""
+    if where == "memory":
+        attempt(None)
+        return
+    for k in range(1, VETH_ATTEMPTS + 1):
+        host = BusyHost()
+        try:
+            attempt(host)
+            return
+        except AssertionError:
+            why = host.evidence()
+            if why is None or k == VETH_ATTEMPTS:
+                raise
+            print(f"veth attempt {k} failed on a busy host ({why}); again")
+
+
 @contextlib.contextmanager
-def network(plan: NetworkPlan, where: str, rig: object | None = None, **kwargs: object
+def network(plan: NetworkPlan, where: str, rig: object | None = None,
+            host: BusyHost | None = None, **kwargs: object
             ) -> Iterator[tuple[Network, list[Event]]]:
     """The example line brought to OP, in memory or over the veth rig (the segment in
-    namespace B, the master's raw socket in namespace A); the events it reported."""
+    namespace B, the master's raw socket in namespace A, its cycles watched by ``host``);
+    the events it reported."""
     events: list[Event] = []
     if where == "memory":
         with Network.virtual(plan, esi=[ESI], on_event=events.append, clock=SimClock(),
@@ -62,6 +129,8 @@ def network(plan: NetworkPlan, where: str, rig: object | None = None, **kwargs: 
     with serving(rig, seg):
         with Network(plan, rig.socket_in(rig.ns_a), on_event=events.append) as net:
             net.segment = seg
+            if host is not None:
+                host.track(net)
             net.up()
             yield net, events
 
@@ -70,9 +139,10 @@ class IoCheck:
     """Every cycle: a new lamp pattern out and a new button pattern in, both checked on
     the other side the next cycle (the I/O terminals' data never stops)."""
 
-    def __init__(self, net: Network) -> None:
+    def __init__(self, net: Network, host: BusyHost | None = None) -> None:
         self.net = net
         self.seg = net.segment
+        self.host = host
         self.n = 0
         self.failures: list[str] = []
 
@@ -85,22 +155,29 @@ class IoCheck:
         buttons = next(s for s in seg.slaves if s.name == "buttons")
         buttons.set_inputs(bytes([self.n % 16]))
         ok = net.cycle()
-        lamps = next(s for s in seg.slaves if s.name == "lamps")
-        if lamps.outputs() != bytes([pattern]):
-            self.failures.append(f"cycle {self.n}: lamps show {lamps.outputs().hex()}, "
-                                 f"sent {pattern:02x}")
-        got = sum(int(net[b]) << k for k, b in enumerate(BUTTONS))
-        if got != self.n % 16:
-            self.failures.append(f"cycle {self.n}: buttons read {got}, set {self.n % 16}")
+        # A cycle that is not valid says so (run() counts it); its data is not checked.
+        if ok:
+            lamps = next(s for s in seg.slaves if s.name == "lamps")
+            if lamps.outputs() != bytes([pattern]):
+                self.failures.append(f"cycle {self.n}: lamps show {lamps.outputs().hex()}, "
+                                     f"sent {pattern:02x}")
+            got = sum(int(net[b]) << k for k, b in enumerate(BUTTONS))
+            if got != self.n % 16:
+                self.failures.append(f"cycle {self.n}: buttons read {got}, set {self.n % 16}")
         self.net.clock.sleep(0.0005)
         return ok
 
     def run(self, seconds: float) -> int:
-        """Cycles for ``seconds``; how many were not valid."""
+        """Cycles for ``seconds``; how many were not valid.  Over veth (``host`` given),
+        a cycle whose frame the host lost (the reply came too late) is not counted: the
+        master counts it lost, and that is not what the tests here are about."""
         bad = 0
+        lost = self.host.lost_cycles() if self.host else 0
         end = self.net.clock.monotonic() + seconds
         while self.net.clock.monotonic() < end:
             bad += not self.cycle()
+        if self.host:
+            bad -= self.host.lost_cycles() - lost
         return bad
 
     def steady(self, seconds: float, limit: float) -> None:
@@ -132,28 +209,31 @@ def kinds(events: list[Event], slave: str) -> list[str]:
 def test_a_drive_power_cycled_in_op_is_back_within_the_bound_while_the_io_goes_on(
         plan, where, request):
     rig = request.getfixturevalue("veth_netns") if where == "veth" else None
-    with network(plan, where, rig, timing=Timing()) as (net, events):
-        io = IoCheck(net)
-        assert io.run(0.2) == 0
-        drive = next(s for s in net.segment.slaves if s.name == "axis1")
-        drive.set_inputs(bytes(range(1, 32)))
-        io.run(0.05)
-        assert net["axis1.TxPDO 1 (CSP).Position actual value"] != 0
-        net.segment.remove_cable("axis1")             # power lost: off the wire ...
-        drive.power_cycle()                           # ... registers gone, EEPROM kept
-        bad = io.run(0.3)
-        assert bad <= 1, [e.text for e in events]     # the cycle it vanished in
-        assert not net.online("axis1") and net.online("lamps")
-        assert net.health["axis1"].reason == "stopped answering"
-        assert not net.valid("axis1.TxPDO 1 (CSP).Statusword") and net.valid(BUTTONS[0])
-        assert net["axis1.TxPDO 1 (CSP).Position actual value"] == 0
-        net.segment.restore_cable("axis1")            # ... and back, in INIT
-        took = io.until(lambda: net.online("axis1"), BOUND_S)
-        assert drive.state == AlState.OP and drive.station_address == 0x3ED
-        assert io.run(0.2) == 0, [e.text for e in events]
-        assert kinds(events, "axis1") == ["offline", "online"], [e.text for e in events]
-        assert io.failures == []
-        print(f"{where}: back in OP {took:.2f} s after the cable came back")
+
+    def attempt(host: BusyHost | None) -> None:
+        with network(plan, where, rig, host, timing=Timing()) as (net, events):
+            io = IoCheck(net, host)
+            assert io.run(0.2) == 0
+            drive = next(s for s in net.segment.slaves if s.name == "axis1")
+            drive.set_inputs(bytes(range(1, 32)))
+            io.run(0.05)
+            assert net["axis1.TxPDO 1 (CSP).Position actual value"] != 0
+            net.segment.remove_cable("axis1")             # power lost: off the wire ...
+            drive.power_cycle()                           # ... registers gone, EEPROM kept
+            bad = io.run(0.3)
+            assert bad <= 1, [e.text for e in events]     # the cycle it vanished in
+            assert not net.online("axis1") and net.online("lamps")
+            assert net.health["axis1"].reason == "stopped answering"
+            assert not net.valid("axis1.TxPDO 1 (CSP).Statusword") and net.valid(BUTTONS[0])
+            assert net["axis1.TxPDO 1 (CSP).Position actual value"] == 0
+            net.segment.restore_cable("axis1")            # ... and back, in INIT
+            took = io.until(lambda: net.online("axis1"), BOUND_S)
+            assert drive.state == AlState.OP and drive.station_address == 0x3ED
+            assert io.run(0.2) == 0, [e.text for e in events]
+            assert kinds(events, "axis1") == ["offline", "online"], [e.text for e in events]
+            assert io.failures == []
+            print(f"{where}: back in OP {took:.2f} s after the cable came back")
+    tolerating_the_host(where, attempt)
 
 
 def test_a_slave_in_safeop_err_after_its_watchdog_is_brought_back_to_op(plan):
@@ -347,9 +427,11 @@ def grouped_segment(plan: NetworkPlan, head: str, leave_out: set[str] = frozense
 
 
 @contextlib.contextmanager
-def grouped_network(plan, segment, where: str, rig=None, pcap: Path | None = None):
-    """A network of ``plan`` on ``segment`` (in memory or over the veth rig), recording its
-    frames to ``pcap`` when given (written when the network closes)."""
+def grouped_network(plan, segment, where: str, rig=None, pcap: Path | None = None,
+                    host: BusyHost | None = None):
+    """A network of ``plan`` on ``segment`` (in memory or over the veth rig, its cycles
+    watched by ``host``), recording its frames to ``pcap`` when given (written when the
+    network closes)."""
     events: list[Event] = []
     if where == "memory":
         from rig import serve_in_memory
@@ -361,6 +443,8 @@ def grouped_network(plan, segment, where: str, rig=None, pcap: Path | None = Non
     try:
         with Network(plan, link, on_event=events.append, pcap=pcap) as net:
             net.segment = segment
+            if host is not None:
+                host.track(net)
             yield net, events
     finally:
         close()
@@ -388,29 +472,34 @@ def armw_datagrams(pcap: Path) -> list[tuple[int, int, int]]:
 def test_a_hot_connect_group_absent_at_start_joins_when_plugged_in(plan, where, request):
     rig = request.getfixturevalue("veth_netns") if where == "veth" else None
     grouped = with_group(plan, "lamps", 2)             # lamps and the drive behind it
-    seg = grouped_segment(grouped, "lamps")
-    seg.remove_cable("lamps")
-    with grouped_network(grouped, seg, where, rig) as (net, events):
-        net.up()
-        assert net.state == AlState.OP
-        assert [e.text for e in events if e.kind == "hot-connect"] == [
-            "hot-connect group 'lamps' (2 slaves) is not on the line; the others go on"]
-        assert [s.state for s in seg.slaves] == [AlState.OP] * 3
-        assert not net.online("lamps") and not net.online("axis1") and net.online("buttons")
-        io = IoCheck.__new__(IoCheck)
-        assert all(net.cycle() for _ in range(50))
-        seg.restore_cable("lamps")
-        start = net.clock.monotonic()
-        while not (net.online("lamps") and net.online("axis1")):
-            assert net.clock.monotonic() - start < BOUND_S
-            assert net.cycle() or True
-            net.clock.sleep(0.0005)
-        assert [s.state for s in seg.slaves] == [AlState.OP] * 5
-        del io
-        checker = IoCheck(net)
-        checker.steady(0.2, 2.0)                  # the joined group's I/O runs
-        assert "hot-connect group 'lamps' is on the line; bringing it up" in [
-            e.text for e in events]
+
+    def valid(net: Network, host: BusyHost | None) -> bool:
+        # Over veth a cycle whose frame the host lost is not held against the line.
+        lost = host.lost_cycles() if host else 0
+        return net.cycle() or (host is not None and host.lost_cycles() > lost)
+
+    def attempt(host: BusyHost | None) -> None:
+        seg = grouped_segment(grouped, "lamps")
+        seg.remove_cable("lamps")
+        with grouped_network(grouped, seg, where, rig, host=host) as (net, events):
+            net.up()
+            assert net.state == AlState.OP
+            assert [e.text for e in events if e.kind == "hot-connect"] == [
+                "hot-connect group 'lamps' (2 slaves) is not on the line; the others go on"]
+            assert [s.state for s in seg.slaves] == [AlState.OP] * 3
+            assert not net.online("lamps") and not net.online("axis1") and net.online("buttons")
+            assert all(valid(net, host) for _ in range(50))
+            seg.restore_cable("lamps")
+            start = net.clock.monotonic()
+            while not (net.online("lamps") and net.online("axis1")):
+                assert net.clock.monotonic() - start < BOUND_S
+                net.cycle()
+                net.clock.sleep(0.0005)
+            assert [s.state for s in seg.slaves] == [AlState.OP] * 5
+            IoCheck(net, host).steady(0.2, 2.0)          # the joined group's I/O runs
+            assert "hot-connect group 'lamps' is on the line; bringing it up" in [
+                e.text for e in events]
+    tolerating_the_host(where, attempt)
 
 
 def test_a_group_absent_in_the_middle_moves_the_slaves_behind_it(plan, tmp_path):
@@ -483,24 +572,27 @@ def test_another_device_in_its_place_is_refused_once_and_the_right_one_rejoins(
     """The drive is swapped for a digital input terminal: its SII identity is not the
     ENI's, so it is reported (once) and never configured; the drive put back is."""
     rig = request.getfixturevalue("veth_netns") if where == "veth" else None
-    with network(plan, where, rig) as (net, events):
-        io = IoCheck(net)
-        seg = net.segment
-        spec = next(s for s in emulate.specs_from_eni(plan, Library([ESI], cache=False), "x")
-                    if s.name == "buttons")
-        import dataclasses
-        intruder = emulate.emulated_slave(dataclasses.replace(spec, name="intruder"))
-        drive = seg.swap("axis1", intruder)
-        io.until(lambda: not net.online("axis1"), 1.0)
-        assert io.run(0.5) == 0
-        refused = [e.text for e in events if e.kind == "refused"]
-        assert len(refused) == 1 and "another device is in its place" in refused[0]
-        assert f":0x{spec.device.product_code:x}:" in refused[0]     # EX1004 (its ESI)
-        assert intruder.state == AlState.INIT and intruder.station_address == 0
-        assert not net.online("axis1")
-        seg.swap("intruder", drive)
-        io.until(lambda: net.online("axis1"), BOUND_S)
-        assert drive.state == AlState.OP and io.failures == []
+    spec = next(s for s in emulate.specs_from_eni(plan, Library([ESI], cache=False), "x")
+                if s.name == "buttons")
+
+    def attempt(host: BusyHost | None) -> None:
+        with network(plan, where, rig, host) as (net, events):
+            io = IoCheck(net, host)
+            seg = net.segment
+            import dataclasses
+            intruder = emulate.emulated_slave(dataclasses.replace(spec, name="intruder"))
+            drive = seg.swap("axis1", intruder)
+            io.until(lambda: not net.online("axis1"), 1.0)
+            assert io.run(0.5) == 0
+            refused = [e.text for e in events if e.kind == "refused"]
+            assert len(refused) == 1 and "another device is in its place" in refused[0]
+            assert f":0x{spec.device.product_code:x}:" in refused[0]     # EX1004 (its ESI)
+            assert intruder.state == AlState.INIT and intruder.station_address == 0
+            assert not net.online("axis1")
+            seg.swap("intruder", drive)
+            io.until(lambda: net.online("axis1"), BOUND_S)
+            assert drive.state == AlState.OP and io.failures == []
+    tolerating_the_host(where, attempt)
 
 
 def test_the_compiled_tree_example_runs_without_its_groups_and_takes_them_in(tmp_path):
