@@ -70,22 +70,30 @@ def one_round(transport: Transport, active: Pending, timeout: float | None = Non
 
 def _round(transport: Transport, active: Pending, timeout: float | None,
            on_error: Callable[[Job, Exception], None] | None) -> Pending:
-    owned = [(i, dg) for i, (_, request) in enumerate(active) for dg in request]
-    replies: dict[int, list[Datagram] | None] = {i: [] for i in range(len(active))}
-    for frame in pack([dg for _, dg in owned]):
-        owners = [owner for owner, dg in owned[:len(frame)]]
-        owned = owned[len(frame):]
+    # A datagram several jobs ask for in one round (the same object: the LRD of the
+    # mailbox-state bits, replay.MailboxStatePoll) goes once; each of them gets its reply.
+    unique: list[Datagram] = []
+    where: dict[int, int] = {}
+    wanted: list[list[int]] = []
+    for _, request in active:
+        spots = []
+        for dg in request:
+            k = where.get(id(dg))
+            if k is None:
+                k = where[id(dg)] = len(unique)
+                unique.append(dg)
+            spots.append(k)
+        wanted.append(spots)
+    back_of: list[Datagram | None] = []
+    for frame in pack(unique):
         back = transport.exchange(frame, timeout)
-        for k, owner in enumerate(owners):
-            got = replies[owner]
-            if back is None or got is None:
-                replies[owner] = None
-            else:
-                got.append(back[k])
+        back_of += [None] * len(frame) if back is None else back
     still: Pending = []
-    for i, (job, _) in enumerate(active):
+    for (job, _), spots in zip(active, wanted):
+        got = [back_of[k] for k in spots]
+        reply = None if any(g is None for g in got) else [g for g in got if g is not None]
         try:
-            still.append((job, job.send(replies[i])))
+            still.append((job, job.send(reply)))
         except StopIteration:
             pass
         except Exception as exc:

@@ -550,8 +550,9 @@ class Supervisor:
                 if state != AlState.INIT:
                     yield from _request(slave, AlState.INIT, AlState.INIT)
                 state = AlState.INIT
-                channel = MailboxChannel(slave.phys_addr, slave.mailbox) \
-                    if slave.mailbox is not None else None
+                old = master.mailboxes.get(plan.name)
+                channel = None if slave.mailbox is None else old.again() \
+                    if old is not None else MailboxChannel(slave.phys_addr, slave.mailbox)
                 # A slave in INIT asked for INIT: its INIT->INIT commands, as at start-up
                 # (esc.TRANSITION_RULES).
                 yield from slave_transition_job(slave, Transition.II,
