@@ -234,3 +234,54 @@ def _without_area(plan: NetworkPlan) -> NetworkPlan:
     out = copy.deepcopy(plan)
     out.master.mailbox_states = None
     return out
+
+
+def _between_cycles(frames: list[list[Datagram]]) -> tuple[int, int, int]:
+    """In frames that are not the cyclic frame (no BRD of the AL status): (LRDs of the area,
+    FPRDs of SM1's status byte, reads of SM1 at 0x1080)."""
+    lrd = fprd = sm1 = 0
+    for f in frames:
+        if any(d.cmd == Cmd.BRD and d.ado == 0x0130 for d in f):
+            continue
+        lrd += sum(1 for d in f if d.cmd == Cmd.LRD and d.address == AREA)
+        fprd += sum(1 for d in f if d.cmd == Cmd.FPRD and d.ado == 0x080D and len(d.data) == 1)
+        sm1 += sum(1 for d in f if d.cmd == Cmd.FPRD and d.ado == 0x1080)
+    return lrd, fprd, sm1
+
+
+def test_in_op_the_cyclic_frame_polls_the_mailboxes_of_a_drive_brought_back(tmp_path, lib):
+    """A drive power-cycled in OP is configured again between the cycles, its 9 PDO-
+    assignment SDOs answered after 1.749 ms each: the cyclic frame's LRD of the area
+    (1 ms cycle) tells the master when to read SM1, and no poll of any kind goes between
+    the cycles; without MailboxStates the master polls SM1's status byte there."""
+    plan = drives_plan(lib, 2)
+    seen = {}
+    for name, p in (("bits", plan), ("fallback", _without_area(plan))):
+        pcap = tmp_path / f"{name}.pcap"
+        with Network.virtual(p, esi=[ESI], timing=Timing(), pcap=pcap) as net:
+            net.up()
+            for _ in range(50):
+                net.cycle()
+                net.clock.sleep(0.001)
+            before = net.master.transport.counters.frames_sent
+            net.segment.remove_cable("axis1")
+            net.segment.power_cycle("axis1")
+            for _ in range(20):
+                net.cycle()
+                net.clock.sleep(0.001)
+            assert not net.online("axis1")
+            net.segment.restore_cable("axis1")
+            for _ in range(3000):
+                net.cycle()
+                net.clock.sleep(0.001)
+                if net.online("axis1"):
+                    break
+            assert net.online("axis1")
+            assert [s.state for s in net.segment.slaves] == [AlState.OP] * 2
+            after = net.master.transport.counters.frames_sent
+        # Both directions are recorded: the master's frames are every other one.
+        seen[name] = _between_cycles(_datagrams(pcap)[before:after])
+    lrd, fprd, sm1 = seen["bits"]
+    assert (lrd, fprd) == (0, 0) and sm1 >= 9, seen
+    lrd, fprd, sm1 = seen["fallback"]
+    assert lrd == 0 and fprd > 0 and sm1 >= 9, seen
