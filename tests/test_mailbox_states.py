@@ -285,3 +285,21 @@ def test_in_op_the_cyclic_frame_polls_the_mailboxes_of_a_drive_brought_back(tmp_
     assert (lrd, fprd) == (0, 0) and sm1 >= 9, seen
     lrd, fprd, sm1 = seen["fallback"]
     assert lrd == 0 and fprd > 0 and sm1 >= 9, seen
+
+
+def test_a_bit_the_area_does_not_hold_is_polled_through_sm1_status(tmp_path, lib):
+    """axis1's StatusBitAddr set to axis0's bit (ENI122: two slaves on one bit, which
+    cannot tell whose mailbox is full): neither bit is trusted, apply polls both drives'
+    SM1 status bytes, and the line reaches OP."""
+    plan = drives_plan(lib, 2)
+    bad = copy.deepcopy(plan)
+    axis1 = bad.slaves[1]
+    assert axis1.mailbox is not None
+    axis1.mailbox.status_bit_addr = 0
+    assert state_bits(bad)[0] == []
+    pcap = tmp_path / "bad.pcap"
+    with Network.virtual(bad, esi=[ESI], timing=Timing(), pcap=pcap) as net:
+        net.up()
+        assert [s.state for s in net.segment.slaves] == [AlState.OP] * 2
+    fprd, lrd = _status_polls(_datagrams(pcap))
+    assert fprd > 0 and lrd == 0
