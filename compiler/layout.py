@@ -225,8 +225,22 @@ def build(slaves: list[ResolvedSlave], layout: str, uses_dc: bool,
 
     for bit, i in enumerate(mailbox_state):
         results[i].status_bit = bit
-        results[i].fmmus.append((mailbox_state_fmmu(MAILBOX_STATE_ADDR, bit), "mailbox state"))
+        results[i].fmmus.insert(_mailbox_state_position(slaves[i], results[i]),
+                                (mailbox_state_fmmu(MAILBOX_STATE_ADDR, bit), "mailbox state"))
     return Layout(results, out_frames, offs, len(mailbox_state))
+
+
+def _mailbox_state_position(slave: ResolvedSlave, result: SlaveLayout) -> int:
+    """Which FMMU the mailbox-state bit takes: the ESI's Fmmu list gives each FMMU's use
+    in order (ETG.2000 ``Device/Fmmu``), and the process-data FMMUs the slave uses keep
+    that order around it, as TwinCAT numbers them (``Fmmu`` MBoxState, Outputs, Inputs:
+    FMMU 0 mailbox state, 1 outputs, 2 inputs; Inputs, MBoxState: 0 inputs, 1 mailbox
+    state).  Before it: as many of the used process-data FMMUs of each kind as the ESI
+    lists of that kind before its MBoxState entry."""
+    kinds = [f.type for f in slave.device.fmmus]
+    before = kinds[:kinds.index("MBoxState")] if "MBoxState" in kinds else kinds
+    used = [label.capitalize() for _, label in result.fmmus]
+    return sum(min(used.count(kind), before.count(kind)) for kind in ("Outputs", "Inputs"))
 
 
 def _wkc(d: _Datagram, sizes: list[SlaveBits]) -> int:

@@ -163,9 +163,10 @@ CONTENTS: dict[str, dict[str, Part]] = {
     },
     "Config/Master": {
         "Info": _read("name, destination and source MAC, EtherType"),
-        "MailboxStates": _read("where the mailbox-state bits are; apply polls each "
-                               "slave's SM1 status byte (0x080D) instead, which the "
-                               "slave answers the same way"),
+        "MailboxStates": _read("the mailbox-state bits: apply polls the bits of the "
+                               "slaves whose StatusBitAddr the area holds with one LRD "
+                               "(eni/mailbox_states.py), the others' SM1 status byte "
+                               "(0x080D)"),
         "EoE": _accepted("the master's own EoE switch (ports, frames, MAC table): no "
                          "command to a slave"),
         "InitCmds": _read("replayed before (BeforeSlave) or after the slaves' commands",

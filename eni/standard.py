@@ -165,10 +165,6 @@ class _SlaveCmds:
         self.pd = {sm.number: sm for sm in slave.pd_sms}
         self.pd_numbers = sorted(self.pd)
         self.op_only = {n for n, sm in self.pd.items() if sm.op_only}
-        self.pd_fmmus = [(i, f, label) for i, (f, label) in enumerate(slave.fmmus)
-                         if label != "mailbox state"]
-        self.mbx_fmmus = [(i, f) for i, (f, label) in enumerate(slave.fmmus)
-                          if label == "mailbox state"]
 
     def ap(self, transitions: list[T], comment: str, cmd: Cmd, ado: int, data: bytes, *,
            cnt: int | None = None, validate: Validate | None = None,
@@ -317,11 +313,11 @@ def _process_data(c: _SlaveCmds) -> None:
         if n not in c.op_only:
             c.fp([T.PS], f"set sm {n} ({_kind(c.pd[n])}s)", Cmd.FPWR, sm_register(n),
                  c.pd[n].config.to_bytes(), cnt=1)
-    for i, f, label in c.pd_fmmus:
-        c.fp([T.PS], f"set fmmu {i} ({label})", Cmd.FPWR, fmmu_register(i), f.to_bytes(), cnt=1)
-    for i, f in c.mbx_fmmus:
-        c.fp([T.IP, *c.boot], f"set fmmu {i} (mailbox state)", Cmd.FPWR, fmmu_register(i),
-             f.to_bytes(), cnt=1)
+    # In FMMU order, whatever the transition (TwinCAT: an ESI that lists MBoxState first
+    # gives "set fmmu 0 (mailbox state)" IP, then "set fmmu 1 (outputs)" PS ...).
+    for i, (f, label) in enumerate(c.slave.fmmus):
+        c.fp([T.IP, *c.boot] if label == "mailbox state" else [T.PS], f"set fmmu {i} ({label})",
+             Cmd.FPWR, fmmu_register(i), f.to_bytes(), cnt=1)
 
 
 def _going_down(c: _SlaveCmds) -> None:
@@ -329,12 +325,10 @@ def _going_down(c: _SlaveCmds) -> None:
     and DC cleared, PREOP checked."""
     c.fp([T.OS], "set device state to SAFEOP", Cmd.FPWR, Reg.AL_CONTROL,
          _al(AlState.SAFEOP, False), requires="cycle")
-    for i, _, _ in c.pd_fmmus:
-        c.fp([T.SP, T.SI, T.OP, T.OI], f"clear fmmu {i}", Cmd.FPWR, fmmu_register(i),
+    for i, (_, label) in enumerate(c.slave.fmmus):
+        c.fp([T.PI, *c.to_init_boot, T.SI, T.OI] if label == "mailbox state"
+             else [T.SP, T.SI, T.OP, T.OI], f"clear fmmu {i}", Cmd.FPWR, fmmu_register(i),
              bytes(16))
-    for i, _ in c.mbx_fmmus:
-        c.fp([T.PI, *c.to_init_boot, T.SI, T.OI], f"clear fmmu {i}", Cmd.FPWR,
-             fmmu_register(i), bytes(16))
     if c.slave.dc:
         c.fp([T.SP, T.OP], "clear DC activation", Cmd.FPWR, Reg.DC_CYCLIC_UNIT_CONTROL,
              bytes(2), requires="cycle")

@@ -323,6 +323,11 @@ def _revision_9(root: Root) -> None:
     _slave(root, "lamps").find("Info/RevisionNo").text = "9"
 
 
+def _axis1_state_bit_1(root: Root) -> None:
+    """The line's one drive polled through MailboxStates (Count 1) at bit 1."""
+    _slave(root, "axis1").find("Mailbox/Recv/StatusBitAddr").text = "1"
+
+
 # rule, defect, words the message must hold (written here, not taken from the code)
 DEFECTS: list[tuple[str, Callable[[Root], None], list[str]]] = [
     ("ENI001", _revision_9, ["lamps", "revision 0x9", "available"]),
@@ -336,6 +341,8 @@ DEFECTS: list[tuple[str, Callable[[Root], None], list[str]]] = [
                                  "the master reads it", "0x001D"]),
     ("ENI121", _axis1_watchdog_1,
      ["axis1", "SM watchdog 100 µs (1 × 100000 ns)", "the cycle 1000 µs", "0x001B"]),
+    ("ENI122", _axis1_state_bit_1, ["axis1", "StatusBitAddr 1 lies outside "
+                                             "Master/MailboxStates", "Count 1"]),
     ("ENI404", _axis1_sync0_cycle_0, ["axis1", "AssignActivate 0x0300", "0x09A0 is written 0",
                                       "0x0035"]),
     ("ENI120", _mailbox_512, ["axis1", "SM0 (0x1000..0x11FF) reaches into SM1 "

@@ -181,3 +181,30 @@ def test_beckhoff_logical_windows_and_wkc(tmp_path, corpus):
     el2008 = FmmuConfig.from_bytes(next(c for c in plan.slave("Term 2 (EL2008)").init_cmds
                                         if c.comment == "set fmmu 0 (outputs)").payload)
     assert el2008.logical_start == 0x01000000      # TwinCAT: 0x01000004, after the EL4002
+
+
+GEN_DAQ = """
+master: {name: navfac, cycle_time_us: 1000}
+slaves:
+  - {name: "Box 1 (GEN Series DAQ System)", device: "0x11d:0xd01:0x2"}
+"""
+
+
+def test_an_esi_that_lists_the_mailbox_state_fmmu_first_numbers_it_first(tmp_path,
+                                                                         corpus_extra):
+    """The HBM GEN Series DAQ's ESI lists its FMMUs as MBoxState, Outputs, Inputs: TwinCAT
+    (the NAVFACOSWECS export) sets FMMU 0 to the mailbox-state bit in I->P and FMMUs 1 and
+    2 to the process data in P->S, and clears them in that order; so do we (the process
+    data's FMMU lengths depend on the PDOs the export assigned, not compared)."""
+    ref = _ref_slaves(corpus_extra / "eni/pmec-foswec2/NAVFACOSWECSxml.xml")[
+        "Box 1 (GEN Series DAQ System)"]
+    plan = _compile(tmp_path, GEN_DAQ, [corpus_extra / "esi/hbm/20260505_NAVFACOSWECS.xml"])
+    ours = plan.slave("Box 1 (GEN Series DAQ System)")
+
+    def shape(cmds: list[tuple]) -> list[tuple]:
+        return [(comment, tuple(t for t in transitions if t not in ("IB", "BI")), ado)
+                for comment, transitions, ado, _ in cmds]
+    assert shape(_our_cmds(ours, 0x600, 0x700)) == shape(_reg_cmds(ref, 0x600, 0x700))
+    [mine] = [d for c, _, _, d in _our_cmds(ours, 0x600, 0x700) if "mailbox state" in c]
+    [theirs] = [d for c, _, _, d in _reg_cmds(ref, 0x600, 0x700) if "mailbox state" in c]
+    assert mine == theirs == "00000009010000000d08000101000000"

@@ -11,6 +11,7 @@ from collections.abc import Sequence
 from ecatcfg.eni.check.context import CheckContext
 from ecatcfg.eni.contents import ENCRYPTED_FMMU, UNMAPPED_FMMU
 from ecatcfg.eni.check.rules import declare
+from ecatcfg.eni.mailbox_states import state_bits
 from ecatcfg.eni.plan import (COPY_ELEMENT, BitRange, CoeInitCmd, EoeInitCmd, FoeInitCmd,
                               PdoDesc, SlavePlan, SmSettings, SoeInitCmd, register_writes,
                               register_writes_at)
@@ -73,6 +74,16 @@ SOE_TRANSITION = declare("ENI107", "warning", "an SoE InitCmd in a transition th
     slave is in PREOP (and refuses one of II, IB or BI, where no mailbox answers), but the
     file does not validate against the schema, and other masters may refuse it.  An ESI
     SoE InitCmd of IP belongs to PS (ecatcfg's compiler writes it there, first).""")
+MAILBOX_STATE = declare("ENI122", "error", "a mailbox-state bit MailboxStates does not hold",
+                        """
+    A slave's Mailbox/Recv/StatusBitAddr is the bit of Master/MailboxStates (StartAddr,
+    Count slaves; ETG.2100) where an FMMU of the slave copies its mailbox-full flag (SM1
+    status, 0x080D), so that one LRD tells the master which mailboxes hold an answer. The
+    bit must lie in the area (0 to Count - 1), belong to this slave alone, and be where an
+    FMMU the slave's INIT->PREOP InitCmds write maps SM1's status (one bit, read). Else the
+    master reads another slave's flag, or one nothing sets, and waits for an answer that
+    is there, or reads an empty mailbox: apply then reads this slave's SM1 status itself
+    (eni/mailbox_states.py), and other masters take the bit as it is.""")
 
 
 def check(ctx: CheckContext) -> None:
@@ -88,6 +99,10 @@ def check(ctx: CheckContext) -> None:
         _soe(ctx, slave)
     _overlaps(ctx)
     _frames(ctx)
+    for problem in state_bits(ctx.plan)[1]:
+        slave = problem.slave
+        ctx.add(MAILBOX_STATE, ctx.lines.child(slave, "Mailbox/Recv/StatusBitAddr"),
+                problem.message, slave)
 
 
 def is_unmapped_fmmu(what: str) -> bool:

@@ -30,8 +30,8 @@ from ecatcfg.runtime.master.cyclic import CyclicFrames
 from ecatcfg.runtime.master.lockstep import Job, Step, run_jobs, until_answered
 from ecatcfg.runtime.master.reached import (EXPLAIN, SlaveState, describe_missing,
                                             missing_requests, not_reached)
-from ecatcfg.runtime.master.replay import (TIMEOUT_COMMAND, ApplyError, MailboxChannel,
-                                           SlaveProgress)
+from ecatcfg.runtime.master.replay import (TIMEOUT_COMMAND, ApplyError, SlaveProgress,
+                                           mailbox_channels)
 from ecatcfg.runtime.master.scan import FoundSlave, Mismatch, scan, verify
 from ecatcfg.runtime.master.transition import mailbox_init_cmds, master_job, slave_transition_job
 from ecatcfg.runtime.master.transport import Transport, pack
@@ -178,8 +178,7 @@ class Master:
         self.line = plan                # the plan as the line is (hot-connect groups absent)
         self.state = AlState.INIT
         self.progress = {s.name: SlaveProgress(s.name) for s in self.slaves}
-        self.mailboxes = {s.name: MailboxChannel(s.phys_addr, s.mailbox)
-                          for s in self.slaves if s.mailbox is not None}
+        self.mailboxes = mailbox_channels(plan)
         self.on_event = on_event
         self._cycling = False
         self._next_cycle = 0.0

@@ -15,7 +15,7 @@ costs is about the length of its longest per-slave chain.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Generator
+from collections.abc import Callable, Generator, Mapping
 from typing import TypeVar
 
 from ecatcfg.runtime.clock import monotonic, using
@@ -59,33 +59,42 @@ def start(jobs: list[Job]) -> Pending:
 
 
 def one_round(transport: Transport, active: Pending, timeout: float | None = None,
-              on_error: Callable[[Job, Exception], None] | None = None) -> Pending:
+              on_error: Callable[[Job, Exception], None] | None = None,
+              answered: Mapping[int, Datagram] | None = None) -> Pending:
     """One round: the pending datagrams of every job in as few frames as fit, each job
     sent its replies (``None`` when a frame was lost); returns the jobs still running.
     An exception from a job propagates, or goes to ``on_error(job, exception)`` (the job
-    then ends) when that is given."""
+    then ends) when that is given.  ``answered``: replies already known this round, by
+    the ``id`` of the datagram asked for (the mailbox-state LRD the cyclic frame just
+    carried: ``recovery.py``); those datagrams are not sent."""
     with using(transport.clock):
-        return _round(transport, active, timeout, on_error)
+        return _round(transport, active, timeout, on_error, answered)
 
 
 def _round(transport: Transport, active: Pending, timeout: float | None,
-           on_error: Callable[[Job, Exception], None] | None) -> Pending:
-    owned = [(i, dg) for i, (_, request) in enumerate(active) for dg in request]
-    replies: dict[int, list[Datagram] | None] = {i: [] for i in range(len(active))}
-    for frame in pack([dg for _, dg in owned]):
-        owners = [owner for owner, dg in owned[:len(frame)]]
-        owned = owned[len(frame):]
-        back = transport.exchange(frame, timeout)
-        for k, owner in enumerate(owners):
-            got = replies[owner]
-            if back is None or got is None:
-                replies[owner] = None
+           on_error: Callable[[Job, Exception], None] | None,
+           answered: Mapping[int, Datagram] | None = None) -> Pending:
+    # A datagram several jobs ask for in one round (the same object: the LRD of the
+    # mailbox-state bits, replay.MailboxStatePoll) goes once; each of them gets its reply.
+    back: dict[int, Datagram | None] = {}
+    unique: dict[int, Datagram] = {}
+    for _, request in active:
+        for dg in request:
+            key = id(dg)
+            if answered is not None and key in answered:
+                back[key] = answered[key]
             else:
-                got.append(back[k])
+                unique.setdefault(key, dg)
+    for frame in pack(list(unique.values())):
+        came = transport.exchange(frame, timeout)
+        for k, dg in enumerate(frame):
+            back[id(dg)] = None if came is None else came[k]
     still: Pending = []
-    for i, (job, _) in enumerate(active):
+    for job, request in active:
+        got = [back[id(dg)] for dg in request]
+        reply = None if any(g is None for g in got) else [g for g in got if g is not None]
         try:
-            still.append((job, job.send(replies[i])))
+            still.append((job, job.send(reply)))
         except StopIteration:
             pass
         except Exception as exc:

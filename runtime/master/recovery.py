@@ -41,7 +41,7 @@ from ecatcfg.runtime.master import hotconnect
 from ecatcfg.runtime.master.hotconnect import at_position
 from ecatcfg.runtime.master.lockstep import Job, Pending, Step, one_round, start, until_answered
 from ecatcfg.runtime.master.replay import (TIMEOUT_COMMAND, TIMEOUT_STATE, ApplyError,
-                                           MailboxChannel, SlaveProgress)
+                                           MailboxChannel, MailboxStatePoll, SlaveProgress)
 from ecatcfg.runtime.master.transition import slave_transition_job
 from ecatcfg.runtime.wire import Datagram
 
@@ -225,6 +225,15 @@ class Supervisor:
         self._inputs = {name: input_bits(s, cyclic) for name, s in self._by_name.items()}
         self._al_slots = [slot for slot in self._slots if slot.cmd.cmd == Cmd.BRD
                           and slot.cmd.ado == Reg.AL_STATUS and slot.cmd.length >= 1]
+        # The ENI's cyclic LRD of Master/MailboxStates ("Poll Mailbox State"), when the
+        # mailboxes poll that area: its data answers their poll in the round after it.
+        poll = next((c.poll for c in master.mailboxes.values() if c.poll is not None), None)
+        self._state_poll: tuple[MailboxStatePoll, _Slot] | None = None
+        if poll is not None:
+            self._state_poll = next(
+                ((poll, slot) for slot in self._slots if slot.cmd.cmd == Cmd.LRD
+                 and slot.cmd.addr == poll.datagram.address
+                 and slot.cmd.length >= len(poll.datagram.data)), None)
         for name, h in self.health.items():
             if not h.online:
                 for slot, share in self._shares[name]:
@@ -269,12 +278,29 @@ class Supervisor:
             self._incoming = []
         if self._pending:
             self._pending = one_round(self.master.transport, self._pending, self.timeout,
-                                      self._job_failed)
+                                      self._job_failed, self._cycled_mailbox_states())
         # Last: the slaves found offline in this cycle's round are cleared at once.
         inputs = self.master.cyclic.inputs
         for at, keep in self._clear:
             inputs[at] &= keep
         return ok
+
+    def _cycled_mailbox_states(self) -> dict[int, Datagram] | None:
+        """The mailbox-full bits this cycle's frame read (the ENI's LRD of
+        Master/MailboxStates, in the input image), as the reply to the mailboxes' own
+        poll of the area, which then stays off the wire (TwinCAT polls the mailboxes in the
+        cyclic frame).  None when the cyclic frame has no such command in this state, or
+        it did not come back."""
+        if self._state_poll is None:
+            return None
+        poll, slot = self._state_poll
+        if slot.wkc < 1 or self.master.state.name not in slot.cmd.states:
+            return None
+        n = len(poll.datagram.data)
+        got = Datagram.logical(Cmd.LRD, poll.datagram.address,
+                               bytes(self.master.cyclic.inputs[slot.in_at:slot.in_at + n]))
+        got.wkc = slot.wkc
+        return {id(poll.datagram): got}
 
     def _al_wrong(self, inputs: bytearray) -> bool:
         """The cyclic BRD of the AL status: any slave out of the network's state (the
@@ -550,8 +576,9 @@ class Supervisor:
                 if state != AlState.INIT:
                     yield from _request(slave, AlState.INIT, AlState.INIT)
                 state = AlState.INIT
-                channel = MailboxChannel(slave.phys_addr, slave.mailbox) \
-                    if slave.mailbox is not None else None
+                old = master.mailboxes.get(plan.name)
+                channel = None if slave.mailbox is None else old.again() \
+                    if old is not None else MailboxChannel(slave.phys_addr, slave.mailbox)
                 # A slave in INIT asked for INIT: its INIT->INIT commands, as at start-up
                 # (esc.TRANSITION_RULES).
                 yield from slave_transition_job(slave, Transition.II,

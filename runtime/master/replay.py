@@ -17,8 +17,9 @@ from typing import TYPE_CHECKING, Any, TypeVar
 
 from ecatcfg.runtime.clock import monotonic
 from ecatcfg.eni.plan import (CoeInitCmd, EoeInitCmd, FoeInitCmd, InitCmd, MailboxPlan,
-                              SoeInitCmd)
+                              NetworkPlan, SoeInitCmd)
 from ecatcfg.eni.compare import compared, matches
+from ecatcfg.eni.mailbox_states import state_bits
 from ecatcfg.eni.words import init_cmd_name
 from ecatcfg.errors import EcatcfgError
 from ecatcfg.esc import (AL_STATUS_ERROR, SM1_STATUS, SM_ACTIVATE_REPEAT, SM_PDI_REPEAT_ACK,
@@ -183,6 +184,23 @@ def _refused(status: bytes | bytearray, who: str | None, comment: str,
 # -- mailbox ----------------------------------------------------------------------------------
 
 @record
+class MailboxStatePoll:
+    """The LRD over the ENI's ``Master/MailboxStates`` area: one datagram reads the
+    mailbox-full bits of every slave whose FMMU maps SM1's status there
+    (``eni/mailbox_states.py``).  The channels of all slaves that wait for an answer yield
+    this same object, and a round sends it once (``lockstep``): the polls of 64 drives
+    cost one datagram of 8 bytes instead of 64 datagrams of 1 byte (TwinCAT's way)."""
+
+    datagram: Datagram
+
+    @classmethod
+    def over(cls, area: tuple[int, int]) -> MailboxStatePoll:
+        """The poll of ``area`` (StartAddr, Count slaves: one bit each)."""
+        start, count = area
+        return cls(Datagram.logical(Cmd.LRD, start, bytes((count + 7) // 8)))
+
+
+@record
 class MailboxChannel:
     """The master's side of one slave's mailbox: where SM0/SM1 are, the message counter
     and the repeat toggle (ETG.1000.4 mailbox repeat)."""
@@ -200,6 +218,26 @@ class MailboxChannel:
     ahead: bytes | None = None
     ahead_taken: bool = False
     ahead_tried: bool = False
+    # Where the slave's mailbox-full flag is read while an answer is awaited: bit
+    # ``state_bit`` of the shared LRD ``poll``, else (None) SM1's own status byte.
+    poll: MailboxStatePoll | None = None
+    state_bit: int = 0
+
+    def again(self) -> MailboxChannel:
+        """The channel of this slave starting over (brought back: counters from the
+        start), its mailbox-full flag read where it was."""
+        return MailboxChannel(self.address, self.plan, poll=self.poll,
+                              state_bit=self.state_bit)
+
+    def _says_full(self, got: Datagram) -> bool:
+        """Whether the poll's reply says the slave posted a message.  The LRD counts 1 for
+        each slave whose FMMU mapped its bit; a slave that did not answer leaves its bit
+        at 0 (as read), so a set bit is this slave's flag (ESC datasheet section I,
+        FMMU; the ENI's bits are each one slave's: ``eni/mailbox_states.py``)."""
+        if self.poll is None:
+            return got.wkc == 1 and bool(got.data[0] & SM_STATUS_MAILBOX_FULL)
+        bit = self.state_bit
+        return got.wkc >= 1 and bool(got.data[bit // 8] >> bit % 8 & 1)
 
     def counter(self) -> int:
         """The next mailbox counter, 1..7 (0 means 'not used'; SOEM never sends it)."""
@@ -253,17 +291,20 @@ class MailboxChannel:
     def receive(self, deadline: float, who: str | None, what: str | None) -> Step[bytes]:
         """Read the slave's next message from SM1.  Reading an empty mailbox gets working
         counter 0 and changes nothing, so SM1 is read directly at first, instead of
-        polling its status before.  While the answer is not there, SM1's status byte is
-        polled (0x080D bit 3, mailbox full: ESC datasheet section II, SyncManager status),
-        1 byte where a read takes the whole SM1, so that the polls of many slow slaves
-        share a frame; once it says full, SM1 is read.  If a read's frame was lost, the
+        polling its status before.  While the answer is not there, the slave's bit of the
+        ENI's MailboxStates area is polled with the LRD all slaves share
+        (:class:`MailboxStatePoll`), else SM1's status byte (0x080D bit 3, mailbox full:
+        ESC datasheet section II, SyncManager status), 1 byte where a read takes the whole
+        SM1, so that the polls of many slow slaves share a frame; once it says full, SM1
+        is read.  If a read's frame was lost, the
         message may have been taken out of SM1 on the way: when SM1 then stays empty for
         ``REPEAT_AFTER`` (a slow firmware may simply not have answered yet), the repeat
         toggle asks the slave to post its last message again (ETG.1000.4 mailbox
         repeat)."""
         sm1 = self.plan.recv
         read = Datagram.physical(Cmd.FPRD, self.address, sm1.start, sm1.length)
-        status = Datagram.physical(Cmd.FPRD, self.address, SM1_STATUS, 1)
+        status = self.poll.datagram if self.poll is not None else \
+            Datagram.physical(Cmd.FPRD, self.address, SM1_STATUS, 1)
         direct = True          # read SM1 itself: at first, and once its status says full
         lost_at: float | None = None
         empty = 0
@@ -279,8 +320,8 @@ class MailboxChannel:
                 if reply is not None and reply[1].wkc == 1:
                     self.ahead_taken = True
                     self.sent_messages += 1
-            if not direct and reply is not None and reply[0].wkc == 1 and \
-                    reply[0].data[0] & SM_STATUS_MAILBOX_FULL and now <= deadline:
+            if not direct and reply is not None and self._says_full(reply[0]) and \
+                    now <= deadline:
                 direct = True
                 continue
             if direct and reply is not None and reply[0].wkc == 1:
@@ -332,6 +373,20 @@ class MailboxChannel:
             if monotonic() > deadline:
                 raise ApplyError("the slave did not acknowledge the mailbox repeat", who,
                                  what)
+
+
+def mailbox_channels(plan: NetworkPlan) -> dict[str, MailboxChannel]:
+    """The mailbox channel of each slave with a mailbox.  The slaves whose mailbox-full
+    flag the ENI maps into ``Master/MailboxStates`` (``eni/mailbox_states.py``) poll it
+    with one LRD they share; the others (no MailboxStates, no StatusBitAddr, or one the
+    area does not hold: ``check`` rule ENI122) poll SM1's status byte."""
+    bits = {b.slave: b.bit for b in state_bits(plan)[0]}
+    area = plan.master.mailbox_states
+    poll = MailboxStatePoll.over(area) if bits and area is not None else None
+    return {s.name: MailboxChannel(s.phys_addr, s.mailbox,
+                                   poll=poll if s.name in bits else None,
+                                   state_bit=bits.get(s.name, 0))
+            for s in plan.slaves if s.mailbox is not None}
 
 
 def sdo_job(channel: MailboxChannel, transaction: Transaction, who: str | None,
