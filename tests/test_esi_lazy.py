@@ -163,3 +163,39 @@ def test_a_list_of_documents_is_read_whole(tmp_path):
     assert [lib.device(e).type_name for e in lib.entries] == ["A", "B"]
     assert lib.load(lib.files[0]) == read_file(path, lib.files[0].shown)
     assert etree.fromstring(text.encode()).tag == "EtherCATInfoList"
+
+
+_INIT_MODULE = """    <Modules>
+      <Module><Type ModuleIdent="#x33">INITMOD</Type><Name>m</Name>
+        <Mailbox><CoE><InitCmd><Transition>PS</Transition><Index>#x8000</Index>
+          <SubIndex>0</SubIndex><Data>01020304</Data></InitCmd></CoE></Mailbox>
+      </Module>
+    </Modules>
+"""
+_INIT_SLOTS = """        <Slots>
+          <Slot MinInstances="0" MaxInstances="1"><Name>S1</Name>
+            <ModuleIdent>#x33</ModuleIdent></Slot>
+        </Slots>
+"""
+_UINT_OBJECT = """        <Profile><Dictionary><Objects><Object><Index>#x8000</Index><Name>u</Name>
+          <Type>UINT</Type><BitSize>16</BitSize></Object></Objects></Dictionary></Profile>
+"""
+
+
+def test_a_plugged_module_is_checked_against_every_device_of_its_file(tmp_path, capsys):
+    """A module's InitCmd is checked against the dictionary of each device of its file that
+    takes it (ESI304): here only an unused device says 0x8000 is a UINT, so the gate must
+    check the whole file when the topology plugs one of its modules."""
+    from ecatcfg.cli import main
+    from test_esi_gate import _device, _esi
+    text = _esi(_device("STATION", "#x10", slots=_INIT_SLOTS),
+                _device("OTHER", "#x11", slots=_INIT_SLOTS + _UINT_OBJECT),
+                modules=_INIT_MODULE)
+    path = write(tmp_path, "dev.xml", text)
+    topo = write(tmp_path, "t.yaml", "slaves:\n  - {name: dut, device: STATION, "
+                 "modules: {1: INITMOD}}\n")
+    out = tmp_path / "out.xml"
+    code = main(["compile", str(topo), "--esi", str(path), "-o", str(out), "--no-cache"])
+    err = capsys.readouterr().err
+    line = _line_of(text, "<CoE><InitCmd>")
+    assert code == 1 and f"dev.xml:{line}: ESI304 " in err, err

@@ -140,9 +140,9 @@ def _checked(target: Target, options: LintOptions, others: list[Path], result: F
         # The others need not have been read (``Library.loaded``), nor their dictionaries
         # (``EsiFile.problems`` reads only the view's): a topology uses one or two devices
         # of a family file of a hundred.  A Device's span starts at its line.
-        starts = {first: (first, end) for first, end in spans}
+        span_at = {first: (first, end) for first, end in spans}
         esi = replace(esi, devices=[d for d in esi.devices if d.source.line in only])
-        spans = [starts[d.source.line] for d in esi.devices]
+        spans = [span_at[d.source.line] for d in esi.devices]
     result.module_spans = where.modules
     devices = [DeviceRef(d.vendor.id, d.product_code, d.revision, d.type_name, d.source.line)
                for d in esi.devices]
