@@ -25,6 +25,7 @@ from __future__ import annotations
 import copy
 import difflib
 import os
+import threading
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path, PureWindowsPath
@@ -106,6 +107,7 @@ class Library:
         self.skipped: list[str] = []
         self.problems: list[EcatcfgError] = []
         self._models: dict[Path, reader.FileReader] = {}
+        self._reading = threading.Lock()
         for given in paths:
             for path, shown, explicit in expand_paths(given):
                 self._add(path.resolve(), shown, explicit)
@@ -384,10 +386,13 @@ class Library:
     def _reader(self, lf: LibraryFile) -> reader.FileReader:
         found = self._models.get(lf.path)
         if found is None:
-            data = xmlsafe.read_file(lf.path, lf.shown)
-            tree = xmlsafe.parse_bytes(data, lf.shown)
-            found = self._models[lf.path] = reader.FileReader(tree, lf.shown)
-            self._loaded[lf.path] = (content_digest(data), reader.spans_of(tree))
+            with self._reading:         # two threads: one reads the file, both get it
+                found = self._models.get(lf.path)
+                if found is None:
+                    data = xmlsafe.read_file(lf.path, lf.shown)
+                    tree = xmlsafe.parse_bytes(data, lf.shown)
+                    found = self._models[lf.path] = reader.FileReader(tree, lf.shown)
+                    self._loaded[lf.path] = (content_digest(data), reader.spans_of(tree))
         return found
 
     def loaded(self, path: Path, digest: str, devices: frozenset[int] | None = None

@@ -11,6 +11,7 @@ diagnosis texts, vendor-specific blocks) are skipped silently.
 from __future__ import annotations
 
 import gc
+import threading
 from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
@@ -217,36 +218,45 @@ class FileReader:
     def __init__(self, tree: etree._ElementTree, file: str) -> None:
         root = tree.getroot()
         check_root(root, file)
-        self._elements: list[etree._Element] = []
+        # The Device elements not read yet (``None`` once read: what is read lets its
+        # element, and at last the tree, go).
+        self._elements: list[etree._Element | None] = []
         self._devices: dict[int, Device] = {}
-        self._reader = _Reader(file)
+        self._lock = threading.Lock()
         if root.tag == LIST_ROOT:
             self.esi = read_tree(tree, file)
             self._devices = dict(enumerate(self.esi.devices))
+            self._elements = [None] * len(self._devices)
         else:
+            self._reader = _Reader(file)
+            later: list[etree._Element] = []
             with _gc_paused():
-                self.esi = self._reader.read_root(root, self._elements)
-
-    @property
-    def complete(self) -> bool:
-        """Whether every Device is read (``esi`` is the whole file)."""
-        return len(self._devices) == len(self._elements) or not self._elements
+                self.esi = self._reader.read_root(root, later)
+            self._reader.later = None
+            self._elements = list(later)
 
     def device(self, ordinal: int) -> Device:
         """The Device ``ordinal`` of the file (``device_elements`` order), read once."""
         dev = self._devices.get(ordinal)
         if dev is None:
-            with _gc_paused():
-                dev = self._reader.device(self._elements[ordinal], self.esi.vendor)
-            dev.vendor = self.esi.vendor
-            self._devices[ordinal] = dev
-            self.esi.devices = [self._devices[i] for i in sorted(self._devices)]
+            with self._lock:            # two threads: one reads it, both get that one
+                dev = self._devices.get(ordinal)
+                el = self._elements[ordinal]
+                if dev is None and el is not None:
+                    with _gc_paused():
+                        dev = self._reader.device(el, self.esi.vendor)
+                    dev.vendor = self.esi.vendor
+                    self._devices[ordinal] = dev
+                    self._elements[ordinal] = None
+                    self.esi.devices = [self._devices[i] for i in sorted(self._devices)]
+        assert dev is not None
         return dev
 
     def model(self) -> EsiFile:
         """The whole file: every Device read (those read already are kept)."""
-        for ordinal in range(len(self._elements)):
-            self.device(ordinal)
+        if len(self._devices) < len(self._elements):
+            for ordinal in range(len(self._elements)):
+                self.device(ordinal)
         return self.esi
 
 
@@ -796,13 +806,8 @@ class _Reader:
     def dictionaries(self, elements: list[etree._Element]) -> Dictionary:
         """A Profile's dictionary, read on first use (the last, if the element repeats;
         each one's problems are reported)."""
-        was_enabled = gc.isenabled()
-        gc.disable()                        # as in read_tree: many small acyclic objects
-        try:
+        with _gc_paused():                  # as in read_tree: many small acyclic objects
             return [self.dictionary(el) for el in elements][-1]
-        finally:
-            if was_enabled:
-                gc.enable()
 
     def dictionary(self, el: etree._Element) -> Dictionary:
         dic = Dictionary({}, {}, self.src(el))

@@ -117,6 +117,27 @@ def test_the_library_reads_only_the_devices_asked_for(corpus):
     assert whole == read_file(path, lib.files[0].shown)
 
 
+def test_two_threads_asking_the_library_for_one_device_get_one_model(tmp_path):
+    path = write(tmp_path, "f.xml", _text())
+    lib = Library([path], cache=False)
+    start = threading.Barrier(4)
+    got = []
+
+    def ask() -> None:
+        start.wait()
+        got.append(lib.device(lib.entries[1]))
+
+    threads = [threading.Thread(target=ask) for _ in range(4)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert len(got) == 4 and all(d is got[0] for d in got)
+    whole = lib.load(lib.files[0])
+    assert [d.type_name for d in whole.devices] == ["GOOD", "BAD"]
+    assert whole.devices[1] is got[0] and len(whole.problems) == 1
+
+
 def _gate_and_lint(path: Path) -> tuple[Library, list]:
     lib = Library([path], cache=False)
     whole = lint_file(Target(path, lib.files[0].shown, True), LintOptions(STOPS_COMPILE), [])
