@@ -219,10 +219,10 @@ class Profile:
     The reader fills ``dictionary`` when it is first asked for, from the Dictionary element
     it kept (:meth:`read_later`): the dictionaries are two thirds of a full read of the
     Beckhoff terminal files, and a compile uses those of a few devices.  What the reader
-    could not take in a dictionary joins the file's ``problems`` and ``ignored`` then;
-    :meth:`EsiFile.read_dictionaries` reads every dictionary of a file at once (lint does,
-    before its rules).  Until then the Profile keeps the element, and with it the whole
-    parsed document, alive."""
+    could not take in a dictionary joins the file's ``problems`` and ``ignored`` then
+    (asking the file for those reads every dictionary not read yet, as lint does);
+    :meth:`EsiFile.read_dictionaries` reads them all at once.  Until then the Profile
+    keeps the element, and with it the whole parsed document, alive."""
 
     __slots__ = ("source", "profile_no", "add_info", "channel", "dictionary_file",
                  "_dictionary", "_read")
@@ -795,7 +795,8 @@ class EsiFile:
     @property
     def problems(self) -> list[ReadProblem]:
         """What the reader could not take as written, anywhere in the file (the
-        dictionaries not read yet are read first)."""
+        dictionaries not read yet are read first; a file the library reads a device at a
+        time holds the devices read so far, ``reader.FileReader``)."""
         self.read_dictionaries()
         return self._problems
 
@@ -810,7 +811,7 @@ class EsiFile:
         return next((g for g in self.groups if g.type == type_), None)
 
     def profiles(self) -> list[Profile]:
-        """Every Profile of the file's devices and modules, in file order."""
+        """Every Profile of the file's devices, then of its modules."""
         found = [p for dev in self.devices for p in dev.profiles]
         return found + [m.profile for m in self.modules if m.profile is not None]
 
