@@ -9,6 +9,8 @@ topology.  Compile refuses a slave with such a finding, unless the user allows E
 
 from __future__ import annotations
 
+from collections.abc import Iterable
+
 from ecatcfg.compiler.resolve import ResolvedSlave
 from ecatcfg.compiler.topology import LoadedTopology
 from ecatcfg.errors import EcatcfgError
@@ -23,19 +25,32 @@ class FileGate:
     ``file_findings`` reads and hashes the whole file on every call, to see a file changed
     under a long-running process; 512 slaves of one 3 MB Beckhoff family file asked it 512
     times (1.5 GB hashed, most of a cold compile's time).  One topology is compiled from
-    one reading of its files, so each is asked once here."""
+    one reading of its files, so each is asked once here.
 
-    def __init__(self, library: Library) -> None:
+    ``used``: the slaves of the topology.  A file is then checked only in the Device
+    elements they use (lint's rules for the others would read dictionaries compile never
+    looks at: a Beckhoff family file holds up to 124 devices), unless they plug one of its
+    modules (a module's InitCmds are checked against every device of its file)."""
+
+    def __init__(self, library: Library, used: Iterable[ResolvedSlave] = ()) -> None:
         self.library = library
         self.paths = {lf.shown: lf.path for lf in library.files}
         self.others = list(self.paths.values())
         self.results: dict[str, FileResult] = {}
+        lines: dict[str, set[int]] = {}
+        whole: set[str] = set()
+        for s in used:
+            lines.setdefault(s.device.source.file, set()).add(s.device.source.line)
+            whole.update(p.module.source.file for p in s.modules)
+        self.devices = {file: frozenset(found) for file, found in lines.items()
+                        if file not in whole}
 
     def findings(self, shown: str) -> FileResult:
         found = self.results.get(shown)
         if found is None:
             found = self.results[shown] = file_findings(self.paths[shown], shown, self.others,
-                                                        self.library.loaded)
+                                                        self.library.loaded,
+                                                        self.devices.get(shown))
         return found
 
 
@@ -43,7 +58,7 @@ def slave_findings(s: ResolvedSlave, library: Library,
                    gate: FileGate | None = None) -> list[Finding]:
     """The findings that stop compile inside the slave's Device element or its modules
     (``gate``: shared by the slaves of one topology)."""
-    gate = gate or FileGate(library)
+    gate = gate or FileGate(library, [s])
     paths = gate.paths
     found: list[Finding] = []
     dev = s.device
@@ -77,5 +92,5 @@ def slave_errors(loaded: LoadedTopology, s: ResolvedSlave, library: Library,
 def esi_errors(loaded: LoadedTopology, resolved: list[ResolvedSlave], library: Library,
                allowed: bool = False) -> list[EcatcfgError]:
     """The errors (``allowed``: warnings) of every slave, in bus order."""
-    gate = FileGate(library)
+    gate = FileGate(library, resolved)
     return [e for s in resolved for e in slave_errors(loaded, s, library, allowed, gate)]

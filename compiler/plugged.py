@@ -47,7 +47,7 @@ def plugged_devices(loaded: LoadedTopology, library: Library,
     parts = split(loaded, library)
     resolved, errors, _ = resolve_all(parts.active, library)
     errors = parts.errors + errors
-    gate = FileGate(library)
+    gate = FileGate(library, resolved)
     defects = [slave_errors(parts.active, r, library, allow_esi_errors, gate) for r in resolved]
     if not allow_esi_errors:
         errors += [e for found in defects for e in found]

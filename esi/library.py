@@ -25,6 +25,7 @@ from __future__ import annotations
 import copy
 import difflib
 import os
+import threading
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path, PureWindowsPath
@@ -105,7 +106,8 @@ class Library:
         self.files: list[LibraryFile] = []
         self.skipped: list[str] = []
         self.problems: list[EcatcfgError] = []
-        self._models: dict[Path, EsiFile] = {}
+        self._models: dict[Path, reader.FileReader] = {}
+        self._reading = threading.Lock()
         for given in paths:
             for path, shown, explicit in expand_paths(given):
                 self._add(path.resolve(), shown, explicit)
@@ -221,7 +223,7 @@ class Library:
         sources = [lf] + [t for t in (self.resolve_reference(lf, r)
                                       for r in lf.summary.info_references) if t]
         for src in sources:
-            for module in self.load(src).modules:
+            for module in self._reader(src).esi.modules:     # read without the devices
                 if module.ident is not None:
                     found.setdefault(module.ident, module)
         return found
@@ -372,28 +374,44 @@ class Library:
         return _highest(matches)
 
     def device(self, selector: str | DeviceEntry) -> Device:
-        """The full model of the device ``selector`` names."""
+        """The full model of the device ``selector`` names (read once; the file's other
+        devices are not read for it)."""
         entry = selector if isinstance(selector, DeviceEntry) else self.find(selector).entry
-        return self.load(self._file(entry.file)).devices[entry.ordinal]
+        return self._reader(self._file(entry.file)).device(entry.ordinal)
 
     def load(self, lf: LibraryFile) -> EsiFile:
-        model = self._models.get(lf.path)
-        if model is None:
-            data = xmlsafe.read_file(lf.path, lf.shown)
-            tree = xmlsafe.parse_bytes(data, lf.shown)
-            model = self._models[lf.path] = reader.read_tree(tree, lf.shown)
-            self._loaded[lf.path] = (content_digest(data), reader.spans_of(tree))
-        return model
+        """The whole file's model (the devices read already are kept)."""
+        return self._reader(lf).model()
 
-    def loaded(self, path: Path, digest: str) -> tuple[EsiFile, reader.ElementSpans] | None:
+    def _reader(self, lf: LibraryFile) -> reader.FileReader:
+        found = self._models.get(lf.path)
+        if found is None:
+            with self._reading:         # two threads: one reads the file, both get it
+                found = self._models.get(lf.path)
+                if found is None:
+                    data = xmlsafe.read_file(lf.path, lf.shown)
+                    tree = xmlsafe.parse_bytes(data, lf.shown)
+                    found = self._models[lf.path] = reader.FileReader(tree, lf.shown)
+                    self._loaded[lf.path] = (content_digest(data), reader.spans_of(tree))
+        return found
+
+    def loaded(self, path: Path, digest: str, devices: frozenset[int] | None = None
+               ) -> tuple[EsiFile, reader.ElementSpans] | None:
         """The model and element spans already read from ``path`` when it held the content
         of ``digest`` (``esi.cache.content_digest``), else ``None``: lint of a file the
         library read for a compile need not parse and read it a second time (the model of
-        a 3 MB Beckhoff file takes longer to build than its lint rules take to run)."""
+        a 3 MB Beckhoff file takes longer to build than its lint rules take to run).
+        ``devices``: only the Device elements at these lines are wanted; the model may
+        then hold only the devices read so far, if they are among them (else every
+        device is read)."""
         known = self._loaded.get(path)
         if known is None or known[0] != digest:
             return None
-        return self._models[path], known[1]
+        found = self._models[path]
+        have = {d.source.line for d in found.esi.devices}
+        if devices is None or not devices <= have:
+            found.model()
+        return found.esi, known[1]
 
     def _file(self, shown: str) -> LibraryFile:
         return next(lf for lf in self.files if lf.shown == shown)

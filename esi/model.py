@@ -12,6 +12,8 @@ Names follow ETG.2000 element names in snake case (``RxPdo`` -> :class:`Pdo` wit
 
 from __future__ import annotations
 
+import threading
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Literal, NamedTuple
 
@@ -206,14 +208,77 @@ class Dictionary:
         return dt.sub_items if dt is not None else []
 
 
-@dataclass(slots=True)
+# One lock for every dictionary read on first use: reads are rare (once per Profile) and
+# the reader appends to its file's lists of problems, which two threads must not do at once.
+_READ_LOCK = threading.Lock()
+
+
 class Profile:
-    source: Source
-    profile_no: int | None = None
-    add_info: int | None = None
-    channel: int | None = None
-    dictionary: Dictionary | None = None
-    dictionary_file: str | None = None
+    """Device/Profile (or a Module's): the device profile and its object dictionary.
+
+    The reader fills ``dictionary`` when it is first asked for, from the Dictionary element
+    it kept (:meth:`read_later`): the dictionaries are two thirds of a full read of the
+    Beckhoff terminal files, and a compile uses those of a few devices.  What the reader
+    could not take in a dictionary joins the file's ``problems`` and ``ignored`` then
+    (asking the file for those reads every dictionary not read yet, as lint does);
+    :meth:`EsiFile.read_dictionaries` reads them all at once.  Until then the Profile
+    keeps the element, and with it the whole parsed document, alive."""
+
+    __slots__ = ("source", "profile_no", "add_info", "channel", "dictionary_file",
+                 "_dictionary", "_read")
+
+    def __init__(self, source: Source, profile_no: int | None = None,
+                 add_info: int | None = None, channel: int | None = None,
+                 dictionary: Dictionary | None = None,
+                 dictionary_file: str | None = None) -> None:
+        self.source = source
+        self.profile_no = profile_no
+        self.add_info = add_info
+        self.channel = channel
+        self.dictionary_file = dictionary_file
+        self._dictionary = dictionary
+        self._read: Callable[[], Dictionary] | None = None
+
+    @property
+    def dictionary(self) -> Dictionary | None:
+        if self._read is not None:
+            with _READ_LOCK:
+                read = self._read
+                if read is not None:            # not read by another thread meanwhile
+                    self._dictionary = read()
+                    self._read = None
+        return self._dictionary
+
+    @dictionary.setter
+    def dictionary(self, value: Dictionary | None) -> None:
+        with _READ_LOCK:
+            self._dictionary = value
+            self._read = None
+
+    def read_later(self, read: Callable[[], Dictionary]) -> None:
+        """Take the dictionary from ``read()`` when it is first asked for."""
+        self._dictionary = None
+        self._read = read
+
+    @property
+    def dictionary_pending(self) -> bool:
+        """Whether the dictionary is still to be read (for tests and measurements)."""
+        return self._read is not None
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, Profile):
+            return NotImplemented
+        return ((self.source, self.profile_no, self.add_info, self.channel,
+                 self.dictionary, self.dictionary_file)
+                == (other.source, other.profile_no, other.add_info, other.channel,
+                    other.dictionary, other.dictionary_file))
+
+    __hash__ = None     # type: ignore[assignment]   # mutable, as the dataclasses here
+
+    def __repr__(self) -> str:
+        return (f"Profile(source={self.source!r}, profile_no={self.profile_no!r}, "
+                f"add_info={self.add_info!r}, channel={self.channel!r}, "
+                f"dictionary={self.dictionary!r}, dictionary_file={self.dictionary_file!r})")
 
 
 @dataclass(slots=True)
@@ -722,11 +787,41 @@ class EsiFile:
     devices: list[Device] = field(default_factory=list)
     modules: list[Module] = field(default_factory=list)
     info_references: list[tuple[str, Source]] = field(default_factory=list)
-    problems: list[ReadProblem] = field(default_factory=list)
-    ignored: list[IgnoredElement] = field(default_factory=list)
+    # What ``problems`` and ``ignored`` give once every dictionary is read; the reader
+    # adds a dictionary's when it reads it (on first use).
+    _problems: list[ReadProblem] = field(default_factory=list)
+    _ignored: list[IgnoredElement] = field(default_factory=list)
+
+    @property
+    def problems(self) -> list[ReadProblem]:
+        """What the reader could not take as written, anywhere in the file (the
+        dictionaries not read yet are read first; a file the library reads a device at a
+        time holds the devices read so far, ``reader.FileReader``)."""
+        self.read_dictionaries()
+        return self._problems
+
+    @property
+    def ignored(self) -> list[IgnoredElement]:
+        """The elements ETG.2000 does not define where they are, anywhere in the file (the
+        dictionaries not read yet are read first)."""
+        self.read_dictionaries()
+        return self._ignored
 
     def group(self, type_: str | None) -> Group | None:
         return next((g for g in self.groups if g.type == type_), None)
+
+    def profiles(self) -> list[Profile]:
+        """Every Profile of the file's devices, then of its modules."""
+        found = [p for dev in self.devices for p in dev.profiles]
+        return found + [m.profile for m in self.modules if m.profile is not None]
+
+    def read_dictionaries(self) -> EsiFile:
+        """Read every object dictionary not read yet, so that ``problems`` and ``ignored``
+        hold what the reader found in all of them."""
+        for profile in self.profiles():
+            if profile.dictionary_pending:
+                _ = profile.dictionary
+        return self
 
 
 def format_selector(vendor: int | None, product: int | None, revision: int | None) -> str:

@@ -11,7 +11,9 @@ diagnosis texts, vendor-specific blocks) are skipped silently.
 from __future__ import annotations
 
 import gc
+import threading
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 
 from lxml import etree
@@ -203,18 +205,89 @@ def read_tree(tree: etree._ElementTree, file: str) -> EsiFile:
             gc.enable()
 
 
+class FileReader:
+    """One file's model, its Device elements read one by one when asked for.
+
+    A compile uses one or two devices of a Beckhoff family file of 24 to 124: everything
+    else of the file (vendor, groups, modules, references) is read at once, each Device
+    when :meth:`device` asks for it, all of them by :meth:`model`.  ``esi`` is the file
+    with the devices read so far, in file order; its ``problems`` and ``ignored`` hold
+    those of the parts read.  An EtherCATInfoList (several documents, each with its own
+    vendor) is read whole at once."""
+
+    def __init__(self, tree: etree._ElementTree, file: str) -> None:
+        root = tree.getroot()
+        check_root(root, file)
+        # The Device elements not read yet (``None`` once read: what is read lets its
+        # element, and at last the tree, go).
+        self._elements: list[etree._Element | None] = []
+        self._devices: dict[int, Device] = {}
+        self._lock = threading.Lock()
+        if root.tag == LIST_ROOT:
+            self.esi = read_tree(tree, file)
+            self._devices = dict(enumerate(self.esi.devices))
+            self._elements = [None] * len(self._devices)
+        else:
+            self._reader = _Reader(file)
+            later: list[etree._Element] = []
+            with _gc_paused():
+                self.esi = self._reader.read_root(root, later)
+            self._reader.later = None
+            self._elements = list(later)
+
+    def device(self, ordinal: int) -> Device:
+        """The Device ``ordinal`` of the file (``device_elements`` order), read once."""
+        dev = self._devices.get(ordinal)
+        if dev is None:
+            with self._lock:            # two threads: one reads it, both get that one
+                dev = self._devices.get(ordinal)
+                el = self._elements[ordinal]
+                if dev is None and el is not None:
+                    with _gc_paused():
+                        dev = self._reader.device(el, self.esi.vendor)
+                    dev.vendor = self.esi.vendor
+                    self._devices[ordinal] = dev
+                    self._elements[ordinal] = None
+                    self.esi.devices = [self._devices[i] for i in sorted(self._devices)]
+        assert dev is not None
+        return dev
+
+    def model(self) -> EsiFile:
+        """The whole file: every Device read (those read already are kept)."""
+        if len(self._devices) < len(self._elements):
+            for ordinal in range(len(self._elements)):
+                self.device(ordinal)
+        return self.esi
+
+
+class _gc_paused:
+    """The cyclic GC off while a model is read (see ``read_tree``)."""
+
+    def __enter__(self) -> None:
+        self.was_enabled = gc.isenabled()
+        gc.disable()
+
+    def __exit__(self, *exc: object) -> None:
+        if self.was_enabled:
+            gc.enable()
+
+
 def _read_list(root: etree._Element, file: str) -> EsiFile:
     """An EtherCATInfoList as one file of all its documents' devices, each with its own
     vendor (``Device.vendor``); the file's vendor is the first document's."""
-    docs = [_Reader(file).read_root(doc) for doc in documents(root)]
+    # One list of problems and ignored elements for all documents: a dictionary read later
+    # adds to the file's.
+    problems: list[ReadProblem] = []
+    ignored: list[IgnoredElement] = []
+    docs = [_Reader(file, problems, ignored).read_root(doc) for doc in documents(root)]
     first = docs[0].vendor if docs else Vendor(None, {}, _new_source(Source, (file, 1)))
     esi = EsiFile(file, LIST_ROOT, first, version=root.get("Version"))
     for doc in docs:
         esi.groups += doc.groups
         esi.devices += doc.devices
         esi.info_references += doc.info_references
-        esi.problems += doc.problems
-        esi.ignored += doc.ignored
+    esi._problems = problems
+    esi._ignored = ignored
     return esi
 
 
@@ -237,10 +310,14 @@ def text_of(el: etree._Element) -> str:
 class _Reader:
     """Reads one file; collects problems and ignored elements as it goes."""
 
-    def __init__(self, file: str) -> None:
+    def __init__(self, file: str, problems: list[ReadProblem] | None = None,
+                 ignored: list[IgnoredElement] | None = None) -> None:
         self.file = file
-        self.problems: list[ReadProblem] = []
-        self.ignored: list[IgnoredElement] = []
+        # The file's lists (``EsiFile.problems``, ``ignored``): a dictionary read on first
+        # use (``Profile.read_later``) adds to them then.
+        self.problems: list[ReadProblem] = [] if problems is None else problems
+        self.ignored: list[IgnoredElement] = [] if ignored is None else ignored
+        self.later: list[etree._Element] | None = None
 
     # -- values ---------------------------------------------------------------------------
 
@@ -302,7 +379,10 @@ class _Reader:
 
     # -- file level -----------------------------------------------------------------------
 
-    def read_root(self, root: etree._Element) -> EsiFile:
+    def read_root(self, root: etree._Element,
+                  later: list[etree._Element] | None = None) -> EsiFile:
+        """The file; ``later``: its Device elements are put there, not read (``FileReader``)."""
+        self.later = later
         vendor = Vendor(None, {}, self.src(root))
         esi = EsiFile(self.file, str(root.tag), vendor, version=root.get("Version"))
         for ch in root:
@@ -319,8 +399,8 @@ class _Reader:
                 self.unknown(ch, "EtherCATInfo", root)
         for dev in esi.devices:
             dev.vendor = vendor
-        esi.problems = self.problems
-        esi.ignored = self.ignored
+        esi._problems = self.problems
+        esi._ignored = self.ignored
         return esi
 
     def vendor(self, el: etree._Element) -> Vendor:
@@ -346,7 +426,10 @@ class _Reader:
             elif tag == "Devices":
                 for d in ch:
                     if d.tag == "Device":
-                        esi.devices.append(self.device(d, esi.vendor))
+                        if self.later is not None:
+                            self.later.append(d)
+                        else:
+                            esi.devices.append(self.device(d, esi.vendor))
                     else:
                         self.unknown(d, "Descriptions", ch)
             elif tag == "Modules":
@@ -701,6 +784,7 @@ class _Reader:
 
     def profile(self, el: etree._Element) -> Profile:
         prof = Profile(self.src(el), channel=self.int_(el.get("Channel"), el, "@Channel"))
+        dictionaries = []
         for ch in el:
             tag = ch.tag
             if tag == "ProfileNo":
@@ -708,12 +792,22 @@ class _Reader:
             elif tag == "AddInfo":
                 prof.add_info = self.int_(ch.text, ch, "Profile/AddInfo")
             elif tag == "Dictionary":
-                prof.dictionary = self.dictionary(ch)
+                dictionaries.append(ch)
             elif tag == "DictionaryFile":
                 prof.dictionary_file = text_of(ch)
             else:
                 self.unknown(ch, "Profile", el)
+        if dictionaries:
+            # Read when first asked for (``Profile.dictionary``): the dictionaries are two
+            # thirds of the reader's time over the corpus, and most devices' are never used.
+            prof.read_later(partial(self.dictionaries, dictionaries))
         return prof
+
+    def dictionaries(self, elements: list[etree._Element]) -> Dictionary:
+        """A Profile's dictionary, read on first use (the last, if the element repeats;
+        each one's problems are reported)."""
+        with _gc_paused():                  # as in read_tree: many small acyclic objects
+            return [self.dictionary(el) for el in elements][-1]
 
     def dictionary(self, el: etree._Element) -> Dictionary:
         dic = Dictionary({}, {}, self.src(el))

@@ -64,33 +64,35 @@ DOES_NOT_STOP: dict[str, str] = {
 }
 
 
-_cache: dict[tuple[Path, str, str], FileResult] = {}
+_cache: dict[tuple[Path, str, str, frozenset[int] | None], FileResult] = {}
 _CACHE_FILES = 64       # a long-running process (a fuzz campaign) must not grow without end
 
 
 def file_findings(path: Path, shown: str, others: list[Path],
-                  loaded: Callable[[Path, str], tuple[EsiFile, ElementSpans] | None] | None
-                  = None) -> FileResult:
+                  loaded: Callable[[Path, str, frozenset[int] | None],
+                                   tuple[EsiFile, ElementSpans] | None] | None
+                  = None, devices: frozenset[int] | None = None) -> FileResult:
     """The findings of the rules that stop compile in one ESI file, linted once per
     process while its content is unchanged (a sweep compiles the devices of one file one
     after another).  Keyed by a digest of the content, not the modification time, whose
     granularity (a clock tick) lets a file rewritten at once with the same size look
     unchanged.  ``loaded(path, digest)``: the model and element spans already read from
     that very content (``Library.loaded``), which lint then takes instead of parsing and
-    reading the file again."""
+    reading the file again.  ``devices``: only the Device elements at these lines are
+    checked (``lint_file``), the others' findings are left out."""
     try:
         digest = content_digest(read_input(path, shown))
     except OSError:
         digest = ""                         # lint reports the unreadable file (ESI001)
-    key = (path, shown, digest)
+    key = (path, shown, digest, devices)
     found = _cache.get(key)
     if found is None:
         # Named directly, a file is never skipped (``None`` is for non-ESI files in folders).
         if len(_cache) >= _CACHE_FILES:
             del _cache[next(iter(_cache))]          # the oldest
-        known = loaded(path, digest) if loaded is not None and digest else None
+        known = loaded(path, digest, devices) if loaded is not None and digest else None
         found = _cache[key] = lint_file(Target(path, shown, True), LintOptions(STOPS_COMPILE),
-                                        others, known) or FileResult(shown)
+                                        others, known, devices) or FileResult(shown)
     return found
 
 

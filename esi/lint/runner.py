@@ -10,7 +10,7 @@ from __future__ import annotations
 import bisect
 import os
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Callable
 
@@ -79,17 +79,23 @@ class _Emitter:
 
 
 def lint_file(target: Target, options: LintOptions, others: list[Path],
-              known: tuple[EsiFile, ElementSpans] | None = None) -> FileResult | None:
+              known: tuple[EsiFile, ElementSpans] | None = None,
+              devices: frozenset[int] | None = None) -> FileResult | None:
     """Lint one file; ``None`` for a non-ESI XML file met inside a folder (skipped).
     ``known``: the file's model and element spans, already read from the same content
     (the rules only read them), instead of parsing and reading the file again (unless a
-    schema is to be validated: that needs the tree)."""
+    schema is to be validated: that needs the tree).  ``devices``: check only the Device
+    elements starting at these lines (and every module): what compile's gate asks of the
+    devices a topology uses; the findings of those devices are the ones a whole-file lint
+    gives them, as long as no module of the file is in use (a module's InitCmds are
+    checked against the dictionaries of every device of its file that takes it)."""
     start = time.perf_counter()
     result = FileResult(target.shown)
     out = _Emitter(target.shown, options.active)
     if known is not None and options.schema_dir is None:
         esi, where = known
-        return _checked(target, options, others, result, out, start, esi, where, None)
+        return _checked(target, options, others, result, out, start, esi, where, None,
+                        devices)
     try:
         data = read_input(target.path, target.shown)
         tree = xmlsafe.parse_bytes(data, target.shown, strip=False)
@@ -119,14 +125,24 @@ def lint_file(target: Target, options: LintOptions, others: list[Path],
 
     xmlsafe.strip_namespaces(tree)
     return _checked(target, options, others, result, out, start,
-                    reader.read_tree(tree, target.shown), reader.spans_of(tree), schema_errors)
+                    reader.read_tree(tree, target.shown), reader.spans_of(tree), schema_errors,
+                    devices)
 
 
 def _checked(target: Target, options: LintOptions, others: list[Path], result: FileResult,
              out: _Emitter, start: float, esi: EsiFile, where: ElementSpans,
-             schema_errors: list[tuple[int, int | None, str]] | None) -> FileResult:
-    """The rules run over a file's model, findings tied to its Device elements."""
+             schema_errors: list[tuple[int, int | None, str]] | None,
+             only: frozenset[int] | None = None) -> FileResult:
+    """The rules run over a file's model, findings tied to its Device elements (``only``:
+    the devices at these lines, see ``lint_file``)."""
     spans = where.devices
+    if only is not None:
+        # The others need not have been read (``Library.loaded``), nor their dictionaries
+        # (``EsiFile.problems`` reads only the view's): a topology uses one or two devices
+        # of a family file of a hundred.  A Device's span starts at its line.
+        span_at = {first: (first, end) for first, end in spans}
+        esi = replace(esi, devices=[d for d in esi.devices if d.source.line in only])
+        spans = [span_at[d.source.line] for d in esi.devices]
     result.module_spans = where.modules
     devices = [DeviceRef(d.vendor.id, d.product_code, d.revision, d.type_name, d.source.line)
                for d in esi.devices]
