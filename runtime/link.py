@@ -127,13 +127,17 @@ class RawLink(_Base):
     ``tests/rig.py`` for opening one inside another namespace).
     """
 
-    __slots__ = ("iface", "ethertype", "mtu", "_sock", "_fd", "_bufsize", "_closed", "_rcvtimeo")
+    __slots__ = ("iface", "ethertype", "mtu", "_sock", "_fd", "_bufsize", "_closed", "_rcvtimeo",
+                 "_outgoing_dropped")
 
     def __init__(self, iface: str, *, ethertype: int = ETHERTYPE, rcvbuf: int = _RCVBUF) -> None:
         self.iface = iface
         self.ethertype = ethertype
         self._closed = True
         self._rcvtimeo = 0.0        # s, the SO_RCVTIMEO recv_into set (0: none)
+        # Whether the kernel drops the copies of our own frames (PACKET_IGNORE_OUTGOING
+        # accepted): then recv_into needs no source address to tell them apart.
+        self._outgoing_dropped = False
         try:
             # Protocol 0 receives nothing until bind() names the EtherType; a socket created
             # with the protocol costs the kernel an RCU grace period (6-16 ms) at creation
@@ -153,12 +157,15 @@ class RawLink(_Base):
                     raise UsageError(f"no such network interface: {iface!r}"
                                      f"{_available_interfaces()}") from None
                 raise UsageError(f"{iface}: cannot bind a raw socket: {exc}") from None
-            for level, opt, value in ((_SOL_PACKET, _PACKET_IGNORE_OUTGOING, 1),
-                                      (socket.SOL_SOCKET, socket.SO_RCVBUF, rcvbuf)):
-                try:
-                    sock.setsockopt(level, opt, value)
-                except OSError:
-                    pass      # old kernel: outgoing copies are still filtered in recv()
+            try:
+                sock.setsockopt(_SOL_PACKET, _PACKET_IGNORE_OUTGOING, 1)
+                self._outgoing_dropped = True
+            except OSError:
+                pass          # old kernel: outgoing copies are still filtered in recv()
+            try:
+                sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, rcvbuf)
+            except OSError:
+                pass
             if os.geteuid() == 0:       # root may exceed net.core.rmem_max
                 try:
                     sock.setsockopt(socket.SOL_SOCKET, _SO_RCVBUFFORCE, rcvbuf)
@@ -247,8 +254,15 @@ class RawLink(_Base):
 
         One blocking ``recvfrom_into`` bounded by ``SO_RCVTIMEO`` (set when the timeout
         changes by more than 0.5 ms), as SOEM waits: no poll() before it and no exception
-        while a reply is on its way.  May wait up to 0.5 ms past ``timeout``."""
+        while a reply is on its way.  May wait up to 0.5 ms past ``timeout``.
+
+        Where the kernel drops our own frames (``PACKET_IGNORE_OUTGOING``), a plain
+        ``recv_into``: ``recvfrom_into`` builds the sender's address per frame, and for
+        ``AF_PACKET`` CPython looks the interface's name up with an ``ioctl``
+        (``SIOCGIFNAME``, socketmodule.c ``makesockaddr``), a system call and four objects
+        per cycle (docs/BENCHMARKS.md, "Cyclic")."""
         sock, outgoing = self._sock, socket.PACKET_OUTGOING
+        plain = self._outgoing_dropped
         deadline = None if timeout is None else time.monotonic() + timeout
         wait = timeout
         while True:
@@ -263,6 +277,11 @@ class RawLink(_Base):
                                             if wait else 0))
                 self._rcvtimeo = wait
             try:
+                if plain:
+                    n = sock.recv_into(buffer)
+                    if self._closed:
+                        raise LinkError(f"{self.iface}: link is closed")
+                    return n
                 n, addr = sock.recvfrom_into(buffer)
             except (BlockingIOError, InterruptedError):
                 n, addr = 0, None
