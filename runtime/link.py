@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import errno
 import fcntl
+import functools
 import os
 import select
 import socket
@@ -28,6 +29,7 @@ import struct
 import threading
 import time
 from collections import deque
+from collections.abc import Callable
 from typing import Protocol, Self, runtime_checkable
 
 from ..errors import EcatcfgError, UsageError
@@ -42,6 +44,30 @@ _PACKET_IGNORE_OUTGOING = getattr(socket, "PACKET_IGNORE_OUTGOING", 23)   # Linu
 _SO_RCVBUFFORCE = getattr(socket, "SO_RCVBUFFORCE", 33)
 _SIOCGIFMTU = 0x8921
 _RCVBUF = 4 << 20        # room for bursts while the receiving thread is not scheduled
+
+PURE_PYTHON_VARIABLE = "ECATCFG_PURE_PYTHON"
+
+
+def _compiled_exchange() -> Callable[..., tuple[int, int]] | None:
+    """The compiled exchange of a cyclic frame (runtime/_exchange.c), if the build could
+    compile it and ``ECATCFG_PURE_PYTHON`` is not set (non-empty, not ``0``): an install
+    without a C compiler has none and cycles in Python (docs/architecture.md, "The
+    compiled cyclic exchange")."""
+    if os.environ.get(PURE_PYTHON_VARIABLE, "") not in ("", "0"):
+        return None
+    try:
+        from . import _exchange
+    except ImportError:
+        return None
+    return _exchange.exchange
+
+
+_COMPILED = _compiled_exchange()
+
+
+def cyclic_exchange_path() -> str:
+    """Which path a RawLink's cyclic frames take: for ``ecatcfg --version``."""
+    return "compiled" if _COMPILED is not None else "pure Python"
 
 
 class LinkError(EcatcfgError):
@@ -128,7 +154,7 @@ class RawLink(_Base):
     """
 
     __slots__ = ("iface", "ethertype", "mtu", "_sock", "_fd", "_bufsize", "_closed", "_rcvtimeo",
-                 "_outgoing_dropped")
+                 "_outgoing_dropped", "exchange_frame")
 
     def __init__(self, iface: str, *, ethertype: int = ETHERTYPE, rcvbuf: int = _RCVBUF) -> None:
         self.iface = iface
@@ -138,6 +164,11 @@ class RawLink(_Base):
         # Whether the kernel drops the copies of our own frames (PACKET_IGNORE_OUTGOING
         # accepted): then recv_into needs no source address to tell them apart.
         self._outgoing_dropped = False
+        # The compiled exchange of a prepared frame on this socket, (frame, index_le,
+        # reply, mask, idx, timeout) -> (size or 0 if lost, stray replies), used by
+        # Transport.exchange_prepared (errors through exchange_error); a partial, not a
+        # method: no Python frame per cycle.  None: the frames go through send/recv_into.
+        self.exchange_frame: Callable[..., tuple[int, int]] | None = None
         try:
             # Protocol 0 receives nothing until bind() names the EtherType; a socket created
             # with the protocol costs the kernel an RCU grace period (6-16 ms) at creation
@@ -177,6 +208,8 @@ class RawLink(_Base):
             raise
         self._sock = sock
         self._fd = sock.fileno()
+        if _COMPILED is not None:
+            self.exchange_frame = functools.partial(_COMPILED, sock)
         # A frame never exceeds MTU + header (+ 4 for a VLAN tag); keep room for larger MTUs.
         self._bufsize = max(self.mtu + ETH_HEADER_SIZE + 4, 2048)
         self._closed = False
@@ -292,6 +325,13 @@ class RawLink(_Base):
             if addr is not None and addr[2] != outgoing:
                 return n
             wait = None if deadline is None else deadline - time.monotonic()
+
+    def exchange_error(self, exc: OSError, size: int) -> Exception:
+        """The error :attr:`exchange_frame` raised, as :meth:`send` and :meth:`recv_into`
+        would have raised it (runtime/_exchange.c names the call in ``filename``)."""
+        if exc.filename == "send":
+            return self._send_error(exc, size)
+        return self._recv_error(exc)
 
     def recv_many(self, max_frames: int, timeout: float | None = None) -> list[bytes]:
         """Up to ``max_frames`` frames: waits up to ``timeout`` for the first one, then takes

@@ -134,9 +134,9 @@ def _median(ordered: list[float]) -> float:
 class _Prepared:
     """One cyclic frame of one AL state, encoded once, with the places a cycle touches."""
 
-    __slots__ = ("slots", "frame", "index_at", "length", "_header", "_wkcs", "_expect",
-                 "_shape", "_out_copies", "_in_copies", "_inputs", "_outputs", "wkcs",
-                 "_slave_copies")
+    __slots__ = ("slots", "frame", "index_at", "index_le", "reply_mask", "length", "_header",
+                 "_wkcs", "_expect", "_shape", "_out_copies", "_in_copies", "_inputs",
+                 "_outputs", "_slave_copies")
 
     def __init__(self, slots: list[_Slot], constant: list[bytes]) -> None:
         self.slots = slots
@@ -147,6 +147,11 @@ class _Prepared:
         self.index_at = tuple(pos + 1 for pos, _ in places)
         last, n = places[-1]
         self.length = last + wire.DG_HEADER_LEN + n + wire.WKC.size
+        # The same check for the compiled exchange (runtime/_exchange.c): the index
+        # offsets as 16-bit little-endian numbers, and per byte of the reply the bits that
+        # must be as sent, from the same struct as :meth:`matches` (its B and H fields).
+        self.index_le = b"".join(at.to_bytes(2, "little") for at in self.index_at)
+        self.reply_mask = _reply_mask(self.length, places)
         # The fixed offsets, read with one struct call each: EtherType, EtherCAT header
         # and each datagram's cmd, index and len|flags; and each datagram's WKC.
         self._header = struct.Struct("<12xHH" + "".join(f"BB4xH2x{n}x2x" for _, n in places))
@@ -160,7 +165,6 @@ class _Prepared:
         self._in_copies: tuple[tuple[memoryview, memoryview], ...] = ()
         self._inputs: bytearray | None = None
         self._outputs: bytearray | None = None
-        self.wkcs: tuple[int, ...] = ()        # the working counters of the last reply
         # Per command with CopyInfos: the command's slot, the working counter that makes
         # its input data valid (-1: any that came back) and its compiled copies.
         self._slave_copies: tuple[tuple[_Slot, int, tuple[_CopyOp, ...]], ...] = ()
@@ -192,7 +196,7 @@ class _Prepared:
     def matches(self, reply: bytearray, size: int, idx: int) -> bool:
         """The reply is this frame come back under ``idx``: EtherType and EtherCAT header
         as sent, and every datagram's command, index and length (ignoring the circulating
-        bit a slave may set); then its working counters are in :attr:`wkcs`."""
+        bit a slave may set).  :attr:`reply_mask` says the same for the compiled path."""
         if size < self.length:
             return False
         got = self._header.unpack_from(reply)
@@ -207,12 +211,7 @@ class _Prepared:
                 if got[k] != expect[k] or got[k + 1] != idx \
                         or got[k + 2] & _FLAG_SHAPE != expect[k + 2] & _FLAG_SHAPE:
                     return False
-        self.wkcs = self._wkcs.unpack_from(reply)
         return True
-
-    def take(self) -> None:
-        for to, source in self._in_copies:
-            to[:] = source
 
     def copy_slave_to_slave(self) -> None:
         """This frame's CopyInfos, for the commands whose input data is valid."""
@@ -235,6 +234,18 @@ class _Prepared:
                     value = int.from_bytes(inputs[sb:se], "little") >> ss & mask
                     outputs[db:de] = (int.from_bytes(outputs[db:de], "little") & keep
                                       | value << ds).to_bytes(de - db, "little")
+
+
+def _reply_mask(length: int, places: list[tuple[int, int]]) -> bytes:
+    """Per byte of a reply, the bits :meth:`_Prepared.matches` compares with the frame as
+    sent: EtherType and EtherCAT header (bytes 12-15), each datagram's command and index,
+    and its len|flags but for the circulating bit (``_FLAG_SHAPE``)."""
+    mask = bytearray(length)
+    mask[12:wire.FRAME_HEADER_END] = b"\xff" * (wire.FRAME_HEADER_END - 12)
+    for pos, _ in places:
+        mask[pos] = mask[pos + 1] = 0xFF
+        mask[pos + 6:pos + 8] = _FLAG_SHAPE.to_bytes(2, "little")
+    return bytes(mask)
 
 
 # A compiled copy: (destination view, source view) for whole bytes; for bits within one
@@ -320,24 +331,31 @@ class CyclicFrames:
         with the working counters expected (each slot's ``expected``)."""
         now = transport.clock.monotonic()
         stats = self.stats
-        if self._last_start is not None:
-            stats.add_period((now - self._last_start) * 1e6)
+        last = self._last_start
+        if last is not None:
+            stats.add_period((now - last) * 1e6)
         self._last_start = now
         stats.cycles += 1
         ok = True
         inputs, outputs, reply = self.inputs, self.outputs, self._reply
         prepared = self._prepared.get(state) or self.prepared(state)
+        exchange = transport.exchange_prepared
+        # bind, fill and take written out here: a method call costs as much as the copy
+        # (docs/BENCHMARKS.md, "Cyclic").
         for p in prepared:
-            p.bind(inputs, outputs, reply)
-            p.fill()
-            if not transport.exchange_prepared(p, reply, timeout):
+            if p._inputs is not inputs or p._outputs is not outputs:
+                p.bind(inputs, outputs, reply)
+            for to, source in p._out_copies:
+                to[:] = source
+            if not exchange(p, reply, timeout):
                 stats.lost_frames += 1
                 for s in p.slots:
                     s.wkc = -1
                 ok = False
                 continue
-            p.take()
-            for s, wkc in zip(p.slots, p.wkcs):
+            for to, source in p._in_copies:
+                to[:] = source
+            for s, wkc in zip(p.slots, p._wkcs.unpack_from(reply)):
                 s.wkc = wkc
                 if s.expected is not None and wkc != s.expected:
                     stats.wkc_errors += 1

@@ -47,6 +47,11 @@ class Transport:
         self.counters = Counters()
         self._idx = 0
         self._recv_into = getattr(link, "recv_into", None)   # links that have it
+        # A RawLink's compiled exchange (runtime/_exchange.c), unless the build had no C
+        # compiler or ECATCFG_PURE_PYTHON is set: then the loop below, in Python.
+        self._exchange_frame = getattr(link, "exchange_frame", None)
+        self._exchange_error: Callable[[OSError, int], Exception] | None = getattr(
+            link, "exchange_error", None)
 
     def exchange(self, datagrams: list[Datagram],
                  timeout: float | None = None) -> list[Datagram] | None:
@@ -94,6 +99,24 @@ class Transport:
         (index and shape; anything else is a stray reply), without building objects: the
         cyclic frames' path."""
         self._idx = idx = (self._idx + 1) & 0xFF
+        compiled = self._exchange_frame
+        if compiled is not None and not self.recorder:
+            # The same steps in C: index, send, wait, the shape check (prepared.reply_mask
+            # holds the bits matches() compares), strays counted, a lost frame is 0.
+            try:
+                size, strays = compiled(prepared.frame, prepared.index_le, reply,
+                                        prepared.reply_mask, idx,
+                                        self.timeout if timeout is None else timeout)
+            except OSError as exc:
+                assert self._exchange_error is not None     # a RawLink's
+                raise self._exchange_error(exc, len(prepared.frame)) from None
+            counters = self.counters
+            counters.frames_sent += 1
+            if strays:
+                counters.stray_replies += strays
+            if not size:
+                counters.frames_lost += 1
+            return size
         frame = prepared.frame
         for at in prepared.index_at:
             frame[at] = idx
@@ -136,6 +159,8 @@ class Prepared(Protocol):
 
     frame: bytearray            # the Ethernet frame as sent, datagram indices aside
     index_at: tuple[int, ...]   # offset of each datagram's index byte
+    index_le: bytes             # the same, 16-bit little-endian each (the compiled path)
+    reply_mask: bytes           # per byte of a reply, the bits matches() compares with frame
 
     def matches(self, reply: bytearray, size: int, idx: int) -> bool:
         """``reply[:size]`` is this frame come back with index ``idx`` on every datagram:

@@ -1,0 +1,174 @@
+/* The exchange of one cyclic frame on a raw socket, compiled: ecatcfg.runtime._exchange.
+ *
+ * Why C: on one CPU a cycle of the pure-Python path costs about 1.5x SOEM's (docs/
+ * BENCHMARKS.md, "Cyclic"); most of the difference is the interpreter around the two
+ * system calls (the socket module's argument parsing and result objects, the deadline
+ * arithmetic in floats, the reply's shape check).  This module does only what the
+ * Python path in runtime/master/transport.py (Transport.exchange_prepared with
+ * RawLink.recv_into, and the shape check of _Prepared.matches in cyclic.py) does between
+ * "the frame is filled" and "the reply is in the buffer": it is optional, and the Python
+ * path stays the reference (tests/test_compiled_exchange.py runs both on the same frames).
+ *
+ * exchange(sock, frame, index_at, reply, shape, idx, timeout) -> (size, strays)
+ *   sock      the RawLink's socket object (its fileno() is -1 once closed: never an fd
+ *             number that another file may have taken since)
+ *   frame     bytearray, the prepared frame; idx is written at each offset of index_at
+ *   index_at  bytes, one offset per datagram, two bytes little-endian each
+ *   reply     bytearray the reply is received into
+ *   shape     bytes, as long as the reply must be at least: per byte, the bits in which
+ *             the reply must equal the frame as sent (EtherType, EtherCAT header, each
+ *             datagram's command, index and length; 0 elsewhere: data, WKC, addresses
+ *             the slaves fill in, the circulating bit)
+ *   timeout   seconds to wait for the reply
+ *   size      the reply's length, 0 if the frame was lost (no matching reply in time)
+ *   strays    replies received that did not match (Transport.counters.stray_replies)
+ * A failed send or receive raises OSError with filename "send" or "recv", which the
+ * caller turns into the link's own error, as the Python path does.
+ *
+ * The GIL is released while the socket is used: a cycling thread blocked in recv must
+ * not stop the application's other threads.  The buffers are held with
+ * PyObject_GetBuffer meanwhile, so no other thread can resize them (a bytearray with an
+ * export refuses to).  Nothing is allocated per call beyond the result tuple (small ints
+ * are cached; the tuple comes from CPython's free list).
+ */
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+
+#include <errno.h>
+#include <poll.h>
+#include <string.h>
+#include <sys/socket.h>
+#include <time.h>
+#include <linux/if_packet.h>
+
+static double monotonic_now(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);    /* the clock of time.monotonic() */
+    return (double)ts.tv_sec + ts.tv_nsec * 1e-9;
+}
+
+/* Whether reply[:size] is the frame come back: every bit that shape names as sent. */
+static int matches(const unsigned char *reply, Py_ssize_t size,
+                   const unsigned char *frame, const unsigned char *shape, Py_ssize_t n)
+{
+    if (size < n)
+        return 0;                           /* a short frame is a stray, as in Python */
+    for (Py_ssize_t i = 0; i < n; i++)
+        if ((reply[i] ^ frame[i]) & shape[i])
+            return 0;
+    return 1;
+}
+
+static PyObject *exchange(PyObject *Py_UNUSED(self), PyObject *args)
+{
+    PyObject *sock;
+    Py_buffer frame, index_at, reply, shape;
+    int idx;
+    double timeout;
+    if (!PyArg_ParseTuple(args, "Ow*y*w*y*id", &sock, &frame, &index_at, &reply, &shape,
+                          &idx, &timeout))
+        return NULL;
+    PyObject *result = NULL;
+    unsigned char *f = frame.buf, *r = reply.buf;
+    const unsigned char *at = index_at.buf, *mask = shape.buf;
+    int fd = PyObject_AsFileDescriptor(sock);
+    if (fd < 0) {
+        /* A closed socket's fileno() is -1 (a ValueError here): the error of a send on a
+         * closed socket, which the link reports as closed. */
+        if (PyErr_ExceptionMatches(PyExc_ValueError)) {
+            PyErr_Clear();
+            errno = EBADF;
+            PyErr_SetFromErrnoWithFilename(PyExc_OSError, "send");
+        }
+        goto done;
+    }
+    if (shape.len > frame.len || shape.len > reply.len) {
+        PyErr_SetString(PyExc_ValueError, "shape longer than the frame or the reply buffer");
+        goto done;
+    }
+    for (Py_ssize_t k = 0; k + 1 < index_at.len; k += 2) {
+        Py_ssize_t pos = at[k] | at[k + 1] << 8;
+        if (pos >= frame.len) {
+            PyErr_SetString(PyExc_ValueError, "index offset past the frame");
+            goto done;
+        }
+        f[pos] = (unsigned char)idx;
+    }
+    ssize_t sent, got = 0;
+    long strays = 0;
+    int err = 0, failed_send = 0;
+    Py_BEGIN_ALLOW_THREADS
+    double deadline = monotonic_now() + timeout;
+    sent = send(fd, f, (size_t)frame.len, 0);
+    if (sent < 0) {
+        err = errno;
+        failed_send = 1;
+    }
+    while (!err) {
+        struct sockaddr_ll from;
+        socklen_t fromlen = sizeof from;
+        /* Non-blocking first: on one CPU the reply is usually back when send returns
+         * (two system calls, as SOEM's cycle); else wait in poll until the deadline. */
+        got = recvfrom(fd, r, (size_t)reply.len, MSG_DONTWAIT, (struct sockaddr *)&from,
+                       &fromlen);
+        if (got >= 0) {
+            /* Our own frame (a kernel without PACKET_IGNORE_OUTGOING): not a reply. */
+            if (from.sll_pkttype == PACKET_OUTGOING)
+                continue;
+            if (matches(r, got, f, mask, shape.len))
+                break;
+            strays++;                       /* late, foreign or malformed: keep waiting */
+            continue;
+        }
+        if (errno == EINTR)
+            continue;
+        if (errno != EAGAIN && errno != EWOULDBLOCK) {
+            err = errno;
+            break;
+        }
+        double left = deadline - monotonic_now();
+        if (left <= 0) {
+            got = 0;                        /* lost: Transport counts it */
+            break;
+        }
+        struct pollfd p = {fd, POLLIN, 0};
+        /* rounded up: never give up early (nor wait past a day on a huge timeout) */
+        int ms = left > 86400.0 ? 86400000 : (int)(left * 1000.0) + 1;
+        if (poll(&p, 1, ms) < 0 && errno != EINTR) {
+            err = errno;
+            break;
+        }
+    }
+    Py_END_ALLOW_THREADS
+    if (err) {
+        errno = err;
+        PyErr_SetFromErrnoWithFilename(PyExc_OSError, failed_send ? "send" : "recv");
+        goto done;
+    }
+    result = Py_BuildValue("(nl)", (Py_ssize_t)got, strays);
+done:
+    PyBuffer_Release(&frame);
+    PyBuffer_Release(&index_at);
+    PyBuffer_Release(&reply);
+    PyBuffer_Release(&shape);
+    return result;
+}
+
+static PyMethodDef methods[] = {
+    {"exchange", exchange, METH_VARARGS,
+     "exchange(sock, frame, index_at, reply, shape, idx, timeout) -> (size, strays): send "
+     "the prepared frame under idx and receive its reply (size 0: lost)."},
+    {NULL, NULL, 0, NULL},
+};
+
+static struct PyModuleDef module = {
+    PyModuleDef_HEAD_INIT, "_exchange",
+    "One cyclic frame's exchange on a raw socket, compiled (runtime/_exchange.c).", -1,
+    methods,
+};
+
+PyMODINIT_FUNC PyInit__exchange(void)
+{
+    return PyModule_Create(&module);
+}
