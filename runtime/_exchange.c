@@ -5,11 +5,12 @@
  * system calls (the socket module's argument parsing and result objects, the deadline
  * arithmetic in floats, the reply's shape check).  This module does only what the
  * Python path in runtime/master/transport.py (Transport.exchange_prepared with
- * RawLink.recv_into, and the shape check of _Prepared.matches in cyclic.py) does between
- * "the frame is filled" and "the reply is in the buffer": it is optional, and the Python
+ * RawLink.recv_into, and _Prepared.fill, matches and take in cyclic.py) does between
+ * "the outputs are set" and "the inputs are in the image": it is optional, and the Python
  * path stays the reference (tests/test_compiled_exchange.py runs both on the same frames).
  *
- * exchange(sock, frame, index_at, reply, shape, idx, timeout) -> (size, strays)
+ * exchange(sock, frame, index_at, reply, shape, idx, timeout, out_table, outputs,
+ *          in_table, inputs) -> (size, strays)
  *   sock      the RawLink's socket object (its fileno() is -1 once closed: never an fd
  *             number that another file may have taken since)
  *   frame     bytearray, the prepared frame; idx is written at each offset of index_at
@@ -20,6 +21,8 @@
  *             datagram's command, index and length; 0 elsewhere: data, WKC, addresses
  *             the slaves fill in, the circulating bit)
  *   timeout   seconds to wait for the reply
+ *   out_table, outputs, in_table, inputs: the process data copied into the frame before
+ *             it is sent and out of the reply once it matched (see copy_table)
  *   size      the reply's length, 0 if the frame was lost (no matching reply in time)
  *   strays    replies received that did not match (Transport.counters.stray_replies)
  * A failed send or receive raises OSError with filename "send" or "recv", which the
@@ -60,19 +63,72 @@ static int matches(const unsigned char *reply, Py_ssize_t size,
     return 1;
 }
 
-static PyObject *exchange(PyObject *Py_UNUSED(self), PyObject *args)
+/* Copy n bytes for each (to, from, n) triple of int32 in table, checked against both
+ * buffers' lengths (a memoryview assignment in Python raises ValueError alike). */
+static int copy_table(const Py_buffer *table, unsigned char *to, Py_ssize_t to_len,
+                      const unsigned char *from, Py_ssize_t from_len, int from_is_image)
 {
-    PyObject *sock;
-    Py_buffer frame, index_at, reply, shape;
-    int idx;
-    double timeout;
-    if (!PyArg_ParseTuple(args, "Ow*y*w*y*id", &sock, &frame, &index_at, &reply, &shape,
-                          &idx, &timeout))
+    const int *t = table->buf;
+    Py_ssize_t count = table->len / (Py_ssize_t)(3 * sizeof(int));
+    for (Py_ssize_t k = 0; k < count; k++) {
+        /* (frame or reply offset, image offset, length) */
+        Py_ssize_t at = t[3 * k], image_at = t[3 * k + 1], n = t[3 * k + 2];
+        Py_ssize_t to_at = from_is_image ? at : image_at;
+        Py_ssize_t from_at = from_is_image ? image_at : at;
+        if (at < 0 || image_at < 0 || n < 0 || to_at + n > to_len || from_at + n > from_len) {
+            PyErr_SetString(PyExc_ValueError,
+                            "a cyclic command's data lies outside the process image");
+            return -1;
+        }
+        memcpy(to + to_at, from + from_at, (size_t)n);
+    }
+    return 0;
+}
+
+/* exchange(sock, frame, index_at, reply, shape, idx, timeout, out_table, outputs,
+ *          in_table, inputs) -> (size, strays)
+ * out_table/in_table: int32 triples (offset in the frame or reply, offset in the image,
+ * length): the output image is copied into the frame before it is sent, and the reply's
+ * read data into the input image once it matched (_Prepared.fill and take in Python). */
+static PyObject *exchange(PyObject *Py_UNUSED(self), PyObject *const *args, Py_ssize_t nargs)
+{
+    if (nargs != 11) {
+        PyErr_SetString(PyExc_TypeError, "exchange() takes 11 arguments");
         return NULL;
+    }
+    /* The buffers, held (and so not resizable) until the end; released in reverse. */
+    enum { FRAME, INDEX_AT, REPLY, SHAPE, OUT_TABLE, OUTPUTS, IN_TABLE, INPUTS, NBUF };
+    static const int arg_of[NBUF] = {1, 2, 3, 4, 7, 8, 9, 10};
+    static const int writable[NBUF] = {1, 0, 1, 0, 0, 0, 0, 1};
+    Py_buffer b[NBUF];
+    int held = 0;
     PyObject *result = NULL;
-    unsigned char *f = frame.buf, *r = reply.buf;
-    const unsigned char *at = index_at.buf, *mask = shape.buf;
-    int fd = PyObject_AsFileDescriptor(sock);
+    for (; held < NBUF; held++)
+        if (PyObject_GetBuffer(args[arg_of[held]], &b[held],
+                               writable[held] ? PyBUF_WRITABLE : PyBUF_SIMPLE) < 0)
+            goto done;
+    long idx = PyLong_AsLong(args[5]);
+    double timeout = PyFloat_AsDouble(args[6]);
+    if (PyErr_Occurred())
+        goto done;
+    unsigned char *f = b[FRAME].buf, *r = b[REPLY].buf;
+    const unsigned char *at = b[INDEX_AT].buf, *mask = b[SHAPE].buf;
+    Py_ssize_t frame_len = b[FRAME].len, reply_len = b[REPLY].len, shape_len = b[SHAPE].len;
+    if (shape_len > frame_len || shape_len > reply_len) {
+        PyErr_SetString(PyExc_ValueError, "shape longer than the frame or the reply buffer");
+        goto done;
+    }
+    for (Py_ssize_t k = 0; k + 1 < b[INDEX_AT].len; k += 2) {
+        Py_ssize_t pos = at[k] | at[k + 1] << 8;
+        if (pos >= frame_len) {
+            PyErr_SetString(PyExc_ValueError, "index offset past the frame");
+            goto done;
+        }
+        f[pos] = (unsigned char)idx;
+    }
+    if (copy_table(&b[OUT_TABLE], f, frame_len, b[OUTPUTS].buf, b[OUTPUTS].len, 1) < 0)
+        goto done;
+    int fd = PyObject_AsFileDescriptor(args[0]);
     if (fd < 0) {
         /* A closed socket's fileno() is -1 (a ValueError here): the error of a send on a
          * closed socket, which the link reports as closed. */
@@ -83,40 +139,28 @@ static PyObject *exchange(PyObject *Py_UNUSED(self), PyObject *args)
         }
         goto done;
     }
-    if (shape.len > frame.len || shape.len > reply.len) {
-        PyErr_SetString(PyExc_ValueError, "shape longer than the frame or the reply buffer");
-        goto done;
-    }
-    for (Py_ssize_t k = 0; k + 1 < index_at.len; k += 2) {
-        Py_ssize_t pos = at[k] | at[k + 1] << 8;
-        if (pos >= frame.len) {
-            PyErr_SetString(PyExc_ValueError, "index offset past the frame");
-            goto done;
-        }
-        f[pos] = (unsigned char)idx;
-    }
-    ssize_t sent, got = 0;
+    ssize_t got = 0;
     long strays = 0;
     int err = 0, failed_send = 0;
     Py_BEGIN_ALLOW_THREADS
     double deadline = monotonic_now() + timeout;
-    sent = send(fd, f, (size_t)frame.len, 0);
-    if (sent < 0) {
+    if (send(fd, f, (size_t)frame_len, 0) < 0) {
         err = errno;
         failed_send = 1;
     }
     while (!err) {
         struct sockaddr_ll from;
         socklen_t fromlen = sizeof from;
+        from.sll_pkttype = PACKET_HOST;     /* a socket without this field leaves it */
         /* Non-blocking first: on one CPU the reply is usually back when send returns
          * (two system calls, as SOEM's cycle); else wait in poll until the deadline. */
-        got = recvfrom(fd, r, (size_t)reply.len, MSG_DONTWAIT, (struct sockaddr *)&from,
+        got = recvfrom(fd, r, (size_t)reply_len, MSG_DONTWAIT, (struct sockaddr *)&from,
                        &fromlen);
         if (got >= 0) {
             /* Our own frame (a kernel without PACKET_IGNORE_OUTGOING): not a reply. */
             if (from.sll_pkttype == PACKET_OUTGOING)
                 continue;
-            if (matches(r, got, f, mask, shape.len))
+            if (matches(r, got, f, mask, shape_len))
                 break;
             strays++;                       /* late, foreign or malformed: keep waiting */
             continue;
@@ -146,19 +190,20 @@ static PyObject *exchange(PyObject *Py_UNUSED(self), PyObject *args)
         PyErr_SetFromErrnoWithFilename(PyExc_OSError, failed_send ? "send" : "recv");
         goto done;
     }
+    if (got > 0 && copy_table(&b[IN_TABLE], b[INPUTS].buf, b[INPUTS].len, r, got, 0) < 0)
+        goto done;
     result = Py_BuildValue("(nl)", (Py_ssize_t)got, strays);
 done:
-    PyBuffer_Release(&frame);
-    PyBuffer_Release(&index_at);
-    PyBuffer_Release(&reply);
-    PyBuffer_Release(&shape);
+    while (held > 0)
+        PyBuffer_Release(&b[--held]);
     return result;
 }
 
 static PyMethodDef methods[] = {
-    {"exchange", exchange, METH_VARARGS,
-     "exchange(sock, frame, index_at, reply, shape, idx, timeout) -> (size, strays): send "
-     "the prepared frame under idx and receive its reply (size 0: lost)."},
+    {"exchange", (PyCFunction)(void (*)(void))exchange, METH_FASTCALL,
+     "exchange(sock, frame, index_at, reply, shape, idx, timeout, out_table, outputs, "
+     "in_table, inputs) -> (size, strays): fill, send the prepared frame under idx, receive "
+     "its reply and take its inputs (size 0: lost)."},
     {NULL, NULL, 0, NULL},
 };
 

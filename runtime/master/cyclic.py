@@ -135,8 +135,8 @@ class _Prepared:
     """One cyclic frame of one AL state, encoded once, with the places a cycle touches."""
 
     __slots__ = ("slots", "frame", "index_at", "index_le", "reply_mask", "length", "_header",
-                 "_wkcs", "_expect", "_shape", "_out_copies", "_in_copies", "_inputs",
-                 "_outputs", "_slave_copies")
+                 "_wkcs", "_expect", "_shape", "_out_copies", "_in_copies", "inputs_bound",
+                 "outputs_bound", "out_table", "in_table", "_slave_copies")
 
     def __init__(self, slots: list[_Slot], constant: list[bytes]) -> None:
         self.slots = slots
@@ -163,34 +163,47 @@ class _Prepared:
         self._shape = sent
         self._out_copies: tuple[tuple[memoryview, memoryview], ...] = ()
         self._in_copies: tuple[tuple[memoryview, memoryview], ...] = ()
-        self._inputs: bytearray | None = None
-        self._outputs: bytearray | None = None
+        self.inputs_bound: bytearray | None = None       # the images bind() was given
+        self.outputs_bound: bytearray | None = None
+        # The same copies for the compiled exchange: int32 triples (offset in the frame,
+        # in the output image, length) and (in the reply, in the input image, length).
+        self.out_table = self.in_table = b""
         # Per command with CopyInfos: the command's slot, the working counter that makes
         # its input data valid (-1: any that came back) and its compiled copies.
         self._slave_copies: tuple[tuple[_Slot, int, tuple[_CopyOp, ...]], ...] = ()
 
     def bind(self, inputs: bytearray, outputs: bytearray, reply: bytearray) -> None:
         """Views from the frame to the images (again if the images were replaced)."""
-        if inputs is self._inputs and outputs is self._outputs:
+        if inputs is self.inputs_bound and outputs is self.outputs_bound:
             return
         frame, places = memoryview(self.frame), wire.datagram_offsets(self.frame)
         back, ins, outs = memoryview(reply), memoryview(inputs), memoryview(outputs)
         out_copies, in_copies = [], []
+        out_table, in_table = array("i"), array("i")
         for s, (pos, n) in zip(self.slots, places):
             data = pos + wire.DG_HEADER_LEN
             if s.cmd.cmd in (Cmd.LWR, Cmd.LRW):      # process data from the output image
                 out_copies.append((frame[data:data + n], outs[s.out_at:s.out_at + n]))
+                out_table.extend((data, s.out_at, n))
             if s.cmd.cmd in _READS:
                 in_copies.append((ins[s.in_at:s.in_at + n], back[data:data + n]))
+                in_table.extend((data, s.in_at, n))
         self._out_copies, self._in_copies = tuple(out_copies), tuple(in_copies)
+        self.out_table, self.in_table = out_table.tobytes(), in_table.tobytes()
         self._slave_copies = tuple(
             (s, -1 if s.cmd.cnt is None else s.cmd.cnt,
              tuple(_compile(c, ins, outs) for c in s.cmd.copy_infos))
             for s in self.slots if s.cmd.copy_infos)
-        self._inputs, self._outputs = inputs, outputs
+        self.inputs_bound, self.outputs_bound = inputs, outputs
 
     def fill(self) -> None:
+        """The output image into the frame (before it is sent)."""
         for to, source in self._out_copies:
+            to[:] = source
+
+    def take(self) -> None:
+        """The reply's read data into the input image (once it matched)."""
+        for to, source in self._in_copies:
             to[:] = source
 
     def matches(self, reply: bytearray, size: int, idx: int) -> bool:
@@ -215,7 +228,7 @@ class _Prepared:
 
     def copy_slave_to_slave(self) -> None:
         """This frame's CopyInfos, for the commands whose input data is valid."""
-        inputs, outputs = self._inputs, self._outputs
+        inputs, outputs = self.inputs_bound, self.outputs_bound
         assert inputs is not None and outputs is not None   # bound before the exchange
         for slot, want, ops in self._slave_copies:
             wkc = slot.wkc
@@ -340,21 +353,17 @@ class CyclicFrames:
         inputs, outputs, reply = self.inputs, self.outputs, self._reply
         prepared = self._prepared.get(state) or self.prepared(state)
         exchange = transport.exchange_prepared
-        # bind, fill and take written out here: a method call costs as much as the copy
-        # (docs/BENCHMARKS.md, "Cyclic").
+        # The exchange fills the frame from the output image and takes the inputs
+        # (compiled or Python: Transport.exchange_prepared).
         for p in prepared:
-            if p._inputs is not inputs or p._outputs is not outputs:
+            if p.inputs_bound is not inputs or p.outputs_bound is not outputs:
                 p.bind(inputs, outputs, reply)
-            for to, source in p._out_copies:
-                to[:] = source
             if not exchange(p, reply, timeout):
                 stats.lost_frames += 1
                 for s in p.slots:
                     s.wkc = -1
                 ok = False
                 continue
-            for to, source in p._in_copies:
-                to[:] = source
             for s, wkc in zip(p.slots, p._wkcs.unpack_from(reply)):
                 s.wkc = wkc
                 if s.expected is not None and wkc != s.expected:

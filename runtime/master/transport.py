@@ -94,19 +94,22 @@ class Transport:
 
     def exchange_prepared(self, prepared: Prepared, reply: bytearray,
                           timeout: float | None = None) -> int:
-        """Send a prepared frame under the next index and wait for it in ``reply``: the
-        reply's length, or 0 if the frame was lost.  The same matching as :meth:`exchange`
+        """Fill a prepared frame from the output image, send it under the next index, wait
+        for it in ``reply`` and take its inputs: the reply's length, or 0 if the frame was
+        lost.  The same matching as :meth:`exchange`
         (index and shape; anything else is a stray reply), without building objects: the
         cyclic frames' path."""
         self._idx = idx = (self._idx + 1) & 0xFF
         compiled = self._exchange_frame
         if compiled is not None and not self.recorder:
-            # The same steps in C: index, send, wait, the shape check (prepared.reply_mask
-            # holds the bits matches() compares), strays counted, a lost frame is 0.
+            # The same steps in C: fill, index, send, wait, the shape check (reply_mask
+            # holds the bits matches() compares), take; strays counted, a lost frame is 0.
             try:
                 size, strays = compiled(prepared.frame, prepared.index_le, reply,
                                         prepared.reply_mask, idx,
-                                        self.timeout if timeout is None else timeout)
+                                        self.timeout if timeout is None else timeout,
+                                        prepared.out_table, prepared.outputs_bound,
+                                        prepared.in_table, prepared.inputs_bound)
             except OSError as exc:
                 assert self._exchange_error is not None     # a RawLink's
                 raise self._exchange_error(exc, len(prepared.frame)) from None
@@ -117,6 +120,7 @@ class Transport:
             if not size:
                 counters.frames_lost += 1
             return size
+        prepared.fill()
         frame = prepared.frame
         for at in prepared.index_at:
             frame[at] = idx
@@ -149,6 +153,7 @@ class Transport:
             if recorder:
                 recorder(bytes(reply[:size]), False)
             if prepared.matches(reply, size, idx):
+                prepared.take()
                 return size
             self.counters.stray_replies += 1
 
@@ -161,6 +166,19 @@ class Prepared(Protocol):
     index_at: tuple[int, ...]   # offset of each datagram's index byte
     index_le: bytes             # the same, 16-bit little-endian each (the compiled path)
     reply_mask: bytes           # per byte of a reply, the bits matches() compares with frame
+    # The process data's copies (int32 triples) and the images they copy from and to.
+    out_table: bytes
+    in_table: bytes
+    outputs_bound: bytearray | None
+    inputs_bound: bytearray | None
+
+    def fill(self) -> None:
+        """The output image into the frame."""
+        ...
+
+    def take(self) -> None:
+        """The read data of a reply that matched into the input image."""
+        ...
 
     def matches(self, reply: bytearray, size: int, idx: int) -> bool:
         """``reply[:size]`` is this frame come back with index ``idx`` on every datagram:
