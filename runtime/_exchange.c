@@ -9,8 +9,8 @@
  * "the outputs are set" and "the inputs are in the image": it is optional, and the Python
  * path stays the reference (tests/test_compiled_exchange.py runs both on the same frames).
  *
- * exchange(sock, frame, index_at, reply, shape, idx, timeout, out_table, outputs,
- *          in_table, inputs) -> (size, strays)
+ * exchange(sock, (frame, index_at, shape, out_table, outputs, in_table, inputs), reply,
+ *          idx, timeout) -> (size, strays)
  *   sock      the RawLink's socket object (its fileno() is -1 once closed: never an fd
  *             number that another file may have taken since)
  *   frame     bytearray, the prepared frame; idx is written at each offset of index_at
@@ -85,30 +85,32 @@ static int copy_table(const Py_buffer *table, unsigned char *to, Py_ssize_t to_l
     return 0;
 }
 
-/* exchange(sock, frame, index_at, reply, shape, idx, timeout, out_table, outputs,
- *          in_table, inputs) -> (size, strays)
+/* exchange(sock, prepared, reply, idx, timeout) -> (size, strays), prepared being the
+ * tuple (frame, index_at, shape, out_table, outputs, in_table, inputs) made once per
+ * frame and images (_Prepared.compiled: one argument instead of seven attribute reads).
  * out_table/in_table: int32 triples (offset in the frame or reply, offset in the image,
  * length): the output image is copied into the frame before it is sent, and the reply's
  * read data into the input image once it matched (_Prepared.fill and take in Python). */
 static PyObject *exchange(PyObject *Py_UNUSED(self), PyObject *const *args, Py_ssize_t nargs)
 {
-    if (nargs != 11) {
-        PyErr_SetString(PyExc_TypeError, "exchange() takes 11 arguments");
+    if (nargs != 5 || !PyTuple_Check(args[1]) || PyTuple_GET_SIZE(args[1]) != 7) {
+        PyErr_SetString(PyExc_TypeError,
+                        "exchange(sock, (frame, index_at, shape, out_table, outputs, "
+                        "in_table, inputs), reply, idx, timeout)");
         return NULL;
     }
     /* The buffers, held (and so not resizable) until the end; released in reverse. */
-    enum { FRAME, INDEX_AT, REPLY, SHAPE, OUT_TABLE, OUTPUTS, IN_TABLE, INPUTS, NBUF };
-    static const int arg_of[NBUF] = {1, 2, 3, 4, 7, 8, 9, 10};
-    static const int writable[NBUF] = {1, 0, 1, 0, 0, 0, 0, 1};
+    enum { FRAME, INDEX_AT, SHAPE, OUT_TABLE, OUTPUTS, IN_TABLE, INPUTS, REPLY, NBUF };
+    static const int writable[NBUF] = {1, 0, 0, 0, 0, 0, 1, 1};
     Py_buffer b[NBUF];
     int held = 0;
     PyObject *result = NULL;
     for (; held < NBUF; held++)
-        if (PyObject_GetBuffer(args[arg_of[held]], &b[held],
-                               writable[held] ? PyBUF_WRITABLE : PyBUF_SIMPLE) < 0)
+        if (PyObject_GetBuffer(held == REPLY ? args[2] : PyTuple_GET_ITEM(args[1], held),
+                               &b[held], writable[held] ? PyBUF_WRITABLE : PyBUF_SIMPLE) < 0)
             goto done;
-    long idx = PyLong_AsLong(args[5]);
-    double timeout = PyFloat_AsDouble(args[6]);
+    long idx = PyLong_AsLong(args[3]);
+    double timeout = PyFloat_AsDouble(args[4]);
     if (PyErr_Occurred())
         goto done;
     unsigned char *f = b[FRAME].buf, *r = b[REPLY].buf;
@@ -201,9 +203,9 @@ done:
 
 static PyMethodDef methods[] = {
     {"exchange", (PyCFunction)(void (*)(void))exchange, METH_FASTCALL,
-     "exchange(sock, frame, index_at, reply, shape, idx, timeout, out_table, outputs, "
-     "in_table, inputs) -> (size, strays): fill, send the prepared frame under idx, receive "
-     "its reply and take its inputs (size 0: lost)."},
+     "exchange(sock, (frame, index_at, shape, out_table, outputs, in_table, inputs), reply, "
+     "idx, timeout) -> (size, strays): fill, send the prepared frame under idx, receive its "
+     "reply and take its inputs (size 0: lost)."},
     {NULL, NULL, 0, NULL},
 };
 

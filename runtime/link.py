@@ -164,8 +164,8 @@ class RawLink(_Base):
         # Whether the kernel drops the copies of our own frames (PACKET_IGNORE_OUTGOING
         # accepted): then recv_into needs no source address to tell them apart.
         self._outgoing_dropped = False
-        # The compiled exchange of a prepared frame on this socket, (frame, index_le,
-        # reply, mask, idx, timeout) -> (size or 0 if lost, stray replies), used by
+        # The compiled exchange of a prepared frame on this socket, (prepared.compiled,
+        # reply, idx, timeout) -> (size or 0 if lost, stray replies), used by
         # Transport.exchange_prepared (errors through exchange_error); a partial, not a
         # method: no Python frame per cycle.  None: the frames go through send/recv_into.
         self.exchange_frame: Callable[..., tuple[int, int]] | None = None

@@ -149,19 +149,19 @@ def _reply_to(frame: bytes, idx: int | None = None) -> bytearray:
 
 def _peer(rig, script):
     """A hand-made slave line in namespace B: for each frame the master sends, ``script``
-    gives the frames to send back."""
+    gives the frames to send back; stopped by the event returned."""
     peer = rig.socket_in(rig.ns_b)
+    stop = threading.Event()
 
     def serve() -> None:
-        while True:
-            got = peer.recv(2.0)
-            if got is None:
-                return
-            for frame in script(got):
-                peer.send(frame)
+        while not stop.is_set():            # until the test is done, however slow
+            got = peer.recv(0.1)
+            if got is not None:
+                for frame in script(got):
+                    peer.send(frame)
     thread = threading.Thread(target=serve, daemon=True)
     thread.start()
-    return thread
+    return thread, stop
 
 
 @pytest.mark.parametrize("compiled", [
@@ -185,7 +185,7 @@ def test_strays_short_frames_and_a_lost_frame(veth_netns, example_plan, compiled
         other_cmd[16] ^= 0x01
         return [bytes(_reply_to(got, (idx + 1) & 0xFF)), bytes(_reply_to(got))[:p.length - 1],
                 bytes(other_cmd), bytes(_reply_to(got))]
-    thread = _peer(veth_netns, script)
+    thread, stop = _peer(veth_netns, script)
     link = _open(veth_netns, veth_netns.ns_a, compiled)
     transport = Transport(link)
     assert (transport._exchange_frame is not None) is compiled
@@ -202,6 +202,7 @@ def test_strays_short_frames_and_a_lost_frame(veth_netns, example_plan, compiled
     link.close()
     with pytest.raises(LinkError, match="link is closed"):
         transport.exchange_prepared(p, reply, 0.05)
+    stop.set()
     thread.join(5)
 
 

@@ -136,7 +136,7 @@ class _Prepared:
 
     __slots__ = ("slots", "frame", "index_at", "index_le", "reply_mask", "length", "_header",
                  "_wkcs", "_expect", "_shape", "_out_copies", "_in_copies", "inputs_bound",
-                 "outputs_bound", "out_table", "in_table", "_slave_copies")
+                 "outputs_bound", "compiled", "_slave_copies", "good")
 
     def __init__(self, slots: list[_Slot], constant: list[bytes]) -> None:
         self.slots = slots
@@ -165,12 +165,20 @@ class _Prepared:
         self._in_copies: tuple[tuple[memoryview, memoryview], ...] = ()
         self.inputs_bound: bytearray | None = None       # the images bind() was given
         self.outputs_bound: bytearray | None = None
-        # The same copies for the compiled exchange: int32 triples (offset in the frame,
-        # in the output image, length) and (in the reply, in the input image, length).
-        self.out_table = self.in_table = b""
+        # What the compiled exchange gets (runtime/_exchange.c), one tuple made by bind():
+        # the frame, index_le, reply_mask, the same copies as int32 triples (offset in the
+        # frame, in the output image, length) and (in the reply, in the input image,
+        # length) with the images.
+        self.compiled: tuple[bytearray, bytes, bytes, bytes, bytearray, bytes, bytearray] \
+            = (frame, self.index_le, self.reply_mask, b"", bytearray(), b"", bytearray())
         # Per command with CopyInfos: the command's slot, the working counter that makes
         # its input data valid (-1: any that came back) and its compiled copies.
         self._slave_copies: tuple[tuple[_Slot, int, tuple[_CopyOp, ...]], ...] = ()
+        # The working counters of the last reply whose every checked one was as expected,
+        # and which the slots hold: a reply with the same ones needs no look at each slot
+        # (docs/BENCHMARKS.md, "Cyclic").  None after a loss, an error, a change of state
+        # or of what a slot expects (CyclicFrames.expected_changed).
+        self.good: tuple[int, ...] | None = None
 
     def bind(self, inputs: bytearray, outputs: bytearray, reply: bytearray) -> None:
         """Views from the frame to the images (again if the images were replaced)."""
@@ -189,7 +197,8 @@ class _Prepared:
                 in_copies.append((ins[s.in_at:s.in_at + n], back[data:data + n]))
                 in_table.extend((data, s.in_at, n))
         self._out_copies, self._in_copies = tuple(out_copies), tuple(in_copies)
-        self.out_table, self.in_table = out_table.tobytes(), in_table.tobytes()
+        self.compiled = (self.frame, self.index_le, self.reply_mask, out_table.tobytes(),
+                         outputs, in_table.tobytes(), inputs)
         self._slave_copies = tuple(
             (s, -1 if s.cmd.cnt is None else s.cmd.cnt,
              tuple(_compile(c, ins, outs) for c in s.cmd.copy_infos))
@@ -316,6 +325,7 @@ class CyclicFrames:
         self._last_start: float | None = None
         self._prepared: dict[AlState, tuple[_Prepared, ...]] = {}
         self._reply = bytearray(REPLY_BUFFER)
+        self._last_prepared: tuple[_Prepared, ...] = ()
 
     def working_counters(self) -> list[list[CommandCount]]:
         """Per frame, each command with the working counter the last cycle brought back
@@ -335,6 +345,13 @@ class CyclicFrames:
                                for slots in self.frames) if active)
         return found
 
+    def expected_changed(self) -> None:
+        """A slot's ``expected`` changed (runtime/master/recovery.py): the next cycle looks
+        at every working counter again."""
+        for frames in self._prepared.values():
+            for p in frames:
+                p.good = None
+
     def restart_periods(self) -> None:
         """The next cycle starts the periods afresh (not measured from a cycle before)."""
         self._last_start = None
@@ -346,12 +363,20 @@ class CyclicFrames:
         stats = self.stats
         last = self._last_start
         if last is not None:
-            stats.add_period((now - last) * 1e6)
+            ring = stats._ring           # CycleStats.add_period, written out (per cycle)
+            if ring is not None:
+                ring[stats._count % PERIODS_KEPT] = (now - last) * 1e6
+                stats._count += 1
+            else:
+                stats.add_period((now - last) * 1e6)
         self._last_start = now
         stats.cycles += 1
         ok = True
         inputs, outputs, reply = self.inputs, self.outputs, self._reply
         prepared = self._prepared.get(state) or self.prepared(state)
+        if prepared is not self._last_prepared:     # another state: other slots' counts
+            self._last_prepared = prepared
+            self.expected_changed()
         exchange = transport.exchange_prepared
         # The exchange fills the frame from the output image and takes the inputs
         # (compiled or Python: Transport.exchange_prepared).
@@ -362,15 +387,22 @@ class CyclicFrames:
                 stats.lost_frames += 1
                 for s in p.slots:
                     s.wkc = -1
+                p.good = None
                 ok = False
                 continue
-            for s, wkc in zip(p.slots, p._wkcs.unpack_from(reply)):
+            wkcs = p._wkcs.unpack_from(reply)
+            if wkcs == p.good:
+                continue                    # as the last good cycle: the slots hold them
+            good: tuple[int, ...] | None = wkcs
+            for s, wkc in zip(p.slots, wkcs):
                 s.wkc = wkc
                 if s.expected is not None and wkc != s.expected:
                     stats.wkc_errors += 1
                     key = s.cmd.comment or f"cmd {s.cmd.cmd}"
                     stats.wkc_error_cmds[key] = stats.wkc_error_cmds.get(key, 0) + 1
                     ok = False
+                    good = None
+            p.good = good
         if self.copies:
             for p in prepared:
                 p.copy_slave_to_slave()

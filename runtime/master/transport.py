@@ -105,11 +105,8 @@ class Transport:
             # The same steps in C: fill, index, send, wait, the shape check (reply_mask
             # holds the bits matches() compares), take; strays counted, a lost frame is 0.
             try:
-                size, strays = compiled(prepared.frame, prepared.index_le, reply,
-                                        prepared.reply_mask, idx,
-                                        self.timeout if timeout is None else timeout,
-                                        prepared.out_table, prepared.outputs_bound,
-                                        prepared.in_table, prepared.inputs_bound)
+                size, strays = compiled(prepared.compiled, reply, idx,
+                                        self.timeout if timeout is None else timeout)
             except OSError as exc:
                 assert self._exchange_error is not None     # a RawLink's
                 raise self._exchange_error(exc, len(prepared.frame)) from None
@@ -166,11 +163,9 @@ class Prepared(Protocol):
     index_at: tuple[int, ...]   # offset of each datagram's index byte
     index_le: bytes             # the same, 16-bit little-endian each (the compiled path)
     reply_mask: bytes           # per byte of a reply, the bits matches() compares with frame
-    # The process data's copies (int32 triples) and the images they copy from and to.
-    out_table: bytes
-    in_table: bytes
-    outputs_bound: bytearray | None
-    inputs_bound: bytearray | None
+    # For the compiled path: (frame, index_le, reply_mask, the output copies as int32
+    # triples, the output image, the input copies, the input image), made by bind().
+    compiled: tuple[bytearray, bytes, bytes, bytes, bytearray, bytes, bytearray]
 
     def fill(self) -> None:
         """The output image into the frame."""
