@@ -49,7 +49,8 @@ class Transport:
         self._recv_into = getattr(link, "recv_into", None)   # links that have it
         # A RawLink's compiled exchange (runtime/_exchange.c), unless the build had no C
         # compiler or ECATCFG_PURE_PYTHON is set: then the loop below, in Python.
-        self._exchange_frame = getattr(link, "exchange_frame", None)
+        self._exchange_frame: Callable[..., tuple[int, int]] | None = getattr(
+            link, "exchange_frame", None)
         self._exchange_error: Callable[[OSError, int], Exception] | None = getattr(
             link, "exchange_error", None)
 
