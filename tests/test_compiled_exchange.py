@@ -4,7 +4,9 @@ Both paths run on raw Ethernet between two namespaces (tests/rig.py): the same f
 go out and the same images, working counters and counters come back; a short reply, a
 reply under another index and a reply that never comes are handled alike (strays counted,
 the frame lost after the timeout); a closed link raises the same error; the compiled path
-lets other threads run while it waits.  The references are the emulated slaves (what they
+lets other threads run while it waits; cycles on a raw link allocate within the budget on
+both paths.  And the cycle's shortcut for working counters that repeat the last good ones
+(both paths): checked again once an expectation or the state changes.  The references are the emulated slaves (what they
 received and sent) and frames made by hand here, not the code under test.
 
 The compiled module exists where the package was built with a C compiler (README command
@@ -296,3 +298,48 @@ def test_cycles_on_a_raw_link_allocate_nothing_that_stays(veth_netns, compiled):
 def veth_netns_dir(rig) -> Path:
     import tempfile
     return Path(tempfile.mkdtemp(prefix="compiled-exchange-")) / "line.eni.xml"
+
+
+def test_a_repeat_of_the_last_good_counts_is_checked_again_after_a_change(example_plan):
+    """A reply whose working counters repeat the last good cycle's skips the look at each
+    command (runtime/master/cyclic.py); once what a command expects changes (the recovery
+    supervisor lowers or raises it for a slave that leaves or comes back) or the state
+    changes, the same counts are checked again: here the LRW is made to expect one more,
+    and the very next cycle is a working-counter error, counted, as without the shortcut."""
+    with Network.virtual(example_plan, esi=ESI, recovery=False) as net:
+        net.up()
+        assert net.cycle() and net.cycle()          # the second: the shortcut
+        cyclic = net.master.cyclic
+        lrw = next(s for f in cyclic.frames for s in f if s.cmd.cmd == Cmd.LRW)
+        assert lrw.wkc == lrw.expected == lrw.cmd.cnt
+        lrw.expected += 1                            # as recovery.Supervisor._online does
+        cyclic.expected_changed()
+        errors = cyclic.stats.wkc_errors
+        assert not net.cycle()
+        assert cyclic.stats.wkc_errors == errors + 1
+        assert not net.cycle()                       # and again: an error is never "good"
+        lrw.expected -= 1
+        cyclic.expected_changed()
+        assert net.cycle() and net.cycle()
+        # Through SAFEOP (other frames, the same slots) and back: OP's counts again.
+        net.down(AlState.SAFEOP)
+        assert net.cycle()
+        net.up()
+        assert net.cycle() and lrw.wkc == lrw.cmd.cnt
+
+
+def test_the_recovery_supervisor_tells_the_cyclic_frames_when_an_expectation_moves(
+        example_plan):
+    """The supervisor lowers what the LRW expects when a slave drops out and raises it
+    when it is back; each time the frames must forget their last good counts."""
+    with Network.virtual(example_plan, esi=ESI) as net:
+        net.up()
+        net.cycle()
+        cyclic = net.master.cyclic
+        calls = []
+        original = cyclic.expected_changed
+        cyclic.expected_changed = lambda: (calls.append(1), original())[1]  # type: ignore[method-assign]
+        net.segment.remove_cable("axis1")
+        for _ in range(20):
+            net.cycle()
+        assert not net.online("axis1") and calls
