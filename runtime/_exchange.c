@@ -194,7 +194,12 @@ static PyObject *exchange(PyObject *Py_UNUSED(self), PyObject *const *args, Py_s
     }
     if (got > 0 && copy_table(&b[IN_TABLE], b[INPUTS].buf, b[INPUTS].len, r, got, 0) < 0)
         goto done;
-    result = Py_BuildValue("(nl)", (Py_ssize_t)got, strays);
+    /* Built by hand: Py_BuildValue parses its format string on every call. */
+    PyObject *size = PyLong_FromSsize_t((Py_ssize_t)got), *stray = PyLong_FromLong(strays);
+    if (size != NULL && stray != NULL)
+        result = PyTuple_Pack(2, size, stray);
+    Py_XDECREF(size);
+    Py_XDECREF(stray);
 done:
     while (held > 0)
         PyBuffer_Release(&b[--held]);
