@@ -29,10 +29,12 @@
  * caller turns into the link's own error, as the Python path does.
  *
  * The GIL is released while the socket is used: a cycling thread blocked in recv must
- * not stop the application's other threads.  The buffers are held with
- * PyObject_GetBuffer meanwhile, so no other thread can resize them (a bytearray with an
- * export refuses to).  Nothing is allocated per call beyond the result tuple (small ints
- * are cached; the tuple comes from CPython's free list).
+ * not stop the application's other threads.  The frame and the reply buffer are held
+ * with PyObject_GetBuffer meanwhile, so no other thread can resize them (a bytearray with
+ * an export refuses to); index_at and shape, also read then, are bytes (immutable, kept
+ * alive by the caller's tuple); the images are touched only with the GIL held.  Nothing
+ * is allocated per call beyond the result (small ints are cached; the tuple comes from
+ * CPython's free list).
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
@@ -65,14 +67,15 @@ static int matches(const unsigned char *reply, Py_ssize_t size,
 
 /* Copy n bytes for each (to, from, n) triple of int32 in table, checked against both
  * buffers' lengths (a memoryview assignment in Python raises ValueError alike). */
-static int copy_table(const Py_buffer *table, unsigned char *to, Py_ssize_t to_len,
-                      const unsigned char *from, Py_ssize_t from_len, int from_is_image)
+static int copy_table(const char *table, Py_ssize_t table_len, unsigned char *to,
+                      Py_ssize_t to_len, const unsigned char *from, Py_ssize_t from_len,
+                      int from_is_image)
 {
-    const int *t = table->buf;
-    Py_ssize_t count = table->len / (Py_ssize_t)(3 * sizeof(int));
+    Py_ssize_t count = table_len / (Py_ssize_t)(3 * sizeof(int));
     for (Py_ssize_t k = 0; k < count; k++) {
-        /* (frame or reply offset, image offset, length) */
-        Py_ssize_t at = t[3 * k], image_at = t[3 * k + 1], n = t[3 * k + 2];
+        int t[3];                           /* (frame or reply offset, image offset, length) */
+        memcpy(t, table + k * (Py_ssize_t)sizeof t, sizeof t);   /* bytes: maybe unaligned */
+        Py_ssize_t at = t[0], image_at = t[1], n = t[2];
         Py_ssize_t to_at = from_is_image ? at : image_at;
         Py_ssize_t from_at = from_is_image ? image_at : at;
         if (at < 0 || image_at < 0 || n < 0 || to_at + n > to_len || from_at + n > from_len) {
@@ -82,6 +85,21 @@ static int copy_table(const Py_buffer *table, unsigned char *to, Py_ssize_t to_l
         }
         memcpy(to + to_at, from + from_at, (size_t)n);
     }
+    return 0;
+}
+
+/* The bytes of a bytes object (want_bytearray 0) or of a bytearray (1), read while the
+ * GIL is held: cheaper than a buffer export; the frame and the reply buffer, used
+ * without the GIL, are exported instead (PyObject_GetBuffer). */
+static int bytes_of(PyObject *o, int want_bytearray, char **data, Py_ssize_t *len)
+{
+    if (want_bytearray ? !PyByteArray_CheckExact(o) : !PyBytes_CheckExact(o)) {
+        PyErr_Format(PyExc_TypeError, "exchange: expected %s, got %.100s",
+                     want_bytearray ? "bytearray" : "bytes", Py_TYPE(o)->tp_name);
+        return -1;
+    }
+    *data = want_bytearray ? PyByteArray_AS_STRING(o) : PyBytes_AS_STRING(o);
+    *len = want_bytearray ? PyByteArray_GET_SIZE(o) : PyBytes_GET_SIZE(o);
     return 0;
 }
 
@@ -99,28 +117,38 @@ static PyObject *exchange(PyObject *Py_UNUSED(self), PyObject *const *args, Py_s
                         "in_table, inputs), reply, idx, timeout)");
         return NULL;
     }
-    /* The buffers, held (and so not resizable) until the end; released in reverse. */
-    enum { FRAME, INDEX_AT, SHAPE, OUT_TABLE, OUTPUTS, IN_TABLE, INPUTS, REPLY, NBUF };
-    static const int writable[NBUF] = {1, 0, 0, 0, 0, 0, 1, 1};
+    /* The frame and the reply buffer are used without the GIL: held (and so not
+     * resizable by another thread) until the end, released in reverse. */
+    enum { FRAME, REPLY, NBUF };
     Py_buffer b[NBUF];
     int held = 0;
     PyObject *result = NULL;
+    PyObject *const *prep = &PyTuple_GET_ITEM(args[1], 0);
     for (; held < NBUF; held++)
-        if (PyObject_GetBuffer(held == REPLY ? args[2] : PyTuple_GET_ITEM(args[1], held),
-                               &b[held], writable[held] ? PyBUF_WRITABLE : PyBUF_SIMPLE) < 0)
+        if (PyObject_GetBuffer(held == REPLY ? args[2] : prep[0], &b[held],
+                               PyBUF_WRITABLE) < 0)
             goto done;
+    /* The rest only while the GIL is held. */
+    char *at_, *mask_, *out_table, *outputs, *in_table, *inputs;
+    Py_ssize_t at_len, shape_len, out_table_len, outputs_len, in_table_len, inputs_len;
+    if (bytes_of(prep[1], 0, &at_, &at_len) < 0 || bytes_of(prep[2], 0, &mask_, &shape_len) < 0
+            || bytes_of(prep[3], 0, &out_table, &out_table_len) < 0
+            || bytes_of(prep[4], 1, &outputs, &outputs_len) < 0
+            || bytes_of(prep[5], 0, &in_table, &in_table_len) < 0
+            || bytes_of(prep[6], 1, &inputs, &inputs_len) < 0)
+        goto done;
     long idx = PyLong_AsLong(args[3]);
     double timeout = PyFloat_AsDouble(args[4]);
     if (PyErr_Occurred())
         goto done;
     unsigned char *f = b[FRAME].buf, *r = b[REPLY].buf;
-    const unsigned char *at = b[INDEX_AT].buf, *mask = b[SHAPE].buf;
-    Py_ssize_t frame_len = b[FRAME].len, reply_len = b[REPLY].len, shape_len = b[SHAPE].len;
+    const unsigned char *at = (const unsigned char *)at_, *mask = (const unsigned char *)mask_;
+    Py_ssize_t frame_len = b[FRAME].len, reply_len = b[REPLY].len;
     if (shape_len > frame_len || shape_len > reply_len) {
         PyErr_SetString(PyExc_ValueError, "shape longer than the frame or the reply buffer");
         goto done;
     }
-    for (Py_ssize_t k = 0; k + 1 < b[INDEX_AT].len; k += 2) {
+    for (Py_ssize_t k = 0; k + 1 < at_len; k += 2) {
         Py_ssize_t pos = at[k] | at[k + 1] << 8;
         if (pos >= frame_len) {
             PyErr_SetString(PyExc_ValueError, "index offset past the frame");
@@ -128,7 +156,8 @@ static PyObject *exchange(PyObject *Py_UNUSED(self), PyObject *const *args, Py_s
         }
         f[pos] = (unsigned char)idx;
     }
-    if (copy_table(&b[OUT_TABLE], f, frame_len, b[OUTPUTS].buf, b[OUTPUTS].len, 1) < 0)
+    if (copy_table(out_table, out_table_len, f, frame_len, (unsigned char *)outputs,
+                   outputs_len, 1) < 0)
         goto done;
     int fd = PyObject_AsFileDescriptor(args[0]);
     if (fd < 0) {
@@ -192,7 +221,12 @@ static PyObject *exchange(PyObject *Py_UNUSED(self), PyObject *const *args, Py_s
         PyErr_SetFromErrnoWithFilename(PyExc_OSError, failed_send ? "send" : "recv");
         goto done;
     }
-    if (got > 0 && copy_table(&b[IN_TABLE], b[INPUTS].buf, b[INPUTS].len, r, got, 0) < 0)
+    /* Another thread may have resized the input image while the GIL was released:
+     * its bytes are looked up again, now that the GIL is held. */
+    if (got > 0 && bytes_of(prep[6], 1, &inputs, &inputs_len) < 0)
+        goto done;
+    if (got > 0 && copy_table(in_table, in_table_len, (unsigned char *)inputs, inputs_len, r,
+                              got, 0) < 0)
         goto done;
     /* Built by hand: Py_BuildValue parses its format string on every call. */
     PyObject *size = PyLong_FromSsize_t((Py_ssize_t)got), *stray = PyLong_FromLong(strays);
