@@ -17,7 +17,9 @@ Method:
      (CPU time of the cycling thread: user + system, waiting excluded) and wall time.
      ecatcfg: ``Network.cycle()``; SOEM: ``send_processdata(); receive_processdata(2000)``
      (both sleep in the kernel while the reply travels: not CPU time).  They alternate
-     (ecatcfg, ecatcfg with ``recovery=False``, SOEM, ``--baseline``'s ecatcfg),
+     (ecatcfg, ecatcfg in pure Python (``ECATCFG_PURE_PYTHON=1``: the fallback of an
+     install without a C compiler), ecatcfg with ``recovery=False``, SOEM,
+     ``--baseline``'s ecatcfg),
      ``--rounds`` processes each, the master on CPU 0 with the simulator (``same``) or on
      CPU 1 (``split``, ``--layouts``); min and median over rounds.  ``floor``: ecatcfg's
      own Python per cycle, in this process, on a link that answers at once.
@@ -63,7 +65,7 @@ LAYOUTS = {"same": 0, "split": 1}
 # ------------------------------------------------------------------ the workers (namespace A)
 
 def worker_ecatcfg(args: argparse.Namespace) -> dict:
-    from ecatcfg.runtime.link import RawLink
+    from ecatcfg.runtime.link import RawLink, cyclic_exchange_path
     from ecatcfg.runtime.network import Network
 
     out: dict = {}
@@ -79,6 +81,7 @@ def worker_ecatcfg(args: argparse.Namespace) -> dict:
             out["cpu_us"] = (time.thread_time() - cpu) / args.cycles * 1e6
             out["wall_us"] = (time.perf_counter() - wall) / args.cycles * 1e6
             out["lost"] = stats.lost_frames + stats.wkc_errors
+            out["exchange"] = cyclic_exchange_path()
         elif args.mode == "rate":
             out["rates"] = []
             for period in args.periods:
@@ -297,8 +300,10 @@ def run(args: argparse.Namespace, tmp: Path) -> None:
         wait_for(sim, "ready:", 120)
 
         def worker(kind: str, mode: str, *extra: str, path: str | None = None,
-                   cpu: int | None = None) -> dict:
+                   cpu: int | None = None, pure: bool = False) -> dict:
             env = ["env", f"PYTHONPATH={path}"] if path else []
+            if pure:        # the fallback, as an install without a C compiler runs it
+                env = [*(env or ["env"]), "ECATCFG_PURE_PYTHON=1"]
             # Both masters in the same place: CPU ``cpu`` (the simulator is on CPU 0).
             pin = ["taskset", "-c", str(cpu)] if cpu is not None else []
             out = bench.run(bench.ns_a, [*pin, *env, py, str(Path(__file__).resolve()), "--worker",
@@ -315,17 +320,19 @@ def run(args: argparse.Namespace, tmp: Path) -> None:
             results["cpu"] = {}
             for layout in args.layouts.split(","):
                 cpu = LAYOUTS[layout]
-                ours, soem, base, bare = [], [], [], []
+                ours, soem, base, bare, pure = [], [], [], [], []
                 for k in range(args.rounds + 1):        # round 0: warm-up, not counted
                     a = worker("ecatcfg", "cpu", cpu=cpu)
+                    p = worker("ecatcfg", "cpu", cpu=cpu, pure=True)
                     d = worker("ecatcfg", "cpu", "--no-recovery", cpu=cpu)
                     b = worker("soem", "cpu", cpu=cpu)
                     c = worker("ecatcfg", "cpu", path=args.baseline, cpu=cpu) \
                         if args.baseline else None
-                    print(f"{layout} round {k}: ecatcfg {a}  soem {b}  baseline {c}",
-                          flush=True)
+                    print(f"{layout} round {k}: ecatcfg {a}  pure Python {p}  soem {b}  "
+                          f"baseline {c}", flush=True)
                     if k:
                         ours.append(a)
+                        pure.append(p)
                         soem.append(b)
                         bare.append(d)
                         if c is not None:
@@ -333,8 +340,11 @@ def run(args: argparse.Namespace, tmp: Path) -> None:
                 oc = [r["cpu_us"] for r in ours]
                 sc = [r["cpu_us"] for r in soem]
                 res = {
+                    "exchange": ours[0]["exchange"],
                     "ecatcfg_cpu_us": mm(oc), "soem_cpu_us": mm(sc),
                     "ratio_min_median": ratio(sc, oc),
+                    "pure_python_cpu_us": mm([r["cpu_us"] for r in pure]),
+                    "pure_python_over_soem": ratio(sc, [r["cpu_us"] for r in pure]),
                     "ecatcfg_no_recovery_cpu_us": mm([r["cpu_us"] for r in bare]),
                     "no_recovery_over_soem": ratio(sc, [r["cpu_us"] for r in bare]),
                     "ecatcfg_wall_us": mm([r["wall_us"] for r in ours]),

@@ -28,6 +28,19 @@ MODULES = {"report": "network_report"}
 EXIT_OK, EXIT_INPUT, EXIT_USAGE = 0, 1, 2
 
 
+class _Version(argparse.Action):
+    """``--version``: the package's version, and whether the cyclic frames go through the
+    compiled exchange or the pure-Python fallback (an install built without a C compiler,
+    or ``ECATCFG_PURE_PYTHON=1``: docs/architecture.md).  The runtime's link module is
+    imported only when asked, not by every command's parser."""
+
+    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace,
+                 values: object, option_string: str | None = None) -> NoReturn:
+        from ecatcfg.runtime.link import cyclic_exchange_path
+        print(f"ecatcfg {__version__}\ncyclic exchange: {cyclic_exchange_path()}")
+        parser.exit()
+
+
 class _Parser(argparse.ArgumentParser):
     def error(self, message: str) -> NoReturn:     # argparse's own exit code is already 2
         self.print_usage(sys.stderr)
@@ -45,7 +58,8 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
         description="EtherCAT configuration compiler and network configurator: "
                     "vendor ESI files + a topology -> ENI; ENI -> a running network.",
         epilog="Exit codes: 0 success, 1 the input has errors, 2 usage error or missing path.")
-    parser.add_argument("--version", action="version", version=f"ecatcfg {__version__}")
+    parser.add_argument("--version", action=_Version, nargs=0,
+                        help="show the version and the cyclic exchange in use, and exit")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     for name in (only,) if only else SUBCOMMANDS:
         module = importlib.import_module(f"ecatcfg.cli.{MODULES.get(name, name)}")

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import errno
 import fcntl
+import functools
 import os
 import select
 import socket
@@ -28,6 +29,7 @@ import struct
 import threading
 import time
 from collections import deque
+from collections.abc import Callable
 from typing import Protocol, Self, runtime_checkable
 
 from ..errors import EcatcfgError, UsageError
@@ -42,6 +44,32 @@ _PACKET_IGNORE_OUTGOING = getattr(socket, "PACKET_IGNORE_OUTGOING", 23)   # Linu
 _SO_RCVBUFFORCE = getattr(socket, "SO_RCVBUFFORCE", 33)
 _SIOCGIFMTU = 0x8921
 _RCVBUF = 4 << 20        # room for bursts while the receiving thread is not scheduled
+
+PURE_PYTHON_VARIABLE = "ECATCFG_PURE_PYTHON"
+
+
+def _compiled_exchange() -> Callable[..., tuple[int, int]] | None:
+    """The compiled exchange of a cyclic frame (runtime/_exchange.c), if the build could
+    compile it and ``ECATCFG_PURE_PYTHON`` is not set (non-empty, not ``0``): an install
+    without a C compiler has none and cycles in Python (docs/architecture.md, "The
+    compiled cyclic exchange")."""
+    if os.environ.get(PURE_PYTHON_VARIABLE, "") not in ("", "0"):
+        return None
+    try:
+        # By its full name: "from . import" would read as an import of the package
+        # itself to the import graph's checks (the extension has no .py file).
+        from ecatcfg.runtime._exchange import exchange
+    except ImportError:
+        return None
+    return exchange
+
+
+_COMPILED = _compiled_exchange()
+
+
+def cyclic_exchange_path() -> str:
+    """Which path a RawLink's cyclic frames take: for ``ecatcfg --version``."""
+    return "compiled" if _COMPILED is not None else "pure Python"
 
 
 class LinkError(EcatcfgError):
@@ -127,13 +155,22 @@ class RawLink(_Base):
     ``tests/rig.py`` for opening one inside another namespace).
     """
 
-    __slots__ = ("iface", "ethertype", "mtu", "_sock", "_fd", "_bufsize", "_closed", "_rcvtimeo")
+    __slots__ = ("iface", "ethertype", "mtu", "_sock", "_fd", "_bufsize", "_closed", "_rcvtimeo",
+                 "_outgoing_dropped", "exchange_frame")
 
     def __init__(self, iface: str, *, ethertype: int = ETHERTYPE, rcvbuf: int = _RCVBUF) -> None:
         self.iface = iface
         self.ethertype = ethertype
         self._closed = True
         self._rcvtimeo = 0.0        # s, the SO_RCVTIMEO recv_into set (0: none)
+        # Whether the kernel drops the copies of our own frames (PACKET_IGNORE_OUTGOING
+        # accepted): then recv_into needs no source address to tell them apart.
+        self._outgoing_dropped = False
+        # The compiled exchange of a prepared frame on this socket, (prepared.compiled,
+        # reply, idx, timeout) -> (size or 0 if lost, stray replies), used by
+        # Transport.exchange_prepared (errors through exchange_error); a partial, not a
+        # method: no Python frame per cycle.  None: the frames go through send/recv_into.
+        self.exchange_frame: Callable[..., tuple[int, int]] | None = None
         try:
             # Protocol 0 receives nothing until bind() names the EtherType; a socket created
             # with the protocol costs the kernel an RCU grace period (6-16 ms) at creation
@@ -153,12 +190,15 @@ class RawLink(_Base):
                     raise UsageError(f"no such network interface: {iface!r}"
                                      f"{_available_interfaces()}") from None
                 raise UsageError(f"{iface}: cannot bind a raw socket: {exc}") from None
-            for level, opt, value in ((_SOL_PACKET, _PACKET_IGNORE_OUTGOING, 1),
-                                      (socket.SOL_SOCKET, socket.SO_RCVBUF, rcvbuf)):
-                try:
-                    sock.setsockopt(level, opt, value)
-                except OSError:
-                    pass      # old kernel: outgoing copies are still filtered in recv()
+            try:
+                sock.setsockopt(_SOL_PACKET, _PACKET_IGNORE_OUTGOING, 1)
+                self._outgoing_dropped = True
+            except OSError:
+                pass          # old kernel: outgoing copies are still filtered in recv()
+            try:
+                sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, rcvbuf)
+            except OSError:
+                pass
             if os.geteuid() == 0:       # root may exceed net.core.rmem_max
                 try:
                     sock.setsockopt(socket.SOL_SOCKET, _SO_RCVBUFFORCE, rcvbuf)
@@ -170,6 +210,8 @@ class RawLink(_Base):
             raise
         self._sock = sock
         self._fd = sock.fileno()
+        if _COMPILED is not None:
+            self.exchange_frame = functools.partial(_COMPILED, sock)
         # A frame never exceeds MTU + header (+ 4 for a VLAN tag); keep room for larger MTUs.
         self._bufsize = max(self.mtu + ETH_HEADER_SIZE + 4, 2048)
         self._closed = False
@@ -247,8 +289,15 @@ class RawLink(_Base):
 
         One blocking ``recvfrom_into`` bounded by ``SO_RCVTIMEO`` (set when the timeout
         changes by more than 0.5 ms), as SOEM waits: no poll() before it and no exception
-        while a reply is on its way.  May wait up to 0.5 ms past ``timeout``."""
+        while a reply is on its way.  May wait up to 0.5 ms past ``timeout``.
+
+        Where the kernel drops our own frames (``PACKET_IGNORE_OUTGOING``), a plain
+        ``recv_into``: ``recvfrom_into`` builds the sender's address per frame, and for
+        ``AF_PACKET`` CPython looks the interface's name up with an ``ioctl``
+        (``SIOCGIFNAME``, socketmodule.c ``makesockaddr``), a system call and four objects
+        per cycle (docs/BENCHMARKS.md, "Cyclic")."""
         sock, outgoing = self._sock, socket.PACKET_OUTGOING
+        plain = self._outgoing_dropped
         deadline = None if timeout is None else time.monotonic() + timeout
         wait = timeout
         while True:
@@ -263,6 +312,11 @@ class RawLink(_Base):
                                             if wait else 0))
                 self._rcvtimeo = wait
             try:
+                if plain:
+                    n = sock.recv_into(buffer)
+                    if self._closed:
+                        raise LinkError(f"{self.iface}: link is closed")
+                    return n
                 n, addr = sock.recvfrom_into(buffer)
             except (BlockingIOError, InterruptedError):
                 n, addr = 0, None
@@ -273,6 +327,13 @@ class RawLink(_Base):
             if addr is not None and addr[2] != outgoing:
                 return n
             wait = None if deadline is None else deadline - time.monotonic()
+
+    def exchange_error(self, exc: OSError, size: int) -> Exception:
+        """The error :attr:`exchange_frame` raised, as :meth:`send` and :meth:`recv_into`
+        would have raised it (runtime/_exchange.c names the call in ``filename``)."""
+        if exc.filename == "send":
+            return self._send_error(exc, size)
+        return self._recv_error(exc)
 
     def recv_many(self, max_frames: int, timeout: float | None = None) -> list[bytes]:
         """Up to ``max_frames`` frames: waits up to ``timeout`` for the first one, then takes

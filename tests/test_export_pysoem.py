@@ -100,7 +100,7 @@ def test_the_export_is_deterministic_and_says_where_it_came_from(example_eni, tm
     text = first.read_text()
     digest = hashlib.sha256(example_eni.read_bytes()).hexdigest()
     version = subprocess.run([sys.executable, "-m", "ecatcfg", "--version"],
-                             capture_output=True, text=True, timeout=30).stdout.split()[-1]
+                             capture_output=True, text=True, timeout=30).stdout.split()[1]
     assert f"ENI_SHA256 = '{digest}'" in text
     assert "ENI_NAME = 'line.eni.xml'" in text
     assert f"ECATCFG_VERSION = '{version}'" in text

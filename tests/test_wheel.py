@@ -15,6 +15,7 @@ import re
 import shutil
 import subprocess
 import sys
+import sysconfig
 import venv
 import zipfile
 from pathlib import Path
@@ -43,6 +44,10 @@ def package_folders(root: Path) -> list[str]:
 
 
 NOT_PACKAGES = ("tests", "bench", "docs", "build_backend")
+# The optional compiled cyclic exchange (runtime/_exchange.c), as a build names it, and
+# whether this machine has the C compiler the build would use (sysconfig's CC).
+EXTENSION = Path("runtime") / ("_exchange" + sysconfig.get_config_var("EXT_SUFFIX"))
+HAS_COMPILER = shutil.which((sysconfig.get_config_var("CC") or "cc").split()[0]) is not None
 SUBPACKAGES = tuple(package_folders(ROOT))
 
 CHECK_IMPORTS = f"""
@@ -71,7 +76,7 @@ def clean_copy(tmp_path) -> tuple:
     # symlinks=True: .mypy_path/ecatcfg links to the checkout itself (pyproject.toml, mypy)
     shutil.copytree(ROOT, src, symlinks=True, ignore=shutil.ignore_patterns(
         ".git", "build", "dist", "*.egg-info", "__pycache__", "*_cache", ".hypothesis",
-        "ecatcfg-demo"))
+        "ecatcfg-demo", "*.so"))
     return src, sorted(p.relative_to(src) for p in src.rglob("*") if "__pycache__" not in p.parts)
 
 
@@ -127,6 +132,12 @@ def test_wheel_installs_and_runs(installed, tmp_path):
     assert "ecatcfg/examples/tree/esi/ecatcfg-EXB-branching.xml" in names
     assert "ecatcfg/templates/process_image.h.j2" in names
     assert "ecatcfg/templates/__init__.py" in names
+    # the compiled cyclic exchange where the build found a C compiler, and --version says
+    # which path runs
+    assert (f"ecatcfg/{EXTENSION.as_posix()}" in names) is HAS_COMPILER, names
+    out = installed.run("--version")
+    assert out.returncode == 0 and out.stdout.splitlines()[1] == \
+        f"cyclic exchange: {'compiled' if HAS_COMPILER else 'pure Python'}", out.stdout
     assert not any(n.startswith(("ecatcfg/tests/", "ecatcfg/bench/", "ecatcfg/docs/",
                                  "ecatcfg/build_backend/", "ecatcfg/.mypy_path"))
                    for n in names)
@@ -296,8 +307,46 @@ def test_editable_install_imports_only_real_subpackages_and_leaves_no_litter(tmp
     out = subprocess.run([str(py), "-m", "pip", "install", "-q", "--no-deps", "-e", str(src)],
                          capture_output=True, text=True, env=VENV_ENV)
     assert out.returncode == 0, out.stderr
-    assert listing(src) == before, set(listing(src)) - set(before)
+    # The one exception: the compiled cyclic exchange is built into the source folder,
+    # since the editable package *is* that folder (setuptools builds extensions in place
+    # for editable installs; docs/architecture.md); nothing else (no .o, no build/).
+    assert set(listing(src)) - set(before) == ({EXTENSION} if HAS_COMPILER else set()), \
+        set(listing(src)) - set(before)
+    assert set(before) <= set(listing(src))
     where = subprocess.run([str(py), "-c", CHECK_IMPORTS], capture_output=True, text=True,
                            cwd=tmp_path, env=VENV_ENV)
     assert where.returncode == 0, where.stdout + where.stderr
     assert where.stdout.strip() == str(src / "__init__.py")
+
+
+def test_a_build_without_a_c_compiler_installs_and_cycles_in_pure_python(tmp_path):
+    """README command 1 on a machine without a C compiler (CC=/bin/false): the build
+    leaves the compiled exchange out with a warning instead of failing, the wheel installs,
+    ``ecatcfg --version`` reports the pure-Python path, and the demo reaches OP."""
+    src, before = clean_copy(tmp_path)
+    dist = tmp_path / "dist"
+    built = subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w",
+                            str(dist), str(src)], capture_output=True, text=True,
+                           env={**os.environ, "CC": "/bin/false"})
+    assert built.returncode == 0, built.stderr
+    assert listing(src) == before, set(listing(src)) - set(before)
+    wheel, = dist.glob("ecatcfg-*.whl")
+    assert not any(n.endswith(".so") for n in zipfile.ZipFile(wheel).namelist())
+    env_dir = tmp_path / "venv"
+    venv.create(env_dir, with_pip=True)
+    py = env_dir / "bin" / "python"
+    # The dependencies from the interpreter running the tests, as in the editable test.
+    inner = subprocess.run([str(py), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
+                           capture_output=True, text=True, check=True).stdout.strip()
+    outer = [p for p in sys.path if p.endswith("-packages") and os.path.isdir(p)]
+    (Path(inner) / "zz-test-dependencies.pth").write_text("\n".join(outer) + "\n")
+    done = subprocess.run([str(py), "-m", "pip", "install", "-q", "--no-deps", str(wheel)],
+                          capture_output=True, text=True, env=VENV_ENV)
+    assert done.returncode == 0, done.stderr
+    exe = env_dir / "bin" / "ecatcfg"
+    out = subprocess.run([str(exe), "--version"], capture_output=True, text=True,
+                         env=VENV_ENV, timeout=60)
+    assert out.stdout.splitlines()[1] == "cyclic exchange: pure Python", out.stdout + out.stderr
+    out = subprocess.run([str(exe), "demo"], capture_output=True, text=True, env=VENV_ENV,
+                         cwd=tmp_path, timeout=300)
+    assert out.returncode == 0 and "SAFEOP -> OP: OP" in out.stdout, out.stdout + out.stderr

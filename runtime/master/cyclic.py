@@ -134,9 +134,9 @@ def _median(ordered: list[float]) -> float:
 class _Prepared:
     """One cyclic frame of one AL state, encoded once, with the places a cycle touches."""
 
-    __slots__ = ("slots", "frame", "index_at", "length", "_header", "_wkcs", "_expect",
-                 "_shape", "_out_copies", "_in_copies", "_inputs", "_outputs", "wkcs",
-                 "_slave_copies")
+    __slots__ = ("slots", "frame", "index_at", "index_le", "reply_mask", "length", "_header",
+                 "_wkcs", "_expect", "_shape", "_out_copies", "_in_copies", "inputs_bound",
+                 "outputs_bound", "compiled", "_slave_copies", "good")
 
     def __init__(self, slots: list[_Slot], constant: list[bytes]) -> None:
         self.slots = slots
@@ -147,6 +147,11 @@ class _Prepared:
         self.index_at = tuple(pos + 1 for pos, _ in places)
         last, n = places[-1]
         self.length = last + wire.DG_HEADER_LEN + n + wire.WKC.size
+        # The same check for the compiled exchange (runtime/_exchange.c): the index
+        # offsets as 16-bit little-endian numbers, and per byte of the reply the bits that
+        # must be as sent, from the same struct as :meth:`matches` (its B and H fields).
+        self.index_le = b"".join(at.to_bytes(2, "little") for at in self.index_at)
+        self.reply_mask = _reply_mask(self.length, places)
         # The fixed offsets, read with one struct call each: EtherType, EtherCAT header
         # and each datagram's cmd, index and len|flags; and each datagram's WKC.
         self._header = struct.Struct("<12xHH" + "".join(f"BB4xH2x{n}x2x" for _, n in places))
@@ -158,41 +163,62 @@ class _Prepared:
         self._shape = sent
         self._out_copies: tuple[tuple[memoryview, memoryview], ...] = ()
         self._in_copies: tuple[tuple[memoryview, memoryview], ...] = ()
-        self._inputs: bytearray | None = None
-        self._outputs: bytearray | None = None
-        self.wkcs: tuple[int, ...] = ()        # the working counters of the last reply
+        self.inputs_bound: bytearray | None = None       # the images bind() was given
+        self.outputs_bound: bytearray | None = None
+        # What the compiled exchange gets (runtime/_exchange.c), one tuple made by bind():
+        # the frame, index_le, reply_mask, the same copies as int32 triples (offset in the
+        # frame, in the output image, length) and (in the reply, in the input image,
+        # length) with the images.
+        self.compiled: tuple[bytearray, bytes, bytes, bytes, bytearray, bytes, bytearray] \
+            = (frame, self.index_le, self.reply_mask, b"", bytearray(), b"", bytearray())
         # Per command with CopyInfos: the command's slot, the working counter that makes
         # its input data valid (-1: any that came back) and its compiled copies.
         self._slave_copies: tuple[tuple[_Slot, int, tuple[_CopyOp, ...]], ...] = ()
+        # The working counters of the last reply whose every checked one was as expected,
+        # and which the slots hold: a reply with the same ones needs no look at each slot
+        # (docs/BENCHMARKS.md, "Cyclic").  None after a loss, an error, a change of state
+        # or of what a slot expects (CyclicFrames.expected_changed).
+        self.good: tuple[int, ...] | None = None
 
     def bind(self, inputs: bytearray, outputs: bytearray, reply: bytearray) -> None:
         """Views from the frame to the images (again if the images were replaced)."""
-        if inputs is self._inputs and outputs is self._outputs:
+        if inputs is self.inputs_bound and outputs is self.outputs_bound:
             return
         frame, places = memoryview(self.frame), wire.datagram_offsets(self.frame)
         back, ins, outs = memoryview(reply), memoryview(inputs), memoryview(outputs)
         out_copies, in_copies = [], []
+        out_table, in_table = array("i"), array("i")
         for s, (pos, n) in zip(self.slots, places):
             data = pos + wire.DG_HEADER_LEN
             if s.cmd.cmd in (Cmd.LWR, Cmd.LRW):      # process data from the output image
                 out_copies.append((frame[data:data + n], outs[s.out_at:s.out_at + n]))
+                out_table.extend((data, s.out_at, n))
             if s.cmd.cmd in _READS:
                 in_copies.append((ins[s.in_at:s.in_at + n], back[data:data + n]))
+                in_table.extend((data, s.in_at, n))
         self._out_copies, self._in_copies = tuple(out_copies), tuple(in_copies)
+        self.compiled = (self.frame, self.index_le, self.reply_mask, out_table.tobytes(),
+                         outputs, in_table.tobytes(), inputs)
         self._slave_copies = tuple(
             (s, -1 if s.cmd.cnt is None else s.cmd.cnt,
              tuple(_compile(c, ins, outs) for c in s.cmd.copy_infos))
             for s in self.slots if s.cmd.copy_infos)
-        self._inputs, self._outputs = inputs, outputs
+        self.inputs_bound, self.outputs_bound = inputs, outputs
 
     def fill(self) -> None:
+        """The output image into the frame (before it is sent)."""
         for to, source in self._out_copies:
+            to[:] = source
+
+    def take(self) -> None:
+        """The reply's read data into the input image (once it matched)."""
+        for to, source in self._in_copies:
             to[:] = source
 
     def matches(self, reply: bytearray, size: int, idx: int) -> bool:
         """The reply is this frame come back under ``idx``: EtherType and EtherCAT header
         as sent, and every datagram's command, index and length (ignoring the circulating
-        bit a slave may set); then its working counters are in :attr:`wkcs`."""
+        bit a slave may set).  :attr:`reply_mask` says the same for the compiled path."""
         if size < self.length:
             return False
         got = self._header.unpack_from(reply)
@@ -207,16 +233,11 @@ class _Prepared:
                 if got[k] != expect[k] or got[k + 1] != idx \
                         or got[k + 2] & _FLAG_SHAPE != expect[k + 2] & _FLAG_SHAPE:
                     return False
-        self.wkcs = self._wkcs.unpack_from(reply)
         return True
-
-    def take(self) -> None:
-        for to, source in self._in_copies:
-            to[:] = source
 
     def copy_slave_to_slave(self) -> None:
         """This frame's CopyInfos, for the commands whose input data is valid."""
-        inputs, outputs = self._inputs, self._outputs
+        inputs, outputs = self.inputs_bound, self.outputs_bound
         assert inputs is not None and outputs is not None   # bound before the exchange
         for slot, want, ops in self._slave_copies:
             wkc = slot.wkc
@@ -235,6 +256,18 @@ class _Prepared:
                     value = int.from_bytes(inputs[sb:se], "little") >> ss & mask
                     outputs[db:de] = (int.from_bytes(outputs[db:de], "little") & keep
                                       | value << ds).to_bytes(de - db, "little")
+
+
+def _reply_mask(length: int, places: list[tuple[int, int]]) -> bytes:
+    """Per byte of a reply, the bits :meth:`_Prepared.matches` compares with the frame as
+    sent: EtherType and EtherCAT header (bytes 12-15), each datagram's command and index,
+    and its len|flags but for the circulating bit (``_FLAG_SHAPE``)."""
+    mask = bytearray(length)
+    mask[12:wire.FRAME_HEADER_END] = b"\xff" * (wire.FRAME_HEADER_END - 12)
+    for pos, _ in places:
+        mask[pos] = mask[pos + 1] = 0xFF
+        mask[pos + 6:pos + 8] = _FLAG_SHAPE.to_bytes(2, "little")
+    return bytes(mask)
 
 
 # A compiled copy: (destination view, source view) for whole bytes; for bits within one
@@ -292,6 +325,7 @@ class CyclicFrames:
         self._last_start: float | None = None
         self._prepared: dict[AlState, tuple[_Prepared, ...]] = {}
         self._reply = bytearray(REPLY_BUFFER)
+        self._last_prepared: tuple[_Prepared, ...] = ()
 
     def working_counters(self) -> list[list[CommandCount]]:
         """Per frame, each command with the working counter the last cycle brought back
@@ -311,6 +345,13 @@ class CyclicFrames:
                                for slots in self.frames) if active)
         return found
 
+    def expected_changed(self) -> None:
+        """A slot's ``expected`` changed (runtime/master/recovery.py): the next cycle looks
+        at every working counter again."""
+        for frames in self._prepared.values():
+            for p in frames:
+                p.good = None
+
     def restart_periods(self) -> None:
         """The next cycle starts the periods afresh (not measured from a cycle before)."""
         self._last_start = None
@@ -320,30 +361,48 @@ class CyclicFrames:
         with the working counters expected (each slot's ``expected``)."""
         now = transport.clock.monotonic()
         stats = self.stats
-        if self._last_start is not None:
-            stats.add_period((now - self._last_start) * 1e6)
+        last = self._last_start
+        if last is not None:
+            ring = stats._ring           # CycleStats.add_period, written out (per cycle)
+            if ring is not None:
+                ring[stats._count % PERIODS_KEPT] = (now - last) * 1e6
+                stats._count += 1
+            else:
+                stats.add_period((now - last) * 1e6)
         self._last_start = now
         stats.cycles += 1
         ok = True
         inputs, outputs, reply = self.inputs, self.outputs, self._reply
         prepared = self._prepared.get(state) or self.prepared(state)
+        if prepared is not self._last_prepared:     # another state: other slots' counts
+            self._last_prepared = prepared
+            self.expected_changed()
+        exchange = transport.exchange_prepared
+        # The exchange fills the frame from the output image and takes the inputs
+        # (compiled or Python: Transport.exchange_prepared).
         for p in prepared:
-            p.bind(inputs, outputs, reply)
-            p.fill()
-            if not transport.exchange_prepared(p, reply, timeout):
+            if p.inputs_bound is not inputs or p.outputs_bound is not outputs:
+                p.bind(inputs, outputs, reply)
+            if not exchange(p, reply, timeout):
                 stats.lost_frames += 1
                 for s in p.slots:
                     s.wkc = -1
+                p.good = None
                 ok = False
                 continue
-            p.take()
-            for s, wkc in zip(p.slots, p.wkcs):
+            wkcs = p._wkcs.unpack_from(reply)
+            if wkcs == p.good:
+                continue                    # as the last good cycle: the slots hold them
+            good: tuple[int, ...] | None = wkcs
+            for s, wkc in zip(p.slots, wkcs):
                 s.wkc = wkc
                 if s.expected is not None and wkc != s.expected:
                     stats.wkc_errors += 1
                     key = s.cmd.comment or f"cmd {s.cmd.cmd}"
                     stats.wkc_error_cmds[key] = stats.wkc_error_cmds.get(key, 0) + 1
                     ok = False
+                    good = None
+            p.good = good
         if self.copies:
             for p in prepared:
                 p.copy_slave_to_slave()

@@ -62,6 +62,8 @@ _UP = {AlState.INIT: Transition.IP, AlState.PREOP: Transition.PS,
 _READS_FROM = (FmmuType.READ, FmmuType.READ_WRITE)
 _WRITES_TO = (FmmuType.WRITE, FmmuType.READ_WRITE)
 
+_AL_STATE_AND_ERROR = AL_STATE_MASK | AL_STATUS_ERROR   # what the cyclic AL status BRD shows
+
 
 @record
 class SlaveHealth:
@@ -239,6 +241,7 @@ class Supervisor:
                 for slot, share in self._shares[name]:
                     if slot.expected is not None:
                         slot.expected -= share
+        cyclic.expected_changed()
         self._update_clear()
         self.timeout = max(cyclic.cycle_time_us / 1e6, 0.001)
         self._all_online = all(h.online for h in self.health.values())
@@ -250,8 +253,15 @@ class Supervisor:
         slaves that dropped out, go one round on with the recovery's frames.  Returns
         whether every *online* slave's data came back as expected."""
         inputs = self.master.cyclic.inputs
-        if ok and self._all_online and not self._pending and not self._al_wrong(inputs):
-            return True                         # the usual cycle: nothing to look after
+        if ok and self._all_online and not self._pending:
+            # The usual cycle: nothing to look after if the AL status is as expected
+            # (_al_wrong, written out: a call costs as much as the check).
+            want = self.master.state
+            for slot in self._al_slots:
+                if slot.wkc >= 0 and inputs[slot.in_at] & _AL_STATE_AND_ERROR != want:
+                    break
+            else:
+                return True
         now = self._now()
         if not ok:
             ok = self._tolerated()
@@ -305,9 +315,9 @@ class Supervisor:
     def _al_wrong(self, inputs: bytearray) -> bool:
         """The cyclic BRD of the AL status: any slave out of the network's state (the
         data ORs every answering slave's state and error bits)."""
-        want = int(self.master.state)
+        want = self.master.state            # an IntEnum compares as its int (no int() call)
         for slot in self._al_slots:
-            if slot.wkc >= 0 and inputs[slot.in_at] & (AL_STATE_MASK | AL_STATUS_ERROR) != want:
+            if slot.wkc >= 0 and inputs[slot.in_at] & _AL_STATE_AND_ERROR != want:
                 return True
         return False
 
@@ -357,6 +367,7 @@ class Supervisor:
         for slot, share in self._shares[name]:
             if slot.expected is not None:
                 slot.expected -= share
+        self.master.cyclic.expected_changed()
         self._update_clear()
         if announce:
             self._event("offline", f"{self._where(h)} {reason}; the others go on", name)
@@ -386,6 +397,7 @@ class Supervisor:
         for slot, share in self._shares[name]:
             if slot.expected is not None:
                 slot.expected += share
+        self.master.cyclic.expected_changed()
         h.online, h.joining, h.reason, h.attempts, h.cause = True, False, "", 0, []
         self._all_online = all(h.online for h in self.health.values())
         h.refused.clear()

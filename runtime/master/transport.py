@@ -47,6 +47,12 @@ class Transport:
         self.counters = Counters()
         self._idx = 0
         self._recv_into = getattr(link, "recv_into", None)   # links that have it
+        # A RawLink's compiled exchange (runtime/_exchange.c), unless the build had no C
+        # compiler or ECATCFG_PURE_PYTHON is set: then the loop below, in Python.
+        self._exchange_frame: Callable[..., tuple[int, int]] | None = getattr(
+            link, "exchange_frame", None)
+        self._exchange_error: Callable[[OSError, int], Exception] | None = getattr(
+            link, "exchange_error", None)
 
     def exchange(self, datagrams: list[Datagram],
                  timeout: float | None = None) -> list[Datagram] | None:
@@ -89,11 +95,30 @@ class Transport:
 
     def exchange_prepared(self, prepared: Prepared, reply: bytearray,
                           timeout: float | None = None) -> int:
-        """Send a prepared frame under the next index and wait for it in ``reply``: the
-        reply's length, or 0 if the frame was lost.  The same matching as :meth:`exchange`
+        """Fill a prepared frame from the output image, send it under the next index, wait
+        for it in ``reply`` and take its inputs: the reply's length, or 0 if the frame was
+        lost.  The same matching as :meth:`exchange`
         (index and shape; anything else is a stray reply), without building objects: the
         cyclic frames' path."""
         self._idx = idx = (self._idx + 1) & 0xFF
+        compiled = self._exchange_frame
+        if compiled is not None and not self.recorder:
+            # The same steps in C: fill, index, send, wait, the shape check (reply_mask
+            # holds the bits matches() compares), take; strays counted, a lost frame is 0.
+            try:
+                size, strays = compiled(prepared.compiled, reply, idx,
+                                        self.timeout if timeout is None else timeout)
+            except OSError as exc:
+                assert self._exchange_error is not None     # a RawLink's
+                raise self._exchange_error(exc, len(prepared.frame)) from None
+            counters = self.counters
+            counters.frames_sent += 1
+            if strays:
+                counters.stray_replies += strays
+            if not size:
+                counters.frames_lost += 1
+            return size
+        prepared.fill()
         frame = prepared.frame
         for at in prepared.index_at:
             frame[at] = idx
@@ -126,6 +151,7 @@ class Transport:
             if recorder:
                 recorder(bytes(reply[:size]), False)
             if prepared.matches(reply, size, idx):
+                prepared.take()
                 return size
             self.counters.stray_replies += 1
 
@@ -136,6 +162,19 @@ class Prepared(Protocol):
 
     frame: bytearray            # the Ethernet frame as sent, datagram indices aside
     index_at: tuple[int, ...]   # offset of each datagram's index byte
+    index_le: bytes             # the same, 16-bit little-endian each (the compiled path)
+    reply_mask: bytes           # per byte of a reply, the bits matches() compares with frame
+    # For the compiled path: (frame, index_le, reply_mask, the output copies as int32
+    # triples, the output image, the input copies, the input image), made by bind().
+    compiled: tuple[bytearray, bytes, bytes, bytes, bytearray, bytes, bytearray]
+
+    def fill(self) -> None:
+        """The output image into the frame."""
+        ...
+
+    def take(self) -> None:
+        """The read data of a reply that matched into the input image."""
+        ...
 
     def matches(self, reply: bytearray, size: int, idx: int) -> bool:
         """``reply[:size]`` is this frame come back with index ``idx`` on every datagram:
