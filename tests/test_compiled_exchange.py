@@ -10,8 +10,9 @@ both paths.  And the cycle's shortcut for working counters that repeat the last 
 received and sent) and frames made by hand here, not the code under test.
 
 The compiled module exists where the package was built with a C compiler (README command
-2's editable install builds it into the checkout); elsewhere these tests skip, and the
-pure-Python path is what runs (tests/test_wheel.py builds without a compiler).
+2's editable install builds it into the checkout); elsewhere these tests skip locally and
+fail in CI (tests/prereq.py), and the pure-Python path is what runs (tests/test_wheel.py
+builds without a compiler).
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ import time
 import pytest
 
 from conftest import EXAMPLES, ROOT, compile_example
+from prereq import TOOLS, missing
 from ecatcfg.esc import AlState, Cmd
 from ecatcfg.runtime import link as link_module
 from ecatcfg.runtime.link import LinkError, RawLink
@@ -36,10 +38,20 @@ ESI = [EXAMPLES / "esi"]
 SENSORS_IN = 4          # input bits 4..7: the sensors' channels 1-4
 LAMPS_OUT = 8           # output bits 8..15: the lamps' channels 1-8
 
-compiled_only = pytest.mark.skipif(
-    link_module._COMPILED is None,
-    reason="the compiled exchange is not built here (no C compiler at install, or "
-           "ECATCFG_PURE_PYTHON set): only the pure-Python path runs")
+@pytest.fixture
+def compiled_exchange() -> None:
+    """The compiled module, built here: where it is not, the test skips locally and fails
+    in CI (a C compiler is a tool CI provides: tests/prereq.py), unless the pure-Python
+    path was asked for on purpose."""
+    if link_module._COMPILED is not None:
+        return
+    if os.environ.get(link_module.PURE_PYTHON_VARIABLE, "") not in ("", "0"):
+        pytest.skip(f"{link_module.PURE_PYTHON_VARIABLE} is set: only the pure-Python path runs")
+    missing("the compiled cyclic exchange (runtime/_exchange.c)",
+            "not built at install (no C compiler, or an install older than the C file)", TOOLS)
+
+
+compiled_only = pytest.mark.usefixtures("compiled_exchange")
 
 
 def _open(rig, ns: str, compiled: bool) -> RawLink:
@@ -167,12 +179,14 @@ def _peer(rig, script):
 
 
 @pytest.mark.parametrize("compiled", [
-    pytest.param(True, marks=compiled_only, id="compiled"),
+    pytest.param(True, id="compiled"),
     pytest.param(False, id="pure-python")])
-def test_strays_short_frames_and_a_lost_frame(veth_netns, example_plan, compiled):
+def test_strays_short_frames_and_a_lost_frame(veth_netns, example_plan, compiled, request):
     """Before the real reply: a reply under another index, one cut short, one with another
     command; the exchange takes the real one and counts three strays.  Then no reply: 0
     after the timeout, one frame lost.  The same counts on both paths."""
+    if compiled:
+        request.getfixturevalue("compiled_exchange")
     frames = CyclicFrames(example_plan)
     p = frames.prepared(AlState.OP)[0]
     p.bind(frames.inputs, frames.outputs, bytearray(2048))
@@ -292,14 +306,17 @@ with Network(sys.argv[1], link) as net:
 
 
 @pytest.mark.parametrize("compiled", [
-    pytest.param(True, marks=compiled_only, id="compiled"),
+    pytest.param(True, id="compiled"),
     pytest.param(False, id="pure-python")])
-def test_cycles_on_a_raw_link_allocate_nothing_that_stays(veth_netns, compiled, tmp_path):
+def test_cycles_on_a_raw_link_allocate_nothing_that_stays(veth_netns, compiled, tmp_path,
+                                                          request):
     """The allocation guard of tests/startup_budget.toml measures cycles on a link in
     memory, which always runs the Python path; this is the same measure on a raw link,
     where the compiled exchange runs: the line served by ``ecatcfg simulate`` in another
     process.  Within the budget of the line with DC (the example line has DC on its
     drive: the ARMW in the cyclic frame too)."""
+    if compiled:
+        request.getfixturevalue("compiled_exchange")
     import json
     import tomllib
     from rig import start_simulate
@@ -308,11 +325,16 @@ def test_cycles_on_a_raw_link_allocate_nothing_that_stays(veth_netns, compiled, 
                                 str(EXAMPLES / "topology.yaml"))
     assert lines and lines[-1].startswith("ready:"), lines
     eni = compile_example(tmp_path / "line.eni.xml")
-    done = veth_netns.run_in(veth_netns.ns_a, [
-        sys.executable, "-c", ALLOCATIONS, str(eni), veth_netns.if_a,
-        "compiled" if compiled else "pure"], timeout=120)
-    assert done.returncode == 0, done.stderr
-    got = json.loads(done.stdout.strip().splitlines()[-1])
+    # What a cycle allocates when its reply comes back: a frame the busy host delivered
+    # too late (counted lost) takes another path, so such a run is measured again.
+    for _ in range(3):
+        done = veth_netns.run_in(veth_netns.ns_a, [
+            sys.executable, "-c", ALLOCATIONS, str(eni), veth_netns.if_a,
+            "compiled" if compiled else "pure"], timeout=120)
+        assert done.returncode == 0, done.stderr
+        got = json.loads(done.stdout.strip().splitlines()[-1])
+        if got["lost"] == 0:
+            break
     assert got["compiled"] is compiled and got["lost"] == 0, got
     assert got["peak"] <= budget["64 dc peak"], got
     assert got["retained"] <= budget["64 dc retained"], got
