@@ -271,15 +271,13 @@ def _up_and_cycle(net: Network, plan: NetworkPlan, target: AlState,
     """Bring the line up to ``target`` and, in SAFEOP or OP, cycle it (--cycles)."""
     from ecatcfg.esc import AlState
 
-    if target >= AlState.SAFEOP and args.cycles != 0:
-        prepare_cycling(net, realtime)
+    undo = prepare_cycling(net, realtime) if target >= AlState.SAFEOP and args.cycles != 0 \
+        else None
     try:
         _up_and_run(net, plan, target, args, report, notify, realtime, guard)
     finally:
-        if realtime is not None:
-            import gc
-            gc.unfreeze()       # prepare_cycling froze the heap; a run that never
-            #                     cycled did not unfreeze it (Network._loop does)
+        if undo is not None:
+            undo()              # what prepare_cycling did, whether the run cycled or not
 
 
 def _up_and_run(net: Network, plan: NetworkPlan, target: AlState,
@@ -301,16 +299,17 @@ def _up_and_run(net: Network, plan: NetworkPlan, target: AlState,
         report.cycling(args.cycles)
         notify.ready(status.replace(";", ", cycling;", 1))
         net.run(args.cycles, guard.cycle_callback(report.cycle_callback(net, notify.watchdog)),
-                realtime=realtime)
+                realtime=realtime, read_states=True)
         report.mark(f"{args.cycles} cycles", net)
     else:
         notify.ready(status)
 
 
-def prepare_cycling(net: Network, realtime: RealtimeOptions | None = None) -> None:
+def prepare_cycling(net: Network, realtime: RealtimeOptions | None = None
+                    ) -> Callable[[], None]:
     """Do before the slaves are in OP what the first cycles would otherwise wait for: a
     slave whose outputs stop for longer than its SM watchdog (100 ms by default) drops to
-    SAFEOP+ERR.
+    SAFEOP+ERR.  Returns the function that undoes it, for the end of the run.
 
     - Import the supervisor of slaves that drop out (``runtime/master/recovery.py``), which
       the first cycle imports (a module compiled from source, where no bytecode is
@@ -319,15 +318,29 @@ def prepare_cycling(net: Network, realtime: RealtimeOptions | None = None) -> No
       (``gc.collect()`` and ``gc.freeze()``, ``Network._loop``); a full collection of a
       large heap (an application that imports ecatcfg, the test runner) takes tens to
       hundreds of ms.  Collected and frozen here, the run's own collection only scans what
-      is new since, and the run unfreezes everything at its end."""
+      is new since; undone: the heap unfrozen (the run does it too, a run that never
+      cycled did not).
+    - With ``--lock-memory``, the process's memory is locked here (``mlockall`` pins
+      every page it has: hundreds of ms for a large process on a busy host), not at the
+      run's start between OP and the first cycle; undone: unlocked (the run's own undo
+      unlocks it too)."""
+    steps: list[Callable[[], object]] = []
     if net.master.recovery:
         import ecatcfg.runtime.master.recovery  # noqa: F401
     if realtime is not None:
         import gc
 
-        import ecatcfg.runtime.master.realtime  # noqa: F401  (the run's first step)
+        from ecatcfg.runtime.master import realtime as rt  # the run's first step
+        if realtime.lock_memory:
+            steps.append(rt.lock_memory())
         gc.collect()
         gc.freeze()
+        steps.append(gc.unfreeze)
+
+    def undo() -> None:
+        for step in reversed(steps):
+            step()
+    return undo
 
 
 def _down(net: Network, plan: NetworkPlan, args: argparse.Namespace, report: ApplyReport,
@@ -340,11 +353,14 @@ def _down(net: Network, plan: NetworkPlan, args: argparse.Namespace, report: App
     failure: EcatcfgError | None = None
     highest = net.master.read_states()
     if net.state == target > AlState.INIT:
-        # The line reached its target and ran there: a slave that left it since (an SM
-        # watchdog run out between two cycles) fails the run, as the transition's own
-        # read-back would have.  (A run stopped on the way up has slaves between states.)
+        # The line reached its target and ran there: a slave that left it while it ran
+        # (an SM watchdog run out between two cycles) fails the run, as the transition's
+        # own read-back would have.  Judged on the states read right after the last cycle
+        # (Network.states_after_run): by now, on a busy host, outputs stopped longer than
+        # a watchdog may have taken a slave to SAFEOP+ERR after the cycles, as they
+        # should.  (A run stopped on the way up has slaves between states.)
         try:
-            net.master.check_kept(highest)
+            net.master.check_kept(net.states_after_run or highest)
         except EcatcfgError as exc:
             failure = exc
     if not args.stay and net.state > AlState.INIT:

@@ -45,6 +45,7 @@ if TYPE_CHECKING:                   # imported where used: `import ecatcfg.runti
     from ecatcfg.runtime.link import Link
     from ecatcfg.runtime.pcap import PcapRecorder
     from ecatcfg.runtime.master.realtime import RealtimeOptions
+    from ecatcfg.runtime.master.reached import SlaveState
     from ecatcfg.runtime.master.recovery import SlaveHealth
     from ecatcfg.runtime.segment.virtual import Faults, VirtualSegment
     from ecatcfg.runtime.segment.timing import Timing
@@ -136,6 +137,9 @@ class Network:
                        for v in self._vars}
         self._closers = list(_closers)
         self.run_stats: CycleStats | None = None
+        # Each slave's AL state right after the last run(read_states=True) (None: not
+        # asked for, the run ended below SAFEOP, or the read failed): see _states_now.
+        self.states_after_run: list[SlaveState | None] | None = None
         self._run: BackgroundRun | None = None     # the last run(background=True)
         self._stop = threading.Event()
         self._lock = threading.Lock()
@@ -400,17 +404,17 @@ class Network:
     def run(self, cycles: int | None = None,
             callback: Callable[[Network], None] | None = None, *,
             background: Literal[False] = False,
-            realtime: RealtimeOptions | None = None) -> None: ...
+            realtime: RealtimeOptions | None = None, read_states: bool = False) -> None: ...
 
     @overload
     def run(self, cycles: int | None = None,
             callback: Callable[[Network], None] | None = None, *,
             background: Literal[True], realtime: RealtimeOptions | None = None,
-            ) -> BackgroundRun: ...
+            read_states: bool = False) -> BackgroundRun: ...
 
     def run(self, cycles: int | None = None, callback: Callable[[Network], None] | None = None,
-            *, background: bool = False,
-            realtime: RealtimeOptions | None = None) -> BackgroundRun | None:
+            *, background: bool = False, realtime: RealtimeOptions | None = None,
+            read_states: bool = False) -> BackgroundRun | None:
         """Cycle at the ENI's cycle time (``cycles`` times, or until :meth:`stop`), calling
         ``callback(network)`` after every cycle (on the cycling thread; what it returns is
         not used; an exception it raises ends the run).  ``background``: cycle on a thread
@@ -419,13 +423,14 @@ class Network:
         options of ``runtime/master/realtime.py`` (SCHED_FIFO, mlockall, CPU affinity,
         busy-wait), applied to the cycling thread for the run and undone after it; a
         refusal raises :class:`~ecatcfg.runtime.master.realtime.RealtimeError` here, before the
-        first cycle."""
+        first cycle.  ``read_states``: read every slave's AL state right after the last
+        cycle, on the cycling thread, into :attr:`states_after_run` (one frame more)."""
         if self._run is not None and not self._run.done:
             raise EcatcfgError("the network is already cycling on its own thread: "
                                "stop() or join() that run first")
         self._stop.clear()
         if not background:
-            self._loop(cycles, callback, realtime)
+            self._loop(cycles, callback, realtime, read_states=read_states)
             return None
         started = threading.Event()
         refused: list[BaseException] = []
@@ -433,7 +438,7 @@ class Network:
 
         def cycling() -> None:
             try:
-                self._loop(cycles, callback, realtime, started, refused)
+                self._loop(cycles, callback, realtime, started, refused, read_states)
             except BaseException as exc:        # the application's to see: join(), error
                 run._error = exc
 
@@ -456,7 +461,7 @@ class Network:
 
     def _loop(self, cycles: int | None, callback: Callable[[Network], None] | None,
               realtime: RealtimeOptions | None = None, started: threading.Event | None = None,
-              refused: list[BaseException] | None = None) -> None:
+              refused: list[BaseException] | None = None, read_states: bool = False) -> None:
         from ecatcfg.runtime.master.cyclic import CycleStats
         restore: Callable[[], None] | None = None
         try:
@@ -509,11 +514,27 @@ class Network:
                     while clock() < next_at:
                         sleep(0)
         finally:
+            self.states_after_run = self._states_now() if read_states else None
             if frozen:
                 gc.unfreeze()
             if restore is not None:
                 restore()
             self.master.cyclic.stats = CycleStats()
+
+    def _states_now(self) -> list[SlaveState | None] | None:
+        """The slaves' AL states read right after a run's last cycle, in the cycling thread
+        with the run's real-time settings still in force: whether a slave left the state
+        while the line ran (cli/apply, ``Master.check_kept``) must not depend on how long
+        the host takes to get back to the caller, since outputs that stop for longer than
+        a slave's SM watchdog (100 ms by default) take it to SAFEOP+ERR, as they should
+        once the cycles have ended.  None below SAFEOP, or when the read fails (the run's
+        own error, if any, is the one raised)."""
+        if self.master.state < AlState.SAFEOP:
+            return None
+        try:
+            return self.master.read_states()
+        except (EcatcfgError, OSError):
+            return None
 
     def stop(self) -> None:
         """End :meth:`run` after the cycle under way; a run on its own thread is waited

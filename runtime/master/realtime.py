@@ -142,7 +142,32 @@ def apply(opts: RealtimeOptions | None) -> Callable[[], None]:
     return restore
 
 
+def lock_memory() -> Callable[[], object]:
+    """Lock the process's memory now (``mlockall``); returns the function that unlocks it.
+    ``mlockall(MCL_CURRENT)`` faults in and pins every page the process has: hundreds of
+    milliseconds for a process of a few hundred MB on a busy host, longer than a slave's
+    SM watchdog, so a run with ``lock_memory`` locks before the slaves reach OP
+    (cli/apply.prepare_cycling); the run's own :func:`apply` then finds it done."""
+    global _held
+    undo: list[Callable[[], object]] = []
+    _lock_memory(undo)
+    _held = True
+
+    def unlock() -> object:
+        global _held
+        _held = False
+        return undo[0]()
+    return unlock
+
+
+# Whether :func:`lock_memory` holds the process's memory locked: a run's :func:`apply` then
+# leaves it as it is (mlockall again walks every page once more: as long as the first).
+_held = False
+
+
 def _lock_memory(undo: list[Callable[[], object]]) -> None:
+    if _held:
+        return                  # locked before the run, unlocked by whoever locked it
     libc = _libc()
     if libc.mlockall(MCL_CURRENT | MCL_FUTURE) != 0:
         err = ctypes.get_errno()
