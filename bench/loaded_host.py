@@ -55,7 +55,9 @@ def one_run(pytest_args: list[str]) -> tuple[dict[str, int], list[str], float, s
     counts: dict[str, int] = {}
     for n, what in _COUNT.findall(summary):
         counts["errors" if what.startswith("error") else what] = int(n)
-    failed = [line.split(" ", 1)[1].split(" - ")[0] for line in lines
+    # The node id and pytest's one-line reason ("FAILED id - AssertionError: ..."), cut
+    # to a line: what the host did, or the code, is then readable from the report alone.
+    failed = [line.split(" ", 1)[1][:300] for line in lines
               if line.startswith(("FAILED ", "ERROR "))]
     if proc.returncode not in (0, 1) and not counts:
         counts["errors"] = 1       # pytest itself could not run: a usage or collection error
@@ -80,8 +82,8 @@ def main() -> int:
             load = os.getloadavg()[0]
             print(f"run {run}: {summary}  [wall {wall:.0f} s, load average {load:.1f}]",
                   flush=True)
-            for nodeid in failed:
-                print(f"  failed: {nodeid}", flush=True)
+            for reason in failed:
+                print(f"  failed: {reason}", flush=True)
             bad += counts.get("failed", 0) + counts.get("errors", 0)
     finally:
         stop_hogs(hogs)
