@@ -29,8 +29,9 @@ from ecatcfg.runtime.master.transport import Transport
 from ecatcfg.runtime.wire import Datagram
 
 READ_TIMEOUT = 0.5         # s per 4-word read (as the scan: IgH allows 500 ms for loading)
-WRITE_TIMEOUT = 0.1        # s per word: the write cycle (5 ms at most for I2C EEPROMs) and
-                           # the refused commands during it, with room for lost frames
+WRITE_TIMEOUT = 0.5        # s per word: the write cycle (5 ms at most for I2C EEPROMs) and
+                           # the refused commands during it, with room for lost frames and
+                           # for a master descheduled on a busy host (as READ_TIMEOUT)
 HEADER_BYTES = 128         # words 0-0x3F: config area, identity, mailbox, size, version
 IDENTITY = slice(2 * SII_VENDOR_ID, 2 * SII_VENDOR_ID + 12)   # vendor, product, revision
 

@@ -62,18 +62,25 @@ def sii_words(position: int, word: int, deadline: float) -> Step[bytes]:
         status = Datagram.physical(Cmd.APRD, adp, Reg.EEPROM_CONTROL, 2)
         value = Datagram.physical(Cmd.APRD, adp, Reg.EEPROM_DATA, 8)
         phase = "request"
+
+        def waiting() -> None:
+            # Checked only where a reply brought no progress: a reply that answers is used
+            # even when it comes after the deadline (the master's own process may have
+            # been descheduled past it on a busy host; the EEPROM had answered).
+            if monotonic() > deadline:
+                raise ApplyError(f"position {position}: the SII EEPROM does not answer")
         while True:
             reply = yield [request] if phase == "request" else [status] if phase == "poll" \
                 else [value]
-            if monotonic() > deadline:
-                raise ApplyError(f"position {position}: the SII EEPROM does not answer")
             if reply is None or reply[0].wkc != 1:
+                waiting()
                 continue
             if phase == "request":
                 phase = "poll"
             elif phase == "poll":
                 control, = struct.unpack("<H", reply[0].data)
                 if control & EEPROM_BUSY:
+                    waiting()
                     continue
                 if control & EEPROM_ERROR_ACKNOWLEDGE and not control & EEPROM_ERRORS \
                         & ~EEPROM_ERROR_ACKNOWLEDGE:
@@ -81,6 +88,7 @@ def sii_words(position: int, word: int, deadline: float) -> Step[bytes]:
                     # cycle after a word was written (ESC Section II 0x0502 bit 13). Ask
                     # again until the deadline.
                     phase = "request"
+                    waiting()
                     continue
                 if control & EEPROM_ERRORS:
                     raise ApplyError(f"position {position}: SII EEPROM error "
