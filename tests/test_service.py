@@ -173,19 +173,57 @@ def _messages(sock: socket.socket, until: float) -> list[tuple[float, dict[str, 
         got.append((time.monotonic(), fields))
 
 
+# A run whose cycles the host held up for this long (the longest cycle period's jitter in
+# apply's report): half a drive's SM watchdog, and a tenth of the service watchdog's period.
+STALLED_US = 50_000
+
+
+def _stalled(out: str) -> bool:
+    """Whether apply's JSON report shows the host held its cycles up (or lost frames)."""
+    try:
+        cycles = json.loads(out)["cycles"]
+    except (ValueError, KeyError, TypeError):
+        return False
+    return bool(cycles["lost_frames"]) or cycles["jitter_us"]["max"] >= STALLED_US
+
+
 @pytest.mark.parametrize("abstract", [False, True], ids=["path", "abstract"])
 def test_notify_ready_watchdog_stopping(example_eni, tmp_path, abstract):
-    sock, address = _notify_socket(tmp_path, abstract)
-    watchdog_usec = 1_000_000
-    env = dict(os.environ, NOTIFY_SOCKET=address, WATCHDOG_USEC=str(watchdog_usec))
+    """READY once the line cycles, WATCHDOG=1 every half period, STOPPING on the way down.
+    apply cycles a virtual line on the host's clock here: a run whose cycles the host held
+    up (its own report says so) is run again, at most three times; a failure without that
+    evidence fails at once."""
+    for attempt in range(1, 4):
+        run = _notify_run(example_eni, tmp_path / str(attempt), abstract)
+        try:
+            _check_notify_run(*run)
+            return
+        except AssertionError:
+            if attempt == 3 or not _stalled(run[3]):
+                raise
+
+
+def _notify_run(example_eni: Path, folder: Path, abstract: bool
+                ) -> tuple[list, list, int, str, str]:
+    folder.mkdir()
+    sock, address = _notify_socket(folder, abstract)
+    env = dict(os.environ, NOTIFY_SOCKET=address, WATCHDOG_USEC=str(WATCHDOG_USEC))
     env.pop("WATCHDOG_PID", None)
     with sock:
         run = start_virtual(example_eni, "--format", "json", env=env)
         run.wait_for("cycling until Ctrl-C")
         cycling = _messages(sock, time.monotonic() + 3.0)
         run.kill(signal.SIGTERM)
-        assert run.finish() == 0, run.stderr()
+        code = run.finish()
         after = _messages(sock, time.monotonic() + 0.5)
+    return cycling, after, code, run.out, run.stderr()
+
+
+WATCHDOG_USEC = 1_000_000
+
+
+def _check_notify_run(cycling: list, after: list, code: int, out: str, err: str) -> None:
+    assert code == 0, err
     ready = [k for k, (_, m) in enumerate(cycling) if m.get("READY") == "1"]
     assert len(ready) == 1, cycling
     first = cycling[ready[0]][1]
@@ -194,8 +232,8 @@ def test_notify_ready_watchdog_stopping(example_eni, tmp_path, abstract):
     # Half the period between pings: about 6 in the 3 s read, never a full period apart.
     assert len(pings) >= 4, cycling
     gaps = [b - a for a, b in zip(pings, pings[1:])]
-    assert max(gaps) < watchdog_usec / 1e6, gaps
-    assert min(gaps) >= watchdog_usec / 2e6 * 0.8, gaps
+    assert max(gaps) < WATCHDOG_USEC / 1e6, gaps
+    assert min(gaps) >= WATCHDOG_USEC / 2e6 * 0.8, gaps
     stopping = [m for _, m in after if m.get("STOPPING") == "1"]
     assert stopping and "down to INIT" in stopping[0]["STATUS"], after
 
