@@ -48,7 +48,9 @@ def one_run(pytest_args: list[str]) -> tuple[dict[str, int], list[str], float, s
     """The suite once: (counts by outcome, failed node ids, wall seconds, pytest's last line)."""
     t0 = time.monotonic()
     proc = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider",
-                           "-rfE", *pytest_args], cwd=ROOT, capture_output=True, text=True)
+                           "-rfE", *pytest_args], cwd=ROOT, capture_output=True, text=True,
+                          # pytest cuts the summary's reasons to the terminal's width
+                          env=dict(os.environ, COLUMNS="400"))
     wall = time.monotonic() - t0
     lines = proc.stdout.strip().splitlines()
     summary = lines[-1] if lines else proc.stderr.strip()[-200:]
