@@ -150,13 +150,14 @@ def lock_memory() -> Callable[[], object]:
     (cli/apply.prepare_cycling); the run's own :func:`apply` then finds it done."""
     global _held
     undo: list[Callable[[], object]] = []
-    _lock_memory(undo)
+    _lock_memory(undo)          # nothing to undo when it was held already: its holder's
     _held = True
 
-    def unlock() -> object:
+    def unlock() -> None:
         global _held
-        _held = False
-        return undo[0]()
+        if undo:
+            _held = False
+            undo[0]()
     return unlock
 
 
