@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import struct
 import threading
-import time
 
 import pytest
 
@@ -241,9 +240,12 @@ def test_sm_watchdog_drops_outputs(lib):
     request(seg, 0x1001, AlState.OP)
     run(seg, Datagram.logical(Cmd.LWR, 0, b"\x42"))
     slave = seg.slaves[0]
-    slave.check_watchdog(time.monotonic())
+    # Times from the write on (the slave's own record of it), not the host's clock now: a
+    # host that holds this test up 10 ms after the write would expire the watchdog early.
+    written = slave._last_output_write
+    slave.check_watchdog(written + 0.005)
     assert slave.outputs() == b"\x42"
-    slave.check_watchdog(time.monotonic() + 0.02)
+    slave.check_watchdog(written + 0.02)
     assert (slave.state, slave.error, slave.status_code) == (AlState.SAFEOP, True, 0x001B)
     assert slave.outputs() == b"\x00"
     [d] = run(seg, fp(Cmd.FPRD, 0x1001, 0x0440, 1))

@@ -119,11 +119,24 @@ def states(report: dict) -> dict[str, tuple[str, str]]:
 
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP, signal.SIGINT])
 def test_a_signal_stops_apply_like_ctrl_c(example_eni, sig):
-    run = start_virtual(example_eni, "--format", "json")
-    run.wait_for("cycling until Ctrl-C")
-    time.sleep(0.3)
-    run.kill(sig)
-    assert run.finish() == 0, run.stderr()
+    """apply cycles a virtual line on the host's clock here: a run whose cycles the host
+    held up (its own report says so: _stalled) is run again, at most three times."""
+    for attempt in range(1, 4):
+        run = start_virtual(example_eni, "--format", "json")
+        run.wait_for("cycling until Ctrl-C")
+        time.sleep(0.3)
+        run.kill(sig)
+        code = run.finish()
+        try:
+            _check_stopped_by(sig, code, run)
+            return
+        except AssertionError:
+            if attempt == 3 or not _stalled(run.out):
+                raise
+
+
+def _check_stopped_by(sig: signal.Signals, code: int, run: Running) -> None:
+    assert code == 0, run.stderr()
     report = json.loads(run.out)
     assert report["ok"] is True and report["error"] is None
     assert states(report) == {n: ("INIT", "OP") for n in NAMES}
