@@ -287,23 +287,28 @@ def test_the_installed_command_is_the_wheels_when_the_tests_run_against_it(insta
     assert str(installed.env_dir) in done.stdout, done.stdout + done.stderr
 
 
+def venv_with_test_dependencies(env_dir: Path) -> Path:
+    """A new venv's python that sees the test dependencies.  They come from the
+    site-packages of the interpreter running the tests, which is a venv's when README
+    command 2 was run in one (a venv made with system_site_packages sees only the base
+    interpreter's: lxml was missing there).  A plain path in a .pth file does not run that
+    folder's own .pth files, so the checkout's editable finder stays out; the venv's own
+    finder for what is installed into it comes first."""
+    venv.create(env_dir, with_pip=True)
+    py = env_dir / "bin" / "python"
+    inner = subprocess.run([str(py), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
+                           capture_output=True, text=True, check=True).stdout.strip()
+    outer = [p for p in sys.path if p.endswith("-packages") and os.path.isdir(p)]
+    (Path(inner) / "zz-test-dependencies.pth").write_text("\n".join(outer) + "\n")
+    return py
+
+
 def test_editable_install_imports_only_real_subpackages_and_leaves_no_litter(tmp_path):
     """``pip install -e .`` maps ``ecatcfg`` onto the source folder, where tests/, bench/ and
     docs/ sit beside the subpackages: they must not import as namespace packages, and the
     install must leave no egg-info behind."""
     src, before = clean_copy(tmp_path)
-    env_dir = tmp_path / "venv"
-    venv.create(env_dir, with_pip=True)
-    py = env_dir / "bin" / "python"
-    # The dependencies come from the site-packages of the interpreter running the tests,
-    # which is a venv's when README command 2 was run in one (a venv made with
-    # system_site_packages sees only the base interpreter's: lxml was missing there).
-    # A plain path in a .pth file does not run that folder's own .pth files, so the
-    # checkout's editable finder stays out; the venv's own finder for the copy comes first.
-    inner = subprocess.run([str(py), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
-                           capture_output=True, text=True, check=True).stdout.strip()
-    outer = [p for p in sys.path if p.endswith("-packages") and os.path.isdir(p)]
-    (Path(inner) / "zz-test-dependencies.pth").write_text("\n".join(outer) + "\n")
+    py = venv_with_test_dependencies(tmp_path / "venv")
     out = subprocess.run([str(py), "-m", "pip", "install", "-q", "--no-deps", "-e", str(src)],
                          capture_output=True, text=True, env=VENV_ENV)
     assert out.returncode == 0, out.stderr
@@ -332,18 +337,11 @@ def test_a_build_without_a_c_compiler_installs_and_cycles_in_pure_python(tmp_pat
     assert listing(src) == before, set(listing(src)) - set(before)
     wheel, = dist.glob("ecatcfg-*.whl")
     assert not any(n.endswith(".so") for n in zipfile.ZipFile(wheel).namelist())
-    env_dir = tmp_path / "venv"
-    venv.create(env_dir, with_pip=True)
-    py = env_dir / "bin" / "python"
-    # The dependencies from the interpreter running the tests, as in the editable test.
-    inner = subprocess.run([str(py), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
-                           capture_output=True, text=True, check=True).stdout.strip()
-    outer = [p for p in sys.path if p.endswith("-packages") and os.path.isdir(p)]
-    (Path(inner) / "zz-test-dependencies.pth").write_text("\n".join(outer) + "\n")
+    py = venv_with_test_dependencies(tmp_path / "venv")
     done = subprocess.run([str(py), "-m", "pip", "install", "-q", "--no-deps", str(wheel)],
                           capture_output=True, text=True, env=VENV_ENV)
     assert done.returncode == 0, done.stderr
-    exe = env_dir / "bin" / "ecatcfg"
+    exe = py.parent / "ecatcfg"
     out = subprocess.run([str(exe), "--version"], capture_output=True, text=True,
                          env=VENV_ENV, timeout=60)
     assert out.stdout.splitlines()[1] == "cyclic exchange: pure Python", out.stdout + out.stderr
