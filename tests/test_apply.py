@@ -623,7 +623,8 @@ def test_swapped_slaves_exit_1_before_any_configuration(veth_netns, corpus_lib, 
 
 def _apply_virtual(eni: Path, *args: str, env: dict | None = None) -> tuple[int, dict, str]:
     done = subprocess.run([sys.executable, "-m", "ecatcfg", "apply", str(eni), "--virtual",
-                           "--esi", str(EXAMPLES / "esi"), "--format", "json", *args],
+                           "--esi", str(EXAMPLES / "esi"), "--simulated-time", "--format",
+                           "json", *args],
                           capture_output=True, text=True, timeout=APPLY_TIMEOUT, env=env)
     return done.returncode, json.loads(done.stdout), done.stderr
 

@@ -109,7 +109,7 @@ TOPOLOGY = """slaves:
 
 def _apply(eni: Path, *args: str) -> tuple[int, dict, str]:
     done = subprocess.run([sys.executable, "-m", "ecatcfg", "apply", str(eni), "--virtual",
-                           "--format", "json", "--cycles", "2", *args],
+                           "--format", "json", "--simulated-time", "--cycles", "2", *args],
                           capture_output=True, text=True, timeout=120)
     return done.returncode, json.loads(done.stdout or "{}"), done.stderr
 

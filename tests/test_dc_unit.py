@@ -170,7 +170,7 @@ def test_a_line_with_a_dc_less_coupler_before_a_dc_drive_reaches_op(tmp_path):
                            str(eni), *common], capture_output=True, text=True, timeout=60)
     assert done.returncode == 0, done.stderr
     done = subprocess.run([sys.executable, "-m", "ecatcfg", "apply", str(eni), "--virtual",
-                           "--format", "json", "--cycles", "20", *common],
+                           "--format", "json", "--simulated-time", "--cycles", "20", *common],
                           capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr
     report = json.loads(done.stdout)

@@ -260,21 +260,21 @@ def test_apply_virtual_takes_the_description_the_eni_has_unless_preferred(pair: 
     eni = pair / "out.xml"
     assert ecatcfg("compile", topo, "--esi", pair / "esi", "-o", eni,
                    "--no-cache").returncode == 0
-    done = ecatcfg("apply", eni, "--virtual", "--esi", pair / "esi", "--cycles", "3",
-                   "--no-cache")
+    done = ecatcfg("apply", eni, "--virtual", "--esi", pair / "esi", "--simulated-time",
+                   "--cycles", "3", "--no-cache")
     assert done.returncode == 0, done.stderr
     b, a = pair / "esi" / "b.xml", pair / "esi" / "a.xml"
     words = " ".join((done.stdout + done.stderr).split())
     assert f"took {b}:{_device_line(b)}: the only description that agrees" in words
     assert f"{a}:{_device_line(a)}: TxPdo 0x1A00 entries differ from the ENI's" in words
     eni.write_text(eni.read_text().replace("<BitLen>16</BitLen>", "<BitLen>32</BitLen>"))
-    done = ecatcfg("apply", eni, "--virtual", "--esi", pair / "esi", "--cycles", "3",
-                   "--no-cache")
+    done = ecatcfg("apply", eni, "--virtual", "--esi", pair / "esi", "--simulated-time",
+                   "--cycles", "3", "--no-cache")
     assert done.returncode == 1
     assert "a.xml" in done.stderr and "b.xml" in done.stderr and "Traceback" not in done.stderr
     assert "none agrees with the ENI's slave 'io'" in " ".join(done.stderr.split())
     done = ecatcfg("apply", eni, "--virtual", "--esi", pair / "esi", "--prefer",
-                   pair / "esi" / "b.xml", "--cycles", "3", "--no-cache")
+                   pair / "esi" / "b.xml", "--simulated-time", "--cycles", "3", "--no-cache")
     assert done.returncode == 0, done.stderr + done.stdout
 
 

@@ -351,7 +351,8 @@ def _assert_no_description_agrees(path: Path, esi: list[Path] | None) -> None:
 def test_apply_reports_which_slaves_come_from_the_eni(corpus):
     eni = corpus / "eni" / "jn-ec-master" / "mega_master_eni.xml"
     run = subprocess.run([sys.executable, "-m", "ecatcfg", "apply", str(eni), "--virtual",
-                          "--esi", str(corpus / "esi"), "--cycles", "3", "--format", "json",
+                          "--esi", str(corpus / "esi"), "--simulated-time", "--cycles", "3",
+                          "--format", "json",
                           "--no-cache"], capture_output=True, text=True, timeout=120)
     assert run.returncode == 0, run.stderr
     report = json.loads(run.stdout)
@@ -362,7 +363,8 @@ def test_apply_reports_which_slaves_come_from_the_eni(corpus):
                             "alone (no device 0x2:0xfa23052:0x150000 in the library")
                for e in report["events"])
     text = subprocess.run([sys.executable, "-m", "ecatcfg", "apply", str(eni), "--virtual",
-                           "--cycles", "3"], capture_output=True, text=True, timeout=120)
+                           "--simulated-time", "--cycles", "3"], capture_output=True, text=True,
+                           timeout=120)
     assert text.returncode == 0, text.stderr
     words = " ".join(text.stdout.split())          # rich wraps text at 80 columns in a pipe
     assert words.count("emulated from the ENI alone (no ESI files given)") == 4
@@ -375,7 +377,7 @@ def test_apply_names_the_file_line_and_cause_of_a_refused_sdo(esi_index):
     eni = esi[1].parent / "eni" / "rocos-ecm-history" / "eni_sea.xml"
     run = subprocess.run([sys.executable, "-m", "ecatcfg", "apply", str(eni), "--virtual",
                           "--esi", str(esi[0]), "--esi", str(esi[1]), "--prefer",
-                          str(prefer(esi)[0]), "--cycles", "3"],
+                          str(prefer(esi)[0]), "--simulated-time", "--cycles", "3"],
                          capture_output=True, text=True, timeout=120,
                          env={**os.environ, "XDG_CACHE_HOME": str(home)})
     assert run.returncode == 1, run.stderr

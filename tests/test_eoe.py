@@ -533,7 +533,8 @@ def test_eni1_sets_the_ip_parameters_on_the_wire(corpus, tshark_path, tmp_path):
     eni = corpus / "eni" / "rocos-ethercat" / "eni1.xml"
     pcap = tmp_path / "eni1.pcapng"
     done = subprocess.run([sys.executable, "-m", "ecatcfg", "apply", str(eni), "--virtual",
-                           "--esi", str(corpus / "esi"), "--cycles", "5", "--pcap", str(pcap),
+                           "--esi", str(corpus / "esi"), "--simulated-time", "--cycles", "5",
+                           "--pcap", str(pcap),
                            "--format", "json"], capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr
     report = json.loads(done.stdout)

@@ -19,6 +19,7 @@ from ecatcfg.esi.library import Library
 from ecatcfg.runtime import wire
 from ecatcfg.runtime.segment.emulate import SlaveSpec, segment
 from ecatcfg.runtime.link import MemoryLink
+from ecatcfg.runtime.segment.timing import Timing
 from ecatcfg.runtime.segment.virtual import Faults, VirtualSegment
 from ecatcfg.runtime.wire import Datagram
 
@@ -178,6 +179,55 @@ def test_injected_refusal(lib):
     seg.slaves[0].refuse["IP"] = 0x0020
     address_all(seg)
     assert request(seg, 0x1001, AlState.PREOP) == (AlState.INIT | 0x10, 0x0020)
+
+
+def _timed_drive_in_preop(lib: Library) -> tuple[VirtualSegment, list[int]]:
+    """The example drive with the fitted firmware timing on a clock the test moves, its
+    mailbox SyncManagers as its ESI gives them, in PREOP."""
+    now = [0]
+    device = lib.device(lib.find("EXD-402").entry)
+    seg = segment([SlaveSpec(device, "drive")], timing=Timing(), clock_ns=lambda: now[0])
+    address_all(seg)
+    for sm in device.sms[:2]:
+        config = SmConfig(sm.start_address, sm.default_size, sm.control_byte, True)
+        [d] = run(seg, fp(Cmd.FPWR, 0x1001, sm_register(sm.number), config.to_bytes()))
+        assert d.wkc == 1
+    run(seg, fp(Cmd.FPWR, 0x1001, 0x0120, u16(AlState.PREOP)))
+    now[0] += 10**9                      # far longer than any firmware time of the model
+    assert al_status(seg) == (AlState.PREOP, 0)
+    return seg, now
+
+
+def al_status(seg: VirtualSegment) -> tuple[int, int]:
+    [d] = run(seg, fp(Cmd.FPRD, 0x1001, 0x0130, 6))
+    status, _, code = struct.unpack("<HHH", d.data)
+    return status, code
+
+
+def clear_mailbox_sms(seg: VirtualSegment) -> None:
+    for n in (0, 1):
+        [d] = run(seg, fp(Cmd.FPWR, 0x1001, sm_register(n), bytes(8)))
+        assert d.wkc == 1
+
+
+def test_mailbox_sms_cleared_behind_a_request_for_init_are_no_refusal(lib):
+    """PREOP -> INIT as some exporters write it: AL control = INIT, then SM0 and SM1
+    cleared at once, with no state check between, so the firmware has not taken the
+    request yet when the SMs change.  A firmware takes the state request first (SOES runs
+    ESC_state() before ESC_sm_act_event() in every pass): the slave reaches INIT without
+    an error.  The same SMs cleared in PREOP with no request pending stop its mailbox, and
+    it falls back to INIT+ERR 0x0016 (SOES ESC_checkmbx)."""
+    seg, now = _timed_drive_in_preop(lib)
+    run(seg, fp(Cmd.FPWR, 0x1001, 0x0120, u16(AlState.INIT)))
+    clear_mailbox_sms(seg)
+    assert al_status(seg) == (AlState.PREOP, 0)      # the firmware is still at it
+    now[0] += 10**9
+    assert al_status(seg) == (AlState.INIT, 0)
+
+    seg, now = _timed_drive_in_preop(lib)
+    clear_mailbox_sms(seg)
+    now[0] += 10**9
+    assert al_status(seg) == (AlState.INIT | 0x10, 0x0016)
 
 
 # -- process data through FMMUs -----------------------------------------------------------------

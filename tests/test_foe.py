@@ -696,8 +696,8 @@ def test_other_foe_init_cmds_are_refused_by_name(lib, tmp_path, data, why):
     assert f"{eni}:{line}: slave 'box': {why}" in done.stderr, done.stderr
     assert "[FoE/InitCmds/InitCmd]: 1 command would be lost" in done.stderr
     skipped = subprocess.run([sys.executable, "-m", "ecatcfg", "apply", str(eni), "--virtual",
-                              "--esi", str(ESI), "--skip-unsupported", "--cycles", "3",
-                              "--format", "json"],
+                              "--esi", str(ESI), "--skip-unsupported", "--simulated-time",
+                              "--cycles", "3", "--format", "json"],
                              capture_output=True, text=True, timeout=120, cwd=ROOT)
     assert skipped.returncode == 0, skipped.stderr
     assert json.loads(skipped.stdout)["skipped"][0]["element"] == "FoE/InitCmds/InitCmd"

@@ -114,8 +114,8 @@ def test_compile_check_and_apply_with_the_list(tmp_path):
             for s in slaves] == [p for _, p, *_ in _expected()]
     run = _cli("check", str(eni), "--esi", str(LIST))
     assert run.returncode == 0, run.stdout + run.stderr
-    run = _cli("apply", str(eni), "--virtual", "--esi", str(LIST), "--cycles", "3",
-               "--format", "json")
+    run = _cli("apply", str(eni), "--virtual", "--esi", str(LIST), "--simulated-time", "--cycles",
+               "3", "--format", "json")
     assert run.returncode == 0, run.stderr
     report = json.loads(run.stdout)
     assert [s["highest_state"] for s in report["slaves"]] == ["OP"] * 3

@@ -259,8 +259,8 @@ def test_apply_virtual_cli_reaches_op_for_the_ur20_station(corpus, modular_lib, 
     eni.write_bytes(eni_writer.to_bytes(compile_station(station("io", "UR20-FBC-EC", UR20),
                                                         modular_lib)))
     done = subprocess.run([sys.executable, "-m", "ecatcfg", "apply", str(eni), "--virtual",
-                           "--esi", str(corpus / "esi/modular"), "--cycles", "5",
-                           "--no-cache"], capture_output=True, text=True, timeout=120)
+                           "--esi", str(corpus / "esi/modular"), "--simulated-time", "--cycles",
+                           "5", "--no-cache"], capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr + done.stdout
     assert "PREOP -> SAFEOP: SAFEOP" in done.stdout + done.stderr
 

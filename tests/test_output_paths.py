@@ -71,8 +71,8 @@ def _writers(eni: Path, out: str) -> dict[str, list[str]]:
         "check -o": ["check", str(eni), "-o", out],
         "lint -o": ["lint", ESI, "-o", out, "--no-config"],
         "sii build": ["sii", "build", ESI, "--device", "EX1100", "-o", out],
-        "apply --pcap": ["apply", str(eni), "--virtual", "--esi", ESI, "--cycles", "2",
-                         "--pcap", out],
+        "apply --pcap": ["apply", str(eni), "--virtual", "--esi", ESI, "--simulated-time",
+                         "--cycles", "2", "--pcap", out],
     }
 
 

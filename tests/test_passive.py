@@ -238,7 +238,8 @@ def test_a_passive_slave_inside_a_hot_connect_group_is_refused(tmp_path):
 
 def _apply_virtual(eni: Path, *args: str) -> tuple[int, dict, str]:
     done = subprocess.run([sys.executable, "-m", "ecatcfg", "apply", str(eni), "--virtual",
-                           "--format", "json", "--cycles", "20", "--no-cache", *args],
+                           "--format", "json", "--simulated-time", "--cycles", "20", "--no-cache",
+                           *args],
                           capture_output=True, text=True, timeout=APPLY_TIMEOUT)
     return done.returncode, json.loads(done.stdout), done.stderr
 
@@ -284,7 +285,7 @@ def test_apply_virtual_with_esi_does_not_emulate_passive_devices(tmp_path):
 
 def test_apply_text_marks_passive_slaves(passive_eni):
     done = subprocess.run([sys.executable, "-m", "ecatcfg", "apply", str(passive_eni),
-                           "--virtual", "--cycles", "5", "--no-cache"],
+                           "--virtual", "--simulated-time", "--cycles", "5", "--no-cache"],
                           capture_output=True, text=True, timeout=APPLY_TIMEOUT)
     assert done.returncode == 0, done.stderr
     rows = [line for line in done.stdout.splitlines() if "Term 9 (EL9011)" in line]

@@ -52,7 +52,8 @@ def cut(src: Path, dst: Path, drop: Callable[[str, str], bool]) -> Path:
 def apply_json(eni: Path, *args: str) -> tuple[int, dict, str]:
     """``apply --virtual --format json``: stdout must be exactly one JSON document."""
     done = subprocess.run([sys.executable, "-m", "ecatcfg", "apply", str(eni), "--virtual",
-                           "--esi", str(EXAMPLES / "esi"), "--format", "json", "--cycles", "5",
+                           "--esi", str(EXAMPLES / "esi"), "--format", "json", "--simulated-time",
+                           "--cycles", "5",
                            *args], capture_output=True, text=True, timeout=TIMEOUT)
     return done.returncode, json.loads(done.stdout), done.stderr
 

@@ -80,8 +80,8 @@ def test_the_fixtures_are_four_descriptions_of_one_identity_that_one_eni_fits():
 
 def test_apply_virtual_reaches_op_with_the_description_the_eni_agrees_with():
     [right] = _fitting(HERE / "eni.xml")
-    run = ecatcfg("apply", HERE / "eni.xml", "--virtual", "--esi", HERE, "--cycles", "3",
-                  "--format", "json", "--no-cache")
+    run = ecatcfg("apply", HERE / "eni.xml", "--virtual", "--esi", HERE, "--simulated-time",
+                  "--cycles", "3", "--format", "json", "--no-cache")
     assert run.returncode == 0, run.stderr
     report = json.loads(run.stdout)
     [row] = report["slaves"]
@@ -97,8 +97,8 @@ def test_apply_virtual_reaches_op_with_the_description_the_eni_agrees_with():
     assert f"{_where(HERE / 'vendor-build-1.xml')}: the ENI's TxPdo 0x1A01 not in it" in why
     assert any(why in e for e in report["events"])
     # The text output says it too.
-    text = ecatcfg("apply", HERE / "eni.xml", "--virtual", "--esi", HERE, "--cycles", "3",
-                   "--no-cache")
+    text = ecatcfg("apply", HERE / "eni.xml", "--virtual", "--esi", HERE, "--simulated-time",
+                   "--cycles", "3", "--no-cache")
     assert text.returncode == 0, text.stderr
     words = " ".join((text.stdout + text.stderr).split())
     assert f"took {_where(right)}: the only description that agrees with" in words
@@ -146,7 +146,8 @@ def _renumber_counter_pdo(root: etree._Element) -> None:
 def test_an_eni_no_description_fits_is_refused_naming_the_differences(tmp_path: Path):
     eni = _variant(tmp_path, _renumber_counter_pdo)
     assert _fitting(eni) == []
-    run = ecatcfg("apply", eni, "--virtual", "--esi", HERE, "--cycles", "3", "--no-cache")
+    run = ecatcfg("apply", eni, "--virtual", "--esi", HERE, "--simulated-time", "--cycles", "3",
+                  "--no-cache")
     assert run.returncode == 1
     err = " ".join(run.stderr.split())
     assert f"{eni}: slave 'Box 1 (EXD4400)': 0xe0000eca:0x4400:0x10000 (EXD4400) is " \
@@ -158,7 +159,7 @@ def test_an_eni_no_description_fits_is_refused_naming_the_differences(tmp_path: 
     # --prefer still decides (the user's choice), and the note says it does not agree.
     right = HERE / "vendor-build-2.xml"
     chosen = ecatcfg("apply", eni, "--virtual", "--esi", HERE, "--prefer", right,
-                     "--cycles", "3", "--no-cache", "--format", "json")
+                     "--simulated-time", "--cycles", "3", "--no-cache", "--format", "json")
     assert chosen.returncode == 0, chosen.stderr
     [row] = json.loads(chosen.stdout)["slaves"]
     assert row["highest_state"] == "OP" and row["esi"] == _where(right)

@@ -25,6 +25,7 @@ import queue
 import re
 import signal
 import socket
+import struct
 import subprocess
 import sys
 import threading
@@ -160,8 +161,16 @@ def test_stay_keeps_the_state_after_sigterm(example_eni):
 
 # -- sd_notify -------------------------------------------------------------------------------
 
+# SO_TIMESTAMPNS (include/uapi/asm-generic/socket.h; Python's socket module does not name
+# it): the kernel stamps each datagram when it is sent to the socket, so the gaps between
+# apply's messages are measured at apply's end, not when this test (as held up by a busy
+# host as apply is) gets round to reading them.
+SO_TIMESTAMPNS = 35
+
+
 def _notify_socket(tmp_path: Path, abstract: bool) -> tuple[socket.socket, str]:
     sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+    sock.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
     if abstract:
         name = f"ecatcfg-test-{os.getpid()}-{time.monotonic_ns()}"
         sock.bind("\0" + name)
@@ -179,11 +188,19 @@ def _messages(sock: socket.socket, until: float) -> list[tuple[float, dict[str, 
             return got
         sock.settimeout(left)
         try:
-            data = sock.recv(4096)
+            data, ancillary, _, _ = sock.recvmsg(4096, socket.CMSG_SPACE(16))
         except TimeoutError:
             return got
         fields = dict(line.split("=", 1) for line in data.decode().splitlines())
-        got.append((time.monotonic(), fields))
+        got.append((_sent_at(ancillary), fields))
+
+
+def _sent_at(ancillary: list[tuple[int, int, bytes]]) -> float:
+    """The kernel's time stamp of a datagram (CLOCK_REALTIME, seconds)."""
+    stamp = next(d for level, kind, d in ancillary
+                 if level == socket.SOL_SOCKET and kind == SO_TIMESTAMPNS)
+    sec, nsec = struct.unpack("qq", stamp)
+    return sec + nsec / 1e9
 
 
 # A run whose cycles the host held up for this long (the longest cycle period's jitter in

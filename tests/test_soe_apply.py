@@ -76,8 +76,8 @@ def test_compiled_soe_drive_reaches_op_with_every_idn_written_in_order(tmp_path,
     assert (1, 0x8064, bytes.fromhex("02000000")) == expected[-1]  # P-0-0100, SO, drive 1
     assert {(d, i) for d, i, _ in expected} >= {(0, 1), (0, 2), (0, 32)}
     pcap = tmp_path / "up.pcapng"
-    done = ecatcfg("apply", eni, "--virtual", "--esi", ESI, "--cycles", "5", "--pcap", pcap,
-                   "--format", "json")
+    done = ecatcfg("apply", eni, "--virtual", "--esi", ESI, "--simulated-time", "--cycles", "5",
+                   "--pcap", pcap, "--format", "json")
     assert done.returncode == 0, done.stderr
     report = json.loads(done.stdout)
     assert report["ok"] is True
@@ -93,7 +93,7 @@ def test_a_missing_required_idn_is_a_named_refusal_of_safeop(tmp_path):
             if c.findtext("IDN") == "2" and c.findtext("DriveNo") == "0"]
     s2.getparent().remove(s2)
     tree.write(str(eni))
-    done = ecatcfg("apply", eni, "--virtual", "--esi", ESI, "--cycles", "5")
+    done = ecatcfg("apply", eni, "--virtual", "--esi", ESI, "--simulated-time", "--cycles", "5")
     assert done.returncode == 1, done.stdout + done.stderr
     said = done.stdout + done.stderr
     assert "slave 'axes'" in said

@@ -349,7 +349,8 @@ def test_only_write_requests_are_read_another_opcode_is_refused_by_name(tmp_path
     # Left out of the plan, so that a skipping apply does not send it.
     assert len(soe_cmds(plan)) == 7 and all(c.op_code == 3 for c in soe_cmds(plan))
     done = subprocess.run([sys.executable, "-m", "ecatcfg", "apply", str(eni), "--virtual",
-                           "--esi", str(ESI), "--cycles", "1"], capture_output=True,
+                           "--esi", str(ESI), "--simulated-time", "--cycles", "1"],
+                           capture_output=True,
                           text=True, timeout=120)
     assert done.returncode == 1 and "Traceback" not in done.stderr
     assert f"{eni}:{op_line}: slave 'axes': an SoE request with OpCode 1" in done.stderr

@@ -360,7 +360,8 @@ def test_tshark_reads_our_request_as_set_ip_parameter(esi_file, tmp_path, tshark
                                  "--no-cache"], capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr
     done = subprocess.run(run + ["apply", str(eni), "--virtual", "--esi", str(esi_file),
-                                 "--cycles", "5", "--pcap", str(pcap), "--format", "json",
+                                 "--simulated-time", "--cycles", "5", "--pcap", str(pcap),
+                                 "--format", "json",
                                  "--no-cache"], capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr
     report = json.loads(done.stdout)

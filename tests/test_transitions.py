@@ -100,7 +100,7 @@ def _with_commands(eni: bytes, transition: Transition, kinds: tuple[str, ...]) -
 
 def _apply(eni: Path, esi: Path, *args: str) -> subprocess.CompletedProcess[str]:
     return subprocess.run([sys.executable, "-m", "ecatcfg", "apply", str(eni), "--virtual",
-                           "--esi", str(esi), "--cycles", "3", *args],
+                           "--esi", str(esi), "--simulated-time", "--cycles", "3", *args],
                           capture_output=True, text=True, timeout=120)
 
 

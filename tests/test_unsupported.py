@@ -78,7 +78,7 @@ def _insert(eni: bytes, xpath: str, fragment: str, tmp_path: Path,
 
 def _apply(eni: Path, *args: str, esi: Path = ESI) -> subprocess.CompletedProcess[str]:
     return subprocess.run([sys.executable, "-m", "ecatcfg", "apply", str(eni), "--virtual",
-                           "--esi", str(esi), "--cycles", "3", *args],
+                           "--esi", str(esi), "--simulated-time", "--cycles", "3", *args],
                           capture_output=True, text=True, timeout=120)
 
 
@@ -388,7 +388,8 @@ def test_encrypted_fmmu_settings_are_refused_and_never_written(corpus, tmp_path)
     # Only the mailbox-state FMMU (clear text) stays in the plan: skipping never writes them.
     assert [c.comment for c in fmmu_writes] == ["set fmmu 2 (mailbox state)"]
     run = subprocess.run([sys.executable, "-m", "ecatcfg", "apply", str(eni), "--virtual",
-                          "--cycles", "1"], capture_output=True, text=True, timeout=60)
+                          "--simulated-time", "--cycles", "1"], capture_output=True, text=True,
+                          timeout=60)
     assert run.returncode == 1
     assert "slave 'Slave_1002 [54632]': FMMU 0 setting that maps logical 0xEB030B5F" in \
         run.stderr and "nothing was written to the bus" in run.stderr

@@ -284,7 +284,8 @@ def test_apply_virtual_cli_reaches_op(tmp_path):
                                  "--no-cache"], capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr
     done = subprocess.run(run + ["apply", str(eni), "--virtual", "--esi", str(FIXTURE),
-                                 "--cycles", "5", "--no-cache", "--format", "json"],
+                                 "--simulated-time", "--cycles", "5", "--no-cache", "--format",
+                                 "json"],
                           capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr
     report = json.loads(done.stdout)

@@ -121,7 +121,7 @@ def _write(tree: etree._ElementTree, path: Path) -> Path:
 
 def _apply(eni: Path, *args: str) -> subprocess.CompletedProcess[str]:
     return subprocess.run([sys.executable, "-m", "ecatcfg", "apply", str(eni), "--virtual",
-                           "--esi", str(ESI), "--cycles", "3", *args],
+                           "--esi", str(ESI), "--simulated-time", "--cycles", "3", *args],
                           capture_output=True, text=True, timeout=180)
 
 
@@ -253,7 +253,7 @@ def test_a_twincat_export_with_adapt_automatically_on_coe_initcmds_reaches_op(co
     plan = eni_reader.read_file(eni)
     assert plan.unsupported == []
     run = subprocess.run([sys.executable, "-m", "ecatcfg", "apply", str(eni), "--virtual",
-                          "--cycles", "3", "--format", "json"],
+                          "--simulated-time", "--cycles", "3", "--format", "json"],
                          capture_output=True, text=True, timeout=300)
     assert run.returncode == 0, run.stderr[-2000:]
     states = {s["highest_state"] for s in json.loads(run.stdout)["slaves"]}
@@ -302,7 +302,8 @@ def test_use_lrd_lwr_stops_an_lrw_layout_and_runs_with_lrd_lwr(tmp_path):
         "Config/Cyclic/Frame/Cmd")}
     assert 12 not in cmds and {10, 11} <= cmds          # LRD, LWR; no LRW (ETG.1000.4)
     run = subprocess.run([sys.executable, "-m", "ecatcfg", "apply", str(eni), "--virtual",
-                          "--esi", str(esi), "--cycles", "3", "--format", "json"],
+                          "--esi", str(esi), "--simulated-time", "--cycles", "3", "--format",
+                          "json"],
                          capture_output=True, text=True, timeout=180)
     assert run.returncode == 0, run.stderr
     assert [s["highest_state"] for s in json.loads(run.stdout)["slaves"]] == ["OP"] * 3

@@ -20,7 +20,8 @@ from ecatcfg.esc import (AL_ERROR_ACK, AL_STATE_MASK, AL_STATUS_ERROR, AlState, 
                          al_state_name, al_status_name)
 from ecatcfg.record import record
 from ecatcfg.runtime.master.lockstep import Job, run_jobs
-from ecatcfg.runtime.master.replay import ERROR_GRACE, TIMEOUT_COMMAND, TIMEOUT_STATE
+from ecatcfg.runtime.master.reached import al_status_read, awaited_al_status
+from ecatcfg.runtime.master.replay import TIMEOUT_COMMAND, TIMEOUT_STATE
 from ecatcfg.runtime.master.scan import count_slaves
 from ecatcfg.runtime.master.transport import Transport
 from ecatcfg.runtime.wire import Datagram
@@ -75,11 +76,6 @@ def positions_on_line(transport: Transport, slave: int | None) -> list[int]:
     return [slave]
 
 
-def _status(position: int) -> Datagram:
-    # 0x0130..0x0135: AL status, reserved, AL status code in one read.
-    return Datagram.physical(Cmd.APRD, -position & 0xFFFF, Reg.AL_STATUS, 6)
-
-
 def _decode(position: int, data: bytes | bytearray, requested: AlState | None = None,
             timed_out: bool = False) -> SlaveAlStatus:
     al_status, = struct.unpack_from("<H", data)
@@ -90,7 +86,7 @@ def _decode(position: int, data: bytes | bytearray, requested: AlState | None = 
 def _read_job(position: int, out: dict[int, SlaveAlStatus]) -> Job:
     deadline = monotonic() + TIMEOUT_COMMAND
     while True:
-        reply = yield [_status(position)]
+        reply = yield [al_status_read(position)]
         if reply is not None and reply[0].wkc == 1:
             out[position] = _decode(position, reply[0].data)
             return
@@ -119,27 +115,10 @@ def _request_job(before: SlaveAlStatus, target: AlState, timeout: float,
         if monotonic() > deadline:
             raise StatesError(f"slave {position}: the AL control write (0x0120) of "
                               f"{target.name} was not answered")
-    deadline = monotonic() + timeout
-    error_since: float | None = None
-    last = before
-    while True:
-        reply = yield [_status(position)]
-        now = monotonic()
-        if reply is not None and reply[0].wkc == 1:
-            last = _decode(position, reply[0].data, target)
-            if last.reached:
-                out[position] = last
-                return
-            if last.error:
-                error_since = error_since or now
-                if now - error_since >= ERROR_GRACE:
-                    out[position] = last
-                    return
-            else:
-                error_since = None
-        if now > deadline:
-            out[position] = SlaveAlStatus(position, last.al_status, last.code, target, True)
-            return
+    data = yield from awaited_al_status(position, target, timeout)
+    got = _decode(position, data, target) if data is not None else before
+    out[position] = got if got.reached or (data is not None and got.error) else \
+        SlaveAlStatus(position, got.al_status, got.code, target, timed_out=True)
 
 
 def request_state(transport: Transport, positions: list[int], target: AlState,

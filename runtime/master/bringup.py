@@ -28,10 +28,11 @@ from ecatcfg.record import record
 from ecatcfg.runtime.master import hotconnect
 from ecatcfg.runtime.master.cyclic import CyclicFrames
 from ecatcfg.runtime.master.lockstep import Job, Step, run_jobs, until_answered
-from ecatcfg.runtime.master.reached import (EXPLAIN, SlaveState, describe_missing,
-                                            missing_requests, not_reached)
-from ecatcfg.runtime.master.replay import (TIMEOUT_COMMAND, ApplyError, SlaveProgress,
-                                           mailbox_channels)
+from ecatcfg.runtime.master.reached import (EXPLAIN, UNANSWERED_READS, SlaveState,
+                                            al_status_read, awaited_al_status,
+                                            describe_missing, missing_requests, not_reached)
+from ecatcfg.runtime.master.replay import (TIMEOUT_COMMAND, TIMEOUT_STATE, ApplyError,
+                                           SlaveProgress, mailbox_channels)
 from ecatcfg.runtime.master.scan import FoundSlave, Mismatch, scan, verify
 from ecatcfg.runtime.master.transition import mailbox_init_cmds, master_job, slave_transition_job
 from ecatcfg.runtime.master.transport import Transport, pack
@@ -272,10 +273,24 @@ class Master:
 
     def check_reached(self, transition: Transition) -> None:
         """Raise :class:`NotReachedError` unless every slave on the line reads back in
-        ``transition``'s target state without the error flag."""
-        lines = not_reached(self.slaves, self.read_states(), transition.target)
+        ``transition``'s target state without the error flag.  A slave still on its way is
+        read again until it is there, refuses (error flag) or ``TIMEOUT_STATE`` passes
+        (``reached.awaited_al_status``); the cyclic frames go on meanwhile where the
+        transition needs them."""
+        lines = not_reached(self.slaves, self.await_states(transition.target),
+                            transition.target)
         if lines:
             raise NotReachedError(transition, lines)
+
+    def await_states(self, target: AlState, skip: frozenset[str] | set[str] = frozenset()
+                     ) -> list[SlaveState | None]:
+        """Each slave's AL status once it shows ``target``, refuses it (error flag) or
+        ``TIMEOUT_STATE`` passes (``None``: no answer, or a slave named in ``skip``)."""
+        out: dict[int, SlaveState] = {}
+        run_jobs(self.transport, [_await_state(s.position, target, out)
+                                  for s in self.slaves if s.name not in skip],
+                 self._tick if self._cycling else None)
+        return [out.get(s.position) for s in self.slaves]
 
     def check_kept(self, states: list[SlaveState | None]) -> None:
         """Raise :class:`LeftStateError` if a slave that answered the read of ``states``
@@ -311,6 +326,10 @@ class Master:
                 break
             try:
                 self.run_transition(transition, offline)
+                # The slaves take the request in their own time: the next step (or the
+                # caller's final read) finds them there.  What they show is the caller's
+                # to report; the way down goes on regardless.
+                self.await_states(transition.target, offline)
             except ApplyError as exc:
                 first = first or exc
                 self.state = transition.target
@@ -326,8 +345,9 @@ class Master:
     def down_bound(self, target: AlState = AlState.INIT) -> float:
         """Seconds :meth:`bring_down` can take at most from the current state: per
         transition, the master's InitCmds and the slowest slave's (their timeouts, lost
-        frames included: the slaves run in parallel), its mailbox InitCmds, and the AL error
-        acknowledgements (a state read and a write) before and after each step.  A service
+        frames included: the slaves run in parallel), its mailbox InitCmds, the wait for
+        the slaves to show the step's state, and the AL error acknowledgements (a state
+        read and a write) before and after each step.  A service
         manager's stop timeout must be above this (docs/runtime.md)."""
         from ecatcfg.runtime.master.replay import TIMEOUT_MAILBOX, command_timeout
         ack = 2 * TIMEOUT_COMMAND
@@ -343,7 +363,7 @@ class Master:
                 t = sum(command_timeout(c) for c in s.init_cmds if transition in c.transitions)
                 t += sum(c.timeout / 1000 if c.timeout else TIMEOUT_MAILBOX for c in coe + eoe)
                 slowest = max(slowest, t)
-            total += master + slowest + ack
+            total += master + slowest + ack + TIMEOUT_STATE
         return total
 
     def _acknowledge_errors(self) -> None:
@@ -707,14 +727,24 @@ def _dc_above(position: int, dc: dict[int, SlavePlan], found: list[FoundSlave] |
     return None
 
 
+def _slave_state(data: bytes | bytearray) -> SlaveState:
+    status, _, code = struct.unpack_from("<HHH", data)
+    return SlaveState(status & AL_STATE_MASK, bool(status & AL_STATUS_ERROR), code)
+
+
 def _read_state(position: int, out: dict[int, SlaveState]) -> Job:
-    dg = Datagram.physical(Cmd.APRD, -position & 0xFFFF, Reg.AL_STATUS, 6)
-    for _ in range(5):
+    dg = al_status_read(position)
+    for _ in range(UNANSWERED_READS):
         reply = yield [dg]
         if reply is not None and reply[0].wkc == 1:
-            status, _, code = struct.unpack("<HHH", reply[0].data)
-            out[position] = SlaveState(status & AL_STATE_MASK, bool(status & AL_STATUS_ERROR), code)
+            out[position] = _slave_state(reply[0].data)
             return
+
+
+def _await_state(position: int, target: AlState, out: dict[int, SlaveState]) -> Job:
+    data = yield from awaited_al_status(position, target, TIMEOUT_STATE)
+    if data is not None:
+        out[position] = _slave_state(data)
 
 
 def _write_by_position(position: int, ado: int, data: bytes) -> Job:

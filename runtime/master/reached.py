@@ -15,7 +15,10 @@ Two checks keep ``apply`` and the ``Network`` honest:
   command that requests each state on it (its own, or the master's broadcast); otherwise the
   ENI is refused, naming the slave, its line and the transitions without one;
 - :func:`not_reached`, after each transition: every slave's AL status, read back, shows the
-  transition's target state without the error flag.
+  transition's target state without the error flag.  The read-back waits for a slave on its
+  way (:func:`awaited_al_status`): a slave's application takes a request from AL control in
+  its own time (milliseconds on real firmware), and an ENI without "check device state"
+  InitCmds, which would have waited, is read back right after the request.
 """
 
 from __future__ import annotations
@@ -26,9 +29,13 @@ from typing import TYPE_CHECKING
 from ecatcfg.esc import (AL_STATE_MASK, AL_STATUS_ERROR, AlState, Cmd, Reg, Transition,
                          al_state_name)
 from ecatcfg.record import record
+from ecatcfg.runtime.clock import monotonic
+from ecatcfg.runtime.master.replay import ERROR_GRACE, FAST_POLLS, POLL_INTERVAL, pause
+from ecatcfg.runtime.wire import Datagram
 
 if TYPE_CHECKING:
     from ecatcfg.eni.plan import InitCmd, NetworkPlan, SlavePlan
+    from ecatcfg.runtime.master.lockstep import Step
 
 # Writes that reach a slave's register: addressed to it (auto-increment or configured
 # address), or to every slave (broadcast; the master's InitCmds).
@@ -117,3 +124,50 @@ def not_reached(slaves: list[SlavePlan], states: list[SlaveState | None],
             lines.append(f"slave {slave.name!r} (position {slave.position}) is in "
                          f"{st.name}, not {target.name}{code}")
     return lines
+
+
+def al_status_read(position: int) -> Datagram:
+    """A read of 0x0130..0x0135 (AL status, reserved, AL status code) by position, so it
+    works before the station addresses are set."""
+    return Datagram.physical(Cmd.APRD, -position & 0xFFFF, Reg.AL_STATUS, 6)
+
+
+# Reads in a row without an answer after which a slave is taken for one that does not answer.
+UNANSWERED_READS = 5
+
+
+def awaited_al_status(position: int, target: int, timeout: float) -> Step[bytes | None]:
+    """Read a slave's AL status until it shows ``target`` (AL status bits 0-4: a state, or
+    a state with the error flag) or, when ``target`` has no error flag, shows the error
+    flag for ``ERROR_GRACE`` (a refusal; a flag being cleared by an acknowledge is not
+    taken for one), or ``timeout`` s pass.  Returns the last 6 bytes read (0x0130..0x0135),
+    ``None`` if the slave never answered (``UNANSWERED_READS`` reads in a row).  The first
+    reads go out at once, then one every ``POLL_INTERVAL``, as a state-check InitCmd's."""
+    deadline = monotonic() + timeout
+    last: bytes | None = None
+    error_since: float | None = None
+    unanswered = polls = 0
+    while True:
+        reply = yield [al_status_read(position)]
+        now = monotonic()
+        if reply is not None and reply[0].wkc == 1:
+            last = bytes(reply[0].data)
+            unanswered = 0
+            status = last[0] & (AL_STATE_MASK | AL_STATUS_ERROR)
+            if status == target:
+                return last
+            if status & AL_STATUS_ERROR and not target & AL_STATUS_ERROR:
+                error_since = error_since or now
+                if now - error_since >= ERROR_GRACE:
+                    return last
+            else:
+                error_since = None
+        else:
+            unanswered += 1
+            if last is None and unanswered >= UNANSWERED_READS:
+                return None
+        if now > deadline:
+            return last
+        polls += 1
+        if polls > FAST_POLLS:
+            yield from pause(POLL_INTERVAL)

@@ -86,7 +86,7 @@ class SlaveProgress:
     last_command: str = ""
 
 
-def _pause(seconds: float) -> Job:
+def pause(seconds: float) -> Job:
     """Let the other jobs' rounds go by for ``seconds`` without sending anything."""
     until = monotonic() + seconds
     while monotonic() < until:
@@ -154,7 +154,7 @@ def init_cmd_job(cmd: InitCmd, who: str | None, data: bytes | None = None,
                     error_since = None
                 polls += 1
                 if polls > FAST_POLLS and now < deadline:
-                    yield from _pause(POLL_INTERVAL)
+                    yield from pause(POLL_INTERVAL)
             else:
                 return
         if now > deadline:
@@ -352,7 +352,7 @@ class MailboxChannel:
             else:
                 empty += 1
                 if empty > FAST_POLLS:
-                    yield from _pause(POLL_INTERVAL)
+                    yield from pause(POLL_INTERVAL)
 
     def _repeat(self, deadline: float, who: str | None, what: str | None) -> Job:
         """Toggle the repeat request (0x080E bit 1) from what the register holds, then wait

@@ -608,8 +608,12 @@ class EmulatedSlave:
         was_repeat = sm.repeat_request
         sm.load(self.mem)
         request = bool(self.mem[reg + 6] & SM_ACTIVATE_REPEAT)
+        # The firmware takes a pending state request before an SM change (SOES runs
+        # ESC_state() before ESC_sm_act_event() in every pass): mailbox SMs cleared right
+        # after a request for INIT are looked at in INIT, where no mailbox runs.
+        upcoming = self._transition[1] if self._transition is not None else None
         refusal = (self._check_mailbox() if not self.device_emulation
-                   and self._mailbox_running() else None)
+                   and self._mailbox_running(upcoming) else None)
         if refusal is not None:
             # The mailbox SMs no longer as the firmware set them up: it stops the mailbox
             # and falls back to INIT with 0x0016, 0x0015 in BOOT (SOES ESC_sm_act_event,
@@ -630,9 +634,11 @@ class EmulatedSlave:
         if self.on_mapping_change:
             self.on_mapping_change()
 
-    def _mailbox_running(self) -> bool:
-        return self.mem[Reg.AL_STATUS] & AL_STATE_MASK in (AlState.PREOP, AlState.BOOT,
-                                                            AlState.SAFEOP, AlState.OP)
+    def _mailbox_running(self, state: int | None = None) -> bool:
+        """Whether the mailbox runs in ``state`` (default: the state AL status shows)."""
+        if state is None:
+            state = self.mem[Reg.AL_STATUS] & AL_STATE_MASK
+        return state in (AlState.PREOP, AlState.BOOT, AlState.SAFEOP, AlState.OP)
 
     def _stop_mailbox(self) -> None:
         self.mailbox_queue.clear()
