@@ -129,3 +129,101 @@ def test_object_size_bound_takes_the_largest_vendor_objects():
     text, line = changed("<BitSize>144</BitSize>", f"<BitSize>{64008 * 8}</BitSize>")
     esi = reader.read_bytes(text.encode(), "drive.xml")
     assert not [p for p in esi.problems if p.source.line == line]
+
+
+# The dictionary's and the PDO entries' numbers and hexBinary are read inline when they are
+# spelled the common way (a short decimal, hex digits in pairs); every other spelling must
+# read as anywhere else: the same value, or a ReadProblem at its line.  The expected values
+# are written out here, from the ETG.2000 HexDecValue and xs:hexBinary syntax.
+def _dt1018(esi, i=1):
+    return esi.devices[0].dictionary.data_types["DT1018"].sub_items[i]
+
+
+def _info_1018(esi):
+    return dict(esi.devices[0].dictionary.objects[0x1018].info.sub_items)["Vendor ID"]
+
+
+def _entry(esi):
+    return esi.devices[0].rx_pdos[0].entries[0]
+
+
+SUB = "<SubIdx>1</SubIdx><Name>Vendor ID</Name>"
+SIZE = "<BitSize>32</BitSize><BitOffs>16</BitOffs>"
+DATA = "<DefaultData>CA0E00E0</DefaultData>"
+ENTRY = "<SubIndex>0</SubIndex><BitLen>16</BitLen><Name>Controlword</Name>"
+SPELLINGS = [   # (what is changed, into what, the field read back, its value, the problem)
+    (SUB, "<SubIdx>#x01</SubIdx><Name>Vendor ID</Name>", lambda e: _dt1018(e).subindex, 1, None),
+    (SUB, "<SubIdx> 1 </SubIdx><Name>Vendor ID</Name>", lambda e: _dt1018(e).subindex, 1, None),
+    (SUB, "<SubIdx>001</SubIdx><Name>Vendor ID</Name>", lambda e: _dt1018(e).subindex, 1, None),
+    (SUB, "<SubIdx>255</SubIdx><Name>Vendor ID</Name>", lambda e: _dt1018(e).subindex, 255,
+     None),
+    (SUB, "<SubIdx>256</SubIdx><Name>Vendor ID</Name>", lambda e: _dt1018(e).subindex, None,
+     "SubItem/SubIdx: 0x100 does not fit 8 bits (0..255)"),
+    (SUB, "<SubIdx>\u0661</SubIdx><Name>Vendor ID</Name>", lambda e: _dt1018(e).subindex,
+     None, "SubItem/SubIdx: not a number"),                    # an Arabic-Indic one
+    (SUB, "<SubIdx></SubIdx><Name>Vendor ID</Name>", lambda e: _dt1018(e).subindex, None,
+     None),                                                   # empty: as if not given
+    (SIZE, "<BitSize>#x20</BitSize><BitOffs>16</BitOffs>", lambda e: _dt1018(e).bit_size, 32,
+     None),
+    (SIZE, "<BitSize>524280</BitSize><BitOffs>16</BitOffs>", lambda e: _dt1018(e).bit_size,
+     524280, None),
+    (SIZE, "<BitSize>524281</BitSize><BitOffs>16</BitOffs>", lambda e: _dt1018(e).bit_size,
+     None, "SubItem/BitSize: 0x7fff9 does not fit"),
+    (SIZE, "<BitSize>32</BitSize><BitOffs>0x10</BitOffs>", lambda e: _dt1018(e).bit_offset,
+     16, None),
+    (SIZE, "<BitSize>32</BitSize><BitOffs>1 6</BitOffs>", lambda e: _dt1018(e).bit_offset,
+     None, "SubItem/BitOffs: not a number"),
+    (DATA, "<DefaultData>CA 0E 00 E0</DefaultData>", lambda e: _info_1018(e).default_data,
+     b"\xca\x0e\x00\xe0", None),
+    (DATA, "<DefaultData>C A0E00E0</DefaultData>", lambda e: _info_1018(e).default_data,
+     b"\xca\x0e\x00\xe0", None),
+    (DATA, "<DefaultData>\n  CA0E00E0\n</DefaultData>", lambda e: _info_1018(e).default_data,
+     b"\xca\x0e\x00\xe0", None),
+    (DATA, "<DefaultData>CA0E00E</DefaultData>", lambda e: _info_1018(e).default_data, None,
+     "Info/DefaultData: not hex bytes: 'CA0E00E' (odd number of digits)"),
+    (DATA, "<DefaultData>CA0E00EG</DefaultData>", lambda e: _info_1018(e).default_data, None,
+     "Info/DefaultData: not hex bytes"),
+    (DATA, "<DefaultData></DefaultData>", lambda e: _info_1018(e).default_data, b"", None),
+    (ENTRY, "<SubIndex>#x0</SubIndex><BitLen>16</BitLen><Name>Controlword</Name>",
+     lambda e: _entry(e).subindex, 0, None),
+    (ENTRY, "<SubIndex>300</SubIndex><BitLen>16</BitLen><Name>Controlword</Name>",
+     lambda e: _entry(e).subindex, None, "Entry/SubIndex: 0x12c does not fit 8 bits"),
+    (ENTRY, "<SubIndex>0</SubIndex><BitLen>65535</BitLen><Name>Controlword</Name>",
+     lambda e: _entry(e).bit_len, 65535, None),
+    (ENTRY, "<SubIndex>0</SubIndex><BitLen>99999</BitLen><Name>Controlword</Name>",
+     lambda e: _entry(e).bit_len, None, "Entry/BitLen: 0x1869f does not fit 16 bits"),
+    (ENTRY, "<SubIndex>0</SubIndex><BitLen>1_6</BitLen><Name>Controlword</Name>",
+     lambda e: _entry(e).bit_len, None, "Entry/BitLen: not a number"),
+]
+
+
+@pytest.mark.parametrize("old, new, field, value, problem", SPELLINGS,
+                         ids=[repr(c[1][:40]) for c in SPELLINGS])
+def test_each_spelling_reads_as_the_syntax_says(old, new, field, value, problem):
+    text, line = changed(old, new)
+    esi = reader.read_bytes(text.encode(), "drive.xml")
+    assert field(esi) == value
+    found = [p.message for p in esi.problems if p.source.line == line]
+    if problem is None:
+        assert found == []
+    else:
+        assert len(found) == 1 and found[0].startswith(problem), found
+
+
+ACCESS = '<Access WriteRestrictions="PreOp">rw</Access>'
+
+
+@pytest.mark.parametrize("new, value, read, write, problem", [
+    ("<Access>RW</Access>", "rw", {"PreOp", "SafeOp", "Op"}, {"PreOp", "SafeOp", "Op"}, None),
+    ('<Access ReadRestrictions="PreOp_SafeOp"> ro </Access>', "ro", {"PreOp", "SafeOp"},
+     {"PreOp", "SafeOp", "Op"}, None),
+    ('<Access WriteRestrictions="preop_Boot">rw</Access>', "rw", {"PreOp", "SafeOp", "Op"},
+     {"PreOp"}, "Access/@WriteRestrictions: unknown state 'Boot' in 'preop_Boot'"),
+], ids=["no restriction", "read restricted", "unknown state"])
+def test_access_restrictions_read_as_written(new, value, read, write, problem):
+    text, line = changed(ACCESS, new)                     # DT1600's subindex 0 (line 60)
+    esi = reader.read_bytes(text.encode(), "drive.xml")
+    access = esi.devices[0].dictionary.data_types["DT1600"].sub_items[0].flags.access
+    assert (access.value, access.read_states, access.write_states) == (value, read, write)
+    found = [p.message for p in esi.problems if p.source.line == line]
+    assert found == ([] if problem is None else [problem])
