@@ -7,8 +7,10 @@ because the host was busy for a few tens of milliseconds teaches everyone to rer
 read.  This script starts ``--hogs`` CPU hogs (``while True: pass`` processes, twice the cores
 of the project's 2-core machine by default) *before* the first run, runs the whole suite
 ``--runs`` times in a row while they spin, and kills them after the last run.  It prints one
-line per run (passed, failed, expected failures, wall time, load average) and the node ids
-of every failure; the exit status is 1 when any run had a failure.
+line per run (passed, failed, expected failures, wall time, load average), the node ids
+of every failure and the end of each failure's report (from pytest's JUnit XML report of
+the run; ``--reports DIR`` keeps those files); the exit status is 1 when any run had a
+failure.
 
 The suite's own settings apply (pytest's configuration in pyproject.toml); extra pytest
 arguments follow ``--``.  Nothing here changes what a test expects: a failure under load is
@@ -21,9 +23,11 @@ import argparse
 import os
 import platform
 import re
+import shutil
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -44,11 +48,14 @@ def stop_hogs(hogs: list[subprocess.Popen[bytes]]) -> None:
         p.wait()
 
 
-def one_run(pytest_args: list[str]) -> tuple[dict[str, int], list[str], float, str]:
-    """The suite once: (counts by outcome, failed node ids, wall seconds, pytest's last line)."""
+def one_run(pytest_args: list[str], junit: Path) -> tuple[dict[str, int], list[str], float,
+                                                         str]:
+    """The suite once: (counts by outcome, failed node ids, wall seconds, pytest's last line).
+    pytest's JUnit XML report goes to ``junit``: it keeps each failure's whole text."""
     t0 = time.monotonic()
     proc = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider",
-                           "-rfE", *pytest_args], cwd=ROOT, capture_output=True, text=True,
+                           "-rfE", f"--junitxml={junit}", *pytest_args], cwd=ROOT,
+                          capture_output=True, text=True,
                           # pytest cuts the summary's reasons to the terminal's width
                           env=dict(os.environ, COLUMNS="400"))
     wall = time.monotonic() - t0
@@ -67,12 +74,33 @@ def one_run(pytest_args: list[str]) -> tuple[dict[str, int], list[str], float, s
     return counts, failed, wall, summary
 
 
+def failure_texts(junit: Path, tail: int = 60) -> list[str]:
+    """The last ``tail`` lines of each failed or erroring test's report in a JUnit XML file
+    of pytest (what the one-line reason leaves out: apply's stderr, the values compared)."""
+    from lxml import etree
+    if not junit.is_file():
+        return []
+    parser = etree.XMLParser(resolve_entities=False, no_network=True, huge_tree=True)
+    out = []
+    for case in etree.parse(str(junit), parser).iter("testcase"):
+        for bad in [*case.iterfind("failure"), *case.iterfind("error")]:
+            lines = (bad.text or bad.get("message") or "").splitlines()[-tail:]
+            out.append(f"{case.get('classname')}::{case.get('name')}\n" + "\n".join(
+                "    " + line for line in lines))
+    return out
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--runs", type=int, default=3)
     ap.add_argument("--hogs", type=int, default=2 * (os.cpu_count() or 2))
+    ap.add_argument("--reports", type=Path, default=None, metavar="DIR",
+                    help="keep pytest's JUnit XML report of each run here (default: a "
+                         "temporary folder, removed at the end)")
     ap.add_argument("pytest_args", nargs="*", help="after --: passed to pytest")
     args = ap.parse_args()
+    reports = args.reports or Path(tempfile.mkdtemp(prefix="loaded-host-"))
+    reports.mkdir(parents=True, exist_ok=True)
     print(f"# {platform.machine()}, {os.cpu_count()} CPUs, Python {platform.python_version()}; "
           f"{args.hogs} CPU hogs from before the first run to after the last")
     hogs = start_hogs(args.hogs)
@@ -80,15 +108,20 @@ def main() -> int:
     try:
         time.sleep(1.0)       # the hogs are spinning before the suite starts
         for run in range(1, args.runs + 1):
-            counts, failed, wall, summary = one_run(args.pytest_args)
+            junit = reports / f"run-{run}.xml"
+            counts, failed, wall, summary = one_run(args.pytest_args, junit)
             load = os.getloadavg()[0]
             print(f"run {run}: {summary}  [wall {wall:.0f} s, load average {load:.1f}]",
                   flush=True)
             for reason in failed:
                 print(f"  failed: {reason}", flush=True)
+            for text in failure_texts(junit):
+                print(f"  --- {text}", flush=True)
             bad += counts.get("failed", 0) + counts.get("errors", 0)
     finally:
         stop_hogs(hogs)
+        if args.reports is None:
+            shutil.rmtree(reports, ignore_errors=True)
     print(f"# {bad} failure(s) in {args.runs} run(s) under load")
     return 1 if bad else 0
 

@@ -306,9 +306,9 @@ def minimum_frames(plan) -> Minimum:
                 split = next((i for i, c in enumerate(cmds) if c.ado == Reg.AL_CONTROL
                               and c.cmd in (Cmd.APWR, Cmd.FPWR, Cmd.BWR)), len(cmds))
             mbx: list[int] = []
-            write, read = dg + s.mailbox.send.length, dg + s.mailbox.recv.length
             before = None
-            for c in coe:
+            for c in coe:                   # none for a slave without a mailbox
+                write, read = dg + s.mailbox.send.length, dg + s.mailbox.recv.length
                 if before is not None and before.ccs != 2 and \
                         (before.index, before.subindex) != (c.index, c.subindex):
                     mbx[-1] += write          # the request ahead, behind the read before

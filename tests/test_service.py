@@ -30,6 +30,7 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -122,18 +123,14 @@ def states(report: dict) -> dict[str, tuple[str, str]]:
 def test_a_signal_stops_apply_like_ctrl_c(example_eni, sig):
     """apply cycles a virtual line on the host's clock here: a run whose cycles the host
     held up (its own report says so: _stalled) is run again, at most three times."""
-    for attempt in range(1, 4):
+    def attempt(_: int) -> tuple[str, Callable[[], None]]:
         run = start_virtual(example_eni, "--format", "json")
         run.wait_for("cycling until Ctrl-C")
         time.sleep(0.3)
         run.kill(sig)
         code = run.finish()
-        try:
-            _check_stopped_by(sig, code, run)
-            return
-        except AssertionError:
-            if attempt == 3 or not _stalled(run.out):
-                raise
+        return run.out, lambda: _check_stopped_by(sig, code, run)
+    retried_when_held_up(attempt)
 
 
 def _check_stopped_by(sig: signal.Signals, code: int, run: Running) -> None:
@@ -217,20 +214,31 @@ def _stalled(out: str) -> bool:
     return bool(cycles["lost_frames"]) or cycles["jitter_us"]["max"] >= STALLED_US
 
 
+def retried_when_held_up(attempt: Callable[[int], tuple[str, Callable[[], None]]]) -> None:
+    """Make ``attempt`` (its number, from 1), which runs apply on the host's clock and
+    returns apply's JSON output and the check of the run.  A failed check is tried again
+    only when that report shows the host held apply's cycles up (``_stalled``), at most
+    three attempts in all; a failure without that evidence fails at once."""
+    for n in range(1, 4):
+        out, check = attempt(n)
+        try:
+            check()
+            return
+        except AssertionError:
+            if n == 3 or not _stalled(out):
+                raise
+
+
 @pytest.mark.parametrize("abstract", [False, True], ids=["path", "abstract"])
 def test_notify_ready_watchdog_stopping(example_eni, tmp_path, abstract):
     """READY once the line cycles, WATCHDOG=1 every half period, STOPPING on the way down.
     apply cycles a virtual line on the host's clock here: a run whose cycles the host held
     up (its own report says so) is run again, at most three times; a failure without that
     evidence fails at once."""
-    for attempt in range(1, 4):
-        run = _notify_run(example_eni, tmp_path / str(attempt), abstract)
-        try:
-            _check_notify_run(*run)
-            return
-        except AssertionError:
-            if attempt == 3 or not _stalled(run[3]):
-                raise
+    def attempt(n: int) -> tuple[str, Callable[[], None]]:
+        run = _notify_run(example_eni, tmp_path / str(n), abstract)
+        return run[3], lambda: _check_notify_run(*run)
+    retried_when_held_up(attempt)
 
 
 def _notify_run(example_eni: Path, folder: Path, abstract: bool
@@ -360,16 +368,25 @@ def _apply_on_veth(rig, eni: Path) -> Running:
 
 
 def test_sigterm_over_veth_brings_the_slaves_down(veth_netns, example_eni, tmp_path):
-    sim = _simulate(veth_netns, example_eni, tmp_path, slow=False)
-    try:
-        run = _apply_on_veth(veth_netns, example_eni)
-        run.wait_for("cycling until Ctrl-C")
-        time.sleep(0.5)
-        run.kill(signal.SIGTERM)
-        rc = run.finish()
-    finally:
-        sim_out = _stop_simulate(sim)
-    assert rc == 0, run.stderr()
+    """apply and simulate cycle over veth on the host's clock here: an attempt whose cycles
+    the host held up (apply's own report says so: _stalled) is made again, at most three
+    in all; a failure without that evidence fails at once."""
+    def attempt(_: int) -> tuple[str, Callable[[], None]]:
+        sim = _simulate(veth_netns, example_eni, tmp_path, slow=False)
+        try:
+            run = _apply_on_veth(veth_netns, example_eni)
+            run.wait_for("cycling until Ctrl-C")
+            time.sleep(0.5)
+            run.kill(signal.SIGTERM)
+            rc = run.finish()
+        finally:
+            sim_out = _stop_simulate(sim)
+        return run.out, lambda: _check_sigterm_over_veth(rc, run, sim_out)
+    retried_when_held_up(attempt)
+
+
+def _check_sigterm_over_veth(rc: int, run: Running, sim_out: str) -> None:
+    assert rc == 0, run.stderr() + run.out
     report = json.loads(run.out)
     assert states(report) == {n: ("INIT", "OP") for n in NAMES}
     assert report["cycles"]["count"] > 100
