@@ -328,3 +328,77 @@ def test_an_sm_whose_pdos_are_partly_described_cannot_be_derived(compiled, tmp_p
     refused = {r["slave"]: r["what"] for r in report["refused"]}
     assert refused["axis1"].startswith("ProcessData/Sm3 assigns PDOs that are not all "
                                        "described"), refused
+
+
+# -- the wait for a slave on its way (reached.awaited_al_status) ---------------------------------
+
+FRAME_NS = 100_000          # each round of the wait: a frame's round trip, 0.1 ms
+
+
+def wait_for_state(shown: Callable[[float], tuple[int, int] | None], target: int = 0x02,
+                   timeout: float = 5.0) -> tuple[bytes | None, float, int]:
+    """Run the wait against a slave whose AL status, ``shown(seconds since the start)``, is
+    (AL status, AL status code), or None for no answer; on simulated time, a round trip per
+    read.  Returns what the wait returned, the seconds it took and the reads it sent."""
+    import struct
+
+    from ecatcfg.runtime.clock import SimClock, using
+    from ecatcfg.runtime.master.reached import al_status_read, awaited_al_status
+    clock = SimClock()
+    start = clock.monotonic()
+    reads = 0
+    with using(clock):
+        step = awaited_al_status(al_status_read(3), target, timeout)
+        request = next(step)
+        while True:
+            clock.advance(FRAME_NS)
+            reply = None
+            if request:
+                reads += 1
+                [read] = request
+                assert (read.cmd, read.adp, read.ado, len(read.data)) == \
+                    (Cmd.APRD, -3 & 0xFFFF, Reg.AL_STATUS, 6)
+                now = shown(clock.monotonic() - start)
+                if now is not None:
+                    read.data, read.wkc = struct.pack("<HHH", now[0], 0, now[1]), 1
+                reply = [read]
+            try:
+                request = step.send(reply)
+            except StopIteration as done:
+                return done.value, clock.monotonic() - start, reads
+
+
+def test_the_wait_ends_when_the_slave_gets_there():
+    got, took, reads = wait_for_state(lambda t: (0x01, 0) if t < 0.030 else (0x02, 0))
+    assert got[:2] == b"\x02\x00" and 0.030 <= took < 0.035
+    # Three reads at once, then one a millisecond: not a frame per round trip.
+    assert reads < 40
+
+
+def test_a_refusal_ends_the_wait_after_the_error_flag_held_20_ms():
+    got, took, _ = wait_for_state(lambda t: (0x11, 0x0016))
+    assert got == bytes([0x11, 0, 0, 0, 0x16, 0]) and 0.020 <= took < 0.025
+
+
+def test_an_error_flag_that_clears_is_no_refusal():
+    # The flag of an error being acknowledged, gone after 10 ms; the state after 40 ms.
+    got, took, _ = wait_for_state(
+        lambda t: (0x11, 0x0016) if t < 0.010 else (0x01, 0) if t < 0.040 else (0x02, 0))
+    assert got[:2] == b"\x02\x00" and 0.040 <= took < 0.045
+
+
+def test_a_slave_that_stays_is_given_up_at_the_timeout():
+    got, took, _ = wait_for_state(lambda t: (0x01, 0), timeout=2.0)
+    assert got[:2] == b"\x01\x00" and 2.0 <= took < 2.01
+
+
+def test_a_slave_that_never_answers_is_given_up_after_five_reads():
+    got, took, reads = wait_for_state(lambda t: None)
+    assert got is None and reads == 5
+
+
+def test_the_error_flag_must_hold_20_ms_each_time_it_shows():
+    # Shown 10 ms, cleared, then shown for good from 30 ms: a refusal at 50 ms, not at 30.
+    got, took, _ = wait_for_state(
+        lambda t: (0x11, 0x0016) if t < 0.010 or t >= 0.030 else (0x01, 0))
+    assert got[0] == 0x11 and 0.050 <= took < 0.055

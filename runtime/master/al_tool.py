@@ -115,7 +115,7 @@ def _request_job(before: SlaveAlStatus, target: AlState, timeout: float,
         if monotonic() > deadline:
             raise StatesError(f"slave {position}: the AL control write (0x0120) of "
                               f"{target.name} was not answered")
-    data = yield from awaited_al_status(position, target, timeout)
+    data = yield from awaited_al_status(al_status_read(position), target, timeout)
     got = _decode(position, data, target) if data is not None else before
     out[position] = got if got.reached or (data is not None and got.error) else \
         SlaveAlStatus(position, got.al_status, got.code, target, timed_out=True)

@@ -742,7 +742,7 @@ def _read_state(position: int, out: dict[int, SlaveState]) -> Job:
 
 
 def _await_state(position: int, target: AlState, out: dict[int, SlaveState]) -> Job:
-    data = yield from awaited_al_status(position, target, TIMEOUT_STATE)
+    data = yield from awaited_al_status(al_status_read(position), target, TIMEOUT_STATE)
     if data is not None:
         out[position] = _slave_state(data)
 

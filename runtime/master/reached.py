@@ -136,8 +136,9 @@ def al_status_read(position: int) -> Datagram:
 UNANSWERED_READS = 5
 
 
-def awaited_al_status(position: int, target: int, timeout: float) -> Step[bytes | None]:
-    """Read a slave's AL status until it shows ``target`` (AL status bits 0-4: a state, or
+def awaited_al_status(read: Datagram, target: int, timeout: float) -> Step[bytes | None]:
+    """Send ``read`` (a read of one slave's 0x0130..0x0135, by position or station address:
+    :func:`al_status_read`) until the AL status shows ``target`` (bits 0-4: a state, or
     a state with the error flag) or, when ``target`` has no error flag, shows the error
     flag for ``ERROR_GRACE`` (a refusal; a flag being cleared by an acknowledge is not
     taken for one), or ``timeout`` s pass.  Returns the last 6 bytes read (0x0130..0x0135),
@@ -148,7 +149,7 @@ def awaited_al_status(position: int, target: int, timeout: float) -> Step[bytes 
     error_since: float | None = None
     unanswered = polls = 0
     while True:
-        reply = yield [al_status_read(position)]
+        reply = yield [read]
         now = monotonic()
         if reply is not None and reply[0].wkc == 1:
             last = bytes(reply[0].data)

@@ -150,7 +150,7 @@ def lock_memory() -> Callable[[], object]:
     (cli/apply.prepare_cycling); the run's own :func:`apply` then finds it done."""
     global _held
     undo: list[Callable[[], object]] = []
-    _lock_memory(undo)          # nothing to undo when it was held already: its holder's
+    _lock_memory(undo)          # adds no undo when already held: its holder unlocks
     _held = True
 
     def unlock() -> None:

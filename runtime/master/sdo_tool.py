@@ -40,7 +40,8 @@ from ecatcfg.esc import (AL_ERROR_ACK, AL_STATE_MASK, AL_STATUS_ERROR, MAILBOX_P
                          SmConfig, al_state_name, al_status_name, mailbox_protocol_names)
 from ecatcfg.runtime.master.lockstep import Job, Step, run_jobs
 from ecatcfg.runtime.mailbox import NORMAL_OVERHEAD, abort_name
-from ecatcfg.runtime.master.replay import (ERROR_GRACE, TIMEOUT_COMMAND, TIMEOUT_MAILBOX,
+from ecatcfg.runtime.master.reached import awaited_al_status
+from ecatcfg.runtime.master.replay import (TIMEOUT_COMMAND, TIMEOUT_MAILBOX,
                                            TIMEOUT_STATE, ApplyError, MailboxChannel, sdo_job)
 from ecatcfg.runtime.master.scan import count_slaves, sii_words
 from ecatcfg.runtime.master.transport import Transport
@@ -349,28 +350,14 @@ def request_state(address: int, target: AlState, who: str) -> Job:
     yield from access(Datagram.physical(Cmd.FPWR, address, Reg.AL_CONTROL,
                                          struct.pack("<H", target | AL_ERROR_ACK)),
                        deadline, f"{who}: requesting {target.name} (0x0120)")
-    read = Datagram.physical(Cmd.FPRD, address, Reg.AL_STATUS, 6)
-    deadline = monotonic() + TIMEOUT_STATE
-    error_since: float | None = None
-    al_status = code = -1
-    while True:
-        reply = yield [read]
-        now = monotonic()
-        if reply is not None and reply[0].wkc == 1:
-            al_status = struct.unpack_from("<H", reply[0].data)[0]
-            code = struct.unpack_from("<H", reply[0].data, 4)[0]
-            if al_status & 0x1F == target:
-                return
-            if al_status & AL_STATUS_ERROR:
-                error_since = error_since or now
-                if now - error_since >= ERROR_GRACE:
-                    raise _refused(who, target, al_status, code)
-            else:
-                error_since = None
-        if now > deadline:
-            if al_status < 0:
-                raise SdoToolError(f"{who}: no answer to AL status reads (0x0130)")
-            raise _refused(who, target, al_status, code, timed_out=True)
+    data = yield from awaited_al_status(
+        Datagram.physical(Cmd.FPRD, address, Reg.AL_STATUS, 6), target, TIMEOUT_STATE)
+    if data is None:
+        raise SdoToolError(f"{who}: no answer to AL status reads (0x0130)")
+    al_status, _, code = struct.unpack_from("<HHH", data)
+    if al_status & 0x1F != target:
+        raise _refused(who, target, al_status, code,
+                       timed_out=not al_status & AL_STATUS_ERROR)
 
 
 def _refused(who: str, target: AlState, al_status: int, code: int,
